@@ -1,0 +1,13 @@
+# cmake -P script: writes a .cpp defining vksonar::embedded_presets() from JSON files.
+set(body "// Generated from assets/presets/*.json by cmake/embed_presets_script.cmake. Do not edit.\n")
+string(APPEND body "#include <string_view>\n#include <utility>\n#include <vector>\nnamespace vksonar {\n")
+string(APPEND body "const std::vector<std::pair<std::string_view, std::string_view>>& embedded_presets() {\n")
+string(APPEND body "    static const std::vector<std::pair<std::string_view, std::string_view>> presets = {\n")
+list(SORT FILES)
+foreach(f ${FILES})
+  get_filename_component(name ${f} NAME_WE)
+  file(READ ${f} text)
+  string(APPEND body "        {\"${name}\", R\"vksjson(${text})vksjson\"},\n")
+endforeach()
+string(APPEND body "    };\n    return presets;\n}\n} // namespace vksonar\n")
+file(WRITE ${OUTPUT} "${body}")

@@ -1,0 +1,109 @@
+// SonarConfig: every parameter of a simulated sonar, as a plain struct with defaults.
+// Units are in the field names. JSON keys (presets, config files, --set) are the names without the
+// unit suffix, grouped as documented in README.md ("Config reference"): e.g. `hfov`, `range_max`,
+// `effects.speckle`, `display.db_min`.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "vksonar/result.h"
+
+namespace vksonar {
+
+// Each effect of DESIGN §4. `automatic` is resolved from scene + config into on/off with a reason.
+enum class EffectMode : std::uint8_t { automatic, on, off };
+
+struct EffectsConfig {
+    EffectMode incidence = EffectMode::automatic;          // Lambert cos(theta); auto: on if a material is angle-dependent
+    EffectMode vertical_pattern = EffectMode::automatic;   // b_v(psi)^2; auto: on
+    EffectMode horizontal_pattern = EffectMode::automatic; // side lobes along beams; auto: on
+    EffectMode spreading = EffectMode::automatic;          // r^-4; auto: on
+    EffectMode absorption = EffectMode::automatic;         // auto: on if 2 alpha range_max >= 0.1 dB
+    EffectMode speckle = EffectMode::automatic;            // auto: on
+    EffectMode ambient_noise = EffectMode::automatic;      // auto: on
+    EffectMode tvg = EffectMode::automatic;                // time-varied gain; auto: off
+};
+
+enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian };
+enum class BeamSpacing : std::uint8_t { equiangular, equisine };
+enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
+enum class RangeKernel : std::uint8_t { nearest, tent };
+enum class NormalMethod : std::uint8_t { sobel3, sobel5 };
+enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
+enum class Precision : std::uint8_t { f32, f64 };
+
+struct SonarConfig {
+    std::string name = "default";
+    std::string description;
+    std::string source; // where the device figures come from (presets cite it)
+
+    // Geometry (DESIGN §2). Azimuth is positive to port; beam 0 is the port-most beam.
+    double frequency_hz = 750e3;
+    double hfov_deg = 130.0;
+    double vfov_deg = 20.0;                // two-way -3 dB vertical beamwidth
+    double horizontal_beamwidth_deg = 1.0; // two-way -3 dB receive beamwidth of one beam
+    std::uint32_t beams = 512;
+    BeamSpacing beam_spacing = BeamSpacing::equiangular;
+    std::vector<double> beam_angles_deg; // explicit table (port first); overrides beams/spacing if non-empty
+    std::uint32_t bins = 512;
+    double range_min_m = 0.5;
+    double range_max_m = 40.0;
+    double sound_speed_mps = 1500.0;
+
+    // Sonar equation (DESIGN §3). Levels in dB re 1 uPa (at 1 m for SL).
+    double source_level_db = 210.0;
+    double noise_level_db = 60.0;
+    double directivity_index_db = 20.0;
+    double default_backscatter_db = -30.0; // materials whose extras say nothing
+    double absorption_db_per_m = -1.0;     // < 0: Francois-Garrison from the water below
+    double temperature_c = 10.0;
+    double salinity_ppt = 35.0;
+    double water_depth_m = 10.0;
+    double ph = 8.0;
+
+    BeamPattern vertical_pattern = BeamPattern::sinc;
+    BeamPattern horizontal_pattern = BeamPattern::sinc;
+
+    // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
+    SpeckleModel speckle = SpeckleModel::rayleigh;
+    double speckle_looks = 1.0;         // L for the gamma model
+    double speckle_gaussian_sigma = 0.1; // for the legacy gaussian model: |N(1, sigma)|
+    double tvg_db_per_decade = 20.0;    // TVG = k log10 r + 2 alpha r
+
+    // Display (host stage 6).
+    double db_min = 60.0; // dB re 1 uPa mapped to 0
+    double db_max = 140.0; // mapped to 1
+    Colormap colormap = Colormap::sonar;
+    std::uint32_t fan_width_px = 1024;
+
+    // Accuracy knobs (DESIGN §5).
+    double pixels_per_beam = 2.0;        // horizontal oversampling (pixel columns per beam spacing)
+    std::uint32_t rows_per_vfov = 64;    // pixel rows per vertical beamwidth
+    double vertical_coverage = 2.0;      // depth pass covers this many vertical beamwidths
+    double max_slice_deg = 60.0;         // widest frustum slice
+    NormalMethod normal_method = NormalMethod::sobel3;
+    RangeKernel range_kernel = RangeKernel::tent;
+    double sidelobe_kernel_beamwidths = 3.0; // side-lobe kernel reaches +- this many beamwidths
+    Precision cpu_precision = Precision::f32;
+
+    EffectsConfig effects;
+
+    // Returns the first problem in words (field and value), or an empty string if the config is usable.
+    std::string validate() const;
+};
+
+// Loading: presets are embedded in the library; files are JSON. Errors name file, key and value.
+[[nodiscard]] Result<SonarConfig> load_preset(const std::string& name);
+[[nodiscard]] std::vector<std::string> preset_names();
+// Applies a JSON object (text) on top of `base`; `origin` names the source in error messages.
+[[nodiscard]] Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string& json_text,
+                                                    const std::string& origin);
+[[nodiscard]] Result<SonarConfig> apply_config_file(const SonarConfig& base, const std::string& path);
+// Applies one `key=value` override (dotted keys, e.g. effects.speckle=off).
+[[nodiscard]] Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::string& key_equals_value);
+// The fully resolved config as JSON text (for meta.json and `vksonar presets --show`).
+[[nodiscard]] std::string config_to_json(const SonarConfig& config);
+
+} // namespace vksonar

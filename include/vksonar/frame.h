@@ -1,0 +1,59 @@
+// Frame: one ping's result. Allocated once by Renderer::make_frame(); render() refills it without
+// allocating. Polar arrays are range-major: index = bin * beams + beam (beam 0 = port-most).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace vksonar {
+
+// Which intermediates a render keeps (bit mask).
+enum SaveFlags : std::uint32_t {
+    save_depth = 1u << 0,    // reversed-Z depth per pixel, and view range
+    save_normals = 1u << 1,  // sonar-frame normal + cos(incidence) per pixel
+    save_echo = 1u << 2,     // per-pixel echo energy and slant range
+    save_profiles = 1u << 3, // per-column range profiles and beam profiles before side lobes
+};
+
+struct StageTime {
+    std::string stage; // "depth", "normals", "echo", "beamform", "noise", "image"
+    double ms = 0;
+};
+
+struct EffectState {
+    std::string name;
+    bool on = false;
+    std::string why;
+};
+
+struct Frame {
+    std::uint32_t beams = 0, bins = 0;
+    std::uint32_t columns = 0, rows = 0; // pixel grid of the depth pass (all slices side by side)
+    std::uint64_t frame_index = 0;
+    std::uint64_t seed = 0;
+
+    std::vector<double> beam_angles_rad; // beams, port (positive) to starboard
+    std::vector<double> bin_ranges_m;    // bins, centre of each range bin
+
+    // Echo intensity before noise, linear, relative to the source level (10 log10 + SL = dB re 1 uPa).
+    std::vector<float> clean;
+    // Received intensity after speckle, ambient noise and TVG, linear in uPa^2 (10 log10 = dB re 1 uPa).
+    std::vector<float> intensity;
+    // Display value in [0, 1] after the dB window.
+    std::vector<float> display;
+
+    // Intermediates, filled when requested in RendererOptions::save_mask (else empty).
+    std::vector<float> depth;    // rows * columns reversed-Z depth, 0 = no hit
+    std::vector<std::uint32_t> material; // rows * columns material id, 0xffffffff = no hit
+    std::vector<float> normals;  // rows * columns * 4: nx ny nz (sonar frame) cos_incidence
+    std::vector<float> echo;     // rows * columns * 2: energy, slant range m
+    std::vector<float> profiles; // bins * columns
+    std::vector<float> beam_profiles; // bins * beams, before the side-lobe convolution
+
+    std::vector<StageTime> times;
+    std::vector<EffectState> effects;
+    std::vector<std::string> stages_run;
+};
+
+} // namespace vksonar

@@ -1,0 +1,66 @@
+// Errors as values: nothing in the public API throws. Every call that can fail returns
+// Result<T>; on failure it carries a code, the VkResult (if Vulkan failed) and one line of text
+// naming the file, field and value at fault.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <variant>
+
+#include <vulkan/vulkan_core.h>
+
+namespace vksonar {
+
+enum class ErrorCode {
+    invalid_argument, // a config value, pose or CLI argument makes no sense
+    io,               // a file could not be read or written
+    parse,            // a file is malformed (glTF, JSON, CSV)
+    unsupported,      // valid input that vksonar does not handle (e.g. a required glTF extension)
+    vulkan,           // a Vulkan call failed; see vk_result
+    no_device,        // no suitable Vulkan device
+    internal,         // a bug in vksonar
+};
+
+struct Error {
+    ErrorCode code = ErrorCode::internal;
+    std::string message; // one line, names file/field/value
+    VkResult vk_result = VK_SUCCESS;
+};
+
+template <class T> class [[nodiscard]] Result {
+public:
+    Result(T value) : value_(std::move(value)) {}
+    Result(Error error) : value_(std::move(error)) {}
+
+    bool ok() const { return value_.index() == 0; }
+    explicit operator bool() const { return ok(); }
+    T& value() & { return std::get<0>(value_); }
+    const T& value() const& { return std::get<0>(value_); }
+    T&& value() && { return std::get<0>(std::move(value_)); }
+    T* operator->() { return &std::get<0>(value_); }
+    const T* operator->() const { return &std::get<0>(value_); }
+    T& operator*() & { return std::get<0>(value_); }
+    const Error& error() const { return std::get<1>(value_); }
+
+private:
+    std::variant<T, Error> value_;
+};
+
+template <> class [[nodiscard]] Result<void> {
+public:
+    Result() = default;
+    Result(Error error) : error_(std::move(error)), ok_(false) {}
+    bool ok() const { return ok_; }
+    explicit operator bool() const { return ok_; }
+    const Error& error() const { return error_; }
+
+private:
+    Error error_;
+    bool ok_ = true;
+};
+
+inline Error make_error(ErrorCode code, std::string message, VkResult vk_result = VK_SUCCESS) {
+    return Error{code, std::move(message), vk_result};
+}
+
+} // namespace vksonar

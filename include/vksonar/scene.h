@@ -1,0 +1,75 @@
+// Scene: triangle meshes with node transforms and acoustic materials, in the world frame
+// (x forward/east, y left/north, z up, metres). glTF's +Y-up frame maps to it by a +90 deg rotation
+// about x: world = (x_gltf, -z_gltf, y_gltf) (the same mapping Blender uses).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "vksonar/config.h"
+#include "vksonar/result.h"
+
+namespace vksonar {
+
+struct AcousticMaterial {
+    std::string name;
+    double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr
+    enum class Model : std::uint8_t { lambert, constant } model = Model::lambert;
+};
+
+// One drawable: a range of a mesh's triangles placed by a world matrix.
+struct SceneDraw {
+    std::uint32_t mesh = 0;     // index into SceneMeshView list
+    std::uint32_t material = 0; // index into materials
+    std::array<double, 16> world_from_local{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; // column-major
+};
+
+struct SceneStats {
+    std::uint64_t triangles = 0;  // drawn triangles (instances counted)
+    std::uint32_t meshes = 0;
+    std::uint32_t draws = 0;
+    std::uint32_t skipped_primitives = 0; // points/lines and degenerate-only primitives, skipped with a warning
+    std::vector<std::string> warnings;
+};
+
+struct SceneData; // internal
+
+class Scene {
+public:
+    Scene();
+    ~Scene();
+    Scene(Scene&&) noexcept;
+    Scene& operator=(Scene&&) noexcept;
+
+    // Loads .gltf or .glb. Fails with a one-line error naming the file and what is wrong.
+    [[nodiscard]] static Result<Scene> load_gltf(const std::string& path);
+
+    // Builds a scene from arrays an engine already has: positions xyz (mesh-local), triangle indices.
+    // Adds one mesh and returns its index; then place it with add_draw.
+    [[nodiscard]] Result<std::uint32_t> add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
+                                                 const std::uint32_t* indices, std::uint32_t index_count);
+    std::uint32_t add_material(const AcousticMaterial& material);
+    [[nodiscard]] Result<void> add_draw(const SceneDraw& draw);
+
+    const SceneStats& stats() const;
+    const std::vector<AcousticMaterial>& materials() const;
+    // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
+    const std::string& effects_json() const;
+
+    const SceneData& data() const { return *data_; }
+
+private:
+    std::unique_ptr<SceneData> data_;
+};
+
+// Sonar pose in the world frame: position in metres, orientation as roll, pitch, yaw in degrees
+// (rotation R = Rz(yaw) Ry(pitch) Rx(roll), REP-103). Yaw 0 looks along world +x.
+struct Pose {
+    double x_m = 0, y_m = 0, z_m = 0;
+    double roll_deg = 0, pitch_deg = 0, yaw_deg = 0;
+};
+
+} // namespace vksonar

@@ -1,0 +1,9 @@
+// Umbrella header of the vksonar library.
+#pragma once
+
+#include "vksonar/config.h"
+#include "vksonar/context.h"
+#include "vksonar/frame.h"
+#include "vksonar/renderer.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"

@@ -1,0 +1,125 @@
+// Shared between GLSL (compute/graphics shaders) and C++ (CPU reference and Vulkan host code).
+// Everything that crosses the CPU/GPU boundary is declared here exactly once: buffer layouts,
+// workgroup sizes, effect bits and sentinel values. The formulas live in sonar_math.h.
+//
+// Rules for this file: scalars only in structs that cross (no vec3: std140/std430 padding differs),
+// every struct has a static_assert on its size on the C++ side.
+#ifndef VKSONAR_SONAR_SHARED_H
+#define VKSONAR_SONAR_SHARED_H
+
+#ifdef __cplusplus
+#include <cstdint>
+namespace vksonar::shared {
+using uint = std::uint32_t;
+#define VKS_CONST constexpr
+#else
+#define VKS_CONST const
+#endif
+
+VKS_CONST uint kWorkgroupSize = 64u;          // 1-D compute workgroups (per pixel, per column, per cell)
+VKS_CONST uint kMaxSlices = 16u;              // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kNoMaterial = 0xffffffffu;     // material attachment clear value: no geometry hit
+VKS_CONST float kPi = 3.14159265358979323846f;
+
+// Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
+VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
+VKS_CONST uint kEffectVerticalPattern = 1u << 1;   // b_v(psi)^2
+VKS_CONST uint kEffectHorizontalPattern = 1u << 2; // side-lobe convolution along beams
+VKS_CONST uint kEffectSpreading = 1u << 3;         // r^-4 two-way spherical spreading
+VKS_CONST uint kEffectAbsorption = 1u << 4;        // 10^(-2 alpha r / 10)
+// speckle, ambient noise and TVG are host stages and never reach a shader.
+
+// Beam pattern shapes (b_v, b_h). Power patterns, 1 on axis, 0.5 (-3 dB) at +-beamwidth/2.
+VKS_CONST uint kPatternBox = 0u;      // 1 inside +-beamwidth/2, 0 outside (legacy; energy tests)
+VKS_CONST uint kPatternSinc = 1u;     // uniform line array: sinc^2(k sin a)
+VKS_CONST uint kPatternHann = 2u;     // Hann-tapered aperture: lower side lobes, wider main lobe
+VKS_CONST uint kPatternGaussian = 3u; // exp(-k a^2): no side lobes
+
+// Scattering models (Material.model). The value stored is f(theta) = s(theta) / cos(theta),
+// the factor that multiplies 10^(mu/10) * Omega * r^-2 in the combined sonar equation.
+VKS_CONST uint kScatterLambert = 0u;  // s = mu cos^2(theta) -> f = cos(theta): angle-dependent
+VKS_CONST uint kScatterConstant = 1u; // f = 1: angle-independent, needs no normals
+
+// Range kernels K_r.
+VKS_CONST uint kRangeKernelNearest = 0u;
+VKS_CONST uint kRangeKernelTent = 1u;
+
+// Normal methods.
+VKS_CONST uint kNormalsSobel3 = 0u;
+VKS_CONST uint kNormalsSobel5 = 1u;
+
+// Per-frame-constant parameters of the compute stages (uniform buffer, std140; scalars only).
+// Pixel grid: `columns` = slices * slice_columns pixel columns (left to right = port to starboard),
+// `rows` rows (top to bottom = up to down). Buffers are row-major: index = row * columns + column.
+struct SonarParams {
+    uint columns;
+    uint rows;
+    uint slice_columns;
+    uint slices;
+
+    uint beams;
+    uint bins;
+    uint effect_flags;
+    uint sidelobe_taps; // 2K+1 taps of the side-lobe kernel along beams
+
+    float tan_half_h;  // tan(slice width / 2): horizontal half extent of one slice, focal-normalized
+    float tan_half_v;  // tan(vertical coverage / 2)
+    float depth_a;     // view z = depth_a / (d - depth_b) for reversed-Z depth d (see sonar_math.h)
+    float depth_b;
+
+    float range_min_m;
+    float range_max_m;
+    float bin_width_m;
+    float alpha_db_per_m; // absorption, one way
+
+    float vpattern_k; // pattern constant for the vertical pattern, see pattern_power()
+    uint vpattern_shape;
+    uint range_kernel;
+    uint normal_method;
+
+    float edge_relative_jump; // neighbours whose range differs by more than this fraction are not the same surface
+    float vpattern_halfwidth_rad; // for the box pattern
+    float pad0;
+    float pad1;
+};
+#ifdef __cplusplus
+static_assert(sizeof(SonarParams) == 24 * 4, "SonarParams must match the GLSL std140 block");
+#endif
+
+// Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.
+struct SliceInfo {
+    float center_azimuth_rad; // positive to port (left)
+    float cos_center;
+    float sin_center;
+    float pad;
+};
+#ifdef __cplusplus
+static_assert(sizeof(SliceInfo) == 16, "SliceInfo must match std430");
+#endif
+
+// Acoustic material (storage buffer, std430), indexed by the material id the depth pass writes.
+struct MaterialGpu {
+    float backscatter_linear; // 10^(backscatter_db / 10)
+    uint model;               // kScatter*
+    float pad0;
+    float pad1;
+};
+#ifdef __cplusplus
+static_assert(sizeof(MaterialGpu) == 16, "MaterialGpu must match std430");
+#endif
+
+// Push constants of the depth pass: one draw (node x primitive) in one slice.
+struct DepthPush {
+    float clip_from_local[16]; // column-major, composed in double on the host, sonar-relative
+    uint material_id;
+    uint pad0;
+    uint pad1;
+    uint pad2;
+};
+#ifdef __cplusplus
+static_assert(sizeof(DepthPush) == 80, "DepthPush must fit push constants");
+} // namespace vksonar::shared
+#undef VKS_CONST
+#endif
+
+#endif

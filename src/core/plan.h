@@ -1,0 +1,90 @@
+// Plan: everything derived once from (SonarConfig, Scene) before the first frame: sizes, beam and
+// range tables, beam-pattern constants, absorption, resolved effects and the tables the beamform
+// stage needs. Both backends read the same Plan, so they cannot disagree about geometry.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "sonar_shared.h"
+#include "vksonar/config.h"
+#include "vksonar/frame.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+
+struct SceneData;
+
+struct ResolvedEffects {
+    bool incidence = true, vertical_pattern = true, horizontal_pattern = true, spreading = true, absorption = true,
+         speckle = true, ambient_noise = true, tvg = false;
+    std::vector<EffectState> states; // name, on, why (for meta.json)
+    std::uint32_t shader_flags() const;
+};
+
+struct Plan {
+    SonarConfig config; // the validated config this plan was made from
+
+    // Pixel grid of the depth pass: `slices` frusta side by side, port to starboard.
+    std::uint32_t slices = 1;
+    std::uint32_t slice_columns = 0; // pixel columns per slice
+    std::uint32_t columns = 0;       // slices * slice_columns
+    std::uint32_t rows = 0;
+    double slice_width_rad = 0; // horizontal angle covered by one slice
+    double vertical_coverage_rad = 0;
+    double tan_half_h = 0, tan_half_v = 0;
+    double near_m = 0, far_m = 0;     // depth-pass clip planes (near < range_min so slant ranges are not clipped)
+    double depth_a = 0, depth_b = 0;  // view z = depth_a / (d - depth_b); d = 1 at near, 0 at far
+    std::vector<shared::SliceInfo> slice_info; // slices
+
+    // Beams and range bins.
+    std::uint32_t beams = 0, bins = 0;
+    std::vector<double> beam_angle_rad; // beams, strictly decreasing (port first)
+    double bin_width_m = 0;
+    std::vector<double> bin_range_m;    // bin centres
+
+    // Beam patterns.
+    double vpattern_k = 0, vpattern_halfwidth_rad = 0;
+    double hpattern_k = 0, hpattern_halfwidth_rad = 0;
+    double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
+
+    // Beamform tables. Column c (azimuth column_azimuth_rad[c]) gives weight column_weight[c] to beam
+    // column_beam[c] and 1 - column_weight[c] to column_beam[c] + 1 (tent on the beam table; columns
+    // outside the beam fan give their energy only to the nearest edge beam... see plan.cpp).
+    std::vector<double> column_azimuth_rad; // columns
+    std::vector<std::uint32_t> column_beam; // columns
+    std::vector<float> column_weight;       // columns
+    // Beam j gathers from columns [beam_column_begin[j], beam_column_end[j]).
+    std::vector<std::uint32_t> beam_column_begin, beam_column_end;
+    // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t).
+    std::uint32_t sidelobe_taps = 1; // 2K + 1
+    std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
+
+    // Acoustic materials as uploaded (index = material id written by the depth pass).
+    std::vector<shared::MaterialGpu> materials;
+
+    ResolvedEffects effects;
+    shared::SonarParams params{}; // the uniform block of the compute stages
+};
+
+// Validates the config and derives the plan. Errors name the config field and value.
+[[nodiscard]] Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene);
+
+// Francois & Garrison (1982) absorption in dB/m for frequency (Hz), temperature (C), salinity (ppt),
+// depth (m), pH and sound speed (m/s).
+double francois_garrison_db_per_m(double frequency_hz, double temperature_c, double salinity_ppt, double depth_m,
+                                  double ph, double sound_speed_mps);
+
+// Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
+double pattern_constant(BeamPattern shape, double beamwidth_rad);
+
+// The per-draw, per-slice clip_from_local matrices of the depth pass, composed in double relative
+// to the sonar and rounded to float once. out is resized to slices * draws (slice-major);
+// no allocation once it has that size.
+void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
+                         std::vector<shared::DepthPush>& out);
+
+} // namespace vksonar

@@ -1,0 +1,48 @@
+// C++ side of shaders/sonar_math.h: the same formulas in float and double.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "sonar_shared.h"
+
+namespace vksonar {
+
+#define VKS_ATAN2 std::atan2
+
+namespace math_f32 {
+using shared::uint;
+using std::abs, std::atan, std::cos, std::exp, std::sin, std::sqrt;
+#define REAL float
+#include "sonar_math.h"
+#undef REAL
+} // namespace math_f32
+
+namespace math_f64 {
+using shared::uint;
+using std::abs, std::atan, std::cos, std::exp, std::sin, std::sqrt;
+#define REAL double
+#include "sonar_math.h"
+#undef REAL
+} // namespace math_f64
+
+#undef VKS_ATAN2
+
+// math<Real>::fn selects the precision in templated CPU code.
+template <class Real> struct Math;
+template <> struct Math<float> {
+#define VKS_FORWARD(fn) template <class... A> static auto fn(A... a) { return math_f32::fn(a...); }
+    VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
+    VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
+    VKS_FORWARD(range_bin_coord)
+#undef VKS_FORWARD
+};
+template <> struct Math<double> {
+#define VKS_FORWARD(fn) template <class... A> static auto fn(A... a) { return math_f64::fn(a...); }
+    VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
+    VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
+    VKS_FORWARD(range_bin_coord)
+#undef VKS_FORWARD
+};
+
+} // namespace vksonar

@@ -1,0 +1,63 @@
+// Host stages 5 (noise + gain) and 6 (images), shared by both backends.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/plan.h"
+#include "vksonar/frame.h"
+#include "vksonar/result.h"
+
+namespace vksonar::host {
+
+// Counter-based RNG: a uniform double in (0, 1) from (seed, frame, beam, bin, stream), stateless,
+// identical on every backend and rerun.
+double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream);
+
+// Stage 5: frame.clean -> frame.intensity (speckle, ambient noise, TVG; uPa^2) -> frame.display ([0,1]).
+void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame);
+
+struct Rgb8 {
+    std::uint8_t r, g, b;
+};
+Rgb8 colormap(Colormap map, float value01);
+
+// Stage 6 images: 8-bit RGB, row-major, preallocated by the caller through the *Image structs.
+struct Image {
+    std::uint32_t width = 0, height = 0;
+    std::vector<std::uint8_t> rgb; // width * height * 3
+};
+// Polar image: one column per beam (port left), one row per bin (far range at the top).
+void polar_image(const Plan& plan, const Frame& frame, Image& out);
+// Cartesian fan (apex at bottom centre, or centre for hfov > 180) with range rings and bearing lines.
+class FanRenderer {
+public:
+    explicit FanRenderer(const Plan& plan); // precomputes the pixel -> (beam, bin) lookup once
+    void render(const Frame& frame, Image& out) const;
+    std::uint32_t width() const;
+    std::uint32_t height() const;
+
+private:
+    struct Lookup;
+    std::vector<std::int32_t> beam0_, bin0_; // -1: outside the fan
+    std::vector<float> beam_t_, bin_t_;
+    std::vector<std::uint8_t> overlay_; // 1 where rings/bearing lines are drawn
+    std::uint32_t width_ = 0, height_ = 0;
+    Colormap colormap_ = Colormap::sonar;
+};
+
+// Files. Errors name the path.
+[[nodiscard]] Result<void> write_png(const std::string& path, const Image& image);
+[[nodiscard]] Result<void> write_npy_f32(const std::string& path, const float* data, std::uint32_t rows,
+                                         std::uint32_t cols, std::uint32_t channels = 1);
+[[nodiscard]] Result<void> write_npy_u16(const std::string& path, const std::uint16_t* data, std::uint32_t rows,
+                                         std::uint32_t cols);
+// Point cloud of the polar scan: one point per (beam, bin) above the display floor at elevation 0,
+// binary little-endian PLY with float x y z intensity.
+[[nodiscard]] Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Frame& frame);
+// meta.json: beam angles, bin ranges, resolved config, effects, stage times, seed, frame convention.
+[[nodiscard]] Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
+                                           const std::string& extra_json_fields);
+
+} // namespace vksonar::host

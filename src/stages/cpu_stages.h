@@ -1,0 +1,38 @@
+// CPU reference of every GPU stage, with the same math (shaders/sonar_math.h) and the same data
+// layouts as the shaders. Real is the arithmetic precision (float or double); storage is float so
+// that any stage can take the GPU's output of the previous stage as input.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/plan.h"
+#include "scene/scene_data.h"
+#include "sonar_shared.h"
+#include "stages/stage_backend.h"
+
+namespace vksonar::cpu {
+
+// Stage 1: rasterizes every draw into every slice with Vulkan's rules (top-left fill convention,
+// pixel-centre sampling, reversed-Z, depth test GREATER, clip 0 <= z <= w).
+// depth: rows * columns (cleared to 0); material: rows * columns (cleared to kNoMaterial).
+void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
+                std::uint32_t* material);
+
+// Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
+template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);
+
+// Stage 3: echo2 = rows * columns * 2 (energy, slant range). normals4 may be null when the
+// incidence effect is off.
+template <class Real>
+void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2);
+
+// Stage 4: per-column range profiles (bins * columns), beam profiles (bins * beams) and the polar
+// scan after the side-lobe convolution (bins * beams).
+template <class Real>
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar);
+
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene);
+
+} // namespace vksonar::cpu

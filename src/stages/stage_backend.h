@@ -1,0 +1,26 @@
+// The interface both backends implement: depth pass, normals, echo and beamform for one pose.
+// Host stages (noise, gain, images) run after it and are shared.
+#pragma once
+
+#include <cstdint>
+
+#include "vksonar/frame.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+
+struct Plan;
+struct SceneData;
+
+class StageBackend {
+public:
+    virtual ~StageBackend() = default;
+    // Fills frame.clean (bins * beams, linear, relative to SL), the intermediates selected by
+    // save_mask, frame.times (one entry per GPU/CPU stage run) and frame.stages_run.
+    // Must not allocate once the frame is sized (Renderer::make_frame).
+    [[nodiscard]] virtual Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) = 0;
+    virtual const char* name() const = 0;
+};
+
+} // namespace vksonar
