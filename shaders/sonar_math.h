@@ -14,40 +14,45 @@
 #ifndef REAL
 #error "define REAL (float or double) before including sonar_math.h"
 #endif
+#ifdef __cplusplus
+#define VKS_FN inline
+#else
+#define VKS_FN
+#endif
 
 // Focal-normalized pixel-centre coordinate of index i of n across [-tan_half, tan_half].
-REAL pixel_coord(uint i, uint n, REAL tan_half) {
+VKS_FN REAL pixel_coord(uint i, uint n, REAL tan_half) {
     return (REAL(2) * (REAL(i) + REAL(0.5)) / REAL(n) - REAL(1)) * tan_half;
 }
 
 // Exact solid angle of a pixel of size du x dv (focal-normalized) centred at (u, v).
-REAL pixel_solid_angle(REAL u, REAL v, REAL du, REAL dv) {
+VKS_FN REAL pixel_solid_angle(REAL u, REAL v, REAL du, REAL dv) {
     REAL q = REAL(1) + u * u + v * v;
     return du * dv / (q * sqrt(q));
 }
 
 // View-space z (metres along the slice's optical axis) from reversed-Z depth d in (0, 1].
-REAL view_z_from_depth(REAL d, REAL depth_a, REAL depth_b) {
+VKS_FN REAL view_z_from_depth(REAL d, REAL depth_a, REAL depth_b) {
     return depth_a / (d - depth_b);
 }
 
 // Slant range of a pixel at view-space z.
-REAL slant_range(REAL view_z, REAL u, REAL v) {
+VKS_FN REAL slant_range(REAL view_z, REAL u, REAL v) {
     return view_z * sqrt(REAL(1) + u * u + v * v);
 }
 
 // Azimuth (positive to port) of a pixel column inside a slice centred at slice_azimuth.
-REAL pixel_azimuth(REAL slice_azimuth, REAL u) {
+VKS_FN REAL pixel_azimuth(REAL slice_azimuth, REAL u) {
     return slice_azimuth - atan(u);
 }
 
 // Elevation (positive up) of a pixel ray.
-REAL pixel_elevation(REAL u, REAL v) {
+VKS_FN REAL pixel_elevation(REAL u, REAL v) {
     return VKS_ATAN2(-v, sqrt(REAL(1) + u * u));
 }
 
 // sinc(x) = sin(x) / x, exact 1 at 0 and without 0/0 near it.
-REAL sinc_of(REAL x) {
+VKS_FN REAL sinc_of(REAL x) {
     REAL ax = abs(x);
     if (ax < REAL(1e-4)) {
         return REAL(1) - x * x / REAL(6);
@@ -58,7 +63,7 @@ REAL sinc_of(REAL x) {
 // Beam pattern power (1 on axis) at angle a off the beam axis.
 // k: pattern constant computed on the host so that the power is 0.5 at +-beamwidth/2
 // (sinc/hann: k = x_3dB / sin(bw/2); gaussian: k = ln 2 / (bw/2)^2); box: half_width.
-REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
+VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
     if (shape == 0u) { // box
         return abs(a) <= half_width ? REAL(1) : REAL(0);
     }
@@ -83,7 +88,7 @@ REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
 //   E = 10^(mu/10) * f(theta) * Omega * r^-2 * 10^(-2 alpha r / 10) * b_v(psi)^2
 // where f = cos(theta) for Lambert (so grazing goes smoothly to 0 and never divides by zero).
 // Spreading off keeps the footprint r^2 Omega but drops the r^-4 two-way loss.
-REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid_angle, REAL range_m,
+VKS_FN REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid_angle, REAL range_m,
                  REAL alpha_db_per_m, REAL vertical_power, bool spreading, bool absorption) {
     REAL e = backscatter_linear * scatter_factor * solid_angle * vertical_power;
     if (spreading) {
@@ -99,6 +104,8 @@ REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid_angle,
 }
 
 // Fractional range-bin coordinate: bin k covers [range_min + k w, range_min + (k+1) w).
-REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL bin_width_m) {
+VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL bin_width_m) {
     return (range_m - range_min_m) / bin_width_m;
 }
+
+#undef VKS_FN

@@ -22,6 +22,7 @@ struct RendererOptions {
 };
 
 class RendererImpl; // internal
+struct Plan;        // internal
 
 class Renderer {
 public:
@@ -44,6 +45,7 @@ public:
     const SonarConfig& config() const;
 
 private:
+    friend const Plan& renderer_plan(const Renderer&);
     std::unique_ptr<RendererImpl> impl_;
 };
 

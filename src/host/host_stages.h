@@ -14,6 +14,16 @@ namespace vksonar::host {
 // Counter-based RNG: a uniform double in (0, 1) from (seed, frame, beam, bin, stream), stateless,
 // identical on every backend and rerun.
 double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream);
+// Samplers on top of uniform01 (still counter-based: same key -> same draw). `stream` is the first
+// stream used; exp1 uses 1 stream, normal01 2, gamma_unit_mean kGammaStreams.
+constexpr std::uint32_t kGammaAttempts = 16;                      // Marsaglia-Tsang tries before the mean
+constexpr std::uint32_t kGammaStreams = 3 * kGammaAttempts + 1;   // 3 per try + 1 for looks < 1
+double sample_exp1(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream);
+double sample_normal01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
+                       std::uint32_t stream);
+// Gamma(looks, 1/looks): mean 1, variance 1/looks.
+double sample_gamma_unit_mean(double looks, std::uint64_t seed, std::uint64_t frame, std::uint32_t beam,
+                              std::uint32_t bin, std::uint32_t stream);
 
 // Stage 5: frame.clean -> frame.intensity (speckle, ambient noise, TVG; uPa^2) -> frame.display ([0,1]).
 void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame);
@@ -44,6 +54,7 @@ private:
     std::vector<float> beam_t_, bin_t_;
     std::vector<std::uint8_t> overlay_; // 1 where rings/bearing lines are drawn
     std::uint32_t width_ = 0, height_ = 0;
+    std::uint32_t beams_ = 0, bins_ = 0;
     Colormap colormap_ = Colormap::sonar;
 };
 

@@ -3,6 +3,7 @@
 // that any stage can take the GPU's output of the previous stage as input.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -22,6 +23,9 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
 
 // Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);
+// The same with caller-owned scratch of normals_scratch_count(plan) values (the overload above allocates it).
+template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch);
+std::size_t normals_scratch_count(const Plan& plan);
 
 // Stage 3: echo2 = rows * columns * 2 (energy, slant range). normals4 may be null when the
 // incidence effect is off.
@@ -32,6 +36,11 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
 // scan after the side-lobe convolution (bins * beams).
 template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar);
+// The same with caller-owned scratch of beamform_scratch_count(plan) values (the overload above allocates it).
+template <class Real>
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar,
+              Real* scratch);
+std::size_t beamform_scratch_count(const Plan& plan);
 
 std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene);
 

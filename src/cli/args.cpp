@@ -1,0 +1,158 @@
+// Command-line parsing helpers (see args.h).
+#include "cli/args.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+
+namespace vksonar::cli {
+namespace {
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t above = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = above;
+        }
+    }
+    return row[b.size()];
+}
+
+std::string trim(const std::string& text) {
+    const auto first = text.find_first_not_of(" \t\r\n");
+    if (first == std::string::npos) return {};
+    const auto last = text.find_last_not_of(" \t\r\n");
+    return text.substr(first, last - first + 1);
+}
+
+} // namespace
+
+std::string Args::value(const std::string& name, const std::string& fallback) const {
+    const auto it = options.find(name);
+    return it == options.end() ? fallback : it->second.back();
+}
+
+const std::vector<std::string>& Args::values(const std::string& name) const {
+    static const std::vector<std::string> none;
+    const auto it = options.find(name);
+    return it == options.end() ? none : it->second;
+}
+
+std::string closest_word(const std::string& word, const std::vector<std::string>& candidates) {
+    std::string best;
+    std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+    for (const auto& candidate : candidates) {
+        const std::size_t distance = edit_distance(word, candidate);
+        if (distance < best_distance) {
+            best_distance = distance;
+            best = candidate;
+        }
+    }
+    return best;
+}
+
+Args parse_args(const std::vector<std::string>& args, const std::vector<OptionSpec>& specs,
+                const std::string& command) {
+    Args parsed;
+    for (std::size_t i = 0; i < args.size(); ++i) {
+        const std::string& arg = args[i];
+        if (arg.size() < 2 || arg.compare(0, 2, "--") != 0 || arg == "--") {
+            if (arg.size() > 1 && arg[0] == '-' && arg != "-")
+                throw BadInput(command + ": unknown option '" + arg + "' (options start with --; see --help)");
+            parsed.positional.push_back(arg);
+            continue;
+        }
+        std::string name = arg;
+        std::string inline_value;
+        bool has_inline = false;
+        if (const auto equals = arg.find('='); equals != std::string::npos) {
+            name = arg.substr(0, equals);
+            inline_value = arg.substr(equals + 1);
+            has_inline = true;
+        }
+        const auto spec = std::find_if(specs.begin(), specs.end(), [&](const OptionSpec& s) { return name == s.name; });
+        if (spec == specs.end()) {
+            std::vector<std::string> names;
+            for (const auto& s : specs) names.emplace_back(s.name);
+            const std::string hint = closest_word(name, names);
+            throw BadInput(command + ": unknown option '" + name + "'" +
+                           (hint.empty() ? std::string() : " (did you mean '" + hint + "'?)"));
+        }
+        std::string value;
+        if (spec->takes_value) {
+            if (has_inline) {
+                value = inline_value;
+            } else {
+                if (i + 1 >= args.size()) throw BadInput(command + ": option " + name + " needs a value");
+                value = args[++i];
+            }
+        } else if (has_inline) {
+            throw BadInput(command + ": option " + name + " takes no value, got '" + inline_value + "'");
+        }
+        auto& slot = parsed.options[name];
+        if (!slot.empty() && !spec->repeatable)
+            throw BadInput(command + ": option " + name + " given twice ('" + slot.back() + "' and '" + value + "')");
+        slot.push_back(value);
+    }
+    return parsed;
+}
+
+double parse_double(const std::string& text, const std::string& what) {
+    const std::string t = trim(text);
+    errno = 0;
+    char* end = nullptr;
+    const double value = t.empty() ? 0.0 : std::strtod(t.c_str(), &end);
+    if (t.empty() || end != t.c_str() + t.size())
+        throw BadInput(what + ": '" + text + "' is not a number");
+    if (!std::isfinite(value) || errno == ERANGE) throw BadInput(what + ": '" + text + "' is not a finite number");
+    return value;
+}
+
+std::uint64_t parse_u64(const std::string& text, const std::string& what) {
+    const std::string t = trim(text);
+    errno = 0;
+    char* end = nullptr;
+    const unsigned long long value = t.empty() ? 0 : std::strtoull(t.c_str(), &end, 10);
+    if (t.empty() || t[0] == '-' || t[0] == '+' || end != t.c_str() + t.size() || errno == ERANGE)
+        throw BadInput(what + ": '" + text + "' is not a whole number >= 0");
+    return value;
+}
+
+std::vector<std::string> split(const std::string& text, char separator) {
+    std::vector<std::string> items;
+    std::size_t start = 0;
+    while (true) {
+        const auto end = text.find(separator, start);
+        items.push_back(trim(text.substr(start, end == std::string::npos ? std::string::npos : end - start)));
+        if (end == std::string::npos) break;
+        start = end + 1;
+    }
+    return items;
+}
+
+Pose parse_pose(const std::string& text, const std::string& what) {
+    const auto items = split(text, ',');
+    if (items.size() != 6)
+        throw BadInput(what + ": '" + text + "' needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
+                       std::to_string(items.size()));
+    static const char* const names[6] = {"x", "y", "z", "roll", "pitch", "yaw"};
+    double v[6];
+    for (int i = 0; i < 6; ++i) {
+        try {
+            v[i] = parse_double(items[static_cast<std::size_t>(i)], what);
+        } catch (const BadInput&) {
+            throw BadInput(what + ": '" + text + "': " + names[i] + " = '" + items[static_cast<std::size_t>(i)] +
+                           "' is not a finite number (needs x,y,z,roll,pitch,yaw)");
+        }
+    }
+    return Pose{v[0], v[1], v[2], v[3], v[4], v[5]};
+}
+
+} // namespace vksonar::cli

@@ -1,0 +1,58 @@
+// Command-line parsing for the vksonar tool: options, typed values and the two error kinds that map
+// to exit codes (BadInput -> 2, Failure -> 1).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "vksonar/scene.h"
+
+namespace vksonar::cli {
+
+// The user gave something unusable (exit code 2). what() is the message after "error: ".
+struct BadInput : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+// Valid input, but the work failed (exit code 1).
+struct Failure : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+struct OptionSpec {
+    const char* name; // "--scene"
+    bool takes_value;
+    bool repeatable;
+};
+
+struct Args {
+    std::map<std::string, std::vector<std::string>> options; // flags map to {""}
+    std::vector<std::string> positional;
+
+    bool has(const std::string& name) const { return options.count(name) != 0; }
+    // The value of a single-valued option, or `fallback` if it was not given.
+    std::string value(const std::string& name, const std::string& fallback = {}) const;
+    const std::vector<std::string>& values(const std::string& name) const;
+};
+
+// Parses `args` (after the subcommand) against `specs`. Accepts "--opt value" and "--opt=value".
+// Throws BadInput for an unknown option (naming the closest one), a missing value, or a repeated
+// single-valued option.
+Args parse_args(const std::vector<std::string>& args, const std::vector<OptionSpec>& specs,
+                const std::string& command);
+
+// The candidate closest to `word` by edit distance (empty if there are no candidates).
+std::string closest_word(const std::string& word, const std::vector<std::string>& candidates);
+
+// Strict number parsing (the whole text, finite). `what` names the option in the error.
+double parse_double(const std::string& text, const std::string& what);
+std::uint64_t parse_u64(const std::string& text, const std::string& what);
+// "x,y,z,roll,pitch,yaw" (metres, degrees). `what` names where the text came from.
+Pose parse_pose(const std::string& text, const std::string& what);
+
+// Splits on `separator`, trimming spaces around each item.
+std::vector<std::string> split(const std::string& text, char separator);
+
+} // namespace vksonar::cli

@@ -1,0 +1,16 @@
+// The vksonar subcommands. Each takes the arguments after its name and returns the exit code;
+// bad input is thrown as cli::BadInput (exit 2), other failures as cli::Failure (exit 1).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace vksonar::cli {
+
+int run_render(const std::vector<std::string>& args);
+int run_presets(const std::vector<std::string>& args);
+int run_info(const std::vector<std::string>& args);
+int run_compare(const std::vector<std::string>& args);
+int run_bench(const std::vector<std::string>& args);
+
+} // namespace vksonar::cli

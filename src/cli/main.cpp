@@ -1,0 +1,77 @@
+// vksonar: the command-line tool. Dispatches subcommands and turns errors into one stderr line and an
+// exit code: 0 success, 2 bad input, 1 any other failure.
+#include <cstdio>
+#include <exception>
+#include <string>
+#include <vector>
+
+#include "cli/args.h"
+#include "cli/commands.h"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: vksonar <command> [options]\n"
+    "\n"
+    "commands:\n"
+    "  render    render a scene (or a trajectory) to PNG/NPY/PLY/JSON files\n"
+    "  presets   list the sonar presets; --show NAME prints one as JSON\n"
+    "  info      print the Vulkan device and driver vksonar would use\n"
+    "  compare   compare two .npy scans (max abs, RMSE, max dB difference, PSNR)\n"
+    "  bench     benchmarks: speed | effects | accuracy\n"
+    "\n"
+    "Run 'vksonar <command> --help' for the options of a command.\n";
+
+int dispatch(const std::vector<std::string>& argv) {
+    using namespace vksonar::cli;
+    if (argv.empty()) {
+        std::fputs(kUsage, stderr);
+        return 2;
+    }
+    const std::string& command = argv[0];
+    const std::vector<std::string> rest(argv.begin() + 1, argv.end());
+    if (command == "--help" || command == "-h" || command == "help") {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
+    if (command == "--version") {
+        std::printf("vksonar 0.1.0\n");
+        return 0;
+    }
+    if (command == "render") return run_render(rest);
+    if (command == "presets") return run_presets(rest);
+    if (command == "info") return run_info(rest);
+    if (command == "compare") return run_compare(rest);
+    if (command == "bench") return run_bench(rest);
+    throw BadInput("unknown command '" + command + "' (did you mean '" +
+                   closest_word(command, {"render", "presets", "info", "compare", "bench"}) +
+                   "'?); run 'vksonar --help'");
+}
+
+// Messages go out as exactly one line.
+std::string one_line(std::string text) {
+    for (char& ch : text)
+        if (ch == '\n' || ch == '\r') ch = ' ';
+    return text;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    using namespace vksonar::cli;
+    try {
+        return dispatch(std::vector<std::string>(argv + 1, argv + argc));
+    } catch (const BadInput& e) {
+        std::fprintf(stderr, "error: %s\n", one_line(e.what()).c_str());
+        return 2;
+    } catch (const Failure& e) {
+        std::fprintf(stderr, "error: %s\n", one_line(e.what()).c_str());
+        return 1;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "error: internal: %s\n", one_line(e.what()).c_str());
+        return 1;
+    } catch (...) {
+        std::fprintf(stderr, "error: internal: unknown exception\n");
+        return 1;
+    }
+}

@@ -1,0 +1,476 @@
+// `vksonar render`: scene + sonar config + pose(s) -> PNG/NPY/PLY/JSON files.
+//
+// Order matters for the "no partial output" promise: every input (config layers, scene, poses,
+// trajectory, --save list) is read and validated first; only then is the output directory created,
+// and it is removed again if anything fails before the first frame is on disk. Each file is written
+// under a temporary name and renamed, so a reader never sees half a file.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/args.h"
+#include "cli/commands.h"
+#include "core/plan.h"
+#include "core/renderer_access.h"
+#include "host/host_stages.h"
+#include "vksonar/vksonar.h"
+
+namespace fs = std::filesystem;
+
+namespace vksonar::cli {
+namespace {
+
+constexpr const char* kUsage =
+    "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
+    "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
+    "                      [--seed N] [--backend vulkan|cpu] [--save fan,polar,depth,normals,echo,cloud]\n"
+    "                      --out DIR\n"
+    "\n"
+    "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
+    "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
+    "  --config      JSON file of config keys applied on top (see docs/config.md)\n"
+    "  --set         one config key, dotted for groups: --set effects.speckle=off --set display.db_min=50\n"
+    "                precedence: preset < scene effects < --config < --set\n"
+    "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down\n"
+    "                (default for the bundled scene: 0,0,0,0,10,0; otherwise 0,0,0,0,0,0)\n"
+    "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed);\n"
+    "                frames go to DIR/frame_NNNNNN/ with NNNNNN the line number\n"
+    "  --seed        noise seed (default 1)\n"
+    "  --backend     vulkan (default) or cpu\n"
+    "  --save        extra outputs: depth (depth.npy, view range m), normals (normals.npy), echo (echo.npy),\n"
+    "                cloud (cloud.ply); fan.png, polar.png, polar.npy, polar_u16.npy and meta.json are always written\n"
+    "  --out         output directory (created)\n";
+
+const std::vector<std::string> kSaveItems = {"fan", "polar", "depth", "normals", "echo", "cloud"};
+
+struct SaveSet {
+    bool depth = false, normals = false, echo = false, cloud = false;
+    std::uint32_t mask() const {
+        return (depth ? save_depth : 0u) | (normals ? save_normals : 0u) | (echo ? save_echo : 0u);
+    }
+};
+
+struct TrajectoryPose {
+    Pose pose;
+    std::uint64_t line = 0;
+};
+
+// ---- inputs ------------------------------------------------------------------------------------
+
+fs::path executable_dir() {
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    return ec ? fs::path() : exe.parent_path();
+}
+
+// The bundled default scene: the source tree's assets (VKSONAR_ASSET_DIR), then an installed tree.
+fs::path find_default_scene() {
+    std::vector<fs::path> candidates;
+#ifdef VKSONAR_ASSET_DIR
+    candidates.emplace_back(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+#endif
+    const fs::path exe_dir = executable_dir();
+    if (!exe_dir.empty()) {
+        candidates.push_back(exe_dir / ".." / "share" / "vksonar" / "assets" / "scenes" / "default.gltf");
+        candidates.push_back(exe_dir / ".." / "assets" / "scenes" / "default.gltf");
+    }
+    std::string looked;
+    for (const auto& candidate : candidates) {
+        std::error_code ec;
+        if (fs::is_regular_file(candidate, ec)) return candidate.lexically_normal();
+        looked += (looked.empty() ? "" : ", ") + candidate.lexically_normal().string();
+    }
+    throw Failure("the bundled default scene is missing (looked in " + looked + "); pass --scene FILE.gltf");
+}
+
+bool looks_like_file(const std::string& text) {
+    return text.find('/') != std::string::npos || (text.size() > 5 && text.compare(text.size() - 5, 5, ".json") == 0);
+}
+
+SonarConfig base_config(const std::string& sonar) {
+    std::error_code ec;
+    if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
+        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
+        auto config = apply_config_file(SonarConfig{}, sonar);
+        if (!config) throw BadInput(config.error().message);
+        if (config->name == SonarConfig{}.name) config->name = fs::path(sonar).stem().string();
+        return config.value();
+    }
+    auto preset = load_preset(sonar);
+    if (!preset) throw BadInput("--sonar: " + preset.error().message);
+    return preset.value();
+}
+
+SaveSet parse_save(const std::vector<std::string>& values) {
+    SaveSet save;
+    for (const auto& value : values) {
+        for (const auto& item : split(value, ',')) {
+            if (item.empty()) continue;
+            if (item == "depth") save.depth = true;
+            else if (item == "normals") save.normals = true;
+            else if (item == "echo") save.echo = true;
+            else if (item == "cloud") save.cloud = true;
+            else if (item == "fan" || item == "polar") continue; // always written
+            else
+                throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
+                               closest_word(item, kSaveItems) + "'? valid: fan,polar,depth,normals,echo,cloud)");
+        }
+    }
+    return save;
+}
+
+std::vector<TrajectoryPose> read_trajectory(const std::string& path) {
+    std::ifstream file(path);
+    if (!file) throw BadInput("--trajectory " + path + ": cannot open");
+    std::vector<TrajectoryPose> poses;
+    std::string line;
+    std::uint64_t number = 0;
+    bool seen_data = false;
+    while (std::getline(file, line)) {
+        ++number;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        const auto first = line.find_first_not_of(" \t");
+        if (first == std::string::npos || line[first] == '#') continue;
+        const std::string where = path + ":" + std::to_string(number);
+        // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw").
+        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos) {
+            seen_data = true;
+            continue;
+        }
+        seen_data = true;
+        poses.push_back({parse_pose(line, where), number});
+    }
+    if (file.bad()) throw BadInput("--trajectory " + path + ": read error");
+    if (poses.empty()) throw BadInput("--trajectory " + path + ": no poses in the file");
+    return poses;
+}
+
+// ---- output directory --------------------------------------------------------------------------
+
+// Creates the output directory; unless keep() is called, removes what it created when destroyed
+// (an error before the first frame leaves nothing behind).
+class OutputDir {
+public:
+    explicit OutputDir(const fs::path& dir) : dir_(dir) {
+        std::error_code ec;
+        if (fs::exists(dir, ec)) {
+            if (!fs::is_directory(dir, ec)) throw BadInput("--out " + dir.string() + ": exists and is not a directory");
+        } else {
+            // Remember the first missing ancestor so cleanup removes exactly what was created.
+            fs::path missing = dir;
+            for (fs::path p = dir; !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+                missing = p;
+                if (p == p.parent_path()) break;
+            }
+            if (!fs::create_directories(dir, ec) || ec)
+                throw BadInput("--out " + dir.string() + ": cannot create the output directory (" +
+                               (ec ? ec.message() : std::string("unknown error")) + ")");
+            created_ = missing;
+        }
+        // Root passes access(W_OK) everywhere, so probe with a real file.
+        const fs::path probe = dir / (".vksonar-probe-" + std::to_string(::getpid()));
+        std::FILE* f = std::fopen(probe.c_str(), "wb");
+        if (!f) {
+            cleanup();
+            throw BadInput("--out " + dir.string() + ": output directory is not writable");
+        }
+        std::fclose(f);
+        fs::remove(probe, ec);
+    }
+    ~OutputDir() {
+        if (!keep_) cleanup();
+    }
+    OutputDir(const OutputDir&) = delete;
+    OutputDir& operator=(const OutputDir&) = delete;
+
+    void keep() { keep_ = true; }
+    const fs::path& path() const { return dir_; }
+
+private:
+    void cleanup() {
+        std::error_code ec;
+        if (!created_.empty()) fs::remove_all(created_, ec);
+        created_.clear();
+    }
+    fs::path dir_;
+    fs::path created_;
+    bool keep_ = false;
+};
+
+// Writes through `write(temporary path)`, then renames onto `path`.
+template <class WriteFn> void write_atomically(const fs::path& path, WriteFn&& write) {
+    const fs::path temporary = path.parent_path() / (".~" + path.filename().string());
+    Result<void> written = write(temporary.string());
+    std::error_code ec;
+    if (!written) {
+        fs::remove(temporary, ec);
+        throw Failure(written.error().message);
+    }
+    fs::rename(temporary, path, ec);
+    if (ec) {
+        fs::remove(temporary, ec);
+        throw Failure("cannot write " + path.string() + ": " + ec.message());
+    }
+}
+
+// ---- per-frame outputs -------------------------------------------------------------------------
+
+struct Outputs {
+    const Plan& plan;
+    const SaveSet& save;
+    const host::FanRenderer& fan;
+    std::string config_json;
+    std::string scene_path;
+    std::string backend;
+    std::string device;
+    // Scratch reused across frames.
+    host::Image image;
+    std::vector<std::uint16_t> quantized;
+    std::vector<float> view_range;
+};
+
+std::string extra_meta_fields(const Outputs& out, const Pose& pose) {
+    nlohmann::ordered_json extra;
+    extra["config"] = nlohmann::ordered_json::parse(out.config_json);
+    extra["scene"] = out.scene_path;
+    extra["pose"] = {{"x_m", pose.x_m},           {"y_m", pose.y_m},         {"z_m", pose.z_m},
+                     {"roll_deg", pose.roll_deg}, {"pitch_deg", pose.pitch_deg}, {"yaw_deg", pose.yaw_deg}};
+    extra["backend"] = out.backend;
+    extra["device"] = out.device;
+    return extra.dump();
+}
+
+// Reversed-Z depth -> slant range along each pixel's ray (0 where nothing was hit). Same formulas as
+// shaders/sonar_math.h (pixel_coord, view_z_from_depth, slant_range), in double.
+void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range) {
+    range.assign(frame.depth.size(), 0.0f);
+    const std::uint32_t width = plan.slice_columns ? plan.slice_columns : 1;
+    auto pixel_coord = [](std::uint32_t i, std::uint32_t n, double tan_half) {
+        return (2.0 * (i + 0.5) / n - 1.0) * tan_half;
+    };
+    for (std::uint32_t row = 0; row < frame.rows; ++row) {
+        const double v = pixel_coord(row, frame.rows, plan.tan_half_v);
+        for (std::uint32_t column = 0; column < frame.columns; ++column) {
+            const std::size_t p = static_cast<std::size_t>(row) * frame.columns + column;
+            if (p >= frame.depth.size()) return;
+            const double d = frame.depth[p];
+            if (!(d > 0.0) || d <= plan.depth_b) continue;
+            const double u = pixel_coord(column % width, width, plan.tan_half_h);
+            const double view_z = plan.depth_a / (d - plan.depth_b);
+            const double r = view_z * std::sqrt(1.0 + u * u + v * v);
+            range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;
+        }
+    }
+}
+
+void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose) {
+    const Plan& plan = out.plan;
+    out.fan.render(frame, out.image);
+    write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+    host::polar_image(plan, frame, out.image);
+    write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+    write_atomically(dir / "polar.npy", [&](const std::string& p) {
+        return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
+    });
+    out.quantized.resize(frame.display.size());
+    for (std::size_t i = 0; i < frame.display.size(); ++i) {
+        const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
+        out.quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
+    }
+    write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
+        return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
+    });
+    if (out.save.depth) {
+        depth_to_view_range(plan, frame, out.view_range);
+        write_atomically(dir / "depth.npy", [&](const std::string& p) {
+            return host::write_npy_f32(p, out.view_range.data(), frame.rows, frame.columns);
+        });
+    }
+    if (out.save.normals)
+        write_atomically(dir / "normals.npy", [&](const std::string& p) {
+            return host::write_npy_f32(p, frame.normals.data(), frame.rows, frame.columns, 4);
+        });
+    if (out.save.echo)
+        write_atomically(dir / "echo.npy", [&](const std::string& p) {
+            return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
+        });
+    if (out.save.cloud)
+        write_atomically(dir / "cloud.ply", [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
+    const std::string extra = extra_meta_fields(out, pose);
+    write_atomically(dir / "meta.json",
+                     [&](const std::string& p) { return host::write_meta_json(p, plan, frame, extra); });
+}
+
+std::string frame_dir_name(std::uint64_t line) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%06llu", static_cast<unsigned long long>(line));
+    return name;
+}
+
+} // namespace
+
+int run_render(const std::vector<std::string>& argv) {
+    const Args args = parse_args(argv,
+                                 {{"--scene", true, false},
+                                  {"--sonar", true, false},
+                                  {"--config", true, false},
+                                  {"--pose", true, false},
+                                  {"--trajectory", true, false},
+                                  {"--set", true, true},
+                                  {"--seed", true, false},
+                                  {"--backend", true, false},
+                                  {"--save", true, true},
+                                  {"--out", true, false},
+                                  {"--help", false, false}},
+                                 "render");
+    if (args.has("--help")) {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
+    if (!args.positional.empty())
+        throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
+    if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
+    if (args.has("--pose") && args.has("--trajectory"))
+        throw BadInput("render: give --pose or --trajectory, not both");
+
+    // 1. Options that need no files.
+    Backend backend = Backend::vulkan;
+    const std::string backend_name = args.value("--backend", "vulkan");
+    if (backend_name == "cpu") backend = Backend::cpu;
+    else if (backend_name != "vulkan")
+        throw BadInput("--backend: '" + backend_name + "' is not a backend (vulkan or cpu)");
+    const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
+    const SaveSet save = parse_save(args.values("--save"));
+
+    // 2. Scene (its effects sit between the preset and the config file).
+    const bool default_scene = !args.has("--scene");
+    const std::string scene_path = default_scene ? find_default_scene().string() : args.value("--scene");
+    if (!default_scene) {
+        std::error_code ec;
+        if (!fs::is_regular_file(scene_path, ec)) throw BadInput("--scene " + scene_path + ": no such file");
+    }
+
+    // 3. Poses.
+    std::vector<TrajectoryPose> poses;
+    if (args.has("--trajectory")) {
+        poses = read_trajectory(args.value("--trajectory"));
+    } else if (args.has("--pose")) {
+        poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
+    } else {
+        Pose pose;
+        if (default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
+        poses.push_back({pose, 0});
+    }
+
+    // 4. Config layers: preset < scene effects < --config < --set. The user's layers are checked
+    //    before the (possibly slow) scene load, then applied again above the scene's effects.
+    const SonarConfig preset = base_config(args.value("--sonar", "default"));
+    auto apply_user_layers = [&](SonarConfig config) {
+        if (args.has("--config")) {
+            std::error_code ec;
+            const std::string path = args.value("--config");
+            if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
+            auto layered = apply_config_file(config, path);
+            if (!layered) throw BadInput(layered.error().message);
+            config = layered.value();
+        }
+        for (const auto& item : args.values("--set")) {
+            auto layered = apply_config_override(config, item);
+            if (!layered) throw BadInput(layered.error().message);
+            config = layered.value();
+        }
+        if (std::string problem = config.validate(); !problem.empty()) throw BadInput("invalid config: " + problem);
+        return config;
+    };
+    SonarConfig config = apply_user_layers(preset);
+    auto scene = Scene::load_gltf(scene_path);
+    if (!scene) {
+        if (default_scene) throw Failure(scene.error().message);
+        throw BadInput(scene.error().message);
+    }
+    const std::string& scene_effects = scene->effects_json();
+    if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
+        auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}",
+                                         scene_path + " (scene extras vksonar.effects)");
+        if (!layered) throw BadInput(layered.error().message);
+        config = apply_user_layers(layered.value());
+    }
+
+    // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
+    OutputDir out_dir(args.value("--out"));
+
+    // 6. Device and renderer.
+    Context context;
+    std::string device = "cpu";
+    if (backend == Backend::vulkan) {
+        ContextOptions options;
+        options.enable_validation = false;
+        auto created = Context::create(options);
+        if (!created) throw Failure(created.error().message + " (try --backend cpu)");
+        context = std::move(created.value());
+        device = context.device_description();
+    } else {
+        context = Context::cpu_only();
+    }
+    RendererOptions renderer_options;
+    renderer_options.backend = backend;
+    renderer_options.seed = seed;
+    renderer_options.save_mask = save.mask();
+    auto renderer = Renderer::create(context, config, scene.value(), renderer_options);
+    if (!renderer) {
+        const Error& e = renderer.error();
+        if (e.code == ErrorCode::invalid_argument || e.code == ErrorCode::parse || e.code == ErrorCode::unsupported)
+            throw BadInput(e.message);
+        throw Failure(e.message + (backend == Backend::vulkan ? " (try --backend cpu)" : ""));
+    }
+    const Plan& plan = renderer_plan(renderer.value());
+    const host::FanRenderer fan(plan);
+    Outputs outputs{plan, save, fan, config_to_json(plan.config), scene_path, backend_name, device, {}, {}, {}};
+    Frame frame = renderer->make_frame();
+
+    // 7. Frames.
+    const bool trajectory = args.has("--trajectory");
+    const bool progress = trajectory && ::isatty(::fileno(stderr));
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        const TrajectoryPose& item = poses[i];
+        auto rendered = renderer->render(item.pose, item.line, frame);
+        if (!rendered) {
+            const std::string where = trajectory ? args.value("--trajectory") + ":" + std::to_string(item.line) + ": "
+                                                 : std::string();
+            throw Failure(where + rendered.error().message);
+        }
+        fs::path dir = out_dir.path();
+        if (trajectory) {
+            dir /= frame_dir_name(item.line);
+            std::error_code ec;
+            fs::create_directories(dir, ec);
+            if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
+        }
+        write_frame(outputs, dir, frame, item.pose);
+        out_dir.keep();
+        if (progress) {
+            const double seconds =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            std::fprintf(stderr, "\rvksonar: frame %zu/%zu (line %llu), %.1f frames/s", i + 1, poses.size(),
+                         static_cast<unsigned long long>(item.line),
+                         seconds > 0 ? static_cast<double>(i + 1) / seconds : 0.0);
+            std::fflush(stderr);
+        }
+    }
+    if (progress) std::fputc('\n', stderr);
+    return 0;
+}
+
+} // namespace vksonar::cli

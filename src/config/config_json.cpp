@@ -1,0 +1,205 @@
+// SonarConfig <-> JSON (files, --set overrides, meta.json) and SonarConfig::validate().
+// Every key goes through the table in config_keys.cpp.
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "config/config_keys.h"
+#include "vksonar/config.h"
+
+namespace vksonar {
+namespace {
+
+using config_keys::Json;
+
+std::string unknown_key_message(const std::string& name) {
+    return "unknown key '" + name + "' (did you mean '" + config_keys::closest(name) + "'?)";
+}
+
+// Applies the members of `object` (whose keys are relative to `prefix`) to `config`.
+// Returns an empty string or the first problem, naming the dotted key.
+std::string apply_object(SonarConfig& config, const Json& object, const std::string& prefix) {
+    for (auto it = object.begin(); it != object.end(); ++it) {
+        const std::string name = prefix + it.key();
+        if (const auto* key = config_keys::find(name)) {
+            std::string problem = key->set(config, it.value());
+            if (!problem.empty()) return "key '" + name + "': " + problem;
+            continue;
+        }
+        if (config_keys::is_group(name)) {
+            if (!it.value().is_object())
+                return "key '" + name + "': expected an object of " + name + ".* keys, got " + it.value().dump();
+            std::string problem = apply_object(config, it.value(), name + ".");
+            if (!problem.empty()) return problem;
+            continue;
+        }
+        return unknown_key_message(name);
+    }
+    return {};
+}
+
+std::string format_number(double value) {
+    std::ostringstream out;
+    out.precision(10);
+    out << value;
+    return out.str();
+}
+
+// Helpers for validate(): each returns true when the check fails and fills `problem`.
+struct Checker {
+    std::string problem;
+
+    bool fail(const std::string& key, double value, const std::string& rule) {
+        if (problem.empty()) problem = key + " = " + format_number(value) + ": " + rule;
+        return true;
+    }
+    void check(bool ok, const std::string& key, double value, const std::string& rule) {
+        if (!ok) fail(key, value, rule);
+    }
+};
+
+} // namespace
+
+Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string& json_text,
+                                      const std::string& origin) {
+    Json root;
+    try {
+        root = Json::parse(json_text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/true);
+    } catch (const nlohmann::json::parse_error& e) {
+        // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ...".
+        std::string what = e.what();
+        const auto pos = what.find("] ");
+        if (pos != std::string::npos) what = what.substr(pos + 2);
+        return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
+    }
+    if (!root.is_object())
+        return make_error(ErrorCode::parse, origin + ": expected a JSON object of config keys, got " +
+                                                std::string(root.type_name()));
+    SonarConfig config = base;
+    std::string problem = apply_object(config, root, "");
+    if (!problem.empty()) return make_error(ErrorCode::invalid_argument, origin + ": " + problem);
+    return config;
+}
+
+Result<SonarConfig> apply_config_file(const SonarConfig& base, const std::string& path) {
+    std::ifstream file(path, std::ios::binary);
+    if (!file) return make_error(ErrorCode::io, path + ": cannot open config file");
+    std::ostringstream text;
+    text << file.rdbuf();
+    if (file.bad()) return make_error(ErrorCode::io, path + ": cannot read config file");
+    return apply_config_json(base, text.str(), path);
+}
+
+Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::string& key_equals_value) {
+    const auto equals = key_equals_value.find('=');
+    if (equals == std::string::npos || equals == 0)
+        return make_error(ErrorCode::invalid_argument,
+                          "--set " + key_equals_value + ": expected key=value (e.g. --set effects.speckle=off)");
+    const std::string name = key_equals_value.substr(0, equals);
+    const std::string value = key_equals_value.substr(equals + 1);
+    const auto* key = config_keys::find(name);
+    if (!key) return make_error(ErrorCode::invalid_argument, "--set " + key_equals_value + ": " + unknown_key_message(name));
+    SonarConfig config = base;
+    std::string problem = key->set(config, config_keys::parse_override_value(*key, value));
+    if (!problem.empty())
+        return make_error(ErrorCode::invalid_argument, "--set " + key_equals_value + ": key '" + name + "': " + problem);
+    return config;
+}
+
+std::string config_to_json(const SonarConfig& config) {
+    Json root = Json::object();
+    for (const auto& key : config_keys::all()) {
+        Json* node = &root;
+        std::string name = key.name;
+        std::size_t dot;
+        while ((dot = name.find('.')) != std::string::npos) {
+            node = &(*node)[name.substr(0, dot)];
+            name = name.substr(dot + 1);
+        }
+        (*node)[name] = key.get(config);
+    }
+    return root.dump(2);
+}
+
+std::string SonarConfig::validate() const {
+    Checker c;
+
+    // Every number in the table must be finite (NaN/Inf arrive through --set or a hand-written file).
+    for (const auto& key : config_keys::all()) {
+        const Json value = key.get(*this);
+        if (value.is_number_float() && !std::isfinite(value.get<double>()))
+            return std::string(key.name) + " = " + format_number(value.get<double>()) + ": must be a finite number";
+    }
+    for (std::size_t i = 0; i < beam_angles_deg.size(); ++i)
+        if (!std::isfinite(beam_angles_deg[i]))
+            return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                   ": must be a finite number";
+
+    // Geometry.
+    c.check(frequency_hz > 0, "frequency", frequency_hz, "must be > 0 Hz");
+    c.check(hfov_deg > 0 && hfov_deg <= 360, "hfov", hfov_deg, "must be in (0, 360] degrees");
+    c.check(vfov_deg > 0 && vfov_deg < 180, "vfov", vfov_deg, "must be in (0, 180) degrees");
+    c.check(horizontal_beamwidth_deg > 0 && horizontal_beamwidth_deg <= 180, "horizontal_beamwidth",
+            horizontal_beamwidth_deg, "must be in (0, 180] degrees");
+    c.check(beams >= 1, "beams", beams, "must be at least 1");
+    c.check(beams <= 16384, "beams", beams, "must be at most 16384");
+    c.check(bins >= 1, "bins", bins, "must be at least 1");
+    c.check(bins <= 65536, "bins", bins, "must be at most 65536");
+    c.check(range_min_m > 0, "range_min", range_min_m, "must be > 0 m");
+    c.check(range_max_m > range_min_m, "range_max", range_max_m,
+            "must be greater than range_min (" + format_number(range_min_m) + " m)");
+    c.check(range_max_m <= 1e5, "range_max", range_max_m, "must be at most 100000 m");
+    if (c.problem.empty())
+        c.check(range_max_m / range_min_m <= 1e6, "range_max", range_max_m,
+                "range_max / range_min must be at most 1e6 (range_min = " + format_number(range_min_m) +
+                    " m); raise range_min");
+    c.check(sound_speed_mps > 0, "sound_speed", sound_speed_mps, "must be > 0 m/s");
+    if (!c.problem.empty()) return c.problem;
+
+    if (!beam_angles_deg.empty()) {
+        if (beam_angles_deg.size() != beams)
+            return "beams = " + std::to_string(beams) + ": does not match beam_angles (" +
+                   std::to_string(beam_angles_deg.size()) + " entries); set one or clear beam_angles";
+        const double half = hfov_deg / 2 + 1e-9;
+        for (std::size_t i = 0; i < beam_angles_deg.size(); ++i) {
+            if (std::abs(beam_angles_deg[i]) > half)
+                return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                       ": outside +-hfov/2 (" + format_number(hfov_deg / 2) + " degrees)";
+            if (i > 0 && !(beam_angles_deg[i] < beam_angles_deg[i - 1]))
+                return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                       ": the table must be strictly decreasing (port first), but beam_angles[" +
+                       std::to_string(i - 1) + "] = " + format_number(beam_angles_deg[i - 1]);
+        }
+    }
+
+    // Water (only used for automatic absorption, but nonsense is nonsense).
+    c.check(salinity_ppt >= 0, "salinity", salinity_ppt, "must be >= 0 ppt");
+    c.check(water_depth_m >= 0, "water_depth", water_depth_m, "must be >= 0 m");
+    c.check(ph > 0 && ph <= 14, "ph", ph, "must be in (0, 14]");
+    c.check(temperature_c > -5 && temperature_c < 100, "temperature", temperature_c, "must be in (-5, 100) degC");
+
+    // Noise and gain.
+    c.check(speckle_looks > 0, "speckle_looks", speckle_looks, "must be > 0");
+    c.check(speckle_gaussian_sigma >= 0, "speckle_sigma", speckle_gaussian_sigma, "must be >= 0");
+    c.check(db_max > db_min, "display.db_max", db_max,
+            "must be greater than display.db_min (" + format_number(db_min) + " dB)");
+    c.check(fan_width_px >= 16 && fan_width_px <= 16384, "display.fan_width", fan_width_px,
+            "must be in [16, 16384] pixels");
+
+    // Accuracy knobs.
+    c.check(pixels_per_beam > 0 && pixels_per_beam <= 64, "accuracy.pixels_per_beam", pixels_per_beam,
+            "must be in (0, 64]");
+    c.check(rows_per_vfov >= 1 && rows_per_vfov <= 4096, "accuracy.rows_per_vfov", rows_per_vfov,
+            "must be in [1, 4096]");
+    c.check(vertical_coverage >= 1 && vertical_coverage <= 10, "accuracy.vertical_coverage", vertical_coverage,
+            "must be in [1, 10] vertical beamwidths");
+    c.check(max_slice_deg > 0 && max_slice_deg <= 120, "accuracy.max_slice", max_slice_deg,
+            "must be in (0, 120] degrees");
+    c.check(sidelobe_kernel_beamwidths >= 0 && sidelobe_kernel_beamwidths <= 1000,
+            "accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "must be in [0, 1000]");
+    return c.problem;
+}
+
+} // namespace vksonar

@@ -1,0 +1,387 @@
+// The SonarConfig key table (see config_keys.h). Accessors are generated from pointers to members so
+// each row names its field once.
+#include "config/config_keys.h"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace vksonar::config_keys {
+namespace {
+
+// Short description of a JSON value for error messages: the value itself, clipped.
+std::string describe(const Json& value) {
+    std::string text = value.dump();
+    if (text.size() > 40) text = text.substr(0, 37) + "...";
+    return text;
+}
+
+// ---- enum names --------------------------------------------------------------------------------
+
+template <class E> struct EnumNames;
+template <> struct EnumNames<BeamPattern> {
+    static constexpr std::array<const char*, 4> names{"box", "sinc", "hann", "gaussian"};
+};
+template <> struct EnumNames<BeamSpacing> {
+    static constexpr std::array<const char*, 2> names{"equiangular", "equisine"};
+};
+template <> struct EnumNames<SpeckleModel> {
+    static constexpr std::array<const char*, 3> names{"rayleigh", "gamma", "gaussian"};
+};
+template <> struct EnumNames<RangeKernel> {
+    static constexpr std::array<const char*, 2> names{"nearest", "tent"};
+};
+template <> struct EnumNames<NormalMethod> {
+    static constexpr std::array<const char*, 2> names{"sobel3", "sobel5"};
+};
+template <> struct EnumNames<Colormap> {
+    static constexpr std::array<const char*, 4> names{"gray", "viridis", "sonar", "jet"};
+};
+template <> struct EnumNames<Precision> {
+    static constexpr std::array<const char*, 2> names{"float", "double"};
+};
+template <> struct EnumNames<EffectMode> {
+    static constexpr std::array<const char*, 3> names{"auto", "on", "off"};
+};
+
+template <class E> std::string choices_text() {
+    std::string text;
+    for (const char* name : EnumNames<E>::names) {
+        if (!text.empty()) text += '|';
+        text += name;
+    }
+    return text;
+}
+
+// ---- generic accessors -------------------------------------------------------------------------
+
+template <double SonarConfig::*M> Json get_number(const SonarConfig& c) { return c.*M; }
+template <double SonarConfig::*M> std::string set_number(SonarConfig& c, const Json& v) {
+    if (!v.is_number()) return "expected a number, got " + describe(v);
+    c.*M = v.get<double>();
+    return {};
+}
+
+template <std::uint32_t SonarConfig::*M> Json get_count(const SonarConfig& c) { return c.*M; }
+template <std::uint32_t SonarConfig::*M> std::string set_count(SonarConfig& c, const Json& v) {
+    if (!v.is_number()) return "expected a whole number, got " + describe(v);
+    const double x = v.get<double>();
+    if (!std::isfinite(x) || x != std::floor(x) || x < 0 ||
+        x > static_cast<double>(std::numeric_limits<std::uint32_t>::max()))
+        return "expected a whole number >= 0, got " + describe(v);
+    c.*M = static_cast<std::uint32_t>(x);
+    return {};
+}
+
+template <std::string SonarConfig::*M> Json get_text(const SonarConfig& c) { return c.*M; }
+template <std::string SonarConfig::*M> std::string set_text(SonarConfig& c, const Json& v) {
+    if (!v.is_string()) return "expected a string, got " + describe(v);
+    c.*M = v.get<std::string>();
+    return {};
+}
+
+template <class E> std::string set_enum_value(E& field, const Json& v) {
+    if (v.is_string()) {
+        const auto text = v.get<std::string>();
+        const auto& names = EnumNames<E>::names;
+        for (std::size_t i = 0; i < names.size(); ++i) {
+            if (text == names[i]) {
+                field = static_cast<E>(i);
+                return {};
+            }
+        }
+    }
+    return "expected one of " + choices_text<E>() + ", got " + describe(v);
+}
+
+template <class E, E SonarConfig::*M> Json get_enum(const SonarConfig& c) {
+    return EnumNames<E>::names[static_cast<std::size_t>(c.*M)];
+}
+template <class E, E SonarConfig::*M> std::string set_enum(SonarConfig& c, const Json& v) {
+    return set_enum_value(c.*M, v);
+}
+
+template <EffectMode EffectsConfig::*M> Json get_effect(const SonarConfig& c) {
+    return EnumNames<EffectMode>::names[static_cast<std::size_t>(c.effects.*M)];
+}
+template <EffectMode EffectsConfig::*M> std::string set_effect(SonarConfig& c, const Json& v) {
+    if (v.is_boolean()) { // true/false read naturally in JSON files
+        c.effects.*M = v.get<bool>() ? EffectMode::on : EffectMode::off;
+        return {};
+    }
+    return set_enum_value(c.effects.*M, v);
+}
+
+// ---- special keys ------------------------------------------------------------------------------
+
+Json get_beam_angles(const SonarConfig& c) { return c.beam_angles_deg; }
+std::string set_beam_angles(SonarConfig& c, const Json& v) {
+    if (!v.is_array()) return "expected an array of angles in degrees, got " + describe(v);
+    std::vector<double> angles;
+    angles.reserve(v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) {
+        if (!v[i].is_number()) return "entry " + std::to_string(i) + " is not a number: " + describe(v[i]);
+        angles.push_back(v[i].get<double>());
+    }
+    c.beam_angles_deg = std::move(angles);
+    // The table defines the beam count; keeping `beams` in step lets validate() catch a later,
+    // contradictory `beams`.
+    if (!c.beam_angles_deg.empty()) c.beams = static_cast<std::uint32_t>(c.beam_angles_deg.size());
+    return {};
+}
+
+Json get_absorption(const SonarConfig& c) {
+    if (c.absorption_db_per_m < 0) return "auto";
+    return c.absorption_db_per_m;
+}
+std::string set_absorption(SonarConfig& c, const Json& v) {
+    if (v.is_string() && v.get<std::string>() == "auto") {
+        c.absorption_db_per_m = -1.0;
+        return {};
+    }
+    if (!v.is_number()) return "expected a number (dB/m) or \"auto\", got " + describe(v);
+    const double x = v.get<double>();
+    if (x < 0) return "expected a number >= 0 (dB/m) or \"auto\", got " + describe(v);
+    c.absorption_db_per_m = x;
+    return {};
+}
+
+// ---- the table ---------------------------------------------------------------------------------
+
+#define VKS_NUMBER(key, member, unit, doc) \
+    ConfigKey { key, KeyType::number, unit, "", doc, &get_number<&SonarConfig::member>, &set_number<&SonarConfig::member> }
+#define VKS_COUNT(key, member, unit, doc) \
+    ConfigKey { key, KeyType::count, unit, "", doc, &get_count<&SonarConfig::member>, &set_count<&SonarConfig::member> }
+#define VKS_TEXT(key, member, doc) \
+    ConfigKey { key, KeyType::text, "", "", doc, &get_text<&SonarConfig::member>, &set_text<&SonarConfig::member> }
+#define VKS_ENUM(key, E, member, choices, doc)                                                                  \
+    ConfigKey {                                                                                                 \
+        key, KeyType::choice, "", choices, doc, &get_enum<E, &SonarConfig::member>, &set_enum<E, &SonarConfig::member> \
+    }
+#define VKS_EFFECT(name, doc)                                                                                       \
+    ConfigKey {                                                                                                     \
+        "effects." #name, KeyType::choice, "", "auto|on|off", doc, &get_effect<&EffectsConfig::name>,               \
+            &set_effect<&EffectsConfig::name>                                                                       \
+    }
+
+std::vector<ConfigKey> make_table() {
+    return {
+        VKS_TEXT("name", name, "Preset or device name"),
+        VKS_TEXT("description", description, "One-line description"),
+        VKS_TEXT("source", source, "Where the device figures come from (datasheet citation)"),
+
+        VKS_NUMBER("frequency", frequency_hz, "Hz", "Centre frequency (sets absorption and wavelength)"),
+        VKS_NUMBER("hfov", hfov_deg, "deg", "Horizontal field of view, (0, 360]"),
+        VKS_NUMBER("vfov", vfov_deg, "deg", "Vertical beamwidth (two-way -3 dB), (0, 180)"),
+        VKS_NUMBER("horizontal_beamwidth", horizontal_beamwidth_deg, "deg",
+                   "Two-way -3 dB receive beamwidth of one beam"),
+        VKS_COUNT("beams", beams, "", "Number of beams (set by beam_angles when that table is given)"),
+        VKS_ENUM("beam_spacing", BeamSpacing, beam_spacing, "equiangular|equisine",
+                 "Beam centres uniform in angle, or uniform in sine of the angle"),
+        ConfigKey{"beam_angles", KeyType::number_list, "deg", "",
+                  "Explicit beam-centre table, port first (strictly decreasing, within +-hfov/2); overrides "
+                  "beams and beam_spacing when non-empty",
+                  &get_beam_angles, &set_beam_angles},
+        VKS_COUNT("bins", bins, "", "Number of range bins"),
+        VKS_NUMBER("range_min", range_min_m, "m", "Start of the range window, > 0"),
+        VKS_NUMBER("range_max", range_max_m, "m", "End of the range window, > range_min"),
+        VKS_NUMBER("sound_speed", sound_speed_mps, "m/s", "Speed of sound in water"),
+
+        VKS_NUMBER("source_level", source_level_db, "dB re 1 uPa at 1 m", "Source level SL"),
+        VKS_NUMBER("noise_level", noise_level_db, "dB re 1 uPa", "Ambient noise level NL"),
+        VKS_NUMBER("directivity_index", directivity_index_db, "dB", "Receive directivity index DI"),
+        VKS_NUMBER("default_backscatter", default_backscatter_db, "dB",
+                   "Backscatter strength of materials whose glTF extras say nothing"),
+        ConfigKey{"absorption", KeyType::number_or_auto, "dB/m", "",
+                  "One-way absorption, or \"auto\" for Francois-Garrison from frequency and the water below",
+                  &get_absorption, &set_absorption},
+        VKS_NUMBER("temperature", temperature_c, "degC", "Water temperature (for auto absorption)"),
+        VKS_NUMBER("salinity", salinity_ppt, "ppt", "Salinity (for auto absorption)"),
+        VKS_NUMBER("water_depth", water_depth_m, "m", "Depth of the sonar (for auto absorption)"),
+        VKS_NUMBER("ph", ph, "", "pH (for auto absorption)"),
+
+        VKS_ENUM("vertical_pattern", BeamPattern, vertical_pattern, "box|sinc|hann|gaussian",
+                 "Shape of the vertical beam pattern b_v"),
+        VKS_ENUM("horizontal_pattern", BeamPattern, horizontal_pattern, "box|sinc|hann|gaussian",
+                 "Shape of the horizontal beam pattern b_h (side lobes)"),
+
+        VKS_ENUM("speckle", SpeckleModel, speckle, "rayleigh|gamma|gaussian",
+                 "Speckle model: Exp(1) intensity, Gamma(L, 1/L), or legacy |N(1, sigma)|"),
+        VKS_NUMBER("speckle_looks", speckle_looks, "", "Number of looks L of the gamma model, > 0"),
+        VKS_NUMBER("speckle_sigma", speckle_gaussian_sigma, "", "Sigma of the legacy gaussian model, >= 0"),
+        VKS_NUMBER("tvg_db_per_decade", tvg_db_per_decade, "dB/decade",
+                   "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)"),
+
+        VKS_NUMBER("display.db_min", db_min, "dB re 1 uPa", "Intensity shown as black (display value 0)"),
+        VKS_NUMBER("display.db_max", db_max, "dB re 1 uPa", "Intensity shown as full scale (display value 1)"),
+        VKS_ENUM("display.colormap", Colormap, colormap, "gray|viridis|sonar|jet", "Colormap of the PNG images"),
+        VKS_COUNT("display.fan_width", fan_width_px, "px", "Width of the fan image"),
+
+        VKS_NUMBER("accuracy.pixels_per_beam", pixels_per_beam, "",
+                   "Depth-pass pixel columns per beam spacing (horizontal oversampling), > 0"),
+        VKS_COUNT("accuracy.rows_per_vfov", rows_per_vfov, "", "Depth-pass pixel rows per vertical beamwidth, >= 1"),
+        VKS_NUMBER("accuracy.vertical_coverage", vertical_coverage, "",
+                   "Depth pass covers this many vertical beamwidths (pattern tails), >= 1"),
+        VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]"),
+        VKS_ENUM("accuracy.normal_method", NormalMethod, normal_method, "sobel3|sobel5", "Normal estimation kernel"),
+        VKS_ENUM("accuracy.range_kernel", RangeKernel, range_kernel, "nearest|tent",
+                 "Range kernel K_r: nearest bin, or split between the two nearest bins"),
+        VKS_NUMBER("accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "",
+                   "Side-lobe kernel reaches +- this many beamwidths, >= 0"),
+        VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),
+
+        VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a material is angle-dependent)"),
+        VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),
+        VKS_EFFECT(horizontal_pattern, "Side lobes along beams (auto: on)"),
+        VKS_EFFECT(spreading, "Two-way spherical spreading r^-4 (auto: on)"),
+        VKS_EFFECT(absorption, "Absorption (auto: on if 2 alpha range_max >= 0.1 dB)"),
+        VKS_EFFECT(speckle, "Speckle (auto: on)"),
+        VKS_EFFECT(ambient_noise, "Ambient noise floor (auto: on)"),
+        VKS_EFFECT(tvg, "Time-varied gain (auto: off)"),
+    };
+}
+
+#undef VKS_NUMBER
+#undef VKS_COUNT
+#undef VKS_TEXT
+#undef VKS_ENUM
+#undef VKS_EFFECT
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+    std::vector<std::size_t> row(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        std::size_t diagonal = row[0];
+        row[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j) {
+            const std::size_t above = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = above;
+        }
+    }
+    return row[b.size()];
+}
+
+bool parse_double(const std::string& text, double& out) {
+    if (text.empty()) return false;
+    errno = 0;
+    char* end = nullptr;
+    out = std::strtod(text.c_str(), &end);
+    return end == text.c_str() + text.size();
+}
+
+std::string markdown_cell(std::string text) {
+    std::string out;
+    for (char ch : text) {
+        if (ch == '|') out += "\\|";
+        else out += ch;
+    }
+    return out;
+}
+
+} // namespace
+
+const std::vector<ConfigKey>& all() {
+    static const std::vector<ConfigKey> table = make_table();
+    return table;
+}
+
+const ConfigKey* find(std::string_view name) {
+    for (const auto& key : all())
+        if (name == key.name) return &key;
+    return nullptr;
+}
+
+bool is_group(std::string_view prefix) {
+    if (prefix.empty()) return false;
+    for (const auto& key : all()) {
+        const std::string_view name = key.name;
+        if (name.size() > prefix.size() && name.compare(0, prefix.size(), prefix) == 0 && name[prefix.size()] == '.')
+            return true;
+    }
+    return false;
+}
+
+std::string closest(std::string_view name) {
+    std::string best;
+    std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+    for (const auto& key : all()) {
+        const std::string_view full = key.name;
+        std::size_t distance = edit_distance(name, full);
+        // "db_min" should find "display.db_min": also compare with the part after the group.
+        const auto dot = full.rfind('.');
+        if (dot != std::string_view::npos && name.find('.') == std::string_view::npos)
+            distance = std::min(distance, edit_distance(name, full.substr(dot + 1)) + 1);
+        if (distance < best_distance) {
+            best_distance = distance;
+            best = key.name;
+        }
+    }
+    return best;
+}
+
+Json parse_override_value(const ConfigKey& key, const std::string& text) {
+    double number = 0;
+    switch (key.type) {
+    case KeyType::text:
+    case KeyType::choice: return text;
+    case KeyType::number:
+    case KeyType::count:
+        if (parse_double(text, number)) return number;
+        return text; // the setter reports "expected a number, got ..."
+    case KeyType::number_or_auto:
+        if (text != "auto" && parse_double(text, number)) return number;
+        return text;
+    case KeyType::number_list: {
+        // Accept "[1, 2, 3]", "1,2,3" and "" (an empty table).
+        std::string body = text;
+        if (!body.empty() && body.front() == '[' && body.back() == ']') body = body.substr(1, body.size() - 2);
+        Json list = Json::array();
+        std::stringstream stream(body);
+        std::string item;
+        bool any = false;
+        while (std::getline(stream, item, ',')) {
+            any = true;
+            const auto first = item.find_first_not_of(" \t");
+            const auto last = item.find_last_not_of(" \t");
+            item = first == std::string::npos ? std::string() : item.substr(first, last - first + 1);
+            if (parse_double(item, number)) list.push_back(number);
+            else list.push_back(item);
+        }
+        if (!any && body.find_first_not_of(" \t") != std::string::npos) return text;
+        return list;
+    }
+    }
+    return text;
+}
+
+std::string reference_markdown() {
+    const SonarConfig defaults;
+    std::string out;
+    out += "| key | type | unit | default | description |\n";
+    out += "|---|---|---|---|---|\n";
+    for (const auto& key : all()) {
+        std::string type;
+        switch (key.type) {
+        case KeyType::number: type = "number"; break;
+        case KeyType::count: type = "integer"; break;
+        case KeyType::text: type = "string"; break;
+        case KeyType::choice: type = key.choices; break;
+        case KeyType::number_list: type = "array of numbers"; break;
+        case KeyType::number_or_auto: type = "number or \"auto\""; break;
+        }
+        std::string default_text = key.get(defaults).dump();
+        if (default_text == "\"\"" || default_text == "[]") default_text = "(empty)";
+        out += "| `" + std::string(key.name) + "` | " + markdown_cell(type) + " | " + markdown_cell(key.unit) + " | " +
+               markdown_cell(default_text) + " | " + markdown_cell(key.doc) + " |\n";
+    }
+    return out;
+}
+
+} // namespace vksonar::config_keys

@@ -1,0 +1,92 @@
+// compose_depth_draws: world -> sonar -> slice camera -> clip, composed in double and rounded to
+// float once, so a scene 1e5 m from the world origin renders like one at the origin.
+#include <array>
+#include <cmath>
+
+#include "core/plan.h"
+#include "scene/scene_data.h"
+
+namespace vksonar {
+namespace {
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+
+// Column-major 4x4 in double.
+using Mat4 = std::array<double, 16>;
+
+Mat4 multiply(const Mat4& a, const Mat4& b) {
+    Mat4 r{};
+    for (int col = 0; col < 4; ++col) {
+        for (int row = 0; row < 4; ++row) {
+            double s = 0;
+            for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[col * 4 + k];
+            r[col * 4 + row] = s;
+        }
+    }
+    return r;
+}
+
+// sonar_from_world = inverse of [R | t] with R = Rz(yaw) Ry(pitch) Rx(roll).
+Mat4 sonar_from_world(const Pose& pose) {
+    const double cr = std::cos(pose.roll_deg * kDegToRad), sr = std::sin(pose.roll_deg * kDegToRad);
+    const double cp = std::cos(pose.pitch_deg * kDegToRad), sp = std::sin(pose.pitch_deg * kDegToRad);
+    const double cy = std::cos(pose.yaw_deg * kDegToRad), sy = std::sin(pose.yaw_deg * kDegToRad);
+    // R (row-major, world_from_sonar)
+    const double R[3][3] = {{cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr},
+                            {sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr},
+                            {-sp, cp * sr, cp * cr}};
+    const double t[3] = {pose.x_m, pose.y_m, pose.z_m};
+    Mat4 m{};
+    for (int row = 0; row < 3; ++row) {
+        double tr = 0;
+        for (int col = 0; col < 3; ++col) {
+            m[col * 4 + row] = R[col][row]; // transpose
+            tr += R[col][row] * t[col];
+        }
+        m[12 + row] = -tr;
+    }
+    m[15] = 1.0;
+    return m;
+}
+
+// clip_from_sonar for one slice: camera axes (right, down, forward) then the reversed-Z projection
+// clip = (x / tan_half_h, y / tan_half_v, A + B z, z) so that z_ndc = A / z + B.
+Mat4 clip_from_sonar(const Plan& plan, std::uint32_t slice) {
+    const double phi = plan.slice_info[slice].center_azimuth_rad;
+    const double c = std::cos(phi), s = std::sin(phi);
+    // rows of camera_from_sonar
+    const double right[3] = {s, -c, 0};
+    const double down[3] = {0, 0, -1};
+    const double forward[3] = {c, s, 0};
+    Mat4 m{};
+    for (int k = 0; k < 3; ++k) {
+        m[k * 4 + 0] = right[k] / plan.tan_half_h;
+        m[k * 4 + 1] = down[k] / plan.tan_half_v;
+        m[k * 4 + 2] = plan.depth_b * forward[k];
+        m[k * 4 + 3] = forward[k];
+    }
+    m[12 + 2] = plan.depth_a;
+    return m;
+}
+
+} // namespace
+
+void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
+                         std::vector<shared::DepthPush>& out) {
+    const std::size_t draws = scene.draws.size();
+    out.resize(plan.slices * draws);
+    const Mat4 sonar_world = sonar_from_world(pose);
+    for (std::size_t i = 0; i < draws; ++i) {
+        const SceneDraw& d = scene.draws[i];
+        const Mat4 sonar_local = multiply(sonar_world, d.world_from_local);
+        for (std::uint32_t s = 0; s < plan.slices; ++s) {
+            const Mat4 clip_local = multiply(clip_from_sonar(plan, s), sonar_local);
+            shared::DepthPush& push = out[s * draws + i];
+            for (int k = 0; k < 16; ++k) push.clip_from_local[k] = static_cast<float>(clip_local[k]);
+            push.material_id = d.material;
+            push.pad0 = push.pad1 = push.pad2 = 0;
+        }
+    }
+}
+
+} // namespace vksonar

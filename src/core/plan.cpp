@@ -1,0 +1,352 @@
+// make_plan: turns a validated SonarConfig and a scene into sizes, tables and resolved effects.
+#include "core/plan.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <sstream>
+
+#include "core/sonar_math.hpp"
+#include "scene/scene_data.h"
+
+namespace vksonar {
+namespace {
+
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+// Absorption below this over the two-way range window is invisible on any display: DESIGN §4.
+constexpr double kAbsorptionAutoThresholdDb = 0.1;
+// Neighbours whose slant range differs by more than 5% are treated as another surface by the
+// Sobel stage (docs/pipeline.md §2); the one-sided fallback handles them.
+constexpr float kEdgeRelativeJump = 0.05f;
+// lavapipe and most GPUs allow 16384-wide framebuffers; more pixel columns than that buys nothing.
+constexpr std::uint32_t kMaxColumns = 16384;
+constexpr std::uint32_t kMaxRows = 4096;
+constexpr std::uint32_t kMaxSidelobeHalfTaps = 256;
+
+std::string fmt(double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+}
+
+// Beam centre table, port first (strictly decreasing azimuth).
+Result<std::vector<double>> beam_table(const SonarConfig& c) {
+    std::vector<double> angles;
+    const double half = 0.5 * c.hfov_deg * kDegToRad;
+    if (!c.beam_angles_deg.empty()) {
+        angles.reserve(c.beam_angles_deg.size());
+        for (double a : c.beam_angles_deg) angles.push_back(a * kDegToRad);
+        for (std::size_t j = 1; j < angles.size(); ++j) {
+            if (!(angles[j] < angles[j - 1])) {
+                return make_error(ErrorCode::invalid_argument,
+                                  "config: beam_angles must be strictly decreasing (port first); entry " +
+                                      std::to_string(j) + " = " + fmt(c.beam_angles_deg[j]));
+            }
+        }
+        return angles;
+    }
+    angles.resize(c.beams);
+    for (std::uint32_t j = 0; j < c.beams; ++j) {
+        const double t = 1.0 - (2.0 * j + 1.0) / c.beams; // +1 - 1/N .. -1 + 1/N: centres of N sectors
+        if (c.beam_spacing == BeamSpacing::equisine && c.hfov_deg <= 180.0) {
+            angles[j] = std::asin(t * std::sin(half));
+        } else {
+            angles[j] = t * half;
+        }
+    }
+    return angles;
+}
+
+void resolve(bool& on, EffectMode mode, bool auto_value, const char* name, const std::string& auto_why,
+             std::vector<EffectState>& states) {
+    if (mode == EffectMode::automatic) {
+        on = auto_value;
+        states.push_back({name, on, "auto: " + auto_why});
+    } else {
+        on = mode == EffectMode::on;
+        states.push_back({name, on, on ? "on in config" : "off in config"});
+    }
+}
+
+} // namespace
+
+std::uint32_t ResolvedEffects::shader_flags() const {
+    std::uint32_t f = 0;
+    if (incidence) f |= shared::kEffectIncidence;
+    if (vertical_pattern) f |= shared::kEffectVerticalPattern;
+    if (horizontal_pattern) f |= shared::kEffectHorizontalPattern;
+    if (spreading) f |= shared::kEffectSpreading;
+    if (absorption) f |= shared::kEffectAbsorption;
+    return f;
+}
+
+double francois_garrison_db_per_m(double frequency_hz, double temperature_c, double salinity_ppt, double depth_m,
+                                  double ph, double sound_speed_mps) {
+    // Francois & Garrison, JASA 72(6) 1982: boric acid, magnesium sulphate and pure-water terms.
+    const double f = frequency_hz / 1000.0; // kHz
+    const double T = temperature_c, S = salinity_ppt, D = depth_m, c = sound_speed_mps;
+    const double theta = 273.0 + T;
+    // Boric acid
+    const double A1 = 8.86 / c * std::pow(10.0, 0.78 * ph - 5.0);
+    const double P1 = 1.0;
+    const double f1 = 2.8 * std::sqrt(S / 35.0) * std::pow(10.0, 4.0 - 1245.0 / theta);
+    // Magnesium sulphate
+    const double A2 = 21.44 * S / c * (1.0 + 0.025 * T);
+    const double P2 = 1.0 - 1.37e-4 * D + 6.2e-9 * D * D;
+    const double f2 = 8.17 * std::pow(10.0, 8.0 - 1990.0 / theta) / (1.0 + 0.0018 * (S - 35.0));
+    // Pure water
+    const double A3 = T <= 20.0 ? 4.937e-4 - 2.59e-5 * T + 9.11e-7 * T * T - 1.50e-8 * T * T * T
+                                : 3.964e-4 - 1.146e-5 * T + 1.45e-7 * T * T - 6.5e-10 * T * T * T;
+    const double P3 = 1.0 - 3.83e-5 * D + 4.9e-10 * D * D;
+    const double f_sq = f * f;
+    const double db_per_km = A1 * P1 * f1 * f_sq / (f1 * f1 + f_sq) + A2 * P2 * f2 * f_sq / (f2 * f2 + f_sq) +
+                             A3 * P3 * f_sq;
+    return db_per_km / 1000.0;
+}
+
+double pattern_constant(BeamPattern shape, double beamwidth_rad) {
+    const double half = 0.5 * beamwidth_rad;
+    switch (shape) {
+    case BeamPattern::box:
+        return 0.0;
+    case BeamPattern::gaussian:
+        return std::log(2.0) / (half * half);
+    case BeamPattern::sinc:
+    case BeamPattern::hann: {
+        // Find x in (0, pi) where the power pattern (same formula as the shaders, via k = 1 and the
+        // angle asin(x) scaled out) falls to 0.5, then k = x / sin(half).
+        const std::uint32_t id = shape == BeamPattern::sinc ? shared::kPatternSinc : shared::kPatternHann;
+        auto power_at_x = [id](double x) {
+            // pattern_power evaluates k * sin(a); with a = pi/2 and k = x this is exactly x.
+            return math_f64::pattern_power(id, x, 0.0, 3.14159265358979323846 / 2.0);
+        };
+        double lo = 0.0, hi = 3.0;
+        for (int i = 0; i < 100; ++i) {
+            const double mid = 0.5 * (lo + hi);
+            (power_at_x(mid) > 0.5 ? lo : hi) = mid;
+        }
+        return 0.5 * (lo + hi) / std::sin(half);
+    }
+    }
+    return 0.0;
+}
+
+Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
+    if (std::string problem = config.validate(); !problem.empty()) {
+        return make_error(ErrorCode::invalid_argument, "config: " + problem);
+    }
+    Plan p;
+    p.config = config;
+    const SonarConfig& c = config;
+
+    auto beams_or = beam_table(c);
+    if (!beams_or) return beams_or.error();
+    p.beam_angle_rad = std::move(beams_or.value());
+    p.beams = static_cast<std::uint32_t>(p.beam_angle_rad.size());
+    p.bins = c.bins;
+
+    // Pixel grid: enough columns that pixels_per_beam of them fall in the finer of the beam spacing and
+    // the beamwidth, split into slices no wider than max_slice_deg.
+    const double hfov = c.hfov_deg * kDegToRad;
+    const double hbw = c.horizontal_beamwidth_deg * kDegToRad;
+    const double spacing = p.beams > 1 ? hfov / p.beams : hfov;
+    const double resolved_angle = std::min(spacing, hbw);
+    const double wanted_columns = std::ceil(c.pixels_per_beam * hfov / resolved_angle);
+    p.slices = static_cast<std::uint32_t>(std::ceil(c.hfov_deg / c.max_slice_deg - 1e-9));
+    p.slices = std::max(1u, p.slices);
+    if (p.slices > shared::kMaxSlices) {
+        return make_error(ErrorCode::invalid_argument, "config: accuracy.max_slice = " + fmt(c.max_slice_deg) +
+                                                           " needs " + std::to_string(p.slices) +
+                                                           " slices for hfov " + fmt(c.hfov_deg) + "; at most " +
+                                                           std::to_string(shared::kMaxSlices));
+    }
+    if (wanted_columns > kMaxColumns) {
+        return make_error(ErrorCode::invalid_argument,
+                          "config: " + fmt(wanted_columns) + " pixel columns needed (accuracy.pixels_per_beam = " +
+                              fmt(c.pixels_per_beam) + ", beams = " + std::to_string(p.beams) + ") exceeds " +
+                              std::to_string(kMaxColumns));
+    }
+    const std::uint32_t min_columns = 8; // a 1-beam sonar still needs a few columns for its pattern
+    const std::uint32_t total = std::max(min_columns, static_cast<std::uint32_t>(wanted_columns));
+    p.slice_columns = (total + p.slices - 1) / p.slices;
+    p.columns = p.slice_columns * p.slices;
+    p.slice_width_rad = hfov / p.slices;
+    p.tan_half_h = std::tan(0.5 * p.slice_width_rad);
+
+    p.vertical_coverage_rad = std::min(c.vfov_deg * c.vertical_coverage, 170.0) * kDegToRad;
+    p.tan_half_v = std::tan(0.5 * p.vertical_coverage_rad);
+    const double rows = std::ceil(c.rows_per_vfov * p.vertical_coverage_rad / (c.vfov_deg * kDegToRad));
+    if (rows > kMaxRows) {
+        return make_error(ErrorCode::invalid_argument, "config: accuracy.rows_per_vfov = " +
+                                                           std::to_string(c.rows_per_vfov) + " gives " + fmt(rows) +
+                                                           " rows; at most " + std::to_string(kMaxRows));
+    }
+    p.rows = std::max(2u, static_cast<std::uint32_t>(rows));
+
+    p.slice_info.resize(p.slices);
+    for (std::uint32_t s = 0; s < p.slices; ++s) {
+        const double centre = 0.5 * hfov - (s + 0.5) * p.slice_width_rad;
+        p.slice_info[s] = {static_cast<float>(centre), static_cast<float>(std::cos(centre)),
+                           static_cast<float>(std::sin(centre)), 0.0f};
+    }
+
+    // Clip planes: the corner ray of a slice reaches range_min at view z = range_min / |(u, v, 1)|, so the
+    // near plane sits there (slightly closer) and the echo stage cuts at the exact slant range.
+    const double corner = std::sqrt(1.0 + p.tan_half_h * p.tan_half_h + p.tan_half_v * p.tan_half_v);
+    p.near_m = 0.999 * c.range_min_m / corner;
+    p.far_m = c.range_max_m;
+    p.depth_a = p.near_m * p.far_m / (p.far_m - p.near_m);
+    p.depth_b = -p.near_m / (p.far_m - p.near_m);
+
+    p.bin_width_m = (c.range_max_m - c.range_min_m) / p.bins;
+    p.bin_range_m.resize(p.bins);
+    for (std::uint32_t k = 0; k < p.bins; ++k) p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
+
+    // Beam patterns.
+    const double vfov = c.vfov_deg * kDegToRad;
+    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov);
+    p.vpattern_halfwidth_rad = 0.5 * vfov;
+    p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw);
+    p.hpattern_halfwidth_rad = 0.5 * hbw;
+
+    // Materials: one per scene material, or the config default if the scene has none.
+    bool any_angle_dependent = false;
+    if (scene.materials.empty()) {
+        p.materials.push_back({static_cast<float>(std::pow(10.0, c.default_backscatter_db / 10.0)),
+                               shared::kScatterLambert, 0.0f, 0.0f});
+        any_angle_dependent = !scene.draws.empty();
+    }
+    for (const AcousticMaterial& m : scene.materials) {
+        const double db = std::isfinite(m.backscatter_db) ? m.backscatter_db : c.default_backscatter_db;
+        const std::uint32_t model =
+            m.model == AcousticMaterial::Model::lambert ? shared::kScatterLambert : shared::kScatterConstant;
+        any_angle_dependent |= model == shared::kScatterLambert;
+        p.materials.push_back({static_cast<float>(std::pow(10.0, db / 10.0)), model, 0.0f, 0.0f});
+    }
+
+    // Effects (DESIGN §4).
+    const double alpha = c.absorption_db_per_m >= 0.0
+                             ? c.absorption_db_per_m
+                             : francois_garrison_db_per_m(c.frequency_hz, c.temperature_c, c.salinity_ppt,
+                                                          c.water_depth_m, c.ph, c.sound_speed_mps);
+    const double absorption_window_db = 2.0 * alpha * c.range_max_m;
+
+    // Side-lobe kernel reach in beams (from the finest spacing, so a non-uniform table is covered).
+    double min_spacing = std::numeric_limits<double>::infinity();
+    for (std::uint32_t j = 1; j < p.beams; ++j) {
+        min_spacing = std::min(min_spacing, p.beam_angle_rad[j - 1] - p.beam_angle_rad[j]);
+    }
+    const double reach = c.sidelobe_kernel_beamwidths * hbw;
+    std::uint32_t half_taps = 0;
+    if (p.beams > 1) {
+        const double k = std::floor(reach / min_spacing);
+        half_taps = static_cast<std::uint32_t>(std::min<double>({k, p.beams - 1.0, double(kMaxSidelobeHalfTaps)}));
+    }
+
+    ResolvedEffects& e = p.effects;
+    resolve(e.incidence, c.effects.incidence, any_angle_dependent, "incidence",
+            any_angle_dependent ? "a material uses the angle-dependent Lambert model"
+                                : "no angle-dependent material: no normals pass",
+            e.states);
+    resolve(e.vertical_pattern, c.effects.vertical_pattern, true, "vertical_pattern",
+            "vertical beam pattern always shapes seabed returns", e.states);
+    resolve(e.horizontal_pattern, c.effects.horizontal_pattern, half_taps > 0, "horizontal_pattern",
+            half_taps > 0 ? "side-lobe kernel spans " + std::to_string(2 * half_taps + 1) + " beams"
+                          : "beam pattern narrower than the beam spacing",
+            e.states);
+    resolve(e.spreading, c.effects.spreading, true, "spreading", "two-way spherical spreading, 40 log r", e.states);
+    resolve(e.absorption, c.effects.absorption, absorption_window_db >= kAbsorptionAutoThresholdDb, "absorption",
+            "2 alpha range_max = " + fmt(absorption_window_db) + " dB (alpha = " + fmt(alpha * 1000.0) +
+                " dB/km) vs threshold " + fmt(kAbsorptionAutoThresholdDb) + " dB",
+            e.states);
+    resolve(e.speckle, c.effects.speckle, true, "speckle", "fully developed speckle", e.states);
+    resolve(e.ambient_noise, c.effects.ambient_noise, true, "ambient_noise", "noise floor NL - DI", e.states);
+    resolve(e.tvg, c.effects.tvg, false, "tvg", "raw received levels; turn on for display gain", e.states);
+    p.alpha_db_per_m = alpha;
+
+    // Beamform tables: tent from pixel columns onto the beam table.
+    p.column_azimuth_rad.resize(p.columns);
+    p.column_beam.resize(p.columns);
+    p.column_weight.resize(p.columns);
+    for (std::uint32_t col = 0; col < p.columns; ++col) {
+        const std::uint32_t s = col / p.slice_columns;
+        const double u = math_f64::pixel_coord(col % p.slice_columns, p.slice_columns, p.tan_half_h);
+        const double a = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
+        p.column_azimuth_rad[col] = a;
+        const std::vector<double>& b = p.beam_angle_rad;
+        if (a >= b.front()) {
+            p.column_beam[col] = 0;
+            p.column_weight[col] = 1.0f;
+        } else if (a <= b.back()) {
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = 1.0f;
+        } else {
+            // first beam j+1 with b[j+1] < a (b decreasing), so b[j] >= a > b[j+1]
+            const auto it = std::upper_bound(b.begin(), b.end(), a, [](double x, double y) { return x > y; });
+            const std::uint32_t j = static_cast<std::uint32_t>(it - b.begin()) - 1;
+            p.column_beam[col] = j;
+            p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
+        }
+    }
+    p.beam_column_begin.assign(p.beams, p.columns);
+    p.beam_column_end.assign(p.beams, 0);
+    for (std::uint32_t col = 0; col < p.columns; ++col) {
+        for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
+            if (j >= p.beams) continue;
+            p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
+            p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
+        }
+    }
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
+    }
+
+    // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their angular separation.
+    if (!e.horizontal_pattern) half_taps = 0;
+    p.sidelobe_taps = 2 * half_taps + 1;
+    p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
+    const std::uint32_t hshape = static_cast<std::uint32_t>(c.horizontal_pattern);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
+            const std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
+            if (src < 0 || src >= p.beams) continue;
+            const double sep = p.beam_angle_rad[src] - p.beam_angle_rad[j];
+            float w = 1.0f;
+            if (half_taps > 0) {
+                w = std::abs(sep) <= reach + 1e-12
+                        ? static_cast<float>(
+                              math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, sep))
+                        : 0.0f;
+            }
+            p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
+        }
+    }
+
+    shared::SonarParams& g = p.params;
+    g.columns = p.columns;
+    g.rows = p.rows;
+    g.slice_columns = p.slice_columns;
+    g.slices = p.slices;
+    g.beams = p.beams;
+    g.bins = p.bins;
+    g.effect_flags = e.shader_flags();
+    g.sidelobe_taps = p.sidelobe_taps;
+    g.tan_half_h = static_cast<float>(p.tan_half_h);
+    g.tan_half_v = static_cast<float>(p.tan_half_v);
+    g.depth_a = static_cast<float>(p.depth_a);
+    g.depth_b = static_cast<float>(p.depth_b);
+    g.range_min_m = static_cast<float>(c.range_min_m);
+    g.range_max_m = static_cast<float>(c.range_max_m);
+    g.bin_width_m = static_cast<float>(p.bin_width_m);
+    g.alpha_db_per_m = static_cast<float>(alpha);
+    g.vpattern_k = static_cast<float>(p.vpattern_k);
+    g.vpattern_shape = static_cast<std::uint32_t>(c.vertical_pattern);
+    g.range_kernel = c.range_kernel == RangeKernel::tent ? shared::kRangeKernelTent : shared::kRangeKernelNearest;
+    g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
+    g.edge_relative_jump = kEdgeRelativeJump;
+    g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
+    return p;
+}
+
+} // namespace vksonar

@@ -1,0 +1,212 @@
+// Output files: PNG, NumPy .npy, PLY point cloud and meta.json. Every error names the path.
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "host/host_stages.h"
+
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wshadow"
+#pragma GCC diagnostic ignored "-Wunused-parameter"
+#endif
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_STATIC // private copy: no clash with any other stb user in the program
+#include <stb_image_write.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "vksonar writes little-endian .npy/.ply by copying memory; add byte swapping for this target"
+#endif
+
+namespace vksonar::host {
+namespace {
+
+Error io_error(const std::string& path, const std::string& what) {
+    return make_error(ErrorCode::io, "cannot write " + path + ": " + what);
+}
+
+// Writes header + body in one go; on failure the message carries strerror(errno).
+Result<void> write_file(const std::string& path, const void* header, std::size_t header_size, const void* body,
+                        std::size_t body_size) {
+    errno = 0;
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f) return io_error(path, errno ? std::strerror(errno) : "cannot open");
+    bool ok = true;
+    if (header_size) ok = std::fwrite(header, 1, header_size, f) == header_size;
+    if (ok && body_size) ok = std::fwrite(body, 1, body_size, f) == body_size;
+    const int write_errno = errno;
+    const bool closed = std::fclose(f) == 0;
+    if (!ok || !closed) {
+        const int e = write_errno ? write_errno : errno;
+        return io_error(path, e ? std::strerror(e) : "write failed");
+    }
+    return {};
+}
+
+// NumPy format 1.0: magic, version, little-endian u16 header length, a Python dict literal padded
+// with spaces and terminated by '\n' so the data starts at a multiple of 64 bytes.
+std::string npy_header(const char* descr, std::uint32_t rows, std::uint32_t cols, std::uint32_t channels) {
+    std::string dict = std::string("{'descr': '") + descr + "', 'fortran_order': False, 'shape': (" +
+                       std::to_string(rows) + ", " + std::to_string(cols);
+    if (channels > 1) dict += ", " + std::to_string(channels);
+    dict += "), }";
+    const std::size_t preamble = 10; // magic (6) + version (2) + header length (2)
+    std::size_t total = preamble + dict.size() + 1;
+    total = (total + 63) / 64 * 64;
+    dict.append(total - preamble - dict.size() - 1, ' ');
+    dict += '\n';
+    const auto len = static_cast<std::uint16_t>(dict.size());
+    std::string header("\x93NUMPY\x01\x00", 8);
+    header += static_cast<char>(len & 0xff);
+    header += static_cast<char>(len >> 8);
+    return header + dict;
+}
+
+} // namespace
+
+Result<void> write_png(const std::string& path, const Image& image) {
+    const std::size_t n = static_cast<std::size_t>(image.width) * image.height * 3;
+    if (image.width == 0 || image.height == 0 || image.rgb.size() < n)
+        return make_error(ErrorCode::invalid_argument,
+                          "cannot write " + path + ": image is empty or smaller than " +
+                              std::to_string(image.width) + "x" + std::to_string(image.height));
+    // Encode in memory, then write with stdio so that a failure reports the OS reason.
+    std::vector<unsigned char> png;
+    auto sink = [](void* context, void* data, int size) {
+        auto* out = static_cast<std::vector<unsigned char>*>(context);
+        const auto* bytes = static_cast<const unsigned char*>(data);
+        out->insert(out->end(), bytes, bytes + size);
+    };
+    const int ok = stbi_write_png_to_func(sink, &png, static_cast<int>(image.width), static_cast<int>(image.height),
+                                          3, image.rgb.data(), static_cast<int>(image.width * 3));
+    if (!ok || png.empty()) return make_error(ErrorCode::internal, "cannot write " + path + ": PNG encoding failed");
+    return write_file(path, nullptr, 0, png.data(), png.size());
+}
+
+Result<void> write_npy_f32(const std::string& path, const float* data, std::uint32_t rows, std::uint32_t cols,
+                           std::uint32_t channels) {
+    const std::size_t count = static_cast<std::size_t>(rows) * cols * (channels ? channels : 1);
+    if (count && !data) return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": no data");
+    const std::string header = npy_header("<f4", rows, cols, channels);
+    return write_file(path, header.data(), header.size(), data, count * sizeof(float));
+}
+
+Result<void> write_npy_u16(const std::string& path, const std::uint16_t* data, std::uint32_t rows,
+                           std::uint32_t cols) {
+    const std::size_t count = static_cast<std::size_t>(rows) * cols;
+    if (count && !data) return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": no data");
+    const std::string header = npy_header("<u2", rows, cols, 1);
+    return write_file(path, header.data(), header.size(), data, count * sizeof(std::uint16_t));
+}
+
+Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Frame& frame) {
+    const std::size_t beams = plan.beams, bins = plan.bins;
+    const std::size_t n = beams * bins;
+    if (frame.display.size() < n || frame.intensity.size() < n || plan.beam_angle_rad.size() < beams ||
+        plan.bin_range_m.size() < bins)
+        return make_error(ErrorCode::invalid_argument,
+                          "cannot write " + path + ": frame does not match the plan (" + std::to_string(beams) +
+                              " beams x " + std::to_string(bins) + " bins)");
+    std::vector<float> points;
+    points.reserve(4 * 1024);
+    for (std::size_t k = 0; k < bins; ++k) {
+        const double r = plan.bin_range_m[k];
+        for (std::size_t j = 0; j < beams; ++j) {
+            const std::size_t i = k * beams + j;
+            if (!(frame.display[i] > 0.0f)) continue;
+            const double az = plan.beam_angle_rad[j];
+            // Sonar frame: x forward, y port (left), z up; the scan lies at elevation 0.
+            points.push_back(static_cast<float>(r * std::cos(az)));
+            points.push_back(static_cast<float>(r * std::sin(az)));
+            points.push_back(0.0f);
+            points.push_back(frame.intensity[i]);
+        }
+    }
+    const std::string header = "ply\n"
+                               "format binary_little_endian 1.0\n"
+                               "comment vksonar polar scan in the sonar frame: x forward, y port (left), z up; "
+                               "intensity linear uPa^2\n"
+                               "element vertex " +
+                               std::to_string(points.size() / 4) +
+                               "\n"
+                               "property float x\n"
+                               "property float y\n"
+                               "property float z\n"
+                               "property float intensity\n"
+                               "end_header\n";
+    return write_file(path, header.data(), header.size(), points.data(), points.size() * sizeof(float));
+}
+
+Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
+                             const std::string& extra_json_fields) {
+    using nlohmann::json;
+    const SonarConfig& cfg = plan.config;
+    constexpr double kDeg = 3.14159265358979323846 / 180.0;
+    json m = json::object();
+    m["format"] = "vksonar-frame-1";
+    m["frame_convention"] =
+        "Sonar frame (REP-103): x forward, y port (left), z up; azimuth is positive to port, beam 0 is the "
+        "port-most beam. beam_directions follow marine_acoustic_msgs/ProjectedSonarImage instead: Z forward, "
+        "X up, Y starboard (right), so azimuth a maps to (x = 0, y = -sin a, z = cos a).";
+    m["beams"] = plan.beams;
+    m["bins"] = plan.bins;
+    json angles = json::array(), directions = json::array(), tx = json::array(), rx = json::array();
+    for (std::size_t j = 0; j < plan.beams && j < plan.beam_angle_rad.size(); ++j) {
+        const double a = plan.beam_angle_rad[j];
+        angles.push_back(a);
+        directions.push_back({{"x", 0.0}, {"y", -std::sin(a)}, {"z", std::cos(a)}});
+        tx.push_back(cfg.vfov_deg * kDeg);
+        rx.push_back(cfg.horizontal_beamwidth_deg * kDeg);
+    }
+    m["beam_angles_rad"] = std::move(angles);
+    m["beam_directions"] = std::move(directions);
+    json ranges = json::array();
+    for (std::size_t k = 0; k < plan.bins && k < plan.bin_range_m.size(); ++k) ranges.push_back(plan.bin_range_m[k]);
+    m["ranges_m"] = std::move(ranges);
+    m["range_min_m"] = cfg.range_min_m;
+    m["range_max_m"] = cfg.range_max_m;
+    m["bin_width_m"] = plan.bin_width_m;
+    m["frequency_hz"] = cfg.frequency_hz;
+    m["sound_speed_mps"] = cfg.sound_speed_mps;
+    m["tx_beamwidths_rad"] = std::move(tx);
+    m["rx_beamwidths_rad"] = std::move(rx);
+    m["seed"] = frame.seed;
+    m["frame_index"] = frame.frame_index;
+    json effects = json::object();
+    const std::vector<EffectState>& states = frame.effects.empty() ? plan.effects.states : frame.effects;
+    for (const EffectState& e : states) effects[e.name] = {{"on", e.on}, {"why", e.why}};
+    m["effects"] = std::move(effects);
+    m["stages_run"] = frame.stages_run;
+    json timings = json::object();
+    for (const StageTime& t : frame.times) {
+        const double prev = timings.contains(t.stage) ? timings[t.stage].get<double>() : 0.0;
+        timings[t.stage] = prev + t.ms; // a stage that ran twice reports its total
+    }
+    m["timings_ms"] = std::move(timings);
+    m["polar_layout"] = "float32 (bins, beams) range-major, beam 0 = port";
+    m["intensity_unit"] = "uPa^2 (10 log10 -> dB re 1 uPa)";
+
+    if (!extra_json_fields.empty()) {
+        json extra = json::parse(extra_json_fields, nullptr, /*allow_exceptions=*/false);
+        if (extra.is_discarded() || !extra.is_object())
+            return make_error(ErrorCode::internal,
+                              "cannot write " + path + ": extra fields are not a JSON object");
+        for (auto it = extra.begin(); it != extra.end(); ++it) m[it.key()] = it.value();
+    }
+    const std::string text = m.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+    return write_file(path, nullptr, 0, text.data(), text.size());
+}
+
+} // namespace vksonar::host

@@ -1,0 +1,248 @@
+// Host stage 6 images: the polar image and the Cartesian fan.
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+
+#include "host/host_stages.h"
+
+namespace vksonar::host {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr Rgb8 kBackground{14, 18, 24};
+constexpr Rgb8 kOverlay{200, 200, 200};
+constexpr float kOverlayAlpha = 0.55f;   // overlay = mix(data colour, light grey, alpha)
+constexpr double kLineHalfWidthPx = 0.6; // rings and bearing lines are ~1.2 px wide
+
+inline void ensure_size(Image& out, std::uint32_t w, std::uint32_t h) {
+    out.width = w;
+    out.height = h;
+    const std::size_t n = static_cast<std::size_t>(w) * h * 3;
+    if (out.rgb.size() != n) out.rgb.resize(n); // only the first time for a given image
+}
+
+inline void put(Image& out, std::size_t pixel, Rgb8 c) {
+    std::uint8_t* p = &out.rgb[pixel * 3];
+    p[0] = c.r;
+    p[1] = c.g;
+    p[2] = c.b;
+}
+
+inline float finite_or_zero(float v) { return std::isfinite(v) ? v : 0.0f; }
+
+// Interval of a sorted table containing x: returns i0 and t with x = table[i0] + t (table[i0+1] - table[i0]),
+// clamped to the ends (t = 0 at either end). `decreasing` selects the order of the table.
+void locate(const std::vector<double>& table, std::size_t n, double x, bool decreasing, std::int32_t& i0,
+            float& t) {
+    if (n <= 1) {
+        i0 = 0;
+        t = 0.0f;
+        return;
+    }
+    auto before = [decreasing](double a, double b) { return decreasing ? a > b : a < b; };
+    if (!before(table[0], x)) { // x at or before the first entry
+        i0 = 0;
+        t = 0.0f;
+        return;
+    }
+    if (!before(x, table[n - 1])) { // x at or past the last entry
+        i0 = static_cast<std::int32_t>(n - 1);
+        t = 0.0f;
+        return;
+    }
+    // Binary search: table[lo] before x, x not after table[hi].
+    std::size_t lo = 0, hi = n - 1;
+    while (hi - lo > 1) {
+        const std::size_t mid = (lo + hi) / 2;
+        if (before(table[mid], x))
+            lo = mid;
+        else
+            hi = mid;
+    }
+    const double span = table[hi] - table[lo];
+    i0 = static_cast<std::int32_t>(lo);
+    t = span != 0.0 ? static_cast<float>(std::clamp((x - table[lo]) / span, 0.0, 1.0)) : 0.0f;
+}
+
+// A "nice" ring spacing (1, 2, 2.5 or 5 x 10^k) giving about 4-5 rings up to range_max.
+double ring_step(double range_max) {
+    const double raw = range_max / 4.5;
+    const double p = std::pow(10.0, std::floor(std::log10(raw)));
+    for (double m : {1.0, 2.0, 2.5, 5.0, 10.0})
+        if (m * p >= raw * 0.75) return m * p;
+    return 10.0 * p;
+}
+
+// Smallest signed angle difference a - b in (-pi, pi].
+inline double angle_diff(double a, double b) {
+    double d = std::fmod(a - b, 2.0 * kPi);
+    if (d > kPi) d -= 2.0 * kPi;
+    if (d <= -kPi) d += 2.0 * kPi;
+    return d;
+}
+
+} // namespace
+
+void polar_image(const Plan& plan, const Frame& frame, Image& out) {
+    const std::uint32_t beams = plan.beams, bins = plan.bins;
+    ensure_size(out, beams, bins);
+    const Colormap map = plan.config.colormap;
+    const std::size_t n = static_cast<std::size_t>(beams) * bins;
+    for (std::uint32_t k = 0; k < bins; ++k) {
+        const std::size_t row = bins - 1 - k; // far range at the top
+        for (std::uint32_t j = 0; j < beams; ++j) {
+            const std::size_t i = static_cast<std::size_t>(k) * beams + j;
+            const float v = i < frame.display.size() && i < n ? finite_or_zero(frame.display[i]) : 0.0f;
+            put(out, row * beams + j, colormap(map, v)); // beam 0 (port) on the left
+        }
+    }
+}
+
+FanRenderer::FanRenderer(const Plan& plan) {
+    const SonarConfig& cfg = plan.config;
+    beams_ = plan.beams;
+    bins_ = plan.bins;
+    colormap_ = cfg.colormap;
+
+    const double rmax = cfg.range_max_m > 0.0 ? cfg.range_max_m : 1.0;
+    const double rmin = std::clamp(cfg.range_min_m, 0.0, rmax);
+    // Angular extent: the configured fan, widened to cover the beam table if that reaches further.
+    double az_hi = 0.5 * cfg.hfov_deg * kPi / 180.0, az_lo = -az_hi;
+    if (!plan.beam_angle_rad.empty()) {
+        az_hi = std::max(az_hi, plan.beam_angle_rad.front());
+        az_lo = std::min(az_lo, plan.beam_angle_rad.back());
+    }
+    const bool full_circle = az_hi - az_lo >= 2.0 * kPi - 1e-9;
+    const bool centred = cfg.hfov_deg > 180.0 || az_hi > 0.5 * kPi || az_lo < -0.5 * kPi;
+
+    // Layout: apex at the bottom centre (hfov <= 180) or at the centre (wider fans, square image).
+    const std::uint32_t w = std::max<std::uint32_t>(cfg.fan_width_px, 16);
+    const double margin = std::max(4.0, w / 64.0);
+    double scale, cx, cy; // pixels per metre, apex position in pixel coordinates
+    std::uint32_t h;
+    if (centred) {
+        h = w;
+        scale = (0.5 * w - margin) / rmax;
+        cx = 0.5 * w;
+        cy = 0.5 * h;
+    } else {
+        // Half-width of the fan in metres; a narrow fan still gets an image at least 0.3 R wide each
+        // side so that the image does not become a tall sliver.
+        const double half_extent = rmax * std::max(std::sin(std::max(az_hi, -az_lo)), 0.3);
+        scale = (0.5 * w - margin) / half_extent;
+        h = static_cast<std::uint32_t>(std::ceil(rmax * scale + 2.0 * margin));
+        cx = 0.5 * w;
+        cy = h - margin;
+    }
+    width_ = w;
+    height_ = h;
+
+    const std::size_t npix = static_cast<std::size_t>(w) * h;
+    beam0_.assign(npix, -1);
+    bin0_.assign(npix, 0);
+    beam_t_.assign(npix, 0.0f);
+    bin_t_.assign(npix, 0.0f);
+    overlay_.assign(npix, 0);
+
+    // Overlay geometry.
+    const double step = ring_step(rmax);
+    const double line_m = kLineHalfWidthPx / scale;
+    std::vector<double> bearings;
+    if (!full_circle) {
+        bearings.push_back(az_hi);
+        bearings.push_back(az_lo);
+    }
+    for (int deg = -180; deg < 180; deg += 30) {
+        const double a = deg * kPi / 180.0;
+        if (full_circle || (a < az_hi - 1e-6 && a > az_lo + 1e-6)) bearings.push_back(a);
+    }
+    const bool interpolate_wrap = full_circle && beams_ > 1;
+
+    for (std::uint32_t py = 0; py < h; ++py) {
+        for (std::uint32_t px = 0; px < w; ++px) {
+            const std::size_t p = static_cast<std::size_t>(py) * w + px;
+            // Sonar frame: x forward = up the image, y port = left in the image.
+            const double x = (cy - (py + 0.5)) / scale;
+            const double y = (cx - (px + 0.5)) / scale;
+            const double r = std::hypot(x, y);
+            const double az = std::atan2(y, x);
+            const bool in_angle = full_circle || (az <= az_hi && az >= az_lo);
+            const bool in_range = r >= rmin && r <= rmax;
+
+            // Overlay: rings and bearing lines, drawn within the fan and on its outline.
+            const double ang_tol = r > 0.0 ? line_m / r : kPi;
+            const bool near_fan = (full_circle || (az <= az_hi + ang_tol && az >= az_lo - ang_tol)) &&
+                                  r >= rmin - line_m && r <= rmax + line_m;
+            if (near_fan) {
+                bool line = false;
+                for (double ring = step; ring < rmax && !line; ring += step)
+                    line = ring > rmin && std::abs(r - ring) <= line_m;
+                line = line || std::abs(r - rmax) <= line_m || (rmin > 0.0 && std::abs(r - rmin) <= line_m);
+                for (std::size_t b = 0; b < bearings.size() && !line; ++b) {
+                    const double d = angle_diff(az, bearings[b]);
+                    line = std::abs(d) < 0.5 * kPi && r * std::abs(std::sin(d)) <= line_m;
+                }
+                overlay_[p] = line ? 1 : 0;
+            }
+
+            if (!(in_angle && in_range) || beams_ == 0 || bins_ == 0) continue;
+            std::int32_t j0 = 0, k0 = 0;
+            float jt = 0.0f, kt = 0.0f;
+            if (interpolate_wrap && az > plan.beam_angle_rad.front()) {
+                // Between beam 0 and the last beam, across the +-180 deg seam.
+                const double span = plan.beam_angle_rad.front() - plan.beam_angle_rad.back();
+                const double gap = 2.0 * kPi - span;
+                j0 = static_cast<std::int32_t>(beams_ - 1);
+                jt = gap > 0.0 ? static_cast<float>(1.0 - (az - plan.beam_angle_rad.front()) / gap) : 0.0f;
+            } else if (interpolate_wrap && az < plan.beam_angle_rad.back()) {
+                const double span = plan.beam_angle_rad.front() - plan.beam_angle_rad.back();
+                const double gap = 2.0 * kPi - span;
+                j0 = static_cast<std::int32_t>(beams_ - 1);
+                jt = gap > 0.0 ? static_cast<float>((plan.beam_angle_rad.back() - az) / gap) : 0.0f;
+            } else {
+                locate(plan.beam_angle_rad, beams_, az, /*decreasing=*/true, j0, jt);
+            }
+            locate(plan.bin_range_m, bins_, r, /*decreasing=*/false, k0, kt);
+            beam0_[p] = j0;
+            beam_t_[p] = std::clamp(jt, 0.0f, 1.0f);
+            bin0_[p] = k0;
+            bin_t_[p] = kt;
+        }
+    }
+}
+
+std::uint32_t FanRenderer::width() const { return width_; }
+std::uint32_t FanRenderer::height() const { return height_; }
+
+void FanRenderer::render(const Frame& frame, Image& out) const {
+    ensure_size(out, width_, height_);
+    const std::size_t npix = static_cast<std::size_t>(width_) * height_;
+    const std::size_t beams = beams_;
+    const bool sized = frame.display.size() >= beams * bins_;
+    const float* d = frame.display.data();
+    for (std::size_t p = 0; p < npix; ++p) {
+        Rgb8 c = kBackground;
+        const std::int32_t j0 = beam0_[p];
+        if (j0 >= 0 && sized) {
+            // Bilinear over (beam, bin); the next beam after the last one is beam 0 (used only by the
+            // 360 deg seam; elsewhere its weight is 0 at the table's end).
+            const std::size_t ja = static_cast<std::size_t>(j0);
+            const std::size_t jb = ja + 1 < beams ? ja + 1 : 0;
+            const std::size_t ka = static_cast<std::size_t>(bin0_[p]);
+            const std::size_t kb = ka + 1 < bins_ ? ka + 1 : ka;
+            const float tj = beam_t_[p], tk = bin_t_[p];
+            const float v_near = (1.0f - tj) * finite_or_zero(d[ka * beams + ja]) + tj * finite_or_zero(d[ka * beams + jb]);
+            const float v_far = (1.0f - tj) * finite_or_zero(d[kb * beams + ja]) + tj * finite_or_zero(d[kb * beams + jb]);
+            c = colormap(colormap_, (1.0f - tk) * v_near + tk * v_far);
+        }
+        if (overlay_[p]) {
+            auto mix = [](std::uint8_t a, std::uint8_t b) {
+                return static_cast<std::uint8_t>(a + (static_cast<float>(b) - a) * kOverlayAlpha + 0.5f);
+            };
+            c = {mix(c.r, kOverlay.r), mix(c.g, kOverlay.g), mix(c.b, kOverlay.b)};
+        }
+        put(out, p, c);
+    }
+}
+
+} // namespace vksonar::host

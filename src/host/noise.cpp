@@ -1,0 +1,87 @@
+// Host stage 5 (docs/pipeline.md §5/6): clean -> intensity (speckle, ambient noise, TVG) -> display.
+#include <algorithm>
+#include <cassert>
+#include <cfloat>
+#include <cmath>
+#include <cstddef>
+
+#include "host/host_stages.h"
+
+namespace vksonar::host {
+namespace {
+
+// Stream layout of one cell: speckle draws first (the gamma model uses kGammaStreams of them), then
+// the ambient-noise draw. Fixed so that switching the speckle model never changes the noise draw.
+constexpr std::uint32_t kSpeckleStream = 0;
+constexpr std::uint32_t kNoiseStream = 64;
+static_assert(kSpeckleStream + kGammaStreams <= kNoiseStream, "speckle streams overlap the noise stream");
+
+constexpr double kMinIntensity = 1e-30; // dB floor guard: 10 log10(1e-30) = -300 dB, far below any window
+constexpr double kMinTvgRange = 1e-3;   // m; TVG's log10(r) at r -> 0
+
+} // namespace
+
+void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame) {
+    const SonarConfig& cfg = plan.config;
+    const std::size_t beams = plan.beams, bins = plan.bins;
+    const std::size_t n = beams * bins;
+    assert(frame.clean.size() == n);
+    assert(plan.bin_range_m.size() >= bins);
+    // The frame is allocated by make_frame(); these only allocate if a caller hands a wrong-sized frame.
+    if (frame.clean.size() != n) frame.clean.resize(n, 0.0f);
+    if (frame.intensity.size() != n) frame.intensity.resize(n);
+    if (frame.display.size() != n) frame.display.resize(n);
+
+    const double source = std::pow(10.0, cfg.source_level_db / 10.0);
+    const double noise = plan.effects.ambient_noise
+                             ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0)
+                             : 0.0;
+    const bool speckle = plan.effects.speckle;
+    const SpeckleModel model = cfg.speckle;
+    const double looks = cfg.speckle_looks;
+    const double sigma = cfg.speckle_gaussian_sigma;
+    const double db_span = std::max(cfg.db_max - cfg.db_min, 1e-12);
+    const double inv_db_span = 1.0 / db_span;
+
+    for (std::size_t k = 0; k < bins; ++k) {
+        double gain = 1.0;
+        if (plan.effects.tvg) {
+            const double r = std::max(k < plan.bin_range_m.size() ? plan.bin_range_m[k] : 0.0, kMinTvgRange);
+            gain = std::pow(10.0, (cfg.tvg_db_per_decade * std::log10(r) + 2.0 * plan.alpha_db_per_m * r) / 10.0);
+        }
+        const auto bin = static_cast<std::uint32_t>(k);
+        for (std::size_t j = 0; j < beams; ++j) {
+            const std::size_t i = k * beams + j;
+            const auto beam = static_cast<std::uint32_t>(j);
+            const double clean = frame.clean[i];
+            // NaN or negative echo energy would poison the frame: treat it as no echo.
+            double signal = clean > 0.0 ? source * clean : 0.0;
+            if (speckle && signal > 0.0) {
+                double s = 1.0;
+                switch (model) {
+                case SpeckleModel::rayleigh: s = sample_exp1(seed, frame_index, beam, bin, kSpeckleStream); break;
+                case SpeckleModel::gamma:
+                    s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
+                    break;
+                case SpeckleModel::gaussian:
+                    s = std::abs(1.0 + sigma * sample_normal01(seed, frame_index, beam, bin, kSpeckleStream));
+                    break;
+                }
+                signal *= s;
+            }
+            double intensity = signal;
+            if (noise > 0.0) intensity += noise * sample_exp1(seed, frame_index, beam, bin, kNoiseStream);
+            intensity *= gain;
+            if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
+            const float stored = static_cast<float>(intensity);
+            frame.intensity[i] = stored;
+
+            // display is a function of the stored intensity alone (what polar.npy holds).
+            const double db = 10.0 * std::log10(std::max(static_cast<double>(stored), kMinIntensity));
+            const double d = std::clamp((db - cfg.db_min) * inv_db_span, 0.0, 1.0);
+            frame.display[i] = static_cast<float>(d);
+        }
+    }
+}
+
+} // namespace vksonar::host

@@ -1,0 +1,718 @@
+// Scene::load_gltf: .gltf / .glb -> SceneData.
+//
+// tinygltf parses the file and loads the buffers; everything that reads buffer memory is checked
+// here first (tinygltf does not bounds-check accessors or buffer views). Before tinygltf sees a
+// file we also validate the GLB container (tinygltf 2.7 can read 8 bytes past a short BIN chunk),
+// cap JSON nesting (its extras conversion recurses), and reject required extensions, which would
+// otherwise fail later with a less useful message. Errors travel as an internal exception and are
+// turned into a Result at the boundary, so nothing throws across the API.
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wshadow"
+#pragma GCC diagnostic ignored "-Wunused-parameter"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#endif
+#define TINYGLTF_IMPLEMENTATION
+#define TINYGLTF_NO_STB_IMAGE
+#define TINYGLTF_NO_STB_IMAGE_WRITE
+#define TINYGLTF_NO_EXTERNAL_IMAGE
+#include <tiny_gltf.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "scene/scene_data.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+namespace {
+
+using nlohmann::json;
+using Mat4 = std::array<double, 16>; // column-major, m[col * 4 + row]
+
+constexpr std::size_t max_file_bytes = std::size_t(1) << 31; // tinygltf takes unsigned int sizes
+constexpr int max_json_depth = 128;
+
+struct LoadFailure {
+    ErrorCode code;
+    std::string what; // without the file prefix
+};
+
+[[noreturn]] void fail(ErrorCode code, std::string what) {
+    throw LoadFailure{code, std::move(what)};
+}
+
+// tinygltf messages are multi-line and may embed a whole data: URI; make them one short line.
+std::string one_line(const std::string& text, std::size_t max_chars = 300) {
+    std::string in = text;
+    for (std::size_t at = in.find("data:"); at != std::string::npos; at = in.find("data:", at + 1)) {
+        const std::size_t comma = in.find(',', at);
+        const std::size_t end = in.find_first_of(" \n\r'\"", at);
+        if (comma != std::string::npos && comma < end) in.replace(comma + 1, end - comma - 1, "...");
+    }
+    std::string out;
+    bool pending_separator = false;
+    for (char c : in) {
+        if (c == '\n' || c == '\r') {
+            pending_separator = !out.empty();
+            continue;
+        }
+        if (pending_separator) out += "; ";
+        pending_separator = false;
+        out += c;
+    }
+    if (out.size() > max_chars) out = out.substr(0, max_chars) + "...";
+    return out;
+}
+
+Mat4 identity() {
+    return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+}
+
+Mat4 multiply(const Mat4& a, const Mat4& b) {
+    Mat4 c{};
+    for (int col = 0; col < 4; ++col)
+        for (int row = 0; row < 4; ++row) {
+            double s = 0;
+            for (int k = 0; k < 4; ++k)
+                s += a[k * 4 + row] * b[col * 4 + k];
+            c[col * 4 + row] = s;
+        }
+    return c;
+}
+
+// glTF +Y up -> world +Z up: world = (x, -z, y), a +90 deg rotation about x.
+const Mat4& world_from_gltf() {
+    static const Mat4 m{1, 0, 0, 0, /**/ 0, 0, 1, 0, /**/ 0, -1, 0, 0, /**/ 0, 0, 0, 1};
+    return m;
+}
+
+std::vector<unsigned char> read_file(const std::string& path) {
+    std::error_code ec;
+    const std::filesystem::file_status st = std::filesystem::status(path, ec);
+    if (!std::filesystem::exists(st)) fail(ErrorCode::io, "file not found");
+    if (std::filesystem::is_directory(st)) fail(ErrorCode::io, "is a directory, not a glTF file");
+    std::ifstream in(path, std::ios::binary);
+    if (!in) fail(ErrorCode::io, std::string("cannot open: ") + std::strerror(errno));
+    std::vector<unsigned char> bytes;
+    char chunk[1 << 16];
+    while (in) {
+        in.read(chunk, sizeof chunk);
+        bytes.insert(bytes.end(), chunk, chunk + in.gcount());
+        if (bytes.size() > max_file_bytes) fail(ErrorCode::unsupported, "file is larger than 2 GiB");
+    }
+    if (in.bad()) fail(ErrorCode::io, "read error");
+    if (bytes.empty()) fail(ErrorCode::parse, "file is empty");
+    return bytes;
+}
+
+std::uint32_t read_u32_le(const unsigned char* p) {
+    return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
+}
+
+// Validates the GLB container; returns the JSON chunk and shrinks `bytes` to the declared length.
+std::string glb_json_chunk(std::vector<unsigned char>& bytes) {
+    if (bytes.size() < 20)
+        fail(ErrorCode::parse, "GLB is " + std::to_string(bytes.size()) + " bytes, shorter than its header");
+    if (std::memcmp(bytes.data(), "glTF", 4) != 0)
+        fail(ErrorCode::parse, "not a binary glTF (bad magic; expected 'glTF')");
+    const std::uint32_t version = read_u32_le(&bytes[4]);
+    const std::uint64_t length = read_u32_le(&bytes[8]);
+    if (version != 2) fail(ErrorCode::unsupported, "GLB version " + std::to_string(version) + " (only 2 is supported)");
+    if (length > bytes.size())
+        fail(ErrorCode::parse, "GLB header declares " + std::to_string(length) + " bytes but the file has " +
+                                   std::to_string(bytes.size()) + " (truncated?)");
+    const std::uint64_t json_length = read_u32_le(&bytes[12]);
+    if (read_u32_le(&bytes[16]) != 0x4E4F534Au) fail(ErrorCode::parse, "GLB first chunk is not JSON");
+    if (json_length == 0 || 20 + json_length > length)
+        fail(ErrorCode::parse, "GLB JSON chunk length " + std::to_string(json_length) + " exceeds the file");
+    const std::uint64_t bin_start = 20 + json_length;
+    if (bin_start < length) {
+        if (bin_start + 8 > length) fail(ErrorCode::parse, "GLB BIN chunk header is truncated");
+        const std::uint64_t bin_length = read_u32_le(&bytes[bin_start]);
+        if (bin_start + 8 + bin_length > length)
+            fail(ErrorCode::parse, "GLB BIN chunk length " + std::to_string(bin_length) + " exceeds the file");
+    }
+    bytes.resize(static_cast<std::size_t>(length));
+    return std::string(reinterpret_cast<const char*>(&bytes[20]), static_cast<std::size_t>(json_length));
+}
+
+// nlohmann parses iteratively, but tinygltf converts extras recursively: cap the nesting first.
+void check_json_depth(const std::string& text) {
+    int depth = 0;
+    bool in_string = false, escaped = false;
+    for (char c : text) {
+        if (in_string) {
+            if (escaped)
+                escaped = false;
+            else if (c == '\\')
+                escaped = true;
+            else if (c == '"')
+                in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '{' || c == '[') {
+            if (++depth > max_json_depth)
+                fail(ErrorCode::parse, "JSON nests deeper than " + std::to_string(max_json_depth) + " levels");
+        } else if (c == '}' || c == ']') {
+            --depth;
+        }
+    }
+}
+
+json parse_json(const std::string& text) {
+    check_json_depth(text);
+    try {
+        json doc = json::parse(text);
+        if (!doc.is_object()) fail(ErrorCode::parse, "top level JSON value is not an object");
+        return doc;
+    } catch (const json::parse_error& e) {
+        std::string what = e.what();
+        const std::size_t bracket = what.find("] ");
+        if (what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos) what = what.substr(bracket + 2);
+        fail(ErrorCode::parse, "invalid JSON: " + one_line(what));
+    }
+}
+
+void check_required_extensions(const json& doc) {
+    const auto it = doc.find("extensionsRequired");
+    if (it == doc.end()) return;
+    if (!it->is_array()) fail(ErrorCode::parse, "extensionsRequired is not an array");
+    for (const json& name : *it) {
+        fail(ErrorCode::unsupported,
+             "unsupported required extension " + (name.is_string() ? name.get<std::string>() : name.dump()));
+    }
+}
+
+// External buffers are looked up only next to the scene file (tinygltf would also try the current
+// directory), and a missing one is remembered so it can be reported as an I/O error.
+struct ExternalFiles {
+    std::string base_dir;
+    std::vector<std::string> missing;
+};
+
+bool file_exists_beside_scene(const std::string& path, void* user) {
+    auto* files = static_cast<ExternalFiles*>(user);
+    const std::string prefix = files->base_dir + "/";
+    if (path.compare(0, prefix.size(), prefix) != 0) return false;
+    const bool exists = tinygltf::FileExists(path, nullptr);
+    if (!exists) files->missing.push_back(path.substr(prefix.size()));
+    return exists;
+}
+
+std::string expand_nothing(const std::string& path, void*) {
+    return path;
+}
+
+// vksonar uses no textures; images are accepted and their bytes dropped.
+bool ignore_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
+    return true;
+}
+
+tinygltf::Model run_tinygltf(const std::vector<unsigned char>& bytes, bool binary, const std::string& base_dir,
+                             std::vector<std::string>& warnings) {
+    ExternalFiles files{base_dir, {}};
+    tinygltf::FsCallbacks fs{};
+    fs.FileExists = &file_exists_beside_scene;
+    fs.ExpandFilePath = &expand_nothing;
+    fs.ReadWholeFile = &tinygltf::ReadWholeFile;
+    fs.WriteWholeFile = &tinygltf::WriteWholeFile;
+    fs.user_data = &files;
+
+    tinygltf::TinyGLTF loader;
+    loader.SetFsCallbacks(fs);
+    loader.SetImageLoader(&ignore_image, nullptr);
+    loader.SetStoreOriginalJSONForExtrasAndExtensions(true);
+
+    tinygltf::Model model;
+    std::string err, warn;
+    const auto size = static_cast<unsigned int>(bytes.size());
+    const bool ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(), size, base_dir)
+                           : loader.LoadASCIIFromString(&model, &err, &warn,
+                                                        reinterpret_cast<const char*>(bytes.data()), size, base_dir);
+    if (!warn.empty()) warnings.push_back("glTF: " + one_line(warn));
+    if (!ok) {
+        if (!files.missing.empty())
+            fail(ErrorCode::io, "external buffer '" + files.missing.front() + "' not found in " + base_dir);
+        fail(ErrorCode::parse, one_line(err.empty() ? std::string("tinygltf failed without a message") : err));
+    }
+    return model;
+}
+
+// ---- accessors ---------------------------------------------------------------------------------
+
+struct AccessorView {
+    const unsigned char* data = nullptr; // first element
+    std::size_t stride = 0;
+    std::size_t count = 0;
+};
+
+std::size_t component_bytes(int component_type) {
+    switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+        return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+        return 2;
+    case TINYGLTF_COMPONENT_TYPE_INT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT:
+        return 4;
+    default:
+        return 0;
+    }
+}
+
+// Checks, without overflow, that every element of the accessor lies inside its buffer view and
+// the view inside its buffer: offset + stride * (count - 1) + element_size <= available.
+AccessorView view_accessor(const tinygltf::Model& model, int index, std::size_t element_bytes,
+                           const std::string& where) {
+    if (index < 0 || std::size_t(index) >= model.accessors.size())
+        fail(ErrorCode::parse, where + " does not exist (" + std::to_string(model.accessors.size()) + " accessors)");
+    const tinygltf::Accessor& acc = model.accessors[std::size_t(index)];
+    if (acc.sparse.isSparse) fail(ErrorCode::unsupported, where + " is sparse (not supported)");
+    if (acc.bufferView < 0 || std::size_t(acc.bufferView) >= model.bufferViews.size())
+        fail(ErrorCode::parse, where + " has no valid bufferView (" + std::to_string(acc.bufferView) + ")");
+    const tinygltf::BufferView& bv = model.bufferViews[std::size_t(acc.bufferView)];
+    const std::string bv_name = "bufferView " + std::to_string(acc.bufferView);
+    if (bv.buffer < 0 || std::size_t(bv.buffer) >= model.buffers.size())
+        fail(ErrorCode::parse, where + ": " + bv_name + " refers to missing buffer " + std::to_string(bv.buffer));
+    const std::vector<unsigned char>& buffer = model.buffers[std::size_t(bv.buffer)].data;
+    if (bv.byteOffset > buffer.size() || bv.byteLength > buffer.size() - bv.byteOffset)
+        fail(ErrorCode::parse, where + ": " + bv_name + " (offset " + std::to_string(bv.byteOffset) + ", length " +
+                                   std::to_string(bv.byteLength) + ") runs past the end of buffer " +
+                                   std::to_string(bv.buffer) + " (" + std::to_string(buffer.size()) + " bytes)");
+    AccessorView view;
+    view.count = acc.count;
+    view.stride = bv.byteStride != 0 ? bv.byteStride : element_bytes;
+    if (view.stride < element_bytes)
+        fail(ErrorCode::parse, where + ": byteStride " + std::to_string(view.stride) +
+                                   " is smaller than the element (" + std::to_string(element_bytes) + " bytes)");
+    if (acc.count == 0) return view;
+    const std::size_t available = bv.byteLength;
+    const bool fits = acc.byteOffset <= available && element_bytes <= available - acc.byteOffset &&
+                      acc.count - 1 <= (available - acc.byteOffset - element_bytes) / view.stride;
+    if (!fits)
+        fail(ErrorCode::parse, where + ": count " + std::to_string(acc.count) + " at offset " +
+                                   std::to_string(acc.byteOffset) + " (stride " + std::to_string(view.stride) +
+                                   ") does not fit in " + bv_name + " (" + std::to_string(available) +
+                                   " bytes); buffer shorter than the accessor claims");
+    view.data = buffer.data() + bv.byteOffset + acc.byteOffset;
+    return view;
+}
+
+// ---- conversion ---------------------------------------------------------------------------------
+
+struct PrimitiveOut {
+    std::uint32_t mesh = 0; // SceneData mesh index
+    int gltf_material = -1;
+};
+
+class Converter {
+public:
+    Converter(const tinygltf::Model& model, SceneData& out) : model_(model), out_(out) {}
+
+    void run() {
+        convert_materials();
+        select_scene();
+        out_.stats.meshes = static_cast<std::uint32_t>(out_.meshes.size());
+        out_.stats.draws = static_cast<std::uint32_t>(out_.draws.size());
+        if (out_.draws.empty()) out_.stats.warnings.push_back("scene has no triangles to draw");
+    }
+
+private:
+    void warn(std::string text) { out_.stats.warnings.push_back(std::move(text)); }
+
+    void convert_materials() {
+        for (std::size_t i = 0; i < model_.materials.size(); ++i) {
+            const tinygltf::Material& src = model_.materials[i];
+            AcousticMaterial m;
+            m.name = src.name.empty() ? "material " + std::to_string(i) : src.name;
+            const std::string where = "material " + std::to_string(i) + " '" + m.name + "'";
+            if (!src.extras_json_string.empty()) apply_acoustic_extras(json::parse(src.extras_json_string), m, where);
+            out_.materials.push_back(m);
+        }
+    }
+
+    void apply_acoustic_extras(const json& extras, AcousticMaterial& m, const std::string& where) {
+        if (!extras.is_object()) return;
+        const auto it = extras.find("vksonar");
+        if (it == extras.end()) return;
+        if (!it->is_object()) fail(ErrorCode::parse, where + ": extras.vksonar is not an object");
+        for (const auto& [key, value] : it->items()) {
+            if (key == "backscatter_db") {
+                if (!value.is_number() || !std::isfinite(value.get<double>()))
+                    fail(ErrorCode::parse,
+                         where + ": extras.vksonar.backscatter_db = " + value.dump() + " is not a finite number");
+                m.backscatter_db = value.get<double>();
+            } else if (key == "model") {
+                const std::string model = value.is_string() ? value.get<std::string>() : value.dump();
+                if (model == "lambert")
+                    m.model = AcousticMaterial::Model::lambert;
+                else if (model == "constant")
+                    m.model = AcousticMaterial::Model::constant;
+                else
+                    fail(ErrorCode::parse, where + ": extras.vksonar.model = " + value.dump() +
+                                               " (expected \"lambert\" or \"constant\")");
+            } else {
+                warn(where + ": unknown key extras.vksonar." + key + " ignored");
+            }
+        }
+    }
+
+    std::uint32_t material_index(int gltf_material) {
+        if (gltf_material >= 0) return static_cast<std::uint32_t>(gltf_material);
+        if (!default_material_) {
+            AcousticMaterial m;
+            m.name = "default";
+            out_.materials.push_back(m);
+            default_material_ = static_cast<std::uint32_t>(out_.materials.size() - 1);
+        }
+        return *default_material_;
+    }
+
+    void select_scene() {
+        std::vector<int> roots;
+        if (model_.scenes.empty()) {
+            // No scene: draw every node that is nobody's child, as most viewers do.
+            std::vector<char> is_child(model_.nodes.size(), 0);
+            for (const tinygltf::Node& n : model_.nodes)
+                for (int c : n.children)
+                    if (c >= 0 && std::size_t(c) < is_child.size()) is_child[std::size_t(c)] = 1;
+            for (std::size_t i = 0; i < model_.nodes.size(); ++i)
+                if (!is_child[i]) roots.push_back(static_cast<int>(i));
+            if (!roots.empty()) warn("file has no scenes; drawing all root nodes");
+        } else {
+            const int scene_index = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+            if (std::size_t(scene_index) >= model_.scenes.size())
+                fail(ErrorCode::parse, "scene " + std::to_string(scene_index) + " does not exist (" +
+                                           std::to_string(model_.scenes.size()) + " scenes)");
+            const tinygltf::Scene& scene = model_.scenes[std::size_t(scene_index)];
+            roots = scene.nodes;
+            if (!scene.extras_json_string.empty())
+                read_scene_extras(json::parse(scene.extras_json_string), scene_index);
+        }
+        traverse(roots);
+    }
+
+    void read_scene_extras(const json& extras, int scene_index) {
+        if (!extras.is_object()) return;
+        const auto vk = extras.find("vksonar");
+        if (vk == extras.end()) return;
+        const std::string where = "scene " + std::to_string(scene_index) + ": extras.vksonar";
+        if (!vk->is_object()) fail(ErrorCode::parse, where + " is not an object");
+        const auto effects = vk->find("effects");
+        if (effects == vk->end()) return;
+        if (!effects->is_object()) fail(ErrorCode::parse, where + ".effects is not an object");
+        out_.effects_json = effects->dump();
+    }
+
+    static void check_finite(const std::vector<double>& v, const std::string& where) {
+        for (double x : v)
+            if (!std::isfinite(x)) fail(ErrorCode::parse, where + " has a NaN or Inf value");
+    }
+
+    static Mat4 local_matrix(const tinygltf::Node& node, const std::string& where) {
+        if (!node.matrix.empty()) {
+            if (node.matrix.size() != 16)
+                fail(ErrorCode::parse,
+                     where + ": matrix has " + std::to_string(node.matrix.size()) + " values (expected 16)");
+            check_finite(node.matrix, where + ": matrix");
+            Mat4 m;
+            std::copy(node.matrix.begin(), node.matrix.end(), m.begin());
+            return m;
+        }
+        const auto check_size = [&](const std::vector<double>& v, std::size_t n, const char* name) {
+            if (!v.empty() && v.size() != n)
+                fail(ErrorCode::parse, where + ": " + name + " has " + std::to_string(v.size()) + " values (expected " +
+                                           std::to_string(n) + ")");
+            check_finite(v, where + ": " + name);
+        };
+        check_size(node.translation, 3, "translation");
+        check_size(node.rotation, 4, "rotation");
+        check_size(node.scale, 3, "scale");
+        double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1}; // q = x, y, z, w
+        if (!node.translation.empty()) std::copy(node.translation.begin(), node.translation.end(), t);
+        if (!node.scale.empty()) std::copy(node.scale.begin(), node.scale.end(), s);
+        if (!node.rotation.empty()) {
+            const double norm = std::sqrt(node.rotation[0] * node.rotation[0] + node.rotation[1] * node.rotation[1] +
+                                          node.rotation[2] * node.rotation[2] + node.rotation[3] * node.rotation[3]);
+            if (!(norm > 1e-12)) fail(ErrorCode::parse, where + ": rotation quaternion has zero length");
+            for (int k = 0; k < 4; ++k)
+                q[k] = node.rotation[std::size_t(k)] / norm; // exporters round; renormalize
+        }
+        const double x = q[0], y = q[1], z = q[2], w = q[3];
+        const double r[9] = {// column-major 3x3
+                             1 - 2 * (y * y + z * z), 2 * (x * y + z * w),     2 * (x * z - y * w),
+                             2 * (x * y - z * w),     1 - 2 * (x * x + z * z), 2 * (y * z + x * w),
+                             2 * (x * z + y * w),     2 * (y * z - x * w),     1 - 2 * (x * x + y * y)};
+        Mat4 m = identity();
+        for (int col = 0; col < 3; ++col)
+            for (int row = 0; row < 3; ++row)
+                m[col * 4 + row] = r[col * 3 + row] * s[col];
+        for (int row = 0; row < 3; ++row)
+            m[12 + row] = t[row];
+        return m;
+    }
+
+    void traverse(const std::vector<int>& roots) {
+        // glTF nodes form a forest: a node reached twice is a cycle or a second parent. Rejecting it
+        // keeps traversal finite (a node DAG could otherwise expand into exponentially many draws).
+        std::vector<char> seen(model_.nodes.size(), 0);
+        struct Item {
+            int node;
+            Mat4 parent; // world_from_parent, including the y-up -> z-up rotation
+        };
+        std::vector<Item> stack;
+        for (auto it = roots.rbegin(); it != roots.rend(); ++it)
+            stack.push_back({*it, world_from_gltf()});
+        while (!stack.empty()) {
+            const Item item = stack.back();
+            stack.pop_back();
+            const std::string where = "node " + std::to_string(item.node);
+            if (item.node < 0 || std::size_t(item.node) >= model_.nodes.size())
+                fail(ErrorCode::parse, where + " does not exist (" + std::to_string(model_.nodes.size()) + " nodes)");
+            if (seen[std::size_t(item.node)])
+                fail(ErrorCode::parse, where + " is reached twice (node cycle or more than one parent)");
+            seen[std::size_t(item.node)] = 1;
+            const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
+            const Mat4 world = multiply(item.parent, local_matrix(node, where));
+            if (node.skin >= 0) warn(where + ": skin ignored (drawn in its bind pose)");
+            if (node.mesh >= 0)
+                add_draws(node.mesh, world, where);
+            else if (node.mesh < -1)
+                fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
+            for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
+                stack.push_back({*c, world});
+        }
+    }
+
+    void add_draws(int mesh_index, const Mat4& world, const std::string& where) {
+        if (std::size_t(mesh_index) >= model_.meshes.size())
+            fail(ErrorCode::parse, where + ": mesh " + std::to_string(mesh_index) + " does not exist (" +
+                                       std::to_string(model_.meshes.size()) + " meshes)");
+        if (mesh_cache_.empty()) mesh_cache_.resize(model_.meshes.size());
+        auto& cached = mesh_cache_[std::size_t(mesh_index)];
+        if (!cached) cached = convert_mesh(mesh_index);
+        for (const PrimitiveOut& p : *cached) {
+            SceneDraw draw;
+            draw.mesh = p.mesh;
+            draw.material = material_index(p.gltf_material);
+            draw.world_from_local = world;
+            out_.draws.push_back(draw);
+            out_.stats.triangles += out_.meshes[p.mesh].index_count / 3;
+        }
+    }
+
+    std::vector<PrimitiveOut> convert_mesh(int mesh_index) {
+        std::vector<PrimitiveOut> prims;
+        const tinygltf::Mesh& mesh = model_.meshes[std::size_t(mesh_index)];
+        for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
+            const std::string where = "mesh " + std::to_string(mesh_index) + " primitive " + std::to_string(p);
+            if (std::optional<PrimitiveOut> out = convert_primitive(mesh.primitives[p], where)) prims.push_back(*out);
+        }
+        return prims;
+    }
+
+    void skip(const std::string& where, const std::string& why) {
+        ++out_.stats.skipped_primitives;
+        warn(where + ": skipped (" + why + ")");
+    }
+
+    std::optional<PrimitiveOut> convert_primitive(const tinygltf::Primitive& prim, const std::string& where) {
+        static const char* const mode_names[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP"};
+        if (prim.mode >= 0 && prim.mode <= 3) {
+            skip(where, std::string("mode ") + mode_names[prim.mode] + " has no surface");
+            return std::nullopt;
+        }
+        if (prim.mode < 0 || prim.mode > 6)
+            fail(ErrorCode::parse, where + ": unknown mode " + std::to_string(prim.mode));
+        if (prim.material < -1 || (prim.material >= 0 && std::size_t(prim.material) >= model_.materials.size()))
+            fail(ErrorCode::parse, where + ": material " + std::to_string(prim.material) + " does not exist (" +
+                                       std::to_string(model_.materials.size()) + " materials)");
+
+        const auto position = prim.attributes.find("POSITION");
+        if (position == prim.attributes.end()) fail(ErrorCode::parse, where + ": missing POSITION attribute");
+        const std::string pos_where = where + ": POSITION accessor " + std::to_string(position->second);
+        const AccessorView pos_view = view_accessor(model_, position->second, 12, pos_where);
+        const tinygltf::Accessor& pos_acc = model_.accessors[std::size_t(position->second)];
+        if (pos_acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || pos_acc.type != TINYGLTF_TYPE_VEC3)
+            fail(ErrorCode::unsupported, pos_where + " is not float VEC3");
+        if (pos_view.count == 0) {
+            skip(where, "no vertices");
+            return std::nullopt;
+        }
+        if (pos_view.count > std::numeric_limits<std::uint32_t>::max())
+            fail(ErrorCode::unsupported, pos_where + ": more than 2^32 vertices");
+        const auto vertex_count = static_cast<std::uint32_t>(pos_view.count);
+
+        std::vector<float> positions(std::size_t(vertex_count) * 3);
+        for (std::uint32_t v = 0; v < vertex_count; ++v) {
+            float xyz[3];
+            std::memcpy(xyz, pos_view.data + pos_view.stride * v, sizeof xyz);
+            if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
+                fail(ErrorCode::parse, pos_where + " has " + (std::isnan(xyz[0] + xyz[1] + xyz[2]) ? "NaN" : "Inf") +
+                                           " at vertex " + std::to_string(v));
+            std::copy(xyz, xyz + 3, &positions[std::size_t(v) * 3]);
+        }
+
+        std::vector<std::uint32_t> indices = read_indices(prim, vertex_count, where);
+        indices = to_triangle_list(std::move(indices), prim.mode, where);
+        if (indices.empty()) {
+            skip(where, "no triangles");
+            return std::nullopt;
+        }
+        if (all_degenerate(positions, indices)) {
+            skip(where, "all " + std::to_string(indices.size() / 3) + " triangles are degenerate");
+            return std::nullopt;
+        }
+
+        constexpr std::uint64_t max_u32 = std::numeric_limits<std::uint32_t>::max();
+        if (out_.positions.size() / 3 + vertex_count > max_u32 || out_.indices.size() + indices.size() > max_u32)
+            fail(ErrorCode::unsupported, where + ": scene exceeds 2^32 vertices or indices");
+        MeshRange range;
+        range.first_index = static_cast<std::uint32_t>(out_.indices.size());
+        range.index_count = static_cast<std::uint32_t>(indices.size());
+        range.first_vertex = static_cast<std::uint32_t>(out_.positions.size() / 3);
+        range.vertex_count = vertex_count;
+        out_.positions.insert(out_.positions.end(), positions.begin(), positions.end());
+        out_.indices.insert(out_.indices.end(), indices.begin(), indices.end());
+        out_.meshes.push_back(range);
+        return PrimitiveOut{static_cast<std::uint32_t>(out_.meshes.size() - 1), prim.material};
+    }
+
+    std::vector<std::uint32_t> read_indices(const tinygltf::Primitive& prim, std::uint32_t vertex_count,
+                                            const std::string& where) {
+        std::vector<std::uint32_t> indices;
+        if (prim.indices == -1) {
+            indices.resize(vertex_count);
+            for (std::uint32_t i = 0; i < vertex_count; ++i)
+                indices[i] = i;
+            return indices;
+        }
+        const std::string idx_where = where + ": indices accessor " + std::to_string(prim.indices);
+        if (prim.indices < 0 || std::size_t(prim.indices) >= model_.accessors.size())
+            fail(ErrorCode::parse,
+                 idx_where + " does not exist (" + std::to_string(model_.accessors.size()) + " accessors)");
+        const tinygltf::Accessor& acc = model_.accessors[std::size_t(prim.indices)];
+        const std::size_t bytes = component_bytes(acc.componentType);
+        if (acc.type != TINYGLTF_TYPE_SCALAR || bytes == 0 || acc.componentType == TINYGLTF_COMPONENT_TYPE_BYTE ||
+            acc.componentType == TINYGLTF_COMPONENT_TYPE_SHORT || acc.componentType == TINYGLTF_COMPONENT_TYPE_INT ||
+            acc.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT)
+            fail(ErrorCode::parse, idx_where + " is not an unsigned byte/short/int SCALAR");
+        const AccessorView view = view_accessor(model_, prim.indices, bytes, idx_where);
+        indices.resize(view.count);
+        for (std::size_t i = 0; i < view.count; ++i) {
+            const unsigned char* p = view.data + view.stride * i;
+            std::uint32_t value = 0;
+            if (bytes == 1) {
+                value = *p;
+            } else if (bytes == 2) {
+                std::uint16_t v16;
+                std::memcpy(&v16, p, 2);
+                value = v16;
+            } else {
+                std::memcpy(&value, p, 4);
+            }
+            if (value >= vertex_count)
+                fail(ErrorCode::parse, idx_where + ": index " + std::to_string(i) + " = " + std::to_string(value) +
+                                           " is out of range (" + std::to_string(vertex_count) + " vertices)");
+            indices[i] = value;
+        }
+        return indices;
+    }
+
+    static std::vector<std::uint32_t> to_triangle_list(std::vector<std::uint32_t> in, int mode,
+                                                       const std::string& where) {
+        if (mode == TINYGLTF_MODE_TRIANGLES) {
+            if (in.size() % 3 != 0)
+                fail(ErrorCode::parse,
+                     where + ": " + std::to_string(in.size()) + " triangle indices is not a multiple of 3");
+            return in;
+        }
+        std::vector<std::uint32_t> out;
+        if (in.size() < 3) return out;
+        out.reserve((in.size() - 2) * 3);
+        for (std::size_t i = 0; i + 2 < in.size(); ++i) {
+            if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
+                out.insert(out.end(), {in[0], in[i + 1], in[i + 2]});
+            else if (i % 2 == 0)
+                out.insert(out.end(), {in[i], in[i + 1], in[i + 2]}); // strip keeps winding
+            else
+                out.insert(out.end(), {in[i + 1], in[i], in[i + 2]});
+        }
+        return out;
+    }
+
+    static bool all_degenerate(const std::vector<float>& pos, const std::vector<std::uint32_t>& idx) {
+        for (std::size_t t = 0; t < idx.size(); t += 3) {
+            const float* a = &pos[std::size_t(idx[t]) * 3];
+            const float* b = &pos[std::size_t(idx[t + 1]) * 3];
+            const float* c = &pos[std::size_t(idx[t + 2]) * 3];
+            const double u[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
+            const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
+            const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+            if (n[0] != 0 || n[1] != 0 || n[2] != 0) return false;
+        }
+        return true;
+    }
+
+    const tinygltf::Model& model_;
+    SceneData& out_;
+    std::optional<std::uint32_t> default_material_;
+    std::vector<std::optional<std::vector<PrimitiveOut>>> mesh_cache_;
+};
+
+bool has_extension(const std::string& path, const char* ext) {
+    std::string e = std::filesystem::path(path).extension().string();
+    std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    return e == ext;
+}
+
+} // namespace
+
+Result<Scene> Scene::load_gltf(const std::string& path) {
+    try {
+        std::vector<unsigned char> bytes = read_file(path);
+        const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+        if (has_extension(path, ".glb") && !binary)
+            fail(ErrorCode::parse, "not a binary glTF (bad magic; expected 'glTF')");
+        const json doc = parse_json(binary ? glb_json_chunk(bytes) : std::string(bytes.begin(), bytes.end()));
+        check_required_extensions(doc);
+
+        std::string base_dir = std::filesystem::path(path).parent_path().string();
+        if (base_dir.empty()) base_dir = ".";
+        Scene scene;
+        SceneData& data = *scene.data_;
+        data.source_path = path;
+        const tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, data.stats.warnings);
+        Converter(model, data).run();
+        for (std::string& w : data.stats.warnings)
+            w = path + ": " + w;
+        return Result<Scene>(std::move(scene));
+    } catch (const LoadFailure& e) {
+        return make_error(e.code, path + ": " + e.what);
+    } catch (const json::exception& e) {
+        return make_error(ErrorCode::parse, path + ": invalid JSON: " + one_line(e.what()));
+    } catch (const std::bad_alloc&) {
+        return make_error(ErrorCode::io, path + ": out of memory while loading");
+    } catch (const std::exception& e) {
+        return make_error(ErrorCode::internal, path + ": " + one_line(e.what()));
+    }
+}
+
+} // namespace vksonar

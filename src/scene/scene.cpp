@@ -1,0 +1,103 @@
+// Scene: ownership of SceneData and the engine-facing builder (add_mesh / add_material / add_draw).
+// The glTF loader (gltf_loader.cpp) fills the same SceneData directly, after its own validation.
+#include <cmath>
+#include <limits>
+#include <string>
+#include <utility>
+
+#include "scene/scene_data.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+
+Scene::Scene() : data_(std::make_unique<SceneData>()) {}
+Scene::~Scene() = default;
+
+// A moved-from Scene stays usable (empty), so data() never dereferences null. Allocating an empty
+// SceneData cannot reasonably fail; if it does, terminate is the right answer for a noexcept move.
+Scene::Scene(Scene&& other) noexcept : data_(std::make_unique<SceneData>()) {
+    data_.swap(other.data_);
+}
+
+Scene& Scene::operator=(Scene&& other) noexcept {
+    data_.swap(other.data_);
+    return *this;
+}
+
+Result<std::uint32_t> Scene::add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
+                                      const std::uint32_t* indices, std::uint32_t index_count) {
+    const auto fail = [](std::string what) {
+        return make_error(ErrorCode::invalid_argument, "Scene::add_mesh: " + std::move(what));
+    };
+    if (vertex_count == 0 || positions_xyz == nullptr) return fail("positions_xyz is null or vertex_count is 0");
+    if (index_count == 0 || indices == nullptr) return fail("indices is null or index_count is 0");
+    if (index_count % 3 != 0)
+        return fail("index_count " + std::to_string(index_count) + " is not a multiple of 3 (triangle list)");
+
+    SceneData& d = *data_;
+    constexpr std::uint64_t max_u32 = std::numeric_limits<std::uint32_t>::max();
+    if (d.positions.size() / 3 + vertex_count > max_u32 || d.indices.size() + index_count > max_u32)
+        return fail("scene would exceed 2^32 vertices or indices");
+
+    for (std::uint32_t v = 0; v < vertex_count; ++v) {
+        for (int k = 0; k < 3; ++k) {
+            if (!std::isfinite(positions_xyz[3 * std::size_t(v) + std::size_t(k)]))
+                return fail("vertex " + std::to_string(v) + " has a NaN or Inf coordinate");
+        }
+    }
+    for (std::uint32_t i = 0; i < index_count; ++i) {
+        if (indices[i] >= vertex_count)
+            return fail("index " + std::to_string(i) + " = " + std::to_string(indices[i]) +
+                        " is out of range (vertex_count " + std::to_string(vertex_count) + ")");
+    }
+
+    MeshRange range;
+    range.first_index = static_cast<std::uint32_t>(d.indices.size());
+    range.index_count = index_count;
+    range.first_vertex = static_cast<std::uint32_t>(d.positions.size() / 3);
+    range.vertex_count = vertex_count;
+    d.positions.insert(d.positions.end(), positions_xyz, positions_xyz + 3 * std::size_t(vertex_count));
+    d.indices.insert(d.indices.end(), indices, indices + index_count);
+    d.meshes.push_back(range);
+    d.stats.meshes = static_cast<std::uint32_t>(d.meshes.size());
+    if (d.materials.empty()) d.materials.push_back(AcousticMaterial{"default"});
+    return static_cast<std::uint32_t>(d.meshes.size() - 1);
+}
+
+std::uint32_t Scene::add_material(const AcousticMaterial& material) {
+    data_->materials.push_back(material);
+    return static_cast<std::uint32_t>(data_->materials.size() - 1);
+}
+
+Result<void> Scene::add_draw(const SceneDraw& draw) {
+    SceneData& d = *data_;
+    if (draw.mesh >= d.meshes.size())
+        return make_error(ErrorCode::invalid_argument, "Scene::add_draw: mesh " + std::to_string(draw.mesh) +
+                                                           " does not exist (" + std::to_string(d.meshes.size()) +
+                                                           " meshes)");
+    if (draw.material >= d.materials.size())
+        return make_error(ErrorCode::invalid_argument, "Scene::add_draw: material " + std::to_string(draw.material) +
+                                                           " does not exist (" + std::to_string(d.materials.size()) +
+                                                           " materials)");
+    for (std::size_t k = 0; k < draw.world_from_local.size(); ++k) {
+        if (!std::isfinite(draw.world_from_local[k]))
+            return make_error(ErrorCode::invalid_argument,
+                              "Scene::add_draw: world_from_local[" + std::to_string(k) + "] is NaN or Inf");
+    }
+    d.draws.push_back(draw);
+    d.stats.draws = static_cast<std::uint32_t>(d.draws.size());
+    d.stats.triangles += d.meshes[draw.mesh].index_count / 3;
+    return {};
+}
+
+const SceneStats& Scene::stats() const {
+    return data_->stats;
+}
+const std::vector<AcousticMaterial>& Scene::materials() const {
+    return data_->materials;
+}
+const std::string& Scene::effects_json() const {
+    return data_->effects_json;
+}
+
+} // namespace vksonar

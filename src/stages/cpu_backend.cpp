@@ -1,0 +1,118 @@
+// The CPU StageBackend: runs the four reference stages on buffers allocated once at construction.
+// Arithmetic precision follows plan.config.cpu_precision (f64 -> double, else float).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "stages/cpu_stages.h"
+
+namespace vksonar::cpu {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
+template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) { dst.assign(src.begin(), src.end()); }
+
+template <class Real> class CpuBackend final : public StageBackend {
+public:
+    CpuBackend(const Plan& plan, const SceneData& scene) : plan_(plan), scene_(scene) {
+        const std::size_t pixels = static_cast<std::size_t>(plan_.rows) * plan_.columns;
+        depth_.assign(pixels, 0.0f);
+        material_.assign(pixels, shared::kNoMaterial);
+        if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
+        echo_.assign(pixels * 2, 0.0f);
+        profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.columns, 0.0f);
+        beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
+        polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
+        scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
+        if (plan_.effects.incidence) normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
+        draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
+    }
+
+    Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override {
+        const double pose_values[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
+        const char* pose_names[6] = {"x", "y", "z", "roll", "pitch", "yaw"};
+        for (int i = 0; i < 6; ++i) {
+            if (!std::isfinite(pose_values[i])) {
+                return make_error(ErrorCode::invalid_argument,
+                                  std::string("pose: ") + pose_names[i] + " is not finite (" +
+                                      std::to_string(pose_values[i]) + ")");
+            }
+        }
+
+        auto start = Clock::now();
+        compose_depth_draws(plan_, scene_, pose, draws_);
+        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data());
+        finish("depth", start, frame);
+
+        const float* normals = nullptr;
+        if (plan_.effects.incidence) {
+            start = Clock::now();
+            cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
+            normals = normals_.data();
+            finish("normals", start, frame);
+        }
+
+        start = Clock::now();
+        cpu::echo<Real>(plan_, depth_.data(), material_.data(), normals, echo_.data());
+        finish("echo", start, frame);
+
+        start = Clock::now();
+        cpu::beamform<Real>(plan_, echo_.data(), profiles_.data(), beam_profiles_.data(), polar_.data(),
+                            scratch_.data());
+        finish("beamform", start, frame);
+
+        store(frame.clean, polar_);
+        if (save_mask & save_depth) {
+            store(frame.depth, depth_);
+            store(frame.material, material_);
+        }
+        if (save_mask & save_normals) {
+            if (plan_.effects.incidence) {
+                store(frame.normals, normals_);
+            } else {
+                frame.normals.clear(); // the normals stage did not run (incidence off)
+            }
+        }
+        if (save_mask & save_echo) store(frame.echo, echo_);
+        if (save_mask & save_profiles) {
+            store(frame.profiles, profiles_);
+            store(frame.beam_profiles, beam_profiles_);
+        }
+        return {};
+    }
+
+    const char* name() const override { return "cpu"; }
+
+private:
+    static void finish(const char* stage, Clock::time_point start, Frame& frame) {
+        frame.times.push_back({stage, ms_since(start)});
+        frame.stages_run.emplace_back(stage);
+    }
+
+    Plan plan_;               // copied: the backend may outlive the caller's Plan object
+    const SceneData& scene_;  // the scene must outlive the renderer (renderer.h)
+    std::vector<shared::DepthPush> draws_;
+    std::vector<float> depth_;
+    std::vector<std::uint32_t> material_;
+    std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
+    std::vector<Real> scratch_, normals_scratch_;
+};
+
+} // namespace
+
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene) {
+    if (plan.config.cpu_precision == Precision::f64) return std::make_unique<CpuBackend<double>>(plan, scene);
+    return std::make_unique<CpuBackend<float>>(plan, scene);
+}
+
+} // namespace vksonar::cpu

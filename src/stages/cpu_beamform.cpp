@@ -1,0 +1,147 @@
+// CPU reference of the beamform stage (docs/pipeline.md §4): per-column range profiles (nearest or
+// tent kernel), resampling of pixel columns onto the beam table, side-lobe convolution along beams.
+// Every output cell is computed by one loop iteration with sums in increasing index order, so the
+// result is deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+#include <vector>
+
+#include "core/sonar_math.hpp"
+#include "stages/cpu_stages.h"
+
+namespace vksonar::cpu {
+
+template <class Real>
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar,
+              Real* acc) {
+    using M = Math<Real>;
+    const std::uint32_t C = plan.columns, R = plan.rows, beams = plan.beams, bins = plan.bins;
+    Real range_min, bin_width;
+    if constexpr (std::is_same_v<Real, float>) {
+        range_min = plan.params.range_min_m;
+        bin_width = plan.params.bin_width_m;
+    } else {
+        range_min = plan.config.range_min_m;
+        bin_width = plan.bin_width_m;
+    }
+    const bool tent = plan.params.range_kernel == shared::kRangeKernelTent;
+    const std::int64_t last = static_cast<std::int64_t>(bins) - 1;
+
+    // profile: per column, rows in increasing order. The loops run row-major for locality; every
+    // accumulator (bin k, column c) still receives its additions in increasing row order (and, within
+    // a row, the k0 share before the k0 + 1 share), so the sums are the per-column sums of the contract.
+    const std::size_t cells = static_cast<std::size_t>(bins) * C;
+    std::fill(acc, acc + cells, Real(0));
+    for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
+        const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
+        for (std::uint32_t c = 0; c < C; ++c) {
+            const Real e = static_cast<Real>(e2[2 * c]);
+            if (!(e > Real(0))) continue;
+            const Real x = M::range_bin_coord(static_cast<Real>(e2[2 * c + 1]), range_min, bin_width);
+            if (tent) {
+                Real t = x - Real(0.5);
+                if (std::isnan(t)) continue;
+                // Far outside the grid every share lands on an edge bin anyway; keep floor() in int range.
+                t = std::min(std::max(t, Real(-4)), static_cast<Real>(bins) + Real(4));
+                const Real kf = std::floor(t);
+                const Real w1 = t - kf;
+                const std::int64_t k0 = static_cast<std::int64_t>(kf);
+                const std::int64_t k1 = k0 + 1;
+                acc[static_cast<std::size_t>(std::min(std::max(k0, std::int64_t(0)), last)) * C + c] += (Real(1) - w1) * e;
+                acc[static_cast<std::size_t>(std::min(std::max(k1, std::int64_t(0)), last)) * C + c] += w1 * e;
+            } else {
+                if (!(x >= Real(0) && x < static_cast<Real>(bins))) continue;
+                const std::int64_t k = static_cast<std::int64_t>(std::floor(x));
+                if (k >= 0 && k <= last) acc[static_cast<std::size_t>(k) * C + c] += e;
+            }
+        }
+    }
+    for (std::size_t i = 0; i < cells; ++i) profiles[i] = static_cast<float>(acc[i]);
+
+    // resample: one cell per (beam j, bin k), columns in increasing order.
+    for (std::uint32_t k = 0; k < bins; ++k) {
+        const float* prof = profiles + static_cast<std::size_t>(k) * C;
+        for (std::uint32_t j = 0; j < beams; ++j) {
+            Real sum = Real(0);
+            for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c) {
+                const std::uint32_t b = plan.column_beam[c];
+                const Real cw = static_cast<Real>(plan.column_weight[c]);
+                const Real w = b == j ? cw : (b + 1 == j ? Real(1) - cw : Real(0));
+                sum += w * static_cast<Real>(prof[c]);
+            }
+            beam_profiles[static_cast<std::size_t>(k) * beams + j] = static_cast<float>(sum);
+        }
+    }
+
+    // sidelobe: polar(j) = sum_t weight[j][t] B(j - K + t), or a copy when the pattern is off.
+    if (!plan.effects.horizontal_pattern) {
+        std::copy(beam_profiles, beam_profiles + static_cast<std::size_t>(bins) * beams, polar);
+        return;
+    }
+    const std::uint32_t taps = plan.sidelobe_taps;
+    const std::int64_t K = (static_cast<std::int64_t>(taps) - 1) / 2;
+    const std::int64_t nb = beams;
+    const float* weights = plan.sidelobe_weight.data();
+    for (std::uint32_t k = 0; k < bins; ++k) {
+        const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
+        float* out = polar + static_cast<std::size_t>(k) * beams;
+        // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
+        if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
+            std::fill(out, out + beams, 0.0f);
+            continue;
+        }
+        std::int64_t j = 0;
+        while (j < nb) {
+            if (j >= K && j + 3 + K < nb) {
+                // Four interior beams at once: independent sums, each still in increasing t.
+                const float* w0 = weights + static_cast<std::size_t>(j) * taps;
+                const float* w1 = w0 + taps;
+                const float* w2 = w1 + taps;
+                const float* w3 = w2 + taps;
+                const float* src = B + (j - K);
+                Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
+                for (std::uint32_t t = 0; t < taps; ++t) {
+                    s0 += static_cast<Real>(w0[t]) * static_cast<Real>(src[t]);
+                    s1 += static_cast<Real>(w1[t]) * static_cast<Real>(src[t + 1]);
+                    s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
+                    s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
+                }
+                out[j] = static_cast<float>(s0);
+                out[j + 1] = static_cast<float>(s1);
+                out[j + 2] = static_cast<float>(s2);
+                out[j + 3] = static_cast<float>(s3);
+                j += 4;
+                continue;
+            }
+            // Taps whose source beam j - K + t lies in [0, beams), in increasing t.
+            const float* w = weights + static_cast<std::size_t>(j) * taps;
+            const std::int64_t first = std::max<std::int64_t>(0, K - j);
+            const std::int64_t end = std::min<std::int64_t>(taps, nb + K - j);
+            const float* src = B + (j - K);
+            Real sum = Real(0);
+            for (std::int64_t t = first; t < end; ++t) sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
+            out[j] = static_cast<float>(sum);
+            ++j;
+        }
+    }
+}
+
+std::size_t beamform_scratch_count(const Plan& plan) {
+    return static_cast<std::size_t>(plan.bins) * plan.columns; // one accumulator per profile cell
+}
+
+template <class Real>
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar) {
+    std::vector<Real> acc(std::max<std::size_t>(beamform_scratch_count(plan), 1));
+    beamform<Real>(plan, echo2, profiles, beam_profiles, polar, acc.data());
+}
+
+template void beamform<float>(const Plan&, const float*, float*, float*, float*, float*);
+template void beamform<double>(const Plan&, const float*, float*, float*, float*, double*);
+template void beamform<float>(const Plan&, const float*, float*, float*, float*);
+template void beamform<double>(const Plan&, const float*, float*, float*, float*);
+
+} // namespace vksonar::cpu

@@ -1,0 +1,246 @@
+// CPU reference of the depth pass (docs/pipeline.md §1): a scan-converting rasterizer with Vulkan's
+// rules. Per slice s and draw i (slice-major DepthPush table), every triangle is transformed to clip
+// space in double, clipped against 0 <= z <= w (Sutherland-Hodgman, then fan-triangulated), divided,
+// mapped by the slice's viewport and rasterized inside the slice's scissor rectangle at pixel centres
+// with the top-left fill rule (both windings, no culling). z_ndc is interpolated linearly in screen
+// space; the depth test is strict GREATER in draw order against a buffer cleared to 0 (reversed-Z).
+//
+// Robustness: edge functions are evaluated in double, always from the same (lexicographically
+// smaller) endpoint of an edge, so two triangles that share an edge compute exactly opposite values
+// on it: no pixel is lost or covered twice along a shared edge, whatever the winding. Clipped vertices
+// are interpolated from the inside endpoint, so a shared edge crossing a clip plane is cut at the same
+// point in both triangles. Zero-area, non-finite and w <= 0 triangles produce nothing.
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+#include "stages/cpu_stages.h"
+
+namespace vksonar::cpu {
+namespace {
+
+struct ClipVertex {
+    double x, y, z, w;
+};
+
+struct ScreenVertex {
+    double x, y, z; // framebuffer x, y (pixels) and z_ndc (= framebuffer depth with range [0, 1])
+};
+
+// Outcode bits of the clip volume; a triangle whose three vertices share a bit is invisible.
+enum : unsigned {
+    kOutLeft = 1u, kOutRight = 2u, kOutTop = 4u, kOutBottom = 8u, kOutNear = 16u, kOutFar = 32u
+};
+
+unsigned outcode(const ClipVertex& v) {
+    unsigned code = 0;
+    if (v.x < -v.w) code |= kOutLeft;
+    if (v.x > v.w) code |= kOutRight;
+    if (v.y < -v.w) code |= kOutTop;
+    if (v.y > v.w) code |= kOutBottom;
+    if (v.z > v.w) code |= kOutNear; // reversed-Z: z_ndc = 1 at the near plane
+    if (v.z < 0.0) code |= kOutFar;
+    return code;
+}
+
+// Clips a convex polygon against one plane: plane 0 keeps z >= 0, plane 1 keeps w - z >= 0.
+// Returns the new vertex count (at most n + 1).
+int clip_against(const ClipVertex* in, int n, ClipVertex* out, int plane) {
+    auto dist = [plane](const ClipVertex& v) { return plane == 0 ? v.z : v.w - v.z; };
+    int m = 0;
+    for (int i = 0; i < n; ++i) {
+        const ClipVertex& a = in[i];
+        const ClipVertex& b = in[(i + 1) % n];
+        const double da = dist(a), db = dist(b);
+        const bool a_in = da >= 0.0, b_in = db >= 0.0;
+        if (a_in) out[m++] = a;
+        if (a_in != b_in) {
+            // Interpolate from the inside endpoint: both triangles sharing this edge get the same point.
+            const ClipVertex& p = a_in ? a : b;
+            const ClipVertex& q = a_in ? b : a;
+            const double dp = a_in ? da : db, dq = a_in ? db : da;
+            const double t = dp / (dp - dq);
+            ClipVertex r{p.x + t * (q.x - p.x), p.y + t * (q.y - p.y), p.z + t * (q.z - p.z), p.w + t * (q.w - p.w)};
+            if (plane == 0) {
+                r.z = 0.0; // exactly on the plane
+            } else {
+                r.z = r.w;
+            }
+            out[m++] = r;
+        }
+    }
+    return m;
+}
+
+// Oriented edge from `from` to `to`, evaluated from its lexicographically smaller endpoint so that the
+// reversed edge (in the neighbouring triangle) gives exactly the negated value.
+struct Edge {
+    double ax, ay, dx, dy; // canonical start point and direction
+    double sign;           // +1: oriented edge runs a -> b; -1: reversed
+    bool top_left;         // include samples exactly on the edge
+
+    double eval(double px, double py) const { return sign * (dx * (py - ay) - dy * (px - ax)); }
+    bool covers(double e) const { return e > 0.0 || (e == 0.0 && top_left); }
+};
+
+Edge make_edge(const ScreenVertex& from, const ScreenVertex& to) {
+    const bool swap = to.x < from.x || (to.x == from.x && to.y < from.y);
+    const ScreenVertex& a = swap ? to : from;
+    const ScreenVertex& b = swap ? from : to;
+    Edge e{a.x, a.y, b.x - a.x, b.y - a.y, swap ? -1.0 : 1.0, false};
+    // Interior on the positive side, framebuffer y down. A top edge is horizontal with the interior
+    // below it (larger y): direction +x. A left edge has the interior to its right: direction -y.
+    const double odx = to.x - from.x, ody = to.y - from.y;
+    e.top_left = ody < 0.0 || (ody == 0.0 && odx > 0.0);
+    return e;
+}
+
+struct Target {
+    float* depth;
+    std::uint32_t* material;
+    std::uint32_t columns;
+    std::int64_t x_begin, x_end; // scissor columns [x_begin, x_end)
+    std::int64_t rows;
+    std::uint32_t material_id;
+};
+
+// First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
+std::int64_t first_pixel(double lo, std::int64_t begin, std::int64_t end) {
+    const double f = std::ceil(lo - 0.5);
+    if (!(f > static_cast<double>(begin))) return begin; // also NaN
+    if (f > static_cast<double>(end)) return end;
+    return static_cast<std::int64_t>(f);
+}
+
+// One past the last pixel index whose centre is <= hi, clamped into [begin, end].
+std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
+    const double f = std::floor(hi - 0.5) + 1.0;
+    if (!(f < static_cast<double>(end))) return end;
+    if (f < static_cast<double>(begin)) return begin;
+    return static_cast<std::int64_t>(f);
+}
+
+void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {
+    // Orientation from the same canonical edge function the coverage test uses.
+    double area = make_edge(v0, v1).eval(v2.x, v2.y);
+    if (!(area != 0.0) || !std::isfinite(area)) return; // zero area, NaN or overflow
+    if (area < 0.0) std::swap(v1, v2);
+    const Edge e0 = make_edge(v1, v2); // weight of v0
+    const Edge e1 = make_edge(v2, v0); // weight of v1
+    const Edge e2 = make_edge(v0, v1); // weight of v2
+
+    const double min_x = std::min({v0.x, v1.x, v2.x}), max_x = std::max({v0.x, v1.x, v2.x});
+    const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
+    const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
+    const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
+    const std::int64_t y0 = first_pixel(min_y, 0, t.rows);
+    const std::int64_t y1 = last_pixel_end(max_y, 0, t.rows);
+
+    for (std::int64_t py = y0; py < y1; ++py) {
+        const double cy = static_cast<double>(py) + 0.5;
+        const std::size_t row_base = static_cast<std::size_t>(py) * t.columns;
+        for (std::int64_t px = x0; px < x1; ++px) {
+            const double cx = static_cast<double>(px) + 0.5;
+            const double w0 = e0.eval(cx, cy);
+            if (!e0.covers(w0)) continue;
+            const double w1 = e1.eval(cx, cy);
+            if (!e1.covers(w1)) continue;
+            const double w2 = e2.eval(cx, cy);
+            if (!e2.covers(w2)) continue;
+            const double sum = w0 + w1 + w2;
+            if (!(sum > 0.0)) continue;
+            // Screen-space linear interpolation of z_ndc (no perspective correction, as Vulkan does
+            // for gl_FragCoord.z); clamped to the depth range against rounding.
+            double z = (w0 * v0.z + w1 * v1.z + w2 * v2.z) / sum;
+            z = std::min(1.0, std::max(0.0, z));
+            const float d = static_cast<float>(z);
+            const std::size_t p = row_base + static_cast<std::size_t>(px);
+            if (d > t.depth[p]) { // strict GREATER, reversed-Z
+                t.depth[p] = d;
+                t.material[p] = t.material_id;
+            }
+        }
+    }
+}
+
+ClipVertex transform(const double m[16], const float* pos) {
+    const double x = pos[0], y = pos[1], z = pos[2];
+    return {m[0] * x + m[4] * y + m[8] * z + m[12], m[1] * x + m[5] * y + m[9] * z + m[13],
+            m[2] * x + m[6] * y + m[10] * z + m[14], m[3] * x + m[7] * y + m[11] * z + m[15]};
+}
+
+bool finite(const ClipVertex& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
+}
+
+} // namespace
+
+void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
+                std::uint32_t* material) {
+    const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
+    const std::size_t pixels = static_cast<std::size_t>(rows) * columns;
+    std::fill(depth, depth + pixels, 0.0f);
+    std::fill(material, material + pixels, shared::kNoMaterial);
+
+    const std::size_t draw_count = scene.draws.size();
+    const double half_w = 0.5 * W, half_h = 0.5 * rows;
+    for (std::uint32_t s = 0; s < plan.slices; ++s) {
+        Target target{depth, material, columns, static_cast<std::int64_t>(s) * W,
+                      static_cast<std::int64_t>(s + 1) * W, rows, 0};
+        const double x_offset = static_cast<double>(s) * W;
+        for (std::size_t i = 0; i < draw_count; ++i) {
+            const std::size_t slot = s * draw_count + i;
+            if (slot >= draws.size()) break;
+            const shared::DepthPush& push = draws[slot];
+            const SceneDraw& draw = scene.draws[i];
+            if (draw.mesh >= scene.meshes.size()) continue;
+            const MeshRange& mesh = scene.meshes[draw.mesh];
+            if (static_cast<std::size_t>(mesh.first_index) + mesh.index_count > scene.indices.size()) continue;
+            target.material_id = push.material_id;
+            double m[16];
+            for (int k = 0; k < 16; ++k) m[k] = push.clip_from_local[k];
+
+            const std::size_t vertex_limit = scene.positions.size() / 3;
+            const std::uint32_t* idx = scene.indices.data() + mesh.first_index;
+            for (std::uint32_t tri = 0; tri + 3 <= mesh.index_count; tri += 3) {
+                ClipVertex poly[8], tmp[8];
+                bool ok = true;
+                for (int k = 0; k < 3 && ok; ++k) {
+                    const std::size_t v = static_cast<std::size_t>(mesh.first_vertex) + idx[tri + k];
+                    if (v >= vertex_limit) {
+                        ok = false;
+                        break;
+                    }
+                    poly[k] = transform(m, scene.positions.data() + 3 * v);
+                    ok = finite(poly[k]);
+                }
+                if (!ok) continue;
+                const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
+                if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
+                int n = 3;
+                if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
+                    n = clip_against(poly, n, tmp, 0);
+                    if (n < 3) continue;
+                    n = clip_against(tmp, n, poly, 1);
+                    if (n < 3) continue;
+                }
+                ScreenVertex sv[8];
+                bool valid = true;
+                for (int k = 0; k < n; ++k) {
+                    const ClipVertex& c = poly[k];
+                    if (!(c.w > 0.0)) {
+                        valid = false;
+                        break;
+                    }
+                    const double xn = c.x / c.w, yn = c.y / c.w, zn = c.z / c.w;
+                    sv[k] = {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
+                }
+                if (!valid) continue;
+                for (int k = 1; k + 1 < n; ++k) raster_triangle(sv[0], sv[k], sv[k + 1], target);
+            }
+        }
+    }
+}
+
+} // namespace vksonar::cpu

@@ -1,0 +1,198 @@
+// CPU reference of the normals stage (docs/pipeline.md §2): Sobel 3x3 on reconstructed sonar-frame
+// positions in smooth regions, one-sided differences towards the neighbour of closest range near
+// depth edges, and a sonar-facing fallback where no tangent can be formed.
+//
+// Constants: in float the stage reads the same float values the shaders get (SonarParams,
+// SliceInfo.cos/sin_center); in double it reads the Plan's double values and recomputes the slice
+// rotation in double from the slice azimuth, exactly as compose_depth_draws does.
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+#include <vector>
+
+#include "core/sonar_math.hpp"
+#include "stages/cpu_stages.h"
+
+namespace vksonar::cpu {
+namespace {
+
+template <class Real> struct Vec3 {
+    Real x, y, z;
+};
+template <class Real> Vec3<Real> operator-(const Vec3<Real>& a, const Vec3<Real>& b) {
+    return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+template <class Real> Real dot(const Vec3<Real>& a, const Vec3<Real>& b) {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+template <class Real> Vec3<Real> cross(const Vec3<Real>& a, const Vec3<Real>& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+
+template <class Real> Real length(const Vec3<Real>& a) { return std::sqrt(dot(a, a)); }
+
+} // namespace
+
+std::size_t normals_scratch_count(const Plan& plan) {
+    // per column: ray x, y; three rows of (Px, Py, Pz, r)
+    return static_cast<std::size_t>(plan.columns) * 14;
+}
+
+template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
+    using M = Math<Real>;
+    Real tan_half_h, tan_half_v, depth_a, depth_b;
+    if constexpr (std::is_same_v<Real, float>) {
+        tan_half_h = plan.params.tan_half_h;
+        tan_half_v = plan.params.tan_half_v;
+        depth_a = plan.params.depth_a;
+        depth_b = plan.params.depth_b;
+    } else {
+        tan_half_h = static_cast<Real>(plan.tan_half_h);
+        tan_half_v = static_cast<Real>(plan.tan_half_v);
+        depth_a = static_cast<Real>(plan.depth_a);
+        depth_b = static_cast<Real>(plan.depth_b);
+    }
+    const Real jump = static_cast<Real>(plan.params.edge_relative_jump);
+    const std::int64_t C = plan.columns, R = plan.rows;
+    const std::uint32_t W = plan.slice_columns;
+
+    // Ray of each column in its own slice frame: f_s + u r_s = (cos + u sin, sin - u cos); the z
+    // component is -v per row. P = z * ray, so per pixel only z changes.
+    Real* ray_x = scratch;
+    Real* ray_y = scratch + C;
+    Real* ring = scratch + 2 * C; // rows j % 3: (Px, Py, Pz, r) per column
+    for (std::int64_t c = 0; c < C; ++c) {
+        const std::uint32_t col = static_cast<std::uint32_t>(c), s = col / W;
+        const Real u = M::pixel_coord(col - s * W, W, tan_half_h);
+        Real cs, sn;
+        if constexpr (std::is_same_v<Real, float>) {
+            cs = plan.slice_info[s].cos_center;
+            sn = plan.slice_info[s].sin_center;
+        } else { // the rotation compose_depth_draws uses: cos/sin in double of the slice azimuth
+            const double phi = plan.slice_info[s].center_azimuth_rad;
+            cs = std::cos(phi);
+            sn = std::sin(phi);
+        }
+        ray_x[c] = cs + u * sn;
+        ray_y[c] = sn - u * cs;
+    }
+    auto fill_row = [&](std::int64_t j) {
+        Real* row = ring + (j % 3) * C * 4;
+        const Real minus_v = -M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), tan_half_v);
+        const float* d = depth + j * C;
+        for (std::int64_t c = 0; c < C; ++c) {
+            Real* q = row + 4 * c;
+            if (d[c] > 0.0f) {
+                const Real z = M::view_z_from_depth(static_cast<Real>(d[c]), depth_a, depth_b);
+                const Vec3<Real> P{z * ray_x[c], z * ray_y[c], z * minus_v};
+                q[0] = P.x;
+                q[1] = P.y;
+                q[2] = P.z;
+                q[3] = length(P);
+            } else {
+                q[0] = q[1] = q[2] = q[3] = Real(0);
+            }
+        }
+    };
+    auto valid = [&](std::int64_t c, std::int64_t j) {
+        return c >= 0 && j >= 0 && c < C && j < R && depth[j * C + c] > 0.0f;
+    };
+    auto at = [&](std::int64_t c, std::int64_t j) -> const Real* { return ring + ((j % 3) * C + c) * 4; };
+
+    if (R > 0) fill_row(0);
+    // normal_method: only sobel3 is specified by docs/pipeline.md; sobel5 uses the same 3x3 stencil.
+    for (std::int64_t j = 0; j < R; ++j) {
+        if (j + 1 < R) fill_row(j + 1);
+        for (std::int64_t c = 0; c < C; ++c) {
+            float* out = normals4 + 4 * (j * C + c);
+            if (!valid(c, j)) {
+                out[0] = out[1] = out[2] = out[3] = 0.0f;
+                continue;
+            }
+            const Real* pp = at(c, j);
+            const Vec3<Real> P{pp[0], pp[1], pp[2]};
+            const Real r = pp[3];
+
+            // 3x3 neighbourhood: positions and ranges of the valid neighbours.
+            Vec3<Real> N[3][3];
+            Real rn[3][3];
+            bool ok[3][3];
+            bool smooth = true;
+            for (int dy = -1; dy <= 1; ++dy) {
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const bool v = valid(c + dx, j + dy);
+                    ok[dy + 1][dx + 1] = v;
+                    if (v) {
+                        const Real* q = at(c + dx, j + dy);
+                        N[dy + 1][dx + 1] = {q[0], q[1], q[2]};
+                        rn[dy + 1][dx + 1] = q[3];
+                        if (!(std::abs(q[3] - r) <= jump * r)) smooth = false;
+                    } else {
+                        smooth = false;
+                    }
+                }
+            }
+
+            Vec3<Real> tx{0, 0, 0}, ty{0, 0, 0};
+            bool facing = false;
+            if (smooth) {
+                const Real w[3] = {Real(1), Real(2), Real(1)};
+                for (int k = 0; k < 3; ++k) { // dy = -1, 0, 1
+                    const Vec3<Real> d = N[k][2] - N[k][0];
+                    tx = {tx.x + w[k] * d.x, tx.y + w[k] * d.y, tx.z + w[k] * d.z};
+                }
+                for (int k = 0; k < 3; ++k) { // dx = -1, 0, 1
+                    const Vec3<Real> d = N[2][k] - N[0][k];
+                    ty = {ty.x + w[k] * d.x, ty.y + w[k] * d.y, ty.z + w[k] * d.z};
+                }
+            } else {
+                // One-sided differences towards the valid neighbour of closer range (ties: +1 side).
+                const bool xp = ok[1][2], xm = ok[1][0], yp = ok[2][1], ym = ok[0][1];
+                if ((!xp && !xm) || (!yp && !ym)) {
+                    facing = true;
+                } else {
+                    const bool use_xp = xp && (!xm || std::abs(rn[1][2] - r) <= std::abs(rn[1][0] - r));
+                    tx = use_xp ? N[1][2] - P : P - N[1][0];
+                    const bool use_yp = yp && (!ym || std::abs(rn[2][1] - r) <= std::abs(rn[0][1] - r));
+                    ty = use_yp ? N[2][1] - P : P - N[0][1];
+                }
+            }
+
+            Vec3<Real> n{0, 0, 0};
+            Real cos_inc = Real(1);
+            if (!facing) {
+                const Vec3<Real> cr = cross(tx, ty);
+                const Real len = length(cr);
+                if (len > Real(0) && std::isfinite(len)) {
+                    n = {cr.x / len, cr.y / len, cr.z / len};
+                    if (dot(n, P) > Real(0)) n = {-n.x, -n.y, -n.z};
+                    cos_inc = std::min(Real(1), std::max(Real(0), -dot(n, P) / r));
+                } else {
+                    facing = true;
+                }
+            }
+            if (facing) { // faces the sonar: never brighter than a facing surface
+                n = {-P.x / r, -P.y / r, -P.z / r};
+                cos_inc = Real(1);
+            }
+            out[0] = static_cast<float>(n.x);
+            out[1] = static_cast<float>(n.y);
+            out[2] = static_cast<float>(n.z);
+            out[3] = static_cast<float>(cos_inc);
+        }
+    }
+}
+
+template <class Real> void normals(const Plan& plan, const float* depth, float* normals4) {
+    std::vector<Real> scratch(std::max<std::size_t>(normals_scratch_count(plan), 1));
+    normals<Real>(plan, depth, normals4, scratch.data());
+}
+
+template void normals<float>(const Plan&, const float*, float*);
+template void normals<double>(const Plan&, const float*, float*);
+template void normals<float>(const Plan&, const float*, float*, float*);
+template void normals<double>(const Plan&, const float*, float*, double*);
+
+} // namespace vksonar::cpu

@@ -1,0 +1,334 @@
+// vksonar::Context: creates (and owns) a Vulkan instance and device, optionally with the Khronos
+// validation layer and a messenger that counts warnings and errors.
+#include "vksonar/context.h"
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "vk/vk_error.h"
+#include "vk/vulkan_context.h"
+
+namespace vksonar {
+namespace {
+
+constexpr const char* kValidationLayer = "VK_LAYER_KHRONOS_validation";
+
+VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
+                                              VkDebugUtilsMessageTypeFlagsEXT /*types*/,
+                                              const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
+    if ((severity &
+         (VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT)) == 0) {
+        return VK_FALSE;
+    }
+    auto* context = static_cast<VulkanContext*>(user);
+    context->validation_messages.fetch_add(1, std::memory_order_relaxed);
+    const char* level = (severity & VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT) ? "error" : "warning";
+    std::fprintf(stderr, "vksonar: Vulkan validation %s: %s\n", level,
+                 data && data->pMessage ? data->pMessage : "(no message)");
+    return VK_FALSE;
+}
+
+bool env_flag(const char* name) {
+    const char* value = std::getenv(name);
+    return value && (std::strcmp(value, "1") == 0 || std::strcmp(value, "true") == 0 || std::strcmp(value, "on") == 0);
+}
+
+bool has_layer(const char* name) {
+    std::uint32_t count = 0;
+    if (vkEnumerateInstanceLayerProperties(&count, nullptr) != VK_SUCCESS) {
+        return false;
+    }
+    std::vector<VkLayerProperties> layers(count);
+    if (vkEnumerateInstanceLayerProperties(&count, layers.data()) != VK_SUCCESS) {
+        return false;
+    }
+    for (const auto& layer : layers) {
+        if (std::strcmp(layer.layerName, name) == 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
+bool has_instance_extension(const char* layer, const char* name) {
+    std::uint32_t count = 0;
+    if (vkEnumerateInstanceExtensionProperties(layer, &count, nullptr) != VK_SUCCESS) {
+        return false;
+    }
+    std::vector<VkExtensionProperties> extensions(count);
+    if (vkEnumerateInstanceExtensionProperties(layer, &count, extensions.data()) != VK_SUCCESS) {
+        return false;
+    }
+    for (const auto& extension : extensions) {
+        if (std::strcmp(extension.extensionName, name) == 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
+bool has_device_extension(VkPhysicalDevice device, const char* name) {
+    std::uint32_t count = 0;
+    if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, nullptr) != VK_SUCCESS) {
+        return false;
+    }
+    std::vector<VkExtensionProperties> extensions(count);
+    if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, extensions.data()) != VK_SUCCESS) {
+        return false;
+    }
+    for (const auto& extension : extensions) {
+        if (std::strcmp(extension.extensionName, name) == 0) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// The first queue family with graphics and compute, or -1.
+int find_queue_family(VkPhysicalDevice device, std::uint32_t* timestamp_valid_bits) {
+    std::uint32_t count = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(device, &count, nullptr);
+    std::vector<VkQueueFamilyProperties> families(count);
+    vkGetPhysicalDeviceQueueFamilyProperties(device, &count, families.data());
+    for (std::uint32_t i = 0; i < count; ++i) {
+        VkQueueFlags needed = VK_QUEUE_GRAPHICS_BIT | VK_QUEUE_COMPUTE_BIT;
+        if ((families[i].queueFlags & needed) == needed && families[i].queueCount > 0) {
+            *timestamp_valid_bits = families[i].timestampValidBits;
+            return static_cast<int>(i);
+        }
+    }
+    return -1;
+}
+
+std::string describe(const VkPhysicalDeviceProperties& properties) {
+    std::string text = properties.deviceName;
+    text += " (Vulkan " + std::to_string(VK_API_VERSION_MAJOR(properties.apiVersion)) + "." +
+            std::to_string(VK_API_VERSION_MINOR(properties.apiVersion)) + "." +
+            std::to_string(VK_API_VERSION_PATCH(properties.apiVersion)) + ", driver 0x";
+    char version[16];
+    std::snprintf(version, sizeof(version), "%x", properties.driverVersion);
+    text += version;
+    switch (properties.deviceType) {
+    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU:
+        text += ", discrete GPU";
+        break;
+    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU:
+        text += ", integrated GPU";
+        break;
+    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU:
+        text += ", virtual GPU";
+        break;
+    case VK_PHYSICAL_DEVICE_TYPE_CPU:
+        text += ", CPU";
+        break;
+    default:
+        break;
+    }
+    return text + ")";
+}
+
+Error no_device(const std::string& why) {
+    return make_error(ErrorCode::no_device, why + "; use `--backend cpu` to render without Vulkan");
+}
+
+Result<void> create_instance(VulkanContext& context, bool want_validation) {
+    std::vector<const char*> layers;
+    std::vector<const char*> extensions;
+    bool debug_utils = false;
+    if (want_validation && has_layer(kValidationLayer)) {
+        layers.push_back(kValidationLayer);
+        context.validation = true;
+        if (has_instance_extension(nullptr, VK_EXT_DEBUG_UTILS_EXTENSION_NAME) ||
+            has_instance_extension(kValidationLayer, VK_EXT_DEBUG_UTILS_EXTENSION_NAME)) {
+            extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+            debug_utils = true;
+        }
+    }
+    VkInstanceCreateFlags flags = 0;
+#ifdef VK_KHR_portability_enumeration
+    if (has_instance_extension(nullptr, VK_KHR_PORTABILITY_ENUMERATION_EXTENSION_NAME)) {
+        extensions.push_back(VK_KHR_PORTABILITY_ENUMERATION_EXTENSION_NAME);
+        flags |= VK_INSTANCE_CREATE_ENUMERATE_PORTABILITY_BIT_KHR;
+    }
+#endif
+
+    VkApplicationInfo app{};
+    app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
+    app.pApplicationName = "vksonar";
+    app.pEngineName = "vksonar";
+    app.apiVersion = VK_API_VERSION_1_1;
+
+    VkDebugUtilsMessengerCreateInfoEXT messenger_info{};
+    messenger_info.sType = VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT;
+    messenger_info.messageSeverity =
+        VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    messenger_info.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT |
+                                 VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+                                 VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+    messenger_info.pfnUserCallback = debug_callback;
+    messenger_info.pUserData = &context;
+
+    VkInstanceCreateInfo info{};
+    info.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
+    info.pNext = debug_utils ? &messenger_info : nullptr; // also covers vkCreateInstance/vkDestroyInstance
+    info.flags = flags;
+    info.pApplicationInfo = &app;
+    info.enabledLayerCount = static_cast<std::uint32_t>(layers.size());
+    info.ppEnabledLayerNames = layers.data();
+    info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
+    info.ppEnabledExtensionNames = extensions.data();
+    VkResult result = vkCreateInstance(&info, nullptr, &context.instance);
+    if (result == VK_ERROR_INCOMPATIBLE_DRIVER) {
+        return no_device("no Vulkan driver (vkCreateInstance: VK_ERROR_INCOMPATIBLE_DRIVER)");
+    }
+    if (result != VK_SUCCESS) {
+        return vk::vk_error(result, "vkCreateInstance");
+    }
+    context.owns_instance = true;
+
+    if (debug_utils) {
+        auto create_messenger = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+            vkGetInstanceProcAddr(context.instance, "vkCreateDebugUtilsMessengerEXT"));
+        if (create_messenger) {
+            VKS_VK_TRY(create_messenger(context.instance, &messenger_info, nullptr, &context.debug_messenger));
+        }
+    }
+    return {};
+}
+
+Result<void> create_device(VulkanContext& context, int device_index) {
+    std::uint32_t count = 0;
+    VKS_VK_TRY(vkEnumeratePhysicalDevices(context.instance, &count, nullptr));
+    std::vector<VkPhysicalDevice> devices(count);
+    VKS_VK_TRY(vkEnumeratePhysicalDevices(context.instance, &count, devices.data()));
+    if (count == 0) {
+        return no_device("no Vulkan device found");
+    }
+    if (device_index < 0) {
+        if (const char* env = std::getenv("VKSONAR_DEVICE"); env && *env) {
+            char* end = nullptr;
+            long index = std::strtol(env, &end, 10);
+            if (*end != '\0' || index < 0) {
+                return make_error(ErrorCode::invalid_argument,
+                                  std::string("VKSONAR_DEVICE: '") + env + "' is not a device index (0, 1, ...)");
+            }
+            device_index = static_cast<int>(index);
+        }
+    }
+
+    int family = -1;
+    std::uint32_t timestamp_bits = 0;
+    if (device_index >= 0) {
+        if (static_cast<std::uint32_t>(device_index) >= count) {
+            return no_device("Vulkan device index " + std::to_string(device_index) + " does not exist (" +
+                             std::to_string(count) + " device(s))");
+        }
+        context.physical_device = devices[static_cast<std::size_t>(device_index)];
+        family = find_queue_family(context.physical_device, &timestamp_bits);
+        if (family < 0) {
+            return no_device("Vulkan device " + std::to_string(device_index) + " has no graphics+compute queue");
+        }
+    } else {
+        for (VkPhysicalDevice device : devices) {
+            family = find_queue_family(device, &timestamp_bits);
+            if (family >= 0) {
+                context.physical_device = device;
+                break;
+            }
+        }
+        if (family < 0) {
+            return no_device("no Vulkan device has a graphics+compute queue");
+        }
+    }
+    context.queue_family = static_cast<std::uint32_t>(family);
+    context.timestamp_valid_bits = timestamp_bits;
+    vkGetPhysicalDeviceProperties(context.physical_device, &context.properties);
+    context.description = describe(context.properties);
+    if (context.properties.apiVersion < VK_API_VERSION_1_1) {
+        return no_device("Vulkan device " + context.description + " supports only Vulkan 1.0 (1.1 needed)");
+    }
+
+    std::vector<const char*> extensions;
+    if (has_device_extension(context.physical_device, "VK_KHR_portability_subset")) {
+        extensions.push_back("VK_KHR_portability_subset");
+    }
+    float priority = 1.0f;
+    VkDeviceQueueCreateInfo queue_info{};
+    queue_info.sType = VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO;
+    queue_info.queueFamilyIndex = context.queue_family;
+    queue_info.queueCount = 1;
+    queue_info.pQueuePriorities = &priority;
+    VkDeviceCreateInfo info{};
+    info.sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO;
+    info.queueCreateInfoCount = 1;
+    info.pQueueCreateInfos = &queue_info;
+    info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
+    info.ppEnabledExtensionNames = extensions.data();
+    VKS_VK_TRY(vkCreateDevice(context.physical_device, &info, nullptr, &context.device));
+    context.owns_device = true;
+    vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);
+    return {};
+}
+
+} // namespace
+
+VulkanContext::~VulkanContext() {
+    if (owns_device && device != VK_NULL_HANDLE) {
+        vkDeviceWaitIdle(device);
+        vkDestroyDevice(device, nullptr);
+    }
+    if (debug_messenger != VK_NULL_HANDLE && instance != VK_NULL_HANDLE) {
+        auto destroy_messenger = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
+            vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+        if (destroy_messenger) {
+            destroy_messenger(instance, debug_messenger, nullptr);
+        }
+    }
+    if (owns_instance && instance != VK_NULL_HANDLE) {
+        vkDestroyInstance(instance, nullptr);
+    }
+}
+
+Context::Context() = default;
+Context::~Context() = default;
+Context::Context(Context&&) noexcept = default;
+Context& Context::operator=(Context&&) noexcept = default;
+
+Result<Context> Context::create(const ContextOptions& options) {
+    if (!options.vulkan) {
+        return cpu_only();
+    }
+    // The messenger keeps a pointer to the VulkanContext: it lives on the heap and never moves.
+    auto vulkan = std::make_unique<VulkanContext>();
+    bool want_validation = options.enable_validation || env_flag("VKSONAR_VALIDATION");
+    if (auto created = create_instance(*vulkan, want_validation); !created) {
+        return created.error();
+    }
+    if (auto created = create_device(*vulkan, options.device_index); !created) {
+        return created.error();
+    }
+    Context context;
+    context.vk_ = std::move(vulkan);
+    return context;
+}
+
+Context Context::cpu_only() {
+    return Context();
+}
+
+bool Context::has_vulkan() const {
+    return vk_ != nullptr;
+}
+
+std::string Context::device_description() const {
+    return vk_ ? vk_->description : std::string("CPU (no Vulkan)");
+}
+
+std::uint32_t Context::validation_messages() const {
+    return vk_ ? vk_->validation_messages.load(std::memory_order_relaxed) : 0u;
+}
+
+} // namespace vksonar

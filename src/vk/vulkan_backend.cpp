@@ -1,0 +1,362 @@
+// The Vulkan StageBackend, creation: every pipeline, buffer, image, descriptor set, command buffer,
+// fence and query pool is made here once (make_backend) and the scene is uploaded. The per-frame
+// work (record, submit, read back) is in vulkan_frame.cpp.
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "vk/commands.h"
+#include "vk/handles.h"
+#include "vk/pipelines.h"
+#include "vk/resources.h"
+#include "vk/vk_error.h"
+#include "vk/vulkan_backend_impl.h"
+#include "vk/vulkan_context.h"
+
+#include "depth.frag.spv.h"
+#include "depth.vert.spv.h"
+#include "echo.comp.spv.h"
+#include "normals.comp.spv.h"
+#include "profile.comp.spv.h"
+#include "resample.comp.spv.h"
+#include "sidelobe.comp.spv.h"
+
+namespace vksonar::vk {
+
+VulkanBackend::~VulkanBackend() {
+    // render() always waits for its submission; this only guards against a failed wait.
+    if (fence_) {
+        VkFence fence = fence_.get();
+        vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
+    }
+}
+
+Result<void> VulkanBackend::init() {
+    incidence_ = plan_.effects.incidence;
+    sidelobes_ = plan_.effects.horizontal_pattern;
+    if (plan_.columns == 0 || plan_.rows == 0 || plan_.beams == 0 || plan_.bins == 0) {
+        return make_error(ErrorCode::internal, "vulkan backend: plan has an empty pixel grid or polar scan");
+    }
+    const VkPhysicalDeviceLimits& limits = context_.properties.limits;
+    if (plan_.columns > limits.maxFramebufferWidth || plan_.rows > limits.maxFramebufferHeight ||
+        plan_.columns > limits.maxImageDimension2D || plan_.rows > limits.maxImageDimension2D) {
+        return make_error(
+            ErrorCode::unsupported,
+            "vulkan backend: depth image of " + std::to_string(plan_.columns) + " x " + std::to_string(plan_.rows) +
+                " pixels exceeds the device limit of " + std::to_string(limits.maxFramebufferWidth) + " x " +
+                std::to_string(limits.maxFramebufferHeight) + " (lower pixels_per_beam or rows_per_vfov)");
+    }
+    const std::uint64_t pixels = std::uint64_t(plan_.columns) * plan_.rows;
+    const std::uint64_t largest_dispatch =
+        std::max({std::uint64_t(group_count(pixels / kEchoPixels + 1)),
+                  std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
+                  ceil_div(plan_.beams, kBeamsPerInvocation)});
+    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
+        group_count(plan_.bins) > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
+        return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
+                                                      std::to_string(plan_.rows) +
+                                                      " pixels exceed the device's compute limits");
+    }
+    if (auto r = create_scene_buffers(); !r) return r;
+    if (auto r = create_depth_pass(); !r) return r;
+    if (auto r = create_compute(); !r) return r;
+    return create_commands();
+}
+
+Result<void> VulkanBackend::create_scene_buffers() {
+    const SceneData& scene = scene_;
+    draw_ranges_.reserve(scene.draws.size());
+    for (std::size_t i = 0; i < scene.draws.size(); ++i) {
+        const SceneDraw& draw = scene.draws[i];
+        if (draw.mesh >= scene.meshes.size()) {
+            return make_error(ErrorCode::invalid_argument, "scene draw " + std::to_string(i) + ": mesh " +
+                                                               std::to_string(draw.mesh) + " does not exist");
+        }
+        const MeshRange& mesh = scene.meshes[draw.mesh];
+        if (std::uint64_t(mesh.first_index) + mesh.index_count > scene.indices.size() ||
+            (std::uint64_t(mesh.first_vertex) + mesh.vertex_count) * 3 > scene.positions.size() ||
+            mesh.first_vertex > std::uint32_t(std::numeric_limits<std::int32_t>::max())) {
+            return make_error(ErrorCode::invalid_argument,
+                              "scene mesh " + std::to_string(draw.mesh) + ": index or vertex range out of bounds");
+        }
+        draw_ranges_.push_back(
+            {mesh.index_count - mesh.index_count % 3, mesh.first_index, static_cast<std::int32_t>(mesh.first_vertex)});
+    }
+    draw_pushes_.resize(std::size_t(plan_.slices) * scene.draws.size());
+
+    const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    auto vertices =
+        create_buffer(context_, bytes_of(scene.positions), VK_BUFFER_USAGE_VERTEX_BUFFER_BIT | dst, MemoryUse::device);
+    if (!vertices) return vertices.error();
+    vertices_ = std::move(vertices.value());
+    auto indices =
+        create_buffer(context_, bytes_of(scene.indices), VK_BUFFER_USAGE_INDEX_BUFFER_BIT | dst, MemoryUse::device);
+    if (!indices) return indices.error();
+    indices_ = std::move(indices.value());
+    if (auto r = upload_to_buffer(context_, vertices_, scene.positions.data(), bytes_of(scene.positions)); !r) return r;
+    return upload_to_buffer(context_, indices_, scene.indices.data(), bytes_of(scene.indices));
+}
+
+Result<void> VulkanBackend::create_depth_pass() {
+    VkDevice device = context_.device;
+    VkFormatProperties depth_format, material_format;
+    vkGetPhysicalDeviceFormatProperties(context_.physical_device, kDepthFormat, &depth_format);
+    vkGetPhysicalDeviceFormatProperties(context_.physical_device, kMaterialFormat, &material_format);
+    const VkFormatFeatureFlags copy = VK_FORMAT_FEATURE_TRANSFER_SRC_BIT;
+    if ((depth_format.optimalTilingFeatures & (VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | copy)) !=
+            (VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | copy) ||
+        (material_format.optimalTilingFeatures & (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) !=
+            (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) {
+        return make_error(ErrorCode::unsupported,
+                          "Vulkan device " + context_.description + " cannot render to D32_SFLOAT + R32_UINT");
+    }
+    auto depth_image = create_image_2d(context_, plan_.columns, plan_.rows, kDepthFormat,
+                                       VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                                       VK_IMAGE_ASPECT_DEPTH_BIT);
+    if (!depth_image) return depth_image.error();
+    depth_image_ = std::move(depth_image.value());
+    auto material_image = create_image_2d(context_, plan_.columns, plan_.rows, kMaterialFormat,
+                                          VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                                          VK_IMAGE_ASPECT_COLOR_BIT);
+    if (!material_image) return material_image.error();
+    material_image_ = std::move(material_image.value());
+
+    auto render_pass = create_depth_render_pass(device);
+    if (!render_pass) return render_pass.error();
+    render_pass_ = std::move(render_pass.value());
+
+    std::array<VkImageView, 2> views{material_image_.view.get(), depth_image_.view.get()};
+    VkFramebufferCreateInfo framebuffer_info{};
+    framebuffer_info.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
+    framebuffer_info.renderPass = render_pass_.get();
+    framebuffer_info.attachmentCount = static_cast<std::uint32_t>(views.size());
+    framebuffer_info.pAttachments = views.data();
+    framebuffer_info.width = plan_.columns;
+    framebuffer_info.height = plan_.rows;
+    framebuffer_info.layers = 1;
+    VkFramebuffer framebuffer = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateFramebuffer(device, &framebuffer_info, nullptr, &framebuffer));
+    framebuffer_ = OwnedFramebuffer(device, framebuffer);
+
+    VkPushConstantRange push_range{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                   sizeof(shared::DepthPush)};
+    VkPipelineLayoutCreateInfo layout_info{};
+    layout_info.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    layout_info.pushConstantRangeCount = 1;
+    layout_info.pPushConstantRanges = &push_range;
+    VkPipelineLayout layout = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
+    depth_layout_ = OwnedPipelineLayout(device, layout);
+
+    auto vertex = create_shader_module(device, depth_vert_spv, sizeof(depth_vert_spv));
+    if (!vertex) return vertex.error();
+    auto fragment = create_shader_module(device, depth_frag_spv, sizeof(depth_frag_spv));
+    if (!fragment) return fragment.error();
+    auto pipeline =
+        create_depth_pipeline(device, render_pass_.get(), depth_layout_.get(), vertex->get(), fragment->get());
+    if (!pipeline) return pipeline.error();
+    depth_pipeline_ = std::move(pipeline.value());
+    return {};
+}
+
+Result<void> VulkanBackend::create_compute() {
+    VkDevice device = context_.device;
+    const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
+    const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
+    const std::size_t profile_cells = std::size_t(plan_.bins) * plan_.columns;
+    const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+    const VkBufferUsageFlags in = storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    const VkBufferUsageFlags out = storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
+
+    // Working buffers (GPU-only). Disabled stages keep a small buffer so every descriptor is valid.
+    struct Working {
+        Buffer* buffer;
+        std::size_t bytes;
+        VkBufferUsageFlags usage;
+    };
+    const std::array<Working, 7> working{{
+        {&depth_, pixels * sizeof(float), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
+        {&material_id_, pixels * sizeof(std::uint32_t), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
+        {&normals_, incidence_ ? pixels * 4 * sizeof(float) : 16, out},
+        {&echo_, pixels * 2 * sizeof(float), out},
+        {&profiles_, profile_cells * sizeof(float),
+         out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
+        {&beam_profiles_, cells * sizeof(float), out},
+        {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
+    }};
+    for (const Working& w : working) {
+        auto buffer = create_buffer(context_, w.bytes, w.usage, MemoryUse::device);
+        if (!buffer) return buffer.error();
+        *w.buffer = std::move(buffer.value());
+    }
+
+    // Tables, uploaded once.
+    std::vector<shared::MaterialGpu> materials = plan_.materials;
+    if (materials.empty()) {
+        materials.push_back(shared::MaterialGpu{0.0f, shared::kScatterConstant, 0.0f, 0.0f}); // nothing reflects
+    }
+    struct Table {
+        Buffer* buffer;
+        const void* data;
+        std::size_t bytes;
+        VkBufferUsageFlags usage;
+    };
+    const std::array<Table, 8> tables{{
+        {&params_, &plan_.params, sizeof(plan_.params), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT},
+        {&slice_info_, plan_.slice_info.data(), bytes_of(plan_.slice_info), storage},
+        {&materials_, materials.data(), bytes_of(materials), storage},
+        {&column_beam_, plan_.column_beam.data(), bytes_of(plan_.column_beam), storage},
+        {&column_weight_, plan_.column_weight.data(), bytes_of(plan_.column_weight), storage},
+        {&beam_begin_, plan_.beam_column_begin.data(), bytes_of(plan_.beam_column_begin), storage},
+        {&beam_end_, plan_.beam_column_end.data(), bytes_of(plan_.beam_column_end), storage},
+        {&sidelobe_weight_, plan_.sidelobe_weight.data(), bytes_of(plan_.sidelobe_weight), storage},
+    }};
+    for (const Table& t : tables) {
+        auto buffer = create_buffer(context_, t.bytes, t.usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
+        if (!buffer) return buffer.error();
+        *t.buffer = std::move(buffer.value());
+        if (auto r = upload_to_buffer(context_, *t.buffer, t.data, t.bytes); !r) return r;
+    }
+
+    // One host-visible buffer receives everything a frame may read back.
+    VkDeviceSize readback_bytes = 0;
+    auto place = [&](Region& region, std::size_t bytes) {
+        region.offset = readback_bytes;
+        region.bytes = bytes;
+        readback_bytes += (bytes + 15) & ~VkDeviceSize(15);
+    };
+    place(polar_region_, cells * sizeof(float));
+    place(depth_region_, pixels * sizeof(float));
+    place(material_region_, pixels * sizeof(std::uint32_t));
+    place(normals_region_, incidence_ ? pixels * 4 * sizeof(float) : 0);
+    place(echo_region_, pixels * 2 * sizeof(float));
+    place(profiles_region_, profile_cells * sizeof(float));
+    place(beam_profiles_region_, cells * sizeof(float));
+    auto readback = create_buffer(context_, readback_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
+    if (!readback) return readback.error();
+    readback_ = std::move(readback.value());
+
+    // Descriptors: one set for every compute stage.
+    auto set_layout = create_compute_set_layout(device);
+    if (!set_layout) return set_layout.error();
+    set_layout_ = std::move(set_layout.value());
+    VkDescriptorSetLayout set_layout_handle = set_layout_.get();
+    VkPipelineLayoutCreateInfo layout_info{};
+    layout_info.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    layout_info.setLayoutCount = 1;
+    layout_info.pSetLayouts = &set_layout_handle;
+    VkPipelineLayout layout = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
+    compute_layout_ = OwnedPipelineLayout(device, layout);
+
+    std::array<VkDescriptorPoolSize, 2> pool_sizes{
+        {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1}, {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count - 1}}};
+    VkDescriptorPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    pool_info.maxSets = 1;
+    pool_info.poolSizeCount = static_cast<std::uint32_t>(pool_sizes.size());
+    pool_info.pPoolSizes = pool_sizes.data();
+    VkDescriptorPool pool = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, nullptr, &pool));
+    descriptor_pool_ = OwnedDescriptorPool(device, pool);
+    VkDescriptorSetAllocateInfo set_info{};
+    set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+    set_info.descriptorPool = pool;
+    set_info.descriptorSetCount = 1;
+    set_info.pSetLayouts = &set_layout_handle;
+    VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
+
+    const std::array<const Buffer*, binding_count> bound{
+        &params_,     &depth_,     &material_id_, &normals_,       &echo_,       &profiles_, &beam_profiles_,  &polar_,
+        &slice_info_, &materials_, &column_beam_, &column_weight_, &beam_begin_, &beam_end_, &sidelobe_weight_};
+    std::array<VkDescriptorBufferInfo, binding_count> infos{};
+    std::array<VkWriteDescriptorSet, binding_count> writes{};
+    for (std::uint32_t i = 0; i < binding_count; ++i) {
+        infos[i] = {bound[i]->get(), 0, VK_WHOLE_SIZE};
+        writes[i] = {};
+        writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+        writes[i].dstSet = descriptor_set_;
+        writes[i].dstBinding = i;
+        writes[i].descriptorCount = 1;
+        writes[i].descriptorType =
+            i == binding_params ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        writes[i].pBufferInfo = &infos[i];
+    }
+    vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
+
+    // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
+    const std::uint32_t flags = plan_.effects.shader_flags();
+    auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
+                    std::uint32_t per_invocation) -> Result<void> {
+        auto module = create_shader_module(device, code, bytes);
+        if (!module) return module.error();
+        auto created = create_compute_pipeline(device, compute_layout_.get(), module->get(), flags, per_invocation);
+        if (!created) return created.error();
+        pipeline = std::move(created.value());
+        return {};
+    };
+    if (incidence_) {
+        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), kNormalsRun); !r) return r;
+    }
+    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), kEchoPixels); !r) return r;
+    if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), 1); !r) return r;
+    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv), kBeamsPerInvocation); !r)
+        return r;
+    if (sidelobes_) {
+        if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), kBeamsPerInvocation); !r)
+            return r;
+    }
+    return {};
+}
+
+Result<void> VulkanBackend::create_commands() {
+    VkDevice device = context_.device;
+    VkCommandPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    pool_info.queueFamilyIndex = context_.queue_family;
+    VkCommandPool pool = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateCommandPool(device, &pool_info, nullptr, &pool));
+    command_pool_ = OwnedCommandPool(device, pool);
+    VkCommandBufferAllocateInfo allocate_info{};
+    allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    allocate_info.commandPool = pool;
+    allocate_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    allocate_info.commandBufferCount = stage_count;
+    VKS_VK_TRY(vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
+
+    VkFenceCreateInfo fence_info{};
+    fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+    VkFence fence = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateFence(device, &fence_info, nullptr, &fence));
+    fence_ = OwnedFence(device, fence);
+
+    // VKSONAR_CPU_STAGE_TIMING=1 forces the timestamp-less path (one submission per stage).
+    const char* force_cpu = std::getenv("VKSONAR_CPU_STAGE_TIMING");
+    timestamps_ = context_.timestamp_valid_bits > 0 && context_.properties.limits.timestampPeriod > 0.0f &&
+                  !(force_cpu && std::strcmp(force_cpu, "1") == 0);
+    if (timestamps_) {
+        VkQueryPoolCreateInfo query_info{};
+        query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+        query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
+        query_info.queryCount = stage_count + 1;
+        VkQueryPool query_pool = VK_NULL_HANDLE;
+        VKS_VK_TRY(vkCreateQueryPool(device, &query_info, nullptr, &query_pool));
+        query_pool_ = OwnedQueryPool(device, query_pool);
+        vkCreateQueryPool(device, &query_info, nullptr, &dbg_pool_);
+    }
+    return {};
+}
+
+Result<std::unique_ptr<StageBackend>> make_backend(VulkanContext& context, const Plan& plan, const SceneData& scene) {
+    auto backend = std::make_unique<VulkanBackend>(context, plan, scene);
+    if (auto r = backend->init(); !r) {
+        return r.error();
+    }
+    return std::unique_ptr<StageBackend>(std::move(backend));
+}
+
+} // namespace vksonar::vk

@@ -1,0 +1,126 @@
+// The Vulkan StageBackend's class, shared by its creation (vulkan_backend.cpp) and its per-frame
+// recording and readback (vulkan_frame.cpp). Internal to src/vk.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/plan.h"
+#include "scene/scene_data.h"
+#include "sonar_shared.h"
+#include "stages/stage_backend.h"
+#include "vk/handles.h"
+#include "vk/resources.h"
+
+namespace vksonar {
+struct VulkanContext;
+}
+
+namespace vksonar::vk {
+
+// Work per invocation (specialization constant 1 of the shaders): more work per invocation pays on
+// lavapipe (DESIGN §9) and costs nothing on a GPU at these sizes.
+constexpr std::uint32_t kNormalsRun = 8; // pixels of one row per normals invocation
+constexpr std::uint32_t kEchoPixels = 4; // consecutive pixels per echo invocation
+// Beams per resample/sidelobe workgroup (each invocation one bin of them); sidelobe.comp holds at most 32.
+constexpr std::uint32_t kBeamsPerInvocation = 16;
+
+// The timed stages, in order. Each is recorded into its own command buffer so that, without
+// timestamp queries, they can be submitted and timed one by one.
+enum Stage : std::uint32_t { stage_depth, stage_normals, stage_echo, stage_beamform, stage_readback, stage_count };
+constexpr std::array<const char*, stage_count> kStageNames{"depth", "normals", "echo", "beamform", "readback"};
+
+constexpr VkPipelineStageFlags kComputeOrTransfer =
+    VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
+constexpr VkAccessFlags kShaderOrTransferRead = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
+
+inline std::uint32_t group_count(std::uint64_t invocations) {
+    return static_cast<std::uint32_t>((invocations + shared::kWorkgroupSize - 1) / shared::kWorkgroupSize);
+}
+
+inline std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
+    return (a + b - 1) / b;
+}
+
+template <class T> std::size_t bytes_of(const std::vector<T>& v) {
+    return v.size() * sizeof(T);
+}
+
+// Where each array lives inside the single readback buffer.
+struct Region {
+    VkDeviceSize offset = 0;
+    VkDeviceSize bytes = 0;
+};
+
+struct DrawRange {
+    std::uint32_t index_count = 0;
+    std::uint32_t first_index = 0;
+    std::int32_t vertex_offset = 0;
+};
+
+class VulkanBackend final : public StageBackend {
+public:
+    VulkanBackend(VulkanContext& context, const Plan& plan, const SceneData& scene)
+        : context_(context), plan_(plan), scene_(scene) {}
+    ~VulkanBackend() override;
+
+    Result<void> init();
+    Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override;
+    const char* name() const override { return "vulkan"; }
+
+private:
+    Result<void> create_scene_buffers();
+    Result<void> create_depth_pass();
+    Result<void> create_compute();
+    Result<void> create_commands();
+
+    void record_depth(VkCommandBuffer commands);
+    void record_normals(VkCommandBuffer commands);
+    void record_echo(VkCommandBuffer commands);
+    void record_beamform(VkCommandBuffer commands);
+    void record_readback(VkCommandBuffer commands, std::uint32_t save_mask);
+    void bind_compute(VkCommandBuffer commands, VkPipeline pipeline);
+    void compute_barrier(VkCommandBuffer commands, const Buffer& written);
+
+    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
+    void copy_out(const Region& region, void* destination) const;
+
+    VulkanContext& context_;
+    Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
+    const SceneData& scene_;
+    bool incidence_ = false, sidelobes_ = false;
+    bool timestamps_ = false;
+
+    std::vector<DrawRange> draw_ranges_;         // per scene draw
+    std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
+
+    Buffer vertices_, indices_;
+    Image depth_image_, material_image_;
+    OwnedRenderPass render_pass_;
+    OwnedFramebuffer framebuffer_;
+    OwnedPipelineLayout depth_layout_;
+    OwnedPipeline depth_pipeline_;
+
+    Buffer params_, depth_, material_id_, normals_, echo_, profiles_, beam_profiles_, polar_;
+    Buffer slice_info_, materials_, column_beam_, column_weight_, beam_begin_, beam_end_, sidelobe_weight_;
+    Buffer readback_;
+    Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
+        beam_profiles_region_;
+
+    OwnedDescriptorSetLayout set_layout_;
+    OwnedPipelineLayout compute_layout_;
+    OwnedDescriptorPool descriptor_pool_;
+    VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE; // freed with the pool
+    OwnedPipeline normals_pipeline_, echo_pipeline_, profile_pipeline_, resample_pipeline_, sidelobe_pipeline_;
+
+    OwnedCommandPool command_pool_;
+    std::array<VkCommandBuffer, stage_count> command_buffers_{}; // freed with the pool
+    OwnedFence fence_;
+    OwnedQueryPool query_pool_;
+public: VkQueryPool dbg_pool_ = VK_NULL_HANDLE;
+    std::uint32_t queries_written_ = 0;
+    std::array<Stage, stage_count> query_stage_{}; // the stage that ends at timestamp i + 1
+};
+
+} // namespace vksonar::vk

@@ -1,0 +1,282 @@
+#include <cstdio>
+// The Vulkan StageBackend, per frame: depth pass (one render pass, one viewport per slice) -> copy to
+// storage buffers -> normals -> echo -> profile -> resample -> sidelobe -> readback. Nothing is
+// created here; render() records, submits, waits and copies out.
+#include <chrono>
+#include <cstring>
+
+#include "vk/commands.h"
+#include "vk/vk_error.h"
+#include "vk/vulkan_backend_impl.h"
+#include "vk/vulkan_context.h"
+
+namespace vksonar::vk {
+
+void VulkanBackend::bind_compute(VkCommandBuffer commands, VkPipeline pipeline) {
+    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, compute_layout_.get(), 0, 1, &descriptor_set_, 0,
+                            nullptr);
+}
+
+// A compute stage's output becomes readable by the next compute stage and by the readback copies.
+void VulkanBackend::compute_barrier(VkCommandBuffer commands, const Buffer& written) {
+    VkBufferMemoryBarrier barrier = buffer_barrier(written.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead);
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 1, &barrier);
+}
+
+void VulkanBackend::record_depth(VkCommandBuffer commands) {
+    std::array<VkClearValue, 2> clears{};
+    clears[0].color.uint32[0] = shared::kNoMaterial;
+    clears[1].depthStencil = {0.0f, 0}; // reversed-Z: 0 is the far plane / no hit
+    VkRenderPassBeginInfo begin{};
+    begin.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
+    begin.renderPass = render_pass_.get();
+    begin.framebuffer = framebuffer_.get();
+    begin.renderArea = {{0, 0}, {plan_.columns, plan_.rows}};
+    begin.clearValueCount = static_cast<std::uint32_t>(clears.size());
+    begin.pClearValues = clears.data();
+    vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
+    const std::size_t draws = draw_ranges_.size();
+    if (draws > 0) {
+        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline_.get());
+        VkBuffer vertex_buffer = vertices_.get();
+        VkDeviceSize zero = 0;
+        vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
+        vkCmdBindIndexBuffer(commands, indices_.get(), 0, VK_INDEX_TYPE_UINT32);
+        for (std::uint32_t s = 0; s < plan_.slices; ++s) {
+            const float x = static_cast<float>(s * plan_.slice_columns);
+            VkViewport viewport{x, 0.0f, float(plan_.slice_columns), float(plan_.rows), 0.0f, 1.0f};
+            VkRect2D scissor{{static_cast<std::int32_t>(s * plan_.slice_columns), 0},
+                             {plan_.slice_columns, plan_.rows}};
+            vkCmdSetViewport(commands, 0, 1, &viewport);
+            vkCmdSetScissor(commands, 0, 1, &scissor);
+            for (std::size_t i = 0; i < draws; ++i) {
+                const DrawRange& range = draw_ranges_[i];
+                if (range.index_count == 0) {
+                    continue;
+                }
+                vkCmdPushConstants(commands, depth_layout_.get(),
+                                   VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                   sizeof(shared::DepthPush), &draw_pushes_[s * draws + i]);
+                vkCmdDrawIndexed(commands, range.index_count, 1, range.first_index, range.vertex_offset, 0);
+            }
+        }
+    }
+    vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)
+
+    VkBufferImageCopy region{};
+    region.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, 1};
+    region.imageExtent = {plan_.columns, plan_.rows, 1};
+    vkCmdCopyImageToBuffer(commands, depth_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depth_.get(), 1,
+                           &region);
+    region.imageSubresource.aspectMask = VK_IMAGE_ASPECT_COLOR_BIT;
+    vkCmdCopyImageToBuffer(commands, material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, material_id_.get(), 1,
+                           &region);
+    std::array<VkBufferMemoryBarrier, 2> barriers{
+        buffer_barrier(depth_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
+        buffer_barrier(material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead)};
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, 2, barriers.data());
+}
+
+void VulkanBackend::record_normals(VkCommandBuffer commands) {
+    bind_compute(commands, normals_pipeline_.get());
+    vkCmdDispatch(commands, group_count(std::uint64_t(plan_.rows) * ceil_div(plan_.columns, kNormalsRun)), 1, 1);
+    compute_barrier(commands, normals_);
+}
+
+void VulkanBackend::record_echo(VkCommandBuffer commands) {
+    bind_compute(commands, echo_pipeline_.get());
+    vkCmdDispatch(commands, group_count(ceil_div(std::uint64_t(plan_.columns) * plan_.rows, kEchoPixels)), 1, 1);
+    compute_barrier(commands, echo_);
+}
+
+void VulkanBackend::record_beamform(VkCommandBuffer commands) {
+    // profile.comp accumulates into zeroed profiles.
+    vkCmdFillBuffer(commands, profiles_.get(), 0, VK_WHOLE_SIZE, 0);
+    VkBufferMemoryBarrier zeroed = buffer_barrier(profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+                                                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1, &zeroed);
+    bind_compute(commands, profile_pipeline_.get());
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 0);
+    vkCmdDispatch(commands, group_count(plan_.columns), 1, 1);
+    compute_barrier(commands, profiles_);
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 1);
+
+    // resample and sidelobe: x = runs of beams, y = groups of bins.
+    const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
+    const std::uint32_t bin_groups = group_count(plan_.bins);
+    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
+    vkCmdDispatch(commands, beam_runs, bin_groups, 1);
+    compute_barrier(commands, beam_profiles_);
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 2);
+    if (sidelobes_) {
+        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
+        vkCmdDispatch(commands, beam_runs, bin_groups, 1);
+        compute_barrier(commands, polar_);
+    }
+    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 3);
+}
+
+void VulkanBackend::record_readback(VkCommandBuffer commands, std::uint32_t save_mask) {
+    VkBuffer target = readback_.get();
+    auto copy = [&](const Buffer& source, const Region& region) {
+        if (region.bytes == 0) return;
+        VkBufferCopy copy_region{0, region.offset, region.bytes};
+        vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
+    };
+    copy(sidelobes_ ? polar_ : beam_profiles_, polar_region_);
+    if (save_mask & save_depth) {
+        copy(depth_, depth_region_);
+        copy(material_id_, material_region_);
+    }
+    if ((save_mask & save_normals) && incidence_) copy(normals_, normals_region_);
+    if (save_mask & save_echo) copy(echo_, echo_region_);
+    if (save_mask & save_profiles) {
+        copy(profiles_, profiles_region_);
+        copy(beam_profiles_, beam_profiles_region_);
+    }
+    VkBufferMemoryBarrier barrier = buffer_barrier(target, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT);
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
+}
+
+Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count) {
+    VkSubmitInfo submit{};
+    submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    submit.commandBufferCount = count;
+    submit.pCommandBuffers = command_buffers;
+    VkFence fence = fence_.get();
+    VKS_VK_TRY(vkResetFences(context_.device, 1, &fence));
+    VKS_VK_TRY(queue_submit(context_, submit, fence));
+    VKS_VK_TRY(vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+    return {};
+}
+
+void VulkanBackend::copy_out(const Region& region, void* destination) const {
+    std::memcpy(destination, static_cast<const char*>(readback_.mapped) + region.offset, region.bytes);
+}
+
+namespace {
+
+// Resizes only if the caller's frame was not made for this plan (then the first frame allocates).
+template <class T> T* sized(std::vector<T>& v, std::size_t n) {
+    if (v.size() != n) v.resize(n);
+    return v.data();
+}
+
+} // namespace
+
+Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Frame& frame) {
+    frame.times.clear();
+    frame.stages_run.clear();
+    compose_depth_draws(plan_, scene_, pose, draw_pushes_);
+
+    // Record: one command buffer per stage; the readback goes with the last one.
+    std::array<Stage, stage_count> stages{};
+    std::uint32_t stage_total = 0;
+    stages[stage_total++] = stage_depth;
+    if (incidence_) stages[stage_total++] = stage_normals;
+    stages[stage_total++] = stage_echo;
+    stages[stage_total++] = stage_beamform;
+    stages[stage_total++] = stage_readback;
+
+    VKS_VK_TRY(vkResetCommandPool(context_.device, command_pool_.get(), 0));
+    std::array<VkCommandBuffer, stage_count> recorded{};
+    for (std::uint32_t i = 0; i < stage_total; ++i) {
+        VkCommandBuffer commands = command_buffers_[i];
+        recorded[i] = commands;
+        VkCommandBufferBeginInfo begin{};
+        begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+        begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+        VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
+        if (timestamps_ && i == 0) {
+            vkCmdResetQueryPool(commands, query_pool_.get(), 0, stage_count + 1);
+            vkCmdResetQueryPool(commands, dbg_pool_, 0, 4);
+            vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
+        }
+        switch (stages[i]) {
+        case stage_depth:
+            record_depth(commands);
+            break;
+        case stage_normals:
+            record_normals(commands);
+            break;
+        case stage_echo:
+            record_echo(commands);
+            break;
+        case stage_beamform:
+            record_beamform(commands);
+            break;
+        case stage_readback:
+            record_readback(commands, save_mask);
+            break;
+        case stage_count:
+            break;
+        }
+        if (timestamps_) {
+            vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
+        }
+        VKS_VK_TRY(vkEndCommandBuffer(commands));
+    }
+
+    // Submit: all at once with timestamps, else one stage at a time, timed on the host.
+    std::array<double, stage_count> stage_ms{};
+    if (timestamps_) {
+        if (auto r = submit_and_wait(recorded.data(), stage_total); !r) return r;
+        std::array<std::uint64_t, stage_count + 1> ticks{};
+        VKS_VK_TRY(vkGetQueryPoolResults(context_.device, query_pool_.get(), 0, stage_total + 1,
+                                         sizeof(std::uint64_t) * ticks.size(), ticks.data(), sizeof(std::uint64_t),
+                                         VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+        const std::uint64_t mask = context_.timestamp_valid_bits >= 64
+                                       ? ~std::uint64_t(0)
+                                       : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
+        const double ns_per_tick = context_.properties.limits.timestampPeriod;
+        for (std::uint32_t i = 0; i < stage_total; ++i) {
+            const std::uint64_t elapsed = ((ticks[i + 1] & mask) - (ticks[i] & mask)) & mask;
+            stage_ms[i] = double(elapsed) * ns_per_tick * 1e-6;
+        }
+    } else {
+        for (std::uint32_t i = 0; i < stage_total; ++i) {
+            const auto start = std::chrono::steady_clock::now();
+            if (auto r = submit_and_wait(&recorded[i], 1); !r) return r;
+            stage_ms[i] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        }
+    }
+    for (std::uint32_t i = 0; i < stage_total; ++i) {
+        if (stages[i] == stage_readback) {
+            continue; // a transfer, not a stage of the pipeline
+        }
+        frame.times.push_back(StageTime{kStageNames[stages[i]], stage_ms[i]});
+        frame.stages_run.emplace_back(kStageNames[stages[i]]);
+    }
+
+    { std::uint64_t t[4]; vkGetQueryPoolResults(context_.device, dbg_pool_, 0, 4, sizeof(t), t, 8, VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
+      fprintf(stderr, "profile %.2f resample %.2f sidelobe %.2f\n", (t[1]-t[0])*1e-6, (t[2]-t[1])*1e-6, (t[3]-t[2])*1e-6); }
+    // Copy out of the (coherent) readback buffer.
+    const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
+    const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
+    frame.beams = plan_.beams;
+    frame.bins = plan_.bins;
+    frame.columns = plan_.columns;
+    frame.rows = plan_.rows;
+    copy_out(polar_region_, sized(frame.clean, cells));
+    if (save_mask & save_depth) {
+        copy_out(depth_region_, sized(frame.depth, pixels));
+        copy_out(material_region_, sized(frame.material, pixels));
+    }
+    if (save_mask & save_normals) {
+        float* normals = sized(frame.normals, pixels * 4);
+        if (incidence_) {
+            copy_out(normals_region_, normals);
+        } else {
+            std::memset(normals, 0, pixels * 4 * sizeof(float)); // the normals pass did not run
+        }
+    }
+    if (save_mask & save_echo) copy_out(echo_region_, sized(frame.echo, pixels * 2));
+    if (save_mask & save_profiles) {
+        copy_out(profiles_region_, sized(frame.profiles, std::size_t(plan_.bins) * plan_.columns));
+        copy_out(beam_profiles_region_, sized(frame.beam_profiles, cells));
+    }
+    return {};
+}
+
+} // namespace vksonar::vk

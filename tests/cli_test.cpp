@@ -1,0 +1,366 @@
+// The vksonar command-line tool, run as a separate process: exit codes, the one-line `error: ...`
+// on stderr for each kind of bad input, no output left behind on error, and the file layout of a
+// successful render (CPU backend, so no GPU is needed).
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "config/config_keys.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+    int exit_code = -1;
+    std::string out, err;
+    std::vector<std::string> err_lines() const {
+        std::vector<std::string> lines;
+        std::stringstream stream(err);
+        std::string line;
+        while (std::getline(stream, line)) lines.push_back(line);
+        return lines;
+    }
+};
+
+std::string quote(const std::string& arg) {
+    std::string quoted = "'";
+    for (char ch : arg) {
+        if (ch == '\'') quoted += "'\\''";
+        else quoted += ch;
+    }
+    return quoted + "'";
+}
+
+std::string read_text(const fs::path& path) {
+    std::ifstream file(path, std::ios::binary);
+    std::stringstream text;
+    text << file.rdbuf();
+    return text.str();
+}
+
+void write_text(const fs::path& path, const std::string& text) {
+    std::ofstream file(path, std::ios::binary);
+    file << text;
+}
+
+class Cli : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() /
+               ("vksonar_cli_test_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+        write_text(dir_ / "quad.gltf", kQuadGltf);
+    }
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+
+    CliRun run(const std::vector<std::string>& args) const {
+        std::string command = quote(VKSONAR_CLI);
+        for (const auto& arg : args) command += " " + quote(arg);
+        const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+        command += " > " + quote(out.string()) + " 2> " + quote(err.string()) + " < /dev/null";
+        const int status = std::system(command.c_str());
+        CliRun result;
+        result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        result.out = read_text(out);
+        result.err = read_text(err);
+        return result;
+    }
+
+    // Runs a render that must fail with exit code 2 and exactly one stderr line `error: ...` that
+    // contains every string in `expected`, and must leave no output directory behind.
+    void expect_bad_render(std::vector<std::string> args, const std::vector<std::string>& expected) const {
+        const fs::path parent = dir_ / "never_created";
+        args.insert(args.begin(), "render");
+        if (std::find(args.begin(), args.end(), "--out") == args.end()) {
+            args.push_back("--out");
+            args.push_back((parent / "out").string());
+        }
+        if (std::find(args.begin(), args.end(), "--scene") == args.end()) {
+            args.push_back("--scene");
+            args.push_back((dir_ / "quad.gltf").string());
+        }
+        const CliRun r = run(args);
+        std::string joined;
+        for (const auto& a : args) joined += a + " ";
+        EXPECT_EQ(r.exit_code, 2) << joined << "\nstderr: " << r.err;
+        const auto lines = r.err_lines();
+        ASSERT_EQ(lines.size(), 1u) << joined << "\nstderr: " << r.err;
+        EXPECT_EQ(lines[0].rfind("error: ", 0), 0u) << lines[0];
+        for (const auto& text : expected) EXPECT_NE(lines[0].find(text), std::string::npos) << lines[0];
+        EXPECT_FALSE(fs::exists(parent)) << "output left behind by: " << joined;
+    }
+
+    fs::path dir_;
+
+    // One 10 m x 6 m quad 10 m ahead of a sonar at the origin (glTF is +Y up: world = (x, -z, y)).
+    static constexpr const char* kQuadGltf = R"({
+  "asset": {"version": "2.0"},
+  "scene": 0,
+  "scenes": [{"nodes": [0]}],
+  "nodes": [{"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+  "buffers": [{"byteLength": 60,
+               "uri": "data:application/octet-stream;base64,AAAgQQAAQMAAAKDAAAAgQQAAQMAAAKBAAAAgQQAAQEAAAKBAAAAgQQAAQEAAAKDAAAABAAIAAAACAAMA"}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                  {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                 "min": [10, -3, -5], "max": [10, 3, 5]},
+                {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}]
+})";
+};
+
+// ---- bad input: exit 2, one line, nothing written ---------------------------------------------
+
+TEST_F(Cli, UnknownKeySuggestsClosest) {
+    expect_bad_render({"--set", "hfvo=90"}, {"unknown key 'hfvo'", "did you mean 'hfov'"});
+    write_text(dir_ / "typo.json", R"({"display": {"db_mni": 1}})");
+    expect_bad_render({"--config", (dir_ / "typo.json").string()},
+                      {"typo.json", "'display.db_mni'", "did you mean 'display.db_min'"});
+}
+
+TEST_F(Cli, WrongType) {
+    write_text(dir_ / "many.json", R"({"beams": "many"})");
+    expect_bad_render({"--config", (dir_ / "many.json").string()}, {"many.json", "beams", "\"many\""});
+    expect_bad_render({"--set", "bins=lots"}, {"bins", "lots"});
+    write_text(dir_ / "broken.json", R"({"beams": )");
+    expect_bad_render({"--config", (dir_ / "broken.json").string()}, {"broken.json", "invalid JSON"});
+}
+
+TEST_F(Cli, InvalidValues) {
+    expect_bad_render({"--set", "beams=0"}, {"beams = 0"});
+    expect_bad_render({"--set", "bins=0"}, {"bins = 0"});
+    expect_bad_render({"--set", "range_min=10", "--set", "range_max=5"}, {"range_max = 5"});
+    expect_bad_render({"--set", "range_min=-1"}, {"range_min = -1"});
+    expect_bad_render({"--set", "hfov=400"}, {"hfov = 400"});
+    expect_bad_render({"--set", "vfov=180"}, {"vfov = 180"});
+    expect_bad_render({"--set", "hfov=nan"}, {"hfov", "nan"});
+    expect_bad_render({"--set", "display.db_max=1"}, {"display.db_max = 1"});
+    expect_bad_render({"--set", "accuracy.max_slice=200"}, {"accuracy.max_slice = 200"});
+}
+
+TEST_F(Cli, UnknownPresetListsValidOnes) {
+    expect_bad_render({"--sonar", "oculus_m9000"}, {"oculus_m9000", "valid presets", "gemini_720is", "default"});
+    expect_bad_render({"--sonar", (dir_ / "missing.json").string()}, {"missing.json", "no such file"});
+}
+
+TEST_F(Cli, MalformedPose) {
+    expect_bad_render({"--pose", "1,2,3"}, {"--pose", "6 numbers", "got 3"});
+    expect_bad_render({"--pose", "1,2,3,4,5,x"}, {"--pose", "yaw"});
+    expect_bad_render({"--pose", "1,2,3,4,5,inf"}, {"--pose"});
+}
+
+TEST_F(Cli, UnwritableOutputDirectory) {
+    expect_bad_render({"--out", "/proc/vksonar_out"}, {"/proc/vksonar_out"});
+    EXPECT_FALSE(fs::exists("/proc/vksonar_out"));
+    write_text(dir_ / "a_file", "x");
+    expect_bad_render({"--out", (dir_ / "a_file").string()}, {"a_file", "not a directory"});
+}
+
+TEST_F(Cli, BadTrajectoryLineNamesFileAndLine) {
+    write_text(dir_ / "poses.csv", "# a comment\nx,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n1,2,x,0,0,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "poses.csv").string()}, {"poses.csv:4"});
+    write_text(dir_ / "short.csv", "0,0,0,0,10,0\n\n0,0,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "short.csv").string()}, {"short.csv:3", "6 numbers"});
+    write_text(dir_ / "empty.csv", "# nothing\n");
+    expect_bad_render({"--trajectory", (dir_ / "empty.csv").string()}, {"empty.csv", "no poses"});
+    expect_bad_render({"--trajectory", (dir_ / "none.csv").string()}, {"none.csv", "cannot open"});
+}
+
+TEST_F(Cli, BadOptions) {
+    expect_bad_render({"--save", "depth,nromals"}, {"--save", "nromals", "did you mean 'normals'"});
+    expect_bad_render({"--backend", "gpu"}, {"--backend", "gpu"});
+    expect_bad_render({"--seed", "-1"}, {"--seed"});
+    expect_bad_render({"--sonr", "default"}, {"unknown option '--sonr'", "did you mean '--sonar'"});
+    expect_bad_render({"--scene", (dir_ / "missing.gltf").string()}, {"missing.gltf"});
+    expect_bad_render({"--set", "beams"}, {"key=value"});
+
+    const CliRun no_out = run({"render", "--scene", (dir_ / "quad.gltf").string()});
+    EXPECT_EQ(no_out.exit_code, 2);
+    EXPECT_EQ(no_out.err, "error: render: --out DIR is required\n");
+
+    const CliRun unknown = run({"rendr"});
+    EXPECT_EQ(unknown.exit_code, 2);
+    EXPECT_NE(unknown.err.find("did you mean 'render'"), std::string::npos) << unknown.err;
+}
+
+// ---- presets, compare, bench --------------------------------------------------------------------
+
+TEST_F(Cli, PresetsListShowAndKeys) {
+    const CliRun list = run({"presets"});
+    EXPECT_EQ(list.exit_code, 0) << list.err;
+    for (const char* name : {"default", "oculus_m750d_lf", "gemini_720is", "aris_explorer_3000"})
+        EXPECT_NE(list.out.find(name), std::string::npos) << name;
+
+    const CliRun show = run({"presets", "--show", "blueview_p900_130"});
+    ASSERT_EQ(show.exit_code, 0) << show.err;
+    const auto json = nlohmann::json::parse(show.out);
+    EXPECT_EQ(json["beams"], 768);
+    EXPECT_EQ(json["display"]["colormap"], "sonar");
+    EXPECT_EQ(json["effects"]["speckle"], "auto");
+
+    const CliRun missing = run({"presets", "--show", "nope"});
+    EXPECT_EQ(missing.exit_code, 2);
+    EXPECT_EQ(missing.err_lines().size(), 1u);
+    EXPECT_NE(missing.err.find("valid presets"), std::string::npos);
+
+    const CliRun keys = run({"presets", "--keys"});
+    ASSERT_EQ(keys.exit_code, 0);
+    EXPECT_EQ(keys.out, vksonar::config_keys::reference_markdown());
+}
+
+void write_npy_f32(const fs::path& path, const std::vector<float>& values, std::uint32_t rows, std::uint32_t cols) {
+    std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + std::to_string(rows) + ", " +
+                         std::to_string(cols) + "), }";
+    while ((10 + header.size() + 1) % 64 != 0) header += ' ';
+    header += '\n';
+    std::ofstream file(path, std::ios::binary);
+    file.write("\x93NUMPY\x01\x00", 8);
+    const char length[2] = {static_cast<char>(header.size() & 0xff), static_cast<char>(header.size() >> 8)};
+    file.write(length, 2);
+    file << header;
+    file.write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 4));
+}
+
+TEST_F(Cli, Compare) {
+    write_npy_f32(dir_ / "a.npy", {1e6f, 1e8f, 1e10f, 0.0f, 1e10f, 1e9f}, 2, 3);
+    write_npy_f32(dir_ / "b.npy", {1e6f, 1e8f, 1e10f, 0.0f, 1e10f, 2e9f}, 2, 3); // +3.01 dB in one cell
+    write_npy_f32(dir_ / "c.npy", {1, 2, 3}, 1, 3);
+
+    const CliRun same = run({"compare", (dir_ / "a.npy").string(), (dir_ / "a.npy").string()});
+    EXPECT_EQ(same.exit_code, 0) << same.out << same.err;
+    EXPECT_NE(same.out.find("max_abs:      0"), std::string::npos) << same.out;
+    EXPECT_NE(same.out.find("psnr:         inf"), std::string::npos) << same.out;
+
+    const CliRun over = run({"compare", (dir_ / "a.npy").string(), (dir_ / "b.npy").string(), "--tol", "1"});
+    EXPECT_EQ(over.exit_code, 1) << over.out << over.err;
+    EXPECT_NE(over.out.find("max_db_diff:  3.01"), std::string::npos) << over.out;
+    EXPECT_NE(over.out.find("rmse"), std::string::npos);
+    EXPECT_NE(over.out.find("psnr"), std::string::npos);
+
+    const CliRun within = run({"compare", (dir_ / "a.npy").string(), (dir_ / "b.npy").string(), "--tol", "3.1"});
+    EXPECT_EQ(within.exit_code, 0) << within.out;
+    // The differing cell (90 dB) is below a 95 dB floor, so it does not count.
+    const CliRun floored = run({"compare", (dir_ / "a.npy").string(), (dir_ / "b.npy").string(), "--floor", "95"});
+    EXPECT_EQ(floored.exit_code, 0) << floored.out;
+
+    const CliRun shapes = run({"compare", (dir_ / "a.npy").string(), (dir_ / "c.npy").string()});
+    EXPECT_EQ(shapes.exit_code, 2);
+    EXPECT_NE(shapes.err.find("shapes differ"), std::string::npos) << shapes.err;
+    write_text(dir_ / "junk.npy", "not numpy");
+    const CliRun junk = run({"compare", (dir_ / "a.npy").string(), (dir_ / "junk.npy").string()});
+    EXPECT_EQ(junk.exit_code, 2);
+    EXPECT_EQ(junk.err_lines().size(), 1u);
+}
+
+TEST_F(Cli, BenchDispatch) {
+    const CliRun usage = run({"bench"});
+    EXPECT_EQ(usage.exit_code, 2);
+    EXPECT_NE(usage.err.find("vksonar bench: speed|effects|accuracy"), std::string::npos);
+    const CliRun speed = run({"bench", "speed"});
+    EXPECT_EQ(speed.exit_code, 1);
+    EXPECT_EQ(speed.err, "error: bench mode speed not built yet\n");
+    const CliRun bad = run({"bench", "sped"});
+    EXPECT_EQ(bad.exit_code, 2);
+}
+
+// ---- successful renders (CPU backend) --------------------------------------------------------
+
+std::vector<std::size_t> npy_shape(const fs::path& path) {
+    const std::string text = read_text(path);
+    const auto open = text.find("'shape': (");
+    if (open == std::string::npos) return {};
+    const auto close = text.find(')', open);
+    std::vector<std::size_t> shape;
+    std::stringstream items(text.substr(open + 10, close - open - 10));
+    std::string item;
+    while (std::getline(items, item, ','))
+        if (item.find_first_of("0123456789") != std::string::npos) shape.push_back(std::stoul(item));
+    return shape;
+}
+
+TEST_F(Cli, RenderWritesEveryOutput) {
+    const fs::path out = dir_ / "out" / "nested";
+    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=64",
+                       "--set", "beams=48", "--set", "display.fan_width=128", "--set", "effects.speckle=off",
+                       "--save", "depth,normals", "--save", "echo,cloud", "--pose", "0,0,0,0,0,0", "--seed", "7",
+                       "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+    for (const char* name : {"fan.png", "polar.png", "polar.npy", "polar_u16.npy", "meta.json", "depth.npy",
+                             "normals.npy", "echo.npy", "cloud.ply"})
+        EXPECT_TRUE(fs::is_regular_file(out / name)) << name;
+    EXPECT_EQ(npy_shape(out / "polar.npy"), (std::vector<std::size_t>{64, 48}));
+    EXPECT_EQ(npy_shape(out / "polar_u16.npy"), (std::vector<std::size_t>{64, 48}));
+    EXPECT_EQ(npy_shape(out / "normals.npy").size(), 3u);
+    EXPECT_EQ(npy_shape(out / "normals.npy").back(), 4u);
+    EXPECT_EQ(npy_shape(out / "echo.npy").back(), 2u);
+    EXPECT_EQ(npy_shape(out / "depth.npy").size(), 2u);
+    for (const auto& entry : fs::directory_iterator(out))
+        EXPECT_NE(entry.path().filename().string()[0], '.') << "temporary file left: " << entry.path();
+
+    const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
+    EXPECT_EQ(meta["config"]["bins"], 64);
+    EXPECT_EQ(meta["config"]["effects"]["speckle"], "off");
+    EXPECT_EQ(meta["backend"], "cpu");
+    EXPECT_EQ(meta["device"], "cpu");
+    EXPECT_EQ(meta["scene"], (dir_ / "quad.gltf").string());
+    EXPECT_TRUE(meta.contains("pose"));
+}
+
+TEST_F(Cli, PrecedencePresetSceneEffectsConfigSet) {
+    // The scene asks for speckle off and TVG on; a config file turns TVG back off; --set wins last.
+    std::string scene = kQuadGltf;
+    const std::string from = R"("scenes": [{"nodes": [0]}])";
+    scene.replace(scene.find(from), from.size(),
+                  R"("scenes": [{"nodes": [0], "extras": {"vksonar": {"effects": {"speckle": "off", "tvg": "on",
+                  "spreading": "off"}}}}])");
+    write_text(dir_ / "extras.gltf", scene);
+    write_text(dir_ / "cfg.json", R"({"effects": {"tvg": "off", "spreading": "on"}, "bins": 40})");
+    const fs::path out = dir_ / "out";
+    const CliRun r = run({"render", "--scene", (dir_ / "extras.gltf").string(), "--backend", "cpu", "--sonar",
+                          "oculus_m750d_hf", "--config", (dir_ / "cfg.json").string(), "--set", "beams=20",
+                          "--set", "display.fan_width=64", "--set", "effects.spreading=off", "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto config = nlohmann::json::parse(read_text(out / "meta.json"))["config"];
+    EXPECT_EQ(config["frequency"], 1.2e6);             // preset
+    EXPECT_EQ(config["effects"]["speckle"], "off");    // scene over preset
+    EXPECT_EQ(config["effects"]["tvg"], "off");        // config file over scene
+    EXPECT_EQ(config["bins"], 40);                     // config file over preset
+    EXPECT_EQ(config["effects"]["spreading"], "off");  // --set over config file
+    EXPECT_EQ(config["beams"], 20);
+}
+
+TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
+    write_text(dir_ / "poses.csv", "x,y,z,roll,pitch,yaw\n# comment\n0,0,0,0,0,0\n0.5,0,0,0,0,5\n");
+    const fs::path out = dir_ / "traj";
+    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
+                       "--set", "beams=16", "--set", "display.fan_width=64", "--trajectory",
+                       (dir_ / "poses.csv").string(), "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.err, "") << "progress must only be shown on a terminal";
+    EXPECT_TRUE(fs::is_regular_file(out / "frame_000003" / "polar.npy"));
+    EXPECT_TRUE(fs::is_regular_file(out / "frame_000004" / "meta.json"));
+    EXPECT_FALSE(fs::exists(out / "frame_000001"));
+    const auto meta = nlohmann::json::parse(read_text(out / "frame_000004" / "meta.json"));
+    EXPECT_EQ(meta["frame_index"], 4);
+}
+
+} // namespace

@@ -1,0 +1,271 @@
+// SonarConfig loading, overrides, serialization, presets and validate().
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "config/config_keys.h"
+#include "vksonar/config.h"
+
+namespace vksonar {
+namespace {
+
+SonarConfig apply_json(const SonarConfig& base, const std::string& json) {
+    auto result = apply_config_json(base, json, "test.json");
+    EXPECT_TRUE(result.ok()) << result.error().message;
+    return result.ok() ? result.value() : base;
+}
+
+std::string apply_error(const std::string& json) {
+    auto result = apply_config_json(SonarConfig{}, json, "test.json");
+    EXPECT_FALSE(result.ok()) << json;
+    return result.ok() ? std::string() : result.error().message;
+}
+
+std::string override_error(const std::string& text) {
+    auto result = apply_config_override(SonarConfig{}, text);
+    EXPECT_FALSE(result.ok()) << text;
+    return result.ok() ? std::string() : result.error().message;
+}
+
+TEST(Config, DefaultsAreValid) { EXPECT_EQ(SonarConfig{}.validate(), ""); }
+
+TEST(Config, TableKeysAreUniqueAndRoundTrip) {
+    std::set<std::string> names;
+    for (const auto& key : config_keys::all()) {
+        EXPECT_TRUE(names.insert(key.name).second) << key.name;
+        EXPECT_EQ(config_keys::find(key.name), &key);
+        // Every key's getter output is accepted by its setter.
+        SonarConfig config;
+        EXPECT_EQ(key.set(config, key.get(SonarConfig{})), "") << key.name;
+    }
+}
+
+TEST(Config, FlatAndNestedKeys) {
+    const auto config = apply_json(SonarConfig{}, R"({
+        // comments are allowed
+        "hfov": 90, "beams": 256, "bins": 300, "range_min": 1, "range_max": 25.5,
+        "beam_spacing": "equisine", "absorption": 0.2, "vertical_pattern": "hann",
+        "display": {"db_min": 50, "db_max": 120, "colormap": "viridis", "fan_width": 800},
+        "accuracy": {"pixels_per_beam": 3, "rows_per_vfov": 32, "max_slice": 45, "normal_method": "sobel5",
+                     "range_kernel": "nearest"},
+        "cpu": {"precision": "double"},
+        "effects": {"speckle": "off", "tvg": "on", "absorption": false},
+        "name": "x", "description": "y", "source": "z"
+    })");
+    EXPECT_EQ(config.hfov_deg, 90);
+    EXPECT_EQ(config.beams, 256u);
+    EXPECT_EQ(config.bins, 300u);
+    EXPECT_EQ(config.range_max_m, 25.5);
+    EXPECT_EQ(config.beam_spacing, BeamSpacing::equisine);
+    EXPECT_EQ(config.absorption_db_per_m, 0.2);
+    EXPECT_EQ(config.vertical_pattern, BeamPattern::hann);
+    EXPECT_EQ(config.db_min, 50);
+    EXPECT_EQ(config.db_max, 120);
+    EXPECT_EQ(config.colormap, Colormap::viridis);
+    EXPECT_EQ(config.fan_width_px, 800u);
+    EXPECT_EQ(config.pixels_per_beam, 3);
+    EXPECT_EQ(config.rows_per_vfov, 32u);
+    EXPECT_EQ(config.max_slice_deg, 45);
+    EXPECT_EQ(config.normal_method, NormalMethod::sobel5);
+    EXPECT_EQ(config.range_kernel, RangeKernel::nearest);
+    EXPECT_EQ(config.cpu_precision, Precision::f64);
+    EXPECT_EQ(config.effects.speckle, EffectMode::off);
+    EXPECT_EQ(config.effects.tvg, EffectMode::on);
+    EXPECT_EQ(config.effects.absorption, EffectMode::off);
+    EXPECT_EQ(config.effects.incidence, EffectMode::automatic);
+    EXPECT_EQ(config.name, "x");
+    EXPECT_EQ(config.validate(), "");
+
+    // Dotted keys are accepted in files too.
+    EXPECT_EQ(apply_json(SonarConfig{}, R"({"display.db_min": 42})").db_min, 42);
+}
+
+TEST(Config, UnknownKeySuggestsClosest) {
+    EXPECT_EQ(apply_error(R"({"hfvo": 90})"), "test.json: unknown key 'hfvo' (did you mean 'hfov'?)");
+    EXPECT_NE(apply_error(R"({"display": {"db_mni": 1}})").find("did you mean 'display.db_min'"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"db_min": 1})").find("did you mean 'display.db_min'"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"effects": {"specle": "on"}})").find("'effects.speckle'"), std::string::npos);
+    EXPECT_NE(override_error("rnage_max=3").find("did you mean 'range_max'"), std::string::npos);
+}
+
+TEST(Config, WrongTypesNameKeyAndValue) {
+    const auto beams = apply_error(R"({"beams": "many"})");
+    EXPECT_NE(beams.find("test.json"), std::string::npos) << beams;
+    EXPECT_NE(beams.find("beams"), std::string::npos) << beams;
+    EXPECT_NE(beams.find("\"many\""), std::string::npos) << beams;
+    EXPECT_NE(apply_error(R"({"beams": -3})").find("beams"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"beams": 2.5})").find("beams"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"hfov": "wide"})").find("hfov"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"speckle": "pink"})").find("rayleigh|gamma|gaussian"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"display": 3})").find("display"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"beam_angles": [1, "x"]})").find("beam_angles"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"absorption": -1})").find("absorption"), std::string::npos);
+    EXPECT_NE(apply_error(R"([1, 2])").find("expected a JSON object"), std::string::npos);
+    EXPECT_NE(apply_error(R"({"hfov": )").find("invalid JSON"), std::string::npos);
+}
+
+TEST(Config, Overrides) {
+    auto result = apply_config_override(SonarConfig{}, "effects.speckle=off");
+    ASSERT_TRUE(result.ok()) << result.error().message;
+    EXPECT_EQ(result->effects.speckle, EffectMode::off);
+    result = apply_config_override(*result, "display.db_min=50");
+    ASSERT_TRUE(result.ok());
+    EXPECT_EQ(result->db_min, 50);
+    result = apply_config_override(*result, "absorption=auto");
+    ASSERT_TRUE(result.ok());
+    EXPECT_LT(result->absorption_db_per_m, 0);
+    result = apply_config_override(*result, "beam_angles=[10, 0, -10]");
+    ASSERT_TRUE(result.ok()) << result.error().message;
+    EXPECT_EQ(result->beam_angles_deg, (std::vector<double>{10, 0, -10}));
+    EXPECT_EQ(result->beams, 3u);
+    result = apply_config_override(*result, "beam_angles=");
+    ASSERT_TRUE(result.ok());
+    EXPECT_TRUE(result->beam_angles_deg.empty());
+    result = apply_config_override(*result, "description=a = b");
+    ASSERT_TRUE(result.ok());
+    EXPECT_EQ(result->description, "a = b");
+
+    EXPECT_NE(override_error("beams=many").find("beams"), std::string::npos);
+    EXPECT_NE(override_error("hfov").find("key=value"), std::string::npos);
+    auto nan = apply_config_override(SonarConfig{}, "hfov=nan");
+    ASSERT_TRUE(nan.ok()); // parses; validate() rejects it
+    EXPECT_NE(nan->validate().find("hfov"), std::string::npos);
+}
+
+TEST(Config, PrecedenceIsOrderOfApplication) {
+    auto preset = load_preset("oculus_m750d_lf");
+    ASSERT_TRUE(preset.ok()) << preset.error().message;
+    const auto file = apply_json(*preset, R"({"range_max": 50, "bins": 600})");
+    auto set = apply_config_override(file, "bins=700");
+    ASSERT_TRUE(set.ok());
+    EXPECT_EQ(set->frequency_hz, 750e3); // preset
+    EXPECT_EQ(set->range_max_m, 50);     // file over preset
+    EXPECT_EQ(set->bins, 700u);          // --set over file
+}
+
+TEST(Config, JsonRoundTrip) {
+    for (const auto& name : preset_names()) {
+        auto preset = load_preset(name);
+        ASSERT_TRUE(preset.ok()) << preset.error().message;
+        const std::string text = config_to_json(*preset);
+        const auto back = apply_json(SonarConfig{}, text);
+        EXPECT_EQ(config_to_json(back), text) << name;
+    }
+    SonarConfig config;
+    config.absorption_db_per_m = 0.05;
+    config.effects.tvg = EffectMode::on;
+    const auto json = nlohmann::json::parse(config_to_json(config));
+    EXPECT_EQ(json["absorption"], 0.05);
+    EXPECT_EQ(json["effects"]["tvg"], "on");
+    EXPECT_EQ(json["display"]["colormap"], "sonar");
+    EXPECT_EQ(nlohmann::json::parse(config_to_json(SonarConfig{}))["absorption"], "auto");
+}
+
+TEST(Presets, AllLoadValidateAndCiteASource) {
+    const auto names = preset_names();
+    for (const char* expected : {"default", "oculus_m750d_lf", "oculus_m750d_hf", "oculus_m1200d_lf",
+                                 "oculus_m1200d_hf", "gemini_720is", "blueview_m900_90", "blueview_p900_130",
+                                 "aris_explorer_3000"})
+        EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
+    for (const auto& name : names) {
+        auto preset = load_preset(name);
+        ASSERT_TRUE(preset.ok()) << preset.error().message;
+        EXPECT_EQ(preset->validate(), "") << name;
+        EXPECT_EQ(preset->name, name);
+        EXPECT_FALSE(preset->description.empty()) << name;
+        EXPECT_FALSE(preset->source.empty()) << name;
+        EXPECT_LE(preset->bins, 1024u) << name;
+    }
+    auto aris = load_preset("aris_explorer_3000");
+    ASSERT_TRUE(aris.ok());
+    EXPECT_EQ(aris->beam_angles_deg.size(), 128u);
+    EXPECT_EQ(aris->beams, 128u);
+    EXPECT_EQ(aris->frequency_hz, 3e6);
+
+    auto fallback = load_preset("default");
+    ASSERT_TRUE(fallback.ok());
+    EXPECT_EQ(fallback->bins, 512u);
+    EXPECT_EQ(fallback->range_max_m, 40);
+    EXPECT_EQ(fallback->frequency_hz, 750e3);
+}
+
+TEST(Presets, UnknownPresetListsValidOnes) {
+    auto result = load_preset("oculus_m9000");
+    ASSERT_FALSE(result.ok());
+    EXPECT_NE(result.error().message.find("oculus_m9000"), std::string::npos);
+    EXPECT_NE(result.error().message.find("gemini_720is"), std::string::npos);
+}
+
+std::string invalid(const std::string& override_text) {
+    auto result = apply_config_override(SonarConfig{}, override_text);
+    EXPECT_TRUE(result.ok()) << override_text;
+    if (!result.ok()) return {};
+    std::string problem = result->validate();
+    EXPECT_FALSE(problem.empty()) << override_text;
+    return problem;
+}
+
+TEST(Validate, NamesFieldAndValue) {
+    EXPECT_EQ(invalid("beams=0"), "beams = 0: must be at least 1");
+    EXPECT_EQ(invalid("bins=0"), "bins = 0: must be at least 1");
+    EXPECT_NE(invalid("range_min=-1").find("range_min = -1"), std::string::npos);
+    EXPECT_NE(invalid("range_max=0.2").find("range_max = 0.2"), std::string::npos); // below range_min 0.5
+    EXPECT_NE(invalid("hfov=400").find("hfov = 400"), std::string::npos);
+    EXPECT_NE(invalid("hfov=0").find("hfov = 0"), std::string::npos);
+    EXPECT_NE(invalid("vfov=180").find("vfov = 180"), std::string::npos);
+    EXPECT_NE(invalid("vfov=-1").find("vfov"), std::string::npos);
+    EXPECT_NE(invalid("sound_speed=0").find("sound_speed"), std::string::npos);
+    EXPECT_NE(invalid("frequency=-5").find("frequency"), std::string::npos);
+    EXPECT_NE(invalid("display.db_max=10").find("display.db_max"), std::string::npos);
+    EXPECT_NE(invalid("accuracy.pixels_per_beam=0").find("pixels_per_beam"), std::string::npos);
+    EXPECT_NE(invalid("accuracy.rows_per_vfov=0").find("rows_per_vfov"), std::string::npos);
+    EXPECT_NE(invalid("accuracy.max_slice=121").find("max_slice"), std::string::npos);
+    EXPECT_NE(invalid("accuracy.max_slice=0").find("max_slice"), std::string::npos);
+    EXPECT_NE(invalid("speckle_looks=0").find("speckle_looks"), std::string::npos);
+    EXPECT_NE(invalid("source_level=inf").find("source_level"), std::string::npos);
+    EXPECT_NE(invalid("range_min=1e-5").find("range_max / range_min"), std::string::npos);
+    EXPECT_NE(invalid("beam_angles=10,10,-10").find("strictly decreasing"), std::string::npos);
+    EXPECT_NE(invalid("beam_angles=-10,0,10").find("strictly decreasing"), std::string::npos);
+    EXPECT_NE(invalid("beam_angles=80,0,-10").find("outside"), std::string::npos);
+
+    // The hard cases of DESIGN §6 stay valid.
+    SonarConfig wide;
+    wide.hfov_deg = 360;
+    wide.beams = 4096;
+    EXPECT_EQ(wide.validate(), "");
+    SonarConfig narrow;
+    narrow.hfov_deg = 1;
+    narrow.beams = 1;
+    narrow.range_min_m = 0.01;
+    narrow.range_max_m = 100; // ratio 1e4
+    EXPECT_EQ(narrow.validate(), "");
+
+    // A table contradicted by a later `beams` is reported.
+    auto table = apply_json(SonarConfig{}, R"({"beam_angles": [10, 0, -10]})");
+    EXPECT_EQ(table.validate(), "");
+    table.beams = 4;
+    EXPECT_NE(table.validate().find("does not match beam_angles"), std::string::npos);
+}
+
+TEST(Reference, DocsConfigMdIsInSyncWithTheTable) {
+    const std::string table = config_keys::reference_markdown();
+    for (const auto& key : config_keys::all())
+        EXPECT_NE(table.find(std::string("`") + key.name + "`"), std::string::npos) << key.name;
+#ifdef VKSONAR_ASSET_DIR
+    std::ifstream file(std::string(VKSONAR_ASSET_DIR) + "/../docs/config.md");
+    ASSERT_TRUE(file) << "docs/config.md is missing";
+    std::stringstream text;
+    text << file.rdbuf();
+    EXPECT_NE(text.str().find(table), std::string::npos)
+        << "docs/config.md is out of date: regenerate its table with `vksonar presets --keys`";
+#endif
+}
+
+} // namespace
+} // namespace vksonar

@@ -1,0 +1,216 @@
+// GPU-vs-CPU regression suite: each stage fed the same input on both backends, then whole frames.
+// Tolerances and their reasons: tests/tolerances.h.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "stages/cpu_stages.h"
+#include "test_support.h"
+#include "tolerances.h"
+
+namespace vksonar::testing {
+namespace {
+
+constexpr std::uint32_t kSaveAll = save_depth | save_normals | save_echo | save_profiles;
+
+struct SceneCase {
+    std::string file;
+    Pose pose;
+};
+
+std::vector<SceneCase> bundled_scenes() {
+    std::vector<SceneCase> out;
+    Pose look_down;
+    look_down.pitch_deg = 15.0; // positive pitch tilts the nose down (REP-103): the seabed is in view
+    for (const auto& entry : std::filesystem::directory_iterator(VKSONAR_ASSET_DIR "/scenes")) {
+        const std::string ext = entry.path().extension().string();
+        if (ext == ".gltf" || ext == ".glb") out.push_back({entry.path().string(), look_down});
+    }
+    std::sort(out.begin(), out.end(), [](const SceneCase& a, const SceneCase& b) { return a.file < b.file; });
+    return out;
+}
+
+struct Pair {
+    Scene scene;
+    std::unique_ptr<Rendered> gpu, cpu;
+};
+
+std::unique_ptr<Pair> render_pair(const std::string& file, const SonarConfig& config, const Pose& pose,
+                                  std::uint32_t save_mask) {
+    auto pair = std::make_unique<Pair>();
+    auto scene = Scene::load_gltf(file);
+    if (!scene) {
+        ADD_FAILURE() << scene.error().message;
+        return nullptr;
+    }
+    pair->scene = std::move(scene.value());
+    pair->gpu = render_once(Backend::vulkan, config, pair->scene, pose, save_mask);
+    pair->cpu = render_once(Backend::cpu, config, pair->scene, pose, save_mask);
+    if (!pair->gpu || !pair->cpu) return nullptr;
+    return pair;
+}
+
+class StageTest : public ::testing::TestWithParam<SceneCase> {
+protected:
+    void SetUp() override { VKSONAR_REQUIRE_VULKAN(); }
+    ValidationGuard validation_;
+};
+
+TEST_P(StageTest, DepthDiffersOnlyOnTriangleEdges) {
+    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Frame& c = p->cpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    std::size_t hits = 0, mismatched = 0;
+    double max_rel_interior = 0;
+    for (std::uint32_t row = 0; row < g.rows; ++row) {
+        for (std::uint32_t col = 0; col < g.columns; ++col) {
+            const std::size_t i = static_cast<std::size_t>(row) * g.columns + col;
+            hits += g.depth[i] > 0;
+            const bool same_surface = g.material[i] == c.material[i] && (g.depth[i] > 0) == (c.depth[i] > 0);
+            const double zg = g.depth[i] > 0 ? plan.depth_a / (g.depth[i] - plan.depth_b) : 0;
+            const double zc = c.depth[i] > 0 ? plan.depth_a / (c.depth[i] - plan.depth_b) : 0;
+            const double rel = zg > 0 ? std::abs(zg - zc) / zg : 0;
+            if (!same_surface || rel > kDepthInteriorRelTol) {
+                ++mismatched;
+            } else {
+                max_rel_interior = std::max(max_rel_interior, rel);
+            }
+        }
+    }
+    ASSERT_GT(hits, 0u);
+    RecordProperty("depth_mismatched_pixels", static_cast<int>(mismatched));
+    std::printf("[depth] %s: %zu of %zu hit pixels differ (edges), max interior view-z rel diff %.2e\n",
+                GetParam().file.c_str(), mismatched, hits, max_rel_interior);
+    EXPECT_LE(static_cast<double>(mismatched), kDepthEdgePixelBudget * hits);
+}
+
+TEST_P(StageTest, NormalsEchoBeamformMatchOnTheSameInput) {
+    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    const std::size_t pixels = static_cast<std::size_t>(g.rows) * g.columns;
+
+    // Normals from the GPU's depth.
+    std::vector<float> normals(pixels * 4);
+    cpu::normals<float>(plan, g.depth.data(), normals.data());
+    double max_angle_deg = 0, max_cos_diff = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        if (g.depth[i] <= 0) continue;
+        double dot = 0;
+        for (int k = 0; k < 3; ++k) dot += static_cast<double>(normals[4 * i + k]) * g.normals[4 * i + k];
+        max_angle_deg = std::max(max_angle_deg, std::acos(std::clamp(dot, -1.0, 1.0)) * 180.0 / 3.14159265358979);
+        max_cos_diff = std::max(max_cos_diff, static_cast<double>(std::abs(normals[4 * i + 3] - g.normals[4 * i + 3])));
+    }
+    std::printf("[normals] max angle %.2e deg, max |d cos| %.2e\n", max_angle_deg, max_cos_diff);
+    EXPECT_LE(max_angle_deg, kNormalAngleTolDeg);
+    EXPECT_LE(max_cos_diff, kNormalCosTol);
+
+    // Echo from the GPU's depth, materials and normals.
+    std::vector<float> echo(pixels * 2);
+    cpu::echo<float>(plan, g.depth.data(), g.material.data(), g.normals.data(), echo.data());
+    double max_energy = 0;
+    for (std::size_t i = 0; i < pixels; ++i) max_energy = std::max(max_energy, static_cast<double>(g.echo[2 * i]));
+    ASSERT_GT(max_energy, 0.0);
+    double max_rel_echo = 0, max_range_diff = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        const double a = g.echo[2 * i], b = echo[2 * i];
+        max_rel_echo = std::max(max_rel_echo, std::abs(a - b) / std::max(std::abs(b), kEchoRelFloor * max_energy));
+        max_range_diff = std::max(max_range_diff, static_cast<double>(std::abs(g.echo[2 * i + 1] - echo[2 * i + 1])));
+    }
+    std::printf("[echo] max rel %.2e, max range diff %.2e m\n", max_rel_echo, max_range_diff);
+    EXPECT_LE(max_rel_echo, kEchoRelTol);
+    EXPECT_LE(max_range_diff, kRangeAbsTolM);
+
+    // Beamform from the GPU's echo.
+    std::vector<float> profiles(static_cast<std::size_t>(plan.bins) * plan.columns);
+    std::vector<float> beam_profiles(static_cast<std::size_t>(plan.bins) * plan.beams);
+    std::vector<float> polar(beam_profiles.size());
+    cpu::beamform<float>(plan, g.echo.data(), profiles.data(), beam_profiles.data(), polar.data());
+    double peak = 0;
+    for (float v : polar) peak = std::max(peak, static_cast<double>(v));
+    double max_rel_polar = 0;
+    for (std::size_t i = 0; i < polar.size(); ++i) {
+        const double a = g.clean[i], b = polar[i];
+        max_rel_polar = std::max(max_rel_polar, std::abs(a - b) / std::max(std::abs(b), kBeamformRelFloor * peak));
+    }
+    std::printf("[beamform] max rel %.2e\n", max_rel_polar);
+    EXPECT_LE(max_rel_polar, kBeamformRelTol);
+}
+
+TEST_P(StageTest, WholeFrameAgrees) {
+    SonarConfig config = quiet_config();
+    config.effects.speckle = EffectMode::on; // seeded noise must be identical on both backends
+    config.effects.ambient_noise = EffectMode::on;
+    auto p = render_pair(GetParam().file, config, GetParam().pose, 0);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Frame& c = p->cpu->frame;
+    // The same RNG draws on both: the ratio of noisy to clean intensity of a cell depends only on
+    // (seed, frame, beam, bin), so compare the clean scans and check the noise multipliers.
+    const double floor = std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+    std::size_t above = 0, over = 0;
+    double max_db = 0;
+    for (std::size_t i = 0; i < g.clean.size(); ++i) {
+        if (g.clean[i] < floor && c.clean[i] < floor) continue;
+        ++above;
+        const double d = std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
+                                  to_db(std::max<double>(c.clean[i], floor * 1e-3)));
+        max_db = std::max(max_db, d);
+        over += d > kFrameDbTol;
+    }
+    std::printf("[frame] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().file.c_str(),
+                above, over, kFrameDbTol, max_db);
+    ASSERT_GT(above, 0u);
+    EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above);
+}
+
+std::string scene_name(const ::testing::TestParamInfo<SceneCase>& info) {
+    return std::filesystem::path(info.param.file).stem().string();
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledScenes, StageTest, ::testing::ValuesIn(bundled_scenes()), scene_name);
+
+TEST(Determinism, TwoVulkanRunsAreBitIdentical) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    SonarConfig config = quiet_config();
+    config.effects.speckle = EffectMode::on;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    auto a = render_once(Backend::vulkan, config, scene.value(), pose);
+    auto b = render_once(Backend::vulkan, config, scene.value(), pose);
+    ASSERT_TRUE(a && b);
+    EXPECT_EQ(a->frame.clean, b->frame.clean);
+    EXPECT_EQ(a->frame.intensity, b->frame.intensity);
+    EXPECT_GT(sum(a->frame.clean), 0.0);
+}
+
+TEST(NoiseAcrossBackends, SameSeedSameNoiseMultipliers) {
+    VKSONAR_REQUIRE_VULKAN();
+    // Where both backends produce the same clean value (every empty cell is exactly 0 on both), the
+    // noisy value must be bit-identical: noise is keyed by (seed, frame, beam, bin), not by backend.
+    SonarConfig config = quiet_config();
+    config.effects.speckle = EffectMode::on;
+    config.effects.ambient_noise = EffectMode::on;
+    Scene scene;
+    add_quad(scene, 10.0, 0.0, 0.0, 2.0, 2.0);
+    auto g = render_once(Backend::vulkan, config, scene, {}, 0, 7);
+    auto c = render_once(Backend::cpu, config, scene, {}, 0, 7);
+    ASSERT_TRUE(g && c);
+    std::size_t compared = 0;
+    for (std::size_t i = 0; i < g->frame.clean.size(); ++i) {
+        if (g->frame.clean[i] == c->frame.clean[i]) {
+            ASSERT_EQ(g->frame.intensity[i], c->frame.intensity[i]) << "cell " << i;
+            ++compared;
+        }
+    }
+    EXPECT_GT(compared, g->frame.clean.size() / 2);
+}
+
+} // namespace
+} // namespace vksonar::testing

@@ -1,0 +1,200 @@
+// End-to-end tests of the render path (issue: headless render tool), run on both backends.
+#include <algorithm>
+#include <cmath>
+
+#include "test_support.h"
+
+namespace vksonar::testing {
+namespace {
+
+class RenderTest : public ::testing::TestWithParam<Backend> {
+protected:
+    void SetUp() override {
+        if (GetParam() == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
+    }
+    ValidationGuard validation_;
+};
+
+std::string backend_name(const ::testing::TestParamInfo<Backend>& info) {
+    return info.param == Backend::vulkan ? "vulkan" : "cpu";
+}
+
+// Index of the range bin containing range r.
+int bin_of(const Plan& plan, double r) {
+    return static_cast<int>(std::floor((r - plan.config.range_min_m) / plan.bin_width_m));
+}
+
+TEST_P(RenderTest, PlaneAt10mLandsInItsRangeBinAndBeams) {
+    SonarConfig config = quiet_config();
+    config.effects.horizontal_pattern = EffectMode::off; // so "the beams it covers" has a sharp edge
+    config.effects.ambient_noise = EffectMode::on;
+    Scene scene;
+    add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0);
+    auto r = render_once(GetParam(), config, scene);
+    ASSERT_TRUE(r);
+    const Plan& plan = renderer_plan(r->renderer);
+    const Frame& f = r->frame;
+
+    // First return: the nearest non-empty bin is the bin of 10 m (+-1: the tent kernel splits
+    // energy with the neighbouring bin).
+    int first_bin = -1;
+    for (std::uint32_t k = 0; k < f.bins && first_bin < 0; ++k) {
+        for (std::uint32_t j = 0; j < f.beams; ++j) {
+            if (f.clean[k * f.beams + j] > 0) {
+                first_bin = static_cast<int>(k);
+                break;
+            }
+        }
+    }
+    EXPECT_NEAR(first_bin, bin_of(plan, 10.0), 1);
+
+    // The plane spans azimuth +-atan(2/10); with the horizontal pattern off a beam only receives
+    // columns within one beam spacing (the tent), so beams further out than that are empty.
+    const double half_extent = std::atan(2.0 / 10.0);
+    const double spacing = plan.beam_angle_rad[0] - plan.beam_angle_rad[1];
+    const double noise_floor = std::pow(10.0, (config.noise_level_db - config.directivity_index_db) / 10.0);
+    int lit_beams = 0;
+    for (std::uint32_t j = 0; j < f.beams; ++j) {
+        const double a = plan.beam_angle_rad[j];
+        double beam_energy = 0;
+        for (std::uint32_t k = 0; k < f.bins; ++k) beam_energy += f.clean[k * f.beams + j];
+        if (std::abs(a) > half_extent + spacing) {
+            EXPECT_EQ(beam_energy, 0.0) << "beam " << j << " at " << a << " rad";
+            // Exp(1) noise exceeds 30 x its mean with probability e^-30: never in 262k cells.
+            for (std::uint32_t k = 0; k < f.bins; ++k) ASSERT_LT(f.intensity[k * f.beams + j], 30.0 * noise_floor);
+        } else if (std::abs(a) < half_extent - spacing) {
+            EXPECT_GT(beam_energy, 0.0) << "beam " << j;
+            ++lit_beams;
+            // Each covered beam peaks at the plane's range along its axis (elevation 0): 10 / cos(a).
+            std::uint32_t peak = 0;
+            for (std::uint32_t k = 1; k < f.bins; ++k) {
+                if (f.clean[k * f.beams + j] > f.clean[peak * f.beams + j]) peak = k;
+            }
+            EXPECT_NEAR(static_cast<int>(peak), bin_of(plan, 10.0 / std::cos(a)), 1) << "beam " << j;
+        }
+    }
+    EXPECT_GT(lit_beams, 50); // 22.6 deg of a 130 deg, 512-beam fan: ~89 beams
+    // Nothing beyond the plane's far corner (sqrt(10^2 + 2^2 + 2^2) m) plus one bin.
+    const int last = bin_of(plan, std::sqrt(108.0)) + 1;
+    for (std::uint32_t k = static_cast<std::uint32_t>(last) + 1; k < f.bins; ++k) {
+        for (std::uint32_t j = 0; j < f.beams; ++j) ASSERT_EQ(f.clean[k * f.beams + j], 0.0f);
+    }
+}
+
+TEST_P(RenderTest, TwiceAsFarLosesSpreadingPlusAbsorption) {
+    SonarConfig config = quiet_config();
+    // Isolate the range terms: both patterns off so the small target's angular size does not matter.
+    config.effects.vertical_pattern = EffectMode::off;
+    config.effects.horizontal_pattern = EffectMode::off;
+    config.effects.absorption = EffectMode::on;
+    config.absorption_db_per_m = 0.05;
+    double total[2];
+    for (int i = 0; i < 2; ++i) {
+        Scene scene;
+        add_quad(scene, 10.0 * (i + 1), 0.0, 0.0, 1.0, 1.0);
+        auto r = render_once(GetParam(), config, scene);
+        ASSERT_TRUE(r);
+        total[i] = sum(r->frame.clean);
+    }
+    // Model: E ~ A r^-4 10^(-2 alpha r / 10): 40 log10 2 + 2 alpha (20 - 10) dB.
+    const double predicted_db = 40.0 * std::log10(2.0) + 2.0 * 0.05 * 10.0;
+    EXPECT_NEAR(to_db(total[0] / total[1]), predicted_db, 0.5);
+}
+
+TEST_P(RenderTest, RangeWindowAndFovChangeTheGeometry) {
+    Scene scene;
+    add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0);
+    auto peak_bin = [](const Frame& f) {
+        std::size_t best = 0;
+        for (std::size_t i = 1; i < f.clean.size(); ++i) {
+            if (f.clean[i] > f.clean[best]) best = i;
+        }
+        return static_cast<int>(best / f.beams);
+    };
+    auto lit_beams = [](const Frame& f) {
+        int n = 0;
+        for (std::uint32_t j = 0; j < f.beams; ++j) {
+            double e = 0;
+            for (std::uint32_t k = 0; k < f.bins; ++k) e += f.clean[k * f.beams + j];
+            n += e > 0;
+        }
+        return n;
+    };
+    SonarConfig base = quiet_config();
+    base.effects.horizontal_pattern = EffectMode::off;
+
+    SonarConfig near_window = base;
+    near_window.range_max_m = 20.0;
+    auto a = render_once(GetParam(), base, scene);
+    auto b = render_once(GetParam(), near_window, scene);
+    ASSERT_TRUE(a && b);
+    // Peak at 10 m: bin (10 - 0.5) / (39.5 / 512) ~ 123 vs (10 - 0.5) / (19.5 / 512) ~ 249.
+    EXPECT_NEAR(peak_bin(a->frame), bin_of(renderer_plan(a->renderer), 10.0), 1);
+    EXPECT_NEAR(peak_bin(b->frame), bin_of(renderer_plan(b->renderer), 10.0), 1);
+    EXPECT_GT(peak_bin(b->frame), peak_bin(a->frame) + 100);
+
+    SonarConfig too_short = base;
+    too_short.range_max_m = 8.0; // the plane is beyond the window: the far plane must clip it
+    auto c = render_once(GetParam(), too_short, scene);
+    ASSERT_TRUE(c);
+    EXPECT_EQ(sum(c->frame.clean), 0.0);
+
+    SonarConfig too_far = base;
+    too_far.range_min_m = 12.0; // the plane is closer than range_min
+    auto d = render_once(GetParam(), too_far, scene);
+    ASSERT_TRUE(d);
+    EXPECT_EQ(sum(d->frame.clean), 0.0);
+
+    SonarConfig narrow = base;
+    narrow.hfov_deg = 65.0; // same 512 beams over half the angle: the plane covers ~twice the beams
+    auto e = render_once(GetParam(), narrow, scene);
+    ASSERT_TRUE(e);
+    const double ratio = static_cast<double>(lit_beams(e->frame)) / lit_beams(a->frame);
+    EXPECT_NEAR(ratio, 2.0, 0.1);
+}
+
+TEST_P(RenderTest, SameSeedSameBytesDifferentSeedDifferent) {
+    SonarConfig config = quiet_config();
+    config.effects.speckle = EffectMode::on;
+    config.effects.ambient_noise = EffectMode::on;
+    Scene scene;
+    add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0);
+    auto a = render_once(GetParam(), config, scene, {}, 0, 42);
+    auto b = render_once(GetParam(), config, scene, {}, 0, 42);
+    auto c = render_once(GetParam(), config, scene, {}, 0, 43);
+    ASSERT_TRUE(a && b && c);
+    EXPECT_EQ(a->frame.intensity, b->frame.intensity);
+    EXPECT_NE(a->frame.intensity, c->frame.intensity);
+    EXPECT_TRUE(all_finite(a->frame.intensity));
+}
+
+TEST_P(RenderTest, DrawTransformIsHonoured) {
+    // The same quad placed 15 m out at azimuth +30 deg (port) by its world matrix.
+    SonarConfig config = quiet_config();
+    config.effects.horizontal_pattern = EffectMode::off;
+    Scene scene;
+    const double a = 30.0 * 3.14159265358979323846 / 180.0;
+    add_quad(scene, 15.0 * std::cos(a), 15.0 * std::sin(a), 0.0, 1.0, 1.0, -20.0, 30.0);
+    auto r = render_once(GetParam(), config, scene);
+    ASSERT_TRUE(r);
+    const Plan& plan = renderer_plan(r->renderer);
+    // Energy centroid in azimuth and range: robust to the tent kernel splitting a cell's energy.
+    double total = 0, azimuth = 0, range = 0;
+    for (std::uint32_t k = 0; k < r->frame.bins; ++k) {
+        for (std::uint32_t j = 0; j < r->frame.beams; ++j) {
+            const double e = r->frame.clean[k * r->frame.beams + j];
+            total += e;
+            azimuth += e * plan.beam_angle_rad[j];
+            range += e * plan.bin_range_m[k];
+        }
+    }
+    ASSERT_GT(total, 0.0);
+    const double spacing = plan.beam_angle_rad[0] - plan.beam_angle_rad[1];
+    EXPECT_NEAR(azimuth / total, a, spacing);         // symmetric target: centroid on its axis
+    EXPECT_NEAR(range / total, 15.0, plan.bin_width_m); // 1 m square at 15 m: ranges 15.000..15.017
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, RenderTest, ::testing::Values(Backend::vulkan, Backend::cpu), backend_name);
+
+} // namespace
+} // namespace vksonar::testing

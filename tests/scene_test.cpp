@@ -1,0 +1,589 @@
+// Scene loading: bundled scenes, the y-up -> z-up mapping, node transforms, acoustic materials,
+// primitive handling, the add_mesh builder, and a corpus of malformed files that must fail cleanly.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "scene/scene_data.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+namespace {
+
+constexpr double pi = 3.14159265358979323846;
+
+std::string test_file(const std::string& rel) {
+    return std::string(VKSONAR_TEST_DIR) + "/data/" + rel;
+}
+std::string asset_file(const std::string& rel) {
+    return std::string(VKSONAR_ASSET_DIR) + "/scenes/" + rel;
+}
+
+using Vec3 = std::array<double, 3>;
+
+Vec3 transform_point(const std::array<double, 16>& m, const Vec3& p) {
+    Vec3 out{};
+    for (int r = 0; r < 3; ++r)
+        out[r] = m[r] * p[0] + m[4 + r] * p[1] + m[8 + r] * p[2] + m[12 + r];
+    return out;
+}
+
+Vec3 local_vertex(const SceneData& d, const MeshRange& mesh, std::uint32_t v) {
+    const float* p = &d.positions[3 * std::size_t(mesh.first_vertex + v)];
+    return {p[0], p[1], p[2]};
+}
+
+// World positions of every vertex a draw uses.
+std::vector<Vec3> world_vertices(const SceneData& d, const SceneDraw& draw) {
+    const MeshRange& mesh = d.meshes[draw.mesh];
+    std::vector<Vec3> out;
+    for (std::uint32_t v = 0; v < mesh.vertex_count; ++v)
+        out.push_back(transform_point(draw.world_from_local, local_vertex(d, mesh, v)));
+    return out;
+}
+
+struct Box {
+    Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    void add(const Vec3& p) {
+        for (int k = 0; k < 3; ++k)
+            lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
+    }
+    Vec3 centre() const { return {(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2}; }
+};
+
+Box draw_box(const SceneData& d, const SceneDraw& draw) {
+    Box b;
+    for (const Vec3& p : world_vertices(d, draw))
+        b.add(p);
+    return b;
+}
+
+Box scene_box(const SceneData& d) {
+    Box b;
+    for (const SceneDraw& draw : d.draws)
+        for (const Vec3& p : world_vertices(d, draw))
+            b.add(p);
+    return b;
+}
+
+Scene load_ok(const std::string& path) {
+    Result<Scene> r = Scene::load_gltf(path);
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
+    if (!r.ok()) return Scene{};
+    return std::move(r).value();
+}
+
+// Every draw refers to an existing mesh and material, and index ranges are consistent.
+void expect_consistent(const SceneData& d) {
+    std::uint64_t triangles = 0;
+    for (const SceneDraw& draw : d.draws) {
+        ASSERT_LT(draw.mesh, d.meshes.size());
+        ASSERT_LT(draw.material, d.materials.size());
+        triangles += d.meshes[draw.mesh].index_count / 3;
+    }
+    EXPECT_EQ(d.stats.triangles, triangles);
+    EXPECT_EQ(d.stats.draws, d.draws.size());
+    EXPECT_EQ(d.stats.meshes, d.meshes.size());
+    for (const MeshRange& m : d.meshes) {
+        EXPECT_EQ(m.index_count % 3, 0u);
+        ASSERT_LE(std::size_t(m.first_index) + m.index_count, d.indices.size());
+        ASSERT_LE(3 * (std::size_t(m.first_vertex) + m.vertex_count), d.positions.size());
+        for (std::uint32_t i = 0; i < m.index_count; ++i)
+            ASSERT_LT(d.indices[m.first_index + i], m.vertex_count);
+    }
+    for (float x : d.positions)
+        ASSERT_TRUE(std::isfinite(x));
+}
+
+// ---- bundled scenes ----------------------------------------------------------------------------
+
+struct BundledCase {
+    const char* file;
+    std::size_t draws, meshes, materials;
+    std::uint64_t triangles;
+    Box bounds; // expected world bounds, each side within 0.5 m
+};
+
+class BundledScene : public ::testing::TestWithParam<BundledCase> {};
+
+TEST_P(BundledScene, LoadsWithExpectedContents) {
+    const BundledCase& c = GetParam();
+    const Scene scene = load_ok(asset_file(c.file));
+    const SceneData& d = scene.data();
+    EXPECT_EQ(d.draws.size(), c.draws);
+    EXPECT_EQ(d.meshes.size(), c.meshes);
+    EXPECT_EQ(d.materials.size(), c.materials);
+    EXPECT_EQ(scene.stats().triangles, c.triangles);
+    EXPECT_LT(scene.stats().triangles, 20000u);
+    EXPECT_EQ(scene.stats().skipped_primitives, 0u);
+    EXPECT_TRUE(scene.stats().warnings.empty()) << scene.stats().warnings.front();
+    EXPECT_TRUE(scene.effects_json().empty());
+    expect_consistent(d);
+    const Box b = scene_box(d);
+    for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(b.lo[k], c.bounds.lo[k], 0.5) << "axis " << k;
+        EXPECT_NEAR(b.hi[k], c.bounds.hi[k], 0.5) << "axis " << k;
+    }
+    for (const AcousticMaterial& m : scene.materials()) {
+        EXPECT_FALSE(m.name.empty());
+        EXPECT_LT(m.backscatter_db, -5.0);
+        EXPECT_GT(m.backscatter_db, -40.0);
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Scenes, BundledScene,
+    ::testing::Values(BundledCase{"default.gltf", 7, 5, 3, 5852, {{-5, -30, -5.1}, {55, 30, 5}}},
+                      BundledCase{"harbour.gltf", 12, 5, 4, 4004, {{-20, -40, -8.1}, {60, 40, 2}}},
+                      BundledCase{"tilted_seafloor.gltf", 6, 6, 2, 4940, {{-4.5, -30, -13.3}, {54.5, 30, -2.7}}}),
+    [](const auto& param_info) {
+        std::string name = param_info.param.file;
+        return name.substr(0, name.find('.'));
+    });
+
+TEST(BundledScene, DefaultObjectsSitAheadOfTheSonarOnTheSeabed) {
+    const Scene scene = load_ok(asset_file("default.gltf"));
+    const SceneData& d = scene.data();
+    ASSERT_FALSE(d.draws.empty());
+    ASSERT_EQ(d.materials[0].name, "seabed_sand");
+    EXPECT_DOUBLE_EQ(d.materials[0].backscatter_db, -30.0);
+    int objects = 0;
+    for (const SceneDraw& draw : d.draws) {
+        const Box b = draw_box(d, draw);
+        if (draw.material == 0) { // the seabed: flat at z = -5 m, small relief
+            EXPECT_NEAR(b.lo[2], -5.0, 0.1);
+            EXPECT_NEAR(b.hi[2], -5.0, 0.1);
+            continue;
+        }
+        ++objects;
+        const Vec3 c = b.centre();
+        const double range = std::hypot(c[0], c[1]);
+        EXPECT_GT(range, 5.0);
+        EXPECT_LT(range, 30.0);
+        EXPECT_LT(std::abs(std::atan2(c[1], c[0])), 40.0 * pi / 180.0);
+        EXPECT_NEAR(b.lo[2], -5.0, 0.05) << "object rests on the seabed";
+        EXPECT_TRUE(d.materials[draw.material].name == "steel" || d.materials[draw.material].name == "concrete");
+    }
+    EXPECT_EQ(objects, 6);
+}
+
+TEST(BundledScene, TiltedSeafloorRisesAwayFromTheSonar) {
+    const Scene scene = load_ok(asset_file("tilted_seafloor.gltf"));
+    const SceneData& d = scene.data();
+    ASSERT_FALSE(d.draws.empty());
+    const double slope = std::tan(10.0 * pi / 180.0);
+    const auto plane_z = [&](double x) { return -8.0 + slope * (x - 25.0); };
+    for (const Vec3& p : world_vertices(d, d.draws[0]))
+        ASSERT_NEAR(p[2], plane_z(p[0]), 0.2);
+    for (std::size_t i = 1; i < d.draws.size(); ++i) { // rocks rest on the slope
+        double lowest = 1e300;
+        for (const Vec3& p : world_vertices(d, d.draws[i]))
+            lowest = std::min(lowest, p[2] - plane_z(p[0]));
+        EXPECT_LT(std::abs(lowest), 0.6) << "draw " << i;
+    }
+}
+
+// ---- frames and transforms ---------------------------------------------------------------------
+
+TEST(SceneFrame, GltfYUpMapsToWorldZUp) {
+    const Scene scene = load_ok(test_file("scenes/plane_10m.gltf"));
+    const SceneData& d = scene.data();
+    ASSERT_EQ(d.draws.size(), 1u);
+    const auto& m = d.draws[0].world_from_local;
+    const Vec3 up = transform_point(m, {0, 1, 0});
+    EXPECT_EQ(up, (Vec3{0, 0, 1}));
+    EXPECT_EQ(transform_point(m, {0, 0, 1}), (Vec3{0, -1, 0}));
+    EXPECT_EQ(transform_point(m, {1, 0, 0}), (Vec3{1, 0, 0}));
+
+    const Box b = draw_box(d, d.draws[0]);
+    EXPECT_NEAR(b.lo[0], 10.0, 1e-6);
+    EXPECT_NEAR(b.hi[0], 10.0, 1e-6);
+    EXPECT_NEAR(b.lo[1], -2.0, 1e-6);
+    EXPECT_NEAR(b.hi[1], 2.0, 1e-6);
+    EXPECT_NEAR(b.lo[2], -2.0, 1e-6);
+    EXPECT_NEAR(b.hi[2], 2.0, 1e-6);
+
+    // Front faces (counter-clockwise) face the sonar at the origin: normal along -x.
+    const MeshRange& mesh = d.meshes[0];
+    for (std::uint32_t t = 0; t < mesh.index_count; t += 3) {
+        Vec3 p[3];
+        for (int k = 0; k < 3; ++k)
+            p[k] = transform_point(m, local_vertex(d, mesh, d.indices[mesh.first_index + t + k]));
+        const Vec3 u{p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]};
+        const Vec3 v{p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]};
+        EXPECT_LT(u[1] * v[2] - u[2] * v[1], 0.0);
+    }
+}
+
+TEST(SceneFrame, NodeHierarchyIsHonoured) {
+    const Scene scene = load_ok(test_file("scenes/node_transform.gltf"));
+    const SceneData& d = scene.data();
+    ASSERT_EQ(d.draws.size(), 2u);
+    EXPECT_EQ(d.meshes.size(), 1u) << "a mesh used by two nodes is stored once";
+    EXPECT_EQ(d.draws[0].mesh, d.draws[1].mesh);
+
+    // Draw 0: parent T(1,2,3) * child T(0.5,0,0) R(+90 deg about glTF y: (x,y,z) -> (z,y,-x)) S(2).
+    // Local (1,0,0): S -> (2,0,0), R -> (0,0,-2), T -> (0.5,0,-2), parent -> (1.5,2,1) glTF -> world (1.5,-1,2).
+    // Local (0,1,0): (0,2,0) -> (0,2,0) -> (0.5,2,0) -> (1.5,4,3) -> world (1.5,-3,4).
+    // Local (0,0,1): (0,0,2) -> (2,0,0) -> (2.5,0,0) -> (3.5,2,3) -> world (3.5,-3,2).
+    const std::vector<Vec3> expected0{{1.5, -1, 2}, {1.5, -3, 4}, {3.5, -3, 2}};
+    // Draw 1: matrix columns (0,1,0), (-1,0,0), (0,0,1), translation (10,0,0).
+    // (1,0,0) -> (10,1,0) -> world (10,0,1); (0,1,0) -> (9,0,0) -> (9,0,0); (0,0,1) -> (10,0,1) -> (10,-1,0).
+    const std::vector<Vec3> expected1{{10, 0, 1}, {9, 0, 0}, {10, -1, 0}};
+    const std::vector<Vec3> got0 = world_vertices(d, d.draws[0]);
+    const std::vector<Vec3> got1 = world_vertices(d, d.draws[1]);
+    ASSERT_EQ(got0.size(), 3u);
+    ASSERT_EQ(got1.size(), 3u);
+    for (std::size_t v = 0; v < 3; ++v)
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_NEAR(got0[v][k], expected0[v][k], 1e-9) << "vertex " << v << " axis " << k;
+            EXPECT_NEAR(got1[v][k], expected1[v][k], 1e-9) << "vertex " << v << " axis " << k;
+        }
+}
+
+// ---- materials, primitive kinds, effects ----------------------------------------------------------
+
+TEST(SceneMaterials, ExtrasParsedAndDefaultsApplied) {
+    const Scene scene = load_ok(test_file("scenes/primitives.gltf"));
+    const auto& mats = scene.materials();
+    ASSERT_EQ(mats.size(), 5u); // four from the file + the implicit default
+    EXPECT_EQ(mats[0].name, "mud");
+    EXPECT_DOUBLE_EQ(mats[0].backscatter_db, -27.0);
+    EXPECT_EQ(mats[0].model, AcousticMaterial::Model::lambert);
+    EXPECT_EQ(mats[1].name, "steel");
+    EXPECT_DOUBLE_EQ(mats[1].backscatter_db, -12.0);
+    EXPECT_EQ(mats[1].model, AcousticMaterial::Model::constant);
+    EXPECT_EQ(mats[2].name, "plain"); // no extras: documented defaults
+    EXPECT_DOUBLE_EQ(mats[2].backscatter_db, -30.0);
+    EXPECT_EQ(mats[2].model, AcousticMaterial::Model::lambert);
+    EXPECT_DOUBLE_EQ(mats[3].backscatter_db, -20.0);
+    EXPECT_EQ(mats[4].name, "default");
+    EXPECT_DOUBLE_EQ(mats[4].backscatter_db, -30.0);
+    EXPECT_EQ(mats[4].model, AcousticMaterial::Model::lambert);
+
+    const SceneData& d = scene.data();
+    ASSERT_EQ(d.draws.size(), 5u);
+    const std::vector<std::uint32_t> draw_materials{0, 1, 2, 4, 3};
+    for (std::size_t i = 0; i < d.draws.size(); ++i)
+        EXPECT_EQ(d.draws[i].material, draw_materials[i]) << i;
+
+    const std::vector<std::string>& w = scene.stats().warnings;
+    const auto warned = [&](const char* word) {
+        return std::any_of(w.begin(), w.end(), [&](const std::string& s) { return s.find(word) != std::string::npos; });
+    };
+    EXPECT_TRUE(warned("roughness")) << "unknown extras.vksonar key is reported";
+}
+
+TEST(ScenePrimitives, IndexTypesStripsFansAndSkipping) {
+    const Scene scene = load_ok(test_file("scenes/primitives.gltf"));
+    const SceneData& d = scene.data();
+    expect_consistent(d);
+    // u8 quad (2), u32 triangle (1), non-indexed (1), strip of 4 (2), fan of 5 (3).
+    ASSERT_EQ(d.meshes.size(), 5u);
+    const std::vector<std::uint32_t> counts{6, 3, 3, 6, 9};
+    for (std::size_t i = 0; i < counts.size(); ++i)
+        EXPECT_EQ(d.meshes[i].index_count, counts[i]) << i;
+    EXPECT_EQ(scene.stats().triangles, 9u);
+
+    const auto mesh_indices = [&](std::size_t i) {
+        const MeshRange& m = d.meshes[i];
+        return std::vector<std::uint32_t>(d.indices.begin() + m.first_index,
+                                          d.indices.begin() + m.first_index + m.index_count);
+    };
+    EXPECT_EQ(mesh_indices(0), (std::vector<std::uint32_t>{0, 2, 1, 0, 3, 2}));
+    EXPECT_EQ(mesh_indices(2), (std::vector<std::uint32_t>{0, 1, 2}));
+    EXPECT_EQ(mesh_indices(3), (std::vector<std::uint32_t>{0, 1, 3, 3, 1, 2})); // strip [0,1,3,2], winding kept
+    EXPECT_EQ(mesh_indices(4), (std::vector<std::uint32_t>{0, 1, 2, 0, 2, 3, 0, 3, 4}));
+
+    EXPECT_EQ(scene.stats().skipped_primitives, 3u); // POINTS, LINES, all-degenerate
+    const std::vector<std::string>& w = scene.stats().warnings;
+    for (const char* word : {"POINTS", "LINES", "degenerate"}) {
+        EXPECT_TRUE(std::any_of(w.begin(), w.end(), [&](const std::string& s) {
+            return s.find(word) != std::string::npos && s.find("primitives.gltf") != std::string::npos;
+        })) << word;
+    }
+}
+
+TEST(SceneEffects, SceneExtrasEffectsKeptAsJson) {
+    const Scene scene = load_ok(test_file("scenes/primitives.gltf"));
+    ASSERT_FALSE(scene.effects_json().empty());
+    const nlohmann::json effects = nlohmann::json::parse(scene.effects_json());
+    EXPECT_EQ(effects, (nlohmann::json{{"speckle", "off"}, {"tvg", "on"}}));
+}
+
+// ---- GLB --------------------------------------------------------------------------------------
+
+std::vector<char> read_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write_bytes(const std::string& path, const std::vector<char>& bytes) {
+    std::ofstream out(path, std::ios::binary);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+void append_u32(std::vector<char>& out, std::uint32_t v) {
+    for (int k = 0; k < 4; ++k)
+        out.push_back(static_cast<char>((v >> (8 * k)) & 0xff));
+}
+
+// Packs plane_10m.gltf + plane_10m.bin into a GLB, as an exporter would.
+std::vector<char> make_plane_glb() {
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
+    std::vector<char> bin = read_bytes(test_file("scenes/plane_10m.bin"));
+    doc["buffers"][0].erase("uri");
+    std::string text = doc.dump();
+    while (text.size() % 4)
+        text += ' ';
+    while (bin.size() % 4)
+        bin.push_back(0);
+    std::vector<char> glb{'g', 'l', 'T', 'F'};
+    append_u32(glb, 2);
+    append_u32(glb, static_cast<std::uint32_t>(12 + 8 + text.size() + 8 + bin.size()));
+    append_u32(glb, static_cast<std::uint32_t>(text.size()));
+    append_u32(glb, 0x4E4F534Au);
+    glb.insert(glb.end(), text.begin(), text.end());
+    append_u32(glb, static_cast<std::uint32_t>(bin.size()));
+    append_u32(glb, 0x004E4942u);
+    glb.insert(glb.end(), bin.begin(), bin.end());
+    return glb;
+}
+
+std::string temp_path(const std::string& name) {
+    const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "vksonar_scene_test";
+    std::filesystem::create_directories(dir);
+    return (dir / name).string();
+}
+
+TEST(SceneGlb, RoundTripMatchesTheGltf) {
+    const std::string path = temp_path("plane_roundtrip.glb");
+    write_bytes(path, make_plane_glb());
+    const Scene glb = load_ok(path);
+    const Scene gltf = load_ok(test_file("scenes/plane_10m.gltf"));
+    const Scene generated = load_ok(test_file("scenes/plane_10m.glb"));
+    for (const Scene* s : {&glb, &generated}) {
+        EXPECT_EQ(s->data().positions, gltf.data().positions);
+        EXPECT_EQ(s->data().indices, gltf.data().indices);
+        ASSERT_EQ(s->data().draws.size(), 1u);
+        EXPECT_EQ(s->data().draws[0].world_from_local, gltf.data().draws[0].world_from_local);
+    }
+}
+
+TEST(SceneGlb, EveryTruncationFailsCleanly) {
+    const std::vector<char> glb = make_plane_glb();
+    const std::string path = temp_path("plane_truncated.glb");
+    for (std::size_t n = 0; n < glb.size(); ++n) {
+        write_bytes(path, std::vector<char>(glb.begin(), glb.begin() + static_cast<std::ptrdiff_t>(n)));
+        const Result<Scene> r = Scene::load_gltf(path);
+        ASSERT_FALSE(r.ok()) << "prefix of " << n << " bytes loaded";
+        EXPECT_NE(r.error().message.find("plane_truncated.glb"), std::string::npos) << r.error().message;
+        EXPECT_EQ(r.error().message.find('\n'), std::string::npos) << r.error().message;
+    }
+}
+
+// Random byte corruption of a small glTF never crashes; failures are one-line errors naming the file.
+TEST(SceneCorruption, RandomMutationsNeverCrash) {
+    const std::vector<char> original = read_bytes(test_file("scenes/primitives.gltf"));
+    ASSERT_FALSE(original.empty());
+    const std::string path = temp_path("mutated.gltf");
+    std::mt19937 rng(1234);
+    const char alphabet[] = "0123456789-.eE[]{}\",: ntruefalsnul\\";
+    int failures = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        std::vector<char> bytes = original;
+        const int edits = 1 + static_cast<int>(rng() % 4);
+        for (int e = 0; e < edits; ++e)
+            bytes[rng() % bytes.size()] = alphabet[rng() % (sizeof alphabet - 1)];
+        write_bytes(path, bytes);
+        const Result<Scene> r = Scene::load_gltf(path);
+        if (r.ok()) {
+            expect_consistent(r->data());
+            continue;
+        }
+        ++failures;
+        EXPECT_NE(r.error().message.find("mutated.gltf"), std::string::npos) << r.error().message;
+        EXPECT_EQ(r.error().message.find('\n'), std::string::npos) << r.error().message;
+        EXPECT_NE(r.error().code, ErrorCode::internal) << r.error().message;
+    }
+    EXPECT_GT(failures, 0);
+}
+
+// ---- malformed input ---------------------------------------------------------------------------
+
+struct BadCase {
+    const char* file;
+    ErrorCode code;
+    const char* keyword;
+};
+
+const BadCase bad_cases[] = {
+    {"truncated_json.gltf", ErrorCode::parse, "invalid JSON"},
+    {"not_json.gltf", ErrorCode::parse, "invalid JSON"},
+    {"empty.gltf", ErrorCode::parse, "empty"},
+    {"top_level_array.gltf", ErrorCode::parse, "not an object"},
+    {"deep_nesting.gltf", ErrorCode::parse, "nests deeper"},
+    {"bad_magic.glb", ErrorCode::parse, "magic"},
+    {"json_named_glb.glb", ErrorCode::parse, "magic"},
+    {"truncated.glb", ErrorCode::parse, "truncated"},
+    {"bin_chunk_overrun.glb", ErrorCode::parse, "BIN chunk"},
+    {"glb_version1.glb", ErrorCode::unsupported, "version 1"},
+    {"short_buffer.gltf", ErrorCode::parse, "POSITION accessor 0: count 4"},
+    {"view_past_buffer.gltf", ErrorCode::parse, "past the end of buffer 0"},
+    {"huge_count.gltf", ErrorCode::parse, "count 4294967295"},
+    {"negative_count.gltf", ErrorCode::parse, "count"},
+    {"index_out_of_range.gltf", ErrorCode::parse, "index 2 = 7 is out of range"},
+    {"missing_position.gltf", ErrorCode::parse, "missing POSITION"},
+    {"nan_position.gltf", ErrorCode::parse, "mesh 0 primitive 0: POSITION accessor 0 has NaN at vertex 1"},
+    {"inf_position.gltf", ErrorCode::parse, "Inf at vertex 1"},
+    {"missing_bin.gltf", ErrorCode::io, "missing.bin"},
+    {"wrong_size_bin.gltf", ErrorCode::parse, "wrong_size.bin"},
+    {"bad_data_uri.gltf", ErrorCode::parse, "decode"},
+    {"draco_required.gltf", ErrorCode::unsupported, "unsupported required extension KHR_draco_mesh_compression"},
+    {"meshopt_required.gltf", ErrorCode::unsupported, "unsupported required extension EXT_meshopt_compression"},
+    {"node_cycle.gltf", ErrorCode::parse, "cycle"},
+    {"bad_mesh_index.gltf", ErrorCode::parse, "mesh 5 does not exist"},
+    {"bad_backscatter.gltf", ErrorCode::parse, "backscatter_db"},
+    {"bad_model.gltf", ErrorCode::parse, "phong"},
+    {"missing_asset.gltf", ErrorCode::parse, "asset"},
+    {"index_count_not_multiple.gltf", ErrorCode::parse, "multiple of 3"},
+    {"position_not_float.gltf", ErrorCode::unsupported, "float VEC3"},
+    {"bad_default_scene.gltf", ErrorCode::parse, "scene 3"},
+};
+
+class BadGltf : public ::testing::TestWithParam<BadCase> {};
+
+TEST_P(BadGltf, FailsWithAClearOneLineError) {
+    const BadCase& c = GetParam();
+    const Result<Scene> r = Scene::load_gltf(test_file(std::string("bad_gltf/") + c.file));
+    ASSERT_FALSE(r.ok());
+    const std::string& msg = r.error().message;
+    EXPECT_EQ(r.error().code, c.code) << msg;
+    EXPECT_NE(msg.find(c.file), std::string::npos) << msg;
+    EXPECT_NE(msg.find(c.keyword), std::string::npos) << "expected '" << c.keyword << "' in: " << msg;
+    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    EXPECT_LT(msg.size(), 600u) << msg;
+}
+
+INSTANTIATE_TEST_SUITE_P(Corpus, BadGltf, ::testing::ValuesIn(bad_cases), [](const auto& param_info) {
+    std::string name = param_info.param.file;
+    std::replace(name.begin(), name.end(), '.', '_');
+    return name;
+});
+
+TEST(BadGltf, CorpusAndTableAgree) {
+    std::set<std::string> listed;
+    for (const BadCase& c : bad_cases)
+        listed.insert(c.file);
+    std::set<std::string> on_disk;
+    for (const auto& entry : std::filesystem::directory_iterator(test_file("bad_gltf"))) {
+        const std::string ext = entry.path().extension().string();
+        if (ext == ".gltf" || ext == ".glb") on_disk.insert(entry.path().filename().string());
+    }
+    EXPECT_EQ(listed, on_disk);
+}
+
+TEST(BadGltf, MissingFileIsAnIoError) {
+    const Result<Scene> r = Scene::load_gltf(test_file("bad_gltf/does_not_exist.gltf"));
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().code, ErrorCode::io);
+    EXPECT_NE(r.error().message.find("does_not_exist.gltf"), std::string::npos);
+    EXPECT_NE(r.error().message.find("not found"), std::string::npos);
+
+    const Result<Scene> dir = Scene::load_gltf(test_file("bad_gltf"));
+    ASSERT_FALSE(dir.ok());
+    EXPECT_EQ(dir.error().code, ErrorCode::io);
+}
+
+// ---- builder API ----------------------------------------------------------------------------------
+
+TEST(SceneBuilder, AddMeshValidatesItsArrays) {
+    Scene scene;
+    const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const std::uint32_t idx[3] = {0, 1, 2};
+    const std::uint32_t bad_idx[3] = {0, 1, 3};
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    const float nan_tri[9] = {0, 0, 0, 1, nan, 0, 0, 1, 0};
+
+    const auto expect_invalid = [](const Result<std::uint32_t>& r, const char* word) {
+        ASSERT_FALSE(r.ok());
+        EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);
+        EXPECT_NE(r.error().message.find(word), std::string::npos) << r.error().message;
+    };
+    expect_invalid(scene.add_mesh(nullptr, 3, idx, 3), "null");
+    expect_invalid(scene.add_mesh(tri, 3, nullptr, 3), "null");
+    expect_invalid(scene.add_mesh(tri, 3, idx, 2), "multiple of 3");
+    expect_invalid(scene.add_mesh(tri, 3, bad_idx, 3), "out of range");
+    expect_invalid(scene.add_mesh(nan_tri, 3, idx, 3), "vertex 1");
+    EXPECT_TRUE(scene.data().meshes.empty()) << "a rejected mesh leaves no trace";
+    EXPECT_TRUE(scene.data().positions.empty());
+
+    const Result<std::uint32_t> mesh = scene.add_mesh(tri, 3, idx, 3);
+    ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+    EXPECT_EQ(mesh.value(), 0u);
+    ASSERT_EQ(scene.materials().size(), 1u) << "the default material exists once a mesh does";
+    EXPECT_DOUBLE_EQ(scene.materials()[0].backscatter_db, -30.0);
+
+    AcousticMaterial steel;
+    steel.name = "steel";
+    steel.backscatter_db = -10;
+    const std::uint32_t steel_index = scene.add_material(steel);
+    EXPECT_EQ(steel_index, 1u);
+
+    SceneDraw draw;
+    draw.mesh = mesh.value();
+    draw.material = steel_index;
+    draw.world_from_local[12] = 5.0;
+    ASSERT_TRUE(scene.add_draw(draw).ok());
+    ASSERT_TRUE(scene.add_draw(draw).ok());
+    EXPECT_EQ(scene.stats().draws, 2u);
+    EXPECT_EQ(scene.stats().meshes, 1u);
+    EXPECT_EQ(scene.stats().triangles, 2u);
+
+    SceneDraw bad = draw;
+    bad.mesh = 7;
+    EXPECT_EQ(scene.add_draw(bad).error().code, ErrorCode::invalid_argument);
+    bad = draw;
+    bad.material = 9;
+    EXPECT_EQ(scene.add_draw(bad).error().code, ErrorCode::invalid_argument);
+    bad = draw;
+    bad.world_from_local[5] = std::numeric_limits<double>::infinity();
+    EXPECT_EQ(scene.add_draw(bad).error().code, ErrorCode::invalid_argument);
+    EXPECT_EQ(scene.stats().draws, 2u);
+
+    // Second mesh: indices stay mesh-local, first_vertex offsets them.
+    const Result<std::uint32_t> second = scene.add_mesh(tri, 3, idx, 3);
+    ASSERT_TRUE(second.ok());
+    EXPECT_EQ(scene.data().meshes[1].first_vertex, 3u);
+    EXPECT_EQ(scene.data().meshes[1].first_index, 3u);
+    EXPECT_EQ(scene.data().indices[3], 0u);
+}
+
+TEST(SceneBuilder, MovedFromSceneIsEmptyAndUsable) {
+    Scene a = load_ok(test_file("scenes/plane_10m.gltf"));
+    ASSERT_EQ(a.data().draws.size(), 1u);
+    Scene b(std::move(a));
+    EXPECT_EQ(b.data().draws.size(), 1u);
+    EXPECT_TRUE(a.data().draws.empty()); // NOLINT(bugprone-use-after-move): moved-from state is specified
+    EXPECT_EQ(a.stats().draws, 0u);
+    Scene c;
+    c = std::move(b);
+    EXPECT_EQ(c.data().draws.size(), 1u);
+    EXPECT_EQ(c.data().source_path, test_file("scenes/plane_10m.gltf"));
+}
+
+} // namespace
+} // namespace vksonar

@@ -1,0 +1,136 @@
+// Helpers shared by the tests: a Vulkan context with validation, small hand-built scenes, and
+// renders on both backends. Tolerances used across files live in tests/tolerances.h.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/plan.h"
+#include "core/renderer_access.h"
+#include "vksonar/vksonar.h"
+
+namespace vksonar::testing {
+
+// One Vulkan context per test process (creating an instance with validation costs ~0.1 s).
+// Returns null when no Vulkan device exists; tests then GTEST_SKIP.
+inline Context* vulkan_context() {
+    static std::unique_ptr<Context> context = [] {
+        ContextOptions options;
+        options.enable_validation = true;
+        auto c = Context::create(options);
+        return c ? std::make_unique<Context>(std::move(c.value())) : nullptr;
+    }();
+    return context.get();
+}
+
+inline Context& cpu_context() {
+    static Context context = Context::cpu_only();
+    return context;
+}
+
+#define VKSONAR_REQUIRE_VULKAN()                                                                                       \
+    do {                                                                                                               \
+        if (::vksonar::testing::vulkan_context() == nullptr) GTEST_SKIP() << "no Vulkan device";                       \
+    } while (0)
+
+// Fails the current test if the validation layer reported anything since the last call.
+class ValidationGuard {
+public:
+    ValidationGuard() : before_(vulkan_context() ? vulkan_context()->validation_messages() : 0) {}
+    ~ValidationGuard() {
+        if (vulkan_context()) {
+            EXPECT_EQ(vulkan_context()->validation_messages(), before_) << "Vulkan validation layer reported errors";
+        }
+    }
+
+private:
+    std::uint32_t before_;
+};
+
+// A rectangle of width x height metres, centred at `centre` (world), facing the -x direction
+// (towards a sonar at the origin looking along +x), optionally rotated by yaw_deg about z.
+inline void add_quad(Scene& scene, double cx, double cy, double cz, double width_m, double height_m,
+                     double backscatter_db = -20.0, double yaw_deg = 0.0,
+                     AcousticMaterial::Model model = AcousticMaterial::Model::lambert) {
+    const float hw = static_cast<float>(width_m / 2), hh = static_cast<float>(height_m / 2);
+    const float positions[] = {0, -hw, -hh, 0, hw, -hh, 0, hw, hh, 0, -hw, hh};
+    const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
+    auto mesh = scene.add_mesh(positions, 4, indices, 6);
+    ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+    AcousticMaterial material;
+    material.name = "quad";
+    material.backscatter_db = backscatter_db;
+    material.model = model;
+    SceneDraw draw;
+    draw.mesh = mesh.value();
+    draw.material = scene.add_material(material);
+    const double a = yaw_deg * 3.14159265358979323846 / 180.0;
+    draw.world_from_local = {std::cos(a), std::sin(a), 0, 0, -std::sin(a), std::cos(a), 0, 0, 0, 0, 1, 0,
+                             cx, cy, cz, 1};
+    auto added = scene.add_draw(draw);
+    ASSERT_TRUE(added.ok()) << added.error().message;
+}
+
+// The default preset with every noise source off: the clean, deterministic model.
+inline SonarConfig quiet_config() {
+    auto c = load_preset("default");
+    EXPECT_TRUE(c.ok()) << (c.ok() ? "" : c.error().message);
+    SonarConfig config = c.ok() ? c.value() : SonarConfig{};
+    config.effects.speckle = EffectMode::off;
+    config.effects.ambient_noise = EffectMode::off;
+    config.effects.tvg = EffectMode::off;
+    return config;
+}
+
+struct Rendered {
+    Renderer renderer;
+    Frame frame;
+};
+
+inline std::unique_ptr<Rendered> render_once(Backend backend, const SonarConfig& config, const Scene& scene,
+                                             const Pose& pose = {}, std::uint32_t save_mask = 0,
+                                             std::uint64_t seed = 1) {
+    Context* context = backend == Backend::vulkan ? vulkan_context() : &cpu_context();
+    if (context == nullptr) {
+        ADD_FAILURE() << "no context";
+        return nullptr;
+    }
+    RendererOptions options;
+    options.backend = backend;
+    options.save_mask = save_mask;
+    options.seed = seed;
+    auto r = Renderer::create(*context, config, scene, options);
+    if (!r) {
+        ADD_FAILURE() << r.error().message;
+        return nullptr;
+    }
+    auto out = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});
+    out->frame = out->renderer.make_frame();
+    auto ok = out->renderer.render(pose, 0, out->frame);
+    if (!ok) {
+        ADD_FAILURE() << ok.error().message;
+        return nullptr;
+    }
+    return out;
+}
+
+inline double sum(const std::vector<float>& v) {
+    double s = 0;
+    for (float x : v) s += x;
+    return s;
+}
+
+inline bool all_finite(const std::vector<float>& v) {
+    for (float x : v) {
+        if (!std::isfinite(x)) return false;
+    }
+    return true;
+}
+
+inline double to_db(double x) { return 10.0 * std::log10(x); }
+
+} // namespace vksonar::testing

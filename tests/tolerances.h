@@ -1,0 +1,42 @@
+// Every GPU-vs-CPU tolerance in one place, each with its reason. tests/README.md lists them.
+#pragma once
+
+namespace vksonar::testing {
+
+// Depth: lavapipe snaps vertices to 1/256 pixel (8 sub-pixel bits) and evaluates edge functions in
+// fixed point; the CPU rasterizer evaluates them in double at the exact pixel centre. A pixel whose
+// centre lies within ~1/256 px of a triangle edge can therefore be covered on one side only, or by
+// the neighbouring triangle. That is a band ~1/128 px wide along every silhouette and occlusion
+// edge: a few per mille of the hit pixels in the bundled scenes. 1% leaves headroom for
+// tessellated cylinders and spheres, whose silhouettes are long for their area.
+constexpr double kDepthEdgePixelBudget = 0.01;
+// Where both backends cover a pixel with the same surface, view z agrees to float rounding of the
+// interpolated z_ndc: reversed-Z float has ~2^-24 relative precision near d ~ 1e-2..1, and the
+// depth -> z inversion amplifies it by up to far/near ~ 100: 1e-4 relative.
+constexpr double kDepthInteriorRelTol = 1e-4;
+
+// Normals from identical depth: same formulas, same order; the only differences are the float
+// results of sqrt/atan in the driver vs libm (a few ulp), amplified by the cross product of two
+// nearly parallel tangents at grazing incidence. 0.05 deg is well below the Sobel's own error.
+constexpr double kNormalAngleTolDeg = 0.05;
+constexpr double kNormalCosTol = 1e-3;
+
+// Echo from identical inputs: exp/sin/sqrt differ by a few ulp between LLVM's vectorized versions
+// and libm; near a beam-pattern null the pattern value is a small difference of larger numbers, so
+// the relative error is measured against max(value, 1e-6 x frame peak).
+constexpr double kEchoRelTol = 1e-4;
+constexpr double kEchoRelFloor = 1e-6;
+constexpr double kRangeAbsTolM = 1e-4; // slant range of up to 120 m in float: ulp 7.6e-6 m
+
+// Beamform from identical echo: the same sums in the same order in float; only FMA contraction
+// can differ. 1e-5 relative over at most a few thousand terms.
+constexpr double kBeamformRelTol = 1e-5;
+constexpr double kBeamformRelFloor = 1e-6;
+
+// Whole frame: the depth edge pixels above move energy between neighbouring cells. A cell fed by
+// a few hundred pixels changes by ~1/100 of its energy per flipped pixel; cells above the noise
+// floor that differ by more than 1 dB must stay under 2% of the cells.
+constexpr double kFrameDbTol = 1.0;
+constexpr double kFrameCellBudget = 0.02;
+
+} // namespace vksonar::testing
