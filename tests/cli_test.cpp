@@ -348,6 +348,21 @@ TEST_F(Cli, PrecedencePresetSceneEffectsConfigSet) {
     EXPECT_EQ(config["beams"], 20);
 }
 
+TEST_F(Cli, DefaultSceneAndPose) {
+    // No --scene: the bundled scene from the default preset, sonar pitched 10 deg nose-down.
+    for (const char* backend : {"cpu", "vulkan"}) {
+        if (std::string(backend) == "vulkan" && run({"info"}).exit_code != 0) continue; // no Vulkan device
+        const fs::path out = dir_ / backend;
+        const CliRun r = run({"render", "--backend", backend, "--out", out.string()});
+        ASSERT_EQ(r.exit_code, 0) << backend << ": " << r.err;
+        const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
+        EXPECT_EQ(meta["pose"]["pitch_deg"], 10.0);
+        EXPECT_EQ(meta["config"]["name"], "default");
+        EXPECT_NE(meta["scene"].get<std::string>().find("default.gltf"), std::string::npos);
+        EXPECT_EQ(npy_shape(out / "polar.npy"), (std::vector<std::size_t>{512, 512}));
+    }
+}
+
 TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     write_text(dir_ / "poses.csv", "x,y,z,roll,pitch,yaw\n# comment\n0,0,0,0,0,0\n0.5,0,0,0,0,5\n");
     const fs::path out = dir_ / "traj";

@@ -395,6 +395,20 @@ TEST(SceneGlb, EveryTruncationFailsCleanly) {
     }
 }
 
+TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
+    doc.erase("scenes");
+    doc.erase("scene");
+    const std::string path = temp_path("no_scenes.gltf");
+    const std::string text = doc.dump();
+    write_bytes(path, std::vector<char>(text.begin(), text.end()));
+    const Scene scene = load_ok(path);
+    EXPECT_EQ(scene.data().draws.size(), 5u);
+    EXPECT_TRUE(scene.effects_json().empty());
+    const auto& w = scene.stats().warnings;
+    EXPECT_TRUE(std::any_of(w.begin(), w.end(), [](const std::string& s) { return s.find("no scenes") != s.npos; }));
+}
+
 // Random byte corruption of a small glTF never crashes; failures are one-line errors naming the file.
 TEST(SceneCorruption, RandomMutationsNeverCrash) {
     const std::vector<char> original = read_bytes(test_file("scenes/primitives.gltf"));

@@ -14,6 +14,9 @@
 
 namespace vksonar {
 
+// Acoustic material, read from glTF material extras: {"vksonar": {"backscatter_db": -27, "model": "lambert"}}.
+// Default (a material whose extras say nothing, and the implicit "default" material given to primitives
+// without one): backscatter_db = -30 dB, model = lambert (a mid value for sand/silt seabeds).
 struct AcousticMaterial {
     std::string name;
     double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr

@@ -151,7 +151,7 @@ Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Fr
 
 Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
                              const std::string& extra_json_fields) {
-    using nlohmann::json;
+    using json = nlohmann::ordered_json; // keeps the documented field order in the file
     const SonarConfig& cfg = plan.config;
     constexpr double kDeg = 3.14159265358979323846 / 180.0;
     json m = json::object();

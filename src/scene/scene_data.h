@@ -17,7 +17,7 @@ struct MeshRange {
 };
 
 struct SceneData {
-    std::vector<float> positions;        // xyz per vertex, mesh-local, metres, world axes (z up)
+    std::vector<float> positions;        // xyz per vertex, mesh-local, metres (glTF meshes keep glTF's y-up axes)
     std::vector<std::uint32_t> indices;  // triangle lists, mesh-local indices
     std::vector<MeshRange> meshes;
     std::vector<SceneDraw> draws;        // world_from_local already includes the glTF y-up -> z-up rotation

@@ -334,10 +334,15 @@ Result<void> VulkanBackend::create_commands() {
     VKS_VK_TRY(vkCreateFence(device, &fence_info, nullptr, &fence));
     fence_ = OwnedFence(device, fence);
 
-    // VKSONAR_CPU_STAGE_TIMING=1 forces the timestamp-less path (one submission per stage).
-    const char* force_cpu = std::getenv("VKSONAR_CPU_STAGE_TIMING");
-    timestamps_ = context_.timestamp_valid_bits > 0 && context_.properties.limits.timestampPeriod > 0.0f &&
-                  !(force_cpu && std::strcmp(force_cpu, "1") == 0);
+    // Stage times: timestamp queries where the queue has them, except on CPU devices. lavapipe's
+    // timestamps do not bracket compute dispatches (a dispatch's time shows up in a neighbouring
+    // interval), and there one submission per stage costs ~10 us against stages of milliseconds.
+    // VKSONAR_STAGE_TIMING=host|timestamps overrides the choice.
+    const char* timing = std::getenv("VKSONAR_STAGE_TIMING");
+    const bool can_timestamp = context_.timestamp_valid_bits > 0 && context_.properties.limits.timestampPeriod > 0.0f;
+    timestamps_ = can_timestamp && context_.properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU;
+    if (timing && std::strcmp(timing, "host") == 0) timestamps_ = false;
+    if (timing && std::strcmp(timing, "timestamps") == 0) timestamps_ = can_timestamp;
     if (timestamps_) {
         VkQueryPoolCreateInfo query_info{};
         query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
@@ -346,7 +351,6 @@ Result<void> VulkanBackend::create_commands() {
         VkQueryPool query_pool = VK_NULL_HANDLE;
         VKS_VK_TRY(vkCreateQueryPool(device, &query_info, nullptr, &query_pool));
         query_pool_ = OwnedQueryPool(device, query_pool);
-        vkCreateQueryPool(device, &query_info, nullptr, &dbg_pool_);
     }
     return {};
 }

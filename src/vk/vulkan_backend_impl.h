@@ -118,7 +118,6 @@ private:
     std::array<VkCommandBuffer, stage_count> command_buffers_{}; // freed with the pool
     OwnedFence fence_;
     OwnedQueryPool query_pool_;
-public: VkQueryPool dbg_pool_ = VK_NULL_HANDLE;
     std::uint32_t queries_written_ = 0;
     std::array<Stage, stage_count> query_stage_{}; // the stage that ends at timestamp i + 1
 };

@@ -1,4 +1,3 @@
-#include <cstdio>
 // The Vulkan StageBackend, per frame: depth pass (one render pass, one viewport per slice) -> copy to
 // storage buffers -> normals -> echo -> profile -> resample -> sidelobe -> readback. Nothing is
 // created here; render() records, submits, waits and copies out.
@@ -97,10 +96,8 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
     pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1, &zeroed);
     bind_compute(commands, profile_pipeline_.get());
-    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 0);
     vkCmdDispatch(commands, group_count(plan_.columns), 1, 1);
     compute_barrier(commands, profiles_);
-    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 1);
 
     // resample and sidelobe: x = runs of beams, y = groups of bins.
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
@@ -108,13 +105,11 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
     vkCmdDispatch(commands, beam_runs, bin_groups, 1);
     compute_barrier(commands, beam_profiles_);
-    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 2);
     if (sidelobes_) {
         vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
         vkCmdDispatch(commands, beam_runs, bin_groups, 1);
         compute_barrier(commands, polar_);
     }
-    vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, dbg_pool_, 3);
 }
 
 void VulkanBackend::record_readback(VkCommandBuffer commands, std::uint32_t save_mask) {
@@ -190,7 +185,6 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
         VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
             vkCmdResetQueryPool(commands, query_pool_.get(), 0, stage_count + 1);
-            vkCmdResetQueryPool(commands, dbg_pool_, 0, 4);
             vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
         switch (stages[i]) {
@@ -249,8 +243,6 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
         frame.stages_run.emplace_back(kStageNames[stages[i]]);
     }
 
-    { std::uint64_t t[4]; vkGetQueryPoolResults(context_.device, dbg_pool_, 0, 4, sizeof(t), t, 8, VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
-      fprintf(stderr, "profile %.2f resample %.2f sidelobe %.2f\n", (t[1]-t[0])*1e-6, (t[2]-t[1])*1e-6, (t[3]-t[2])*1e-6); }
     // Copy out of the (coherent) readback buffer.
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;

@@ -1,0 +1,219 @@
+// Shared pieces of `vksonar bench` (see bench_common.h).
+#ifdef VKSONAR_HAVE_BENCHMARK
+
+#include "cli/bench_common.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <system_error>
+
+#include <benchmark/benchmark.h>
+
+namespace fs = std::filesystem;
+
+namespace vksonar::cli::bench {
+namespace {
+
+fs::path executable_dir() {
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    return ec ? fs::path() : exe.parent_path();
+}
+
+// Same search as `vksonar render`: the source tree's assets, then an installed tree.
+std::string find_default_scene() {
+    std::vector<fs::path> candidates;
+#ifdef VKSONAR_ASSET_DIR
+    candidates.emplace_back(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+#endif
+    const fs::path exe_dir = executable_dir();
+    if (!exe_dir.empty()) {
+        candidates.push_back(exe_dir / ".." / "share" / "vksonar" / "assets" / "scenes" / "default.gltf");
+        candidates.push_back(exe_dir / ".." / "assets" / "scenes" / "default.gltf");
+    }
+    std::string looked;
+    for (const auto& candidate : candidates) {
+        std::error_code ec;
+        if (fs::is_regular_file(candidate, ec)) return candidate.lexically_normal().string();
+        looked += (looked.empty() ? "" : ", ") + candidate.lexically_normal().string();
+    }
+    throw Failure("the bundled default scene is missing (looked in " + looked + "); pass --scene FILE.gltf");
+}
+
+bool looks_like_file(const std::string& text) {
+    return text.find('/') != std::string::npos || (text.size() > 5 && text.compare(text.size() - 5, 5, ".json") == 0);
+}
+
+SonarConfig sonar_base(const std::string& sonar) {
+    std::error_code ec;
+    if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
+        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
+        auto config = apply_config_file(SonarConfig{}, sonar);
+        if (!config) throw BadInput(config.error().message);
+        return config.value();
+    }
+    auto preset = load_preset(sonar);
+    if (!preset) throw BadInput("--sonar: " + preset.error().message);
+    return preset.value();
+}
+
+std::vector<std::string>& failures() {
+    static std::vector<std::string> list;
+    return list;
+}
+
+} // namespace
+
+Setup load_setup(const Args& args) {
+    Setup setup;
+    setup.default_scene = !args.has("--scene");
+    setup.scene_path = setup.default_scene ? find_default_scene() : args.value("--scene");
+    if (!setup.default_scene) {
+        std::error_code ec;
+        if (!fs::is_regular_file(setup.scene_path, ec)) throw BadInput("--scene " + setup.scene_path + ": no such file");
+    }
+    setup.sonar_name = args.value("--sonar", "default");
+    setup.preset = sonar_base(setup.sonar_name);
+    auto scene = Scene::load_gltf(setup.scene_path);
+    if (!scene) {
+        if (setup.default_scene) throw Failure(scene.error().message);
+        throw BadInput(scene.error().message);
+    }
+    setup.scene = std::move(scene.value());
+    const std::string& effects = setup.scene.effects_json();
+    if (!effects.empty() && effects != "{}" && effects != "null") setup.scene_effects = effects;
+    setup.config = layered_config(setup, args.values("--set"));
+    if (args.has("--pose")) {
+        setup.pose = parse_pose(args.value("--pose"), "--pose");
+    } else if (setup.default_scene) {
+        setup.pose.pitch_deg = 10.0; // the default pose of `vksonar render` for the bundled scene
+    }
+    return setup;
+}
+
+SonarConfig layered_config(const Setup& setup, const std::vector<std::string>& overrides) {
+    SonarConfig config = setup.preset;
+    if (!setup.scene_effects.empty()) {
+        auto layered = apply_config_json(config, "{\"effects\": " + setup.scene_effects + "}",
+                                         setup.scene_path + " (scene extras vksonar.effects)");
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+    }
+    for (const auto& item : overrides) {
+        auto layered = apply_config_override(config, item);
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+    }
+    if (std::string problem = config.validate(); !problem.empty()) throw BadInput("invalid config: " + problem);
+    return config;
+}
+
+Backend parse_backend(const std::string& name) {
+    if (name == "vulkan") return Backend::vulkan;
+    if (name == "cpu") return Backend::cpu;
+    throw BadInput("--backend: '" + name + "' is not a backend (vulkan or cpu)");
+}
+
+const char* backend_name(Backend backend) { return backend == Backend::vulkan ? "vulkan" : "cpu"; }
+
+Context make_context(Backend backend) {
+    if (backend == Backend::cpu) return Context::cpu_only();
+    auto created = Context::create(ContextOptions{});
+    if (!created) throw Failure(created.error().message + " (try --backend cpu)");
+    return std::move(created.value());
+}
+
+Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
+                       std::uint64_t seed) {
+    RendererOptions options;
+    options.backend = backend;
+    options.seed = seed;
+    auto renderer = Renderer::create(context, config, scene, options);
+    if (!renderer) throw Failure(std::string(backend_name(backend)) + " renderer: " + renderer.error().message);
+    return std::move(renderer.value());
+}
+
+double timed_render(Renderer& renderer, const Pose& pose, std::uint64_t frame_index, Frame& frame) {
+    const auto start = std::chrono::steady_clock::now();
+    auto rendered = renderer.render(pose, frame_index, frame);
+    const auto stop = std::chrono::steady_clock::now();
+    if (!rendered) throw Failure("render: " + rendered.error().message);
+    return std::chrono::duration<double, std::milli>(stop - start).count();
+}
+
+double stage_ms(const Frame& frame, const std::string& stage) {
+    double total = 0;
+    for (const auto& t : frame.times)
+        if (t.stage == stage) total += t.ms;
+    return total;
+}
+
+double median(std::vector<double> values) { return percentile(std::move(values), 0.5); }
+
+double percentile(std::vector<double> values, double p) {
+    if (values.empty()) return 0.0;
+    std::sort(values.begin(), values.end());
+    const double position = std::clamp(p, 0.0, 1.0) * static_cast<double>(values.size() - 1);
+    const auto below = static_cast<std::size_t>(std::floor(position));
+    const std::size_t above = std::min(below + 1, values.size() - 1);
+    const double t = position - static_cast<double>(below);
+    return values[below] * (1.0 - t) + values[above] * t;
+}
+
+double rss_mib() {
+    std::FILE* f = std::fopen("/proc/self/statm", "r");
+    if (!f) return 0.0;
+    unsigned long long size = 0, resident = 0;
+    const int n = std::fscanf(f, "%llu %llu", &size, &resident);
+    std::fclose(f);
+    if (n != 2) return 0.0;
+    return static_cast<double>(resident) * static_cast<double>(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+}
+
+std::string fmt(double value, int decimals) {
+    char text[64];
+    std::snprintf(text, sizeof text, "%.*f", decimals, value);
+    return text;
+}
+
+const char* verdict(bool ok) { return ok ? "PASS" : "MISS"; }
+
+std::uint32_t frames_option(const Args& args, std::uint32_t fallback) {
+    if (!args.has("--frames")) return fallback;
+    const std::uint64_t n = parse_u64(args.value("--frames"), "--frames");
+    if (n < 1 || n > 1000000) throw BadInput("--frames: expected 1..1000000, got " + args.value("--frames"));
+    return static_cast<std::uint32_t>(n);
+}
+
+void record_failure(const std::string& message) { failures().push_back(message); }
+
+void run_registered_benchmarks() {
+    static bool initialized = false;
+    if (!initialized) {
+        // Google Benchmark reads its own flags from argv; ours are parsed already.
+        static char arg0[] = "vksonar-bench";
+        static char arg1[] = "--benchmark_counters_tabular=true";
+        static char* argv[] = {arg0, arg1, nullptr};
+        int argc = 2;
+        benchmark::Initialize(&argc, argv);
+        initialized = true;
+    }
+    std::fflush(stdout);
+    benchmark::RunSpecifiedBenchmarks();
+    benchmark::ClearRegisteredBenchmarks();
+    std::fflush(stdout);
+    if (!failures().empty()) {
+        const std::string first = failures().front();
+        failures().clear();
+        throw Failure(first);
+    }
+}
+
+} // namespace vksonar::cli::bench
+
+#endif // VKSONAR_HAVE_BENCHMARK
