@@ -2,6 +2,10 @@
 // walks its rows top to bottom, so every profile cell has exactly one writer and a fixed summation
 // order: no atomics, bit-identical run to run. The host zeroes `profiles` (vkCmdFillBuffer) first:
 // a memset is far cheaper than per-invocation strided stores.
+//
+// GPU layout: profiles[column * bins + bin] (bins fastest), so that resample.comp, whose invocations
+// are consecutive bins, reads contiguous memory. The host transposes to the public bins x columns
+// layout when profiles are saved.
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
@@ -22,29 +26,47 @@ void main() {
         return;
     }
     uint bins = params.bins;
-    bool tent = params.range_kernel == kRangeKernelTent;
-    for (uint row = 0u; row < params.rows; ++row) {
-        vec2 er = echo2[row * columns + column];
+    uint base = column * bins;
+    uint rows = params.rows;
+    uint kernel = params.range_kernel;
+    float r_up = 0.0;
+    vec2 er = echo2[column];
+    for (uint row = 0u; row < rows; ++row) {
+        float r_down = row + 1u < rows ? echo2[(row + 1u) * columns + column].y : 0.0;
         float e = er.x;
-        if (!(e > 0.0)) {
-            continue;
-        }
-        float x = range_bin_coord(er.y, params.range_min_m, params.bin_width_m);
-        if (tent) {
-            float t = x - 0.5;
-            float k0f = floor(t);
-            float w1 = t - k0f;
-            // a share below bin 0 goes to bin 0, above the last bin to the last bin: energy is kept
-            int k0 = int(clamp(k0f, -1.0, float(bins)));
-            uint b0 = uint(clamp(k0, 0, int(bins) - 1));
-            uint b1 = uint(clamp(k0 + 1, 0, int(bins) - 1));
-            profiles[b0 * columns + column] += (1.0 - w1) * e;
-            profiles[b1 * columns + column] += w1 * e;
-        } else {
-            float kf = floor(x);
-            if (kf >= 0.0 && kf < float(bins)) {
-                profiles[uint(kf) * columns + column] += e;
+        float r = er.y;
+        if (e > 0.0) {
+            float x = range_bin_coord(r, params.range_min_m, params.bin_width_m);
+            if (kernel == kRangeKernelFootprint) {
+                float extent = pixel_range_extent(r_up, r, r_down, params.edge_relative_jump) / params.bin_width_m;
+                float width = min(max(extent, 1.0), kMaxFootprintBins);
+                float lo = x - 0.5 * width;
+                float hi = x + 0.5 * width;
+                float inv_width = 1.0 / width;
+                int nb = int(bins);
+                int k_first = int(floor(min(max(lo, 0.0), float(nb - 1))));
+                int k_last = int(floor(min(max(hi, 0.0), float(nb - 1))));
+                for (int k = k_first; k <= k_last; ++k) {
+                    profiles[base + uint(k)] += footprint_share(lo, hi, inv_width, k, nb) * e;
+                }
+            } else if (kernel == kRangeKernelTent) {
+                float t = x - 0.5;
+                float k0f = floor(t);
+                float w1 = t - k0f;
+                // a share below bin 0 goes to bin 0, above the last bin to the last bin: energy is kept
+                int k0 = int(clamp(k0f, -1.0, float(bins)));
+                uint b0 = uint(clamp(k0, 0, int(bins) - 1));
+                uint b1 = uint(clamp(k0 + 1, 0, int(bins) - 1));
+                profiles[base + b0] += (1.0 - w1) * e;
+                profiles[base + b1] += w1 * e;
+            } else {
+                float kf = floor(x);
+                if (kf >= 0.0 && kf < float(bins)) {
+                    profiles[base + uint(kf)] += e;
+                }
             }
         }
+        r_up = r;
+        er = row + 1u < rows ? echo2[(row + 1u) * columns + column] : vec2(0.0);
     }
 }

@@ -1,7 +1,9 @@
 // Stage 4b, azimuth resampling of column profiles to beam centres (docs/pipeline.md §4):
-// B[k * beams + j] = sum over c in [begin_j, end_j) of w(c, j) * profiles[k * columns + c].
-// A workgroup owns a run of kBeamsPerInvocation beams (so the table loads are uniform: one scalar load
-// for all invocations) and each invocation one range bin of it.
+// B(bin k, beam j) = sum over c in [begin_j, end_j) of w(c, j) * profile(bin k, column c).
+// Invocations are consecutive range bins and a workgroup owns a run of kBeamsPerInvocation beams, so
+// the beam-table loads are uniform (one scalar load for the group) and the profile loads, from the
+// column-major GPU layout profiles[c * bins + k], are contiguous across invocations.
+// Output: the public range-major layout B[k * beams + j] (the polar scan itself without side lobes).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
@@ -21,20 +23,19 @@ void main() {
     uint bins = params.bins;
     uint beams = params.beams;
     uint columns = params.columns;
-    uint k = gl_WorkGroupID.y * kWorkgroupSize + gl_LocalInvocationID.x;
-    uint first_beam = gl_WorkGroupID.x * kBeamsPerInvocation;
+    uint k = gl_GlobalInvocationID.x;
+    uint first_beam = gl_WorkGroupID.y * kBeamsPerInvocation;
     if (k >= bins || first_beam >= beams) {
         return;
     }
     uint last_beam = min(first_beam + kBeamsPerInvocation, beams);
-    uint row = k * columns;
     for (uint j = first_beam; j < last_beam; ++j) {
         float sum = 0.0;
         uint end = min(beam_column_end[j], columns);
         for (uint c = beam_column_begin[j]; c < end; ++c) {
             uint beam = column_beam[c];
             float w = beam == j ? column_weight[c] : (beam + 1u == j ? 1.0 - column_weight[c] : 0.0);
-            sum += w * profiles[row + c];
+            sum += w * profiles[c * bins + k];
         }
         beam_profiles[k * beams + j] = sum;
     }

@@ -108,4 +108,32 @@ VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL bin_width_m) {
     return (range_m - range_min_m) / bin_width_m;
 }
 
+// Range extent (m) of a pixel from the slant ranges of its row neighbours (0 = no hit): half the
+// spread between the neighbours on the same surface (|r_q - r| <= jump_rel r), the one-sided step at
+// an edge, 0 for an isolated pixel. Used by the footprint range kernel.
+VKS_FN REAL pixel_range_extent(REAL r_up, REAL r, REAL r_down, REAL jump_rel) {
+    REAL jump = jump_rel * r;
+    bool up = r_up > REAL(0) && abs(r_up - r) <= jump;
+    bool down = r_down > REAL(0) && abs(r_down - r) <= jump;
+    if (up && down) {
+        return REAL(0.5) * abs(r_down - r_up);
+    }
+    if (up) {
+        return abs(r_up - r);
+    }
+    if (down) {
+        return abs(r_down - r);
+    }
+    return REAL(0);
+}
+
+// Share of a box [lo, hi] (bin coordinates, 1 / (hi - lo) = inv_width) that falls into bin k of
+// `bins`; bin 0 also takes everything below the grid and the last bin everything above, so the
+// shares of bins 0..bins-1 always sum to 1 (energy is kept).
+VKS_FN REAL footprint_share(REAL lo, REAL hi, REAL inv_width, int k, int bins) {
+    REAL cell_lo = k == 0 ? lo : REAL(k);
+    REAL cell_hi = k == bins - 1 ? hi : REAL(k + 1);
+    return max(min(hi, cell_hi) - max(lo, cell_lo), REAL(0)) * inv_width;
+}
+
 #undef VKS_FN

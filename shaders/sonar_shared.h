@@ -43,6 +43,11 @@ VKS_CONST uint kScatterConstant = 1u; // f = 1: angle-independent, needs no norm
 // Range kernels K_r.
 VKS_CONST uint kRangeKernelNearest = 0u;
 VKS_CONST uint kRangeKernelTent = 1u;
+// Box over the pixel's own range extent (half the range step to its row neighbours on the same
+// surface), at least one bin wide. At one bin it is the tent; wider, it fills the range gaps that a
+// coarse row grid leaves on a grazing seabed (without it the fan shows bright/dark stripes there).
+VKS_CONST uint kRangeKernelFootprint = 2u;
+VKS_CONST float kMaxFootprintBins = 64.0f; // caps the per-pixel loop; wider footprints are truncated to it
 
 // Normal methods.
 VKS_CONST uint kNormalsSobel3 = 0u;

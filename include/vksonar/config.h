@@ -29,15 +29,19 @@ struct EffectsConfig {
 enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian };
 enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
-enum class RangeKernel : std::uint8_t { nearest, tent };
+enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
 enum class NormalMethod : std::uint8_t { sobel3, sobel5 };
 enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
 enum class Precision : std::uint8_t { f32, f64 };
+// What the renderer reproduces: the physical model (DESIGN §3), or one of the two legacy Gazebo plugins
+// step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
+enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 
 struct SonarConfig {
     std::string name = "default";
     std::string description;
     std::string source; // where the device figures come from (presets cite it)
+    SonarMode mode = SonarMode::physical; // JSON key `mode`: "physical" | "uuv-legacy" | "gtri-legacy"
 
     // Geometry (DESIGN §2). Azimuth is positive to port; beam 0 is the port-most beam.
     double frequency_hz = 750e3;
@@ -84,7 +88,7 @@ struct SonarConfig {
     double vertical_coverage = 2.0;      // depth pass covers this many vertical beamwidths
     double max_slice_deg = 60.0;         // widest frustum slice
     NormalMethod normal_method = NormalMethod::sobel3;
-    RangeKernel range_kernel = RangeKernel::tent;
+    RangeKernel range_kernel = RangeKernel::footprint;
     double sidelobe_kernel_beamwidths = 3.0; // side-lobe kernel reaches +- this many beamwidths
     Precision cpu_precision = Precision::f32;
 

@@ -35,7 +35,7 @@ template <> struct EnumNames<SpeckleModel> {
     static constexpr std::array<const char*, 3> names{"rayleigh", "gamma", "gaussian"};
 };
 template <> struct EnumNames<RangeKernel> {
-    static constexpr std::array<const char*, 2> names{"nearest", "tent"};
+    static constexpr std::array<const char*, 3> names{"nearest", "tent", "footprint"};
 };
 template <> struct EnumNames<NormalMethod> {
     static constexpr std::array<const char*, 2> names{"sobel3", "sobel5"};
@@ -45,6 +45,9 @@ template <> struct EnumNames<Colormap> {
 };
 template <> struct EnumNames<Precision> {
     static constexpr std::array<const char*, 2> names{"float", "double"};
+};
+template <> struct EnumNames<SonarMode> {
+    static constexpr std::array<const char*, 3> names{"physical", "uuv-legacy", "gtri-legacy"};
 };
 template <> struct EnumNames<EffectMode> {
     static constexpr std::array<const char*, 3> names{"auto", "on", "off"};
@@ -175,6 +178,8 @@ std::vector<ConfigKey> make_table() {
         VKS_TEXT("name", name, "Preset or device name"),
         VKS_TEXT("description", description, "One-line description"),
         VKS_TEXT("source", source, "Where the device figures come from (datasheet citation)"),
+        VKS_ENUM("mode", SonarMode, mode, "physical|uuv-legacy|gtri-legacy",
+                 "Image model: the physical model, or a step-by-step legacy plugin (docs/legacy.md)"),
 
         VKS_NUMBER("frequency", frequency_hz, "Hz", "Centre frequency (sets absorption and wavelength)"),
         VKS_NUMBER("hfov", hfov_deg, "deg", "Horizontal field of view, (0, 360]"),
@@ -230,8 +235,9 @@ std::vector<ConfigKey> make_table() {
                    "Depth pass covers this many vertical beamwidths (pattern tails), >= 1"),
         VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]"),
         VKS_ENUM("accuracy.normal_method", NormalMethod, normal_method, "sobel3|sobel5", "Normal estimation kernel"),
-        VKS_ENUM("accuracy.range_kernel", RangeKernel, range_kernel, "nearest|tent",
-                 "Range kernel K_r: nearest bin, or split between the two nearest bins"),
+        VKS_ENUM("accuracy.range_kernel", RangeKernel, range_kernel, "nearest|tent|footprint",
+                 "Range kernel K_r: nearest bin, split between the two nearest bins, or spread over the "
+                 "pixel's own range extent (at least one bin)"),
         VKS_NUMBER("accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "",
                    "Side-lobe kernel reaches +- this many beamwidths, >= 0"),
         VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),

@@ -263,7 +263,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     resolve(e.speckle, c.effects.speckle, true, "speckle", "fully developed speckle", e.states);
     resolve(e.ambient_noise, c.effects.ambient_noise, true, "ambient_noise", "noise floor NL - DI", e.states);
     resolve(e.tvg, c.effects.tvg, false, "tvg", "raw received levels; turn on for display gain", e.states);
-    p.alpha_db_per_m = alpha;
+    // What the echo stage applies and TVG compensates: nothing when the effect is off (plan.h).
+    p.alpha_db_per_m = e.absorption ? alpha : 0.0;
 
     // Beamform tables: tent from pixel columns onto the beam table.
     p.column_azimuth_rad.resize(p.columns);
@@ -339,10 +340,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.range_min_m = static_cast<float>(c.range_min_m);
     g.range_max_m = static_cast<float>(c.range_max_m);
     g.bin_width_m = static_cast<float>(p.bin_width_m);
-    g.alpha_db_per_m = static_cast<float>(alpha);
+    g.alpha_db_per_m = static_cast<float>(p.alpha_db_per_m);
     g.vpattern_k = static_cast<float>(p.vpattern_k);
     g.vpattern_shape = static_cast<std::uint32_t>(c.vertical_pattern);
-    g.range_kernel = c.range_kernel == RangeKernel::tent ? shared::kRangeKernelTent : shared::kRangeKernelNearest;
+    g.range_kernel = c.range_kernel == RangeKernel::footprint ? shared::kRangeKernelFootprint
+                     : c.range_kernel == RangeKernel::tent ? shared::kRangeKernelTent
+                                                             : shared::kRangeKernelNearest;
     g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
     g.edge_relative_jump = kEdgeRelativeJump;
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);

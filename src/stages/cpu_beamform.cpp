@@ -1,5 +1,5 @@
-// CPU reference of the beamform stage (docs/pipeline.md §4): per-column range profiles (nearest or
-// tent kernel), resampling of pixel columns onto the beam table, side-lobe convolution along beams.
+// CPU reference of the beamform stage (docs/pipeline.md §4): per-column range profiles (nearest,
+// tent or footprint kernel), resampling of pixel columns onto the beam table, side-lobe convolution along beams.
 // Every output cell is computed by one loop iteration with sums in increasing index order, so the
 // result is deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
@@ -28,6 +28,8 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
         bin_width = plan.bin_width_m;
     }
     const bool tent = plan.params.range_kernel == shared::kRangeKernelTent;
+    const bool footprint = plan.params.range_kernel == shared::kRangeKernelFootprint;
+    const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
     const std::int64_t last = static_cast<std::int64_t>(bins) - 1;
 
     // profile: per column, rows in increasing order. The loops run row-major for locality; every
@@ -40,8 +42,21 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
         for (std::uint32_t c = 0; c < C; ++c) {
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
-            const Real x = M::range_bin_coord(static_cast<Real>(e2[2 * c + 1]), range_min, bin_width);
-            if (tent) {
+            const Real r = static_cast<Real>(e2[2 * c + 1]);
+            const Real x = M::range_bin_coord(r, range_min, bin_width);
+            if (footprint) {
+                if (std::isnan(x)) continue;
+                const Real r_up = j > 0 ? static_cast<Real>(e2[2 * c + 1 - 2 * std::size_t(C)]) : Real(0);
+                const Real r_down = j + 1 < R ? static_cast<Real>(e2[2 * c + 1 + 2 * std::size_t(C)]) : Real(0);
+                const Real extent = M::pixel_range_extent(r_up, r, r_down, jump_rel) / bin_width;
+                const Real width = std::min(std::max(extent, Real(1)), static_cast<Real>(shared::kMaxFootprintBins));
+                const Real lo = x - Real(0.5) * width, hi = x + Real(0.5) * width, inv_width = Real(1) / width;
+                const int nb = static_cast<int>(bins);
+                const int k_first = static_cast<int>(std::floor(std::min(std::max(lo, Real(0)), Real(nb - 1))));
+                const int k_last = static_cast<int>(std::floor(std::min(std::max(hi, Real(0)), Real(nb - 1))));
+                for (int k = k_first; k <= k_last; ++k)
+                    acc[static_cast<std::size_t>(k) * C + c] += M::footprint_share(lo, hi, inv_width, k, nb) * e;
+            } else if (tent) {
                 Real t = x - Real(0.5);
                 if (std::isnan(t)) continue;
                 // Far outside the grid every share lands on an edge bin anyway; keep floor() in int range.

@@ -35,10 +35,12 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device) {
 }
 
 Result<OwnedPipeline> create_compute_pipeline(VkDevice device, VkPipelineLayout layout, VkShaderModule module,
-                                              std::uint32_t effect_flags, std::uint32_t per_invocation) {
-    const std::array<std::uint32_t, 2> values{effect_flags, per_invocation};
-    const std::array<VkSpecializationMapEntry, 2> entries{
-        {{0, 0, sizeof(std::uint32_t)}, {1, sizeof(std::uint32_t), sizeof(std::uint32_t)}}};
+                                              std::uint32_t effect_flags, std::uint32_t per_invocation,
+                                              std::uint32_t variant) {
+    const std::array<std::uint32_t, 3> values{effect_flags, per_invocation, variant};
+    const std::array<VkSpecializationMapEntry, 3> entries{{{0, 0, sizeof(std::uint32_t)},
+                                                           {1, sizeof(std::uint32_t), sizeof(std::uint32_t)},
+                                                           {2, 2 * sizeof(std::uint32_t), sizeof(std::uint32_t)}}};
     VkSpecializationInfo specialization{static_cast<std::uint32_t>(entries.size()), entries.data(), sizeof(values),
                                         values.data()};
     VkComputePipelineCreateInfo info{};

@@ -39,10 +39,12 @@ constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
 [[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device);
 
 // A compute pipeline specialized with constant 0 = `effect_flags` (shared::kEffect* bits) and
-// constant 1 = `per_invocation` (how many pixels/beams one invocation handles, where the shader has it).
+// constant 1 = `per_invocation` (how many pixels/beams one invocation handles, where the shader has it)
+// and constant 2 = `variant` (a per-shader switch, e.g. resample.comp's output layout).
 [[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, VkPipelineLayout layout,
                                                             VkShaderModule module, std::uint32_t effect_flags,
-                                                            std::uint32_t per_invocation);
+                                                            std::uint32_t per_invocation,
+                                                             std::uint32_t variant = 0);
 
 // Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), both cleared
 // and left in TRANSFER_SRC_OPTIMAL for the copy to storage buffers.

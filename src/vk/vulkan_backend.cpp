@@ -54,9 +54,10 @@ Result<void> VulkanBackend::init() {
     const std::uint64_t largest_dispatch =
         std::max({std::uint64_t(group_count(pixels / kEchoPixels + 1)),
                   std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
-                  ceil_div(plan_.beams, kBeamsPerInvocation)});
-    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
-        group_count(plan_.bins) > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
+                  std::uint64_t(group_count(plan_.bins)), ceil_div(plan_.beams, kBeamsPerInvocation)});
+    // resample and sidelobe put bins and beam runs on x and y in opposite orders
+    const std::uint64_t largest_y = std::max(std::uint64_t(group_count(plan_.bins)), ceil_div(plan_.beams, kBeamsPerInvocation));
+    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] || largest_y > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -291,10 +292,11 @@ Result<void> VulkanBackend::create_compute() {
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
     const std::uint32_t flags = plan_.effects.shader_flags();
     auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
-                    std::uint32_t per_invocation) -> Result<void> {
+                    std::uint32_t per_invocation, std::uint32_t variant = 0) -> Result<void> {
         auto module = create_shader_module(device, code, bytes);
         if (!module) return module.error();
-        auto created = create_compute_pipeline(device, compute_layout_.get(), module->get(), flags, per_invocation);
+        auto created =
+            create_compute_pipeline(device, compute_layout_.get(), module->get(), flags, per_invocation, variant);
         if (!created) return created.error();
         pipeline = std::move(created.value());
         return {};

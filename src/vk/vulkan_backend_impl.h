@@ -85,6 +85,8 @@ private:
 
     Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
     void copy_out(const Region& region, void* destination) const;
+    // Copies an outer x inner float array out of the readback buffer as inner x outer.
+    void transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, float* destination) const;
 
     VulkanContext& context_;
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan

@@ -99,11 +99,11 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     vkCmdDispatch(commands, group_count(plan_.columns), 1, 1);
     compute_barrier(commands, profiles_);
 
-    // resample and sidelobe: x = runs of beams, y = groups of bins.
+    // resample: x = groups of bins, y = runs of beams; sidelobe: x = runs of beams, y = groups of bins.
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
     const std::uint32_t bin_groups = group_count(plan_.bins);
     vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
-    vkCmdDispatch(commands, beam_runs, bin_groups, 1);
+    vkCmdDispatch(commands, bin_groups, beam_runs, 1);
     compute_barrier(commands, beam_profiles_);
     if (sidelobes_) {
         vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
@@ -148,6 +148,14 @@ Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffe
 
 void VulkanBackend::copy_out(const Region& region, void* destination) const {
     std::memcpy(destination, static_cast<const char*>(readback_.mapped) + region.offset, region.bytes);
+}
+
+void VulkanBackend::transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner,
+                                  float* destination) const {
+    // source[o * inner + i] -> destination[i * outer + o]
+    const auto* source = reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + region.offset);
+    for (std::size_t o = 0; o < outer; ++o)
+        for (std::size_t i = 0; i < inner; ++i) destination[i * outer + o] = source[o * inner + i];
 }
 
 namespace {
@@ -265,7 +273,10 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
     }
     if (save_mask & save_echo) copy_out(echo_region_, sized(frame.echo, pixels * 2));
     if (save_mask & save_profiles) {
-        copy_out(profiles_region_, sized(frame.profiles, std::size_t(plan_.bins) * plan_.columns));
+        // The GPU keeps profiles column-major (contiguous loads in resample.comp); the Frame holds the
+        // public range-major layout.
+        transpose_out(profiles_region_, plan_.columns, plan_.bins,
+                      sized(frame.profiles, std::size_t(plan_.bins) * plan_.columns));
         copy_out(beam_profiles_region_, sized(frame.beam_profiles, cells));
     }
     return {};
