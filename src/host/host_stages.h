@@ -26,7 +26,10 @@ double sample_gamma_unit_mean(double looks, std::uint64_t seed, std::uint64_t fr
                               std::uint32_t bin, std::uint32_t stream);
 
 // Stage 5: frame.clean -> frame.intensity (speckle, ambient noise, TVG; uPa^2) -> frame.display ([0,1]).
-void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame);
+// With `workers`, the bins are split across its threads (same output for any thread count).
+class Workers;
+void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
+                    Workers* workers = nullptr);
 
 struct Rgb8 {
     std::uint8_t r, g, b;
@@ -67,6 +70,10 @@ private:
 // Point cloud of the polar scan: one point per (beam, bin) above the display floor at elevation 0,
 // binary little-endian PLY with float x y z intensity.
 [[nodiscard]] Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Frame& frame);
+// Any point cloud as the same PLY: `xyzi` holds `count` points of 4 floats (x y z intensity, sonar frame);
+// `comment` (one line) says what the intensity is.
+[[nodiscard]] Result<void> write_points_ply(const std::string& path, const float* xyzi, std::size_t count,
+                                            const std::string& comment);
 // meta.json: beam angles, bin ranges, resolved config, effects, stage times, seed, frame convention.
 [[nodiscard]] Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
                                            const std::string& extra_json_fields);

@@ -6,6 +6,8 @@
 #include <cstddef>
 
 #include "host/host_stages.h"
+#include "host/rng.h"
+#include "host/workers.h"
 
 namespace vksonar::host {
 namespace {
@@ -21,16 +23,48 @@ constexpr double kMinTvgRange = 1e-3;   // m; TVG's log10(r) at r -> 0
 
 } // namespace
 
-void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame) {
-    const SonarConfig& cfg = plan.config;
-    const std::size_t beams = plan.beams, bins = plan.bins;
-    const std::size_t n = beams * bins;
+namespace {
+
+struct NoiseTask {
+    const Plan* plan;
+    std::uint64_t seed, frame_index;
+    Frame* frame;
+};
+
+void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, std::size_t bin_begin,
+                std::size_t bin_end);
+
+} // namespace
+
+void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, Workers* workers) {
+    const std::size_t n = std::size_t(plan.beams) * plan.bins;
     assert(frame.clean.size() == n);
-    assert(plan.bin_range_m.size() >= bins);
+    assert(plan.bin_range_m.size() >= plan.bins);
     // The frame is allocated by make_frame(); these only allocate if a caller hands a wrong-sized frame.
     if (frame.clean.size() != n) frame.clean.resize(n, 0.0f);
     if (frame.intensity.size() != n) frame.intensity.resize(n);
     if (frame.display.size() != n) frame.display.resize(n);
+    if (!workers || workers->count() == 1) {
+        noise_bins(plan, seed, frame_index, frame, 0, plan.bins);
+        return;
+    }
+    // Every cell is a pure function of its key, so splitting the bins changes nothing in the output.
+    NoiseTask task{&plan, seed, frame_index, &frame};
+    workers->run(
+        [](void* context, std::uint32_t part, std::uint32_t parts) {
+            const auto& t = *static_cast<NoiseTask*>(context);
+            const std::size_t bins = t.plan->bins;
+            noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, bins * part / parts, bins * (part + 1) / parts);
+        },
+        &task);
+}
+
+namespace {
+
+void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, std::size_t bin_begin,
+                std::size_t bin_end) {
+    const SonarConfig& cfg = plan.config;
+    const std::size_t beams = plan.beams;
 
     const double source = std::pow(10.0, cfg.source_level_db / 10.0);
     const double noise = plan.effects.ambient_noise
@@ -42,8 +76,9 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
     const double sigma = cfg.speckle_gaussian_sigma;
     const double db_span = std::max(cfg.db_max - cfg.db_min, 1e-12);
     const double inv_db_span = 1.0 / db_span;
+    const rng::FrameKey key = rng::frame_key(seed, frame_index);
 
-    for (std::size_t k = 0; k < bins; ++k) {
+    for (std::size_t k = bin_begin; k < bin_end; ++k) {
         double gain = 1.0;
         if (plan.effects.tvg) {
             const double r = std::max(k < plan.bin_range_m.size() ? plan.bin_range_m[k] : 0.0, kMinTvgRange);
@@ -59,7 +94,7 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
             if (speckle && signal > 0.0) {
                 double s = 1.0;
                 switch (model) {
-                case SpeckleModel::rayleigh: s = sample_exp1(seed, frame_index, beam, bin, kSpeckleStream); break;
+                case SpeckleModel::rayleigh: s = rng::exp1(key, beam, bin, kSpeckleStream); break;
                 case SpeckleModel::gamma:
                     s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
                     break;
@@ -70,7 +105,7 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
                 signal *= s;
             }
             double intensity = signal;
-            if (noise > 0.0) intensity += noise * sample_exp1(seed, frame_index, beam, bin, kNoiseStream);
+            if (noise > 0.0) intensity += noise * rng::exp1(key, beam, bin, kNoiseStream);
             intensity *= gain;
             if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
             const float stored = static_cast<float>(intensity);
@@ -83,5 +118,7 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
         }
     }
 }
+
+} // namespace
 
 } // namespace vksonar::host

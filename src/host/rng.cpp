@@ -5,30 +5,10 @@
 #include <cstdint>
 
 #include "host/host_stages.h"
+#include "host/rng.h"
 
 namespace vksonar::host {
 namespace {
-
-// Stafford's "Mix13" variant of the splitmix64 finalizer: a bijection of 64-bit words with full
-// avalanche (every input bit flips every output bit with probability ~1/2).
-inline std::uint64_t mix64(std::uint64_t z) {
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-}
-
-// Absorbs the key words one at a time: h <- mix64((h ^ word) + k_i). For the other words fixed,
-// each step is a bijection of the word being absorbed, so two keys that differ in exactly one
-// component always give different 64-bit hashes. The distinct odd constants keep all-zero keys away
-// from the fixed point of the mixer.
-inline std::uint64_t hash_key(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
-                              std::uint32_t stream) {
-    std::uint64_t h = mix64(seed + 0x9e3779b97f4a7c15ull);
-    h = mix64((h ^ frame) + 0xd1b54a32d192ed03ull);
-    h = mix64((h ^ ((static_cast<std::uint64_t>(beam) << 32) | bin)) + 0x8cb92ba72f3d8dd7ull);
-    h = mix64((h ^ stream) + 0xaef17502108ef2d9ull);
-    return mix64(h + 0xf1357aea2e62a9c5ull); // one more round so the last word is fully mixed too
-}
 
 constexpr double kTwoPi = 6.283185307179586476925286766559;
 
@@ -36,10 +16,7 @@ constexpr double kTwoPi = 6.283185307179586476925286766559;
 
 double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
                  std::uint32_t stream) {
-    // Top 53 bits, centred in their 2^-53 cell: the result lies in [2^-54, 1 - 2^-54], never 0 or 1,
-    // so -log(u) and log(1 - u) are always finite.
-    const std::uint64_t bits = hash_key(seed, frame, beam, bin, stream) >> 11;
-    return (static_cast<double>(bits) + 0.5) * (1.0 / 9007199254740992.0);
+    return rng::uniform01(rng::frame_key(seed, frame), beam, bin, stream);
 }
 
 double sample_exp1(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,

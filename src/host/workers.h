@@ -1,0 +1,43 @@
+// A fixed set of helper threads for the host stages, created once with the Renderer (never per
+// frame). run() splits one stage into `count()` parts, runs part 0 on the caller and the others on the
+// helpers, and returns when all are done. The parts are pure functions of their index, so the
+// result never depends on the thread count or the scheduling.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace vksonar::host {
+
+class Workers {
+public:
+    using Task = void (*)(void* context, std::uint32_t part, std::uint32_t parts);
+
+    // threads = 0: one per hardware thread, at most kMaxThreads. 1: everything on the caller.
+    explicit Workers(std::uint32_t threads = 0);
+    ~Workers();
+    Workers(const Workers&) = delete;
+    Workers& operator=(const Workers&) = delete;
+
+    void run(Task task, void* context);
+    std::uint32_t count() const { return static_cast<std::uint32_t>(helpers_.size()) + 1; }
+
+    static constexpr std::uint32_t kMaxThreads = 8;
+
+private:
+    void helper_loop(std::uint32_t part);
+
+    std::vector<std::thread> helpers_;
+    std::mutex mutex_;
+    std::condition_variable start_, done_;
+    Task task_ = nullptr;
+    void* context_ = nullptr;
+    std::uint64_t generation_ = 0; // bumped by run(): helpers wait for a new one
+    std::uint32_t pending_ = 0;     // helpers still working on the current generation
+    bool stop_ = false;
+};
+
+} // namespace vksonar::host
