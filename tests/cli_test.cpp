@@ -274,9 +274,18 @@ TEST_F(Cli, BenchDispatch) {
     const CliRun usage = run({"bench"});
     EXPECT_EQ(usage.exit_code, 2);
     EXPECT_NE(usage.err.find("vksonar bench: speed|effects|accuracy"), std::string::npos);
-    const CliRun speed = run({"bench", "speed"});
-    EXPECT_EQ(speed.exit_code, 1);
-    EXPECT_EQ(speed.err, "error: bench mode speed not built yet\n");
+    for (const char* mode : {"speed", "effects"}) {
+        const CliRun help = run({"bench", mode, "--help"});
+        EXPECT_EQ(help.exit_code, 0) << mode << ": " << help.err;
+        EXPECT_NE(help.out.find(std::string("usage: vksonar bench ") + mode), std::string::npos) << help.out;
+        const CliRun typo = run({"bench", mode, "--frame", "3"});
+        EXPECT_EQ(typo.exit_code, 2);
+        EXPECT_NE(typo.err.find("did you mean '--frames'"), std::string::npos) << typo.err;
+    }
+    const CliRun accuracy = run({"bench", "accuracy"});
+    EXPECT_EQ(accuracy.exit_code, 1);
+    EXPECT_NE(accuracy.err.find("not built yet"), std::string::npos) << accuracy.err;
+    EXPECT_EQ(accuracy.err_lines().size(), 1u);
     const CliRun bad = run({"bench", "sped"});
     EXPECT_EQ(bad.exit_code, 2);
 }
@@ -346,6 +355,40 @@ TEST_F(Cli, PrecedencePresetSceneEffectsConfigSet) {
     EXPECT_EQ(config["bins"], 40);                     // config file over preset
     EXPECT_EQ(config["effects"]["spreading"], "off");  // --set over config file
     EXPECT_EQ(config["beams"], 20);
+}
+
+TEST_F(Cli, SceneEffectsAndSetReachTheResolvedEffects) {
+    // The resolved effects in meta.json (not only the config echo): the scene's speckle "off" beats the
+    // preset's auto, and --set beats the scene. The bundled quad's default material is Lambert, so the
+    // normals pass runs unless incidence is switched off.
+    std::string scene = kQuadGltf;
+    const std::string from = R"("scenes": [{"nodes": [0]}])";
+    scene.replace(
+        scene.find(from), from.size(),
+        R"("scenes": [{"nodes": [0], "extras": {"vksonar": {"effects": {"speckle": "off", "incidence": "off"}}}}])");
+    write_text(dir_ / "extras.gltf", scene);
+    const std::vector<std::string> common = {
+        "render",  "--scene", (dir_ / "extras.gltf").string(), "--backend", "cpu", "--set", "beams=16", "--set",
+        "bins=32", "--set",   "display.fan_width=64"};
+    auto meta_of = [&](std::vector<std::string> args, const std::string& name) {
+        args.insert(args.begin(), common.begin(), common.end());
+        const fs::path out = dir_ / name;
+        args.push_back("--out");
+        args.push_back(out.string());
+        const CliRun r = run(args);
+        EXPECT_EQ(r.exit_code, 0) << r.err;
+        return nlohmann::json::parse(read_text(out / "meta.json"));
+    };
+    const auto scene_only = meta_of({}, "scene_only");
+    EXPECT_EQ(scene_only["effects"]["speckle"]["on"], false);
+    EXPECT_EQ(scene_only["effects"]["speckle"]["why"], "off in config");
+    EXPECT_EQ(scene_only["effects"]["incidence"]["on"], false);
+    EXPECT_EQ(scene_only["stages_run"], (nlohmann::json{"depth", "echo", "beamform", "noise"}));
+    const auto with_set = meta_of({"--set", "effects.speckle=on", "--set", "effects.incidence=auto"}, "with_set");
+    EXPECT_EQ(with_set["effects"]["speckle"]["on"], true);
+    EXPECT_EQ(with_set["effects"]["speckle"]["why"], "on in config");
+    EXPECT_EQ(with_set["effects"]["incidence"]["on"], true);
+    EXPECT_EQ(with_set["stages_run"], (nlohmann::json{"depth", "normals", "echo", "beamform", "noise"}));
 }
 
 TEST_F(Cli, DefaultSceneAndPose) {

@@ -217,11 +217,17 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                                shared::kScatterLambert, 0.0f, 0.0f});
         any_angle_dependent = !scene.draws.empty();
     }
-    for (const AcousticMaterial& m : scene.materials) {
+    // Only materials that something is drawn with count for the incidence rule: a scene always carries
+    // the implicit Lambert "default" material, used or not.
+    std::vector<bool> drawn(scene.materials.size(), false);
+    for (const SceneDraw& d : scene.draws)
+        if (d.material < drawn.size()) drawn[d.material] = true;
+    for (std::size_t i = 0; i < scene.materials.size(); ++i) {
+        const AcousticMaterial& m = scene.materials[i];
         const double db = std::isfinite(m.backscatter_db) ? m.backscatter_db : c.default_backscatter_db;
         const std::uint32_t model =
             m.model == AcousticMaterial::Model::lambert ? shared::kScatterLambert : shared::kScatterConstant;
-        any_angle_dependent |= model == shared::kScatterLambert;
+        any_angle_dependent |= drawn[i] && model == shared::kScatterLambert;
         p.materials.push_back({static_cast<float>(std::pow(10.0, db / 10.0)), model, 0.0f, 0.0f});
     }
 
@@ -246,8 +252,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
 
     ResolvedEffects& e = p.effects;
     resolve(e.incidence, c.effects.incidence, any_angle_dependent, "incidence",
-            any_angle_dependent ? "a material uses the angle-dependent Lambert model"
-                                : "no angle-dependent material: no normals pass",
+            any_angle_dependent ? "a drawn material uses the angle-dependent Lambert model"
+                                : "no drawn material is angle-dependent: no normals pass",
             e.states);
     resolve(e.vertical_pattern, c.effects.vertical_pattern, true, "vertical_pattern",
             "vertical beam pattern always shapes seabed returns", e.states);
