@@ -24,6 +24,7 @@
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
+#include "legacy/legacy.h"
 #include "vksonar/vksonar.h"
 
 namespace fs = std::filesystem;
@@ -34,7 +35,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
-    "                      [--seed N] [--backend vulkan|cpu] [--save fan,polar,depth,normals,echo,cloud]\n"
+    "                      [--seed N] [--backend vulkan|cpu] [--save fan,polar,depth,normals,echo,cloud,...]\n"
     "                      --out DIR\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
@@ -49,13 +50,18 @@ constexpr const char* kUsage =
     "  --seed        noise seed (default 1)\n"
     "  --backend     vulkan (default) or cpu\n"
     "  --save        extra outputs: depth (depth.npy, view range m), normals (normals.npy), echo (echo.npy),\n"
-    "                cloud (cloud.ply); fan.png, polar.png, polar.npy, polar_u16.npy and meta.json are always written\n"
+    "                cloud (cloud.ply); fan.png, polar.png, polar.npy, polar_u16.npy and meta.json are always\n"
+    "                written. Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the\n"
+    "                legacy image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
+    "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --out         output directory (created)\n";
 
-const std::vector<std::string> kSaveItems = {"fan", "polar", "depth", "normals", "echo", "cloud"};
+const std::vector<std::string> kSaveItems = {"fan",  "polar", "depth",     "normals",
+                                             "echo", "cloud", "multibeam", "raw_scan"};
 
 struct SaveSet {
     bool depth = false, normals = false, echo = false, cloud = false;
+    bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
     std::uint32_t mask() const {
         return (depth ? save_depth : 0u) | (normals ? save_normals : 0u) | (echo ? save_echo : 0u);
     }
@@ -121,10 +127,13 @@ SaveSet parse_save(const std::vector<std::string>& values) {
             else if (item == "normals") save.normals = true;
             else if (item == "echo") save.echo = true;
             else if (item == "cloud") save.cloud = true;
+            else if (item == "multibeam") save.multibeam = true;
+            else if (item == "raw_scan") save.raw_scan = true;
             else if (item == "fan" || item == "polar") continue; // always written
             else
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
-                               closest_word(item, kSaveItems) + "'? valid: fan,polar,depth,normals,echo,cloud)");
+                               closest_word(item, kSaveItems) +
+                               "'? valid: fan,polar,depth,normals,echo,cloud,multibeam,raw_scan)");
         }
     }
     return save;
@@ -226,6 +235,16 @@ template <class WriteFn> void write_atomically(const fs::path& path, WriteFn&& w
 
 // ---- per-frame outputs -------------------------------------------------------------------------
 
+// Legacy modes: the legacy chain's buffers, reused across frames.
+struct LegacyState {
+    SonarMode mode = SonarMode::physical;
+    std::vector<float> depth; // metres along the optical axis, 0 = no hit
+    legacy::UuvImages uuv;
+    legacy::GtriImages gtri;
+    std::vector<legacy::GtriPoint> cloud;
+    host::Image gray; // single-channel intermediates as grey PNGs
+};
+
 struct Outputs {
     const Plan& plan;
     const SaveSet& save;
@@ -238,6 +257,7 @@ struct Outputs {
     host::Image image;
     std::vector<std::uint16_t> quantized;
     std::vector<float> view_range;
+    LegacyState* legacy = nullptr; // set in legacy modes
 };
 
 std::string extra_meta_fields(const Outputs& out, const Pose& pose) {
@@ -248,6 +268,27 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose) {
                      {"roll_deg", pose.roll_deg}, {"pitch_deg", pose.pitch_deg}, {"yaw_deg", pose.yaw_deg}};
     extra["backend"] = out.backend;
     extra["device"] = out.device;
+    if (out.legacy && out.legacy->mode == SonarMode::uuv_legacy) {
+        extra["mode"] = "uuv-legacy";
+        extra["legacy"] = {
+            {"fan.png", "uuv_simulator visual scan (400 rows, fixed 17 m range), see docs/legacy.md"},
+            {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy scan"},
+            {"raw_scan", "raw_scan.npy (--save raw_scan): the legacy 400-row float scan after dilation and speckle"},
+            {"scan_rows", out.legacy->uuv.scan_rows},
+            {"scan_cols", out.legacy->uuv.scan_cols},
+            {"scan_range_m", legacy::kUuvRangeM},
+            {"depth_image", {{"width", out.legacy->uuv.width}, {"height", out.legacy->uuv.height}}}};
+    } else if (out.legacy && out.legacy->mode == SonarMode::gtri_legacy) {
+        extra["mode"] = "gtri-legacy";
+        extra["legacy"] = {
+            {"fan.png", "GTRI 600x600 image (forward up, apex at the centre), see docs/legacy.md"},
+            {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy image"},
+            {"cloud.ply", "the GTRI point cloud before the x jitter, intensity = retro 0..255 (--save cloud)"},
+            {"points", out.legacy->cloud.size()},
+            {"pixels_per_m", legacy::kGtriRangePixels / out.plan.config.range_max_m}};
+    } else {
+        extra["mode"] = "physical";
+    }
     return extra.dump();
 }
 
@@ -274,10 +315,82 @@ void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float
     }
 }
 
+// One channel of floats as a grey PNG: value in [0, 1] -> 0..255 (the plugin's convertTo(CV_8U, 255)).
+void gray_image(const float* values, std::size_t stride, std::uint32_t width, std::uint32_t height,
+                host::Image& image) {
+    image.width = width;
+    image.height = height;
+    image.rgb.resize(static_cast<std::size_t>(width) * height * 3);
+    for (std::size_t i = 0; i < static_cast<std::size_t>(width) * height; ++i) {
+        const float v = values[i * stride];
+        const auto g =
+            static_cast<std::uint8_t>(std::lround(std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) * 255.0f : 0.0f));
+        image.rgb[i * 3 + 0] = image.rgb[i * 3 + 1] = image.rgb[i * 3 + 2] = g;
+    }
+}
+
+// Runs the legacy chain on this frame's depth pass and writes fan.png (the legacy image) and the
+// requested legacy intermediates.
+void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, const Frame& frame) {
+    const Plan& plan = out.plan;
+    LegacyState& L = legacy_state;
+    legacy::legacy_depth_from_frame(plan, frame, L.depth);
+    if (L.depth.empty()) throw Failure("legacy mode: the depth pass returned no depth image");
+    constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+    const double hfov = plan.config.hfov_deg * kDegToRad;
+    auto write_ply = [&](const char* comment) {
+        write_atomically(dir / "cloud.ply", [&](const std::string& p) {
+            return host::write_points_ply(p, reinterpret_cast<const float*>(L.cloud.data()), L.cloud.size(), comment);
+        });
+    };
+    if (L.mode == SonarMode::uuv_legacy) {
+        legacy::uuv_legacy(L.depth.data(), plan.columns, plan.rows, hfov, frame.seed, frame.frame_index, L.uuv);
+        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
+        const legacy::UuvImages& u = L.uuv;
+        if (out.save.normals) {
+            L.gray.width = u.width;
+            L.gray.height = u.height;
+            L.gray.rgb.resize(u.normals.size());
+            for (std::size_t i = 0; i < u.normals.size(); ++i)
+                L.gray.rgb[i] = static_cast<std::uint8_t>(std::lround(std::clamp(u.normals[i], 0.0f, 1.0f) * 255.0f));
+            write_atomically(dir / "normals.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
+        }
+        if (out.save.multibeam) {
+            gray_image(u.multibeam.data(), 1, u.width, u.height, L.gray);
+            write_atomically(dir / "multibeam.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
+            write_atomically(dir / "multibeam.npy", [&](const std::string& p) {
+                return host::write_npy_f32(p, u.multibeam.data(), u.height, u.width);
+            });
+        }
+        if (out.save.raw_scan) {
+            gray_image(u.raw_scan.data(), 1, u.scan_cols, u.scan_rows, L.gray);
+            write_atomically(dir / "raw_scan.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
+            write_atomically(dir / "raw_scan.npy", [&](const std::string& p) {
+                return host::write_npy_f32(p, u.raw_scan.data(), u.scan_rows, u.scan_cols);
+            });
+        }
+        if (out.save.cloud) {
+            legacy::uuv_cloud_from_frame(plan, frame, L.uuv, L.cloud);
+            write_ply("uuv-legacy depth-camera cloud in the sonar frame: x forward, y port (left), z up; "
+                      "intensity = multibeam value 0..1");
+        }
+    } else {
+        legacy::gtri_cloud_from_frame(plan, frame, L.cloud);
+        legacy::gtri_legacy(L.cloud, hfov, plan.config.range_max_m, frame.seed, frame.frame_index, L.gtri);
+        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
+        if (out.save.cloud)
+            write_ply("gtri-legacy cloud in the sonar frame: x forward, y port (left), z up; intensity = retro 0..255");
+    }
+}
+
 void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose) {
     const Plan& plan = out.plan;
-    out.fan.render(frame, out.image);
-    write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+    if (out.legacy) {
+        write_legacy(*out.legacy, out, dir, frame);
+    } else {
+        out.fan.render(frame, out.image);
+        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+    }
     host::polar_image(plan, frame, out.image);
     write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
     write_atomically(dir / "polar.npy", [&](const std::string& p) {
@@ -305,8 +418,9 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
         write_atomically(dir / "echo.npy", [&](const std::string& p) {
             return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
         });
-    if (out.save.cloud)
-        write_atomically(dir / "cloud.ply", [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
+    if (out.save.cloud && !out.legacy)
+        write_atomically(dir / "cloud.ply",
+                         [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
     const std::string extra = extra_meta_fields(out, pose);
     write_atomically(dir / "meta.json",
                      [&](const std::string& p) { return host::write_meta_json(p, plan, frame, extra); });
@@ -391,6 +505,9 @@ int run_render(const std::vector<std::string>& argv) {
             config = layered.value();
         }
         if (std::string problem = config.validate(); !problem.empty()) throw BadInput("invalid config: " + problem);
+        if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
+            throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
+                           ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
         return config;
     };
     SonarConfig config = apply_user_layers(preset);
@@ -426,7 +543,8 @@ int run_render(const std::vector<std::string>& argv) {
     RendererOptions renderer_options;
     renderer_options.backend = backend;
     renderer_options.seed = seed;
-    renderer_options.save_mask = save.mask();
+    // Legacy modes start from the depth pass (and its material ids, for the GTRI retro).
+    renderer_options.save_mask = save.mask() | (config.mode != SonarMode::physical ? save_depth : 0u);
     auto renderer = Renderer::create(context, config, scene.value(), renderer_options);
     if (!renderer) {
         const Error& e = renderer.error();
@@ -436,7 +554,10 @@ int run_render(const std::vector<std::string>& argv) {
     }
     const Plan& plan = renderer_plan(renderer.value());
     const host::FanRenderer fan(plan);
-    Outputs outputs{plan, save, fan, config_to_json(plan.config), scene_path, backend_name, device, {}, {}, {}};
+    LegacyState legacy_state;
+    legacy_state.mode = plan.config.mode;
+    Outputs outputs{plan, save, fan, config_to_json(plan.config), scene_path, backend_name, device, {}, {}, {},
+                    plan.config.mode != SonarMode::physical ? &legacy_state : nullptr};
     Frame frame = renderer->make_frame();
 
     // 7. Frames.

@@ -199,6 +199,12 @@ std::string SonarConfig::validate() const {
             "must be in (0, 120] degrees");
     c.check(sidelobe_kernel_beamwidths >= 0 && sidelobe_kernel_beamwidths <= 1000,
             "accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "must be in [0, 1000]");
+
+    // The uuv plugin projects one pinhole depth image; a sliced depth pass has no single focal length.
+    if (c.problem.empty() && mode == SonarMode::uuv_legacy)
+        c.check(hfov_deg <= max_slice_deg && hfov_deg < 180, "hfov", hfov_deg,
+                "mode uuv-legacy needs one perspective depth image: hfov must be < 180 and <= accuracy.max_slice (" +
+                    format_number(max_slice_deg) + " degrees)");
     return c.problem;
 }
 

@@ -134,19 +134,32 @@ Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Fr
             points.push_back(frame.intensity[i]);
         }
     }
+    return write_points_ply(path, points.data(), points.size() / 4,
+                            "vksonar polar scan in the sonar frame: x forward, y port (left), z up; intensity "
+                            "linear uPa^2");
+}
+
+Result<void> write_points_ply(const std::string& path, const float* xyzi, std::size_t count,
+                              const std::string& comment) {
+    if (count && !xyzi) return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": no points");
+    // A newline in the comment would end the header line early and corrupt the file.
+    std::string one_line = comment;
+    for (char& ch : one_line)
+        if (ch == '\n' || ch == '\r') ch = ' ';
     const std::string header = "ply\n"
                                "format binary_little_endian 1.0\n"
-                               "comment vksonar polar scan in the sonar frame: x forward, y port (left), z up; "
-                               "intensity linear uPa^2\n"
+                               "comment " +
+                               one_line +
+                               "\n"
                                "element vertex " +
-                               std::to_string(points.size() / 4) +
+                               std::to_string(count) +
                                "\n"
                                "property float x\n"
                                "property float y\n"
                                "property float z\n"
                                "property float intensity\n"
                                "end_header\n";
-    return write_file(path, header.data(), header.size(), points.data(), points.size() * sizeof(float));
+    return write_file(path, header.data(), header.size(), xyzi, count * 4 * sizeof(float));
 }
 
 Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,

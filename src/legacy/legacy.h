@@ -55,11 +55,13 @@ struct UuvImages {
     std::uint32_t width = 0, height = 0; // depth image size
     double hfov_rad = 0;
     UuvIntrinsics intrinsics;
-    std::vector<float> normals;   // height * width * 3: (gx, gy, depth/f) normalized, then per-channel min-max
+    // height * width * 3, the plugin's channel order: (vertical-kernel gradient, horizontal-kernel gradient,
+    // depth/f), normalized to unit length, then each channel min-max normalized over the image.
+    std::vector<float> normals;
     std::vector<float> multibeam; // height * width: SNR min-max normalized to [0, 1]
     std::uint32_t scan_rows = kUuvScanRows, scan_cols = 0;
-    std::vector<float> raw_scan;  // scan_rows * scan_cols, after dilation and speckle
-    host::Image visual;           // scan_cols x scan_rows RGB
+    std::vector<float> raw_scan; // scan_rows * scan_cols, after dilation and speckle
+    host::Image visual;          // scan_cols x scan_rows RGB
     // Scratch (kept to avoid per-frame allocation).
     std::vector<float> gx, gy, dilated;
     std::vector<std::uint8_t> no_reading, eroded, element;
@@ -71,11 +73,13 @@ void uuv_prepare(std::uint32_t width, std::uint32_t height, double hfov_rad, Uuv
 
 // Step 1, normals: Sobel/8 (flipped kernels, replicated borders), gradients zeroed where the
 // no-reading mask (depth == 0) eroded twice (3x3) is set, normalize(gx, gy, depth/f), per-channel min-max.
+// A channel that is constant over the image becomes 0 (the plugin divided 0 by 0 there and got NaN).
 // Contract: depth has io.width * io.height values (metres along the axis, 0 = no hit); writes io.normals.
 void uuv_normals(const float* depth, UuvImages& io);
 
 // Step 2, sonar equation: SNR = SL - 2 TL - (NL - DI) + TS with TS = 100 n_z, TL = 5 depth sqrt(1+x^2+y^2);
-// negatives to 0; min-max normalized to [0, 1]. Contract: needs io.normals (step 1); writes io.multibeam.
+// negatives to 0; min-max normalized to [0, 1] (a constant SNR image becomes 0, not the plugin's NaN).
+// Contract: needs io.normals (step 1); writes io.multibeam.
 void uuv_multibeam(const float* depth, UuvImages& io);
 
 // Step 3a: raw scan cleared to 0, fan sector (radius 400, +-hfov/2 about straight up, apex at
@@ -84,12 +88,14 @@ void uuv_scan_prefill(UuvImages& io);
 
 // Projection of one depth pixel into the raw scan: z = depth sqrt(1+y^2), x = (col-cx)/f z,
 // row = 399 - int(z/17*400), col = cols/2 + int(x/17*400). Contract: false (outputs untouched) when
-// depth <= 0 or the cell lies outside the scan; else true with the cell in *scan_row, *scan_col.
+// depth <= 0 or is not finite, x^2 + z^2 >= 17^2, or the cell is not strictly inside (the plugin skips
+// row 0 and column 0 too); else true with the cell in *scan_row, *scan_col.
 bool uuv_project_pixel(float depth, std::uint32_t row, std::uint32_t col, const UuvIntrinsics& k,
                        std::uint32_t scan_cols, int* scan_row, int* scan_col);
 
-// Step 3b: every hit pixel, in row-major order, overwrites its scan cell with its multibeam value
-// (no accumulation: the last writer wins). Contract: needs io.multibeam and a prefilled io.raw_scan.
+// Step 3b: every hit pixel with a non-zero multibeam value, in row-major order, overwrites its scan cell
+// with that value (no accumulation: the last writer wins). Contract: needs io.multibeam and a prefilled
+// io.raw_scan.
 void uuv_scan_project(const float* depth, UuvImages& io);
 
 // Step 3c: grey dilation (max) with the 3-wide x 9-high elliptical element, copied only into cells
@@ -101,7 +107,8 @@ void uuv_scan_dilate(UuvImages& io);
 void uuv_scan_speckle(std::uint64_t seed, std::uint64_t frame_index, UuvImages& io);
 
 // The plugin's hard-coded colormap: a < 0.8 -> (1.25a, 0.78a, 0.5a)*255; 0.8 <= a < 1 ->
-// (a, 1.88a - 0.88, 1.99 - 1.99a)*255; else (255, 255, 0). Rounded to nearest, clamped to [0, 255].
+// (a, 1.88a - 0.88, 1.99 - 1.99a)*255; else (255, 255, 0). Truncated towards zero like the plugin's
+// double -> uchar conversion, clamped to [0, 255]; NaN gives black.
 host::Rgb8 uuv_color(float a);
 constexpr host::Rgb8 kUuvBackground{15, 48, 102};
 
@@ -111,21 +118,28 @@ void uuv_visual(UuvImages& io);
 
 // All steps in order. Contract: depth is width * height metres along the optical axis (0 = no hit);
 // fills every intermediate of `out` (allocating only on the first call for these sizes).
-void uuv_legacy(const float* depth, std::uint32_t width, std::uint32_t height, double hfov_rad,
-                std::uint64_t seed, std::uint64_t frame_index, UuvImages& out);
+void uuv_legacy(const float* depth, std::uint32_t width, std::uint32_t height, double hfov_rad, std::uint64_t seed,
+                std::uint64_t frame_index, UuvImages& out);
 
 // vksonar's reversed-Z depth -> metres along the optical axis: view_z = depth_a / (d - depth_b), 0 where
 // d == 0. Contract: frame.depth must hold plan.rows * plan.columns values (save_depth); else out is empty.
 void legacy_depth_from_frame(const Plan& plan, const Frame& frame, std::vector<float>& out);
 std::vector<float> legacy_depth_from_frame(const Plan& plan, const Frame& frame);
 
+struct GtriPoint; // x, y, z, value: the point type of both legacy clouds (GTRI section below)
+
+// The uuv plugin's point cloud: one sonar-frame point per pixel of a one-slice depth pass with a hit,
+// `retro` = the pixel's multibeam value (0..1). Contract: needs frame.depth (save_depth) and `images`
+// filled by uuv_legacy for the same frame; else out is empty. No allocation once out is large enough.
+void uuv_cloud_from_frame(const Plan& plan, const Frame& frame, const UuvImages& images, std::vector<GtriPoint>& out);
+
 // ------------------------------------------------------------------------------------------------
 // GTRI-based sonar
 // ------------------------------------------------------------------------------------------------
 
-constexpr std::uint32_t kGtriImageSize = 600;   // square 8-bit image
-constexpr float kGtriJitterSigma = 0.01f;       // N(0, 0.01) m added to x
-constexpr double kGtriRangePixels = 300.0;      // range_max maps to 300 px from the apex
+constexpr std::uint32_t kGtriImageSize = 600; // square 8-bit image
+constexpr float kGtriJitterSigma = 0.01f;     // N(0, 0.01) m added to x
+constexpr double kGtriRangePixels = 300.0;    // range_max maps to 300 px from the apex
 
 struct GtriPoint {
     float x = 0, y = 0, z = 0; // sonar frame: x forward, y port, z up (m)
@@ -133,10 +147,10 @@ struct GtriPoint {
 };
 
 struct GtriImages {
-    std::vector<GtriPoint> jittered; // the cloud after the x jitter
-    std::vector<std::uint8_t> gray;  // 600 * 600 drawn circles (before the rotation)
+    std::vector<GtriPoint> jittered;   // the cloud after the x jitter
+    std::vector<std::uint8_t> gray;    // 600 * 600 drawn circles (before the rotation)
     std::vector<std::uint8_t> blurred; // after the 3x3 median
-    host::Image color;               // 600 x 600 RGB: jet, black edges, rotated 180 deg (published)
+    host::Image color;                 // 600 x 600 RGB: jet, black edges, rotated 180 deg (published)
 };
 
 // Pre-rotation pixel of a sonar-frame point: apex at the image centre (300, 300), forward x along +rows,
@@ -167,5 +181,7 @@ void gtri_legacy(const std::vector<GtriPoint>& cloud, double hfov_rad, double ra
 // material's backscatter_linear). Contract: frame.depth and frame.material must be rows * columns
 // (save_depth); else the result is empty.
 std::vector<GtriPoint> gtri_cloud_from_frame(const Plan& plan, const Frame& frame);
+// Same, into a caller-owned vector (no allocation once it is large enough).
+void gtri_cloud_from_frame(const Plan& plan, const Frame& frame, std::vector<GtriPoint>& out);
 
 } // namespace vksonar::legacy
