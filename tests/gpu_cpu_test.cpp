@@ -1,6 +1,7 @@
 // GPU-vs-CPU regression suite: each stage fed the same input on both backends, then whole frames.
 // Tolerances and their reasons: tests/tolerances.h.
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 
@@ -172,6 +173,68 @@ std::string scene_name(const ::testing::TestParamInfo<SceneCase>& info) {
 }
 
 INSTANTIATE_TEST_SUITE_P(BundledScenes, StageTest, ::testing::ValuesIn(bundled_scenes()), scene_name);
+
+// Whole frame on every bundled preset (the physical model; legacy presets have their own tests):
+// the default scene seen with each device's beam table, range window and frequency.
+class PresetFrameTest : public ::testing::TestWithParam<std::string> {
+protected:
+    void SetUp() override { VKSONAR_REQUIRE_VULKAN(); }
+    ValidationGuard validation_;
+};
+
+std::vector<std::string> physical_presets() {
+    std::vector<std::string> out;
+    for (const auto& name : preset_names())
+        if (name.find("legacy") == std::string::npos) out.push_back(name);
+    return out;
+}
+
+TEST_P(PresetFrameTest, WholeFrameAgrees) {
+    auto preset = load_preset(GetParam());
+    ASSERT_TRUE(preset) << preset.error().message;
+    SonarConfig config = preset.value();
+    config.effects.speckle = EffectMode::on;
+    config.effects.ambient_noise = EffectMode::on;
+    config.effects.tvg = EffectMode::off;
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    // Short-range presets (10 m) need the sonar closer to the objects of the default scene.
+    pose.x_m = config.range_max_m < 20.0 ? 6.0 : 0.0;
+    auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose, 0);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Frame& c = p->cpu->frame;
+    const double floor =
+        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+    std::size_t above = 0, over = 0, noise_same = 0, noise_compared = 0;
+    double max_db = 0;
+    for (std::size_t i = 0; i < g.clean.size(); ++i) {
+        if (g.clean[i] == c.clean[i]) { // identical input -> identical seeded noise, bit for bit
+            ++noise_compared;
+            noise_same += g.intensity[i] == c.intensity[i];
+        }
+        if (g.clean[i] < floor && c.clean[i] < floor) continue;
+        ++above;
+        const double d = std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
+                                  to_db(std::max<double>(c.clean[i], floor * 1e-3)));
+        max_db = std::max(max_db, d);
+        over += d > kFrameDbTol;
+    }
+    std::printf("[preset] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().c_str(),
+                above, over, kFrameDbTol, max_db);
+    ASSERT_GT(above, 0u) << "the preset sees nothing of the default scene: move the pose";
+    EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above); // tolerance: tests/tolerances.h
+    EXPECT_EQ(noise_same, noise_compared);
+}
+
+std::string preset_test_name(const ::testing::TestParamInfo<std::string>& info) {
+    std::string name = info.param;
+    for (char& ch : name)
+        if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+    return name;
+}
+
+INSTANTIATE_TEST_SUITE_P(Presets, PresetFrameTest, ::testing::ValuesIn(physical_presets()), preset_test_name);
 
 TEST(Determinism, TwoVulkanRunsAreBitIdentical) {
     VKSONAR_REQUIRE_VULKAN();

@@ -49,6 +49,9 @@ public:
             }
         }
 
+        // A frame reused across renders reports this render's stages only (capacity is kept).
+        frame.times.clear();
+        frame.stages_run.clear();
         auto start = Clock::now();
         compose_depth_draws(plan_, scene_, pose, draws_);
         depth_pass(plan_, scene_, draws_, depth_.data(), material_.data());
