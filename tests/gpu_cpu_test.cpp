@@ -198,8 +198,13 @@ TEST_P(PresetFrameTest, WholeFrameAgrees) {
     config.effects.tvg = EffectMode::off;
     Pose pose;
     pose.pitch_deg = 15.0;
-    // Short-range presets (10 m) need the sonar closer to the objects of the default scene.
-    pose.x_m = config.range_max_m < 20.0 ? 6.0 : 0.0;
+    // Short-range presets (5-10 m) look down steeply from 3 m above the default scene's seabed
+    // (z = -5 m): slant range 3 / sin(40 deg +- vfov/2) = 3.7-4.9 m, inside their window.
+    if (config.range_max_m < 20.0) {
+        pose.x_m = 6.0;
+        pose.z_m = -2.0;
+        pose.pitch_deg = 40.0;
+    }
     auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose, 0);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
