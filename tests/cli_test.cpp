@@ -421,4 +421,23 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     EXPECT_EQ(meta["frame_index"], 4);
 }
 
+TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
+    const fs::path out = dir_ / "accurate";
+    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
+                          "--set", "beams=16", "--quality", "accurate", "--set", "accuracy.rows_per_vfov=96", "--out",
+                          out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto accuracy = nlohmann::json::parse(read_text(out / "meta.json"))["config"]["accuracy"];
+    EXPECT_EQ(accuracy["pixels_per_beam"], 4.0); // from the quality preset
+    EXPECT_EQ(accuracy["max_slice"], 30.0);
+    EXPECT_EQ(accuracy["rows_per_vfov"], 96); // --set is applied after --quality
+
+    const CliRun bad = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--quality", "ultra", "--out",
+                            (dir_ / "bad").string()});
+    EXPECT_EQ(bad.exit_code, 2);
+    ASSERT_EQ(bad.err_lines().size(), 1u) << bad.err;
+    EXPECT_NE(bad.err.find("'ultra'"), std::string::npos) << bad.err;
+    EXPECT_FALSE(fs::exists(dir_ / "bad" / "meta.json"));
+}
+
 } // namespace

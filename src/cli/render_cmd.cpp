@@ -35,14 +35,15 @@ namespace {
 constexpr const char* kUsage =
     "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
-    "                      [--seed N] [--backend vulkan|cpu] [--save fan,polar,depth,normals,echo,cloud,...]\n"
-    "                      --out DIR\n"
+    "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
+    "                      [--save fan,polar,depth,normals,echo,cloud,...] --out DIR\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
     "  --config      JSON file of config keys applied on top (see docs/config.md)\n"
     "  --set         one config key, dotted for groups: --set effects.speckle=off --set display.db_min=50\n"
-    "                precedence: preset < scene effects < --config < --set\n"
+    "                precedence: preset < scene effects < --config < --quality < --set\n"
+    "  --quality     accuracy preset: fast | balanced (default knobs) | accurate (docs/accuracy.md)\n"
     "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down\n"
     "                (default for the bundled scene: 0,0,0,0,10,0; otherwise 0,0,0,0,0,0)\n"
     "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed);\n"
@@ -442,6 +443,7 @@ int run_render(const std::vector<std::string>& argv) {
                                   {"--pose", true, false},
                                   {"--trajectory", true, false},
                                   {"--set", true, true},
+                                  {"--quality", true, false},
                                   {"--seed", true, false},
                                   {"--backend", true, false},
                                   {"--save", true, true},
@@ -487,7 +489,7 @@ int run_render(const std::vector<std::string>& argv) {
         poses.push_back({pose, 0});
     }
 
-    // 4. Config layers: preset < scene effects < --config < --set. The user's layers are checked
+    // 4. Config layers: preset < scene effects < --config < --quality < --set. The user's layers are checked
     //    before the (possibly slow) scene load, then applied again above the scene's effects.
     const SonarConfig preset = base_config(args.value("--sonar", "default"));
     auto apply_user_layers = [&](SonarConfig config) {
@@ -497,6 +499,11 @@ int run_render(const std::vector<std::string>& argv) {
             if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
             auto layered = apply_config_file(config, path);
             if (!layered) throw BadInput(layered.error().message);
+            config = layered.value();
+        }
+        if (args.has("--quality")) {
+            auto layered = apply_quality(config, args.value("--quality"));
+            if (!layered) throw BadInput("--quality: " + layered.error().message);
             config = layered.value();
         }
         for (const auto& item : args.values("--set")) {
