@@ -6,15 +6,49 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <new>
 #include <system_error>
 
 #include <benchmark/benchmark.h>
 
 namespace fs = std::filesystem;
+
+namespace {
+std::atomic<std::uint64_t> g_heap_allocations{0};
+
+void* counted_allocation(std::size_t size) {
+    g_heap_allocations.fetch_add(1, std::memory_order_relaxed);
+    if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+    throw std::bad_alloc();
+}
+} // namespace
+
+// Counting replacements of the global allocation functions (the aligned and nothrow forms keep their
+// library definitions, which allocate through their own paths and are not counted).
+void* operator new(std::size_t size) {
+    return counted_allocation(size);
+}
+void* operator new[](std::size_t size) {
+    return counted_allocation(size);
+}
+void operator delete(void* p) noexcept {
+    std::free(p);
+}
+void operator delete[](void* p) noexcept {
+    std::free(p);
+}
+void operator delete(void* p, std::size_t) noexcept {
+    std::free(p);
+}
+void operator delete[](void* p, std::size_t) noexcept {
+    std::free(p);
+}
 
 namespace vksonar::cli::bench {
 namespace {
@@ -75,7 +109,8 @@ Setup load_setup(const Args& args) {
     setup.scene_path = setup.default_scene ? find_default_scene() : args.value("--scene");
     if (!setup.default_scene) {
         std::error_code ec;
-        if (!fs::is_regular_file(setup.scene_path, ec)) throw BadInput("--scene " + setup.scene_path + ": no such file");
+        if (!fs::is_regular_file(setup.scene_path, ec))
+            throw BadInput("--scene " + setup.scene_path + ": no such file");
     }
     setup.sonar_name = args.value("--sonar", "default");
     setup.preset = sonar_base(setup.sonar_name);
@@ -119,7 +154,9 @@ Backend parse_backend(const std::string& name) {
     throw BadInput("--backend: '" + name + "' is not a backend (vulkan or cpu)");
 }
 
-const char* backend_name(Backend backend) { return backend == Backend::vulkan ? "vulkan" : "cpu"; }
+const char* backend_name(Backend backend) {
+    return backend == Backend::vulkan ? "vulkan" : "cpu";
+}
 
 Context make_context(Backend backend) {
     if (backend == Backend::cpu) return Context::cpu_only();
@@ -153,7 +190,9 @@ double stage_ms(const Frame& frame, const std::string& stage) {
     return total;
 }
 
-double median(std::vector<double> values) { return percentile(std::move(values), 0.5); }
+double median(std::vector<double> values) {
+    return percentile(std::move(values), 0.5);
+}
 
 double percentile(std::vector<double> values, double p) {
     if (values.empty()) return 0.0;
@@ -175,13 +214,19 @@ double rss_mib() {
     return static_cast<double>(resident) * static_cast<double>(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
 }
 
+std::uint64_t heap_allocations() {
+    return g_heap_allocations.load(std::memory_order_relaxed);
+}
+
 std::string fmt(double value, int decimals) {
     char text[64];
     std::snprintf(text, sizeof text, "%.*f", decimals, value);
     return text;
 }
 
-const char* verdict(bool ok) { return ok ? "PASS" : "MISS"; }
+const char* verdict(bool ok) {
+    return ok ? "PASS" : "MISS";
+}
 
 std::uint32_t frames_option(const Args& args, std::uint32_t fallback) {
     if (!args.has("--frames")) return fallback;
@@ -190,7 +235,9 @@ std::uint32_t frames_option(const Args& args, std::uint32_t fallback) {
     return static_cast<std::uint32_t>(n);
 }
 
-void record_failure(const std::string& message) { failures().push_back(message); }
+void record_failure(const std::string& message) {
+    failures().push_back(message);
+}
 
 void run_registered_benchmarks() {
     static bool initialized = false;

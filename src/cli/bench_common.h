@@ -47,7 +47,11 @@ double timed_render(Renderer& renderer, const Pose& pose, std::uint64_t frame_in
 double stage_ms(const Frame& frame, const std::string& stage); // 0 if the stage did not run
 double median(std::vector<double> values);
 double percentile(std::vector<double> values, double p); // p in [0, 1]
-double rss_mib();                                       // resident set size from /proc/self/statm
+double rss_mib();                                        // resident set size from /proc/self/statm
+// Calls of the global operator new / new[] in this process so far (the CLI replaces them with counting
+// versions): the difference around Renderer::render is what vksonar allocates per frame. Allocations
+// of the Vulkan driver (malloc inside libvulkan / lavapipe) are not counted; RSS covers those.
+std::uint64_t heap_allocations();
 
 std::string fmt(double value, int decimals = 2);
 // "PASS" or "MISS".

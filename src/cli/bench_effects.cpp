@@ -29,7 +29,7 @@ constexpr const char* kUsage =
     "medians of the per-round ratios. Target: off'/off within 1.02 (a disabled effect costs nothing\n"
     "measurable).\n";
 
-const std::array<const char*, 8> kEffects = {"incidence", "vertical_pattern", "horizontal_pattern", "spreading",
+const std::array<const char*, 8> kEffects = {"incidence",  "vertical_pattern", "horizontal_pattern", "spreading",
                                              "absorption", "speckle",          "ambient_noise",      "tvg"};
 
 struct Variant {
@@ -87,49 +87,57 @@ int run_bench_effects(const std::vector<std::string>& argv) {
     for (std::size_t e = 0; e < effects.size(); ++e) {
         results[e].effect = effects[e];
         const std::string name = "effects/" + effects[e] + "/on,off,off'";
-        benchmark::RegisterBenchmark(name.c_str(), [&, e](benchmark::State& state) {
-            EffectResult& result = results[e];
-            try {
-                const std::string key = "effects." + effects[e];
-                std::vector<std::string> sets = args.values("--set");
-                sets.push_back(key + "=on");
-                const SonarConfig on = layered_config(setup, sets);
-                sets.back() = key + "=off";
-                const SonarConfig off = layered_config(setup, sets);
-                std::array<Renderer, 3> renderers{make_renderer(context, on, setup.scene, backend),
-                                                  make_renderer(context, off, setup.scene, backend),
-                                                  make_renderer(context, off, setup.scene, backend)};
-                std::array<Frame, 3> frames{renderers[0].make_frame(), renderers[1].make_frame(),
-                                            renderers[2].make_frame()};
-                std::uint64_t index = 0;
-                for (std::uint32_t w = 0; w < kWarmup; ++w)
-                    for (int v = 0; v < 3; ++v) timed_render(renderers[v], setup.pose, index, frames[v]);
-                std::uint64_t round = 0;
-                for (auto _ : state) {
-                    std::array<double, 3> ms{};
-                    for (int k = 0; k < 3; ++k) {
-                        const int v = static_cast<int>((round + k) % 3); // rotate the order every round
-                        ms[v] = timed_render(renderers[v], setup.pose, kWarmup + round, frames[v]);
-                        Variant& variant = result.variants[v];
-                        variant.full_ms.push_back(ms[v]);
-                        for (const auto& t : frames[v].times) variant.stages[t.stage].push_back(t.ms);
+        benchmark::RegisterBenchmark(
+            name.c_str(),
+            [&, e](benchmark::State& state) {
+                EffectResult& result = results[e];
+                try {
+                    const std::string key = "effects." + effects[e];
+                    std::vector<std::string> sets = args.values("--set");
+                    sets.push_back(key + "=on");
+                    const SonarConfig on = layered_config(setup, sets);
+                    sets.back() = key + "=off";
+                    const SonarConfig off = layered_config(setup, sets);
+                    std::array<Renderer, 3> renderers{make_renderer(context, on, setup.scene, backend),
+                                                      make_renderer(context, off, setup.scene, backend),
+                                                      make_renderer(context, off, setup.scene, backend)};
+                    std::array<Frame, 3> frames{renderers[0].make_frame(), renderers[1].make_frame(),
+                                                renderers[2].make_frame()};
+                    std::uint64_t index = 0;
+                    for (std::uint32_t w = 0; w < kWarmup; ++w)
+                        for (int v = 0; v < 3; ++v)
+                            timed_render(renderers[v], setup.pose, index, frames[v]);
+                    std::uint64_t round = 0;
+                    for (auto _ : state) {
+                        std::array<double, 3> ms{};
+                        for (int k = 0; k < 3; ++k) {
+                            const int v = static_cast<int>((round + k) % 3); // rotate the order every round
+                            ms[v] = timed_render(renderers[v], setup.pose, kWarmup + round, frames[v]);
+                            Variant& variant = result.variants[v];
+                            variant.full_ms.push_back(ms[v]);
+                            for (const auto& t : frames[v].times)
+                                variant.stages[t.stage].push_back(t.ms);
+                        }
+                        state.SetIterationTime(ms[0] * 1e-3);
+                        result.on_over_off.push_back(ms[0] / ms[1]);
+                        result.off2_over_off.push_back(ms[2] / ms[1]);
+                        ++round;
                     }
-                    state.SetIterationTime(ms[0] * 1e-3);
-                    result.on_over_off.push_back(ms[0] / ms[1]);
-                    result.off2_over_off.push_back(ms[2] / ms[1]);
-                    ++round;
+                    for (int v = 0; v < 3; ++v)
+                        result.variants[v].stages_run = frames[v].stages_run;
+                    state.counters["on_ms"] = median(result.variants[0].full_ms);
+                    state.counters["off_ms"] = median(result.variants[1].full_ms);
+                    state.counters["on/off"] = median(result.on_over_off);
+                    state.counters["off'/off"] = median(result.off2_over_off);
+                    result.done = true;
+                } catch (const std::exception& ex) {
+                    state.SkipWithError(ex.what());
+                    record_failure(ex.what());
                 }
-                for (int v = 0; v < 3; ++v) result.variants[v].stages_run = frames[v].stages_run;
-                state.counters["on_ms"] = median(result.variants[0].full_ms);
-                state.counters["off_ms"] = median(result.variants[1].full_ms);
-                state.counters["on/off"] = median(result.on_over_off);
-                state.counters["off'/off"] = median(result.off2_over_off);
-                result.done = true;
-            } catch (const std::exception& ex) {
-                state.SkipWithError(ex.what());
-                record_failure(ex.what());
-            }
-        })->UseManualTime()->Iterations(rounds)->Unit(benchmark::kMillisecond);
+            })
+            ->UseManualTime()
+            ->Iterations(rounds)
+            ->Unit(benchmark::kMillisecond);
     }
     run_registered_benchmarks();
 
@@ -159,11 +167,14 @@ int run_bench_effects(const std::vector<std::string>& argv) {
         const double noise = median(r.off2_over_off);
         char change[96];
         std::snprintf(change, sizeof change, "%s %+.3f ms", biggest.c_str(), biggest_delta);
-        std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", r.effect.c_str(),
-                    fmt(median(on.full_ms), 3).c_str(), fmt(median(off.full_ms), 3).c_str(),
-                    fmt(median(r.on_over_off), 3).c_str(), fmt(median(r.variants[2].full_ms), 3).c_str(),
-                    fmt(noise, 3).c_str(), verdict(std::fabs(noise - 1.0) <= 0.02), change,
-                    skipped.empty() ? "none (a flag in the shader / host loop)" : skipped.c_str());
+        std::printf(
+            "| %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", r.effect.c_str(), fmt(median(on.full_ms), 3).c_str(),
+            fmt(median(off.full_ms), 3).c_str(), fmt(median(r.on_over_off), 3).c_str(),
+            fmt(median(r.variants[2].full_ms), 3).c_str(), fmt(noise, 3).c_str(),
+            verdict(std::fabs(noise - 1.0) <= 0.02), change,
+            skipped.empty()
+                ? "none listed (compiled out of a shader, a dispatch skipped inside a stage, or a host-loop flag)"
+                : skipped.c_str());
     }
     std::printf("\noff and off' are two renderers with identical configs: their ratio is what \"no cost\" looks "
                 "like on this machine.\n(timings vary +-30-50%% between runs on lavapipe; ratios come from "

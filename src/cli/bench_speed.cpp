@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <benchmark/benchmark.h>
@@ -68,55 +69,82 @@ int run_bench_speed(const std::vector<std::string>& argv) {
     std::printf("scene %s (%llu triangles, %u draws), sonar %s, pose %g,%g,%g,%g,%g,%g\n", setup.scene_path.c_str(),
                 static_cast<unsigned long long>(stats.triangles), stats.draws, setup.sonar_name.c_str(), setup.pose.x_m,
                 setup.pose.y_m, setup.pose.z_m, setup.pose.roll_deg, setup.pose.pitch_deg, setup.pose.yaw_deg);
-    std::printf("grid %u x %u pixels, %u beams x %u bins, %llu timed frames after %u warm-up frames\n\n",
-                frame.columns, frame.rows, frame.beams, frame.bins, static_cast<unsigned long long>(frames), kWarmup);
+    std::printf("grid %u x %u pixels, %u beams x %u bins, %llu timed frames after %u warm-up frames\n\n", frame.columns,
+                frame.rows, frame.beams, frame.bins, static_cast<unsigned long long>(frames), kWarmup);
 
     std::uint64_t frame_index = 0;
-    for (std::uint32_t i = 0; i < kWarmup; ++i) timed_render(renderer, setup.pose, frame_index++, frame);
+    for (std::uint32_t i = 0; i < kWarmup; ++i)
+        timed_render(renderer, setup.pose, frame_index++, frame);
     const double rss_10 = rss_mib();
+
+    // After the warm-up: operator new calls inside Renderer::render, and RSS at a few frame counts (a
+    // leak grows linearly; driver warm-up flattens out).
+    std::uint64_t allocations = 0, counted_frames = 0;
+    std::vector<std::pair<std::uint64_t, double>> rss_checkpoints;
+    rss_checkpoints.reserve(16);
+    rss_checkpoints.emplace_back(frame_index, rss_10);
+    std::uint64_t next_checkpoint = 100;
+    auto render_counted = [&]() {
+        const std::uint64_t before = heap_allocations();
+        const double ms = timed_render(renderer, setup.pose, frame_index++, frame);
+        allocations += heap_allocations() - before;
+        ++counted_frames;
+        if (frame_index == next_checkpoint) {
+            rss_checkpoints.emplace_back(frame_index, rss_mib());
+            next_checkpoint = next_checkpoint == 100 ? 250 : 2 * next_checkpoint; // 100, 250, 500, 1000, 2000...
+        }
+        return ms;
+    };
 
     SpeedSamples samples;
     // Reserved up front so the samples themselves do not show up as RSS growth.
-    for (auto* v : {&samples.full_ms, &samples.depth_ms, &samples.ratio, &samples.stage_sum_ms}) v->reserve(frames);
+    for (auto* v : {&samples.full_ms, &samples.depth_ms, &samples.ratio, &samples.stage_sum_ms})
+        v->reserve(frames);
     samples.depth_source = backend == Backend::vulkan
                                ? "Frame.times 'depth' (lavapipe: the depth command buffer submitted and waited alone, "
                                  "host-timed; real GPUs: timestamps), same frame as the full-frame time"
                                : "Frame.times 'depth' of the CPU backend, same frame as the full-frame time";
     const std::string name = std::string("speed/") + backend_name(backend) + "/full_frame";
-    benchmark::RegisterBenchmark(name.c_str(), [&](benchmark::State& state) {
-        try {
-            for (auto _ : state) {
-                const double full = timed_render(renderer, setup.pose, frame_index++, frame);
-                state.SetIterationTime(full * 1e-3);
-                double sum = 0;
-                for (const auto& t : frame.times) {
-                    if (!samples.stages.count(t.stage)) {
-                        samples.stage_order.push_back(t.stage);
-                        samples.stages[t.stage].reserve(frames);
-                    }
-                    samples.stages[t.stage].push_back(t.ms);
-                    sum += t.ms;
-                }
-                const double depth = stage_ms(frame, "depth");
-                samples.full_ms.push_back(full);
-                samples.depth_ms.push_back(depth);
-                samples.stage_sum_ms.push_back(sum);
-                if (depth > 0) samples.ratio.push_back(full / depth);
-            }
-            state.counters["full_med_ms"] = median(samples.full_ms);
-            state.counters["depth_med_ms"] = median(samples.depth_ms);
-            state.counters["full/depth"] = median(samples.ratio);
-            state.counters["fps"] = 1000.0 / std::max(1e-9, median(samples.full_ms));
-        } catch (const std::exception& e) {
-            state.SkipWithError(e.what());
-            record_failure(e.what());
-        }
-    })->UseManualTime()->Iterations(frames)->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(name.c_str(),
+                                 [&](benchmark::State& state) {
+                                     try {
+                                         for (auto _ : state) {
+                                             const double full = render_counted();
+                                             state.SetIterationTime(full * 1e-3);
+                                             double sum = 0;
+                                             for (const auto& t : frame.times) {
+                                                 if (!samples.stages.count(t.stage)) {
+                                                     samples.stage_order.push_back(t.stage);
+                                                     samples.stages[t.stage].reserve(frames);
+                                                 }
+                                                 samples.stages[t.stage].push_back(t.ms);
+                                                 sum += t.ms;
+                                             }
+                                             const double depth = stage_ms(frame, "depth");
+                                             samples.full_ms.push_back(full);
+                                             samples.depth_ms.push_back(depth);
+                                             samples.stage_sum_ms.push_back(sum);
+                                             if (depth > 0) samples.ratio.push_back(full / depth);
+                                         }
+                                         state.counters["full_med_ms"] = median(samples.full_ms);
+                                         state.counters["depth_med_ms"] = median(samples.depth_ms);
+                                         state.counters["full/depth"] = median(samples.ratio);
+                                         state.counters["fps"] = 1000.0 / std::max(1e-9, median(samples.full_ms));
+                                     } catch (const std::exception& e) {
+                                         state.SkipWithError(e.what());
+                                         record_failure(e.what());
+                                     }
+                                 })
+        ->UseManualTime()
+        ->Iterations(frames)
+        ->Unit(benchmark::kMillisecond);
     run_registered_benchmarks();
 
     // Soak: keep rendering (untimed) up to `memory_frames` frames in all, then read RSS again.
-    while (frame_index < memory_frames) timed_render(renderer, setup.pose, frame_index++, frame);
+    while (frame_index < memory_frames)
+        render_counted();
     const double rss_end = rss_mib();
+    if (rss_checkpoints.back().first != frame_index) rss_checkpoints.emplace_back(frame_index, rss_end);
 
     const double full = median(samples.full_ms);
     const double depth = median(samples.depth_ms);
@@ -150,6 +178,22 @@ int run_bench_speed(const std::vector<std::string>& argv) {
     std::printf("RSS after %u frames: %s MiB; after %llu frames: %s MiB; difference %+.3f MiB  target <= 1 MiB: %s\n",
                 kWarmup, fmt(rss_10, 2).c_str(), static_cast<unsigned long long>(frame_index), fmt(rss_end, 2).c_str(),
                 growth, verdict(growth <= 1.0));
+    if (rss_checkpoints.size() >= 3) {
+        // From frame 100 on: driver and allocator warm-up is over; what grows now grows per frame.
+        const double steady = rss_end - rss_checkpoints[1].second;
+        std::printf("RSS steady state (frame %llu to %llu): %+.3f MiB\n",
+                    static_cast<unsigned long long>(rss_checkpoints[1].first),
+                    static_cast<unsigned long long>(frame_index), steady);
+    }
+    std::printf("RSS by frame:");
+    for (const auto& [at, mib] : rss_checkpoints)
+        std::printf(" %llu: %s MiB;", static_cast<unsigned long long>(at), fmt(mib, 2).c_str());
+    std::printf("\n");
+    std::printf("heap allocations (operator new) inside Renderer::render after the warm-up: %llu in %llu frames "
+                "(%s per frame)  target 0: %s\n",
+                static_cast<unsigned long long>(allocations), static_cast<unsigned long long>(counted_frames),
+                fmt(counted_frames ? double(allocations) / double(counted_frames) : 0.0, 3).c_str(),
+                verdict(allocations == 0));
     if (frame_index < 1000)
         std::printf("  (note: only %llu frames rendered; the target is stated for 1000)\n",
                     static_cast<unsigned long long>(frame_index));
