@@ -1,8 +1,15 @@
-// Context: the Vulkan instance/device vksonar runs on, owned or borrowed.
-// Thread-safety: a Context may be shared by renderers on different threads; queue submissions are
-// serialized through the optional queue lock (borrowed devices) or an internal mutex (owned).
+// Context: the Vulkan instance/device vksonar runs on, owned (create) or borrowed (adopt).
+// Thread-safety: a Context may be shared by renderers on different threads (one Renderer per thread);
+// its own calls are const and safe to make concurrently. vksonar's queue submissions are serialized
+// through the host's queue lock (HostVulkan::lock_queue) if given, else an internal mutex.
+//
+// Requirements (checked by create and adopt, with an error naming what is missing): Vulkan 1.1 (instance
+// and device), a queue family with compute (and graphics for Renderer::render's depth pass; process()
+// needs compute only), D32_SFLOAT depth + R32_UINT colour attachments for the depth pass. No device
+// extension and no optional device feature is required.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -18,6 +25,26 @@ struct ContextOptions {
     bool vulkan = true;             // false: a CPU-only context (no Vulkan at all)
 };
 
+// A host engine's Vulkan objects, borrowed by Context::adopt. vksonar never destroys any of them; they
+// must outlive the Context and every Renderer made from it. vksonar calls the Vulkan loader's exported
+// functions (libvulkan), so the host must have created them through the same loader.
+struct HostVulkan {
+    VkInstance instance = VK_NULL_HANDLE;
+    VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+    VkDevice device = VK_NULL_HANDLE;
+    std::uint32_t queue_family = 0; // the family `queue` belongs to
+    VkQueue queue = VK_NULL_HANDLE; // vksonar submits here (process, render; never in record)
+    // The apiVersion the host gave VkApplicationInfo (0: unknown, then only the device's is checked).
+    std::uint32_t instance_api_version = 0;
+    // Optional queue lock: the host's queue is externally synchronized (Vulkan rule), so if the host
+    // submits to it from other threads it passes a lock that vksonar takes around each vkQueueSubmit.
+    void (*lock_queue)(void* user) = nullptr;
+    void (*unlock_queue)(void* user) = nullptr;
+    void* queue_lock_user = nullptr;
+    // Host allocation callbacks are not taken: vksonar creates its own objects with the default
+    // allocator (pAllocator = nullptr), which Vulkan allows per object on any device.
+};
+
 struct VulkanContext; // internal
 
 class Context {
@@ -29,10 +56,15 @@ public:
 
     // Creates (and owns) an instance and device. Fails with ErrorCode::no_device if none is usable.
     [[nodiscard]] static Result<Context> create(const ContextOptions& options = {});
+    // Wraps (borrows) the host's instance, device and queue. Checks the requirements above and fails
+    // with ErrorCode::unsupported naming the first one missing, or invalid_argument for null handles.
+    [[nodiscard]] static Result<Context> adopt(const HostVulkan& host);
     // A context without Vulkan, for the CPU backend.
     static Context cpu_only();
 
     bool has_vulkan() const;
+    // True if vksonar created the device (create), false if it is the host's (adopt) or there is none.
+    bool owns_device() const;
     std::string device_description() const; // device name, driver, API version
     // Number of validation-layer messages of severity warning or error seen so far.
     std::uint32_t validation_messages() const;

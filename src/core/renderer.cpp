@@ -3,14 +3,18 @@
 
 #include <chrono>
 #include <cmath>
+#include <string>
 
+#include "core/host_plan.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
 #include "host/workers.h"
 #include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
+#include "vk/host_depth.h"
 #include "vk/vulkan_backend.h"
+#include "vk/vulkan_context.h"
 
 namespace vksonar {
 
@@ -38,6 +42,11 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
     if (options.backend == Backend::vulkan) {
         if (!context.has_vulkan()) {
             return make_error(ErrorCode::no_device, "no Vulkan device in this context; use --backend cpu");
+        }
+        if (!context.vulkan()->graphics) {
+            return make_error(ErrorCode::unsupported,
+                              "Renderer::create: the adopted queue family has no graphics for the depth pass; "
+                              "use create_for_depth with the host's depth image, or adopt a graphics queue");
         }
         auto backend = vk::make_backend(*context.vulkan(), impl->plan, scene.data());
         if (!backend) return backend.error();
@@ -100,6 +109,63 @@ Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame
     frame.times.push_back({"noise", std::chrono::duration<double, std::milli>(t1 - t0).count()});
     frame.stages_run.push_back("noise");
     return {};
+}
+
+// Embedding (docs/embedding.md). The host-depth pass is the renderer's StageBackend: process() and
+// read_back() arm it and go through render(), which checks the frame and runs the host stages.
+Result<Renderer> Renderer::create_for_depth(Context& context, const SonarConfig& config, const HostDepthDesc& desc,
+                                            const RendererOptions& options) {
+    if (options.backend != Backend::vulkan || !context.has_vulkan()) {
+        return make_error(ErrorCode::invalid_argument,
+                          "create_for_depth: a host depth image needs the Vulkan backend and a Vulkan context");
+    }
+    auto plan = make_host_depth_plan(config, desc);
+    if (!plan) return plan.error();
+    Renderer r;
+    r.impl_ = std::make_unique<RendererImpl>();
+    r.impl_->plan = std::move(plan.value());
+    r.impl_->options = options;
+    r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
+    auto pass = vk::HostDepthPass::create(*context.vulkan(), r.impl_->plan, desc);
+    if (!pass) return pass.error();
+    r.impl_->backend = std::move(pass.value());
+    return r;
+}
+
+namespace {
+vk::HostDepthPass* host_depth_pass(const std::unique_ptr<RendererImpl>& impl) {
+    return impl ? dynamic_cast<vk::HostDepthPass*>(impl->backend.get()) : nullptr;
+}
+Error not_for_depth(const char* call) {
+    return make_error(ErrorCode::invalid_argument,
+                      std::string(call) + ": this renderer was made by create(); use create_for_depth");
+}
+} // namespace
+
+Result<void> Renderer::process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame) {
+    vk::HostDepthPass* pass = host_depth_pass(impl_);
+    if (!pass) return not_for_depth("process");
+    pass->arm_process(depth);
+    return render(Pose{}, frame_index, frame);
+}
+
+Result<void> Renderer::record(VkCommandBuffer commands, const HostDepthImage& depth) {
+    vk::HostDepthPass* pass = host_depth_pass(impl_);
+    if (!pass) return not_for_depth("record");
+    return pass->record(commands, depth, impl_->options.save_mask);
+}
+
+Result<void> Renderer::read_back(std::uint64_t frame_index, Frame& frame) {
+    vk::HostDepthPass* pass = host_depth_pass(impl_);
+    if (!pass) return not_for_depth("read_back");
+    pass->arm_read_back();
+    return render(Pose{}, frame_index, frame);
+}
+
+Result<GpuBufferView> Renderer::polar_buffer() const {
+    vk::HostDepthPass* pass = host_depth_pass(impl_);
+    if (!pass) return not_for_depth("polar_buffer");
+    return pass->polar_buffer();
 }
 
 const SonarConfig& Renderer::config() const { return impl_->plan.config; }

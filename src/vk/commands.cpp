@@ -10,6 +10,12 @@
 namespace vksonar::vk {
 
 VkResult queue_submit(VulkanContext& context, const VkSubmitInfo& submit, VkFence fence) {
+    if (context.lock_queue != nullptr && context.unlock_queue != nullptr) {
+        context.lock_queue(context.queue_lock_user);
+        VkResult result = vkQueueSubmit(context.queue, 1, &submit, fence);
+        context.unlock_queue(context.queue_lock_user);
+        return result;
+    }
     std::lock_guard<std::mutex> lock(context.queue_mutex);
     return vkQueueSubmit(context.queue, 1, &submit, fence);
 }

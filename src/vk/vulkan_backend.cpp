@@ -332,6 +332,8 @@ Result<void> VulkanBackend::create_commands() {
 
     VkFenceCreateInfo fence_info{};
     fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+    // Signalled: the destructor waits on it, also when nothing was ever submitted (every submit resets it first).
+    fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
     VkFence fence = VK_NULL_HANDLE;
     VKS_VK_TRY(vkCreateFence(device, &fence_info, nullptr, &fence));
     fence_ = OwnedFence(device, fence);

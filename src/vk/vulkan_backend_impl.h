@@ -59,7 +59,11 @@ struct DrawRange {
     std::int32_t vertex_offset = 0;
 };
 
+class HostDepthPass; // host_depth.cpp: runs these stages on a host engine's depth image
+
 class VulkanBackend final : public StageBackend {
+    friend class HostDepthPass; // reuses the compute stages, buffers and readback without the depth pass
+
 public:
     VulkanBackend(VulkanContext& context, const Plan& plan, const SceneData& scene)
         : context_(context), plan_(plan), scene_(scene) {}

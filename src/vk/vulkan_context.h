@@ -19,6 +19,7 @@ struct VulkanContext {
     VkQueue queue = VK_NULL_HANDLE;
     bool owns_instance = false;
     bool owns_device = false;
+    bool graphics = true; // queue_family supports graphics (the depth pass); adopted compute-only queues do not
 
     VkDebugUtilsMessengerEXT debug_messenger = VK_NULL_HANDLE; // always owned (created by vksonar)
     bool validation = false;                                   // the validation layer is enabled
@@ -26,6 +27,11 @@ struct VulkanContext {
     std::atomic<std::uint32_t> validation_messages{0};
 
     std::mutex queue_mutex; // serializes vkQueueSubmit on `queue`
+    // Adopted devices: the host's queue lock (HostVulkan::lock_queue), taken instead of queue_mutex so
+    // vksonar's submissions are serialized with the host's own.
+    void (*lock_queue)(void* user) = nullptr;
+    void (*unlock_queue)(void* user) = nullptr;
+    void* queue_lock_user = nullptr;
 
     VkPhysicalDeviceProperties properties{};
     std::uint32_t timestamp_valid_bits = 0; // of queue_family; 0: no timestamp queries

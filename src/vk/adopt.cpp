@@ -1,0 +1,86 @@
+// Context::adopt: wraps a host engine's instance, device and queue. Everything here is borrowed:
+// owns_instance / owns_device stay false, so ~VulkanContext destroys nothing of the host's.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "vk/vulkan_context.h"
+#include "vksonar/context.h"
+
+namespace vksonar {
+namespace {
+
+std::string version_text(std::uint32_t version) {
+    return std::to_string(VK_API_VERSION_MAJOR(version)) + "." + std::to_string(VK_API_VERSION_MINOR(version));
+}
+
+Error unsupported(const std::string& what) {
+    return make_error(ErrorCode::unsupported, "Context::adopt: " + what);
+}
+
+} // namespace
+
+Result<Context> Context::adopt(const HostVulkan& host) {
+    if (host.instance == VK_NULL_HANDLE || host.physical_device == VK_NULL_HANDLE || host.device == VK_NULL_HANDLE ||
+        host.queue == VK_NULL_HANDLE) {
+        return make_error(ErrorCode::invalid_argument,
+                          "Context::adopt: HostVulkan.instance, physical_device, device and queue must all be set");
+    }
+    if ((host.lock_queue == nullptr) != (host.unlock_queue == nullptr)) {
+        return make_error(ErrorCode::invalid_argument,
+                          "Context::adopt: HostVulkan.lock_queue and unlock_queue must be given together");
+    }
+    // The shaders are SPIR-V 1.3 (--target-env vulkan1.1), which a 1.0 instance or device may not accept.
+    if (host.instance_api_version != 0 && host.instance_api_version < VK_API_VERSION_1_1) {
+        return unsupported("the instance was created for Vulkan " + version_text(host.instance_api_version) +
+                           " (VkApplicationInfo.apiVersion); vksonar needs Vulkan 1.1");
+    }
+    auto vulkan = std::make_unique<VulkanContext>();
+    VulkanContext& context = *vulkan;
+    vkGetPhysicalDeviceProperties(host.physical_device, &context.properties);
+    if (context.properties.apiVersion < VK_API_VERSION_1_1) {
+        return unsupported(std::string("device ") + context.properties.deviceName + " supports Vulkan " +
+                           version_text(context.properties.apiVersion) + "; vksonar needs Vulkan 1.1");
+    }
+    std::uint32_t family_count = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, nullptr);
+    std::vector<VkQueueFamilyProperties> families(family_count);
+    vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, families.data());
+    if (host.queue_family >= family_count) {
+        return make_error(ErrorCode::invalid_argument,
+                          "Context::adopt: HostVulkan.queue_family = " + std::to_string(host.queue_family) +
+                              " but the device has " + std::to_string(family_count) + " queue families");
+    }
+    const VkQueueFlags flags = families[host.queue_family].queueFlags;
+    if ((flags & VK_QUEUE_COMPUTE_BIT) == 0) {
+        return unsupported("queue family " + std::to_string(host.queue_family) +
+                           " has no VK_QUEUE_COMPUTE_BIT; vksonar's stages are compute shaders");
+    }
+
+    context.instance = host.instance;
+    context.physical_device = host.physical_device;
+    context.device = host.device;
+    context.queue_family = host.queue_family;
+    context.queue = host.queue;
+    context.owns_instance = false;
+    context.owns_device = false;
+    context.graphics = (flags & VK_QUEUE_GRAPHICS_BIT) != 0;
+    context.timestamp_valid_bits = families[host.queue_family].timestampValidBits;
+    context.lock_queue = host.lock_queue;
+    context.unlock_queue = host.unlock_queue;
+    context.queue_lock_user = host.queue_lock_user;
+    char driver[16];
+    std::snprintf(driver, sizeof(driver), "%x", context.properties.driverVersion);
+    context.description = std::string(context.properties.deviceName) + " (Vulkan " +
+                          version_text(context.properties.apiVersion) + ", driver 0x" + driver + ", adopted)";
+
+    Context adopted;
+    adopted.vk_ = std::move(vulkan);
+    return adopted;
+}
+
+bool Context::owns_device() const {
+    return vk_ != nullptr && vk_->owns_device;
+}
+
+} // namespace vksonar

@@ -1,0 +1,466 @@
+// HostDepthPass: the Vulkan backend's compute stages on a host engine's depth image. The backend is
+// created without its depth pass (no scene, no render pass); this file adds the import pass and the
+// three ways to run: process (vksonar submits and waits), record (into the host's command buffer) and
+// read_back (after the host's submission finished, detected through an event vksonar sets).
+#include "vk/host_depth.h"
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <utility>
+
+#include "host_depth_shared.h"
+#include "scene/scene_data.h"
+#include "vk/commands.h"
+#include "vk/handles.h"
+#include "vk/pipelines.h"
+#include "vk/vk_error.h"
+#include "vk/vulkan_backend_impl.h"
+#include "vk/vulkan_context.h"
+
+#include "import_depth.comp.spv.h"
+
+namespace vksonar::vk {
+
+using OwnedEvent = Owned<VkEvent, vkDestroyEvent>;
+
+// Destroyed in reverse order of declaration; nothing is in use by then (see ~HostDepthPass), so the
+// order only has to keep no_scene alive as long as the backend that references it.
+struct HostDepthPass::Objects {
+    SceneData no_scene; // the backend keeps a reference; it has no depth pass to draw it with
+    std::unique_ptr<VulkanBackend> backend;
+    HostDepthDesc desc;
+    shared::ImportDepthPush push{};
+    VkImageAspectFlags barrier_aspect = VK_IMAGE_ASPECT_DEPTH_BIT;
+    OwnedDescriptorSetLayout image_set_layout;
+    OwnedPipelineLayout import_layout;
+    OwnedPipeline import_pipeline;
+    OwnedDescriptorPool image_pool;
+    VkDescriptorSet image_set = VK_NULL_HANDLE; // freed with image_pool
+    OwnedEvent done;                            // set by the last command record() records
+    bool recorded = false;
+    std::uint32_t recorded_mask = 0;
+    enum class Armed { none, process, read_back } armed = Armed::none;
+    HostDepthImage armed_image;
+};
+
+namespace {
+
+bool is_depth_format(VkFormat format) {
+    switch (format) {
+    case VK_FORMAT_D16_UNORM:
+    case VK_FORMAT_X8_D24_UNORM_PACK32:
+    case VK_FORMAT_D32_SFLOAT:
+    case VK_FORMAT_D16_UNORM_S8_UINT:
+    case VK_FORMAT_D24_UNORM_S8_UINT:
+    case VK_FORMAT_D32_SFLOAT_S8_UINT:
+        return true;
+    default:
+        return false;
+    }
+}
+
+bool has_stencil(VkFormat format) {
+    return format == VK_FORMAT_D16_UNORM_S8_UINT || format == VK_FORMAT_D24_UNORM_S8_UINT ||
+           format == VK_FORMAT_D32_SFLOAT_S8_UINT;
+}
+
+// Single-channel formats a host may keep depth in as colour (a G-buffer's linear depth, a depth copy).
+bool is_colour_depth_format(VkFormat format) {
+    return format == VK_FORMAT_R32_SFLOAT || format == VK_FORMAT_R16_SFLOAT || format == VK_FORMAT_R16_UNORM;
+}
+
+bool readable_layout(VkImageLayout layout) {
+    return layout == VK_IMAGE_LAYOUT_GENERAL || layout == VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL ||
+           layout == VK_IMAGE_LAYOUT_DEPTH_STENCIL_READ_ONLY_OPTIMAL ||
+           layout == VK_IMAGE_LAYOUT_DEPTH_READ_ONLY_STENCIL_ATTACHMENT_OPTIMAL;
+}
+
+template <class T> T* sized(std::vector<T>& v, std::size_t n) {
+    if (v.size() != n) v.resize(n); // only if the frame was not made by this renderer's make_frame()
+    return v.data();
+}
+
+} // namespace
+
+HostDepthPass::HostDepthPass() : objects_(std::make_unique<Objects>()) {}
+
+HostDepthPass::~HostDepthPass() {
+    // process() waits for its own work. Work recorded into the host's command buffer may still be
+    // pending: the host must have finished it (documented on Renderer); waiting for the event would
+    // hang forever on a command buffer that was never submitted, so nothing is waited for here.
+}
+
+Result<std::unique_ptr<HostDepthPass>> HostDepthPass::create(VulkanContext& context, const Plan& plan,
+                                                             const HostDepthDesc& desc) {
+    std::unique_ptr<HostDepthPass> pass(new HostDepthPass());
+    if (auto r = pass->init(context, plan, desc); !r) return r.error();
+    return pass;
+}
+
+Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc) {
+    Objects& o = *objects_;
+    o.desc = desc;
+    const bool depth_format = is_depth_format(desc.format);
+    if (!depth_format && !is_colour_depth_format(desc.format)) {
+        return make_error(ErrorCode::unsupported, "HostDepthDesc.format = " + std::to_string(desc.format) +
+                                                      " is not a depth format nor R32_SFLOAT/R16_SFLOAT/R16_UNORM");
+    }
+    if (desc.encoding == DepthEncoding::linear_m && desc.format != VK_FORMAT_R32_SFLOAT &&
+        desc.format != VK_FORMAT_R16_SFLOAT) {
+        return make_error(ErrorCode::invalid_argument,
+                          "HostDepthDesc: encoding linear_m needs a float colour format (R32_SFLOAT or R16_SFLOAT), "
+                          "format = " +
+                              std::to_string(desc.format));
+    }
+    VkFormatProperties properties;
+    vkGetPhysicalDeviceFormatProperties(context.physical_device, desc.format, &properties);
+    if ((properties.optimalTilingFeatures & VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT) == 0) {
+        return make_error(ErrorCode::unsupported, "Vulkan device " + context.description + " cannot sample format " +
+                                                      std::to_string(desc.format) +
+                                                      " (VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT missing)");
+    }
+    o.barrier_aspect = depth_format ? VK_IMAGE_ASPECT_DEPTH_BIT : VK_IMAGE_ASPECT_COLOR_BIT;
+    // Without separateDepthStencilLayouts a barrier on a combined format names both aspects.
+    if (has_stencil(desc.format)) o.barrier_aspect |= VK_IMAGE_ASPECT_STENCIL_BIT;
+
+    o.push.near_m = static_cast<float>(desc.near_m);
+    const double near_over_far = std::isinf(desc.far_m) ? 0.0 : desc.near_m / desc.far_m;
+    switch (desc.encoding) {
+    case DepthEncoding::standard_z:
+        o.push.encoding = shared::kHostDepthStandard;
+        o.push.z_a = 1.0f;
+        o.push.z_b = static_cast<float>(-(1.0 - near_over_far));
+        break;
+    case DepthEncoding::reversed_z:
+        o.push.encoding = shared::kHostDepthReversed;
+        o.push.z_a = static_cast<float>(near_over_far);
+        o.push.z_b = static_cast<float>(1.0 - near_over_far);
+        break;
+    case DepthEncoding::linear_m:
+        o.push.encoding = shared::kHostDepthLinear;
+        o.push.z_a = 1.0f;
+        o.push.z_b = 0.0f;
+        break;
+    }
+
+    // The backend without its depth pass: compute stages, tables, readback and command buffers only.
+    o.backend = std::make_unique<VulkanBackend>(context, plan, o.no_scene);
+    VulkanBackend& b = *o.backend;
+    b.incidence_ = plan.effects.incidence;
+    b.sidelobes_ = plan.effects.horizontal_pattern;
+    const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
+    const VkPhysicalDeviceLimits& limits = context.properties.limits;
+    if (group_count(pixels) > limits.maxComputeWorkGroupCount[0] || pixels * 16 > limits.maxStorageBufferRange) {
+        return make_error(ErrorCode::unsupported, "HostDepthDesc: " + std::to_string(plan.columns) + " x " +
+                                                      std::to_string(plan.rows) +
+                                                      " pixels exceed the device's compute limits");
+    }
+    if (auto r = b.create_compute(); !r) return r;
+    if (auto r = b.create_commands(); !r) return r;
+
+    VkDevice device = context.device;
+    VkDescriptorSetLayoutBinding binding{};
+    binding.binding = 0;
+    binding.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
+    binding.descriptorCount = 1;
+    binding.stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+    VkDescriptorSetLayoutCreateInfo set_layout_info{};
+    set_layout_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+    set_layout_info.bindingCount = 1;
+    set_layout_info.pBindings = &binding;
+    VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &set_layout_info, nullptr, &set_layout));
+    o.image_set_layout = OwnedDescriptorSetLayout(device, set_layout);
+
+    // Set 0 is the backend's compute set (params, depth, material id), set 1 the host image.
+    const std::array<VkDescriptorSetLayout, 2> set_layouts{b.set_layout_.get(), set_layout};
+    VkPushConstantRange push_range{VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(shared::ImportDepthPush)};
+    VkPipelineLayoutCreateInfo layout_info{};
+    layout_info.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    layout_info.setLayoutCount = static_cast<std::uint32_t>(set_layouts.size());
+    layout_info.pSetLayouts = set_layouts.data();
+    layout_info.pushConstantRangeCount = 1;
+    layout_info.pPushConstantRanges = &push_range;
+    VkPipelineLayout layout = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
+    o.import_layout = OwnedPipelineLayout(device, layout);
+
+    auto module = create_shader_module(device, import_depth_comp_spv, sizeof(import_depth_comp_spv));
+    if (!module) return module.error();
+    auto pipeline = create_compute_pipeline(device, layout, module->get(), 0, 1);
+    if (!pipeline) return pipeline.error();
+    o.import_pipeline = std::move(pipeline.value());
+
+    VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE, 1};
+    VkDescriptorPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    pool_info.maxSets = 1;
+    pool_info.poolSizeCount = 1;
+    pool_info.pPoolSizes = &pool_size;
+    VkDescriptorPool pool = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, nullptr, &pool));
+    o.image_pool = OwnedDescriptorPool(device, pool);
+    VkDescriptorSetAllocateInfo set_info{};
+    set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+    set_info.descriptorPool = pool;
+    set_info.descriptorSetCount = 1;
+    set_info.pSetLayouts = &set_layout;
+    VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &o.image_set));
+
+    VkEventCreateInfo event_info{};
+    event_info.sType = VK_STRUCTURE_TYPE_EVENT_CREATE_INFO;
+    VkEvent event = VK_NULL_HANDLE;
+    VKS_VK_TRY(vkCreateEvent(device, &event_info, nullptr, &event));
+    o.done = OwnedEvent(device, event);
+    return {};
+}
+
+Result<void> HostDepthPass::check_image(const HostDepthImage& image) const {
+    if (image.image == VK_NULL_HANDLE || image.view == VK_NULL_HANDLE) {
+        return make_error(ErrorCode::invalid_argument, "HostDepthImage: image and view must be set");
+    }
+    if (!readable_layout(image.layout)) {
+        return make_error(ErrorCode::invalid_argument,
+                          "HostDepthImage.layout = " + std::to_string(image.layout) +
+                              " cannot be sampled; use GENERAL, SHADER_READ_ONLY_OPTIMAL, "
+                              "DEPTH_STENCIL_READ_ONLY_OPTIMAL or DEPTH_READ_ONLY_STENCIL_ATTACHMENT_OPTIMAL");
+    }
+    return {};
+}
+
+// The set is rewritten for every ping instead of cached per view: a host may destroy a view and get
+// the same handle back for a new one. Rewriting is legal because the previous ping has finished
+// (process waits; record's contract is one ping in flight).
+void HostDepthPass::bind_image(const HostDepthImage& image) {
+    VkDescriptorImageInfo info{VK_NULL_HANDLE, image.view, image.layout};
+    VkWriteDescriptorSet write{};
+    write.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+    write.dstSet = objects_->image_set;
+    write.dstBinding = 0;
+    write.descriptorCount = 1;
+    write.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
+    write.pImageInfo = &info;
+    vkUpdateDescriptorSets(objects_->backend->context_.device, 1, &write, 0, nullptr);
+}
+
+void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage& image) {
+    Objects& o = *objects_;
+    VulkanBackend& b = *o.backend;
+    // The host's writes (by default its depth attachment writes) -> this pass's sampled reads. The
+    // layout stays the host's: vksonar only reads the image.
+    VkImageMemoryBarrier barrier{};
+    barrier.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+    barrier.srcAccessMask =
+        image.src_access != 0 ? image.src_access : VkAccessFlags(VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT);
+    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    barrier.oldLayout = image.layout;
+    barrier.newLayout = image.layout;
+    barrier.srcQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    barrier.image = image.image;
+    barrier.subresourceRange = {o.barrier_aspect, 0, VK_REMAINING_MIP_LEVELS, 0, VK_REMAINING_ARRAY_LAYERS};
+    const VkPipelineStageFlags src_stage = image.src_stage != 0
+                                               ? image.src_stage
+                                               : VkPipelineStageFlags(VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT |
+                                                                      VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT);
+    vkCmdPipelineBarrier(commands, src_stage, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, nullptr, 0, nullptr, 1,
+                         &barrier);
+
+    // The previous ping's stages read depth_/material_id_; make them wait before this one overwrites.
+    std::array<VkBufferMemoryBarrier, 2> reuse{
+        buffer_barrier(b.depth_.get(), kShaderOrTransferRead, VK_ACCESS_SHADER_WRITE_BIT),
+        buffer_barrier(b.material_id_.get(), kShaderOrTransferRead, VK_ACCESS_SHADER_WRITE_BIT)};
+    pipeline_barrier(commands, kComputeOrTransfer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 2, reuse.data());
+
+    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_pipeline.get());
+    const std::array<VkDescriptorSet, 2> sets{b.descriptor_set_, o.image_set};
+    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_layout.get(), 0,
+                            static_cast<std::uint32_t>(sets.size()), sets.data(), 0, nullptr);
+    vkCmdPushConstants(commands, o.import_layout.get(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(o.push), &o.push);
+    vkCmdDispatch(commands, group_count(std::uint64_t(b.plan_.columns) * b.plan_.rows), 1, 1);
+    std::array<VkBufferMemoryBarrier, 2> written{
+        buffer_barrier(b.depth_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead),
+        buffer_barrier(b.material_id_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead)};
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 2, written.data());
+}
+
+Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t save_mask, Frame& frame) {
+    if (auto r = check_image(image); !r) return r;
+    Objects& o = *objects_;
+    VulkanBackend& b = *o.backend;
+    VulkanContext& context = b.context_;
+    frame.times.clear();
+    frame.stages_run.clear();
+    bind_image(image);
+
+    // One command buffer per stage, submitted one at a time and timed on the host (the backend's
+    // timestamp path is tied to its own render(); a submit costs ~10 us against stages of ms).
+    constexpr int import_stage = 0, normals_stage = 1, echo_stage = 2, beamform_stage = 3, readback_stage = 4,
+                  stage_total = 5;
+    static_assert(stage_total <= int(stage_count), "the backend allocates stage_count command buffers");
+    constexpr std::array<const char*, std::size_t(stage_total)> names{"import", "normals", "echo", "beamform",
+                                                                      "readback"};
+    VKS_VK_TRY(vkResetCommandPool(context.device, b.command_pool_.get(), 0));
+    std::array<double, std::size_t(stage_total)> stage_ms{};
+    for (int stage = import_stage; stage < stage_total; ++stage) {
+        if (stage == normals_stage && !b.incidence_) continue;
+        VkCommandBuffer commands = b.command_buffers_[stage];
+        VkCommandBufferBeginInfo begin{};
+        begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+        begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+        VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
+        switch (stage) {
+        case import_stage:
+            record_import(commands, image);
+            break;
+        case normals_stage:
+            b.record_normals(commands);
+            break;
+        case echo_stage:
+            b.record_echo(commands);
+            break;
+        case beamform_stage:
+            b.record_beamform(commands);
+            break;
+        default:
+            b.record_readback(commands, save_mask);
+            break;
+        }
+        VKS_VK_TRY(vkEndCommandBuffer(commands));
+
+        const auto start = std::chrono::steady_clock::now();
+        VkSubmitInfo submit{};
+        submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+        submit.commandBufferCount = 1;
+        submit.pCommandBuffers = &commands;
+        const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+        if (stage == import_stage && image.wait_semaphore != VK_NULL_HANDLE) {
+            submit.waitSemaphoreCount = 1;
+            submit.pWaitSemaphores = &image.wait_semaphore;
+            submit.pWaitDstStageMask = &wait_stage;
+        }
+        VkFence fence = b.fence_.get();
+        VKS_VK_TRY(vkResetFences(context.device, 1, &fence));
+        VKS_VK_TRY(queue_submit(context, submit, fence));
+        VKS_VK_TRY(vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        stage_ms[stage] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        if (stage != readback_stage) {
+            frame.times.push_back(StageTime{names[stage], stage_ms[stage]});
+            frame.stages_run.emplace_back(names[stage]);
+        }
+    }
+    copy_frame_out(save_mask, frame);
+    return {};
+}
+
+Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImage& image, std::uint32_t save_mask) {
+    if (commands == VK_NULL_HANDLE) {
+        return make_error(ErrorCode::invalid_argument, "Renderer::record: command buffer is null");
+    }
+    if (auto r = check_image(image); !r) return r;
+    Objects& o = *objects_;
+    VulkanBackend& b = *o.backend;
+    // The previous ping has finished (one ping in flight), so the event can be reset from the host.
+    VKS_VK_TRY(vkResetEvent(b.context_.device, o.done.get()));
+    bind_image(image);
+    record_import(commands, image);
+    if (b.incidence_) b.record_normals(commands);
+    b.record_echo(commands);
+    b.record_beamform(commands);
+    b.record_readback(commands, save_mask);
+    // The polar scan stays readable by whatever the host records next (e.g. a fragment shader drawing it).
+    const Buffer& polar = b.sidelobes_ ? b.polar_ : b.beam_profiles_;
+    VkBufferMemoryBarrier visible = buffer_barrier(polar.get(), VK_ACCESS_SHADER_WRITE_BIT,
+                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT);
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 1, &visible);
+    vkCmdSetEvent(commands, o.done.get(), VK_PIPELINE_STAGE_TRANSFER_BIT);
+    o.recorded = true;
+    o.recorded_mask = save_mask;
+    return {};
+}
+
+Result<void> HostDepthPass::read_back(std::uint32_t save_mask, Frame& frame) {
+    Objects& o = *objects_;
+    if (!o.recorded) {
+        return make_error(ErrorCode::invalid_argument, "Renderer::read_back: nothing was recorded (call record first)");
+    }
+    const VkResult status = vkGetEventStatus(o.backend->context_.device, o.done.get());
+    if (status == VK_EVENT_RESET) {
+        return make_error(ErrorCode::invalid_argument,
+                          "Renderer::read_back: the command buffer given to record() has not finished executing "
+                          "(wait for the host's fence of that submission first)");
+    }
+    if (status != VK_EVENT_SET) return vk_error(status, "vkGetEventStatus");
+    frame.times.clear();
+    frame.stages_run.clear();
+    copy_frame_out(save_mask & o.recorded_mask, frame);
+    return {};
+}
+
+void HostDepthPass::arm_process(const HostDepthImage& image) {
+    objects_->armed = Objects::Armed::process;
+    objects_->armed_image = image;
+}
+
+void HostDepthPass::arm_read_back() {
+    objects_->armed = Objects::Armed::read_back;
+}
+
+Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the sonar*/, std::uint32_t save_mask,
+                                   Frame& frame) {
+    const Objects::Armed armed = std::exchange(objects_->armed, Objects::Armed::none);
+    switch (armed) {
+    case Objects::Armed::process:
+        return process(objects_->armed_image, save_mask, frame);
+    case Objects::Armed::read_back:
+        return read_back(save_mask, frame);
+    case Objects::Armed::none:
+        break;
+    }
+    return make_error(ErrorCode::invalid_argument,
+                      "render: this renderer was made by create_for_depth; use process() or record()");
+}
+
+GpuBufferView HostDepthPass::polar_buffer() const {
+    const VulkanBackend& b = *objects_->backend;
+    const Buffer& polar = b.sidelobes_ ? b.polar_ : b.beam_profiles_;
+    return GpuBufferView{polar.get(), 0, VkDeviceSize(b.plan_.bins) * b.plan_.beams * sizeof(float), b.plan_.beams,
+                         b.plan_.bins};
+}
+
+// Mirrors the copy-out at the end of VulkanBackend::render (vulkan_frame.cpp): same regions, same
+// layout conversions. Keep the two in step.
+void HostDepthPass::copy_frame_out(std::uint32_t save_mask, Frame& frame) const {
+    const VulkanBackend& b = *objects_->backend;
+    const Plan& plan = b.plan_;
+    const std::size_t pixels = std::size_t(plan.columns) * plan.rows;
+    const std::size_t cells = std::size_t(plan.bins) * plan.beams;
+    frame.beams = plan.beams;
+    frame.bins = plan.bins;
+    frame.columns = plan.columns;
+    frame.rows = plan.rows;
+    b.copy_out(b.polar_region_, sized(frame.clean, cells));
+    if (save_mask & save_depth) {
+        b.copy_out(b.depth_region_, sized(frame.depth, pixels));
+        b.copy_out(b.material_region_, sized(frame.material, pixels));
+    }
+    if (save_mask & save_normals) {
+        float* normals = sized(frame.normals, pixels * 4);
+        if (b.incidence_) {
+            b.copy_out(b.normals_region_, normals);
+        } else {
+            std::memset(normals, 0, pixels * 4 * sizeof(float));
+        }
+    }
+    if (save_mask & save_echo) b.copy_out(b.echo_region_, sized(frame.echo, pixels * 2));
+    if (save_mask & save_profiles) {
+        b.transpose_out(b.profiles_region_, plan.columns, plan.bins,
+                        sized(frame.profiles, std::size_t(plan.bins) * plan.columns));
+        b.copy_out(b.beam_profiles_region_, sized(frame.beam_profiles, cells));
+    }
+}
+
+} // namespace vksonar::vk
