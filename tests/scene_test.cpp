@@ -444,6 +444,11 @@ struct BadCase {
     const char* keyword;
 };
 
+// gtest would print the parameter as raw bytes (pointer values); show the file and keyword instead.
+void PrintTo(const BadCase& c, std::ostream* os) {
+    *os << c.file << " (expects '" << c.keyword << "')";
+}
+
 const BadCase bad_cases[] = {
     {"truncated_json.gltf", ErrorCode::parse, "invalid JSON"},
     {"not_json.gltf", ErrorCode::parse, "invalid JSON"},

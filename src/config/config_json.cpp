@@ -73,6 +73,12 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
         const auto pos = what.find("] ");
         if (pos != std::string::npos) what = what.substr(pos + 2);
         return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
+    } catch (const nlohmann::json::exception& e) {
+        // Not a syntax error but a value the parser cannot hold, e.g. "range_max": 1e999 (out_of_range.406).
+        std::string what = e.what();
+        const auto pos = what.find("] ");
+        if (pos != std::string::npos) what = what.substr(pos + 2);
+        return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
     }
     if (!root.is_object())
         return make_error(ErrorCode::parse, origin + ": expected a JSON object of config keys, got " +

@@ -245,9 +245,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     }
     const double reach = c.sidelobe_kernel_beamwidths * hbw;
     std::uint32_t half_taps = 0;
+    p.circular = c.hfov_deg >= 360.0 && p.beams > 1;
     if (p.beams > 1) {
         const double k = std::floor(reach / min_spacing);
-        half_taps = static_cast<std::uint32_t>(std::min<double>({k, p.beams - 1.0, double(kMaxSidelobeHalfTaps)}));
+        // On a circle a kernel wider than the fan would count a source beam twice.
+        const double widest = p.circular ? std::floor((p.beams - 1) / 2.0) : p.beams - 1.0;
+        half_taps = static_cast<std::uint32_t>(std::min<double>({k, widest, double(kMaxSidelobeHalfTaps)}));
     }
 
     ResolvedEffects& e = p.effects;
@@ -282,7 +285,14 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         const double a = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
         p.column_azimuth_rad[col] = a;
         const std::vector<double>& b = p.beam_angle_rad;
-        if (a >= b.front()) {
+        if (p.circular && (a > b.front() || a < b.back())) {
+            // The seam between beam 0 and beam beams-1 (at b.back() + 2 pi): a tent across it, so a
+            // target at 180 deg is beamformed like one anywhere else.
+            const double two_pi = 2.0 * 3.14159265358979323846;
+            const double beyond_beam0 = a > b.front() ? a - b.front() : a + two_pi - b.front();
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = static_cast<float>(beyond_beam0 / (b.back() + two_pi - b.front()));
+        } else if (a >= b.front()) {
             p.column_beam[col] = 0;
             p.column_weight[col] = 1.0f;
         } else if (a <= b.back()) {
@@ -305,6 +315,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
             p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
         }
     }
+    if (p.circular) { // the edge beams gather seam columns at both ends of the pixel grid
+        for (std::uint32_t j : {0u, p.beams - 1}) {
+            p.beam_column_begin[j] = 0;
+            p.beam_column_end[j] = p.columns;
+        }
+    }
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
     }
@@ -316,9 +332,11 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     const std::uint32_t hshape = static_cast<std::uint32_t>(c.horizontal_pattern);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
-            const std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
+            std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
+            if (p.circular) src = (src + p.beams) % p.beams; // half_taps < beams / 2: one wrap at most
             if (src < 0 || src >= p.beams) continue;
-            const double sep = p.beam_angle_rad[src] - p.beam_angle_rad[j];
+            double sep = p.beam_angle_rad[src] - p.beam_angle_rad[j];
+            if (p.circular) sep = std::remainder(sep, 2.0 * 3.14159265358979323846); // into [-pi, pi]
             float w = 1.0f;
             if (half_taps > 0) {
                 w = std::abs(sep) <= reach + 1e-12

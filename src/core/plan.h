@@ -62,6 +62,10 @@ struct Plan {
     // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t).
     std::uint32_t sidelobe_taps = 1; // 2K + 1
     std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
+    // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
+    // +-180 deg seam. Then column_beam[c] + 1 and the side-lobe source j - K + t wrap modulo beams,
+    // and seam columns split their energy between beam beams-1 and beam 0 (docs/pipeline.md §4).
+    bool circular = false;
 
     // Acoustic materials as uploaded (index = material id written by the depth pass).
     std::vector<shared::MaterialGpu> materials;

@@ -84,7 +84,8 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
             for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c) {
                 const std::uint32_t b = plan.column_beam[c];
                 const Real cw = static_cast<Real>(plan.column_weight[c]);
-                const Real w = b == j ? cw : (b + 1 == j ? Real(1) - cw : Real(0));
+                const bool next = plan.circular ? (b + 1) % beams == j : b + 1 == j; // wraps on a full circle
+                const Real w = b == j ? cw : (next ? Real(1) - cw : Real(0));
                 sum += w * static_cast<Real>(prof[c]);
             }
             beam_profiles[static_cast<std::size_t>(k) * beams + j] = static_cast<float>(sum);
@@ -131,8 +132,16 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
                 j += 4;
                 continue;
             }
-            // Taps whose source beam j - K + t lies in [0, beams), in increasing t.
             const float* w = weights + static_cast<std::size_t>(j) * taps;
+            if (plan.circular) { // source j - K + t modulo beams (plan.circular: K < beams / 2)
+                Real sum = Real(0);
+                for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
+                    sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
+                out[j] = static_cast<float>(sum);
+                ++j;
+                continue;
+            }
+            // Taps whose source beam j - K + t lies in [0, beams), in increasing t.
             const std::int64_t first = std::max<std::int64_t>(0, K - j);
             const std::int64_t end = std::min<std::int64_t>(taps, nb + K - j);
             const float* src = B + (j - K);

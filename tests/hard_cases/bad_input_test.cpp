@@ -1,0 +1,160 @@
+// Bad input through the command line, every path a user can feed that tests/cli_test.cpp does not
+// already cover: each malformed glTF of the corpus (tests/data/bad_gltf) given to `vksonar render`,
+// and the edge values of the config validator. Each must exit 2 within a bounded time (run under
+// `timeout`), print exactly one `error: ...` line naming the file/field/value, and leave no output.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr int kTimeoutSeconds = 60; // a bad-input run takes milliseconds; 60 s means "hung"
+
+struct CliResult {
+    int exit_code = -1;
+    std::string err;
+};
+
+std::string quote(const std::string& arg) {
+    std::string quoted = "'";
+    for (char ch : arg) {
+        if (ch == '\'') quoted += "'\\''";
+        else quoted += ch;
+    }
+    return quoted + "'";
+}
+
+std::string read_text(const fs::path& path) {
+    std::ifstream file(path, std::ios::binary);
+    std::stringstream text;
+    text << file.rdbuf();
+    return text.str();
+}
+
+void write_text(const fs::path& path, const std::string& text) {
+    std::ofstream file(path, std::ios::binary);
+    file << text;
+}
+
+class BadInput : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() /
+               ("vksonar_bad_input_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+        // The smallest valid scene: one triangle 10 m ahead (buffer: 3 float VEC3, no indices).
+        write_text(dir_ / "ok.gltf", R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+  "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,AAAgQQAAgL8AAAAAAAAgQQAAgD8AAAAAAAAgQQAAAAAAAIA/"}],
+  "bufferViews": [{"buffer": 0, "byteLength": 36}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [10, -1, 0], "max": [10, 1, 1]}]})");
+    }
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+
+    CliResult run(const std::vector<std::string>& args) const {
+        std::string command = "timeout " + std::to_string(kTimeoutSeconds) + " " + quote(VKSONAR_CLI);
+        for (const auto& arg : args) command += " " + quote(arg);
+        const fs::path err = dir_ / "stderr.txt";
+        command += " > /dev/null 2> " + quote(err.string()) + " < /dev/null";
+        const int status = std::system(command.c_str());
+        CliResult r;
+        r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        r.err = read_text(err);
+        return r;
+    }
+
+    // `vksonar render ARGS --out DIR/never/out` (plus --scene ok.gltf unless given, CPU backend) must
+    // fail with exit 2 and one line `error: ...` containing every `expected` string, leaving nothing.
+    void expect_bad_render(std::vector<std::string> args, const std::vector<std::string>& expected) const {
+        const fs::path parent = dir_ / "never";
+        args.insert(args.begin(), "render");
+        args.insert(args.end(), {"--backend", "cpu", "--out", (parent / "out").string()});
+        if (std::find(args.begin(), args.end(), "--scene") == args.end()) {
+            args.push_back("--scene");
+            args.push_back((dir_ / "ok.gltf").string());
+        }
+        const CliResult r = run(args);
+        std::string joined;
+        for (const auto& a : args) joined += a + " ";
+        ASSERT_NE(r.exit_code, 124) << "timed out after " << kTimeoutSeconds << " s: " << joined;
+        EXPECT_EQ(r.exit_code, 2) << joined << "\nstderr: " << r.err;
+        ASSERT_FALSE(r.err.empty()) << joined;
+        EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "exactly one line: " << r.err;
+        EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
+        for (const auto& text : expected) EXPECT_NE(r.err.find(text), std::string::npos) << "'" << text << "' in " << r.err;
+        EXPECT_FALSE(fs::exists(parent)) << "output left behind by: " << joined;
+    }
+
+    fs::path dir_;
+};
+
+TEST_F(BadInput, ValidSceneRendersSoTheFailuresBelowAreTheInputs) {
+    const CliResult r = run({"render", "--backend", "cpu", "--scene", (dir_ / "ok.gltf").string(), "--set", "bins=32",
+                       "--set", "beams=16", "--set", "display.fan_width=64", "--out", (dir_ / "out").string()});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(fs::is_regular_file(dir_ / "out" / "polar.npy"));
+}
+
+TEST_F(BadInput, EveryMalformedGltfOfTheCorpusIsExit2AndOneLine) {
+    int files = 0;
+    for (const auto& entry : fs::directory_iterator(std::string(VKSONAR_TEST_DIR) + "/data/bad_gltf")) {
+        const std::string ext = entry.path().extension().string();
+        if (ext != ".gltf" && ext != ".glb") continue;
+        SCOPED_TRACE(entry.path().filename().string());
+        expect_bad_render({"--scene", entry.path().string()}, {entry.path().filename().string()});
+        ++files;
+    }
+    EXPECT_GE(files, 30);
+    expect_bad_render({"--scene", (dir_ / "missing.gltf").string()}, {"missing.gltf", "no such file"});
+}
+
+TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
+    expect_bad_render({"--set", "hfov=0"}, {"hfov = 0"});
+    expect_bad_render({"--set", "hfov=-5"}, {"hfov = -5"});
+    expect_bad_render({"--set", "vfov=0"}, {"vfov = 0"});
+    expect_bad_render({"--set", "vfov=-1"}, {"vfov = -1"});
+    expect_bad_render({"--set", "range_min=0"}, {"range_min = 0"});
+    expect_bad_render({"--set", "range_min=5", "--set", "range_max=5"}, {"range_max = 5"}); // empty window
+    expect_bad_render({"--set", "range_min=-3", "--set", "range_max=-1"}, {"range_min = -3"});
+    expect_bad_render({"--set", "range_max=inf"}, {"range_max", "inf"});
+    expect_bad_render({"--set", "range_min=nan"}, {"range_min", "nan"});
+    expect_bad_render({"--set", "beams=-1"}, {"beams", "-1"});
+    expect_bad_render({"--set", "bins=1e12"}, {"bins"});
+    expect_bad_render({"--set", "hfov=360.0001"}, {"hfov = 360.0001"});
+    // JSON cannot spell NaN/Inf, but 1e999 overflows the parser's double (it used to escape as an
+    // uncaught exception: exit 1, "error: internal: ...").
+    write_text(dir_ / "huge.json", R"({"range_max": 1e999})");
+    expect_bad_render({"--config", (dir_ / "huge.json").string()}, {"huge.json", "1e999"});
+    expect_bad_render({"--set", "range_max=1e999"}, {"range_max"});
+    write_text(dir_ / "null.json", R"({"beams": null})");
+    expect_bad_render({"--config", (dir_ / "null.json").string()}, {"null.json", "beams"});
+    write_text(dir_ / "empty.json", "");
+    expect_bad_render({"--config", (dir_ / "empty.json").string()}, {"empty.json"});
+}
+
+TEST_F(BadInput, NonFinitePosesAndTrajectoryValues) {
+    expect_bad_render({"--pose", "0,0,nan,0,0,0"}, {"--pose"});
+    expect_bad_render({"--pose", "0,0,0,0,1e999,0"}, {"--pose"});
+    write_text(dir_ / "nan.csv", "0,0,0,0,10,0\n0,0,0,0,nan,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "nan.csv").string()}, {"nan.csv:2"});
+    write_text(dir_ / "extra.csv", "0,0,0,0,10,0,7\n");
+    expect_bad_render({"--trajectory", (dir_ / "extra.csv").string()}, {"extra.csv:1"});
+}
+
+} // namespace
