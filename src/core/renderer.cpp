@@ -99,6 +99,10 @@ Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame
     if (frame.clean.size() != static_cast<std::size_t>(p.bins) * p.beams) {
         return make_error(ErrorCode::invalid_argument, "render: frame was not made by this renderer's make_frame()");
     }
+    // Each render reports its own stages: the frame is reused, so the lists start empty (clear keeps
+    // the capacity reserved by make_frame; no allocation).
+    frame.times.clear();
+    frame.stages_run.clear();
     auto r = impl_->backend->render(pose, impl_->options.save_mask, frame);
     if (!r) return r;
     const auto t0 = std::chrono::steady_clock::now();
