@@ -3,9 +3,9 @@
 // order: no atomics, bit-identical run to run. The host zeroes `profiles` (vkCmdFillBuffer) first:
 // a memset is far cheaper than per-invocation strided stores.
 //
-// GPU layout: profiles[column * bins + bin] (bins fastest), so that resample.comp, whose invocations
-// are consecutive bins, reads contiguous memory. The host transposes to the public bins x columns
-// layout when profiles are saved.
+// GPU layout: profiles[column * bins_padded + bin] (bins fastest, padded to a multiple of 4), so that
+// resample.comp loads four bins of a column as one vec4. The host transposes to the public
+// bins x columns layout when profiles are saved.
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
@@ -26,7 +26,7 @@ void main() {
         return;
     }
     uint bins = params.bins;
-    uint base = column * bins;
+    uint base = column * params.bins_padded;
     uint rows = params.rows;
     uint kernel = params.range_kernel;
     float r_up = 0.0;

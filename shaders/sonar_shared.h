@@ -84,7 +84,7 @@ struct SonarParams {
 
     float edge_relative_jump; // neighbours whose range differs by more than this fraction are not the same surface
     float vpattern_halfwidth_rad; // for the box pattern
-    float pad0;
+    uint bins_padded; // GPU only: bins rounded up to a multiple of 4 (vec4 layouts of the beamform stage)
     float pad1;
 };
 #ifdef __cplusplus

@@ -78,11 +78,6 @@ bool readable_layout(VkImageLayout layout) {
            layout == VK_IMAGE_LAYOUT_DEPTH_READ_ONLY_STENCIL_ATTACHMENT_OPTIMAL;
 }
 
-template <class T> T* sized(std::vector<T>& v, std::size_t n) {
-    if (v.size() != n) v.resize(n); // only if the frame was not made by this renderer's make_frame()
-    return v.data();
-}
-
 } // namespace
 
 HostDepthPass::HostDepthPass() : objects_(std::make_unique<Objects>()) {}
@@ -431,36 +426,9 @@ GpuBufferView HostDepthPass::polar_buffer() const {
                          b.plan_.bins};
 }
 
-// Mirrors the copy-out at the end of VulkanBackend::render (vulkan_frame.cpp): same regions, same
-// layout conversions. Keep the two in step.
+// The backend's own copy-out: same regions, same layout conversions.
 void HostDepthPass::copy_frame_out(std::uint32_t save_mask, Frame& frame) const {
-    const VulkanBackend& b = *objects_->backend;
-    const Plan& plan = b.plan_;
-    const std::size_t pixels = std::size_t(plan.columns) * plan.rows;
-    const std::size_t cells = std::size_t(plan.bins) * plan.beams;
-    frame.beams = plan.beams;
-    frame.bins = plan.bins;
-    frame.columns = plan.columns;
-    frame.rows = plan.rows;
-    b.copy_out(b.polar_region_, sized(frame.clean, cells));
-    if (save_mask & save_depth) {
-        b.copy_out(b.depth_region_, sized(frame.depth, pixels));
-        b.copy_out(b.material_region_, sized(frame.material, pixels));
-    }
-    if (save_mask & save_normals) {
-        float* normals = sized(frame.normals, pixels * 4);
-        if (b.incidence_) {
-            b.copy_out(b.normals_region_, normals);
-        } else {
-            std::memset(normals, 0, pixels * 4 * sizeof(float));
-        }
-    }
-    if (save_mask & save_echo) b.copy_out(b.echo_region_, sized(frame.echo, pixels * 2));
-    if (save_mask & save_profiles) {
-        b.transpose_out(b.profiles_region_, plan.columns, plan.bins,
-                        sized(frame.profiles, std::size_t(plan.bins) * plan.columns));
-        b.copy_out(b.beam_profiles_region_, sized(frame.beam_profiles, cells));
-    }
+    objects_->backend->copy_frame_out(save_mask, frame);
 }
 
 } // namespace vksonar::vk

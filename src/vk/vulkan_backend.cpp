@@ -54,10 +54,9 @@ Result<void> VulkanBackend::init() {
     const std::uint64_t largest_dispatch =
         std::max({std::uint64_t(group_count(pixels / kEchoPixels + 1)),
                   std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
-                  std::uint64_t(group_count(plan_.bins)), ceil_div(plan_.beams, kBeamsPerInvocation)});
-    // resample and sidelobe put bins and beam runs on x and y in opposite orders
-    const std::uint64_t largest_y = std::max(std::uint64_t(group_count(plan_.bins)), ceil_div(plan_.beams, kBeamsPerInvocation));
-    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] || largest_y > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
+                  std::uint64_t(group_count(ceil_div(plan_.bins, 4)))});
+    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
+        ceil_div(plan_.beams, kBeamsPerInvocation) > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -168,7 +167,12 @@ Result<void> VulkanBackend::create_compute() {
     VkDevice device = context_.device;
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
-    const std::size_t profile_cells = std::size_t(plan_.bins) * plan_.columns;
+    // Beamform intermediates are bin-fastest with bins padded to a multiple of 4, so resample and
+    // sidelobe can load four range bins as one vec4 (see resample.comp).
+    gpu_params_ = plan_.params;
+    gpu_params_.bins_padded = (plan_.bins + 3u) & ~3u;
+    const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
+    const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.columns;
     const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     const VkBufferUsageFlags in = storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     const VkBufferUsageFlags out = storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
@@ -186,7 +190,7 @@ Result<void> VulkanBackend::create_compute() {
         {&echo_, pixels * 2 * sizeof(float), out},
         {&profiles_, profile_cells * sizeof(float),
          out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
-        {&beam_profiles_, cells * sizeof(float), out},
+        {&beam_profiles_, padded_cells * sizeof(float), out},
         {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
     }};
     for (const Working& w : working) {
@@ -207,7 +211,7 @@ Result<void> VulkanBackend::create_compute() {
         VkBufferUsageFlags usage;
     };
     const std::array<Table, 8> tables{{
-        {&params_, &plan_.params, sizeof(plan_.params), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT},
+        {&params_, &gpu_params_, sizeof(gpu_params_), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT},
         {&slice_info_, plan_.slice_info.data(), bytes_of(plan_.slice_info), storage},
         {&materials_, materials.data(), bytes_of(materials), storage},
         {&column_beam_, plan_.column_beam.data(), bytes_of(plan_.column_beam), storage},
@@ -236,7 +240,7 @@ Result<void> VulkanBackend::create_compute() {
     place(normals_region_, incidence_ ? pixels * 4 * sizeof(float) : 0);
     place(echo_region_, pixels * 2 * sizeof(float));
     place(profiles_region_, profile_cells * sizeof(float));
-    place(beam_profiles_region_, cells * sizeof(float));
+    place(beam_profiles_region_, (sidelobes_ ? padded_cells : cells) * sizeof(float));
     auto readback = create_buffer(context_, readback_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
     if (!readback) return readback.error();
     readback_ = std::move(readback.value());
@@ -306,7 +310,9 @@ Result<void> VulkanBackend::create_compute() {
     }
     if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), kEchoPixels); !r) return r;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), 1); !r) return r;
-    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv), kBeamsPerInvocation); !r)
+    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv), kBeamsPerInvocation,
+                      sidelobes_ ? 1u : 0u);
+        !r)
         return r;
     if (sidelobes_) {
         if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), kBeamsPerInvocation); !r)

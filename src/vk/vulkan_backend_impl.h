@@ -89,8 +89,10 @@ private:
 
     Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
     void copy_out(const Region& region, void* destination) const;
-    // Copies an outer x inner float array out of the readback buffer as inner x outer.
-    void transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, float* destination) const;
+    void copy_frame_out(std::uint32_t save_mask, Frame& frame) const;
+    // Copies an outer x inner float array (rows `stride` apart) out of the readback buffer as inner x outer.
+    void transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, std::uint32_t stride,
+                       float* destination) const;
 
     VulkanContext& context_;
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
@@ -118,6 +120,7 @@ private:
     OwnedPipelineLayout compute_layout_;
     OwnedDescriptorPool descriptor_pool_;
     VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE; // freed with the pool
+    shared::SonarParams gpu_params_{}; // plan_.params plus the GPU-only layout fields
     OwnedPipeline normals_pipeline_, echo_pipeline_, profile_pipeline_, resample_pipeline_, sidelobe_pipeline_;
 
     OwnedCommandPool command_pool_;

@@ -99,15 +99,15 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     vkCmdDispatch(commands, group_count(plan_.columns), 1, 1);
     compute_barrier(commands, profiles_);
 
-    // resample: x = groups of bins, y = runs of beams; sidelobe: x = runs of beams, y = groups of bins.
+    // resample and sidelobe: x = groups of 4-bin quads, y = runs of beams.
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
-    const std::uint32_t bin_groups = group_count(plan_.bins);
+    const std::uint32_t bin_groups = group_count(ceil_div(plan_.bins, 4));
     vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
     vkCmdDispatch(commands, bin_groups, beam_runs, 1);
     compute_barrier(commands, beam_profiles_);
     if (sidelobes_) {
         vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
-        vkCmdDispatch(commands, beam_runs, bin_groups, 1);
+        vkCmdDispatch(commands, bin_groups, beam_runs, 1);
         compute_barrier(commands, polar_);
     }
 }
@@ -151,11 +151,11 @@ void VulkanBackend::copy_out(const Region& region, void* destination) const {
 }
 
 void VulkanBackend::transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner,
-                                  float* destination) const {
-    // source[o * inner + i] -> destination[i * outer + o]
+                                  std::uint32_t stride, float* destination) const {
+    // source[o * stride + i] -> destination[i * outer + o], i < inner
     const auto* source = reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + region.offset);
     for (std::size_t o = 0; o < outer; ++o)
-        for (std::size_t i = 0; i < inner; ++i) destination[i * outer + o] = source[o * inner + i];
+        for (std::size_t i = 0; i < inner; ++i) destination[i * outer + o] = source[o * stride + i];
 }
 
 namespace {
@@ -251,7 +251,13 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
         frame.stages_run.emplace_back(kStageNames[stages[i]]);
     }
 
-    // Copy out of the (coherent) readback buffer.
+    copy_frame_out(save_mask, frame);
+    return {};
+}
+
+// Copies what this frame saved out of the (coherent) readback buffer into `frame`, converting the GPU
+// layouts to the public ones. Also used by the host-depth pass (host_depth.cpp).
+void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const {
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     frame.beams = plan_.beams;
@@ -275,11 +281,15 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
     if (save_mask & save_profiles) {
         // The GPU keeps profiles column-major (contiguous loads in resample.comp); the Frame holds the
         // public range-major layout.
-        transpose_out(profiles_region_, plan_.columns, plan_.bins,
+        const std::uint32_t padded = gpu_params_.bins_padded;
+        transpose_out(profiles_region_, plan_.columns, plan_.bins, padded,
                       sized(frame.profiles, std::size_t(plan_.bins) * plan_.columns));
-        copy_out(beam_profiles_region_, sized(frame.beam_profiles, cells));
+        if (sidelobes_) { // beam-major, padded: the side-lobe pass's input layout
+            transpose_out(beam_profiles_region_, plan_.beams, plan_.bins, padded, sized(frame.beam_profiles, cells));
+        } else {
+            copy_out(beam_profiles_region_, sized(frame.beam_profiles, cells));
+        }
     }
-    return {};
 }
 
 } // namespace vksonar::vk
