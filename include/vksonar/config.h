@@ -110,6 +110,8 @@ struct SonarConfig {
 // Accuracy presets fast | balanced (the defaults) | accurate: sets the accuracy.* keys (docs/accuracy.md).
 [[nodiscard]] Result<SonarConfig> apply_quality(const SonarConfig& base, const std::string& name);
 [[nodiscard]] std::vector<std::string> quality_names();
+// The `key=value` overrides a quality stands for (empty for an unknown name).
+[[nodiscard]] std::vector<std::string> quality_settings(const std::string& name);
 // The fully resolved config as JSON text (for meta.json and `vksonar presets --show`).
 [[nodiscard]] std::string config_to_json(const SonarConfig& config);
 

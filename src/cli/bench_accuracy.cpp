@@ -31,7 +31,8 @@ constexpr const char* kUsage =
     "\n"
     "Sweeps the accuracy knobs one at a time around the config (default: the bundled scene and preset):\n"
     "accuracy.pixels_per_beam 1,2,4,8; accuracy.rows_per_vfov 16,32,64,128; accuracy.max_slice 15,30,60,120;\n"
-    "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6.\n"
+    "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6; and the\n"
+    "--quality presets fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
     "range_kernel footprint, sidelobe_kernel_beamwidths 8, and a second one with each row's own side-lobe\n"
     "kernel width (isolates the other knobs). Speckle, ambient noise and TVG are off everywhere.\n"
@@ -278,17 +279,27 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         {"sidelobe_kernel_beamwidths", "1"},
         {"sidelobe_kernel_beamwidths", "2"},
         {"sidelobe_kernel_beamwidths", "6"},
+        {"quality", "fast"},
+        {"quality", "balanced"},
+        {"quality", "accurate"},
     };
     std::vector<Row> rows(settings.size());
     std::vector<const std::vector<float>*> row_matched(settings.size());
     for (std::size_t i = 0; i < settings.size(); ++i) {
         rows[i].setting = settings[i];
-        const std::string width = settings[i].knob == "sidelobe_kernel_beamwidths"
-                                      ? settings[i].value
-                                      : fmt(base.sidelobe_kernel_beamwidths, 0);
-        row_matched[i] = &matched_reference(width);
         std::vector<std::string> sets = base_sets;
-        if (settings[i].knob != "default") sets.push_back("accuracy." + settings[i].knob + "=" + settings[i].value);
+        std::string width = fmt(base.sidelobe_kernel_beamwidths, 0);
+        if (settings[i].knob == "quality") { // a whole --quality preset (src/config/quality.cpp)
+            for (const std::string& s : quality_settings(settings[i].value)) {
+                sets.push_back(s);
+                const std::string key = "accuracy.sidelobe_kernel_beamwidths=";
+                if (s.rfind(key, 0) == 0) width = s.substr(key.size());
+            }
+        } else if (settings[i].knob != "default") {
+            sets.push_back("accuracy." + settings[i].knob + "=" + settings[i].value);
+            if (settings[i].knob == "sidelobe_kernel_beamwidths") width = settings[i].value;
+        }
+        row_matched[i] = &matched_reference(width);
         const std::string label =
             settings[i].knob == "default" ? "default" : settings[i].knob + "=" + settings[i].value;
         if (vulkan_context) {

@@ -1,42 +1,67 @@
-// Accuracy presets: named sets of the accuracy.* knobs (docs/accuracy.md has the measurements
-// behind them). Applied as a layer of JSON on top of a config, so their values go through the same
-// checks as any user file.
+// Accuracy presets: named sets of the accuracy.* knobs, applied as `key=value` overrides so their
+// values go through the same checks as any user setting.
 #include <array>
 #include <string>
 #include <string_view>
-#include <utility>
 
 #include "vksonar/config.h"
 
 namespace vksonar {
 namespace {
 
-constexpr std::array<std::pair<std::string_view, std::string_view>, 3> kQualities{{
-    // One pixel column per beam spacing, half the rows, a tent range kernel: the cheapest frame
-    // that still puts every target in the right beam and bin (stripes on a grazing seabed at range).
-    {"fast", R"({"accuracy": {"pixels_per_beam": 1, "rows_per_vfov": 32, "range_kernel": "tent",
-                 "sidelobe_kernel_beamwidths": 2, "normal_method": "sobel3"}})"},
+struct Quality {
+    std::string_view name;
+    std::array<std::string_view, 5> settings;
+};
+
+// Chosen from `vksonar bench accuracy` on the bundled scenes (README, docs/benchmarks.md): rows per
+// vertical beamwidth and the range kernel buy the most accuracy per millisecond, then narrower
+// slices; more than 2 pixel columns per beam buys little for extended scenes (it matters for point
+// targets: tests/accuracy_test.cpp).
+constexpr std::array<Quality, 3> kQualities{{
+    // One pixel column per beam and a 2-beamwidth side-lobe kernel; rows and the footprint kernel
+    // stay (cutting them costs 9-23 dB RMSE on a grazing seabed).
+    {"fast",
+     {"accuracy.pixels_per_beam=1", "accuracy.rows_per_vfov=64", "accuracy.range_kernel=footprint",
+      "accuracy.sidelobe_kernel_beamwidths=2", "accuracy.max_slice=60"}},
     // The defaults.
-    {"balanced", R"({"accuracy": {"pixels_per_beam": 2, "rows_per_vfov": 64, "range_kernel": "footprint",
-                     "sidelobe_kernel_beamwidths": 3, "normal_method": "sobel3"}})"},
-    // Four columns per beam, twice the rows, narrower slices, wider side-lobe kernel.
-    {"accurate", R"({"accuracy": {"pixels_per_beam": 4, "rows_per_vfov": 128, "range_kernel": "footprint",
-                     "sidelobe_kernel_beamwidths": 6, "max_slice": 30, "normal_method": "sobel3"}})"},
+    {"balanced",
+     {"accuracy.pixels_per_beam=2", "accuracy.rows_per_vfov=64", "accuracy.range_kernel=footprint",
+      "accuracy.sidelobe_kernel_beamwidths=3", "accuracy.max_slice=60"}},
+    // Four columns per beam, twice the rows, 15-degree slices, a 6-beamwidth side-lobe kernel.
+    {"accurate",
+     {"accuracy.pixels_per_beam=4", "accuracy.rows_per_vfov=128", "accuracy.range_kernel=footprint",
+      "accuracy.sidelobe_kernel_beamwidths=6", "accuracy.max_slice=15"}},
 }};
 
 } // namespace
 
 std::vector<std::string> quality_names() {
     std::vector<std::string> names;
-    for (const auto& [name, json] : kQualities) names.emplace_back(name);
+    for (const Quality& q : kQualities) names.emplace_back(q.name);
     return names;
 }
 
+std::vector<std::string> quality_settings(const std::string& name) {
+    std::vector<std::string> out;
+    for (const Quality& q : kQualities)
+        if (q.name == name)
+            for (std::string_view s : q.settings) out.emplace_back(s);
+    return out;
+}
+
 Result<SonarConfig> apply_quality(const SonarConfig& base, const std::string& name) {
-    for (const auto& [quality, json] : kQualities)
-        if (quality == name) return apply_config_json(base, std::string(json), "quality " + name);
-    return make_error(ErrorCode::invalid_argument,
-                      "quality: '" + name + "' is not a quality (fast, balanced or accurate)");
+    const std::vector<std::string> settings = quality_settings(name);
+    if (settings.empty())
+        return make_error(ErrorCode::invalid_argument,
+                          "quality: '" + name + "' is not a quality (fast, balanced or accurate)");
+    SonarConfig config = base;
+    for (const std::string& setting : settings) {
+        auto applied = apply_config_override(config, setting);
+        if (!applied) return applied.error();
+        config = applied.value();
+    }
+    return config;
 }
 
 } // namespace vksonar
