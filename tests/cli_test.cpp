@@ -428,7 +428,7 @@ TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto accuracy = nlohmann::json::parse(read_text(out / "meta.json"))["config"]["accuracy"];
     EXPECT_EQ(accuracy["pixels_per_beam"], 4.0); // from the quality preset
-    EXPECT_EQ(accuracy["max_slice"], 30.0);
+    EXPECT_EQ(accuracy["max_slice"], 15.0);
     EXPECT_EQ(accuracy["rows_per_vfov"], 96); // --set is applied after --quality
 
     const CliRun bad = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--quality", "ultra", "--out",
