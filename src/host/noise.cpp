@@ -96,7 +96,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             if (speckle && signal > 0.0) {
                 double s = 1.0;
                 switch (model) {
-                case SpeckleModel::rayleigh: s = rng::exp1(key, beam, bin, kSpeckleStream); break;
+                case SpeckleModel::rayleigh: s = rng::exp1f(key, beam, bin, kSpeckleStream); break;
                 case SpeckleModel::gamma:
                     s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
                     break;
@@ -107,7 +107,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                 signal *= s;
             }
             double intensity = signal;
-            if (noise > 0.0) intensity += noise * rng::exp1(key, beam, bin, kNoiseStream);
+            if (noise > 0.0) intensity += noise * rng::exp1f(key, beam, bin, kNoiseStream);
             intensity *= gain;
             if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
             const float stored = static_cast<float>(intensity);
