@@ -39,7 +39,9 @@ void main() {
         uint end = min(beam_column_end[j], columns);
         for (uint c = beam_column_begin[j]; c < end; ++c) {
             uint beam = column_beam[c];
-            float w = beam == j ? column_weight[c] : (beam + 1u == j ? 1.0 - column_weight[c] : 0.0);
+            // on a full circle the last beam's right neighbour is beam 0 (the seam columns)
+            bool next = params.circular != 0u ? (beam + 1u) % beams == j : beam + 1u == j;
+            float w = beam == j ? column_weight[c] : (next ? 1.0 - column_weight[c] : 0.0);
             sum += w * profiles4[c * quads + q];
         }
         uint k = 4u * q;

@@ -35,10 +35,18 @@ void main() {
     for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
         sums[r] = vec4(0.0);
     }
-    int first_source = max(first_beam - half_taps, 0);
-    int last_source = min(first_beam + int(kBeamsPerInvocation) - 1 + half_taps, beams - 1);
+    // Source beams j - K + t, unwrapped; on a full circle they wrap modulo beams (K < beams / 2, so
+    // once at most), else those outside [0, beams) are skipped.
+    bool circular = params.circular != 0u;
+    int first_source = first_beam - half_taps;
+    int last_source = first_beam + int(kBeamsPerInvocation) - 1 + half_taps;
+    if (!circular) {
+        first_source = max(first_source, 0);
+        last_source = min(last_source, beams - 1);
+    }
     for (int source = first_source; source <= last_source; ++source) {
-        vec4 b = beam_profiles4[uint(source) * quads + q];
+        int wrapped = source < 0 ? source + beams : (source >= beams ? source - beams : source);
+        vec4 b = beam_profiles4[uint(wrapped) * quads + q];
         for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
             int j = first_beam + int(r);
             int t = source - j + half_taps;

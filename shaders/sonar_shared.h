@@ -85,7 +85,7 @@ struct SonarParams {
     float edge_relative_jump; // neighbours whose range differs by more than this fraction are not the same surface
     float vpattern_halfwidth_rad; // for the box pattern
     uint bins_padded; // GPU only: bins rounded up to a multiple of 4 (vec4 layouts of the beamform stage)
-    float pad1;
+    uint circular;    // 1 for a full circle (hfov 360): beam 0 and the last beam are neighbours
 };
 #ifdef __cplusplus
 static_assert(sizeof(SonarParams) == 24 * 4, "SonarParams must match the GLSL std140 block");

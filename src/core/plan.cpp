@@ -372,6 +372,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                                                              : shared::kRangeKernelNearest;
     g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
     g.edge_relative_jump = kEdgeRelativeJump;
+    g.circular = p.circular ? 1u : 0u;
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
     return p;
 }

@@ -422,10 +422,6 @@ Scene four_plates() {
 }
 
 TEST_P(HardCase, Hfov360SeesEveryDirectionWithEqualEnergy) {
-    // lead: fix shader resample.comp (`beam + 1u == j` -> `(beam + 1u) % beams == j`) and sidelobe.comp
-    // (source j - K + t modulo beams when the plan is circular; needs a flag in SonarParams): the plan's
-    // seam tables (Plan::circular, docs/pipeline.md §4) are in place and the CPU reference follows them.
-    if (GetParam() == Backend::vulkan) GTEST_SKIP() << "lead: fix shader resample.comp/sidelobe.comp: 360 deg seam";
     SonarConfig config = small_config();
     config.hfov_deg = 360.0;
     config.beams = 360;
@@ -461,10 +457,6 @@ TEST_P(HardCase, Hfov360SeesEveryDirectionWithEqualEnergy) {
 }
 
 TEST_P(HardCase, Hfov360IsRotationallySymmetricAcrossTheSeamWithSideLobes) {
-    // lead: fix shader resample.comp (`beam + 1u == j` -> `(beam + 1u) % beams == j`) and sidelobe.comp
-    // (source j - K + t modulo beams when the plan is circular; needs a flag in SonarParams): the plan's
-    // seam tables (Plan::circular, docs/pipeline.md §4) are in place and the CPU reference follows them.
-    if (GetParam() == Backend::vulkan) GTEST_SKIP() << "lead: fix shader resample.comp/sidelobe.comp: 360 deg seam";
     // A full circle has no edge: beam 0 (+179.5 deg) and beam 359 (-179.5 deg) are neighbours. A plate
     // at 180 deg must give the same beam profile as the same plate at 0 deg, rotated by 180 beams,
     // side lobes included. Slice boundaries lie at 0 and 180 deg alike, so the pixel grids are mirror
