@@ -2,6 +2,7 @@
 #ifdef VKSONAR_HAVE_BENCHMARK
 
 #include "cli/bench_common.h"
+#include "cli/inputs.h"
 
 #include <unistd.h>
 
@@ -29,8 +30,25 @@ void* counted_allocation(std::size_t size) {
 }
 } // namespace
 
-// Counting replacements of the global allocation functions (the aligned and nothrow forms keep their
-// library definitions, which allocate through their own paths and are not counted).
+// Counting replacements of the global allocation functions (the aligned forms keep their library
+// definitions, which allocate through their own paths and are not counted). The nothrow forms are
+// replaced too: their memory is released by the operator delete below (free), so it must come from
+// malloc; the library's nothrow new need not use malloc (under ASan it does not: alloc-dealloc
+// mismatch, found by scripts/sanitize.sh in the validation layer's nothrow allocations).
+void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
+    g_heap_allocations.fetch_add(1, std::memory_order_relaxed);
+    return std::malloc(size == 0 ? 1 : size);
+}
+void* operator new[](std::size_t size, const std::nothrow_t&) noexcept {
+    g_heap_allocations.fetch_add(1, std::memory_order_relaxed);
+    return std::malloc(size == 0 ? 1 : size);
+}
+void operator delete(void* p, const std::nothrow_t&) noexcept {
+    std::free(p);
+}
+void operator delete[](void* p, const std::nothrow_t&) noexcept {
+    std::free(p);
+}
 void* operator new(std::size_t size) {
     return counted_allocation(size);
 }
@@ -53,49 +71,6 @@ void operator delete[](void* p, std::size_t) noexcept {
 namespace vksonar::cli::bench {
 namespace {
 
-fs::path executable_dir() {
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    return ec ? fs::path() : exe.parent_path();
-}
-
-// Same search as `vksonar render`: the source tree's assets, then an installed tree.
-std::string find_default_scene() {
-    std::vector<fs::path> candidates;
-#ifdef VKSONAR_ASSET_DIR
-    candidates.emplace_back(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
-#endif
-    const fs::path exe_dir = executable_dir();
-    if (!exe_dir.empty()) {
-        candidates.push_back(exe_dir / ".." / "share" / "vksonar" / "assets" / "scenes" / "default.gltf");
-        candidates.push_back(exe_dir / ".." / "assets" / "scenes" / "default.gltf");
-    }
-    std::string looked;
-    for (const auto& candidate : candidates) {
-        std::error_code ec;
-        if (fs::is_regular_file(candidate, ec)) return candidate.lexically_normal().string();
-        looked += (looked.empty() ? "" : ", ") + candidate.lexically_normal().string();
-    }
-    throw Failure("the bundled default scene is missing (looked in " + looked + "); pass --scene FILE.gltf");
-}
-
-bool looks_like_file(const std::string& text) {
-    return text.find('/') != std::string::npos || (text.size() > 5 && text.compare(text.size() - 5, 5, ".json") == 0);
-}
-
-SonarConfig sonar_base(const std::string& sonar) {
-    std::error_code ec;
-    if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
-        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
-        auto config = apply_config_file(SonarConfig{}, sonar);
-        if (!config) throw BadInput(config.error().message);
-        return config.value();
-    }
-    auto preset = load_preset(sonar);
-    if (!preset) throw BadInput("--sonar: " + preset.error().message);
-    return preset.value();
-}
-
 std::vector<std::string>& failures() {
     static std::vector<std::string> list;
     return list;
@@ -106,14 +81,14 @@ std::vector<std::string>& failures() {
 Setup load_setup(const Args& args) {
     Setup setup;
     setup.default_scene = !args.has("--scene");
-    setup.scene_path = setup.default_scene ? find_default_scene() : args.value("--scene");
+    setup.scene_path = setup.default_scene ? find_default_scene().string() : args.value("--scene");
     if (!setup.default_scene) {
         std::error_code ec;
         if (!fs::is_regular_file(setup.scene_path, ec))
             throw BadInput("--scene " + setup.scene_path + ": no such file");
     }
     setup.sonar_name = args.value("--sonar", "default");
-    setup.preset = sonar_base(setup.sonar_name);
+    setup.preset = sonar_base_config(setup.sonar_name);
     auto scene = Scene::load_gltf(setup.scene_path);
     if (!scene) {
         if (setup.default_scene) throw Failure(scene.error().message);

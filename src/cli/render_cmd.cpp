@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/args.h"
+#include "cli/inputs.h"
 #include "cli/commands.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
@@ -74,50 +75,6 @@ struct TrajectoryPose {
 };
 
 // ---- inputs ------------------------------------------------------------------------------------
-
-fs::path executable_dir() {
-    std::error_code ec;
-    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-    return ec ? fs::path() : exe.parent_path();
-}
-
-// The bundled default scene: the source tree's assets (VKSONAR_ASSET_DIR), then an installed tree.
-fs::path find_default_scene() {
-    std::vector<fs::path> candidates;
-#ifdef VKSONAR_ASSET_DIR
-    candidates.emplace_back(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
-#endif
-    const fs::path exe_dir = executable_dir();
-    if (!exe_dir.empty()) {
-        candidates.push_back(exe_dir / ".." / "share" / "vksonar" / "assets" / "scenes" / "default.gltf");
-        candidates.push_back(exe_dir / ".." / "assets" / "scenes" / "default.gltf");
-    }
-    std::string looked;
-    for (const auto& candidate : candidates) {
-        std::error_code ec;
-        if (fs::is_regular_file(candidate, ec)) return candidate.lexically_normal();
-        looked += (looked.empty() ? "" : ", ") + candidate.lexically_normal().string();
-    }
-    throw Failure("the bundled default scene is missing (looked in " + looked + "); pass --scene FILE.gltf");
-}
-
-bool looks_like_file(const std::string& text) {
-    return text.find('/') != std::string::npos || (text.size() > 5 && text.compare(text.size() - 5, 5, ".json") == 0);
-}
-
-SonarConfig base_config(const std::string& sonar) {
-    std::error_code ec;
-    if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
-        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
-        auto config = apply_config_file(SonarConfig{}, sonar);
-        if (!config) throw BadInput(config.error().message);
-        if (config->name == SonarConfig{}.name) config->name = fs::path(sonar).stem().string();
-        return config.value();
-    }
-    auto preset = load_preset(sonar);
-    if (!preset) throw BadInput("--sonar: " + preset.error().message);
-    return preset.value();
-}
 
 SaveSet parse_save(const std::vector<std::string>& values) {
     SaveSet save;
@@ -491,7 +448,7 @@ int run_render(const std::vector<std::string>& argv) {
 
     // 4. Config layers: preset < scene effects < --config < --quality < --set. The user's layers are checked
     //    before the (possibly slow) scene load, then applied again above the scene's effects.
-    const SonarConfig preset = base_config(args.value("--sonar", "default"));
+    const SonarConfig preset = sonar_base_config(args.value("--sonar", "default"));
     auto apply_user_layers = [&](SonarConfig config) {
         if (args.has("--config")) {
             std::error_code ec;

@@ -1,0 +1,58 @@
+#include "cli/inputs.h"
+
+#include <system_error>
+#include <vector>
+
+#include "cli/args.h"
+
+namespace fs = std::filesystem;
+
+namespace vksonar::cli {
+namespace {
+
+fs::path executable_dir() {
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    return ec ? fs::path() : exe.parent_path();
+}
+
+bool looks_like_file(const std::string& text) {
+    return text.find('/') != std::string::npos || (text.size() > 5 && text.compare(text.size() - 5, 5, ".json") == 0);
+}
+
+} // namespace
+
+fs::path find_default_scene() {
+    std::vector<fs::path> candidates;
+#ifdef VKSONAR_ASSET_DIR
+    candidates.emplace_back(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+#endif
+    const fs::path exe_dir = executable_dir();
+    if (!exe_dir.empty()) {
+        candidates.push_back(exe_dir / ".." / "share" / "vksonar" / "assets" / "scenes" / "default.gltf");
+        candidates.push_back(exe_dir / ".." / "assets" / "scenes" / "default.gltf");
+    }
+    std::string looked;
+    for (const auto& candidate : candidates) {
+        std::error_code ec;
+        if (fs::is_regular_file(candidate, ec)) return candidate.lexically_normal();
+        looked += (looked.empty() ? "" : ", ") + candidate.lexically_normal().string();
+    }
+    throw Failure("the bundled default scene is missing (looked in " + looked + "); pass --scene FILE.gltf");
+}
+
+SonarConfig sonar_base_config(const std::string& sonar) {
+    std::error_code ec;
+    if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
+        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
+        auto config = apply_config_file(SonarConfig{}, sonar);
+        if (!config) throw BadInput(config.error().message);
+        if (config->name == SonarConfig{}.name) config->name = fs::path(sonar).stem().string();
+        return config.value();
+    }
+    auto preset = load_preset(sonar);
+    if (!preset) throw BadInput("--sonar: " + preset.error().message);
+    return preset.value();
+}
+
+} // namespace vksonar::cli

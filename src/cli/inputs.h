@@ -1,0 +1,20 @@
+// Inputs shared by `vksonar render` and `vksonar bench`: the bundled default scene and --sonar.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "vksonar/config.h"
+
+namespace vksonar::cli {
+
+// The bundled default scene: the source tree's assets (VKSONAR_ASSET_DIR), then an installed tree
+// (../share/vksonar/assets, ../assets next to the executable). Throws Failure if none exists.
+std::filesystem::path find_default_scene();
+
+// --sonar: a preset name, or a JSON file (a path, a name ending in .json, or an existing file that
+// is not a preset name). A file's config is named after the file unless it names itself.
+// Throws BadInput naming the file or the preset.
+SonarConfig sonar_base_config(const std::string& sonar);
+
+} // namespace vksonar::cli
