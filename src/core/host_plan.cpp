@@ -105,43 +105,13 @@ Result<Plan> make_host_depth_plan(const SonarConfig& config, const HostDepthDesc
     // Column tables as in make_plan, except that columns outside the sonar's own hfov give nothing: a
     // wide host camera sees what the sonar cannot, and make_plan would fold it into the edge beams.
     // Such a column gets column_beam = beams, which matches no beam in resample (docs/pipeline.md §4).
-    const std::vector<double>& b = p.beam_angle_rad;
     const double half_fan = 0.5 * config.hfov_deg * kDegToRad;
     p.column_azimuth_rad.resize(p.columns);
-    p.column_beam.resize(p.columns);
-    p.column_weight.resize(p.columns);
     for (std::uint32_t col = 0; col < p.columns; ++col) {
         const double u = math_f64::pixel_coord(col, p.columns, tan_half_h);
-        const double a = math_f64::pixel_azimuth(0.0, u);
-        p.column_azimuth_rad[col] = a;
-        if (std::abs(a) > half_fan) {
-            p.column_beam[col] = p.beams;
-            p.column_weight[col] = 0.0f;
-        } else if (a >= b.front()) {
-            p.column_beam[col] = 0;
-            p.column_weight[col] = 1.0f;
-        } else if (a <= b.back()) {
-            p.column_beam[col] = p.beams - 1;
-            p.column_weight[col] = 1.0f;
-        } else {
-            const auto it = std::upper_bound(b.begin(), b.end(), a, [](double x, double y) { return x > y; });
-            const std::uint32_t j = static_cast<std::uint32_t>(it - b.begin()) - 1;
-            p.column_beam[col] = j;
-            p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
-        }
+        p.column_azimuth_rad[col] = math_f64::pixel_azimuth(0.0, u);
     }
-    p.beam_column_begin.assign(p.beams, p.columns);
-    p.beam_column_end.assign(p.beams, 0);
-    for (std::uint32_t col = 0; col < p.columns; ++col) {
-        for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
-            if (j >= p.beams) continue;
-            p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
-            p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
-        }
-    }
-    for (std::uint32_t j = 0; j < p.beams; ++j) {
-        if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
-    }
+    assign_columns_to_beams(p, half_fan);
 
     shared::SonarParams& g = p.params;
     g.columns = p.columns;

@@ -132,6 +132,56 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad) {
     return 0.0;
 }
 
+void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
+    const std::vector<double>& b = p.beam_angle_rad;
+    p.column_beam.resize(p.columns);
+    p.column_weight.resize(p.columns);
+    for (std::uint32_t col = 0; col < p.columns; ++col) {
+        const double a = p.column_azimuth_rad[col];
+        if (std::abs(a) > exclude_beyond_rad) {
+            p.column_beam[col] = p.beams; // no beam: the resample tables skip it
+            p.column_weight[col] = 0.0f;
+        } else if (p.circular && (a > b.front() || a < b.back())) {
+            // The seam between beam 0 and beam beams-1 (at b.back() + 2 pi): a tent across it, so a
+            // target at 180 deg is beamformed like one anywhere else.
+            const double two_pi = 2.0 * 3.14159265358979323846;
+            const double beyond_beam0 = a > b.front() ? a - b.front() : a + two_pi - b.front();
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = static_cast<float>(beyond_beam0 / (b.back() + two_pi - b.front()));
+        } else if (a >= b.front()) {
+            p.column_beam[col] = 0;
+            p.column_weight[col] = 1.0f;
+        } else if (a <= b.back()) {
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = 1.0f;
+        } else {
+            // first beam j+1 with b[j+1] < a (b decreasing), so b[j] >= a > b[j+1]
+            const auto it = std::upper_bound(b.begin(), b.end(), a, [](double x, double y) { return x > y; });
+            const std::uint32_t j = static_cast<std::uint32_t>(it - b.begin()) - 1;
+            p.column_beam[col] = j;
+            p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
+        }
+    }
+    p.beam_column_begin.assign(p.beams, p.columns);
+    p.beam_column_end.assign(p.beams, 0);
+    for (std::uint32_t col = 0; col < p.columns; ++col) {
+        for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
+            if (j >= p.beams) continue;
+            p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
+            p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
+        }
+    }
+    if (p.circular) { // the edge beams gather seam columns at both ends of the pixel grid
+        for (std::uint32_t j : {0u, p.beams - 1}) {
+            p.beam_column_begin[j] = 0;
+            p.beam_column_end[j] = p.columns;
+        }
+    }
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
+    }
+}
+
 Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     if (std::string problem = config.validate(); !problem.empty()) {
         return make_error(ErrorCode::invalid_argument, "config: " + problem);
@@ -277,53 +327,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
 
     // Beamform tables: tent from pixel columns onto the beam table.
     p.column_azimuth_rad.resize(p.columns);
-    p.column_beam.resize(p.columns);
-    p.column_weight.resize(p.columns);
     for (std::uint32_t col = 0; col < p.columns; ++col) {
         const std::uint32_t s = col / p.slice_columns;
         const double u = math_f64::pixel_coord(col % p.slice_columns, p.slice_columns, p.tan_half_h);
-        const double a = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
-        p.column_azimuth_rad[col] = a;
-        const std::vector<double>& b = p.beam_angle_rad;
-        if (p.circular && (a > b.front() || a < b.back())) {
-            // The seam between beam 0 and beam beams-1 (at b.back() + 2 pi): a tent across it, so a
-            // target at 180 deg is beamformed like one anywhere else.
-            const double two_pi = 2.0 * 3.14159265358979323846;
-            const double beyond_beam0 = a > b.front() ? a - b.front() : a + two_pi - b.front();
-            p.column_beam[col] = p.beams - 1;
-            p.column_weight[col] = static_cast<float>(beyond_beam0 / (b.back() + two_pi - b.front()));
-        } else if (a >= b.front()) {
-            p.column_beam[col] = 0;
-            p.column_weight[col] = 1.0f;
-        } else if (a <= b.back()) {
-            p.column_beam[col] = p.beams - 1;
-            p.column_weight[col] = 1.0f;
-        } else {
-            // first beam j+1 with b[j+1] < a (b decreasing), so b[j] >= a > b[j+1]
-            const auto it = std::upper_bound(b.begin(), b.end(), a, [](double x, double y) { return x > y; });
-            const std::uint32_t j = static_cast<std::uint32_t>(it - b.begin()) - 1;
-            p.column_beam[col] = j;
-            p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
-        }
+        p.column_azimuth_rad[col] = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
     }
-    p.beam_column_begin.assign(p.beams, p.columns);
-    p.beam_column_end.assign(p.beams, 0);
-    for (std::uint32_t col = 0; col < p.columns; ++col) {
-        for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
-            if (j >= p.beams) continue;
-            p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
-            p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
-        }
-    }
-    if (p.circular) { // the edge beams gather seam columns at both ends of the pixel grid
-        for (std::uint32_t j : {0u, p.beams - 1}) {
-            p.beam_column_begin[j] = 0;
-            p.beam_column_end[j] = p.columns;
-        }
-    }
-    for (std::uint32_t j = 0; j < p.beams; ++j) {
-        if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
-    }
+    assign_columns_to_beams(p);
 
     // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their angular separation.
     if (!e.horizontal_pattern) half_taps = 0;

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -84,6 +85,10 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
 double pattern_constant(BeamPattern shape, double beamwidth_rad);
+// Beamform tables from p.column_azimuth_rad and p.beam_angle_rad (tent between the two nearest beam
+// centres, edge columns to the edge beams, across the seam on a full circle): column_beam,
+// column_weight, beam_column_begin/end. Columns with |azimuth| > exclude_beyond_rad feed no beam.
+void assign_columns_to_beams(Plan& p, double exclude_beyond_rad = std::numeric_limits<double>::infinity());
 
 // The per-draw, per-slice clip_from_local matrices of the depth pass, composed in double relative
 // to the sonar and rounded to float once. out is resized to slices * draws (slice-major);
