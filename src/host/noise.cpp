@@ -80,6 +80,13 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const auto db_min_f = static_cast<float>(cfg.db_min);
     const auto inv_db_span_f = static_cast<float>(inv_db_span);
 
+    // Rayleigh speckle and ambient noise (the defaults) draw a row of cells at a time through the
+    // vectorizable 32-bit path; the other speckle models and huge grids take the scalar 64-bit one.
+    const bool row_draws = beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
+    const bool row_speckle = speckle && model == SpeckleModel::rayleigh && row_draws;
+    constexpr std::size_t kChunk = 256; // beams per pass: the scratch stays on the stack (no allocation)
+    float speckle_draw[kChunk], noise_draw[kChunk], stored[kChunk];
+
     for (std::size_t k = bin_begin; k < bin_end; ++k) {
         double gain = 1.0;
         if (plan.effects.tvg) {
@@ -87,37 +94,53 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             gain = std::pow(10.0, (cfg.tvg_db_per_decade * std::log10(r) + 2.0 * plan.alpha_db_per_m * r) / 10.0);
         }
         const auto bin = static_cast<std::uint32_t>(k);
-        for (std::size_t j = 0; j < beams; ++j) {
-            const std::size_t i = k * beams + j;
-            const auto beam = static_cast<std::uint32_t>(j);
-            const double clean = frame.clean[i];
-            // NaN or negative echo energy would poison the frame: treat it as no echo.
-            double signal = clean > 0.0 ? source * clean : 0.0;
-            if (speckle && signal > 0.0) {
-                double s = 1.0;
-                switch (model) {
-                case SpeckleModel::rayleigh: s = rng::exp1f(key, beam, bin, kSpeckleStream); break;
-                case SpeckleModel::gamma:
-                    s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
-                    break;
-                case SpeckleModel::gaussian:
-                    s = std::abs(1.0 + sigma * sample_normal01(seed, frame_index, beam, bin, kSpeckleStream));
-                    break;
-                }
-                signal *= s;
+        for (std::size_t j0 = 0; j0 < beams; j0 += kChunk) {
+            const std::size_t count = std::min(kChunk, beams - j0);
+            const auto beam0 = static_cast<std::uint32_t>(j0);
+            if (row_speckle) {
+                for (std::size_t c = 0; c < count; ++c)
+                    speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
             }
-            double intensity = signal;
-            if (noise > 0.0) intensity += noise * rng::exp1f(key, beam, bin, kNoiseStream);
-            intensity *= gain;
-            if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
-            const float stored = static_cast<float>(intensity);
-            frame.intensity[i] = stored;
-
-            // display is a function of the stored intensity alone (what polar.npy holds).
-            // In float: the display value is an 8-to-16-bit picture quantity, and a float log10 costs
-            // half of a double one in this loop (the stage's largest cost after the two draws).
-            const float db = 10.0f * std::log10(std::max(stored, kMinIntensityF));
-            frame.display[i] = std::clamp((db - db_min_f) * inv_db_span_f, 0.0f, 1.0f);
+            if (noise > 0.0 && row_draws) {
+                for (std::size_t c = 0; c < count; ++c)
+                    noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);
+            }
+            for (std::size_t c = 0; c < count; ++c) {
+                const std::size_t i = k * beams + j0 + c;
+                const auto beam = static_cast<std::uint32_t>(j0 + c);
+                const double clean = frame.clean[i];
+                // NaN or negative echo energy would poison the frame: treat it as no echo.
+                double signal = clean > 0.0 ? source * clean : 0.0;
+                if (speckle && signal > 0.0) {
+                    double s = 1.0;
+                    switch (model) {
+                    case SpeckleModel::rayleigh:
+                        s = row_speckle ? speckle_draw[c] : rng::exp1(key, beam, bin, kSpeckleStream);
+                        break;
+                    case SpeckleModel::gamma:
+                        s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
+                        break;
+                    case SpeckleModel::gaussian:
+                        s = std::abs(1.0 + sigma * sample_normal01(seed, frame_index, beam, bin, kSpeckleStream));
+                        break;
+                    }
+                    signal *= s;
+                }
+                double intensity = signal;
+                if (noise > 0.0)
+                    intensity += noise * (row_draws ? double(noise_draw[c]) : rng::exp1(key, beam, bin, kNoiseStream));
+                intensity *= gain;
+                if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
+                stored[c] = static_cast<float>(intensity);
+                frame.intensity[i] = stored[c];
+            }
+            // display is a function of the stored intensity alone (what polar.npy holds); an 8-to-16-bit
+            // picture quantity, so the float log is plenty.
+            float* display = frame.display.data() + k * beams + j0;
+            for (std::size_t c = 0; c < count; ++c) {
+                const float db = 10.0f * 0.43429448f * rng::fast_logf(std::max(stored[c], kMinIntensityF));
+                display[c] = std::min(std::max((db - db_min_f) * inv_db_span_f, 0.0f), 1.0f);
+            }
         }
     }
 }
