@@ -32,7 +32,8 @@ SonarConfig analytic_config(bool side_lobes = false) {
 
 double total(const Frame& frame) {
     double s = 0;
-    for (float x : frame.clean) s += x;
+    for (float x : frame.clean)
+        s += x;
     return s;
 }
 
@@ -40,7 +41,8 @@ double total(const Frame& frame) {
 int first_bin_above(const Frame& frame, double fraction) {
     std::vector<double> per_bin(frame.bins, 0.0);
     for (std::uint32_t k = 0; k < frame.bins; ++k)
-        for (std::uint32_t j = 0; j < frame.beams; ++j) per_bin[k] += frame.clean[std::size_t(k) * frame.beams + j];
+        for (std::uint32_t j = 0; j < frame.beams; ++j)
+            per_bin[k] += frame.clean[std::size_t(k) * frame.beams + j];
     const double peak = *std::max_element(per_bin.begin(), per_bin.end());
     for (std::uint32_t k = 0; k < frame.bins; ++k)
         if (per_bin[k] > fraction * peak) return static_cast<int>(k);
@@ -96,9 +98,8 @@ TEST_P(PlaneCase, FirstReturnAndLambertCurveMatchTheClosedForm) {
         const double expected = plane_echo(std::pow(10.0, mu_db / 10.0), side, d, tilt_deg * kDeg, 600, &nearest);
         const double got = total(r->frame);
         const double error_db = 10.0 * std::log10(got / expected);
-        std::printf("[plane] tilt %4.0f deg: echo %.4e vs closed form %.4e (%+.3f dB), first bin %d vs %d\n",
-                    tilt_deg, got, expected, error_db, first_bin_above(r->frame, 1e-3),
-                    bin_of_range(r->frame, nearest, config));
+        std::printf("[plane] tilt %4.0f deg: echo %.4e vs closed form %.4e (%+.3f dB), first bin %d vs %d\n", tilt_deg,
+                    got, expected, error_db, first_bin_above(r->frame, 1e-3), bin_of_range(r->frame, nearest, config));
         // 0.25 dB: at accurate a 1 m plate at 10 m covers ~90 x 40 pixels; the partly covered pixels
         // along its outline (a few % of them, half covered on average) and the r^-4 variation inside
         // a pixel (< 0.1 %) are the only discretization error, and they are unbiased to first order.
@@ -133,7 +134,8 @@ void add_sphere(Scene& scene, double cx, double rs, int segments, double mu_db) 
     for (int i = 0; i < rings; ++i) {
         for (int j = 0; j < segments; ++j) {
             const std::uint32_t a = i * (segments + 1) + j, b = a + segments + 1;
-            for (std::uint32_t v : {a, b, a + 1, a + 1, b, b + 1}) indices.push_back(v);
+            for (std::uint32_t v : {a, b, a + 1, a + 1, b, b + 1})
+                indices.push_back(v);
         }
     }
     auto mesh = scene.add_mesh(positions.data(), positions.size() / 3, indices.data(), indices.size());
@@ -215,7 +217,8 @@ TEST(HorizontalPattern, PointLikeTargetTracesSincSquared) {
     const Frame& f = r->frame;
     std::vector<double> per_beam(f.beams, 0.0);
     for (std::uint32_t k = 0; k < f.bins; ++k)
-        for (std::uint32_t j = 0; j < f.beams; ++j) per_beam[j] += f.clean[std::size_t(k) * f.beams + j];
+        for (std::uint32_t j = 0; j < f.beams; ++j)
+            per_beam[j] += f.clean[std::size_t(k) * f.beams + j];
     ASSERT_GT(per_beam[j0], 0.0);
     const double bw = config.horizontal_beamwidth_deg * kDeg;
     const double reach = config.sidelobe_kernel_beamwidths * bw; // the kernel is truncated there

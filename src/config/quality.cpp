@@ -38,7 +38,8 @@ constexpr std::array<Quality, 3> kQualities{{
 
 std::vector<std::string> quality_names() {
     std::vector<std::string> names;
-    for (const Quality& q : kQualities) names.emplace_back(q.name);
+    for (const Quality& q : kQualities)
+        names.emplace_back(q.name);
     return names;
 }
 
@@ -46,7 +47,8 @@ std::vector<std::string> quality_settings(const std::string& name) {
     std::vector<std::string> out;
     for (const Quality& q : kQualities)
         if (q.name == name)
-            for (std::string_view s : q.settings) out.emplace_back(s);
+            for (std::string_view s : q.settings)
+                out.emplace_back(s);
     return out;
 }
 

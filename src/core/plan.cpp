@@ -36,7 +36,8 @@ Result<std::vector<double>> beam_table(const SonarConfig& c) {
     const double half = 0.5 * c.hfov_deg * kDegToRad;
     if (!c.beam_angles_deg.empty()) {
         angles.reserve(c.beam_angles_deg.size());
-        for (double a : c.beam_angles_deg) angles.push_back(a * kDegToRad);
+        for (double a : c.beam_angles_deg)
+            angles.push_back(a * kDegToRad);
         for (std::size_t j = 1; j < angles.size(); ++j) {
             if (!(angles[j] < angles[j - 1])) {
                 return make_error(ErrorCode::invalid_argument,
@@ -100,8 +101,8 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
                                 : 3.964e-4 - 1.146e-5 * T + 1.45e-7 * T * T - 6.5e-10 * T * T * T;
     const double P3 = 1.0 - 3.83e-5 * D + 4.9e-10 * D * D;
     const double f_sq = f * f;
-    const double db_per_km = A1 * P1 * f1 * f_sq / (f1 * f1 + f_sq) + A2 * P2 * f2 * f_sq / (f2 * f2 + f_sq) +
-                             A3 * P3 * f_sq;
+    const double db_per_km =
+        A1 * P1 * f1 * f_sq / (f1 * f1 + f_sq) + A2 * P2 * f2 * f_sq / (f2 * f2 + f_sq) + A3 * P3 * f_sq;
     return db_per_km / 1000.0;
 }
 
@@ -207,15 +208,15 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.slices = std::max(1u, p.slices);
     if (p.slices > shared::kMaxSlices) {
         return make_error(ErrorCode::invalid_argument, "config: accuracy.max_slice = " + fmt(c.max_slice_deg) +
-                                                           " needs " + std::to_string(p.slices) +
-                                                           " slices for hfov " + fmt(c.hfov_deg) + "; at most " +
+                                                           " needs " + std::to_string(p.slices) + " slices for hfov " +
+                                                           fmt(c.hfov_deg) + "; at most " +
                                                            std::to_string(shared::kMaxSlices));
     }
     if (wanted_columns > kMaxColumns) {
         return make_error(ErrorCode::invalid_argument,
-                          "config: " + fmt(wanted_columns) + " pixel columns needed (accuracy.pixels_per_beam = " +
-                              fmt(c.pixels_per_beam) + ", beams = " + std::to_string(p.beams) + ") exceeds " +
-                              std::to_string(kMaxColumns));
+                          "config: " + fmt(wanted_columns) +
+                              " pixel columns needed (accuracy.pixels_per_beam = " + fmt(c.pixels_per_beam) +
+                              ", beams = " + std::to_string(p.beams) + ") exceeds " + std::to_string(kMaxColumns));
     }
     const std::uint32_t min_columns = 8; // a 1-beam sonar still needs a few columns for its pattern
     const std::uint32_t total = std::max(min_columns, static_cast<std::uint32_t>(wanted_columns));
@@ -228,9 +229,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.tan_half_v = std::tan(0.5 * p.vertical_coverage_rad);
     const double rows = std::ceil(c.rows_per_vfov * p.vertical_coverage_rad / (c.vfov_deg * kDegToRad));
     if (rows > kMaxRows) {
-        return make_error(ErrorCode::invalid_argument, "config: accuracy.rows_per_vfov = " +
-                                                           std::to_string(c.rows_per_vfov) + " gives " + fmt(rows) +
-                                                           " rows; at most " + std::to_string(kMaxRows));
+        return make_error(ErrorCode::invalid_argument,
+                          "config: accuracy.rows_per_vfov = " + std::to_string(c.rows_per_vfov) + " gives " +
+                              fmt(rows) + " rows; at most " + std::to_string(kMaxRows));
     }
     p.rows = std::max(2u, static_cast<std::uint32_t>(rows));
 
@@ -251,7 +252,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
 
     p.bin_width_m = (c.range_max_m - c.range_min_m) / p.bins;
     p.bin_range_m.resize(p.bins);
-    for (std::uint32_t k = 0; k < p.bins; ++k) p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
+    for (std::uint32_t k = 0; k < p.bins; ++k)
+        p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
 
     // Beam patterns.
     const double vfov = c.vfov_deg * kDegToRad;
@@ -263,8 +265,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     // Materials: one per scene material, or the config default if the scene has none.
     bool any_angle_dependent = false;
     if (scene.materials.empty()) {
-        p.materials.push_back({static_cast<float>(std::pow(10.0, c.default_backscatter_db / 10.0)),
-                               shared::kScatterLambert, 0.0f, 0.0f});
+        p.materials.push_back(
+            {static_cast<float>(std::pow(10.0, c.default_backscatter_db / 10.0)), shared::kScatterLambert, 0.0f, 0.0f});
         any_angle_dependent = !scene.draws.empty();
     }
     // Only materials that something is drawn with count for the incidence rule: a scene always carries
@@ -348,10 +350,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
             if (p.circular) sep = std::remainder(sep, 2.0 * 3.14159265358979323846); // into [-pi, pi]
             float w = 1.0f;
             if (half_taps > 0) {
-                w = std::abs(sep) <= reach + 1e-12
-                        ? static_cast<float>(
-                              math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, sep))
-                        : 0.0f;
+                w = std::abs(sep) <= reach + 1e-12 ? static_cast<float>(math_f64::pattern_power(
+                                                         hshape, p.hpattern_k, p.hpattern_halfwidth_rad, sep))
+                                                   : 0.0f;
             }
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
         }
@@ -377,8 +378,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.vpattern_k = static_cast<float>(p.vpattern_k);
     g.vpattern_shape = static_cast<std::uint32_t>(c.vertical_pattern);
     g.range_kernel = c.range_kernel == RangeKernel::footprint ? shared::kRangeKernelFootprint
-                     : c.range_kernel == RangeKernel::tent ? shared::kRangeKernelTent
-                                                             : shared::kRangeKernelNearest;
+                     : c.range_kernel == RangeKernel::tent    ? shared::kRangeKernelTent
+                                                              : shared::kRangeKernelNearest;
     g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
     g.edge_relative_jump = kEdgeRelativeJump;
     g.circular = p.circular ? 1u : 0u;

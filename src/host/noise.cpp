@@ -19,7 +19,7 @@ constexpr std::uint32_t kNoiseStream = 64;
 static_assert(kSpeckleStream + kGammaStreams <= kNoiseStream, "speckle streams overlap the noise stream");
 
 constexpr float kMinIntensityF = 1e-30f; // dB floor guard: 10 log10(1e-30) = -300 dB, far below any window
-constexpr double kMinTvgRange = 1e-3;   // m; TVG's log10(r) at r -> 0
+constexpr double kMinTvgRange = 1e-3;    // m; TVG's log10(r) at r -> 0
 
 } // namespace
 
@@ -67,9 +67,8 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const std::size_t beams = plan.beams;
 
     const double source = std::pow(10.0, cfg.source_level_db / 10.0);
-    const double noise = plan.effects.ambient_noise
-                             ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0)
-                             : 0.0;
+    const double noise =
+        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
     const bool speckle = plan.effects.speckle;
     const SpeckleModel model = cfg.speckle;
     const double looks = cfg.speckle_looks;

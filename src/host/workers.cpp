@@ -15,7 +15,8 @@ Workers::Workers(std::uint32_t threads) {
     }
     threads = std::min(threads, kMaxThreads);
     helpers_.reserve(threads - 1);
-    for (std::uint32_t part = 1; part < threads; ++part) helpers_.emplace_back([this, part] { helper_loop(part); });
+    for (std::uint32_t part = 1; part < threads; ++part)
+        helpers_.emplace_back([this, part] { helper_loop(part); });
 }
 
 Workers::~Workers() {
@@ -24,7 +25,8 @@ Workers::~Workers() {
         stop_ = true;
     }
     start_.notify_all();
-    for (auto& helper : helpers_) helper.join();
+    for (auto& helper : helpers_)
+        helper.join();
 }
 
 void Workers::run(Task task, void* context) {

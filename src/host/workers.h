@@ -37,7 +37,7 @@ private:
     Task task_ = nullptr;
     void* context_ = nullptr;
     std::uint64_t generation_ = 0; // bumped by run(): helpers wait for a new one
-    std::uint32_t pending_ = 0;     // helpers still working on the current generation
+    std::uint32_t pending_ = 0;    // helpers still working on the current generation
     bool stop_ = false;
 };
 

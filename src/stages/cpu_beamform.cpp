@@ -15,8 +15,7 @@
 namespace vksonar::cpu {
 
 template <class Real>
-void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar,
-              Real* acc) {
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
     using M = Math<Real>;
     const std::uint32_t C = plan.columns, R = plan.rows, beams = plan.beams, bins = plan.bins;
     Real range_min, bin_width;
@@ -65,7 +64,8 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
                 const Real w1 = t - kf;
                 const std::int64_t k0 = static_cast<std::int64_t>(kf);
                 const std::int64_t k1 = k0 + 1;
-                acc[static_cast<std::size_t>(std::min(std::max(k0, std::int64_t(0)), last)) * C + c] += (Real(1) - w1) * e;
+                acc[static_cast<std::size_t>(std::min(std::max(k0, std::int64_t(0)), last)) * C + c] +=
+                    (Real(1) - w1) * e;
                 acc[static_cast<std::size_t>(std::min(std::max(k1, std::int64_t(0)), last)) * C + c] += w1 * e;
             } else {
                 if (!(x >= Real(0) && x < static_cast<Real>(bins))) continue;
@@ -74,7 +74,8 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
             }
         }
     }
-    for (std::size_t i = 0; i < cells; ++i) profiles[i] = static_cast<float>(acc[i]);
+    for (std::size_t i = 0; i < cells; ++i)
+        profiles[i] = static_cast<float>(acc[i]);
 
     // resample: one cell per (beam j, bin k), columns in increasing order.
     for (std::uint32_t k = 0; k < bins; ++k) {
@@ -146,7 +147,8 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
             const std::int64_t end = std::min<std::int64_t>(taps, nb + K - j);
             const float* src = B + (j - K);
             Real sum = Real(0);
-            for (std::int64_t t = first; t < end; ++t) sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
+            for (std::int64_t t = first; t < end; ++t)
+                sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
             out[j] = static_cast<float>(sum);
             ++j;
         }

@@ -56,7 +56,8 @@ Result<void> VulkanBackend::init() {
                   std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
                   std::uint64_t(group_count(ceil_div(plan_.bins, 4)))});
     if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
-        ceil_div(plan_.beams, kBeamsPerInvocation) > limits.maxComputeWorkGroupCount[1] || pixels * 16 > limits.maxStorageBufferRange) {
+        ceil_div(plan_.beams, kBeamsPerInvocation) > limits.maxComputeWorkGroupCount[1] ||
+        pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -295,8 +296,8 @@ Result<void> VulkanBackend::create_compute() {
 
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
     const std::uint32_t flags = plan_.effects.shader_flags();
-    auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
-                    std::uint32_t per_invocation, std::uint32_t variant = 0) -> Result<void> {
+    auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes, std::uint32_t per_invocation,
+                    std::uint32_t variant = 0) -> Result<void> {
         auto module = create_shader_module(device, code, bytes);
         if (!module) return module.error();
         auto created =

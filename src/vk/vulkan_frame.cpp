@@ -150,12 +150,13 @@ void VulkanBackend::copy_out(const Region& region, void* destination) const {
     std::memcpy(destination, static_cast<const char*>(readback_.mapped) + region.offset, region.bytes);
 }
 
-void VulkanBackend::transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner,
-                                  std::uint32_t stride, float* destination) const {
+void VulkanBackend::transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, std::uint32_t stride,
+                                  float* destination) const {
     // source[o * stride + i] -> destination[i * outer + o], i < inner
     const auto* source = reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + region.offset);
     for (std::size_t o = 0; o < outer; ++o)
-        for (std::size_t i = 0; i < inner; ++i) destination[i * outer + o] = source[o * stride + i];
+        for (std::size_t i = 0; i < inner; ++i)
+            destination[i * outer + o] = source[o * stride + i];
 }
 
 namespace {
