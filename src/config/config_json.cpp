@@ -99,6 +99,15 @@ Result<SonarConfig> apply_config_file(const SonarConfig& base, const std::string
 }
 
 Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::string& key_equals_value) {
+    // Keys and values end up in JSON (meta.json, error messages), which must be UTF-8: reject other
+    // bytes here with a clear error instead of a serializer exception later (found by fuzz_config).
+    try {
+        (void)Json(key_equals_value).dump();
+    } catch (const nlohmann::json::type_error&) {
+        return make_error(ErrorCode::invalid_argument,
+                          "--set " + Json(key_equals_value).dump(-1, ' ', false, Json::error_handler_t::replace) +
+                              ": not valid UTF-8 text");
+    }
     const auto equals = key_equals_value.find('=');
     if (equals == std::string::npos || equals == 0)
         return make_error(ErrorCode::invalid_argument,

@@ -17,7 +17,7 @@ namespace {
 
 // Short description of a JSON value for error messages: the value itself, clipped.
 std::string describe(const Json& value) {
-    std::string text = value.dump();
+    std::string text = value.dump(-1, ' ', false, Json::error_handler_t::replace); // never throws on bad UTF-8
     if (text.size() > 40) text = text.substr(0, 37) + "...";
     return text;
 }

@@ -148,6 +148,15 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     expect_bad_render({"--config", (dir_ / "empty.json").string()}, {"empty.json"});
 }
 
+TEST_F(BadInput, SetWithBytesThatAreNotUtf8) {
+    // Found by fuzz/fuzz_config.cpp: such a value reached the JSON serializer and escaped as an
+    // uncaught type_error (exit 1, "error: internal: ...") for numbers, enums and strings alike.
+    expect_bad_render({"--set", "beams=\xd1"}, {"--set", "not valid UTF-8"});
+    expect_bad_render({"--set", "name=abc\xff"}, {"--set", "not valid UTF-8"});
+    expect_bad_render({"--set", "beam_spacing=\xc3"}, {"--set", "not valid UTF-8"});
+    expect_bad_render({"--set", "\xd1=1"}, {"--set", "not valid UTF-8"});
+}
+
 TEST_F(BadInput, NonFinitePosesAndTrajectoryValues) {
     expect_bad_render({"--pose", "0,0,nan,0,0,0"}, {"--pose"});
     expect_bad_render({"--pose", "0,0,0,0,1e999,0"}, {"--pose"});

@@ -106,18 +106,27 @@ TEST_P(EnergyCase, TwoMillionPixelsInOneRangeBinAccumulateWithoutLoss) {
     const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
     std::printf("[one bin] %zu pixels (%u x %u)\n", pixels, plan.columns, plan.rows);
     EXPECT_GT(pixels, 1900000u);
-    // Expected: mu / R^2 times the sum of pixel solid angles = the slices' frustum solid angle. The
-    // midpoint rule on 1920 x 1024 pixels is exact to ~1e-7; the facets sit inside the sphere by at
-    // most R (1 - cos(0.7 deg)) = 7.5e-5 R: up to 1.5e-4 more energy. Float sums of 1024 rows then
-    // 1920 columns: worst case (1024 + 1920) 2^-24 = 1.8e-4. Total 3.3e-4.
+    // Closed form: mu / R^2 times the sum of pixel solid angles = the slices' frustum solid angle. The
+    // midpoint rule on 1920 x 1024 pixels is exact to ~1e-7; the facets lie inside the sphere by up
+    // to R (1 - cos(half-diagonal 1.0 deg)) = 1.5e-4 R: up to 3.0e-4 more energy; float sums of 1024
+    // rows then 1920 columns: worst case (1024 + 1920) 2^-24 = 1.8e-4. Total 4.8e-4.
     const double expected = std::pow(10.0, mu_db / 10.0) / (radius * radius) * plan.slices *
                             frustum_solid_angle(plan.tan_half_h, plan.tan_half_v);
     const double got = total(f.clean);
     const double in_bin = f.clean[4];
-    std::printf("[one bin] bin 4 holds %.6f of the energy; total / expected - 1 = %.2e\n", in_bin / got,
-                got / expected - 1);
-    EXPECT_NEAR(got / expected, 1.0, 3.3e-4);
-    EXPECT_GE(in_bin / got, 0.999) << "the footprint kernel spreads only the facet range spread (0.75 mm)";
+    EXPECT_NEAR(got / expected, 1.0, 4.8e-4);
+    EXPECT_GE(in_bin / got, 0.999) << "the footprint kernel spreads only the facet range spread (1.5 mm)";
+    // Precision of the accumulation alone: the same scene through the CPU reference in double. Same
+    // pixels (lavapipe and the CPU rasterizer agree on this mesh's interior), so only the float sums
+    // differ: within the worst-case bound (1024 + 1920) 2^-24 = 1.8e-4.
+    config.cpu_precision = Precision::f64;
+    auto reference = render_once(Backend::cpu, config, scene);
+    ASSERT_TRUE(reference);
+    const double exact_sum = total(reference->frame.clean);
+    std::printf("[one bin] bin 4 holds %.6f of the energy; total / closed form - 1 = %.2e; "
+                "total / double-precision sum - 1 = %.2e\n",
+                in_bin / got, got / expected - 1, got / exact_sum - 1);
+    EXPECT_NEAR(got / exact_sum, 1.0, 1.8e-4);
 }
 
 // ---- convergence and energy conservation ----------------------------------------------------------

@@ -1,0 +1,40 @@
+// libFuzzer target for the config parser: apply_config_json on arbitrary text, then validate();
+// a config that parses and validates must serialize and parse back to the same JSON. The input's
+// lines are also fed to apply_config_override (the --set path).
+// Build: scripts/fuzz.sh (clang, -DVKSONAR_FUZZ=ON). Seeds: fuzz/corpus/config, assets/presets.
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <sstream>
+#include <string>
+
+#include "vksonar/config.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    const std::string text(reinterpret_cast<const char*>(data), size);
+    const vksonar::SonarConfig base;
+
+    const auto parsed = vksonar::apply_config_json(base, text, "fuzz.json");
+    if (parsed.ok()) {
+        const std::string problem = parsed.value().validate();
+        if (problem.empty()) {
+            const std::string json = vksonar::config_to_json(parsed.value());
+            const auto again = vksonar::apply_config_json(base, json, "roundtrip.json");
+            if (!again.ok() || vksonar::config_to_json(again.value()) != json) std::abort();
+        }
+    } else if (parsed.error().message.find('\n') != std::string::npos) {
+        std::abort(); // errors are one line
+    }
+
+    std::istringstream lines(text);
+    std::string line;
+    vksonar::SonarConfig config;
+    while (std::getline(lines, line)) {
+        const auto next = vksonar::apply_config_override(config, line);
+        if (next.ok()) {
+            config = next.value();
+            (void)config.validate();
+        }
+    }
+    return 0;
+}

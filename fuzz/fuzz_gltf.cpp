@@ -1,0 +1,60 @@
+// libFuzzer target for the glTF/GLB loader (Scene::load_gltf). The loader reads from a path, so each
+// input is written to a per-process temporary file, named .glb when it starts with the GLB magic
+// and .gltf otherwise (the loader itself decides by content).
+// Build: scripts/fuzz.sh (clang, -DVKSONAR_FUZZ=ON). Seeds: tests/data/bad_gltf, tests/data/scenes.
+#include <unistd.h>
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+
+#include "scene/scene_data.h"
+#include "vksonar/scene.h"
+
+namespace {
+
+std::string temp_dir() {
+    static const std::string dir = [] {
+        const char* base = std::getenv("TMPDIR");
+        std::string d = std::string(base && *base ? base : "/tmp") + "/vksonar_fuzz_gltf_" + std::to_string(::getpid());
+        std::system(("mkdir -p '" + d + "'").c_str());
+        return d;
+    }();
+    return dir;
+}
+
+} // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    if (size == 0) return 0;
+    const bool binary = size >= 4 && std::memcmp(data, "glTF", 4) == 0;
+    const std::string path = temp_dir() + (binary ? "/input.glb" : "/input.gltf");
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f) return 0;
+    std::fwrite(data, 1, size, f);
+    std::fclose(f);
+
+    const vksonar::Result<vksonar::Scene> scene = vksonar::Scene::load_gltf(path);
+    if (scene.ok()) {
+        // A loaded scene is consistent: every index inside its mesh, every position finite.
+        const vksonar::SceneData& d = scene.value().data();
+        for (const auto& mesh : d.meshes) {
+            if (std::size_t(mesh.first_index) + mesh.index_count > d.indices.size()) std::abort();
+            for (std::uint32_t i = 0; i < mesh.index_count; ++i)
+                if (d.indices[mesh.first_index + i] >= mesh.vertex_count) std::abort();
+        }
+        for (float x : d.positions)
+            if (!std::isfinite(x)) std::abort();
+        for (const auto& draw : d.draws)
+            if (draw.mesh >= d.meshes.size() || draw.material >= d.materials.size()) std::abort();
+    } else {
+        // Errors are one line that names the file.
+        const std::string& message = scene.error().message;
+        if (message.find('\n') != std::string::npos || message.find(path) == std::string::npos) std::abort();
+    }
+    return 0;
+}
