@@ -29,8 +29,10 @@ struct CliResult {
 std::string quote(const std::string& arg) {
     std::string quoted = "'";
     for (char ch : arg) {
-        if (ch == '\'') quoted += "'\\''";
-        else quoted += ch;
+        if (ch == '\'')
+            quoted += "'\\''";
+        else
+            quoted += ch;
     }
     return quoted + "'";
 }
@@ -51,12 +53,12 @@ class BadInput : public ::testing::Test {
 protected:
     void SetUp() override {
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() /
-               ("vksonar_bad_input_" + std::to_string(::getpid()) + "_" + info->name());
+        dir_ = fs::temp_directory_path() / ("vksonar_bad_input_" + std::to_string(::getpid()) + "_" + info->name());
         fs::remove_all(dir_);
         fs::create_directories(dir_);
         // The smallest valid scene: one triangle 10 m ahead (buffer: 3 float VEC3, no indices).
-        write_text(dir_ / "ok.gltf", R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        write_text(dir_ / "ok.gltf",
+                   R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
   "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
   "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,AAAgQQAAgL8AAAAAAAAgQQAAgD8AAAAAAAAgQQAAAAAAAIA/"}],
   "bufferViews": [{"buffer": 0, "byteLength": 36}],
@@ -69,7 +71,8 @@ protected:
 
     CliResult run(const std::vector<std::string>& args) const {
         std::string command = "timeout " + std::to_string(kTimeoutSeconds) + " " + quote(VKSONAR_CLI);
-        for (const auto& arg : args) command += " " + quote(arg);
+        for (const auto& arg : args)
+            command += " " + quote(arg);
         const fs::path err = dir_ / "stderr.txt";
         command += " > /dev/null 2> " + quote(err.string()) + " < /dev/null";
         const int status = std::system(command.c_str());
@@ -91,13 +94,15 @@ protected:
         }
         const CliResult r = run(args);
         std::string joined;
-        for (const auto& a : args) joined += a + " ";
+        for (const auto& a : args)
+            joined += a + " ";
         ASSERT_NE(r.exit_code, 124) << "timed out after " << kTimeoutSeconds << " s: " << joined;
         EXPECT_EQ(r.exit_code, 2) << joined << "\nstderr: " << r.err;
         ASSERT_FALSE(r.err.empty()) << joined;
         EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "exactly one line: " << r.err;
         EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
-        for (const auto& text : expected) EXPECT_NE(r.err.find(text), std::string::npos) << "'" << text << "' in " << r.err;
+        for (const auto& text : expected)
+            EXPECT_NE(r.err.find(text), std::string::npos) << "'" << text << "' in " << r.err;
         EXPECT_FALSE(fs::exists(parent)) << "output left behind by: " << joined;
     }
 
@@ -106,7 +111,7 @@ protected:
 
 TEST_F(BadInput, ValidSceneRendersSoTheFailuresBelowAreTheInputs) {
     const CliResult r = run({"render", "--backend", "cpu", "--scene", (dir_ / "ok.gltf").string(), "--set", "bins=32",
-                       "--set", "beams=16", "--set", "display.fan_width=64", "--out", (dir_ / "out").string()});
+                             "--set", "beams=16", "--set", "display.fan_width=64", "--out", (dir_ / "out").string()});
     EXPECT_EQ(r.exit_code, 0) << r.err;
     EXPECT_TRUE(fs::is_regular_file(dir_ / "out" / "polar.npy"));
 }

@@ -19,7 +19,8 @@ TEST_P(EnergyCase, BrightTargetBesideADarkOneAddsLinearlyWithBoundedSideLobes) {
     config.source_level_db = 240.0; // loud, to look for overflow in the received intensity
     Scene bright, dark, both;
     const double dark_az = 14 * kDeg; // beyond the side-lobe reach (3 beamwidths = 6 deg) of the bright plate
-    for (Scene* s : {&bright, &both}) add_quad(*s, 10.0, 0.0, 0.0, 0.5, 0.5, +40.0, 0.0, AcousticMaterial::Model::constant);
+    for (Scene* s : {&bright, &both})
+        add_quad(*s, 10.0, 0.0, 0.0, 0.5, 0.5, +40.0, 0.0, AcousticMaterial::Model::constant);
     for (Scene* s : {&dark, &both})
         add_quad(*s, 10 * std::cos(dark_az), 10 * std::sin(dark_az), 0.0, 0.5, 0.5, -60.0, 14.0);
     auto b = render_checked(GetParam(), config, bright);
@@ -237,8 +238,8 @@ TEST_P(EnergyCase, EchoOfTheSameTargetFallsWithRange) {
         const double q = 1.0 / (extent / (config.hfov_deg * kDeg / plan.columns)) +
                          1.0 / (extent / (2 * std::atan(plan.tan_half_v) / plan.rows));
         if (i > 1) {
-            std::printf("[range] %g -> %g m: %.3f dB, model %.3f dB\n", ranges[i - 1], ranges[i],
-                        to_db(previous / e), to_db(previous_reference / reference));
+            std::printf("[range] %g -> %g m: %.3f dB, model %.3f dB\n", ranges[i - 1], ranges[i], to_db(previous / e),
+                        to_db(previous_reference / reference));
             EXPECT_NEAR(to_db(previous / e), to_db(previous_reference / reference), 2 * to_db(1 + q))
                 << ranges[i] << " m";
         }
@@ -293,8 +294,8 @@ TEST_P(EnergyCase, DepthDiscontinuityGivesNoSobelSpikes) {
             if (edge) max_err_edge = std::max(max_err_edge, err);
             EXPECT_LE(err, 1e-3) << (is_box ? "box" : "wall") << (edge ? " edge" : "") << " pixel " << c << "," << j;
         }
-    std::printf("[sobel edges] %d edge pixels, max |cos - exact| %.2e (edges %.2e), bound 1e-3\n", edge_pixels,
-                max_err, max_err_edge);
+    std::printf("[sobel edges] %d edge pixels, max |cos - exact| %.2e (edges %.2e), bound 1e-3\n", edge_pixels, max_err,
+                max_err_edge);
     EXPECT_GT(box_pixels, 50);
     EXPECT_GT(edge_pixels, 20);
 }

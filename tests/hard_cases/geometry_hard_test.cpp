@@ -18,7 +18,8 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
     Mat4 c{};
     for (int col = 0; col < 4; ++col)
         for (int row = 0; row < 4; ++row)
-            for (int k = 0; k < 4; ++k) c[col * 4 + row] += a[k * 4 + row] * b[col * 4 + k];
+            for (int k = 0; k < 4; ++k)
+                c[col * 4 + row] += a[k * 4 + row] * b[col * 4 + k];
     return c;
 }
 
@@ -59,7 +60,8 @@ struct DbDiff {
 DbDiff compare_db(const Frame& a, const Frame& b, double floor_rel, double over_db) {
     DbDiff d;
     double peak = 0;
-    for (std::size_t i = 0; i < a.clean.size(); ++i) peak = std::max({peak, double(a.clean[i]), double(b.clean[i])});
+    for (std::size_t i = 0; i < a.clean.size(); ++i)
+        peak = std::max({peak, double(a.clean[i]), double(b.clean[i])});
     const double floor = floor_rel * peak;
     for (std::size_t i = 0; i < a.clean.size(); ++i) {
         if (a.clean[i] < floor && b.clean[i] < floor) continue;
@@ -85,8 +87,8 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
     config.range_max_m = 60.0;
     const double h = 0.5, mu_db = -20.0;
     Scene scene;
-    add_mesh_draw(scene, {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0}, {0, 1, 2, 0, 2, 3},
-                  translation(0, 0, -h), mu_db);
+    add_mesh_draw(scene, {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0}, {0, 1, 2, 0, 2, 3}, translation(0, 0, -h),
+                  mu_db);
     auto r = render_checked(GetParam(), config, scene);
     ASSERT_TRUE(r);
     const Plan& plan = renderer_plan(r->renderer);
@@ -187,7 +189,8 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMaxIsOutAndJustInsideLandsInTheLastBin) {
     ASSERT_TRUE(b);
     const Frame& f = b->frame;
     double last = 0;
-    for (std::uint32_t j = 0; j < f.beams; ++j) last += f.clean[std::size_t(f.bins - 1) * f.beams + j];
+    for (std::uint32_t j = 0; j < f.beams; ++j)
+        last += f.clean[std::size_t(f.bins - 1) * f.beams + j];
     EXPECT_GT(last, 0.0);
     EXPECT_NEAR(last, total(f.clean), 1e-6 * last) << "all energy in the last bin";
 }
@@ -201,12 +204,13 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMinLandsInTheFirstBins) {
     const Plan& plan = renderer_plan(r->renderer);
     const Frame& f = r->frame;
     // Slant ranges run from range_min (axis) to range_min * |(u, v, 1)| at the corners.
-    const double corner = config.range_min_m * std::sqrt(1 + plan.tan_half_h * plan.tan_half_h +
-                                                         plan.tan_half_v * plan.tan_half_v);
+    const double corner =
+        config.range_min_m * std::sqrt(1 + plan.tan_half_h * plan.tan_half_h + plan.tan_half_v * plan.tan_half_v);
     const int last_bin = int((corner - config.range_min_m) / plan.bin_width_m) + 1; // + 1: kernel spread
     double in = 0, beyond = 0;
     for (std::uint32_t k = 0; k < f.bins; ++k)
-        for (std::uint32_t j = 0; j < f.beams; ++j) (int(k) <= last_bin ? in : beyond) += f.clean[k * f.beams + j];
+        for (std::uint32_t j = 0; j < f.beams; ++j)
+            (int(k) <= last_bin ? in : beyond) += f.clean[k * f.beams + j];
     EXPECT_GT(in, 0.0);
     EXPECT_EQ(beyond, 0.0);
     for (std::size_t p = 0; p < f.echo.size() / 2; ++p) {
@@ -296,14 +300,14 @@ TEST_P(HardCase, SonarInsideAClosedBoxSeesWallsAllAroundAtTheRightRanges) {
 TEST_P(HardCase, DegenerateTrianglesAddNothing) {
     SonarConfig config = small_config();
     Scene clean_scene, with_degenerates;
-    for (Scene* s : {&clean_scene, &with_degenerates}) add_quad(*s, 10.0, 0.0, 0.0, 4.0, 4.0);
+    for (Scene* s : {&clean_scene, &with_degenerates})
+        add_quad(*s, 10.0, 0.0, 0.0, 4.0, 4.0);
     // In view at 8 m: collinear, a repeated vertex, all three at one point, a 1e-9 m sliver,
     // and a triangle whose vertices coincide in float after the world transform.
-    add_mesh_draw(with_degenerates,
-                  {8, -1, 0, 8, 0, 0, 8, 1, 0,     //
-                   8, -1, -1, 8, 1, 1, 8, 1, 1,    //
-                   8, 0.5f, 0.5f, 8, 0.5f, 0.5f, 8, 0.5f, 0.5f, //
-                   8, -1, 0, 8, 1, 1e-9f, 8, 0, 0.5e-9f},
+    add_mesh_draw(with_degenerates, {8, -1,   0,    8, 0,    0,     8, 1,    0,    //
+                                     8, -1,   -1,   8, 1,    1,     8, 1,    1,    //
+                                     8, 0.5f, 0.5f, 8, 0.5f, 0.5f,  8, 0.5f, 0.5f, //
+                                     8, -1,   0,    8, 1,    1e-9f, 8, 0,    0.5e-9f},
                   {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11}, translation(0, 0, 0));
     auto a = render_checked(GetParam(), config, clean_scene);
     auto b = render_checked(GetParam(), config, with_degenerates);
@@ -318,7 +322,8 @@ TEST_P(HardCase, DegenerateTrianglesAddNothing) {
 // Renders structured_scene placed by `place` from pose `place * local_pose` and compares with the scene
 // at the origin seen from local_pose. The host composes view x model in double (DESIGN §2), so the
 // float matrices uploaded differ by rounding only.
-void expect_same_frame_when_moved_together(Backend backend, const Pose& move, const char* label, double max_db_allowed) {
+void expect_same_frame_when_moved_together(Backend backend, const Pose& move, const char* label,
+                                           double max_db_allowed) {
     SonarConfig config = small_config();
     config.rows_per_vfov = 32;
     Pose local;
@@ -338,9 +343,10 @@ void expect_same_frame_when_moved_together(Backend backend, const Pose& move, co
     ASSERT_TRUE(a && b);
     const DbDiff d = compare_db(a->frame, b->frame, 1e-6, 0.01);
     std::size_t depth_flips = 0;
-    for (std::size_t p = 0; p < a->frame.depth.size(); ++p) depth_flips += (a->frame.depth[p] > 0) != (b->frame.depth[p] > 0);
-    std::printf("[%s] %zu cells compared, max diff %.2e dB, %zu over 0.01 dB, %zu coverage flips\n", label,
-                d.compared, d.max_db, d.over, depth_flips);
+    for (std::size_t p = 0; p < a->frame.depth.size(); ++p)
+        depth_flips += (a->frame.depth[p] > 0) != (b->frame.depth[p] > 0);
+    std::printf("[%s] %zu cells compared, max diff %.2e dB, %zu over 0.01 dB, %zu coverage flips\n", label, d.compared,
+                d.max_db, d.over, depth_flips);
     ASSERT_GT(d.compared, 100u);
     EXPECT_LE(d.max_db, max_db_allowed) << label;
 }
@@ -372,7 +378,7 @@ TEST_P(HardCase, RangeRatio1e4ResolvesANearAndAFarTarget) {
     config.effects.horizontal_pattern = EffectMode::off;
     Scene scene;
     const double a = 10 * kDeg;
-    add_quad(scene, 0.5 * std::cos(a), 0.5 * std::sin(a), 0.0, 0.1, 0.1, -20.0, 10.0);      // near, port
+    add_quad(scene, 0.5 * std::cos(a), 0.5 * std::sin(a), 0.0, 0.1, 0.1, -20.0, 10.0);        // near, port
     add_quad(scene, 80.0 * std::cos(-a), 80.0 * std::sin(-a), 0.0, 10.0, 10.0, -10.0, -10.0); // far, starboard
     auto r = render_checked(GetParam(), config, scene);
     ASSERT_TRUE(r);
@@ -474,7 +480,8 @@ TEST_P(HardCase, Hfov360IsRotationallySymmetricAcrossTheSeamWithSideLobes) {
     ASSERT_TRUE(a && b);
     ASSERT_TRUE(renderer_plan(a->renderer).effects.horizontal_pattern);
     double peak = 0;
-    for (std::uint32_t j = 0; j < a->frame.beams; ++j) peak = std::max(peak, beam_energy(a->frame, j));
+    for (std::uint32_t j = 0; j < a->frame.beams; ++j)
+        peak = std::max(peak, beam_energy(a->frame, j));
     ASSERT_GT(peak, 0.0);
     double max_rel = 0;
     for (std::uint32_t j = 0; j < a->frame.beams; ++j) {
@@ -493,7 +500,7 @@ TEST_P(HardCase, Hfov1DegreeLightsEveryBeamOfAFacingPlateAndNothingBeside) {
     config.effects.horizontal_pattern = EffectMode::off;
     config.effects.vertical_pattern = EffectMode::off;
     Scene facing, beside;
-    add_quad(facing, 10.0, 0.0, 0.0, 1.0, 4.0);              // covers +-2.9 deg: the whole fan
+    add_quad(facing, 10.0, 0.0, 0.0, 1.0, 4.0);                       // covers +-2.9 deg: the whole fan
     add_quad(beside, 10.0, 10.0 * std::tan(3 * kDeg), 0.0, 0.2, 4.0); // 2.4..3.6 deg: outside the fan
     auto a = render_checked(GetParam(), config, facing);
     auto b = render_checked(GetParam(), config, beside);

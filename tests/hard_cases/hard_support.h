@@ -14,7 +14,9 @@
 
 namespace vksonar {
 // gtest prints an enum parameter as raw bytes; name the backend instead.
-inline void PrintTo(Backend backend, std::ostream* os) { *os << (backend == Backend::vulkan ? "vulkan" : "cpu"); }
+inline void PrintTo(Backend backend, std::ostream* os) {
+    *os << (backend == Backend::vulkan ? "vulkan" : "cpu");
+}
 } // namespace vksonar
 
 namespace vksonar::testing::hard {
@@ -126,14 +128,15 @@ inline void add_box(Scene& scene, const std::array<double, 3>& lo, const std::ar
         p.push_back(static_cast<float>(i & 2 ? hi[1] : lo[1]));
         p.push_back(static_cast<float>(i & 4 ? hi[2] : lo[2]));
     }
-    add_mesh_draw(scene, p,
-                  {0, 2, 6, 0, 6, 4, 1, 5, 7, 1, 7, 3, 0, 4, 5, 0, 5, 1, 2, 3, 7, 2, 7, 6, 0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5},
+    add_mesh_draw(scene, p, {0, 2, 6, 0, 6, 4, 1, 5, 7, 1, 7, 3, 0, 4, 5, 0, 5, 1,
+                             2, 3, 7, 2, 7, 6, 0, 1, 3, 0, 3, 2, 4, 6, 7, 4, 7, 5},
                   world_from_local, backscatter_db, model);
 }
 
 // UV sphere of radius r centred at the origin (segments around z, rings pole to pole).
 inline void add_sphere(Scene& scene, double radius, std::uint32_t segments, std::uint32_t rings,
-                       double backscatter_db = -20.0, AcousticMaterial::Model model = AcousticMaterial::Model::constant) {
+                       double backscatter_db = -20.0,
+                       AcousticMaterial::Model model = AcousticMaterial::Model::constant) {
     std::vector<float> p;
     std::vector<std::uint32_t> idx;
     for (std::uint32_t i = 0; i <= rings; ++i) {
@@ -180,20 +183,23 @@ inline double plate_reference(double theta_rad, double half, double distance, do
 
 inline double total(const std::vector<float>& v) {
     double s = 0;
-    for (float x : v) s += x;
+    for (float x : v)
+        s += x;
     return s;
 }
 
 // Sum of echo energy (echo2[2p]) over all pixels.
 inline double echo_total(const Frame& f) {
     double s = 0;
-    for (std::size_t p = 0; p < f.echo.size() / 2; ++p) s += f.echo[2 * p];
+    for (std::size_t p = 0; p < f.echo.size() / 2; ++p)
+        s += f.echo[2 * p];
     return s;
 }
 
 inline double beam_energy(const Frame& f, std::uint32_t j) {
     double e = 0;
-    for (std::uint32_t k = 0; k < f.bins; ++k) e += f.clean[std::size_t(k) * f.beams + j];
+    for (std::uint32_t k = 0; k < f.bins; ++k)
+        e += f.clean[std::size_t(k) * f.beams + j];
     return e;
 }
 
