@@ -603,6 +603,156 @@ TYPED_TEST(CpuNormals, GrazingPlaneStaysFiniteAndSmall) {
     EXPECT_GT(hits, 100);
 }
 
+// normal_method = sobel5 on analytic depth (no rasterizer: the surfaces are exact, so the only
+// errors are the stencils' and the float depth's). small_config has 64 x 32 pixels of ~0.31 deg.
+
+// Depth of the first hit of each pixel ray; hit(D) returns the view z of P = z D, or <= 0 for a miss.
+template <class Hit> std::vector<float> analytic_depth(const Plan& plan, Hit hit) {
+    std::vector<float> depth(std::size_t(plan.rows) * plan.columns, 0.0f);
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const double z = hit(pixel_ray(plan, c, j).D);
+            if (z > 0) depth[std::size_t(j) * plan.columns + c] = float(plan.depth_b + plan.depth_a / z);
+        }
+    }
+    return depth;
+}
+
+// Sphere of radius kSphereR about (kSphereX, 0, 0): it fills the view vertically, its silhouette
+// and the image border give the fallback paths.
+constexpr double kSphereX = 12.0, kSphereR = 3.0;
+double sphere_hit(const double* D) {
+    const double a = D[0] * D[0] + D[1] * D[1] + D[2] * D[2], b = -2.0 * kSphereX * D[0];
+    const double cc = kSphereX * kSphereX - kSphereR * kSphereR, disc = b * b - 4 * a * cc;
+    return disc < 0 ? 0.0 : (-b - std::sqrt(disc)) / (2 * a);
+}
+
+Plan plan_with(NormalMethod method) {
+    SonarConfig config = small_config();
+    config.normal_method = method;
+    SceneBuilder b;
+    b.material(-20.0);
+    return plan_for(config, b.scene);
+}
+
+// Angle in degrees between the output normal of pixel p and the sphere's outward normal there.
+double sphere_error_deg(const Plan& plan, const std::vector<float>& depth, const std::vector<float>& out,
+                        std::size_t p) {
+    const PixelRay ray = pixel_ray(plan, std::uint32_t(p % plan.columns), std::uint32_t(p / plan.columns));
+    const double z = view_z(plan, depth[p]);
+    // atan2(|n x m|, n . m) and not acos: a point off the sphere by the depth's rounding or noise
+    // has |P - centre| != R, and acos near 1 would turn a 1e-7 length error into 0.03 deg.
+    const double n[3] = {z * ray.D[0] - kSphereX, z * ray.D[1], z * ray.D[2]};
+    const double m[3] = {out[4 * p], out[4 * p + 1], out[4 * p + 2]};
+    const double cr[3] = {n[1] * m[2] - n[2] * m[1], n[2] * m[0] - n[0] * m[2], n[0] * m[1] - n[1] * m[0]};
+    return std::atan2(std::sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]),
+                      n[0] * m[0] + n[1] * m[1] + n[2] * m[2]) /
+           kDeg;
+}
+
+// True if pixel (c, j) and its 5x5 window lie on the surface: no miss and not the image border.
+bool interior5(const Plan& plan, const std::vector<float>& depth, std::int64_t c, std::int64_t j) {
+    for (std::int64_t y = j - 2; y <= j + 2; ++y) {
+        for (std::int64_t x = c - 2; x <= c + 2; ++x) {
+            if (x < 0 || y < 0 || x >= plan.columns || y >= plan.rows) return false;
+            if (!(depth[std::size_t(y) * plan.columns + std::size_t(x)] > 0.0f)) return false;
+        }
+    }
+    return true;
+}
+
+struct SphereErrors {
+    double rms3 = 0, rms5 = 0, max3 = 0, max5 = 0;
+    int interior = 0, differ = 0;
+};
+
+SphereErrors sphere_errors(const std::vector<float>& depth, bool f64) {
+    const Plan p3 = plan_with(NormalMethod::sobel3), p5 = plan_with(NormalMethod::sobel5);
+    const std::vector<float> n3 = run_normals_plan(p3, depth, f64), n5 = run_normals_plan(p5, depth, f64);
+    SphereErrors e;
+    for (std::uint32_t j = 0; j < p5.rows; ++j) {
+        for (std::uint32_t c = 0; c < p5.columns; ++c) {
+            const std::size_t p = std::size_t(j) * p5.columns + c;
+            if (!interior5(p5, depth, c, j)) {
+                // Within 2 pixels of a miss or the border sobel5 is exactly the sobel3 path.
+                for (int k = 0; k < 4; ++k)
+                    EXPECT_EQ(n5[4 * p + k], n3[4 * p + k]) << c << "," << j;
+                continue;
+            }
+            const double e3 = sphere_error_deg(p5, depth, n3, p), e5 = sphere_error_deg(p5, depth, n5, p);
+            e.rms3 += e3 * e3;
+            e.rms5 += e5 * e5;
+            e.max3 = std::max(e.max3, e3);
+            e.max5 = std::max(e.max5, e5);
+            e.differ += n3[4 * p] != n5[4 * p] || n3[4 * p + 1] != n5[4 * p + 1] || n3[4 * p + 2] != n5[4 * p + 2];
+            ++e.interior;
+        }
+    }
+    e.rms3 = std::sqrt(e.rms3 / std::max(e.interior, 1));
+    e.rms5 = std::sqrt(e.rms5 / std::max(e.interior, 1));
+    std::printf("[sobel] %d interior pixels, %d differ; sobel3 rms %.3e max %.3e deg, sobel5 rms %.3e max %.3e deg\n",
+                e.interior, e.differ, e.rms3, e.rms3 > 0 ? e.max3 : 0.0, e.rms5, e.max5);
+    return e;
+}
+
+TYPED_TEST(CpuNormals, Sobel5TiltedPlaneIsExact) {
+    const bool f64 = std::is_same_v<TypeParam, double>;
+    // The plane of TiltedPlaneMatchesClosedFormIncidence, through (12, 0, 0), facing the sonar.
+    const double yaw = 30 * kDeg, pitch = 20 * kDeg;
+    const double n[3] = {-std::cos(yaw) * std::cos(pitch), -std::sin(yaw) * std::cos(pitch), std::sin(pitch)};
+    const Plan plan = plan_with(NormalMethod::sobel5);
+    const std::vector<float> depth =
+        analytic_depth(plan, [&](const double* D) { return 12.0 * n[0] / (n[0] * D[0] + n[1] * D[1] + n[2] * D[2]); });
+    const std::vector<float> out = run_normals_plan(plan, depth, f64);
+    for (std::size_t p = 0; p < depth.size(); ++p) {
+        ASSERT_GT(depth[p], 0.0f);
+        // Any weighted sum of position differences on a plane lies in the plane: exact up to the
+        // float depth (~1e-7 relative over ~0.065 m spacing, x 16 weight sum): 1e-3 as for sobel3.
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(out[4 * p + k], n[k], 1e-3) << p;
+    }
+}
+
+TYPED_TEST(CpuNormals, Sobel5OnSmoothSphereHasBoundedCurvatureBias) {
+    const bool f64 = std::is_same_v<TypeParam, double>;
+    const Plan plan = plan_with(NormalMethod::sobel5);
+    const std::vector<float> depth = analytic_depth(plan, sphere_hit);
+    const SphereErrors e = sphere_errors(depth, f64);
+    ASSERT_GT(e.interior, 500); // most of the 64 x 32 image
+    // Without noise the wider stencil is the less accurate one on a curved surface: the normal turns
+    // by ~1-3 deg per pixel here, and Taylor expansion gives the 5x5 twice the 3x3's smoothing bias
+    // (second moment of (1 4 6 4 1) is 1 pixel^2, of (1 2 1) 0.5) and 2.5x its derivative truncation
+    // (5/12 h^2 f''' vs 1/6 h^2 f'''). So sobel5 must be worse than sobel3 (else it did not run) but
+    // by no more than 2.5x (else the weights or the order are wrong). Measured: 0.17 vs 0.26 deg rms.
+    EXPECT_GT(e.rms5, e.rms3);
+    EXPECT_LE(e.rms5, 2.5 * e.rms3);
+    EXPECT_GT(e.differ, e.interior / 2); // on a curved surface the 5x5 result is not the 3x3 one
+}
+
+TYPED_TEST(CpuNormals, Sobel5AveragesDepthNoise) {
+    const bool f64 = std::is_same_v<TypeParam, double>;
+    const Plan plan = plan_with(NormalMethod::sobel5);
+    // Range noise of +-1 cm at ~10 m (a coarse or jittered depth), uniform, deterministic: large
+    // enough to dominate the curvature bias of the previous test.
+    std::uint32_t state = 12345u;
+    const std::vector<float> depth = analytic_depth(plan, [&](const double* D) {
+        state = state * 1664525u + 1013904223u;
+        const double noise = (double(state >> 8) / double(1u << 24) * 2.0 - 1.0) * 1e-2;
+        const double z = sphere_hit(D);
+        return z > 0 ? z * (1.0 + noise / 10.0) : z;
+    });
+    const SphereErrors e = sphere_errors(depth, f64);
+    ASSERT_GT(e.interior, 500);
+    // Independent noise on each position: the tangent's noise-to-signal ratio is
+    // sqrt(sum w^2) / sum(derivative gain): sqrt(2 * 6) / 8 = 0.43 for 3x3, sqrt(70 * 10) / 128 = 0.21
+    // for 5x5, so the rms angle error should roughly halve (measured on a noisy plane: 0.48x);
+    // 0.75 leaves room for the curvature bias, which goes the other way. Measured: 1.3 vs 0.7 deg.
+    EXPECT_LT(e.rms5, 0.75 * e.rms3);
+    // Near the silhouette the range changes by more than edge_relative_jump over 2 pixels: those
+    // pixels take the sobel3 path even though their window has no miss.
+    EXPECT_GT(e.differ, e.interior / 2);
+}
+
 // ---------------------------------------------------------------------------------------------
 // 3. Echo
 

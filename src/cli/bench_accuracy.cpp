@@ -31,8 +31,8 @@ constexpr const char* kUsage =
     "\n"
     "Sweeps the accuracy knobs one at a time around the config (default: the bundled scene and preset):\n"
     "accuracy.pixels_per_beam 1,2,4,8; accuracy.rows_per_vfov 16,32,64,128; accuracy.max_slice 15,30,60,120;\n"
-    "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6; and the\n"
-    "--quality presets fast, balanced, accurate.\n"
+    "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6;\n"
+    "accuracy.normal_method sobel3,sobel5; and the --quality presets fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
     "range_kernel footprint, sidelobe_kernel_beamwidths 8, and a second one with each row's own side-lobe\n"
     "kernel width (isolates the other knobs). Speckle, ambient noise and TVG are off everywhere.\n"
@@ -279,6 +279,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         {"sidelobe_kernel_beamwidths", "1"},
         {"sidelobe_kernel_beamwidths", "2"},
         {"sidelobe_kernel_beamwidths", "6"},
+        {"normal_method", "sobel5"},
         {"quality", "fast"},
         {"quality", "balanced"},
         {"quality", "accurate"},

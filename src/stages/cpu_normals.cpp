@@ -1,6 +1,8 @@
-// CPU reference of the normals stage (docs/pipeline.md §2): Sobel 3x3 on reconstructed sonar-frame
-// positions in smooth regions, one-sided differences towards the neighbour of closest range near
-// depth edges, and a sonar-facing fallback where no tangent can be formed.
+// CPU reference of the normals stage (docs/pipeline.md §2): Sobel 3x3 (or 5x5 with normal_method =
+// sobel5, where the whole 5x5 window is one surface) on reconstructed sonar-frame positions in smooth
+// regions, one-sided differences towards the neighbour of closest range near depth edges, and a
+// sonar-facing fallback where no tangent can be formed. Sums run in the order pipeline.md §2 states,
+// the order shaders/normals.comp uses, so float results agree with the GPU to rounding.
 //
 // Constants: in float the stage reads the same float values the shaders get (SonarParams,
 // SliceInfo.cos/sin_center); in double it reads the Plan's double values and recomputes the slice
@@ -32,12 +34,17 @@ template <class Real> Vec3<Real> cross(const Vec3<Real>& a, const Vec3<Real>& b)
 }
 
 template <class Real> Real length(const Vec3<Real>& a) { return std::sqrt(dot(a, a)); }
+template <class Real> Vec3<Real> axpy(Real w, const Vec3<Real>& d, const Vec3<Real>& acc) {
+    return {acc.x + w * d.x, acc.y + w * d.y, acc.z + w * d.z};
+}
+
+constexpr std::int64_t kRingRows = 5; // rows j-2 .. j+2 of reconstructed positions
 
 } // namespace
 
 std::size_t normals_scratch_count(const Plan& plan) {
-    // per column: ray x, y; three rows of (Px, Py, Pz, r)
-    return static_cast<std::size_t>(plan.columns) * 14;
+    // per column: ray x, y; five rows of (Px, Py, Pz, r) (the 5x5 window of sobel5; sobel3 uses 3)
+    return static_cast<std::size_t>(plan.columns) * (2 + kRingRows * 4);
 }
 
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
@@ -62,7 +69,7 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
     // component is -v per row. P = z * ray, so per pixel only z changes.
     Real* ray_x = scratch;
     Real* ray_y = scratch + C;
-    Real* ring = scratch + 2 * C; // rows j % 3: (Px, Py, Pz, r) per column
+    Real* ring = scratch + 2 * C; // rows j % kRingRows: (Px, Py, Pz, r) per column
     for (std::int64_t c = 0; c < C; ++c) {
         const std::uint32_t col = static_cast<std::uint32_t>(c), s = col / W;
         const Real u = M::pixel_coord(col - s * W, W, tan_half_h);
@@ -79,7 +86,7 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
         ray_y[c] = sn - u * cs;
     }
     auto fill_row = [&](std::int64_t j) {
-        Real* row = ring + (j % 3) * C * 4;
+        Real* row = ring + (j % kRingRows) * C * 4;
         const Real minus_v = -M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), tan_half_v);
         const float* d = depth + j * C;
         for (std::int64_t c = 0; c < C; ++c) {
@@ -99,12 +106,17 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
     auto valid = [&](std::int64_t c, std::int64_t j) {
         return c >= 0 && j >= 0 && c < C && j < R && depth[j * C + c] > 0.0f;
     };
-    auto at = [&](std::int64_t c, std::int64_t j) -> const Real* { return ring + ((j % 3) * C + c) * 4; };
+    auto at = [&](std::int64_t c, std::int64_t j) -> const Real* { return ring + ((j % kRingRows) * C + c) * 4; };
+    auto pos = [&](std::int64_t c, std::int64_t j) -> Vec3<Real> {
+        const Real* q = at(c, j);
+        return {q[0], q[1], q[2]};
+    };
+    const bool sobel5 = plan.params.normal_method == shared::kNormalsSobel5;
 
-    if (R > 0) fill_row(0);
-    // normal_method: only sobel3 is specified by docs/pipeline.md; sobel5 uses the same 3x3 stencil.
+    for (std::int64_t j = 0; j < std::min<std::int64_t>(R, 2); ++j)
+        fill_row(j);
     for (std::int64_t j = 0; j < R; ++j) {
-        if (j + 1 < R) fill_row(j + 1);
+        if (j + 2 < R) fill_row(j + 2);
         for (std::int64_t c = 0; c < C; ++c) {
             float* out = normals4 + 4 * (j * C + c);
             if (!valid(c, j)) {
@@ -115,48 +127,80 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
             const Vec3<Real> P{pp[0], pp[1], pp[2]};
             const Real r = pp[3];
 
-            // 3x3 neighbourhood: positions and ranges of the valid neighbours.
-            Vec3<Real> N[3][3];
-            Real rn[3][3];
-            bool ok[3][3];
-            bool smooth = true;
-            for (int dy = -1; dy <= 1; ++dy) {
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const bool v = valid(c + dx, j + dy);
-                    ok[dy + 1][dx + 1] = v;
-                    if (v) {
-                        const Real* q = at(c + dx, j + dy);
-                        N[dy + 1][dx + 1] = {q[0], q[1], q[2]};
-                        rn[dy + 1][dx + 1] = q[3];
-                        if (!(std::abs(q[3] - r) <= jump * r)) smooth = false;
-                    } else {
-                        smooth = false;
+            // sobel5 needs all 24 neighbours of the 5x5 window valid and on the pixel's surface;
+            // anywhere else it is exactly the sobel3 path below.
+            bool smooth5 = sobel5;
+            for (int dy = -2; dy <= 2 && smooth5; ++dy) {
+                for (int dx = -2; dx <= 2 && smooth5; ++dx) {
+                    if (!valid(c + dx, j + dy)) {
+                        smooth5 = false;
+                    } else if (!(std::abs(at(c + dx, j + dy)[3] - r) <= jump * r)) {
+                        smooth5 = false;
                     }
                 }
             }
 
             Vec3<Real> tx{0, 0, 0}, ty{0, 0, 0};
             bool facing = false;
-            if (smooth) {
-                const Real w[3] = {Real(1), Real(2), Real(1)};
-                for (int k = 0; k < 3; ++k) { // dy = -1, 0, 1
-                    const Vec3<Real> d = N[k][2] - N[k][0];
-                    tx = {tx.x + w[k] * d.x, tx.y + w[k] * d.y, tx.z + w[k] * d.z};
+            if (smooth5) {
+                // Smoothing (1 4 6 4 1) x derivative (-1 -2 0 2 1), the derivative taken as differences
+                // of symmetric pairs, 2 (P+1 - P-1) + (P+2 - P-2), so large positions cancel before
+                // weighting; outer sum from the -2 side. Same order as normals.comp (pipeline.md §2).
+                const Real s[5] = {Real(1), Real(4), Real(6), Real(4), Real(1)};
+                for (int k = 0; k < 5; ++k) { // dy = -2 .. 2
+                    const std::int64_t y = j + k - 2;
+                    const Vec3<Real> d1 = pos(c + 1, y) - pos(c - 1, y), d2 = pos(c + 2, y) - pos(c - 2, y);
+                    const Vec3<Real> g{Real(2) * d1.x + d2.x, Real(2) * d1.y + d2.y, Real(2) * d1.z + d2.z};
+                    tx = axpy(s[k], g, tx);
                 }
-                for (int k = 0; k < 3; ++k) { // dx = -1, 0, 1
-                    const Vec3<Real> d = N[2][k] - N[0][k];
-                    ty = {ty.x + w[k] * d.x, ty.y + w[k] * d.y, ty.z + w[k] * d.z};
+                for (int k = 0; k < 5; ++k) { // dx = -2 .. 2
+                    const std::int64_t x = c + k - 2;
+                    const Vec3<Real> d1 = pos(x, j + 1) - pos(x, j - 1), d2 = pos(x, j + 2) - pos(x, j - 2);
+                    const Vec3<Real> g{Real(2) * d1.x + d2.x, Real(2) * d1.y + d2.y, Real(2) * d1.z + d2.z};
+                    ty = axpy(s[k], g, ty);
                 }
             } else {
-                // One-sided differences towards the valid neighbour of closer range (ties: +1 side).
-                const bool xp = ok[1][2], xm = ok[1][0], yp = ok[2][1], ym = ok[0][1];
-                if ((!xp && !xm) || (!yp && !ym)) {
-                    facing = true;
+                // 3x3 neighbourhood: positions and ranges of the valid neighbours.
+                Vec3<Real> N[3][3];
+                Real rn[3][3];
+                bool ok[3][3];
+                bool smooth = true;
+                for (int dy = -1; dy <= 1; ++dy) {
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const bool v = valid(c + dx, j + dy);
+                        ok[dy + 1][dx + 1] = v;
+                        if (v) {
+                            const Real* q = at(c + dx, j + dy);
+                            N[dy + 1][dx + 1] = {q[0], q[1], q[2]};
+                            rn[dy + 1][dx + 1] = q[3];
+                            if (!(std::abs(q[3] - r) <= jump * r)) smooth = false;
+                        } else {
+                            smooth = false;
+                        }
+                    }
+                }
+
+                if (smooth) {
+                    const Real w[3] = {Real(1), Real(2), Real(1)};
+                    for (int k = 0; k < 3; ++k) { // dy = -1, 0, 1
+                        const Vec3<Real> d = N[k][2] - N[k][0];
+                        tx = {tx.x + w[k] * d.x, tx.y + w[k] * d.y, tx.z + w[k] * d.z};
+                    }
+                    for (int k = 0; k < 3; ++k) { // dx = -1, 0, 1
+                        const Vec3<Real> d = N[2][k] - N[0][k];
+                        ty = {ty.x + w[k] * d.x, ty.y + w[k] * d.y, ty.z + w[k] * d.z};
+                    }
                 } else {
-                    const bool use_xp = xp && (!xm || std::abs(rn[1][2] - r) <= std::abs(rn[1][0] - r));
-                    tx = use_xp ? N[1][2] - P : P - N[1][0];
-                    const bool use_yp = yp && (!ym || std::abs(rn[2][1] - r) <= std::abs(rn[0][1] - r));
-                    ty = use_yp ? N[2][1] - P : P - N[0][1];
+                    // One-sided differences towards the valid neighbour of closer range (ties: +1 side).
+                    const bool xp = ok[1][2], xm = ok[1][0], yp = ok[2][1], ym = ok[0][1];
+                    if ((!xp && !xm) || (!yp && !ym)) {
+                        facing = true;
+                    } else {
+                        const bool use_xp = xp && (!xm || std::abs(rn[1][2] - r) <= std::abs(rn[1][0] - r));
+                        tx = use_xp ? N[1][2] - P : P - N[1][0];
+                        const bool use_yp = yp && (!ym || std::abs(rn[2][1] - r) <= std::abs(rn[0][1] - r));
+                        ty = use_yp ? N[2][1] - P : P - N[0][1];
+                    }
                 }
             }
 

@@ -307,7 +307,11 @@ Result<void> VulkanBackend::create_compute() {
         return {};
     };
     if (incidence_) {
-        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), kNormalsRun); !r) return r;
+        // variant: normal_method, so the pipeline holds only its own stencil (shaders/normals.comp).
+        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), kNormalsRun,
+                          plan_.params.normal_method);
+            !r)
+            return r;
     }
     if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), kEchoPixels); !r) return r;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), 1); !r) return r;
