@@ -96,9 +96,14 @@ std::vector<float> expect_normals_match(const Plan& plan, const Frame& g) {
     double max_angle_deg = 0, max_cos_diff = 0;
     for (std::size_t i = 0; i < pixels; ++i) {
         if (g.depth[i] <= 0) continue;
-        double dot = 0;
-        for (int k = 0; k < 3; ++k) dot += static_cast<double>(normals[4 * i + k]) * g.normals[4 * i + k];
-        max_angle_deg = std::max(max_angle_deg, std::acos(std::clamp(dot, -1.0, 1.0)) * 180.0 / 3.14159265358979);
+        // atan2(|a x b|, a . b), not acos(a . b): acos of two float unit vectors bottoms out at
+        // acos(1 - 2^-23) ~ 0.04 deg, which would hide the real difference under rounding.
+        const double a[3] = {normals[4 * i], normals[4 * i + 1], normals[4 * i + 2]};
+        const double b[3] = {g.normals[4 * i], g.normals[4 * i + 1], g.normals[4 * i + 2]};
+        const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2], cz = a[0] * b[1] - a[1] * b[0];
+        const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        const double angle = std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot);
+        max_angle_deg = std::max(max_angle_deg, angle * 180.0 / 3.14159265358979);
         max_cos_diff = std::max(max_cos_diff, static_cast<double>(std::abs(normals[4 * i + 3] - g.normals[4 * i + 3])));
     }
     std::printf("[normals] method %u: max angle %.2e deg, max |d cos| %.2e\n", plan.params.normal_method, max_angle_deg,
