@@ -20,12 +20,22 @@ layout(std430, binding = 1) readonly buffer DepthBuffer { float depth[]; };
 layout(std430, binding = 2) readonly buffer MaterialIdBuffer { uint material_id[]; };
 layout(std430, binding = 3) readonly buffer NormalsBuffer { vec4 normals4[]; };
 layout(std430, binding = 4) writeonly buffer EchoBuffer { vec2 echo2[]; };
+// The same buffer with accuracy.intermediates = fp16: (energy * echo_scale, range) as two halves.
+layout(std430, binding = 4) writeonly buffer EchoHalfBuffer { uint echo_half2[]; };
+
+void store_echo(uint p, vec2 energy_range) {
+    if (params.echo_half != 0u) {
+        echo_half2[p] = packHalf2x16(vec2(energy_range.x * params.echo_scale, energy_range.y));
+    } else {
+        echo2[p] = energy_range;
+    }
+}
 layout(std430, binding = 9) readonly buffer MaterialBuffer { MaterialGpu materials[]; };
 
 void echo_pixel(uint p) {
     float d = depth[p];
     if (!(d > 0.0)) {
-        echo2[p] = vec2(0.0);
+        store_echo(p, vec2(0.0));
         return;
     }
     uint row = p / params.columns;
@@ -36,7 +46,7 @@ void echo_pixel(uint p) {
     float r = slant_range(z, u, v);
     uint m = material_id[p];
     if (r < params.range_min_m || r >= params.range_max_m || m >= uint(materials.length())) {
-        echo2[p] = vec2(0.0, r); // kNoMaterial is >= any material count
+        store_echo(p, vec2(0.0, r)); // kNoMaterial is >= any material count
         return;
     }
     float scatter = 1.0;
@@ -52,7 +62,7 @@ void echo_pixel(uint p) {
     }
     float e = echo_energy(materials[m].backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
                           kSpreading, kAbsorption);
-    echo2[p] = vec2(e, r);
+    store_echo(p, vec2(e, r));
 }
 
 void main() {

@@ -17,6 +17,15 @@ layout(local_size_x = kWorkgroupSize) in;
 
 layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 4) readonly buffer EchoBuffer { vec2 echo2[]; };
+layout(std430, binding = 4) readonly buffer EchoHalfBuffer { uint echo_half2[]; }; // accuracy.intermediates = fp16
+
+vec2 load_echo(uint p) {
+    if (params.echo_half != 0u) {
+        vec2 v = unpackHalf2x16(echo_half2[p]);
+        return vec2(v.x / params.echo_scale, v.y);
+    }
+    return echo2[p];
+}
 layout(std430, binding = 5) buffer ProfileBuffer { float profiles[]; };
 
 void main() {
@@ -30,9 +39,9 @@ void main() {
     uint rows = params.rows;
     uint kernel = params.range_kernel;
     float r_up = 0.0;
-    vec2 er = echo2[column];
+    vec2 er = load_echo(column);
     for (uint row = 0u; row < rows; ++row) {
-        float r_down = row + 1u < rows ? echo2[(row + 1u) * columns + column].y : 0.0;
+        float r_down = row + 1u < rows ? load_echo((row + 1u) * columns + column).y : 0.0;
         float e = er.x;
         float r = er.y;
         if (e > 0.0) {
@@ -67,6 +76,6 @@ void main() {
             }
         }
         r_up = r;
-        er = row + 1u < rows ? echo2[(row + 1u) * columns + column] : vec2(0.0);
+        er = row + 1u < rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
     }
 }

@@ -86,9 +86,14 @@ struct SonarParams {
     float vpattern_halfwidth_rad; // for the box pattern
     uint bins_padded; // GPU only: bins rounded up to a multiple of 4 (vec4 layouts of the beamform stage)
     uint circular;    // 1 for a full circle (hfov 360): beam 0 and the last beam are neighbours
+
+    uint echo_half;   // 1: echo buffer stored as two halves (energy * echo_scale, range), see echo.comp
+    float echo_scale; // power of 2 that brings the brightest possible pixel energy to ~2^15
+    float pad2;
+    float pad3;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SonarParams) == 24 * 4, "SonarParams must match the GLSL std140 block");
+static_assert(sizeof(SonarParams) == 28 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
 // Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.

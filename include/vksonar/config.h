@@ -33,6 +33,8 @@ enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
 enum class NormalMethod : std::uint8_t { sobel3, sobel5 };
 enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
 enum class Precision : std::uint8_t { f32, f64 };
+// Storage of the per-pixel echo buffer (energy, slant range) between the echo and profile passes.
+enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
 // What the renderer reproduces: the physical model (DESIGN §3), or one of the two legacy Gazebo plugins
 // step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
 enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
@@ -90,6 +92,7 @@ struct SonarConfig {
     NormalMethod normal_method = NormalMethod::sobel3;
     RangeKernel range_kernel = RangeKernel::footprint;
     double sidelobe_kernel_beamwidths = 3.0; // side-lobe kernel reaches +- this many beamwidths
+    IntermediatePrecision intermediates = IntermediatePrecision::fp32; // echo buffer storage
     Precision cpu_precision = Precision::f32;
 
     EffectsConfig effects;

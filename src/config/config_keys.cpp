@@ -43,6 +43,9 @@ template <> struct EnumNames<NormalMethod> {
 template <> struct EnumNames<Colormap> {
     static constexpr std::array<const char*, 4> names{"gray", "viridis", "sonar", "jet"};
 };
+template <> struct EnumNames<IntermediatePrecision> {
+    static constexpr std::array<const char*, 2> names{"fp32", "fp16"};
+};
 template <> struct EnumNames<Precision> {
     static constexpr std::array<const char*, 2> names{"float", "double"};
 };
@@ -240,6 +243,9 @@ std::vector<ConfigKey> make_table() {
                  "pixel's own range extent (at least one bin)"),
         VKS_NUMBER("accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "",
                    "Side-lobe kernel reaches +- this many beamwidths, >= 0"),
+        VKS_ENUM("accuracy.intermediates", IntermediatePrecision, intermediates, "fp32|fp16",
+                 "Storage of the per-pixel echo buffer (energy scaled by a power of 2, slant range); fp16 "
+                 "halves its memory traffic and rounds both to 11 significant bits"),
         VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),
 
         VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a material is angle-dependent)"),

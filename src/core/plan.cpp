@@ -383,6 +383,20 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
     g.edge_relative_jump = kEdgeRelativeJump;
     g.circular = p.circular ? 1u : 0u;
+    // fp16 echo storage: scale energies by a power of 2 (exact both ways) so that the brightest
+    // possible pixel (brightest material, facing, on axis, the largest pixel solid angle, at the
+    // near edge of the window, or the far edge without spreading) lands near 2^15 < 65504. Echoes
+    // more than ~2^40 (120 dB) below it underflow to 0.
+    g.echo_half = c.intermediates == IntermediatePrecision::fp16 ? 1u : 0u;
+    {
+        double brightest = 0.0;
+        for (const auto& m : p.materials) brightest = std::max(brightest, double(m.backscatter_linear));
+        const double omega = (2.0 * p.tan_half_h / p.slice_columns) * (2.0 * p.tan_half_v / p.rows);
+        const double r = e.spreading ? c.range_min_m : c.range_max_m;
+        const double peak = brightest * omega * (e.spreading ? 1.0 / (r * r) : r * r);
+        const int exponent = peak > 0.0 ? static_cast<int>(std::floor(std::log2(32768.0 / peak))) : 0;
+        g.echo_scale = std::ldexp(1.0f, std::clamp(exponent, -120, 120));
+    }
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
     return p;
 }

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "core/half.h"
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 
@@ -76,6 +77,14 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
                                           absorption);
             out[0] = static_cast<float>(e);
             out[1] = static_cast<float>(r);
+        }
+    }
+    if (g.echo_half != 0u) {
+        // fp16 storage, as echo.comp stores it: energy * echo_scale (a power of 2) and range as halves.
+        const std::size_t pixels = static_cast<std::size_t>(R) * C;
+        for (std::size_t p = 0; p < pixels; ++p) {
+            echo2[2 * p] = round_to_half(echo2[2 * p] * g.echo_scale) / g.echo_scale;
+            echo2[2 * p + 1] = round_to_half(echo2[2 * p + 1]);
         }
     }
 }

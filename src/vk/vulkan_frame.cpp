@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstring>
 
+#include "core/half.h"
 #include "vk/commands.h"
 #include "vk/vk_error.h"
 #include "vk/vulkan_backend_impl.h"
@@ -278,7 +279,19 @@ void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const 
             std::memset(normals, 0, pixels * 4 * sizeof(float)); // the normals pass did not run
         }
     }
-    if (save_mask & save_echo) copy_out(echo_region_, sized(frame.echo, pixels * 2));
+    if (save_mask & save_echo) {
+        float* echo = sized(frame.echo, pixels * 2);
+        if (plan_.params.echo_half != 0u) { // two halves per pixel: (energy * echo_scale, range)
+            const auto* halves = reinterpret_cast<const std::uint16_t*>(static_cast<const char*>(readback_.mapped) +
+                                                                       echo_region_.offset);
+            for (std::size_t p = 0; p < pixels; ++p) {
+                echo[2 * p] = half_to_float(halves[2 * p]) / plan_.params.echo_scale;
+                echo[2 * p + 1] = half_to_float(halves[2 * p + 1]);
+            }
+        } else {
+            copy_out(echo_region_, echo);
+        }
+    }
     if (save_mask & save_profiles) {
         // The GPU keeps profiles column-major (contiguous loads in resample.comp); the Frame holds the
         // public range-major layout.
