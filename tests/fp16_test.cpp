@@ -15,16 +15,16 @@ namespace {
 TEST(Half, ConversionFollowsIeeeBinary16) {
     EXPECT_EQ(float_to_half(1.0f), 0x3c00);
     EXPECT_EQ(float_to_half(-2.0f), 0xc000);
-    EXPECT_EQ(float_to_half(65504.0f), 0x7bff);                  // largest finite half
-    EXPECT_EQ(float_to_half(65519.0f), 0x7bff);                  // below the halfway point to 2^16
-    EXPECT_EQ(float_to_half(65520.0f), 0x7c00);                  // the tie rounds to even: infinity
-    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -24)), 0x0001);     // smallest subnormal
-    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -25)), 0x0000);     // tie between 0 and 2^-24: even (0)
-    EXPECT_EQ(float_to_half(std::ldexp(3.0f, -26)), 0x0001);     // 0.75 * 2^-24 rounds up
-    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -14)), 0x0400);     // smallest normal
+    EXPECT_EQ(float_to_half(65504.0f), 0x7bff);                     // largest finite half
+    EXPECT_EQ(float_to_half(65519.0f), 0x7bff);                     // below the halfway point to 2^16
+    EXPECT_EQ(float_to_half(65520.0f), 0x7c00);                     // the tie rounds to even: infinity
+    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -24)), 0x0001);        // smallest subnormal
+    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -25)), 0x0000);        // tie between 0 and 2^-24: even (0)
+    EXPECT_EQ(float_to_half(std::ldexp(3.0f, -26)), 0x0001);        // 0.75 * 2^-24 rounds up
+    EXPECT_EQ(float_to_half(std::ldexp(1.0f, -14)), 0x0400);        // smallest normal
     EXPECT_EQ(float_to_half(1.0f + std::ldexp(1.0f, -11)), 0x3c00); // tie: stays on the even 1.0
     EXPECT_EQ(float_to_half(1.0f + std::ldexp(3.0f, -11)), 0x3c02); // tie: up to the even neighbour
-    for (std::uint32_t h = 0; h < 0x7c00; ++h) { // every finite positive half survives a round trip
+    for (std::uint32_t h = 0; h < 0x7c00; ++h) {                    // every finite positive half survives a round trip
         ASSERT_EQ(float_to_half(half_to_float(static_cast<std::uint16_t>(h))), h) << h;
     }
 }
@@ -48,7 +48,8 @@ TEST(Fp16Echo, GpuMatchesCpuReferenceWithinOneHalfUlp) {
     std::vector<float> echo(pixels * 2);
     cpu::echo<float>(plan, f.depth.data(), f.material.data(), f.normals.data(), echo.data());
     double max_energy = 0;
-    for (std::size_t i = 0; i < pixels; ++i) max_energy = std::max(max_energy, double(echo[2 * i]));
+    for (std::size_t i = 0; i < pixels; ++i)
+        max_energy = std::max(max_energy, double(echo[2 * i]));
     ASSERT_GT(max_energy, 0.0);
     std::size_t identical = 0;
     double max_rel = 0, max_range_rel = 0;

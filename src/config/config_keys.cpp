@@ -248,9 +248,9 @@ std::vector<ConfigKey> make_table() {
                  "halves its memory traffic and rounds both to 11 significant bits"),
         VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),
 
-        VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a material is angle-dependent)"),
+        VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a drawn material is angle-dependent)"),
         VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),
-        VKS_EFFECT(horizontal_pattern, "Side lobes along beams (auto: on)"),
+        VKS_EFFECT(horizontal_pattern, "Side lobes along beams (auto: on; main lobe only when the side lobes stay below the display window)"),
         VKS_EFFECT(spreading, "Two-way spherical spreading r^-4 (auto: on)"),
         VKS_EFFECT(absorption, "Absorption (auto: on if 2 alpha range_max >= 0.1 dB)"),
         VKS_EFFECT(speckle, "Speckle (auto: on)"),

@@ -15,7 +15,7 @@ inline std::uint16_t float_to_half(float f) {
     const std::uint32_t mag = x & 0x7fffffffu;
     if (mag >= 0x7f800000u) return static_cast<std::uint16_t>(sign | (mag > 0x7f800000u ? 0x7e00u : 0x7c00u));
     if (mag >= 0x477ff000u) return static_cast<std::uint16_t>(sign | 0x7c00u); // >= 65520: infinity
-    if (mag < 0x38800000u) {                                                    // below 2^-14: subnormal or 0
+    if (mag < 0x38800000u) {                                                   // below 2^-14: subnormal or 0
         const int exponent = static_cast<int>(mag >> 23);
         const int shift = 126 - exponent; // value / 2^-24 = mantissa >> shift
         if (exponent == 0 || shift > 24) return static_cast<std::uint16_t>(sign);
@@ -50,6 +50,8 @@ inline float half_to_float(std::uint16_t h) {
     return f;
 }
 
-inline float round_to_half(float f) { return half_to_float(float_to_half(f)); }
+inline float round_to_half(float f) {
+    return half_to_float(float_to_half(f));
+}
 
 } // namespace vksonar

@@ -133,6 +133,28 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad) {
     return 0.0;
 }
 
+HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double reach_rad) {
+    // Walk out from the axis in steps of 1/200 of the reach: the first local minimum is the first
+    // null, the largest value beyond it the strongest side lobe (none for monotone patterns).
+    HorizontalLobes lobes;
+    constexpr int kSteps = 2000;
+    double previous = math_f64::pattern_power(shape, k, half_width_rad, 0.0);
+    bool falling = true;
+    double peak = 0.0;
+    for (int i = 1; i <= kSteps; ++i) {
+        const double a = reach_rad * i / kSteps;
+        const double value = math_f64::pattern_power(shape, k, half_width_rad, a);
+        if (falling && value > previous) {
+            falling = false;
+            lobes.first_null_rad = reach_rad * (i - 1) / kSteps;
+        }
+        if (!falling) peak = std::max(peak, value);
+        previous = value;
+    }
+    lobes.peak_sidelobe_db = peak > 0.0 ? 10.0 * std::log10(peak) : -std::numeric_limits<double>::infinity();
+    return lobes;
+}
+
 void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
     const std::vector<double>& b = p.beam_angle_rad;
     p.column_beam.resize(p.columns);
@@ -295,7 +317,21 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     for (std::uint32_t j = 1; j < p.beams; ++j) {
         min_spacing = std::min(min_spacing, p.beam_angle_rad[j - 1] - p.beam_angle_rad[j]);
     }
-    const double reach = c.sidelobe_kernel_beamwidths * hbw;
+    double reach = c.sidelobe_kernel_beamwidths * hbw;
+    // Side lobes that stay below the display floor even for a target at the top of the display window
+    // (strongest side lobe, dB re the main lobe, below -(db_max - db_min)) show nothing: with the
+    // effect on auto the kernel then stops at the first null (main lobe only).
+    std::string lobes_why;
+    if (c.effects.horizontal_pattern == EffectMode::automatic) {
+        const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.horizontal_pattern),
+                                                       p.hpattern_k, p.hpattern_halfwidth_rad, reach);
+        const double window_db = c.db_max - c.db_min;
+        if (lobes.first_null_rad > 0.0 && lobes.peak_sidelobe_db < -window_db) {
+            reach = std::min(reach, lobes.first_null_rad);
+            lobes_why = "; side lobes (" + fmt(lobes.peak_sidelobe_db) + " dB) stay below the " + fmt(window_db) +
+                        " dB display window: main lobe only";
+        }
+    }
     std::uint32_t half_taps = 0;
     p.circular = c.hfov_deg >= 360.0 && p.beams > 1;
     if (p.beams > 1) {
@@ -313,7 +349,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     resolve(e.vertical_pattern, c.effects.vertical_pattern, true, "vertical_pattern",
             "vertical beam pattern always shapes seabed returns", e.states);
     resolve(e.horizontal_pattern, c.effects.horizontal_pattern, half_taps > 0, "horizontal_pattern",
-            half_taps > 0 ? "side-lobe kernel spans " + std::to_string(2 * half_taps + 1) + " beams"
+            half_taps > 0 ? "side-lobe kernel spans " + std::to_string(2 * half_taps + 1) + " beams" + lobes_why
                           : "beam pattern narrower than the beam spacing",
             e.states);
     resolve(e.spreading, c.effects.spreading, true, "spreading", "two-way spherical spreading, 40 log r", e.states);

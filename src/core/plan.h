@@ -85,6 +85,13 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
 double pattern_constant(BeamPattern shape, double beamwidth_rad);
+// The horizontal power pattern's first null (0 if it has none within reach_rad, e.g. gaussian or box)
+// and its strongest side lobe beyond it in dB re the axis (-inf if none), found by sampling.
+struct HorizontalLobes {
+    double first_null_rad = 0.0;
+    double peak_sidelobe_db = 0.0;
+};
+HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double reach_rad);
 // Beamform tables from p.column_azimuth_rad and p.beam_angle_rad (tent between the two nearest beam
 // centres, edge columns to the edge beams, across the seam on a full circle): column_beam,
 // column_weight, beam_column_begin/end. Columns with |azimuth| > exclude_beyond_rad feed no beam.
