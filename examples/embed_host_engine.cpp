@@ -135,7 +135,6 @@ std::string Engine::create(const EngineOptions& options) {
     options_ = options;
     const bool validation = options.validation && has_layer("VK_LAYER_KHRONOS_validation");
     const char* layer = "VK_LAYER_KHRONOS_validation";
-    const char* debug_utils = VK_EXT_DEBUG_UTILS_EXTENSION_NAME;
     VkApplicationInfo app{};
     app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
     app.pApplicationName = "vksonar embed_host";
@@ -153,9 +152,18 @@ std::string Engine::create(const EngineOptions& options) {
     instance_info.pApplicationInfo = &app;
     instance_info.enabledLayerCount = validation ? 1 : 0;
     instance_info.ppEnabledLayerNames = &layer;
-    instance_info.enabledExtensionCount = validation ? 1 : 0;
-    instance_info.ppEnabledExtensionNames = &debug_utils;
-    instance_info.pNext = validation ? &messenger_info : nullptr;
+    // Validate every shader afresh: the layer's on-disk cache (~/.cache) would otherwise hide an error
+    // that an earlier process on this machine happened to validate under other settings.
+    const VkValidationFeatureDisableEXT no_shader_cache = VK_VALIDATION_FEATURE_DISABLE_SHADER_VALIDATION_CACHE_EXT;
+    VkValidationFeaturesEXT features{};
+    features.sType = VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT;
+    features.pNext = &messenger_info;
+    features.disabledValidationFeatureCount = 1;
+    features.pDisabledValidationFeatures = &no_shader_cache;
+    const char* extensions[] = {VK_EXT_DEBUG_UTILS_EXTENSION_NAME, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME};
+    instance_info.enabledExtensionCount = validation ? 2 : 0;
+    instance_info.ppEnabledExtensionNames = extensions;
+    instance_info.pNext = validation ? &features : nullptr;
     HOST_TRY(vkCreateInstance(&instance_info, nullptr, &instance_));
     if (validation) {
         auto create_messenger = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(

@@ -138,6 +138,7 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
     std::vector<const char*> layers;
     std::vector<const char*> extensions;
     bool debug_utils = false;
+    bool validation_features = false;
     if (want_validation && has_layer(kValidationLayer)) {
         layers.push_back(kValidationLayer);
         context.validation = true;
@@ -145,6 +146,10 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
             has_instance_extension(kValidationLayer, VK_EXT_DEBUG_UTILS_EXTENSION_NAME)) {
             extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
             debug_utils = true;
+        }
+        if (has_instance_extension(kValidationLayer, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME)) {
+            extensions.push_back(VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME);
+            validation_features = true;
         }
     }
     VkInstanceCreateFlags flags = 0;
@@ -174,6 +179,17 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
     VkInstanceCreateInfo info{};
     info.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
     info.pNext = debug_utils ? &messenger_info : nullptr; // also covers vkCreateInstance/vkDestroyInstance
+    // The layer otherwise skips SPIR-V it finds in its on-disk cache (~/.cache), so whether a shader
+    // error is reported would depend on what an earlier process on the machine validated.
+    const VkValidationFeatureDisableEXT no_shader_cache = VK_VALIDATION_FEATURE_DISABLE_SHADER_VALIDATION_CACHE_EXT;
+    VkValidationFeaturesEXT features{};
+    features.sType = VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT;
+    features.disabledValidationFeatureCount = 1;
+    features.pDisabledValidationFeatures = &no_shader_cache;
+    if (validation_features) {
+        features.pNext = info.pNext;
+        info.pNext = &features;
+    }
     info.flags = flags;
     info.pApplicationInfo = &app;
     info.enabledLayerCount = static_cast<std::uint32_t>(layers.size());
