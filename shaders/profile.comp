@@ -45,29 +45,36 @@ void main() {
         float e = er.x;
         float r = er.y;
         if (e > 0.0) {
-            float x = range_bin_coord(r, params.range_min_m, params.bin_width_m);
+            // `precise`: no fused multiply-add here, so that the bin coordinates and every share are
+            // rounded exactly as the CPU reference rounds them (a GPU compiler may otherwise contract
+            // a*b+c, and an ulp of a bin coordinate moves energy between bins).
+            precise float x = range_bin_coord(r, params.range_min_m, params.inv_bin_width_m);
             if (kernel == kRangeKernelFootprint) {
-                float extent = pixel_range_extent(r_up, r, r_down, params.edge_relative_jump) / params.bin_width_m;
+                precise float extent = pixel_range_extent(r_up, r, r_down, params.edge_relative_jump) *
+                                       params.inv_bin_width_m;
                 float width = min(max(extent, 1.0), kMaxFootprintBins);
-                float lo = x - 0.5 * width;
-                float hi = x + 0.5 * width;
+                precise float lo = x - 0.5 * width;
+                precise float hi = x + 0.5 * width;
                 float inv_width = 1.0 / width;
                 int nb = int(bins);
                 int k_first = int(floor(min(max(lo, 0.0), float(nb - 1))));
                 int k_last = int(floor(min(max(hi, 0.0), float(nb - 1))));
                 for (int k = k_first; k <= k_last; ++k) {
-                    profiles[base + uint(k)] += footprint_share(lo, hi, inv_width, k, nb) * e;
+                    precise float share = footprint_share(lo, hi, inv_width, k, nb) * e;
+                    profiles[base + uint(k)] += share;
                 }
             } else if (kernel == kRangeKernelTent) {
-                float t = x - 0.5;
+                precise float t = x - 0.5;
                 float k0f = floor(t);
-                float w1 = t - k0f;
+                precise float w1 = t - k0f;
                 // a share below bin 0 goes to bin 0, above the last bin to the last bin: energy is kept
                 int k0 = int(clamp(k0f, -1.0, float(bins)));
                 uint b0 = uint(clamp(k0, 0, int(bins) - 1));
                 uint b1 = uint(clamp(k0 + 1, 0, int(bins) - 1));
-                profiles[base + b0] += (1.0 - w1) * e;
-                profiles[base + b1] += w1 * e;
+                precise float share0 = (1.0 - w1) * e;
+                precise float share1 = w1 * e;
+                profiles[base + b0] += share0;
+                profiles[base + b1] += share1;
             } else {
                 float kf = floor(x);
                 if (kf >= 0.0 && kf < float(bins)) {

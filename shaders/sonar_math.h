@@ -103,9 +103,10 @@ VKS_FN REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid
     return e;
 }
 
-// Fractional range-bin coordinate: bin k covers [range_min + k w, range_min + (k+1) w).
-VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL bin_width_m) {
-    return (range_m - range_min_m) / bin_width_m;
+// Fractional range-bin coordinate: bin k covers [range_min + k w, range_min + (k+1) w). Takes 1 / w:
+// a multiplication is correctly rounded on every Vulkan device, a division is not.
+VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL inv_bin_width_m) {
+    return (range_m - range_min_m) * inv_bin_width_m;
 }
 
 // Range extent (m) of a pixel from the slant ranges of its row neighbours (0 = no hit): half the

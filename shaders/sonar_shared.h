@@ -89,7 +89,9 @@ struct SonarParams {
 
     uint echo_half;   // 1: echo buffer stored as two halves (energy * echo_scale, range), see echo.comp
     float echo_scale; // power of 2 that brings the brightest possible pixel energy to ~2^15
-    float pad2;
+    // 1 / bin_width_m rounded once on the host: both backends multiply by it. A GPU may divide with an
+    // error of ulps (Vulkan allows 2.5), and a bin coordinate off by ulps moves energy between bins.
+    float inv_bin_width_m;
     float pad3;
 };
 #ifdef __cplusplus

@@ -410,6 +410,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.range_min_m = static_cast<float>(c.range_min_m);
     g.range_max_m = static_cast<float>(c.range_max_m);
     g.bin_width_m = static_cast<float>(p.bin_width_m);
+    g.inv_bin_width_m = static_cast<float>(1.0 / p.bin_width_m);
     g.alpha_db_per_m = static_cast<float>(p.alpha_db_per_m);
     g.vpattern_k = static_cast<float>(p.vpattern_k);
     g.vpattern_shape = static_cast<std::uint32_t>(c.vertical_pattern);

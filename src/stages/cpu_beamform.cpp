@@ -18,13 +18,13 @@ template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
     using M = Math<Real>;
     const std::uint32_t C = plan.columns, R = plan.rows, beams = plan.beams, bins = plan.bins;
-    Real range_min, bin_width;
+    Real range_min, inv_bin_width;
     if constexpr (std::is_same_v<Real, float>) {
         range_min = plan.params.range_min_m;
-        bin_width = plan.params.bin_width_m;
+        inv_bin_width = plan.params.inv_bin_width_m;
     } else {
         range_min = plan.config.range_min_m;
-        bin_width = plan.bin_width_m;
+        inv_bin_width = Real(1) / plan.bin_width_m;
     }
     const bool tent = plan.params.range_kernel == shared::kRangeKernelTent;
     const bool footprint = plan.params.range_kernel == shared::kRangeKernelFootprint;
@@ -42,12 +42,12 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
             const Real r = static_cast<Real>(e2[2 * c + 1]);
-            const Real x = M::range_bin_coord(r, range_min, bin_width);
+            const Real x = M::range_bin_coord(r, range_min, inv_bin_width);
             if (footprint) {
                 if (std::isnan(x)) continue;
                 const Real r_up = j > 0 ? static_cast<Real>(e2[2 * c + 1 - 2 * std::size_t(C)]) : Real(0);
                 const Real r_down = j + 1 < R ? static_cast<Real>(e2[2 * c + 1 + 2 * std::size_t(C)]) : Real(0);
-                const Real extent = M::pixel_range_extent(r_up, r, r_down, jump_rel) / bin_width;
+                const Real extent = M::pixel_range_extent(r_up, r, r_down, jump_rel) * inv_bin_width;
                 const Real width = std::min(std::max(extent, Real(1)), static_cast<Real>(shared::kMaxFootprintBins));
                 const Real lo = x - Real(0.5) * width, hi = x + Real(0.5) * width, inv_width = Real(1) / width;
                 const int nb = static_cast<int>(bins);
