@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 #include "test_support.h"
 #include "tolerances.h"
@@ -64,8 +65,9 @@ TEST_P(StageTest, DepthDiffersOnlyOnTriangleEdges) {
     const Frame& c = p->cpu->frame;
     const Plan& plan = renderer_plan(p->gpu->renderer);
     std::size_t hits = 0, mismatched = 0;
-    double max_rel_interior = 0;
+    double max_rel_interior = 0, max_abs_range_m = 0;
     for (std::uint32_t row = 0; row < g.rows; ++row) {
+        const double v = math_f64::pixel_coord(row, plan.rows, plan.tan_half_v);
         for (std::uint32_t col = 0; col < g.columns; ++col) {
             const std::size_t i = static_cast<std::size_t>(row) * g.columns + col;
             hits += g.depth[i] > 0;
@@ -77,14 +79,19 @@ TEST_P(StageTest, DepthDiffersOnlyOnTriangleEdges) {
                 ++mismatched;
             } else {
                 max_rel_interior = std::max(max_rel_interior, rel);
+                // The same difference as slant range in metres: r = z |(u, v, 1)|.
+                const double u = math_f64::pixel_coord(col % plan.slice_columns, plan.slice_columns, plan.tan_half_h);
+                max_abs_range_m = std::max(max_abs_range_m, std::abs(zg - zc) * std::sqrt(1 + u * u + v * v));
             }
         }
     }
     ASSERT_GT(hits, 0u);
     RecordProperty("depth_mismatched_pixels", static_cast<int>(mismatched));
-    std::printf("[depth] %s: %zu of %zu hit pixels differ (edges), max interior view-z rel diff %.2e\n",
-                GetParam().file.c_str(), mismatched, hits, max_rel_interior);
+    std::printf("[depth] %s: %zu of %zu hit pixels differ (edges), max interior view-z rel diff %.2e, max slant "
+                "range diff %.2e m\n",
+                GetParam().file.c_str(), mismatched, hits, max_rel_interior, max_abs_range_m);
     EXPECT_LE(static_cast<double>(mismatched), kDepthEdgePixelBudget * hits);
+    EXPECT_LE(max_abs_range_m, kDepthInteriorRelTol * plan.config.range_max_m);
 }
 
 // Normals from the GPU's depth through the CPU reference vs the GPU's normals (same tolerance for
@@ -126,7 +133,8 @@ TEST_P(StageTest, NormalsEchoBeamformMatchOnTheSameInput) {
     std::vector<float> echo(pixels * 2);
     cpu::echo<float>(plan, g.depth.data(), g.material.data(), g.normals.data(), echo.data());
     double max_energy = 0;
-    for (std::size_t i = 0; i < pixels; ++i) max_energy = std::max(max_energy, static_cast<double>(g.echo[2 * i]));
+    for (std::size_t i = 0; i < pixels; ++i)
+        max_energy = std::max(max_energy, static_cast<double>(g.echo[2 * i]));
     ASSERT_GT(max_energy, 0.0);
     double max_rel_echo = 0, max_range_diff = 0;
     for (std::size_t i = 0; i < pixels; ++i) {
@@ -144,14 +152,28 @@ TEST_P(StageTest, NormalsEchoBeamformMatchOnTheSameInput) {
     std::vector<float> polar(beam_profiles.size());
     cpu::beamform<float>(plan, g.echo.data(), profiles.data(), beam_profiles.data(), polar.data());
     double peak = 0;
-    for (float v : polar) peak = std::max(peak, static_cast<double>(v));
+    for (float v : polar)
+        peak = std::max(peak, static_cast<double>(v));
     double max_rel_polar = 0;
     for (std::size_t i = 0; i < polar.size(); ++i) {
         const double a = g.clean[i], b = polar[i];
         max_rel_polar = std::max(max_rel_polar, std::abs(a - b) / std::max(std::abs(b), kBeamformRelFloor * peak));
     }
-    std::printf("[beamform] max rel %.2e\n", max_rel_polar);
+    // The same comparison in dB over the cells above the ambient noise floor (clean is relative to SL).
+    const SonarConfig& cfg = plan.config;
+    const double floor = std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db - cfg.source_level_db) / 10.0);
+    double max_db = 0;
+    std::size_t above = 0;
+    for (std::size_t i = 0; i < polar.size(); ++i) {
+        if (!(polar[i] > floor)) continue;
+        ++above;
+        max_db = std::max(max_db, std::abs(10.0 * std::log10(double(g.clean[i]) / double(polar[i]))));
+    }
+    std::printf("[beamform] max rel %.2e, max %.2e dB over %zu cells above the noise floor\n", max_rel_polar, max_db,
+                above);
     EXPECT_LE(max_rel_polar, kBeamformRelTol);
+    ASSERT_GT(above, 100u);
+    EXPECT_LE(max_db, 10.0 * std::log10(1.0 + kBeamformRelTol)); // 4.3e-5 dB
 }
 
 TEST_P(StageTest, Sobel5NormalsMatchOnTheSameInput) {
@@ -186,7 +208,8 @@ TEST_P(StageTest, WholeFrameAgrees) {
     const Frame& c = p->cpu->frame;
     // The same RNG draws on both: the ratio of noisy to clean intensity of a cell depends only on
     // (seed, frame, beam, bin), so compare the clean scans and check the noise multipliers.
-    const double floor = std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+    const double floor =
+        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
     std::size_t above = 0, over = 0;
     double max_db = 0;
     for (std::size_t i = 0; i < g.clean.size(); ++i) {
@@ -260,8 +283,8 @@ TEST_P(PresetFrameTest, WholeFrameAgrees) {
         max_db = std::max(max_db, d);
         over += d > kFrameDbTol;
     }
-    std::printf("[preset] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().c_str(),
-                above, over, kFrameDbTol, max_db);
+    std::printf("[preset] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().c_str(), above,
+                over, kFrameDbTol, max_db);
     ASSERT_GT(above, 0u) << "the preset sees nothing of the default scene: move the pose";
     EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above); // tolerance: tests/tolerances.h
     EXPECT_EQ(noise_same, noise_compared);

@@ -14,6 +14,7 @@ constexpr double kDepthEdgePixelBudget = 0.01;
 // interpolated z_ndc: reversed-Z float has ~2^-24 relative precision near d ~ 1e-2..1, and the
 // depth -> z inversion amplifies it by up to far/near ~ 100: 1e-4 relative.
 constexpr double kDepthInteriorRelTol = 1e-4;
+// In metres: the same bound on the slant range, at most 1e-4 x range_max (4 mm at 40 m).
 
 // Embedding, a host depth image in standard Z (d = 0 at near, 1 at far, D32 float): near d = 1 a
 // float step is 2^-24, and z = n / (z_a + z_b d) turns one step into a relative z step of
