@@ -30,7 +30,8 @@ struct CliRun {
         std::vector<std::string> lines;
         std::stringstream stream(err);
         std::string line;
-        while (std::getline(stream, line)) lines.push_back(line);
+        while (std::getline(stream, line))
+            lines.push_back(line);
         return lines;
     }
 };
@@ -38,8 +39,10 @@ struct CliRun {
 std::string quote(const std::string& arg) {
     std::string quoted = "'";
     for (char ch : arg) {
-        if (ch == '\'') quoted += "'\\''";
-        else quoted += ch;
+        if (ch == '\'')
+            quoted += "'\\''";
+        else
+            quoted += ch;
     }
     return quoted + "'";
 }
@@ -60,8 +63,7 @@ class Cli : public ::testing::Test {
 protected:
     void SetUp() override {
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() /
-               ("vksonar_cli_test_" + std::to_string(::getpid()) + "_" + info->name());
+        dir_ = fs::temp_directory_path() / ("vksonar_cli_test_" + std::to_string(::getpid()) + "_" + info->name());
         fs::remove_all(dir_);
         fs::create_directories(dir_);
         write_text(dir_ / "quad.gltf", kQuadGltf);
@@ -73,7 +75,8 @@ protected:
 
     CliRun run(const std::vector<std::string>& args) const {
         std::string command = quote(VKSONAR_CLI);
-        for (const auto& arg : args) command += " " + quote(arg);
+        for (const auto& arg : args)
+            command += " " + quote(arg);
         const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
         command += " > " + quote(out.string()) + " 2> " + quote(err.string()) + " < /dev/null";
         const int status = std::system(command.c_str());
@@ -99,12 +102,14 @@ protected:
         }
         const CliRun r = run(args);
         std::string joined;
-        for (const auto& a : args) joined += a + " ";
+        for (const auto& a : args)
+            joined += a + " ";
         EXPECT_EQ(r.exit_code, 2) << joined << "\nstderr: " << r.err;
         const auto lines = r.err_lines();
         ASSERT_EQ(lines.size(), 1u) << joined << "\nstderr: " << r.err;
         EXPECT_EQ(lines[0].rfind("error: ", 0), 0u) << lines[0];
-        for (const auto& text : expected) EXPECT_NE(lines[0].find(text), std::string::npos) << lines[0];
+        for (const auto& text : expected)
+            EXPECT_NE(lines[0].find(text), std::string::npos) << lines[0];
         EXPECT_FALSE(fs::exists(parent)) << "output left behind by: " << joined;
     }
 
@@ -154,6 +159,27 @@ TEST_F(Cli, InvalidValues) {
     expect_bad_render({"--set", "hfov=nan"}, {"hfov", "nan"});
     expect_bad_render({"--set", "display.db_max=1"}, {"display.db_max = 1"});
     expect_bad_render({"--set", "accuracy.max_slice=200"}, {"accuracy.max_slice = 200"});
+    // A value from a config file names the file too.
+    write_text(dir_ / "zero_beams.json", R"({"beams": 0})");
+    expect_bad_render({"--config", (dir_ / "zero_beams.json").string()}, {"zero_beams.json", "beams = 0"});
+}
+
+TEST_F(Cli, SkippedPrimitivesAreReportedAsWarnings) {
+    // POINTS, LINES and an all-degenerate primitive: the render succeeds and says what it skipped.
+    const fs::path out = dir_ / "out";
+    const CliRun r = run({"render", "--backend", "cpu", "--scene",
+                          std::string(VKSONAR_TEST_DIR) + "/data/scenes/primitives.gltf", "--out", out.string()});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    std::size_t warnings = 0;
+    for (const std::string& line : r.err_lines()) {
+        if (line.rfind("warning: ", 0) != 0) continue;
+        ++warnings;
+        EXPECT_NE(line.find("primitives.gltf"), std::string::npos) << line;
+    }
+    for (const char* word : {"POINTS", "LINES", "degenerate"})
+        EXPECT_NE(r.err.find(word), std::string::npos) << word;
+    EXPECT_GE(warnings, 3u) << r.err;
+    EXPECT_TRUE(fs::exists(out / "polar.npy"));
 }
 
 TEST_F(Cli, UnknownPresetListsValidOnes) {
@@ -172,6 +198,16 @@ TEST_F(Cli, UnwritableOutputDirectory) {
     EXPECT_FALSE(fs::exists("/proc/vksonar_out"));
     write_text(dir_ / "a_file", "x");
     expect_bad_render({"--out", (dir_ / "a_file").string()}, {"a_file", "not a directory"});
+    // An existing output folder with a directory where fan.png goes: exit 2, named, no stray files.
+    const fs::path taken = dir_ / "taken";
+    fs::create_directories(taken / "fan.png");
+    const CliRun r =
+        run({"render", "--backend", "cpu", "--scene", (dir_ / "quad.gltf").string(), "--out", taken.string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
+    EXPECT_NE(r.err.find("fan.png: a directory is in the way"), std::string::npos) << r.err;
+    for (const auto& entry : fs::directory_iterator(taken))
+        EXPECT_NE(entry.path().filename().string()[0], '.') << "temporary left: " << entry.path();
 }
 
 TEST_F(Cli, BadTrajectoryLineNamesFileAndLine) {
@@ -229,7 +265,8 @@ TEST_F(Cli, PresetsListShowAndKeys) {
 void write_npy_f32(const fs::path& path, const std::vector<float>& values, std::uint32_t rows, std::uint32_t cols) {
     std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + std::to_string(rows) + ", " +
                          std::to_string(cols) + "), }";
-    while ((10 + header.size() + 1) % 64 != 0) header += ' ';
+    while ((10 + header.size() + 1) % 64 != 0)
+        header += ' ';
     header += '\n';
     std::ofstream file(path, std::ios::binary);
     file.write("\x93NUMPY\x01\x00", 8);
@@ -306,10 +343,29 @@ std::vector<std::size_t> npy_shape(const fs::path& path) {
 
 TEST_F(Cli, RenderWritesEveryOutput) {
     const fs::path out = dir_ / "out" / "nested";
-    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=64",
-                       "--set", "beams=48", "--set", "display.fan_width=128", "--set", "effects.speckle=off",
-                       "--save", "depth,normals", "--save", "echo,cloud", "--pose", "0,0,0,0,0,0", "--seed", "7",
-                       "--out", out.string()});
+    const CliRun r = run({"render",
+                          "--scene",
+                          (dir_ / "quad.gltf").string(),
+                          "--backend",
+                          "cpu",
+                          "--set",
+                          "bins=64",
+                          "--set",
+                          "beams=48",
+                          "--set",
+                          "display.fan_width=128",
+                          "--set",
+                          "effects.speckle=off",
+                          "--save",
+                          "depth,normals",
+                          "--save",
+                          "echo,cloud",
+                          "--pose",
+                          "0,0,0,0,0,0",
+                          "--seed",
+                          "7",
+                          "--out",
+                          out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_EQ(r.err, "");
     for (const char* name : {"fan.png", "polar.png", "polar.npy", "polar_u16.npy", "meta.json", "depth.npy",
@@ -344,15 +400,15 @@ TEST_F(Cli, PrecedencePresetSceneEffectsConfigSet) {
     write_text(dir_ / "cfg.json", R"({"effects": {"tvg": "off", "spreading": "on"}, "bins": 40})");
     const fs::path out = dir_ / "out";
     const CliRun r = run({"render", "--scene", (dir_ / "extras.gltf").string(), "--backend", "cpu", "--sonar",
-                          "oculus_m750d_hf", "--config", (dir_ / "cfg.json").string(), "--set", "beams=20",
-                          "--set", "display.fan_width=64", "--set", "effects.spreading=off", "--out", out.string()});
+                          "oculus_m750d_hf", "--config", (dir_ / "cfg.json").string(), "--set", "beams=20", "--set",
+                          "display.fan_width=64", "--set", "effects.spreading=off", "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto config = nlohmann::json::parse(read_text(out / "meta.json"))["config"];
-    EXPECT_EQ(config["frequency"], 1.2e6);             // preset
-    EXPECT_EQ(config["effects"]["speckle"], "off");    // scene over preset
-    EXPECT_EQ(config["effects"]["tvg"], "off");        // config file over scene
-    EXPECT_EQ(config["bins"], 40);                     // config file over preset
-    EXPECT_EQ(config["effects"]["spreading"], "off");  // --set over config file
+    EXPECT_EQ(config["frequency"], 1.2e6);            // preset
+    EXPECT_EQ(config["effects"]["speckle"], "off");   // scene over preset
+    EXPECT_EQ(config["effects"]["tvg"], "off");       // config file over scene
+    EXPECT_EQ(config["bins"], 40);                    // config file over preset
+    EXPECT_EQ(config["effects"]["spreading"], "off"); // --set over config file
     EXPECT_EQ(config["beams"], 20);
 }
 
@@ -409,8 +465,8 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     write_text(dir_ / "poses.csv", "x,y,z,roll,pitch,yaw\n# comment\n0,0,0,0,0,0\n0.5,0,0,0,0,5\n");
     const fs::path out = dir_ / "traj";
     const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
-                       "--set", "beams=16", "--set", "display.fan_width=64", "--trajectory",
-                       (dir_ / "poses.csv").string(), "--out", out.string()});
+                          "--set", "beams=16", "--set", "display.fan_width=64", "--trajectory",
+                          (dir_ / "poses.csv").string(), "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_EQ(r.err, "") << "progress must only be shown on a terminal";
     EXPECT_TRUE(fs::is_regular_file(out / "frame_000003" / "polar.npy"));
@@ -422,17 +478,17 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
 
 TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
     const fs::path out = dir_ / "accurate";
-    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
-                          "--set", "beams=16", "--quality", "accurate", "--set", "accuracy.rows_per_vfov=96", "--out",
-                          out.string()});
+    const CliRun r =
+        run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set",
+             "beams=16", "--quality", "accurate", "--set", "accuracy.rows_per_vfov=96", "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto accuracy = nlohmann::json::parse(read_text(out / "meta.json"))["config"]["accuracy"];
     EXPECT_EQ(accuracy["pixels_per_beam"], 4.0); // from the quality preset
     EXPECT_EQ(accuracy["max_slice"], 15.0);
     EXPECT_EQ(accuracy["rows_per_vfov"], 96); // --set is applied after --quality
 
-    const CliRun bad = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--quality", "ultra", "--out",
-                            (dir_ / "bad").string()});
+    const CliRun bad = run(
+        {"render", "--scene", (dir_ / "quad.gltf").string(), "--quality", "ultra", "--out", (dir_ / "bad").string()});
     EXPECT_EQ(bad.exit_code, 2);
     ASSERT_EQ(bad.err_lines().size(), 1u) << bad.err;
     EXPECT_NE(bad.err.find("'ultra'"), std::string::npos) << bad.err;

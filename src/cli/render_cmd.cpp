@@ -20,8 +20,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/args.h"
-#include "cli/inputs.h"
 #include "cli/commands.h"
+#include "cli/inputs.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
@@ -81,13 +81,20 @@ SaveSet parse_save(const std::vector<std::string>& values) {
     for (const auto& value : values) {
         for (const auto& item : split(value, ',')) {
             if (item.empty()) continue;
-            if (item == "depth") save.depth = true;
-            else if (item == "normals") save.normals = true;
-            else if (item == "echo") save.echo = true;
-            else if (item == "cloud") save.cloud = true;
-            else if (item == "multibeam") save.multibeam = true;
-            else if (item == "raw_scan") save.raw_scan = true;
-            else if (item == "fan" || item == "polar") continue; // always written
+            if (item == "depth")
+                save.depth = true;
+            else if (item == "normals")
+                save.normals = true;
+            else if (item == "echo")
+                save.echo = true;
+            else if (item == "cloud")
+                save.cloud = true;
+            else if (item == "multibeam")
+                save.multibeam = true;
+            else if (item == "raw_scan")
+                save.raw_scan = true;
+            else if (item == "fan" || item == "polar")
+                continue; // always written
             else
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
                                closest_word(item, kSaveItems) +
@@ -186,8 +193,11 @@ template <class WriteFn> void write_atomically(const fs::path& path, WriteFn&& w
     }
     fs::rename(temporary, path, ec);
     if (ec) {
+        const std::string why = ec.message(); // before remove() reuses ec
         fs::remove(temporary, ec);
-        throw Failure("cannot write " + path.string() + ": " + ec.message());
+        // A directory where an output file goes is the user's to move (bad input); anything else is ours.
+        if (fs::is_directory(path, ec)) throw BadInput("cannot write " + path.string() + ": a directory is in the way");
+        throw Failure("cannot write " + path.string() + ": " + why);
     }
 }
 
@@ -222,8 +232,12 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose) {
     nlohmann::ordered_json extra;
     extra["config"] = nlohmann::ordered_json::parse(out.config_json);
     extra["scene"] = out.scene_path;
-    extra["pose"] = {{"x_m", pose.x_m},           {"y_m", pose.y_m},         {"z_m", pose.z_m},
-                     {"roll_deg", pose.roll_deg}, {"pitch_deg", pose.pitch_deg}, {"yaw_deg", pose.yaw_deg}};
+    extra["pose"] = {{"x_m", pose.x_m},
+                     {"y_m", pose.y_m},
+                     {"z_m", pose.z_m},
+                     {"roll_deg", pose.roll_deg},
+                     {"pitch_deg", pose.pitch_deg},
+                     {"yaw_deg", pose.yaw_deg}};
     extra["backend"] = out.backend;
     extra["device"] = out.device;
     if (out.legacy && out.legacy->mode == SonarMode::uuv_legacy) {
@@ -414,13 +428,13 @@ int run_render(const std::vector<std::string>& argv) {
     if (!args.positional.empty())
         throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
     if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
-    if (args.has("--pose") && args.has("--trajectory"))
-        throw BadInput("render: give --pose or --trajectory, not both");
+    if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
 
     // 1. Options that need no files.
     Backend backend = Backend::vulkan;
     const std::string backend_name = args.value("--backend", "vulkan");
-    if (backend_name == "cpu") backend = Backend::cpu;
+    if (backend_name == "cpu")
+        backend = Backend::cpu;
     else if (backend_name != "vulkan")
         throw BadInput("--backend: '" + backend_name + "' is not a backend (vulkan or cpu)");
     const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
@@ -450,13 +464,20 @@ int run_render(const std::vector<std::string>& argv) {
     //    before the (possibly slow) scene load, then applied again above the scene's effects.
     const SonarConfig preset = sonar_base_config(args.value("--sonar", "default"));
     auto apply_user_layers = [&](SonarConfig config) {
+        // A value the config file made invalid (and no later layer changed) is reported with the file.
+        std::string file_problem, file_path;
         if (args.has("--config")) {
             std::error_code ec;
             const std::string path = args.value("--config");
             if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
+            const std::string before = config.validate();
             auto layered = apply_config_file(config, path);
             if (!layered) throw BadInput(layered.error().message);
             config = layered.value();
+            if (std::string after = config.validate(); after != before) {
+                file_problem = std::move(after);
+                file_path = path;
+            }
         }
         if (args.has("--quality")) {
             auto layered = apply_quality(config, args.value("--quality"));
@@ -468,7 +489,10 @@ int run_render(const std::vector<std::string>& argv) {
             if (!layered) throw BadInput(layered.error().message);
             config = layered.value();
         }
-        if (std::string problem = config.validate(); !problem.empty()) throw BadInput("invalid config: " + problem);
+        if (std::string problem = config.validate(); !problem.empty()) {
+            const bool from_file = !file_problem.empty() && problem == file_problem;
+            throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
+        }
         if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
             throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
                            ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
@@ -480,6 +504,10 @@ int run_render(const std::vector<std::string>& argv) {
         if (default_scene) throw Failure(scene.error().message);
         throw BadInput(scene.error().message);
     }
+    // What the loader skipped or ignored (points and lines, unknown material keys, skins) is the
+    // user's to know: one line each, before any frame.
+    for (const std::string& warning : scene->stats().warnings)
+        std::fprintf(stderr, "warning: %s\n", warning.c_str());
     const std::string& scene_effects = scene->effects_json();
     if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
         auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}",
@@ -520,7 +548,16 @@ int run_render(const std::vector<std::string>& argv) {
     const host::FanRenderer fan(plan);
     LegacyState legacy_state;
     legacy_state.mode = plan.config.mode;
-    Outputs outputs{plan, save, fan, config_to_json(plan.config), scene_path, backend_name, device, {}, {}, {},
+    Outputs outputs{plan,
+                    save,
+                    fan,
+                    config_to_json(plan.config),
+                    scene_path,
+                    backend_name,
+                    device,
+                    {},
+                    {},
+                    {},
                     plan.config.mode != SonarMode::physical ? &legacy_state : nullptr};
     Frame frame = renderer->make_frame();
 
@@ -532,8 +569,8 @@ int run_render(const std::vector<std::string>& argv) {
         const TrajectoryPose& item = poses[i];
         auto rendered = renderer->render(item.pose, item.line, frame);
         if (!rendered) {
-            const std::string where = trajectory ? args.value("--trajectory") + ":" + std::to_string(item.line) + ": "
-                                                 : std::string();
+            const std::string where =
+                trajectory ? args.value("--trajectory") + ":" + std::to_string(item.line) + ": " : std::string();
             throw Failure(where + rendered.error().message);
         }
         fs::path dir = out_dir.path();
@@ -546,8 +583,7 @@ int run_render(const std::vector<std::string>& argv) {
         write_frame(outputs, dir, frame, item.pose);
         out_dir.keep();
         if (progress) {
-            const double seconds =
-                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             std::fprintf(stderr, "\rvksonar: frame %zu/%zu (line %llu), %.1f frames/s", i + 1, poses.size(),
                          static_cast<unsigned long long>(item.line),
                          seconds > 0 ? static_cast<double>(i + 1) / seconds : 0.0);
