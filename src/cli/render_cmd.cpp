@@ -526,7 +526,11 @@ int run_render(const std::vector<std::string>& argv) {
         ContextOptions options;
         options.enable_validation = false;
         auto created = Context::create(options);
-        if (!created) throw Failure(created.error().message + " (try --backend cpu)");
+        if (!created) {
+            // no_device errors already say to use --backend cpu; other failures get the hint here.
+            const Error& e = created.error();
+            throw Failure(e.code == ErrorCode::no_device ? e.message : e.message + " (try --backend cpu)");
+        }
         context = std::move(created.value());
         device = context.device_description();
     } else {
