@@ -19,6 +19,7 @@
 
 namespace vksonar {
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ContextOptions {
     bool enable_validation = false; // VK_LAYER_KHRONOS_validation; also VKSONAR_VALIDATION=1
     int device_index = -1;          // -1: VKSONAR_DEVICE env var, else the first device with compute+graphics
@@ -28,10 +29,11 @@ struct ContextOptions {
     const VkAllocationCallbacks* allocator = nullptr;
 };
 
-// A host engine's Vulkan objects, borrowed by Context::adopt.
-// Thread-safety: a plain value, read only by adopt (copy it freely). vksonar never destroys any of them; they
+// A host engine's Vulkan objects, borrowed by Context::adopt. vksonar never destroys any of them; they
 // must outlive the Context and every Renderer made from it. vksonar calls the Vulkan loader's exported
 // functions (libvulkan), so the host must have created them through the same loader.
+// Thread-safety: a plain value, read only during adopt; the callbacks and queue lock it names must be
+// callable from every thread that uses the Context.
 struct HostVulkan {
     VkInstance instance = VK_NULL_HANDLE;
     VkPhysicalDevice physical_device = VK_NULL_HANDLE;
@@ -55,6 +57,7 @@ struct HostVulkan {
 
 struct VulkanContext; // internal
 
+// Thread-safety: shared by any number of threads (its calls are const); one Renderer per thread.
 class Context {
 public:
     Context();
