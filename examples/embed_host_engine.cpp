@@ -411,6 +411,10 @@ std::string Engine::upload(const std::vector<Mesh>& meshes) {
 }
 
 std::string Engine::begin_frame(const CameraPose& camera) {
+    if (in_flight_) { // the previous frame's command buffer may still be executing
+        HOST_TRY(vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX));
+        in_flight_ = false;
+    }
     HOST_TRY(vkResetCommandBuffer(command_buffer_, 0));
     VkCommandBufferBeginInfo begin{};
     begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
@@ -443,15 +447,23 @@ std::string Engine::begin_frame(const CameraPose& camera) {
     return {};
 }
 
-std::string Engine::end_frame() {
+std::string Engine::end_frame(VkSemaphore signal, bool wait) {
     HOST_TRY(vkEndCommandBuffer(command_buffer_));
     VkSubmitInfo submit{};
     submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     submit.commandBufferCount = 1;
     submit.pCommandBuffers = &command_buffer_;
+    if (signal != VK_NULL_HANDLE) {
+        submit.signalSemaphoreCount = 1;
+        submit.pSignalSemaphores = &signal;
+    }
     HOST_TRY(vkResetFences(device_, 1, &fence_));
     HOST_TRY(vkQueueSubmit(queue_, 1, &submit, fence_));
-    HOST_TRY(vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX));
+    in_flight_ = true;
+    if (wait) {
+        HOST_TRY(vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX));
+        in_flight_ = false;
+    }
     return {};
 }
 

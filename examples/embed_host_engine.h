@@ -62,6 +62,16 @@ public:
     std::string render_depth(const CameraPose& camera) {
         return render_depth(camera, [](VkCommandBuffer) { return std::string(); });
     }
+    // The depth pass of a frame whose later passes are separate submissions: renders the depth image
+    // as render_depth does, submits it signalling `signal` (a binary semaphore, which later work on the
+    // GPU waits for) and returns without waiting. The engine waits for it before its next frame.
+    std::string submit_depth(const CameraPose& camera, VkSemaphore signal) {
+        std::string error = begin_frame(camera);
+        return error.empty() ? end_frame(signal, false) : error;
+    }
+
+    // A host-visible, coherent buffer with its own memory; the caller destroys both (before the engine).
+    std::string create_buffer(VkDeviceSize size, VkBufferUsageFlags usage, VkBuffer& buffer, VkDeviceMemory& memory);
 
     VkInstance instance() const { return instance_; }
     VkPhysicalDevice physical_device() const { return physical_device_; }
@@ -78,8 +88,7 @@ public:
 
 private:
     std::string begin_frame(const CameraPose& camera);
-    std::string end_frame();
-    std::string create_buffer(VkDeviceSize size, VkBufferUsageFlags usage, VkBuffer& buffer, VkDeviceMemory& memory);
+    std::string end_frame(VkSemaphore signal = VK_NULL_HANDLE, bool wait = true);
 
     EngineOptions options_;
     VkInstance instance_ = VK_NULL_HANDLE;
@@ -101,6 +110,7 @@ private:
     VkCommandPool command_pool_ = VK_NULL_HANDLE;
     VkCommandBuffer command_buffer_ = VK_NULL_HANDLE;
     VkFence fence_ = VK_NULL_HANDLE;
+    bool in_flight_ = false; // fence_ is pending: submit_depth did not wait for it
     std::atomic<std::uint32_t> validation_messages_{0};
 };
 

@@ -2,10 +2,16 @@
 // the example engine (examples/embed_host_engine.h), created by each test with its own validation
 // messenger, so a validation message caused by vksonar on the borrowed device fails the test.
 #ifdef VKSONAR_HAVE_EXAMPLE_ENGINE
+#include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <memory>
+#include <mutex>
+#include <new>
 #include <thread>
+#include <unordered_map>
+#include <vector>
 
 #include "embed_glue.h"
 #include "embed_host_engine.h"
@@ -199,6 +205,281 @@ TEST_F(EmbedTest, RecordIntoHostFrameMatchesProcess) {
     EXPECT_NE(polar->buffer, VK_NULL_HANDLE);
     EXPECT_EQ(polar->size, VkDeviceSize(processed.beams) * processed.bins * sizeof(float));
     EXPECT_EQ(host->messages.load(), 0u);
+}
+
+// The host's own objects for the frame after its depth pass, made and destroyed with the host's own
+// (null) allocator; destroyed before the engine.
+struct HostFrame {
+    VkDevice device = VK_NULL_HANDLE;
+    VkCommandPool pool = VK_NULL_HANDLE;
+    VkCommandBuffer sonar_commands = VK_NULL_HANDLE, display_commands = VK_NULL_HANDLE;
+    VkSemaphore depth_done = VK_NULL_HANDLE, sonar_done = VK_NULL_HANDLE;
+    VkFence fence = VK_NULL_HANDLE;
+    VkBuffer copy = VK_NULL_HANDLE; // host-visible: where the host copies vksonar's GPU result
+    VkDeviceMemory copy_memory = VK_NULL_HANDLE;
+
+    ~HostFrame() {
+        if (device == VK_NULL_HANDLE) return;
+        vkDeviceWaitIdle(device);
+        vkDestroyBuffer(device, copy, nullptr);
+        vkFreeMemory(device, copy_memory, nullptr);
+        vkDestroyFence(device, fence, nullptr);
+        vkDestroySemaphore(device, sonar_done, nullptr);
+        vkDestroySemaphore(device, depth_done, nullptr);
+        vkDestroyCommandPool(device, pool, nullptr);
+    }
+};
+
+VkResult submit(VkQueue queue, VkCommandBuffer commands, VkSemaphore wait, VkPipelineStageFlags wait_stage,
+                VkSemaphore signal, VkFence fence) {
+    VkSubmitInfo info{};
+    info.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    info.waitSemaphoreCount = wait != VK_NULL_HANDLE ? 1 : 0;
+    info.pWaitSemaphores = &wait;
+    info.pWaitDstStageMask = &wait_stage;
+    info.commandBufferCount = 1;
+    info.pCommandBuffers = &commands;
+    info.signalSemaphoreCount = signal != VK_NULL_HANDLE ? 1 : 0;
+    info.pSignalSemaphores = &signal;
+    return vkQueueSubmit(queue, 1, &info, fence);
+}
+
+// One host frame of three submissions chained by semaphores, with no CPU wait between them:
+// the engine's depth pass (signals depth_done) -> vksonar's work recorded by Renderer::record into the
+// host's command buffer (waits depth_done, signals sonar_done) -> the host's "display" pass, which
+// copies Renderer::polar_buffer() into its own host-visible buffer (waits sonar_done, signals the
+// fence, the only thing the CPU waits for). Both results equal process() bit for bit.
+TEST_F(EmbedTest, SemaphoreChainedFrameMatchesProcess) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    host::Engine& engine = *host->engine;
+    auto context = Context::adopt(host::host_vulkan(engine));
+    ASSERT_TRUE(context.ok()) << context.error().message;
+    auto sonar = Renderer::create_for_depth(*context, host::demo_config(), host::depth_desc(host->options));
+    ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+    Frame processed = sonar->make_frame();
+    ASSERT_TRUE(sonar->process(host::depth_image(engine), 5, processed).ok());
+    auto polar = sonar->polar_buffer();
+    ASSERT_TRUE(polar.ok()) << polar.error().message;
+    ASSERT_EQ(polar->size, VkDeviceSize(processed.clean.size()) * sizeof(float));
+
+    HostFrame f;
+    f.device = engine.device();
+    VkCommandPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    pool_info.queueFamilyIndex = engine.queue_family();
+    ASSERT_EQ(vkCreateCommandPool(f.device, &pool_info, nullptr, &f.pool), VK_SUCCESS);
+    VkCommandBufferAllocateInfo allocate{};
+    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    allocate.commandPool = f.pool;
+    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    allocate.commandBufferCount = 2;
+    VkCommandBuffer buffers[2] = {};
+    ASSERT_EQ(vkAllocateCommandBuffers(f.device, &allocate, buffers), VK_SUCCESS);
+    f.sonar_commands = buffers[0];
+    f.display_commands = buffers[1];
+    VkSemaphoreCreateInfo semaphore_info{};
+    semaphore_info.sType = VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO;
+    ASSERT_EQ(vkCreateSemaphore(f.device, &semaphore_info, nullptr, &f.depth_done), VK_SUCCESS);
+    ASSERT_EQ(vkCreateSemaphore(f.device, &semaphore_info, nullptr, &f.sonar_done), VK_SUCCESS);
+    VkFenceCreateInfo fence_info{};
+    fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+    ASSERT_EQ(vkCreateFence(f.device, &fence_info, nullptr, &f.fence), VK_SUCCESS);
+    ASSERT_EQ(engine.create_buffer(polar->size, VK_BUFFER_USAGE_TRANSFER_DST_BIT, f.copy, f.copy_memory), "");
+    VkCommandBufferBeginInfo begin{};
+    begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+
+    // 1. The engine's depth pass, submitted without waiting for it.
+    ASSERT_EQ(engine.submit_depth(demo_camera(), f.depth_done), "");
+    // 2. vksonar's work in the host's command buffer, after the depth pass on the GPU.
+    ASSERT_EQ(vkBeginCommandBuffer(f.sonar_commands, &begin), VK_SUCCESS);
+    auto recorded_ok = sonar->record(f.sonar_commands, host::depth_image(engine));
+    ASSERT_TRUE(recorded_ok.ok()) << recorded_ok.error().message;
+    ASSERT_EQ(vkEndCommandBuffer(f.sonar_commands), VK_SUCCESS);
+    ASSERT_EQ(submit(engine.queue(), f.sonar_commands, f.depth_done, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, f.sonar_done,
+                     VK_NULL_HANDLE),
+              VK_SUCCESS);
+    // 3. The host reads the GPU result (as a draw would sample it): a copy into its own buffer.
+    ASSERT_EQ(vkBeginCommandBuffer(f.display_commands, &begin), VK_SUCCESS);
+    const VkBufferCopy region{polar->offset, 0, polar->size};
+    vkCmdCopyBuffer(f.display_commands, polar->buffer, f.copy, 1, &region);
+    VkMemoryBarrier to_host{};
+    to_host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    to_host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    to_host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(f.display_commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host,
+                         0, nullptr, 0, nullptr);
+    ASSERT_EQ(vkEndCommandBuffer(f.display_commands), VK_SUCCESS);
+    ASSERT_EQ(submit(engine.queue(), f.display_commands, f.sonar_done, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_NULL_HANDLE,
+                     f.fence),
+              VK_SUCCESS);
+    // The CPU waits once, for the end of the frame.
+    ASSERT_EQ(vkWaitForFences(f.device, 1, &f.fence, VK_TRUE, UINT64_MAX), VK_SUCCESS);
+
+    Frame recorded = sonar->make_frame();
+    auto read = sonar->read_back(5, recorded);
+    ASSERT_TRUE(read.ok()) << read.error().message;
+    EXPECT_GT(sum(recorded.clean), 0.0);
+    EXPECT_EQ(recorded.clean, processed.clean) << "semaphore-chained record() vs process()";
+    EXPECT_EQ(recorded.intensity, processed.intensity);
+    // The GPU buffer as the host sees it is the clean polar scan, float[bins][beams] like Frame::clean
+    // (speckle, noise and gain are host stages, and speckle is off here anyway).
+    std::vector<float> gpu(processed.clean.size());
+    void* mapped = nullptr;
+    ASSERT_EQ(vkMapMemory(f.device, f.copy_memory, 0, VK_WHOLE_SIZE, 0, &mapped), VK_SUCCESS);
+    std::memcpy(gpu.data(), mapped, gpu.size() * sizeof(float));
+    vkUnmapMemory(f.device, f.copy_memory);
+    EXPECT_EQ(polar->beams, processed.beams);
+    EXPECT_EQ(polar->bins, processed.bins);
+    EXPECT_EQ(gpu, recorded.clean) << "polar_buffer() read back by the host vs Frame::clean";
+    EXPECT_EQ(host->messages.load(), 0u);
+}
+
+// VkAllocationCallbacks that count what goes through them (thread-safe: vksonar and the driver may
+// call them from any thread) and honour the requested alignment, also in reallocation.
+class CountingAllocator {
+public:
+    CountingAllocator() {
+        callbacks_.pUserData = this;
+        callbacks_.pfnAllocation = [](void* user, std::size_t size, std::size_t alignment,
+                                      VkSystemAllocationScope) -> void* {
+            return static_cast<CountingAllocator*>(user)->allocate(size, alignment);
+        };
+        callbacks_.pfnReallocation = [](void* user, void* original, std::size_t size, std::size_t alignment,
+                                        VkSystemAllocationScope) -> void* {
+            return static_cast<CountingAllocator*>(user)->reallocate(original, size, alignment);
+        };
+        callbacks_.pfnFree = [](void* user, void* memory) { static_cast<CountingAllocator*>(user)->free(memory); };
+    }
+    CountingAllocator(const CountingAllocator&) = delete;
+    CountingAllocator& operator=(const CountingAllocator&) = delete;
+
+    const VkAllocationCallbacks* callbacks() const { return &callbacks_; }
+    std::size_t allocations() const { return allocations_.load(); }     // ever made
+    std::size_t unknown_frees() const { return unknown_frees_.load(); } // pointers never returned here
+    std::size_t live() const {                                          // not yet freed
+        std::lock_guard<std::mutex> lock(mutex_);
+        return blocks_.size();
+    }
+
+private:
+    struct Block {
+        std::size_t size, alignment;
+    };
+
+    void* allocate(std::size_t size, std::size_t alignment) {
+        // Like malloc(0), size 0 gets a unique pointer: lavapipe asks for it and takes null as out of memory.
+        size = std::max<std::size_t>(size, 1);
+        alignment = std::max(alignment, alignof(std::max_align_t));
+        void* memory = ::operator new(size, std::align_val_t(alignment), std::nothrow);
+        if (memory == nullptr) return nullptr;
+        allocations_.fetch_add(1);
+        std::lock_guard<std::mutex> lock(mutex_);
+        blocks_[memory] = Block{size, alignment};
+        return memory;
+    }
+    void* reallocate(void* original, std::size_t size, std::size_t alignment) {
+        if (original == nullptr) return allocate(size, alignment);
+        if (size == 0) {
+            free(original);
+            return nullptr;
+        }
+        std::size_t old_size = 0;
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            old_size = blocks_.at(original).size;
+        }
+        void* memory = allocate(size, alignment);
+        if (memory == nullptr) return nullptr; // the original stays valid
+        std::memcpy(memory, original, std::min(old_size, size));
+        free(original);
+        return memory;
+    }
+    void free(void* memory) {
+        if (memory == nullptr) return;
+        std::size_t alignment = 0;
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            auto it = blocks_.find(memory);
+            if (it == blocks_.end()) {
+                unknown_frees_.fetch_add(1);
+                return;
+            }
+            alignment = it->second.alignment;
+            blocks_.erase(it);
+        }
+        ::operator delete(memory, std::align_val_t(alignment));
+    }
+
+    VkAllocationCallbacks callbacks_{};
+    std::atomic<std::size_t> allocations_{0};
+    mutable std::mutex mutex_;
+    std::unordered_map<void*, Block> blocks_;
+    std::atomic<std::size_t> unknown_frees_{0};
+};
+
+// HostVulkan::allocator: every object vksonar makes on the host's device goes through the host's
+// callbacks, and all of it is freed when the Renderer and Context are gone. The host's own objects
+// keep the host's (null) allocator.
+TEST_F(EmbedTest, HostAllocationCallbacksSeeEveryAllocationFreed) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    CountingAllocator counter; // outlives the Context
+    const std::size_t live_before = counter.live();
+    {
+        HostVulkan host_vulkan = host::host_vulkan(*host->engine);
+        host_vulkan.allocator = counter.callbacks();
+        auto context = Context::adopt(host_vulkan);
+        ASSERT_TRUE(context.ok()) << context.error().message;
+        auto sonar = Renderer::create_for_depth(*context, host::demo_config(), host::depth_desc(host->options));
+        ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+        Frame frame = sonar->make_frame();
+        ASSERT_TRUE(sonar->process(host::depth_image(*host->engine), 0, frame).ok());
+        EXPECT_GT(sum(frame.clean), 0.0);
+        // A scene renderer on the same context: render pass, framebuffer, graphics pipeline too.
+        const SonarConfig config = host::demo_config();
+        auto scene = host::to_scene(host::demo_scene(), config.default_backscatter_db);
+        ASSERT_TRUE(scene.ok());
+        auto standalone = Renderer::create(*context, config, *scene);
+        ASSERT_TRUE(standalone.ok()) << standalone.error().message;
+        Frame reference = standalone->make_frame();
+        ASSERT_TRUE(standalone->render(host::to_pose(demo_camera()), 0, reference).ok());
+        EXPECT_GT(counter.allocations(), 0u) << "the driver made no allocation through the host's callbacks";
+        EXPECT_GT(counter.live(), live_before);
+        std::printf("[ embed ] host allocation callbacks: %zu allocations, %zu live with two renderers\n",
+                    counter.allocations(), counter.live());
+    }
+    EXPECT_EQ(counter.live(), live_before) << "allocations made through the host's callbacks were not freed";
+    EXPECT_EQ(counter.unknown_frees(), 0u);
+    // The host's device still works, and tears down without validation messages (nothing leaked).
+    EXPECT_EQ(host->engine->render_depth(demo_camera()), "");
+    EXPECT_EQ(host->messages.load(), 0u);
+    host->engine.reset();
+    EXPECT_EQ(host->messages.load(), 0u);
+}
+
+// ContextOptions::allocator: the same for an instance and device vksonar creates itself.
+TEST(EmbedAllocatorTest, ContextCreateUsesAllocationCallbacks) {
+    VKSONAR_REQUIRE_VULKAN();
+    CountingAllocator counter;
+    {
+        ContextOptions options;
+        options.allocator = counter.callbacks();
+        auto context = Context::create(options);
+        ASSERT_TRUE(context.ok()) << context.error().message;
+        const SonarConfig config = host::demo_config();
+        auto scene = host::to_scene(host::demo_scene(), config.default_backscatter_db);
+        ASSERT_TRUE(scene.ok());
+        auto sonar = Renderer::create(*context, config, *scene);
+        ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+        Frame frame = sonar->make_frame();
+        ASSERT_TRUE(sonar->render(host::to_pose(demo_camera()), 0, frame).ok());
+        EXPECT_GT(counter.allocations(), 0u);
+        EXPECT_EQ(context->validation_messages(), 0u);
+    }
+    EXPECT_EQ(counter.live(), 0u) << "allocations made through the callbacks were not freed";
+    EXPECT_EQ(counter.unknown_frees(), 0u);
 }
 
 // Two sonars on one context, used from two threads at once, give what each gives alone.

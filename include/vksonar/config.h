@@ -15,6 +15,7 @@ namespace vksonar {
 // Each effect of DESIGN §4. `automatic` is resolved from scene + config into on/off with a reason.
 enum class EffectMode : std::uint8_t { automatic, on, off };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct EffectsConfig {
     EffectMode incidence = EffectMode::automatic;          // Lambert cos(theta); auto: on if a material is angle-dependent
     EffectMode vertical_pattern = EffectMode::automatic;   // b_v(psi)^2; auto: on
@@ -39,6 +40,7 @@ enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
 // step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
 enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct SonarConfig {
     std::string name = "default";
     std::string description;

@@ -19,15 +19,21 @@
 
 namespace vksonar {
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ContextOptions {
     bool enable_validation = false; // VK_LAYER_KHRONOS_validation; also VKSONAR_VALIDATION=1
     int device_index = -1;          // -1: VKSONAR_DEVICE env var, else the first device with compute+graphics
     bool vulkan = true;             // false: a CPU-only context (no Vulkan at all)
+    // Optional: the allocation callbacks for the instance, device and every object vksonar makes on
+    // them (null: the implementation's). Borrowed: they must outlive the Context.
+    const VkAllocationCallbacks* allocator = nullptr;
 };
 
 // A host engine's Vulkan objects, borrowed by Context::adopt. vksonar never destroys any of them; they
 // must outlive the Context and every Renderer made from it. vksonar calls the Vulkan loader's exported
 // functions (libvulkan), so the host must have created them through the same loader.
+// Thread-safety: a plain value, read only during adopt; the callbacks and queue lock it names must be
+// callable from every thread that uses the Context.
 struct HostVulkan {
     VkInstance instance = VK_NULL_HANDLE;
     VkPhysicalDevice physical_device = VK_NULL_HANDLE;
@@ -41,12 +47,17 @@ struct HostVulkan {
     void (*lock_queue)(void* user) = nullptr;
     void (*unlock_queue)(void* user) = nullptr;
     void* queue_lock_user = nullptr;
-    // Host allocation callbacks are not taken: vksonar creates its own objects with the default
-    // allocator (pAllocator = nullptr), which Vulkan allows per object on any device.
+    // Optional: the host's allocation callbacks. vksonar passes them to every vkCreate*, vkDestroy*,
+    // vkAllocateMemory and vkFreeMemory it calls on `device` (null: the implementation's allocator,
+    // which Vulkan allows per object whatever the host's own objects use). Borrowed: the callbacks
+    // (and their pUserData) must outlive the Context and every Renderer made from it, and be callable
+    // from any thread that uses them.
+    const VkAllocationCallbacks* allocator = nullptr;
 };
 
 struct VulkanContext; // internal
 
+// Thread-safety: shared by any number of threads (its calls are const); one Renderer per thread.
 class Context {
 public:
     Context();

@@ -16,17 +16,21 @@ enum SaveFlags : std::uint32_t {
     save_profiles = 1u << 3, // per-column range profiles and beam profiles before side lobes
 };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct StageTime {
     std::string stage; // "depth", "normals", "echo", "beamform", "noise", "image"
     double ms = 0;
 };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct EffectState {
     std::string name;
     bool on = false;
     std::string why;
 };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one (a Renderer
+// writes it only inside render, process and read_back).
 struct Frame {
     std::uint32_t beams = 0, bins = 0;
     std::uint32_t columns = 0, rows = 0; // pixel grid of the depth pass (all slices side by side)

@@ -21,6 +21,7 @@ enum class DepthEncoding : std::uint8_t {
 // column 0 the left (port, sonar +y). The image's pixel grid becomes the sonar's pixel grid, so the
 // principal point must be the image centre (cx = width/2, cy = height/2) and the image must cover every
 // beam centre horizontally and the -3 dB vertical beamwidth vertically (checked, with a clear error).
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct HostDepthDesc {
     std::uint32_t width = 0, height = 0;
     // D32_SFLOAT, D16_UNORM, X8_D24_UNORM_PACK32, D24_UNORM_S8_UINT, D32_SFLOAT_S8_UINT (the view must
@@ -34,6 +35,7 @@ struct HostDepthDesc {
 
 // One depth image, per frame. The image must have been created with VK_IMAGE_USAGE_SAMPLED_BIT and
 // match HostDepthDesc; the view is a 2-D view of its depth aspect (or colour for R32_SFLOAT).
+// Thread-safety: a plain value; the image itself is the host's to synchronize (see process and record).
 struct HostDepthImage {
     VkImage image = VK_NULL_HANDLE;
     VkImageView view = VK_NULL_HANDLE;
@@ -51,6 +53,8 @@ struct HostDepthImage {
 
 // A buffer vksonar owns and the host may read (e.g. to draw the sonar image in the engine). Borrowed
 // by the host: valid until the Renderer is destroyed; never destroy it.
+// Thread-safety: a plain value; the buffer's contents change with each recorded ping of its Renderer,
+// so the host reads it only between that ping's completion and the next record() or process().
 struct GpuBufferView {
     VkBuffer buffer = VK_NULL_HANDLE;
     VkDeviceSize offset = 0, size = 0;

@@ -21,6 +21,7 @@ namespace vksonar {
 
 enum class Backend : std::uint8_t { vulkan, cpu };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct RendererOptions {
     Backend backend = Backend::vulkan;
     std::uint64_t seed = 1;
@@ -33,6 +34,7 @@ struct RendererOptions {
 class RendererImpl; // internal
 struct Plan;        // internal
 
+// Thread-safety: not thread-safe: one thread at a time; Renderers sharing a Context are independent.
 class Renderer {
 public:
     Renderer();

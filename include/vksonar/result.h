@@ -21,12 +21,14 @@ enum class ErrorCode {
     internal,         // a bug in vksonar
 };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct Error {
     ErrorCode code = ErrorCode::internal;
     std::string message; // one line, names file/field/value
     VkResult vk_result = VK_SUCCESS;
 };
 
+// Thread-safety: a plain value (as T): safe to read from many threads at once, to write from one.
 template <class T> class [[nodiscard]] Result {
 public:
     Result(T value) : value_(std::move(value)) {}

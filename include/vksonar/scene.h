@@ -17,6 +17,7 @@ namespace vksonar {
 // Acoustic material, read from glTF material extras: {"vksonar": {"backscatter_db": -27, "model": "lambert"}}.
 // Default (a material whose extras say nothing, and the implicit "default" material given to primitives
 // without one): backscatter_db = -30 dB, model = lambert (a mid value for sand/silt seabeds).
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct AcousticMaterial {
     std::string name;
     double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr
@@ -24,14 +25,16 @@ struct AcousticMaterial {
 };
 
 // One drawable: a range of a mesh's triangles placed by a world matrix.
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct SceneDraw {
     std::uint32_t mesh = 0;     // index into SceneMeshView list
     std::uint32_t material = 0; // index into materials
     std::array<double, 16> world_from_local{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; // column-major
 };
 
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct SceneStats {
-    std::uint64_t triangles = 0;  // drawn triangles (instances counted)
+    std::uint64_t triangles = 0; // drawn triangles (instances counted)
     std::uint32_t meshes = 0;
     std::uint32_t draws = 0;
     std::uint32_t skipped_primitives = 0; // points/lines and degenerate-only primitives, skipped with a warning
@@ -40,6 +43,8 @@ struct SceneStats {
 
 struct SceneData; // internal
 
+// Thread-safety: safe to read from many threads at once, to write from one; it must not change while a
+// Renderer made from it exists.
 class Scene {
 public:
     Scene();
@@ -70,6 +75,7 @@ private:
 
 // Sonar pose in the world frame: position in metres, orientation as roll, pitch, yaw in degrees
 // (rotation R = Rz(yaw) Ry(pitch) Rx(roll), REP-103). Yaw 0 looks along world +x.
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct Pose {
     double x_m = 0, y_m = 0, z_m = 0;
     double roll_deg = 0, pitch_deg = 0, yaw_deg = 0;

@@ -69,6 +69,7 @@ Result<Context> Context::adopt(const HostVulkan& host) {
     context.lock_queue = host.lock_queue;
     context.unlock_queue = host.unlock_queue;
     context.queue_lock_user = host.queue_lock_user;
+    context.allocator = host.allocator;
     char driver[16];
     std::snprintf(driver, sizeof(driver), "%x", context.properties.driverVersion);
     context.description = std::string(context.properties.deviceName) + " (Vulkan " +

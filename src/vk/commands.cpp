@@ -26,8 +26,8 @@ Result<void> submit_once(VulkanContext& context, const std::function<void(VkComm
     pool_info.flags = VK_COMMAND_POOL_CREATE_TRANSIENT_BIT;
     pool_info.queueFamilyIndex = context.queue_family;
     VkCommandPool pool_handle = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateCommandPool(context.device, &pool_info, nullptr, &pool_handle));
-    OwnedCommandPool pool(context.device, pool_handle);
+    VKS_VK_TRY(vkCreateCommandPool(context.device, &pool_info, context.allocator, &pool_handle));
+    OwnedCommandPool pool(context.device, pool_handle, context.allocator);
 
     VkCommandBufferAllocateInfo allocate_info{};
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
@@ -53,8 +53,8 @@ Result<void> submit_once(VulkanContext& context, const std::function<void(VkComm
     VkFenceCreateInfo fence_info{};
     fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
     VkFence fence_handle = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateFence(context.device, &fence_info, nullptr, &fence_handle));
-    OwnedFence fence(context.device, fence_handle);
+    VKS_VK_TRY(vkCreateFence(context.device, &fence_info, context.allocator, &fence_handle));
+    OwnedFence fence(context.device, fence_handle, context.allocator);
 
     VkSubmitInfo submit{};
     submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;

@@ -196,7 +196,7 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
     info.ppEnabledLayerNames = layers.data();
     info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
     info.ppEnabledExtensionNames = extensions.data();
-    VkResult result = vkCreateInstance(&info, nullptr, &context.instance);
+    VkResult result = vkCreateInstance(&info, context.allocator, &context.instance);
     if (result == VK_ERROR_INCOMPATIBLE_DRIVER) {
         return no_device("no Vulkan driver (vkCreateInstance: VK_ERROR_INCOMPATIBLE_DRIVER)");
     }
@@ -209,7 +209,8 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
         auto create_messenger = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
             vkGetInstanceProcAddr(context.instance, "vkCreateDebugUtilsMessengerEXT"));
         if (create_messenger) {
-            VKS_VK_TRY(create_messenger(context.instance, &messenger_info, nullptr, &context.debug_messenger));
+            VKS_VK_TRY(
+                create_messenger(context.instance, &messenger_info, context.allocator, &context.debug_messenger));
         }
     }
     return {};
@@ -283,7 +284,7 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     info.pQueueCreateInfos = &queue_info;
     info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
     info.ppEnabledExtensionNames = extensions.data();
-    VKS_VK_TRY(vkCreateDevice(context.physical_device, &info, nullptr, &context.device));
+    VKS_VK_TRY(vkCreateDevice(context.physical_device, &info, context.allocator, &context.device));
     context.owns_device = true;
     vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);
     return {};
@@ -294,17 +295,17 @@ Result<void> create_device(VulkanContext& context, int device_index) {
 VulkanContext::~VulkanContext() {
     if (owns_device && device != VK_NULL_HANDLE) {
         vkDeviceWaitIdle(device);
-        vkDestroyDevice(device, nullptr);
+        vkDestroyDevice(device, allocator);
     }
     if (debug_messenger != VK_NULL_HANDLE && instance != VK_NULL_HANDLE) {
         auto destroy_messenger = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
             vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
         if (destroy_messenger) {
-            destroy_messenger(instance, debug_messenger, nullptr);
+            destroy_messenger(instance, debug_messenger, allocator);
         }
     }
     if (owns_instance && instance != VK_NULL_HANDLE) {
-        vkDestroyInstance(instance, nullptr);
+        vkDestroyInstance(instance, allocator);
     }
 }
 
@@ -319,6 +320,7 @@ Result<Context> Context::create(const ContextOptions& options) {
     }
     // The messenger keeps a pointer to the VulkanContext: it lives on the heap and never moves.
     auto vulkan = std::make_unique<VulkanContext>();
+    vulkan->allocator = options.allocator;
     bool want_validation = options.enable_validation || env_flag("VKSONAR_VALIDATION");
     if (auto created = create_instance(*vulkan, want_validation); !created) {
         return created.error();

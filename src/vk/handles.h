@@ -1,5 +1,6 @@
 // Move-only owners for device-level Vulkan handles. A handle held by Owned<> is destroyed with the
-// device it came from when the owner dies; a plain Vk* handle is borrowed and never destroyed.
+// device it came from, and the allocation callbacks it was created with, when the owner dies; a plain
+// Vk* handle is borrowed and never destroyed.
 #pragma once
 
 #include <utility>
@@ -11,17 +12,21 @@ namespace vksonar::vk {
 template <class Handle, void (*Destroy)(VkDevice, Handle, const VkAllocationCallbacks*)> class Owned {
 public:
     Owned() = default;
-    Owned(VkDevice device, Handle handle) : device_(device), handle_(handle) {}
+    // `allocator`: the callbacks the handle was created with (VulkanContext::allocator; may be null).
+    Owned(VkDevice device, Handle handle, const VkAllocationCallbacks* allocator)
+        : device_(device), handle_(handle), allocator_(allocator) {}
     ~Owned() { reset(); }
     Owned(const Owned&) = delete;
     Owned& operator=(const Owned&) = delete;
     Owned(Owned&& other) noexcept
-        : device_(other.device_), handle_(std::exchange(other.handle_, Handle(VK_NULL_HANDLE))) {}
+        : device_(other.device_), handle_(std::exchange(other.handle_, Handle(VK_NULL_HANDLE))),
+          allocator_(other.allocator_) {}
     Owned& operator=(Owned&& other) noexcept {
         if (this != &other) {
             reset();
             device_ = other.device_;
             handle_ = std::exchange(other.handle_, Handle(VK_NULL_HANDLE));
+            allocator_ = other.allocator_;
         }
         return *this;
     }
@@ -30,7 +35,7 @@ public:
     explicit operator bool() const { return handle_ != VK_NULL_HANDLE; }
     void reset() {
         if (handle_ != VK_NULL_HANDLE) {
-            Destroy(device_, handle_, nullptr);
+            Destroy(device_, handle_, allocator_);
             handle_ = VK_NULL_HANDLE;
         }
     }
@@ -38,6 +43,7 @@ public:
 private:
     VkDevice device_ = VK_NULL_HANDLE;
     Handle handle_ = VK_NULL_HANDLE;
+    const VkAllocationCallbacks* allocator_ = nullptr;
 };
 
 using OwnedBuffer = Owned<VkBuffer, vkDestroyBuffer>;

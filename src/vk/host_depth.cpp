@@ -157,6 +157,8 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     if (auto r = b.create_commands(); !r) return r;
 
     VkDevice device = context.device;
+    const VkAllocationCallbacks* allocator = context.allocator;
+
     VkDescriptorSetLayoutBinding binding{};
     binding.binding = 0;
     binding.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
@@ -167,8 +169,8 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     set_layout_info.bindingCount = 1;
     set_layout_info.pBindings = &binding;
     VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &set_layout_info, nullptr, &set_layout));
-    o.image_set_layout = OwnedDescriptorSetLayout(device, set_layout);
+    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &set_layout_info, allocator, &set_layout));
+    o.image_set_layout = OwnedDescriptorSetLayout(device, set_layout, allocator);
 
     // Set 0 is the backend's compute set (params, depth, material id), set 1 the host image.
     const std::array<VkDescriptorSetLayout, 2> set_layouts{b.set_layout_.get(), set_layout};
@@ -180,12 +182,12 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     layout_info.pushConstantRangeCount = 1;
     layout_info.pPushConstantRanges = &push_range;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
-    o.import_layout = OwnedPipelineLayout(device, layout);
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    o.import_layout = OwnedPipelineLayout(device, layout, allocator);
 
-    auto module = create_shader_module(device, import_depth_comp_spv, sizeof(import_depth_comp_spv));
+    auto module = create_shader_module(device, allocator, import_depth_comp_spv, sizeof(import_depth_comp_spv));
     if (!module) return module.error();
-    auto pipeline = create_compute_pipeline(device, layout, module->get(), 0, 1);
+    auto pipeline = create_compute_pipeline(device, allocator, layout, module->get(), 0, 1);
     if (!pipeline) return pipeline.error();
     o.import_pipeline = std::move(pipeline.value());
 
@@ -196,8 +198,8 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     pool_info.poolSizeCount = 1;
     pool_info.pPoolSizes = &pool_size;
     VkDescriptorPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, nullptr, &pool));
-    o.image_pool = OwnedDescriptorPool(device, pool);
+    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
+    o.image_pool = OwnedDescriptorPool(device, pool, allocator);
     VkDescriptorSetAllocateInfo set_info{};
     set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
     set_info.descriptorPool = pool;
@@ -208,8 +210,8 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     VkEventCreateInfo event_info{};
     event_info.sType = VK_STRUCTURE_TYPE_EVENT_CREATE_INFO;
     VkEvent event = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateEvent(device, &event_info, nullptr, &event));
-    o.done = OwnedEvent(device, event);
+    VKS_VK_TRY(vkCreateEvent(device, &event_info, allocator, &event));
+    o.done = OwnedEvent(device, event, allocator);
     return {};
 }
 

@@ -6,17 +6,18 @@
 
 namespace vksonar::vk {
 
-Result<OwnedShaderModule> create_shader_module(VkDevice device, const std::uint32_t* code, std::size_t bytes) {
+Result<OwnedShaderModule> create_shader_module(VkDevice device, const VkAllocationCallbacks* allocator,
+                                               const std::uint32_t* code, std::size_t bytes) {
     VkShaderModuleCreateInfo info{};
     info.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
     info.codeSize = bytes;
     info.pCode = code;
     VkShaderModule module = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateShaderModule(device, &info, nullptr, &module));
-    return OwnedShaderModule(device, module);
+    VKS_VK_TRY(vkCreateShaderModule(device, &info, allocator, &module));
+    return OwnedShaderModule(device, module, allocator);
 }
 
-Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device) {
+Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, const VkAllocationCallbacks* allocator) {
     std::array<VkDescriptorSetLayoutBinding, binding_count> bindings{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
         bindings[i].binding = i;
@@ -30,11 +31,12 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device) {
     info.bindingCount = binding_count;
     info.pBindings = bindings.data();
     VkDescriptorSetLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &info, nullptr, &layout));
-    return OwnedDescriptorSetLayout(device, layout);
+    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &info, allocator, &layout));
+    return OwnedDescriptorSetLayout(device, layout, allocator);
 }
 
-Result<OwnedPipeline> create_compute_pipeline(VkDevice device, VkPipelineLayout layout, VkShaderModule module,
+Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
+                                              VkPipelineLayout layout, VkShaderModule module,
                                               std::uint32_t effect_flags, std::uint32_t per_invocation,
                                               std::uint32_t variant) {
     const std::array<std::uint32_t, 3> values{effect_flags, per_invocation, variant};
@@ -52,11 +54,11 @@ Result<OwnedPipeline> create_compute_pipeline(VkDevice device, VkPipelineLayout 
     info.stage.pSpecializationInfo = &specialization;
     info.layout = layout;
     VkPipeline pipeline = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline));
-    return OwnedPipeline(device, pipeline);
+    VKS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &info, allocator, &pipeline));
+    return OwnedPipeline(device, pipeline, allocator);
 }
 
-Result<OwnedRenderPass> create_depth_render_pass(VkDevice device) {
+Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator) {
     std::array<VkAttachmentDescription, 2> attachments{};
     for (auto& attachment : attachments) {
         attachment.samples = VK_SAMPLE_COUNT_1_BIT;
@@ -108,12 +110,13 @@ Result<OwnedRenderPass> create_depth_render_pass(VkDevice device) {
     info.dependencyCount = static_cast<std::uint32_t>(dependencies.size());
     info.pDependencies = dependencies.data();
     VkRenderPass render_pass = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateRenderPass(device, &info, nullptr, &render_pass));
-    return OwnedRenderPass(device, render_pass);
+    VKS_VK_TRY(vkCreateRenderPass(device, &info, allocator, &render_pass));
+    return OwnedRenderPass(device, render_pass, allocator);
 }
 
-Result<OwnedPipeline> create_depth_pipeline(VkDevice device, VkRenderPass render_pass, VkPipelineLayout layout,
-                                            VkShaderModule vertex, VkShaderModule fragment) {
+Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
+                                            VkRenderPass render_pass, VkPipelineLayout layout, VkShaderModule vertex,
+                                            VkShaderModule fragment) {
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
     stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
@@ -191,8 +194,8 @@ Result<OwnedPipeline> create_depth_pipeline(VkDevice device, VkRenderPass render
     info.renderPass = render_pass;
     info.subpass = 0;
     VkPipeline pipeline = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateGraphicsPipelines(device, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline));
-    return OwnedPipeline(device, pipeline);
+    VKS_VK_TRY(vkCreateGraphicsPipelines(device, VK_NULL_HANDLE, 1, &info, allocator, &pipeline));
+    return OwnedPipeline(device, pipeline, allocator);
 }
 
 } // namespace vksonar::vk

@@ -33,27 +33,28 @@ enum Binding : std::uint32_t {
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
 
-[[nodiscard]] Result<OwnedShaderModule> create_shader_module(VkDevice device, const std::uint32_t* code,
-                                                             std::size_t bytes);
+[[nodiscard]] Result<OwnedShaderModule> create_shader_module(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                             const std::uint32_t* code, std::size_t bytes);
 
-[[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device);
+[[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device,
+                                                                         const VkAllocationCallbacks* allocator);
 
 // A compute pipeline specialized with constant 0 = `effect_flags` (shared::kEffect* bits) and
 // constant 1 = `per_invocation` (how many pixels/beams one invocation handles, where the shader has it)
 // and constant 2 = `variant` (a per-shader switch, e.g. resample.comp's output layout).
-[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, VkPipelineLayout layout,
-                                                            VkShaderModule module, std::uint32_t effect_flags,
-                                                            std::uint32_t per_invocation,
-                                                             std::uint32_t variant = 0);
+[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                            VkPipelineLayout layout, VkShaderModule module,
+                                                            std::uint32_t effect_flags, std::uint32_t per_invocation,
+                                                            std::uint32_t variant = 0);
 
 // Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), both cleared
 // and left in TRANSFER_SRC_OPTIMAL for the copy to storage buffers.
-[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(VkDevice device);
+[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator);
 
 // Graphics pipeline of the depth pass: vec3 positions, reversed-Z (GREATER), no culling, dynamic
 // viewport/scissor (one per slice), DepthPush push constants in both stages.
-[[nodiscard]] Result<OwnedPipeline> create_depth_pipeline(VkDevice device, VkRenderPass render_pass,
-                                                          VkPipelineLayout layout, VkShaderModule vertex,
-                                                          VkShaderModule fragment);
+[[nodiscard]] Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                          VkRenderPass render_pass, VkPipelineLayout layout,
+                                                          VkShaderModule vertex, VkShaderModule fragment);
 
 } // namespace vksonar::vk

@@ -48,8 +48,8 @@ Result<OwnedMemory> allocate(const VulkanContext& context, const VkMemoryRequire
     info.allocationSize = requirements.size;
     info.memoryTypeIndex = static_cast<std::uint32_t>(type);
     VkDeviceMemory memory = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkAllocateMemory(context.device, &info, nullptr, &memory));
-    return OwnedMemory(context.device, memory);
+    VKS_VK_TRY(vkAllocateMemory(context.device, &info, context.allocator, &memory));
+    return OwnedMemory(context.device, memory, context.allocator);
 }
 
 } // namespace
@@ -63,8 +63,8 @@ Result<Buffer> create_buffer(const VulkanContext& context, VkDeviceSize size, Vk
     info.usage = usage;
     info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
     VkBuffer buffer = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateBuffer(context.device, &info, nullptr, &buffer));
-    result.buffer = OwnedBuffer(context.device, buffer);
+    VKS_VK_TRY(vkCreateBuffer(context.device, &info, context.allocator, &buffer));
+    result.buffer = OwnedBuffer(context.device, buffer, context.allocator);
 
     VkMemoryRequirements requirements;
     vkGetBufferMemoryRequirements(context.device, buffer, &requirements);
@@ -105,8 +105,8 @@ Result<Image> create_image_2d(const VulkanContext& context, std::uint32_t width,
     info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
     info.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
     VkImage image = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateImage(context.device, &info, nullptr, &image));
-    result.image = OwnedImage(context.device, image);
+    VKS_VK_TRY(vkCreateImage(context.device, &info, context.allocator, &image));
+    result.image = OwnedImage(context.device, image, context.allocator);
 
     VkMemoryRequirements requirements;
     vkGetImageMemoryRequirements(context.device, image, &requirements);
@@ -124,8 +124,8 @@ Result<Image> create_image_2d(const VulkanContext& context, std::uint32_t width,
     view_info.format = format;
     view_info.subresourceRange = {aspect, 0, 1, 0, 1};
     VkImageView view = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateImageView(context.device, &view_info, nullptr, &view));
-    result.view = OwnedImageView(context.device, view);
+    VKS_VK_TRY(vkCreateImageView(context.device, &view_info, context.allocator, &view));
+    result.view = OwnedImageView(context.device, view, context.allocator);
     return result;
 }
 

@@ -104,6 +104,7 @@ Result<void> VulkanBackend::create_scene_buffers() {
 
 Result<void> VulkanBackend::create_depth_pass() {
     VkDevice device = context_.device;
+    const VkAllocationCallbacks* allocator = context_.allocator;
     VkFormatProperties depth_format, material_format;
     vkGetPhysicalDeviceFormatProperties(context_.physical_device, kDepthFormat, &depth_format);
     vkGetPhysicalDeviceFormatProperties(context_.physical_device, kMaterialFormat, &material_format);
@@ -126,7 +127,7 @@ Result<void> VulkanBackend::create_depth_pass() {
     if (!material_image) return material_image.error();
     material_image_ = std::move(material_image.value());
 
-    auto render_pass = create_depth_render_pass(device);
+    auto render_pass = create_depth_render_pass(device, allocator);
     if (!render_pass) return render_pass.error();
     render_pass_ = std::move(render_pass.value());
 
@@ -140,8 +141,8 @@ Result<void> VulkanBackend::create_depth_pass() {
     framebuffer_info.height = plan_.rows;
     framebuffer_info.layers = 1;
     VkFramebuffer framebuffer = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateFramebuffer(device, &framebuffer_info, nullptr, &framebuffer));
-    framebuffer_ = OwnedFramebuffer(device, framebuffer);
+    VKS_VK_TRY(vkCreateFramebuffer(device, &framebuffer_info, allocator, &framebuffer));
+    framebuffer_ = OwnedFramebuffer(device, framebuffer, allocator);
 
     VkPushConstantRange push_range{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
                                    sizeof(shared::DepthPush)};
@@ -150,15 +151,15 @@ Result<void> VulkanBackend::create_depth_pass() {
     layout_info.pushConstantRangeCount = 1;
     layout_info.pPushConstantRanges = &push_range;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
-    depth_layout_ = OwnedPipelineLayout(device, layout);
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    depth_layout_ = OwnedPipelineLayout(device, layout, allocator);
 
-    auto vertex = create_shader_module(device, depth_vert_spv, sizeof(depth_vert_spv));
+    auto vertex = create_shader_module(device, allocator, depth_vert_spv, sizeof(depth_vert_spv));
     if (!vertex) return vertex.error();
-    auto fragment = create_shader_module(device, depth_frag_spv, sizeof(depth_frag_spv));
+    auto fragment = create_shader_module(device, allocator, depth_frag_spv, sizeof(depth_frag_spv));
     if (!fragment) return fragment.error();
-    auto pipeline =
-        create_depth_pipeline(device, render_pass_.get(), depth_layout_.get(), vertex->get(), fragment->get());
+    auto pipeline = create_depth_pipeline(device, allocator, render_pass_.get(), depth_layout_.get(), vertex->get(),
+                                          fragment->get());
     if (!pipeline) return pipeline.error();
     depth_pipeline_ = std::move(pipeline.value());
     return {};
@@ -166,6 +167,7 @@ Result<void> VulkanBackend::create_depth_pass() {
 
 Result<void> VulkanBackend::create_compute() {
     VkDevice device = context_.device;
+    const VkAllocationCallbacks* allocator = context_.allocator;
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     // Beamform intermediates are bin-fastest with bins padded to a multiple of 4, so resample and
@@ -247,7 +249,7 @@ Result<void> VulkanBackend::create_compute() {
     readback_ = std::move(readback.value());
 
     // Descriptors: one set for every compute stage.
-    auto set_layout = create_compute_set_layout(device);
+    auto set_layout = create_compute_set_layout(device, allocator);
     if (!set_layout) return set_layout.error();
     set_layout_ = std::move(set_layout.value());
     VkDescriptorSetLayout set_layout_handle = set_layout_.get();
@@ -256,8 +258,8 @@ Result<void> VulkanBackend::create_compute() {
     layout_info.setLayoutCount = 1;
     layout_info.pSetLayouts = &set_layout_handle;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, nullptr, &layout));
-    compute_layout_ = OwnedPipelineLayout(device, layout);
+    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    compute_layout_ = OwnedPipelineLayout(device, layout, allocator);
 
     std::array<VkDescriptorPoolSize, 2> pool_sizes{
         {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1}, {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count - 1}}};
@@ -267,8 +269,8 @@ Result<void> VulkanBackend::create_compute() {
     pool_info.poolSizeCount = static_cast<std::uint32_t>(pool_sizes.size());
     pool_info.pPoolSizes = pool_sizes.data();
     VkDescriptorPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, nullptr, &pool));
-    descriptor_pool_ = OwnedDescriptorPool(device, pool);
+    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
+    descriptor_pool_ = OwnedDescriptorPool(device, pool, allocator);
     VkDescriptorSetAllocateInfo set_info{};
     set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
     set_info.descriptorPool = pool;
@@ -298,10 +300,10 @@ Result<void> VulkanBackend::create_compute() {
     const std::uint32_t flags = plan_.effects.shader_flags();
     auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes, std::uint32_t per_invocation,
                     std::uint32_t variant = 0) -> Result<void> {
-        auto module = create_shader_module(device, code, bytes);
+        auto module = create_shader_module(device, allocator, code, bytes);
         if (!module) return module.error();
-        auto created =
-            create_compute_pipeline(device, compute_layout_.get(), module->get(), flags, per_invocation, variant);
+        auto created = create_compute_pipeline(device, allocator, compute_layout_.get(), module->get(), flags,
+                                               per_invocation, variant);
         if (!created) return created.error();
         pipeline = std::move(created.value());
         return {};
@@ -328,12 +330,13 @@ Result<void> VulkanBackend::create_compute() {
 
 Result<void> VulkanBackend::create_commands() {
     VkDevice device = context_.device;
+    const VkAllocationCallbacks* allocator = context_.allocator;
     VkCommandPoolCreateInfo pool_info{};
     pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
     pool_info.queueFamilyIndex = context_.queue_family;
     VkCommandPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateCommandPool(device, &pool_info, nullptr, &pool));
-    command_pool_ = OwnedCommandPool(device, pool);
+    VKS_VK_TRY(vkCreateCommandPool(device, &pool_info, allocator, &pool));
+    command_pool_ = OwnedCommandPool(device, pool, allocator);
     VkCommandBufferAllocateInfo allocate_info{};
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
     allocate_info.commandPool = pool;
@@ -346,8 +349,8 @@ Result<void> VulkanBackend::create_commands() {
     // Signalled: the destructor waits on it, also when nothing was ever submitted (every submit resets it first).
     fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
     VkFence fence = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateFence(device, &fence_info, nullptr, &fence));
-    fence_ = OwnedFence(device, fence);
+    VKS_VK_TRY(vkCreateFence(device, &fence_info, allocator, &fence));
+    fence_ = OwnedFence(device, fence, allocator);
 
     // Stage times: timestamp queries where the queue has them, except on CPU devices. lavapipe's
     // timestamps do not bracket compute dispatches (a dispatch's time shows up in a neighbouring
@@ -364,8 +367,8 @@ Result<void> VulkanBackend::create_commands() {
         query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
         query_info.queryCount = stage_count + 1;
         VkQueryPool query_pool = VK_NULL_HANDLE;
-        VKS_VK_TRY(vkCreateQueryPool(device, &query_info, nullptr, &query_pool));
-        query_pool_ = OwnedQueryPool(device, query_pool);
+        VKS_VK_TRY(vkCreateQueryPool(device, &query_info, allocator, &query_pool));
+        query_pool_ = OwnedQueryPool(device, query_pool, allocator);
     }
     return {};
 }

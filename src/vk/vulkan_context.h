@@ -20,6 +20,9 @@ struct VulkanContext {
     bool owns_instance = false;
     bool owns_device = false;
     bool graphics = true; // queue_family supports graphics (the depth pass); adopted compute-only queues do not
+    // Passed to every vkCreate*/vkDestroy*/vkAllocateMemory/vkFreeMemory vksonar makes (null: the
+    // implementation's). Borrowed: HostVulkan::allocator or ContextOptions::allocator; outlives the context.
+    const VkAllocationCallbacks* allocator = nullptr;
 
     VkDebugUtilsMessengerEXT debug_messenger = VK_NULL_HANDLE; // always owned (created by vksonar)
     bool validation = false;                                   // the validation layer is enabled
