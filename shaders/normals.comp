@@ -1,4 +1,5 @@
-// Stage 2, normals (docs/pipeline.md §2): Sobel 3x3 (or 5x5 with normal_method = sobel5, where the
+// Stage 2, normals (docs/pipeline.md §2). geometric: the depth pass's face normals, mapped to the
+// sonar frame and oriented. Otherwise Sobel 3x3 (or 5x5 with normal_method = sobel5, where the
 // whole 5x5 window is one surface) on reconstructed sonar-frame positions, with one-sided
 // differences near depth edges and a facing-the-sonar fallback. Output
 // normals4[p] = (n.x, n.y, n.z, cos incidence). Each invocation slides a 3x3 (5x5) window along a
@@ -20,7 +21,8 @@ layout(constant_id = 2) const uint kNormalMethod = kNormalsSobel3;
 
 layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 1) readonly buffer DepthBuffer { float depth[]; };
-layout(std430, binding = 3) writeonly buffer NormalsBuffer { vec4 normals4[]; };
+// Written by every method; read too by geometric, where the depth pass copied its face normals here.
+layout(std430, binding = 3) buffer NormalsBuffer { vec4 normals4[]; };
 layout(std430, binding = 8) readonly buffer SliceBuffer { SliceInfo slice_info[]; };
 
 // Sonar-frame position, slant range and validity of a pixel; invalid outside the image or without a hit.
@@ -95,9 +97,8 @@ bool one_sided(Sample minus, Sample centre, Sample plus, out vec3 t) {
     return false;
 }
 
-// n from the two tangents: normalized, turned to face the sonar; degenerate -> facing fallback.
-vec4 finish(Sample p, vec3 tx, vec3 ty) {
-    vec3 n = cross(tx, ty);
+// n normalized, turned to face the sonar; degenerate -> facing fallback.
+vec4 orient(Sample p, vec3 n) {
     float len = length(n);
     if (!(len > 0.0)) {
         return facing(p);
@@ -106,7 +107,12 @@ vec4 finish(Sample p, vec3 tx, vec3 ty) {
     if (dot(n, p.pos) > 0.0) {
         n = -n;
     }
-    return vec4(n, clamp(-dot(n, p.pos) / p.range, 0.0, 1.0));
+    return vec4(n, incidence_cos(dot(n, p.pos), p.range));
+}
+
+// n from the two tangents.
+vec4 finish(Sample p, vec3 tx, vec3 ty) {
+    return orient(p, cross(tx, ty));
 }
 
 vec4 normal_at(Column l, Column c, Column r) {
@@ -219,6 +225,27 @@ void run_sobel3(uint row, uint first, uint last) {
     }
 }
 
+// geometric: normals4 holds the depth pass's face normal q (clip-linear coordinates, sonar_math.h);
+// map it to the sonar frame of the pixel's slice and orient it in place.
+void run_geometric(uint row, uint first, uint last) {
+    for (uint column = first; column < last; ++column) {
+        uint i = row * params.columns + column;
+        Sample p = load(int(column), int(row));
+        if (!p.valid) {
+            normals4[i] = vec4(0.0);
+            continue;
+        }
+        vec3 q = normals4[i].xyz;
+        uint slice = column / params.slice_columns;
+        float cs = slice_info[slice].cos_center;
+        float sn = slice_info[slice].sin_center;
+        vec3 n = vec3(face_normal_sonar_x(q.x, q.z, params.tan_half_h, cs, sn),
+                      face_normal_sonar_y(q.x, q.z, params.tan_half_h, cs, sn),
+                      face_normal_sonar_z(q.y, params.tan_half_v));
+        normals4[i] = orient(p, n);
+    }
+}
+
 void main() {
     uint runs_per_row = (params.columns + kRun - 1u) / kRun;
     uint row = gl_GlobalInvocationID.x / runs_per_row;
@@ -227,7 +254,9 @@ void main() {
     }
     uint first = (gl_GlobalInvocationID.x - row * runs_per_row) * kRun;
     uint last = min(first + kRun, params.columns);
-    if (kNormalMethod == kNormalsSobel5) {
+    if (kNormalMethod == kNormalsGeometric) {
+        run_geometric(row, first, last);
+    } else if (kNormalMethod == kNormalsSobel5) {
         run_sobel5(row, first, last);
     } else {
         run_sobel3(row, first, last);

@@ -52,6 +52,10 @@ VKS_CONST float kMaxFootprintBins = 64.0f; // caps the per-pixel loop; wider foo
 // Normal methods.
 VKS_CONST uint kNormalsSobel3 = 0u;
 VKS_CONST uint kNormalsSobel5 = 1u;
+// The depth pass also writes each pixel's face normal (the triangle that won the depth test) into a
+// colour attachment, as the plane normal in clip-linear coordinates q = (x_clip, y_clip, w_clip);
+// the normals stage only maps it to the sonar frame and turns it to face the sonar.
+VKS_CONST uint kNormalsGeometric = 2u;
 
 // Per-frame-constant parameters of the compute stages (uniform buffer, std140; scalars only).
 // Pixel grid: `columns` = slices * slice_columns pixel columns (left to right = port to starboard),

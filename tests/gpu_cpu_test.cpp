@@ -198,6 +198,50 @@ TEST_P(StageTest, Sobel5NormalsMatchOnTheSameInput) {
     EXPECT_GT(differ, 0u);
 }
 
+// normal_method = geometric, each backend from its own depth pass: where both cover a pixel with the
+// same surface (the depth test's criterion), the face normals agree to the GPU's derivative precision;
+// the pixels where they do not are triangle-edge pixels won by a neighbouring triangle on one backend.
+TEST_P(StageTest, GeometricNormalsDifferOnlyOnTriangleEdges) {
+    SonarConfig config = quiet_config();
+    config.normal_method = NormalMethod::geometric;
+    auto p = render_pair(GetParam().file, config, GetParam().pose, save_depth | save_normals);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Frame& c = p->cpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    ASSERT_TRUE(plan.face_normals);
+    std::size_t hits = 0, over = 0;
+    double max_angle_deg = 0, max_cos_diff = 0, worst_deg = 0;
+    for (std::size_t i = 0; i < g.depth.size(); ++i) {
+        if (!(g.depth[i] > 0) && !(c.depth[i] > 0)) continue;
+        ++hits;
+        const bool both = g.depth[i] > 0 && c.depth[i] > 0 && g.material[i] == c.material[i];
+        if (!both) {
+            ++over;
+            continue;
+        }
+        const double a[3] = {g.normals[4 * i], g.normals[4 * i + 1], g.normals[4 * i + 2]};
+        const double b[3] = {c.normals[4 * i], c.normals[4 * i + 1], c.normals[4 * i + 2]};
+        const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2], cz = a[0] * b[1] - a[1] * b[0];
+        const double angle =
+            std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * 180.0 /
+            3.14159265358979;
+        const double dcos = std::abs(double(g.normals[4 * i + 3]) - c.normals[4 * i + 3]);
+        worst_deg = std::max(worst_deg, angle);
+        if (angle > kGeometricAngleTolDeg || dcos > kGeometricCosTol) {
+            ++over;
+        } else {
+            max_angle_deg = std::max(max_angle_deg, angle);
+            max_cos_diff = std::max(max_cos_diff, dcos);
+        }
+    }
+    ASSERT_GT(hits, 0u);
+    std::printf("[geometric] %s: %zu of %zu hit pixels differ (edges; worst %.1f deg), elsewhere max angle %.2e "
+                "deg, max |d cos| %.2e\n",
+                GetParam().file.c_str(), over, hits, worst_deg, max_angle_deg, max_cos_diff);
+    EXPECT_LE(static_cast<double>(over), kDepthEdgePixelBudget * hits);
+}
+
 TEST_P(StageTest, WholeFrameAgrees) {
     SonarConfig config = quiet_config();
     config.effects.speckle = EffectMode::on; // seeded noise must be identical on both backends

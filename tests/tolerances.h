@@ -31,6 +31,24 @@ constexpr double kHostStandardZUlps = 8;
 constexpr double kNormalAngleTolDeg = 0.05;
 constexpr double kNormalCosTol = 1e-3;
 
+// Geometric normals (normal_method = geometric). The CPU takes the cross of a triangle's edges in
+// double; the GPU the cross of dFdx, dFdy of the interpolated clip-linear position in float: each
+// derivative is a difference of two interpolated values of magnitude ~w (up to 40 m) that differ by
+// ~2w / slice_columns, so it carries a relative error of ~1e-5 (more where the two derivatives are
+// nearly parallel, at grazing incidence). A tilted plane (every pixel, edges included, 3 slices):
+// measured 4e-6 deg / cos 1.6e-7 on the CPU, 3.2e-3 deg / cos 2.0e-5 on lavapipe. The cos tolerance
+// also covers the plane's own tilt error from float vertices: a strip 1 cm wide whose vertices are
+// rounded to float near 10 m (ulp 9.5e-7 m) tilts by ~1e-4 rad (measured: cos error 1.2e-5).
+constexpr double kGeometricPlaneAngleTolDeg = 0.02;
+constexpr double kGeometricPlaneCosTol = 2e-4;
+// Bundled scenes, GPU vs CPU, where both backends cover the pixel with the same material: measured
+// up to 1.0e-2 deg and |d cos| 9.4e-5 on lavapipe (harbour). Pixels beyond this are triangle-edge
+// pixels that the neighbouring triangle won on one backend (the depth test's sub-pixel band, now
+// along internal mesh edges too, where the depth agrees but the face normal is the neighbour's:
+// measured 24-47 pixels, 0.03-0.06% of the hits); they share kDepthEdgePixelBudget.
+constexpr double kGeometricAngleTolDeg = 0.05;
+constexpr double kGeometricCosTol = 5e-4;
+
 // Echo from identical inputs: exp/sin/sqrt differ by a few ulp between LLVM's vectorized versions
 // and libm; near a beam-pattern null the pattern value is a small difference of larger numbers, so
 // the relative error is measured against max(value, 1e-6 x frame peak).

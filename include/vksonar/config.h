@@ -31,7 +31,8 @@ enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian };
 enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
 enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
-enum class NormalMethod : std::uint8_t { sobel3, sobel5 };
+// geometric: the face normal of the triangle that won each pixel, recorded by the depth pass.
+enum class NormalMethod : std::uint8_t { sobel3, sobel5, geometric };
 enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
 enum class Precision : std::uint8_t { f32, f64 };
 // Storage of the per-pixel echo buffer (energy, slant range) between the echo and profile passes.

@@ -32,7 +32,7 @@ constexpr const char* kUsage =
     "Sweeps the accuracy knobs one at a time around the config (default: the bundled scene and preset):\n"
     "accuracy.pixels_per_beam 1,2,4,8; accuracy.rows_per_vfov 16,32,64,128; accuracy.max_slice 15,30,60,120;\n"
     "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6;\n"
-    "accuracy.normal_method sobel3,sobel5; accuracy.intermediates fp32,fp16; and the --quality presets\n"
+    "accuracy.normal_method sobel3,sobel5,geometric; accuracy.intermediates fp32,fp16; and the --quality presets\n"
     "fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
     "range_kernel footprint, sidelobe_kernel_beamwidths 8, and a second one with each row's own side-lobe\n"
@@ -281,6 +281,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         {"sidelobe_kernel_beamwidths", "2"},
         {"sidelobe_kernel_beamwidths", "6"},
         {"normal_method", "sobel5"},
+        {"normal_method", "geometric"},
         {"intermediates", "fp16"},
         {"quality", "fast"},
         {"quality", "balanced"},

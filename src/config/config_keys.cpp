@@ -38,7 +38,7 @@ template <> struct EnumNames<RangeKernel> {
     static constexpr std::array<const char*, 3> names{"nearest", "tent", "footprint"};
 };
 template <> struct EnumNames<NormalMethod> {
-    static constexpr std::array<const char*, 2> names{"sobel3", "sobel5"};
+    static constexpr std::array<const char*, 3> names{"sobel3", "sobel5", "geometric"};
 };
 template <> struct EnumNames<Colormap> {
     static constexpr std::array<const char*, 4> names{"gray", "viridis", "sonar", "jet"};
@@ -237,7 +237,9 @@ std::vector<ConfigKey> make_table() {
         VKS_NUMBER("accuracy.vertical_coverage", vertical_coverage, "",
                    "Depth pass covers this many vertical beamwidths (pattern tails), >= 1"),
         VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]"),
-        VKS_ENUM("accuracy.normal_method", NormalMethod, normal_method, "sobel3|sobel5", "Normal estimation kernel"),
+        VKS_ENUM("accuracy.normal_method", NormalMethod, normal_method, "sobel3|sobel5|geometric",
+                 "Normal estimation: Sobel 3x3 / 5x5 on depth, or the triangles' face normals (not with a host depth "
+                 "image)"),
         VKS_ENUM("accuracy.range_kernel", RangeKernel, range_kernel, "nearest|tent|footprint",
                  "Range kernel K_r: nearest bin, split between the two nearest bins, or spread over the "
                  "pixel's own range extent (at least one bin)"),

@@ -34,6 +34,11 @@ Error uncovered(const std::string& what) {
 } // namespace
 
 Result<Plan> make_host_depth_plan(const SonarConfig& config, const HostDepthDesc& desc) {
+    if (config.normal_method == NormalMethod::geometric) {
+        return make_error(ErrorCode::unsupported,
+                          "accuracy.normal_method = geometric needs the scene's triangles, and a host depth image "
+                          "has none: use sobel3 or sobel5");
+    }
     if (desc.width < 3 || desc.height < 3) {
         return bad("width x height = " + std::to_string(desc.width) + " x " + std::to_string(desc.height) +
                    " (at least 3 x 3: the normals stage needs neighbours)");

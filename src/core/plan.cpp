@@ -417,7 +417,11 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.range_kernel = c.range_kernel == RangeKernel::footprint ? shared::kRangeKernelFootprint
                      : c.range_kernel == RangeKernel::tent    ? shared::kRangeKernelTent
                                                               : shared::kRangeKernelNearest;
-    g.normal_method = c.normal_method == NormalMethod::sobel5 ? shared::kNormalsSobel5 : shared::kNormalsSobel3;
+    g.normal_method = c.normal_method == NormalMethod::sobel5      ? shared::kNormalsSobel5
+                      : c.normal_method == NormalMethod::geometric ? shared::kNormalsGeometric
+                                                                   : shared::kNormalsSobel3;
+    // The face-normal attachment costs a colour target and a copy per frame: only when it is used.
+    p.face_normals = e.incidence && c.normal_method == NormalMethod::geometric;
     g.edge_relative_jump = kEdgeRelativeJump;
     g.circular = p.circular ? 1u : 0u;
     // fp16 echo storage: scale energies by a power of 2 (exact both ways) so that the brightest

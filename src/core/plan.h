@@ -72,6 +72,9 @@ struct Plan {
     std::vector<shared::MaterialGpu> materials;
 
     ResolvedEffects effects;
+    // The depth pass records each pixel's face normal (normal_method = geometric with the incidence
+    // effect on); otherwise no attachment is created, recorded or copied.
+    bool face_normals = false;
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
 

@@ -35,6 +35,8 @@ template <> struct Math<float> {
     VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
+    VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
+    VKS_FORWARD(face_normal_sonar_z)
 #undef VKS_FORWARD
 };
 template <> struct Math<double> {
@@ -42,6 +44,8 @@ template <> struct Math<double> {
     VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
+    VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
+    VKS_FORWARD(face_normal_sonar_z)
 #undef VKS_FORWARD
 };
 

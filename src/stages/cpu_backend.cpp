@@ -29,12 +29,14 @@ public:
         depth_.assign(pixels, 0.0f);
         material_.assign(pixels, shared::kNoMaterial);
         if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
+        if (plan_.face_normals) face_.assign(pixels * 4, 0.0f);
         echo_.assign(pixels * 2, 0.0f);
         profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
-        if (plan_.effects.incidence) normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
+        if (plan_.effects.incidence && !plan_.face_normals)
+            normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
     }
 
@@ -54,13 +56,17 @@ public:
         frame.stages_run.clear();
         auto start = Clock::now();
         compose_depth_draws(plan_, scene_, pose, draws_);
-        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data());
+        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(), plan_.face_normals ? face_.data() : nullptr);
         finish("depth", start, frame);
 
         const float* normals = nullptr;
         if (plan_.effects.incidence) {
             start = Clock::now();
-            cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
+            if (plan_.face_normals) {
+                cpu::geometric_normals<Real>(plan_, depth_.data(), face_.data(), normals_.data());
+            } else {
+                cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
+            }
             normals = normals_.data();
             finish("normals", start, frame);
         }
@@ -107,6 +113,7 @@ private:
     std::vector<shared::DepthPush> draws_;
     std::vector<float> depth_;
     std::vector<std::uint32_t> material_;
+    std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
     std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
     std::vector<Real> scratch_, normals_scratch_;
 };

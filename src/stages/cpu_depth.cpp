@@ -10,6 +10,9 @@
 // on it: no pixel is lost or covered twice along a shared edge, whatever the winding. Clipped vertices
 // are interpolated from the inside endpoint, so a shared edge crossing a clip plane is cut at the same
 // point in both triangles. Zero-area, non-finite and w <= 0 triangles produce nothing.
+//
+// With a face_normal buffer (normal_method = geometric), each pixel also records the plane normal of
+// the triangle that won its depth test (docs/pipeline.md §1).
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -103,6 +106,8 @@ struct Target {
     std::int64_t x_begin, x_end; // scissor columns [x_begin, x_end)
     std::int64_t rows;
     std::uint32_t material_id;
+    float* face_normal = nullptr;  // rows * columns * 4 or null (normal_method = geometric)
+    float triangle_normal[3] = {}; // the current triangle's unit plane normal, clip-linear coordinates
 };
 
 // First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
@@ -159,6 +164,13 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
             if (d > t.depth[p]) { // strict GREATER, reversed-Z
                 t.depth[p] = d;
                 t.material[p] = t.material_id;
+                if (t.face_normal) {
+                    float* n = t.face_normal + 4 * p;
+                    n[0] = t.triangle_normal[0];
+                    n[1] = t.triangle_normal[1];
+                    n[2] = t.triangle_normal[2];
+                    n[3] = 0.0f;
+                }
             }
         }
     }
@@ -170,6 +182,18 @@ ClipVertex transform(const double m[16], const float* pos) {
             m[2] * x + m[6] * y + m[10] * z + m[14], m[3] * x + m[7] * y + m[11] * z + m[15]};
 }
 
+// Unit normal of the triangle's plane in clip-linear coordinates q = (x_clip, y_clip, w_clip), the
+// quantity the GPU's depth_geometric.frag writes: cross of two edges in double (clip space is linear in
+// the local position, so the unclipped vertices span the plane of every clipped piece); 0 if degenerate.
+void plane_normal(const ClipVertex* v, float out[3]) {
+    const double ax = v[1].x - v[0].x, ay = v[1].y - v[0].y, aw = v[1].w - v[0].w;
+    const double bx = v[2].x - v[0].x, by = v[2].y - v[0].y, bw = v[2].w - v[0].w;
+    const double n[3] = {ay * bw - aw * by, aw * bx - ax * bw, ax * by - ay * bx};
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (int k = 0; k < 3; ++k)
+        out[k] = len > 0.0 && std::isfinite(len) ? static_cast<float>(n[k] / len) : 0.0f;
+}
+
 bool finite(const ClipVertex& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
 }
@@ -177,17 +201,19 @@ bool finite(const ClipVertex& v) {
 } // namespace
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material) {
+                std::uint32_t* material, float* face_normal) {
     const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
     const std::size_t pixels = static_cast<std::size_t>(rows) * columns;
     std::fill(depth, depth + pixels, 0.0f);
     std::fill(material, material + pixels, shared::kNoMaterial);
+    if (face_normal) std::fill(face_normal, face_normal + 4 * pixels, 0.0f);
 
     const std::size_t draw_count = scene.draws.size();
     const double half_w = 0.5 * W, half_h = 0.5 * rows;
     for (std::uint32_t s = 0; s < plan.slices; ++s) {
         Target target{depth, material, columns, static_cast<std::int64_t>(s) * W,
                       static_cast<std::int64_t>(s + 1) * W, rows, 0};
+        target.face_normal = face_normal;
         const double x_offset = static_cast<double>(s) * W;
         for (std::size_t i = 0; i < draw_count; ++i) {
             const std::size_t slot = s * draw_count + i;
@@ -218,6 +244,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
                 if (!ok) continue;
                 const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
                 if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
+                if (face_normal) plane_normal(poly, target.triangle_normal);
                 int n = 3;
                 if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
                     n = clip_against(poly, n, tmp, 0);

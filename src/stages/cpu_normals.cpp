@@ -4,6 +4,9 @@
 // sonar-facing fallback where no tangent can be formed. Sums run in the order pipeline.md §2 states,
 // the order shaders/normals.comp uses, so float results agree with the GPU to rounding.
 //
+// normal_method = geometric (geometric_normals): no stencil; the depth pass recorded each pixel's face
+// normal, which is mapped to the sonar frame, turned to face the sonar and given its cos incidence.
+//
 // Constants: in float the stage reads the same float values the shaders get (SonarParams,
 // SliceInfo.cos/sin_center); in double it reads the Plan's double values and recomputes the slice
 // rotation in double from the slice azimuth, exactly as compose_depth_draws does.
@@ -212,7 +215,7 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
                 if (len > Real(0) && std::isfinite(len)) {
                     n = {cr.x / len, cr.y / len, cr.z / len};
                     if (dot(n, P) > Real(0)) n = {-n.x, -n.y, -n.z};
-                    cos_inc = std::min(Real(1), std::max(Real(0), -dot(n, P) / r));
+                    cos_inc = M::incidence_cos(dot(n, P), r);
                 } else {
                     facing = true;
                 }
@@ -229,11 +232,74 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
     }
 }
 
+template <class Real>
+void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4) {
+    using M = Math<Real>;
+    Real tan_half_h, tan_half_v, depth_a, depth_b;
+    if constexpr (std::is_same_v<Real, float>) {
+        tan_half_h = plan.params.tan_half_h;
+        tan_half_v = plan.params.tan_half_v;
+        depth_a = plan.params.depth_a;
+        depth_b = plan.params.depth_b;
+    } else {
+        tan_half_h = static_cast<Real>(plan.tan_half_h);
+        tan_half_v = static_cast<Real>(plan.tan_half_v);
+        depth_a = static_cast<Real>(plan.depth_a);
+        depth_b = static_cast<Real>(plan.depth_b);
+    }
+    const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
+    for (std::uint32_t j = 0; j < R; ++j) {
+        const Real v = M::pixel_coord(j, R, tan_half_v);
+        for (std::uint32_t c = 0; c < C; ++c) {
+            const std::size_t i = static_cast<std::size_t>(j) * C + c;
+            float* out = normals4 + 4 * i;
+            if (!(depth[i] > 0.0f)) {
+                out[0] = out[1] = out[2] = out[3] = 0.0f;
+                continue;
+            }
+            const std::uint32_t s = c / W;
+            const Real u = M::pixel_coord(c - s * W, W, tan_half_h);
+            Real cs, sn;
+            if constexpr (std::is_same_v<Real, float>) {
+                cs = plan.slice_info[s].cos_center;
+                sn = plan.slice_info[s].sin_center;
+            } else {
+                const double phi = plan.slice_info[s].center_azimuth_rad;
+                cs = std::cos(phi);
+                sn = std::sin(phi);
+            }
+            // The same reconstruction as normals.comp's load(): P = z (f_s + u r_s + v d).
+            const Real z = M::view_z_from_depth(static_cast<Real>(depth[i]), depth_a, depth_b);
+            const Vec3<Real> P{z * (cs + u * sn), z * (sn - u * cs), z * -v};
+            const Real r = length(P);
+            const float* q = face4 + 4 * i;
+            const Real qx = q[0], qy = q[1], qz = q[2];
+            Vec3<Real> n{M::face_normal_sonar_x(qx, qz, tan_half_h, cs, sn),
+                         M::face_normal_sonar_y(qx, qz, tan_half_h, cs, sn), M::face_normal_sonar_z(qy, tan_half_v)};
+            const Real len = length(n);
+            Real cos_inc = Real(1);
+            if (len > Real(0) && std::isfinite(len)) {
+                n = {n.x / len, n.y / len, n.z / len};
+                if (dot(n, P) > Real(0)) n = {-n.x, -n.y, -n.z};
+                cos_inc = M::incidence_cos(dot(n, P), r);
+            } else { // no face normal (degenerate): faces the sonar, as the Sobel fallback
+                n = {-P.x / r, -P.y / r, -P.z / r};
+            }
+            out[0] = static_cast<float>(n.x);
+            out[1] = static_cast<float>(n.y);
+            out[2] = static_cast<float>(n.z);
+            out[3] = static_cast<float>(cos_inc);
+        }
+    }
+}
+
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4) {
     std::vector<Real> scratch(std::max<std::size_t>(normals_scratch_count(plan), 1));
     normals<Real>(plan, depth, normals4, scratch.data());
 }
 
+template void geometric_normals<float>(const Plan&, const float*, const float*, float*);
+template void geometric_normals<double>(const Plan&, const float*, const float*, float*);
 template void normals<float>(const Plan&, const float*, float*);
 template void normals<double>(const Plan&, const float*, float*);
 template void normals<float>(const Plan&, const float*, float*, float*);

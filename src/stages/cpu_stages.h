@@ -17,15 +17,20 @@ namespace vksonar::cpu {
 
 // Stage 1: rasterizes every draw into every slice with Vulkan's rules (top-left fill convention,
 // pixel-centre sampling, reversed-Z, depth test GREATER, clip 0 <= z <= w).
-// depth: rows * columns (cleared to 0); material: rows * columns (cleared to kNoMaterial).
+// depth: rows * columns (cleared to 0); material: rows * columns (cleared to kNoMaterial);
+// face_normal: null, or rows * columns * 4 (cleared to 0) receiving the unit plane normal of the
+// winning triangle in clip-linear coordinates (x_clip, y_clip, w_clip), as the GPU's attachment.
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material);
+                std::uint32_t* material, float* face_normal = nullptr);
 
 // Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);
 // The same with caller-owned scratch of normals_scratch_count(plan) values (the overload above allocates it).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch);
 std::size_t normals_scratch_count(const Plan& plan);
+// Stage 2 with normal_method = geometric: face4 is depth_pass's face_normal output; each hit pixel's
+// face normal is mapped to the sonar frame, turned to face the sonar, and given its cos incidence.
+template <class Real> void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4);
 
 // Stage 3: echo2 = rows * columns * 2 (energy, slant range). normals4 may be null when the
 // incidence effect is off.

@@ -58,8 +58,9 @@ Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocatio
     return OwnedPipeline(device, pipeline, allocator);
 }
 
-Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator) {
-    std::array<VkAttachmentDescription, 2> attachments{};
+Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                 bool face_normals) {
+    std::array<VkAttachmentDescription, 3> attachments{};
     for (auto& attachment : attachments) {
         attachment.samples = VK_SAMPLE_COUNT_1_BIT;
         attachment.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
@@ -71,13 +72,15 @@ Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAlloca
     }
     attachments[0].format = kMaterialFormat;
     attachments[1].format = kDepthFormat;
+    attachments[2].format = kFaceNormalFormat;
 
-    VkAttachmentReference material_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+    const std::array<VkAttachmentReference, 2> colour_refs{
+        {{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL}, {2, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL}}};
     VkAttachmentReference depth_ref{1, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
     VkSubpassDescription subpass{};
     subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-    subpass.colorAttachmentCount = 1;
-    subpass.pColorAttachments = &material_ref;
+    subpass.colorAttachmentCount = face_normals ? 2u : 1u;
+    subpass.pColorAttachments = colour_refs.data();
     subpass.pDepthStencilAttachment = &depth_ref;
 
     constexpr VkPipelineStageFlags attachment_stages = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT |
@@ -103,7 +106,7 @@ Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAlloca
 
     VkRenderPassCreateInfo info{};
     info.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
-    info.attachmentCount = static_cast<std::uint32_t>(attachments.size());
+    info.attachmentCount = face_normals ? 3u : 2u;
     info.pAttachments = attachments.data();
     info.subpassCount = 1;
     info.pSubpasses = &subpass;
@@ -116,7 +119,7 @@ Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAlloca
 
 Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                             VkRenderPass render_pass, VkPipelineLayout layout, VkShaderModule vertex,
-                                            VkShaderModule fragment) {
+                                            VkShaderModule fragment, std::uint32_t colour_attachments) {
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
     stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
@@ -165,12 +168,18 @@ Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationC
     depth.minDepthBounds = 0.0f;
     depth.maxDepthBounds = 1.0f;
 
-    VkPipelineColorBlendAttachmentState blend_attachment{};
-    blend_attachment.colorWriteMask = VK_COLOR_COMPONENT_R_BIT; // integer format: no blending
+    // No blending (integer and float targets). Without the independentBlend feature all attachments
+    // need identical states: with the face normals both write RGBA (R32_UINT ignores G, B, A).
+    std::array<VkPipelineColorBlendAttachmentState, 2> blend_attachments{};
+    for (auto& state : blend_attachments) {
+        state.colorWriteMask = colour_attachments > 1 ? VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
+                                                            VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT
+                                                      : VK_COLOR_COMPONENT_R_BIT;
+    }
     VkPipelineColorBlendStateCreateInfo blend{};
     blend.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
-    blend.attachmentCount = 1;
-    blend.pAttachments = &blend_attachment;
+    blend.attachmentCount = colour_attachments;
+    blend.pAttachments = blend_attachments.data();
 
     std::array<VkDynamicState, 2> dynamic_states{VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
     VkPipelineDynamicStateCreateInfo dynamic{};

@@ -32,6 +32,7 @@ enum Binding : std::uint32_t {
 
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
+constexpr VkFormat kFaceNormalFormat = VK_FORMAT_R32G32B32A32_SFLOAT; // colour attachment + copy: mandatory
 
 [[nodiscard]] Result<OwnedShaderModule> create_shader_module(VkDevice device, const VkAllocationCallbacks* allocator,
                                                              const std::uint32_t* code, std::size_t bytes);
@@ -47,14 +48,18 @@ constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
                                                             std::uint32_t effect_flags, std::uint32_t per_invocation,
                                                             std::uint32_t variant = 0);
 
-// Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), both cleared
-// and left in TRANSFER_SRC_OPTIMAL for the copy to storage buffers.
-[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator);
+// Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), and with
+// face_normals 2 = face normal (RGBA32F, colour location 1), all cleared and left in
+// TRANSFER_SRC_OPTIMAL for the copy to storage buffers.
+[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                               bool face_normals);
 
 // Graphics pipeline of the depth pass: vec3 positions, reversed-Z (GREATER), no culling, dynamic
-// viewport/scissor (one per slice), DepthPush push constants in both stages.
+// viewport/scissor (one per slice), DepthPush push constants in both stages. colour_attachments: 1
+// (material id), or 2 with the face-normal attachment (depth_geometric.vert/.frag).
 [[nodiscard]] Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                                           VkRenderPass render_pass, VkPipelineLayout layout,
-                                                          VkShaderModule vertex, VkShaderModule fragment);
+                                                          VkShaderModule vertex, VkShaderModule fragment,
+                                                          std::uint32_t colour_attachments);
 
 } // namespace vksonar::vk

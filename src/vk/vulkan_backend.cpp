@@ -19,6 +19,8 @@
 
 #include "depth.frag.spv.h"
 #include "depth.vert.spv.h"
+#include "depth_geometric.frag.spv.h"
+#include "depth_geometric.vert.spv.h"
 #include "echo.comp.spv.h"
 #include "normals.comp.spv.h"
 #include "profile.comp.spv.h"
@@ -38,6 +40,7 @@ VulkanBackend::~VulkanBackend() {
 Result<void> VulkanBackend::init() {
     incidence_ = plan_.effects.incidence;
     sidelobes_ = plan_.effects.horizontal_pattern;
+    face_normals_ = plan_.face_normals;
     if (plan_.columns == 0 || plan_.rows == 0 || plan_.beams == 0 || plan_.bins == 0) {
         return make_error(ErrorCode::internal, "vulkan backend: plan has an empty pixel grid or polar scan");
     }
@@ -126,16 +129,32 @@ Result<void> VulkanBackend::create_depth_pass() {
                                           VK_IMAGE_ASPECT_COLOR_BIT);
     if (!material_image) return material_image.error();
     material_image_ = std::move(material_image.value());
+    if (face_normals_) { // normal_method = geometric: the face-normal attachment, only then
+        VkFormatProperties normal_format;
+        vkGetPhysicalDeviceFormatProperties(context_.physical_device, kFaceNormalFormat, &normal_format);
+        if ((normal_format.optimalTilingFeatures & (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) !=
+            (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) {
+            return make_error(ErrorCode::unsupported, "Vulkan device " + context_.description +
+                                                          " cannot render to R32G32B32A32_SFLOAT "
+                                                          "(accuracy.normal_method = geometric)");
+        }
+        auto normal_image = create_image_2d(context_, plan_.columns, plan_.rows, kFaceNormalFormat,
+                                            VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                                            VK_IMAGE_ASPECT_COLOR_BIT);
+        if (!normal_image) return normal_image.error();
+        face_normal_image_ = std::move(normal_image.value());
+    }
 
-    auto render_pass = create_depth_render_pass(device, allocator);
+    auto render_pass = create_depth_render_pass(device, allocator, face_normals_);
     if (!render_pass) return render_pass.error();
     render_pass_ = std::move(render_pass.value());
 
-    std::array<VkImageView, 2> views{material_image_.view.get(), depth_image_.view.get()};
+    std::array<VkImageView, 3> views{material_image_.view.get(), depth_image_.view.get(),
+                                     face_normals_ ? face_normal_image_.view.get() : VK_NULL_HANDLE};
     VkFramebufferCreateInfo framebuffer_info{};
     framebuffer_info.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
     framebuffer_info.renderPass = render_pass_.get();
-    framebuffer_info.attachmentCount = static_cast<std::uint32_t>(views.size());
+    framebuffer_info.attachmentCount = face_normals_ ? 3u : 2u;
     framebuffer_info.pAttachments = views.data();
     framebuffer_info.width = plan_.columns;
     framebuffer_info.height = plan_.rows;
@@ -154,12 +173,16 @@ Result<void> VulkanBackend::create_depth_pass() {
     VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
     depth_layout_ = OwnedPipelineLayout(device, layout, allocator);
 
-    auto vertex = create_shader_module(device, allocator, depth_vert_spv, sizeof(depth_vert_spv));
+    auto vertex = face_normals_ ? create_shader_module(device, allocator, depth_geometric_vert_spv,
+                                                       sizeof(depth_geometric_vert_spv))
+                                : create_shader_module(device, allocator, depth_vert_spv, sizeof(depth_vert_spv));
     if (!vertex) return vertex.error();
-    auto fragment = create_shader_module(device, allocator, depth_frag_spv, sizeof(depth_frag_spv));
+    auto fragment = face_normals_ ? create_shader_module(device, allocator, depth_geometric_frag_spv,
+                                                         sizeof(depth_geometric_frag_spv))
+                                  : create_shader_module(device, allocator, depth_frag_spv, sizeof(depth_frag_spv));
     if (!fragment) return fragment.error();
     auto pipeline = create_depth_pipeline(device, allocator, render_pass_.get(), depth_layout_.get(), vertex->get(),
-                                          fragment->get());
+                                          fragment->get(), face_normals_ ? 2u : 1u);
     if (!pipeline) return pipeline.error();
     depth_pipeline_ = std::move(pipeline.value());
     return {};
@@ -189,7 +212,9 @@ Result<void> VulkanBackend::create_compute() {
     const std::array<Working, 7> working{{
         {&depth_, pixels * sizeof(float), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         {&material_id_, pixels * sizeof(std::uint32_t), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
-        {&normals_, incidence_ ? pixels * 4 * sizeof(float) : 16, out},
+        // geometric: the depth pass copies its face normals in, the normals pass orients them in place
+        {&normals_, incidence_ ? pixels * 4 * sizeof(float) : 16,
+         face_normals_ ? out | VK_BUFFER_USAGE_TRANSFER_DST_BIT : out},
         {&echo_, pixels * 2 * sizeof(float), out},
         {&profiles_, profile_cells * sizeof(float),
          out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer

@@ -98,6 +98,7 @@ private:
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
     const SceneData& scene_;
     bool incidence_ = false, sidelobes_ = false;
+    bool face_normals_ = false; // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
 
     std::vector<DrawRange> draw_ranges_;         // per scene draw
@@ -105,6 +106,7 @@ private:
 
     Buffer vertices_, indices_;
     Image depth_image_, material_image_;
+    Image face_normal_image_; // normal_method = geometric only
     OwnedRenderPass render_pass_;
     OwnedFramebuffer framebuffer_;
     OwnedPipelineLayout depth_layout_;

@@ -25,15 +25,16 @@ void VulkanBackend::compute_barrier(VkCommandBuffer commands, const Buffer& writ
 }
 
 void VulkanBackend::record_depth(VkCommandBuffer commands) {
-    std::array<VkClearValue, 2> clears{};
+    std::array<VkClearValue, 3> clears{};
     clears[0].color.uint32[0] = shared::kNoMaterial;
     clears[1].depthStencil = {0.0f, 0}; // reversed-Z: 0 is the far plane / no hit
+    clears[2].color.float32[0] = 0.0f;  // face normals (geometric only): 0 = none
     VkRenderPassBeginInfo begin{};
     begin.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
     begin.renderPass = render_pass_.get();
     begin.framebuffer = framebuffer_.get();
     begin.renderArea = {{0, 0}, {plan_.columns, plan_.rows}};
-    begin.clearValueCount = static_cast<std::uint32_t>(clears.size());
+    begin.clearValueCount = face_normals_ ? 3u : 2u;
     begin.pClearValues = clears.data();
     vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
     const std::size_t draws = draw_ranges_.size();
@@ -72,10 +73,18 @@ void VulkanBackend::record_depth(VkCommandBuffer commands) {
     region.imageSubresource.aspectMask = VK_IMAGE_ASPECT_COLOR_BIT;
     vkCmdCopyImageToBuffer(commands, material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, material_id_.get(), 1,
                            &region);
-    std::array<VkBufferMemoryBarrier, 2> barriers{
+    std::uint32_t barrier_count = 2;
+    std::array<VkBufferMemoryBarrier, 3> barriers{
         buffer_barrier(depth_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
-        buffer_barrier(material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead)};
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, 2, barriers.data());
+        buffer_barrier(material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
+        {}};
+    if (face_normals_) { // into the normals buffer, which the normals pass then orients in place
+        vkCmdCopyImageToBuffer(commands, face_normal_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, normals_.get(),
+                               1, &region);
+        barriers[barrier_count++] = buffer_barrier(normals_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    }
+    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, barrier_count, barriers.data());
 }
 
 void VulkanBackend::record_normals(VkCommandBuffer commands) {
