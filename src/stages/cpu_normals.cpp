@@ -23,9 +23,7 @@
 namespace vksonar::cpu {
 namespace {
 
-template <class Real> struct Vec3 {
-    Real x, y, z;
-};
+template <class Real> struct Vec3 { Real x, y, z; };
 template <class Real> Vec3<Real> operator-(const Vec3<Real>& a, const Vec3<Real>& b) {
     return {a.x - b.x, a.y - b.y, a.z - b.z};
 }
@@ -36,12 +34,25 @@ template <class Real> Vec3<Real> cross(const Vec3<Real>& a, const Vec3<Real>& b)
     return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 
-template <class Real> Real length(const Vec3<Real>& a) { return std::sqrt(dot(a, a)); }
+template <class Real> Real length(const Vec3<Real>& a) {
+    return std::sqrt(dot(a, a));
+}
 template <class Real> Vec3<Real> axpy(Real w, const Vec3<Real>& d, const Vec3<Real>& acc) {
     return {acc.x + w * d.x, acc.y + w * d.y, acc.z + w * d.z};
 }
 
 constexpr std::int64_t kRingRows = 5; // rows j-2 .. j+2 of reconstructed positions
+
+// The pixel grid's frustum and depth constants in the working precision: the float path uses the
+// GPU's (already rounded) parameters, the double path the plan's doubles.
+template <class Real> struct PixelGeometry { Real tan_half_h, tan_half_v, depth_a, depth_b; };
+template <class Real> PixelGeometry<Real> pixel_geometry(const Plan& plan) {
+    if constexpr (std::is_same_v<Real, float>)
+        return {plan.params.tan_half_h, plan.params.tan_half_v, plan.params.depth_a, plan.params.depth_b};
+    else
+        return {static_cast<Real>(plan.tan_half_h), static_cast<Real>(plan.tan_half_v), static_cast<Real>(plan.depth_a),
+                static_cast<Real>(plan.depth_b)};
+}
 
 } // namespace
 
@@ -52,18 +63,7 @@ std::size_t normals_scratch_count(const Plan& plan) {
 
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
     using M = Math<Real>;
-    Real tan_half_h, tan_half_v, depth_a, depth_b;
-    if constexpr (std::is_same_v<Real, float>) {
-        tan_half_h = plan.params.tan_half_h;
-        tan_half_v = plan.params.tan_half_v;
-        depth_a = plan.params.depth_a;
-        depth_b = plan.params.depth_b;
-    } else {
-        tan_half_h = static_cast<Real>(plan.tan_half_h);
-        tan_half_v = static_cast<Real>(plan.tan_half_v);
-        depth_a = static_cast<Real>(plan.depth_a);
-        depth_b = static_cast<Real>(plan.depth_b);
-    }
+    const auto [tan_half_h, tan_half_v, depth_a, depth_b] = pixel_geometry<Real>(plan);
     const Real jump = static_cast<Real>(plan.params.edge_relative_jump);
     const std::int64_t C = plan.columns, R = plan.rows;
     const std::uint32_t W = plan.slice_columns;
@@ -235,18 +235,7 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
 template <class Real>
 void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4) {
     using M = Math<Real>;
-    Real tan_half_h, tan_half_v, depth_a, depth_b;
-    if constexpr (std::is_same_v<Real, float>) {
-        tan_half_h = plan.params.tan_half_h;
-        tan_half_v = plan.params.tan_half_v;
-        depth_a = plan.params.depth_a;
-        depth_b = plan.params.depth_b;
-    } else {
-        tan_half_h = static_cast<Real>(plan.tan_half_h);
-        tan_half_v = static_cast<Real>(plan.tan_half_v);
-        depth_a = static_cast<Real>(plan.depth_a);
-        depth_b = static_cast<Real>(plan.depth_b);
-    }
+    const auto [tan_half_h, tan_half_v, depth_a, depth_b] = pixel_geometry<Real>(plan);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
     for (std::uint32_t j = 0; j < R; ++j) {
         const Real v = M::pixel_coord(j, R, tan_half_v);
