@@ -254,6 +254,11 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         return frame.clean;
     };
     const std::vector<float> reference = render_reference(kReferenceSidelobe);
+    // An empty reference would print a table of zero errors that reads like a perfect score.
+    if (compare(reference, reference, source, floor).cells == 0)
+        throw BadInput("bench accuracy: no cell of the reference frame is above the noise floor (NL - DI = " +
+                       fmt(base.noise_level_db - base.directivity_index_db, 1) +
+                       " dB): nothing is in view; check --scene, --pose and --sonar");
     // Side-lobe truncation dominates the error of every row that keeps the default kernel width (cells
     // beyond the kernel's reach are empty instead of -40..-80 dB); a second reference with the row's own
     // width isolates the other knobs.
