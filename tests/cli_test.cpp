@@ -324,6 +324,11 @@ TEST_F(Cli, BenchDispatch) {
     EXPECT_EQ(extra.err_lines().size(), 1u);
     const CliRun bad = run({"bench", "sped"});
     EXPECT_EQ(bad.exit_code, 2);
+    // The quad behind the sonar: an accuracy sweep with nothing to compare is an error, not zeros.
+    const CliRun empty = run({"bench", "accuracy", "--no-vulkan", "--frames", "1", "--scene",
+                              (dir_ / "quad.gltf").string(), "--pose", "0,0,0,0,0,180"});
+    EXPECT_EQ(empty.exit_code, 2) << empty.err;
+    EXPECT_NE(empty.err.find("nothing is in view"), std::string::npos) << empty.err;
 }
 
 // ---- successful renders (CPU backend) --------------------------------------------------------
