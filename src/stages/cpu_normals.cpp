@@ -63,7 +63,11 @@ std::size_t normals_scratch_count(const Plan& plan) {
 
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
     using M = Math<Real>;
-    const auto [tan_half_h, tan_half_v, depth_a, depth_b] = pixel_geometry<Real>(plan);
+    // Plain locals, not a structured binding: the lambdas below capture them (C++17 lets no lambda
+    // capture a structured binding; clang rejects it).
+    const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
+    const Real tan_half_h = geometry.tan_half_h, tan_half_v = geometry.tan_half_v;
+    const Real depth_a = geometry.depth_a, depth_b = geometry.depth_b;
     const Real jump = static_cast<Real>(plan.params.edge_relative_jump);
     const std::int64_t C = plan.columns, R = plan.rows;
     const std::uint32_t W = plan.slice_columns;
@@ -235,7 +239,11 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
 template <class Real>
 void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4) {
     using M = Math<Real>;
-    const auto [tan_half_h, tan_half_v, depth_a, depth_b] = pixel_geometry<Real>(plan);
+    // Plain locals, not a structured binding: the lambdas below capture them (C++17 lets no lambda
+    // capture a structured binding; clang rejects it).
+    const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
+    const Real tan_half_h = geometry.tan_half_h, tan_half_v = geometry.tan_half_v;
+    const Real depth_a = geometry.depth_a, depth_b = geometry.depth_b;
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
     for (std::uint32_t j = 0; j < R; ++j) {
         const Real v = M::pixel_coord(j, R, tan_half_v);
