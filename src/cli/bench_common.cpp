@@ -133,17 +133,6 @@ const char* backend_name(Backend backend) {
     return backend == Backend::vulkan ? "vulkan" : "cpu";
 }
 
-Context make_context(Backend backend) {
-    if (backend == Backend::cpu) return Context::cpu_only();
-    auto created = Context::create(ContextOptions{});
-    if (!created) {
-        // no_device errors already say to use --backend cpu; other failures get the hint here.
-        const Error& e = created.error();
-        throw Failure(e.code == ErrorCode::no_device ? e.message : e.message + " (try --backend cpu)");
-    }
-    return std::move(created.value());
-}
-
 Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
                        std::uint64_t seed) {
     RendererOptions options;

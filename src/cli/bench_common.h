@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "cli/inputs.h"
 #include "vksonar/vksonar.h"
 
 namespace vksonar::cli::bench {
@@ -35,8 +36,6 @@ SonarConfig layered_config(const Setup& setup, const std::vector<std::string>& o
 Backend parse_backend(const std::string& name);
 const char* backend_name(Backend backend);
 
-// A context for `backend`; for vulkan, throws Failure (with a hint) when no device exists.
-Context make_context(Backend backend);
 // Throws Failure with the renderer's message.
 Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
                        std::uint64_t seed = 1);

@@ -55,4 +55,15 @@ SonarConfig sonar_base_config(const std::string& sonar) {
     return preset.value();
 }
 
+Context make_context(Backend backend) {
+    if (backend == Backend::cpu) return Context::cpu_only();
+    auto created = Context::create(ContextOptions{});
+    if (!created) {
+        // no_device errors already say to use --backend cpu; other failures get the hint here.
+        const Error& e = created.error();
+        throw Failure(e.code == ErrorCode::no_device ? e.message : e.message + " (try --backend cpu)");
+    }
+    return std::move(created.value());
+}
+
 } // namespace vksonar::cli

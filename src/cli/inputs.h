@@ -4,7 +4,7 @@
 #include <filesystem>
 #include <string>
 
-#include "vksonar/config.h"
+#include "vksonar/vksonar.h"
 
 namespace vksonar::cli {
 
@@ -16,5 +16,9 @@ std::filesystem::path find_default_scene();
 // is not a preset name). A file's config is named after the file unless it names itself.
 // Throws BadInput naming the file or the preset.
 SonarConfig sonar_base_config(const std::string& sonar);
+
+// A context for `backend` (validation only through VKSONAR_VALIDATION); for vulkan, throws Failure
+// when no device exists, with the hint to use --backend cpu.
+Context make_context(Backend backend);
 
 } // namespace vksonar::cli

@@ -520,22 +520,8 @@ int run_render(const std::vector<std::string>& argv) {
     OutputDir out_dir(args.value("--out"));
 
     // 6. Device and renderer.
-    Context context;
-    std::string device = "cpu";
-    if (backend == Backend::vulkan) {
-        ContextOptions options;
-        options.enable_validation = false;
-        auto created = Context::create(options);
-        if (!created) {
-            // no_device errors already say to use --backend cpu; other failures get the hint here.
-            const Error& e = created.error();
-            throw Failure(e.code == ErrorCode::no_device ? e.message : e.message + " (try --backend cpu)");
-        }
-        context = std::move(created.value());
-        device = context.device_description();
-    } else {
-        context = Context::cpu_only();
-    }
+    Context context = make_context(backend);
+    const std::string device = backend == Backend::vulkan ? context.device_description() : "cpu";
     RendererOptions renderer_options;
     renderer_options.backend = backend;
     renderer_options.seed = seed;
