@@ -32,12 +32,16 @@ inline Context& cpu_context() {
     return context;
 }
 
+// CI sets VKSONAR_REQUIRE_VULKAN=1: there a missing device or validation layer must fail, not skip.
+inline bool vulkan_required() {
+    const char* required = std::getenv("VKSONAR_REQUIRE_VULKAN");
+    return required && required[0] == '1';
+}
+
 #define VKSONAR_REQUIRE_VULKAN()                                                                                       \
     do {                                                                                                               \
         if (::vksonar::testing::vulkan_context() == nullptr) {                                                         \
-            /* CI sets VKSONAR_REQUIRE_VULKAN=1: there a missing device must fail, not skip half the suite */          \
-            if (const char* required = std::getenv("VKSONAR_REQUIRE_VULKAN"); required && required[0] == '1')          \
-                FAIL() << "no Vulkan device, and VKSONAR_REQUIRE_VULKAN=1";                                            \
+            if (::vksonar::testing::vulkan_required()) FAIL() << "no Vulkan device, and VKSONAR_REQUIRE_VULKAN=1";     \
             GTEST_SKIP() << "no Vulkan device";                                                                        \
         }                                                                                                              \
     } while (0)

@@ -399,9 +399,8 @@ TEST(VkContext, CountsValidationMessages) {
     ASSERT_TRUE(created.ok()) << created.error().message;
     const VulkanContext& vk = *created->vulkan();
     if (!vk.validation) {
-        // CI (VKSONAR_REQUIRE_VULKAN=1) installs the layer: without it every test would pass unvalidated.
-        const char* required = std::getenv("VKSONAR_REQUIRE_VULKAN");
-        if (required && required[0] == '1') FAIL() << "VK_LAYER_KHRONOS_validation is not installed";
+        // CI installs the layer: without it every test would pass unvalidated.
+        if (vulkan_required()) FAIL() << "VK_LAYER_KHRONOS_validation is not installed";
         GTEST_SKIP() << "VK_LAYER_KHRONOS_validation is not installed";
     }
     EXPECT_EQ(created->validation_messages(), 0u);
