@@ -23,20 +23,44 @@ layout(std430, binding = 4) writeonly buffer EchoBuffer { vec2 echo2[]; };
 // The same buffer with accuracy.intermediates = fp16: (energy * echo_scale, range) as two halves.
 layout(std430, binding = 4) writeonly buffer EchoHalfBuffer { uint echo_half2[]; };
 
+layout(constant_id = 6) const uint kEchoHalf = 0u; // params.echo_half, as a constant (src/vk/pipelines.h)
+
 void store_echo(uint p, vec2 energy_range) {
-    if (params.echo_half != 0u) {
+    if (kEchoHalf != 0u) {
         echo_half2[p] = packHalf2x16(vec2(energy_range.x * params.echo_scale, energy_range.y));
     } else {
         echo2[p] = energy_range;
     }
 }
 layout(std430, binding = 9) readonly buffer MaterialBuffer { MaterialGpu materials[]; };
+// The same table as a uniform block where it fits one (src/vk/pipelines.h): a divergent uniform load
+// is a vector gather on lavapipe, a storage load a loop over the lanes.
+layout(constant_id = 3) const uint kUniformTables = 0u;
+layout(constant_id = 4) const uint kMaterialCount = 1u; // entries of the uniform block
+layout(std140, binding = 13) uniform MaterialBlock { MaterialGpu materials_u[kMaterialCount]; };
 
-void echo_pixel(uint p) {
+uint material_count() {
+    return kUniformTables != 0u ? kMaterialCount : uint(materials.length());
+}
+// (backscatter_linear, model), member by member: a struct copied whole between the std140 and std430
+// blocks is an OpStore of mismatched types before SPIR-V 1.4.
+void material(uint m, out float backscatter_linear, out uint model) {
+    if (kUniformTables != 0u) {
+        backscatter_linear = materials_u[m].backscatter_linear;
+        model = materials_u[m].model;
+    } else {
+        backscatter_linear = materials[m].backscatter_linear;
+        model = materials[m].model;
+    }
+}
+
+// (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range window or
+// without a material. One store at the end, not one per way out: lavapipe runs every branch under a
+// lane mask, and each store is a loop over the lanes.
+vec2 echo_pixel(uint p) {
     float d = depth[p];
     if (!(d > 0.0)) {
-        store_echo(p, vec2(0.0));
-        return;
+        return vec2(0.0);
     }
     uint row = p / params.columns;
     uint column = p - row * params.columns;
@@ -45,12 +69,14 @@ void echo_pixel(uint p) {
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
     float r = slant_range(z, u, v);
     uint m = material_id[p];
-    if (r < params.range_min_m || r >= params.range_max_m || m >= uint(materials.length())) {
-        store_echo(p, vec2(0.0, r)); // kNoMaterial is >= any material count
-        return;
+    if (r < params.range_min_m || r >= params.range_max_m || m >= material_count()) {
+        return vec2(0.0, r); // kNoMaterial is >= any material count
     }
+    float backscatter_linear;
+    uint model;
+    material(m, backscatter_linear, model);
     float scatter = 1.0;
-    if (kIncidence && materials[m].model == kScatterLambert) {
+    if (kIncidence && model == kScatterLambert) {
         scatter = normals4[p].w;
     }
     float omega = pixel_solid_angle(u, v, 2.0 * params.tan_half_h / float(params.slice_columns),
@@ -60,9 +86,9 @@ void echo_pixel(uint p) {
         vertical = pattern_power(params.vpattern_shape, params.vpattern_k, params.vpattern_halfwidth_rad,
                                  pixel_elevation(u, v));
     }
-    float e = echo_energy(materials[m].backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
+    float e = echo_energy(backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
                           kSpreading, kAbsorption);
-    store_echo(p, vec2(e, r));
+    return vec2(e, r);
 }
 
 void main() {
@@ -70,6 +96,6 @@ void main() {
     uint first = gl_GlobalInvocationID.x * kPixelsPerInvocation;
     uint last = min(first + kPixelsPerInvocation, pixels);
     for (uint p = first; p < last; ++p) {
-        echo_pixel(p);
+        store_echo(p, echo_pixel(p));
     }
 }

@@ -23,7 +23,8 @@ layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 1) readonly buffer DepthBuffer { float depth[]; };
 // Written by every method; read too by geometric, where the depth pass copied its face normals here.
 layout(std430, binding = 3) buffer NormalsBuffer { vec4 normals4[]; };
-layout(std430, binding = 8) readonly buffer SliceBuffer { SliceInfo slice_info[]; };
+// A uniform block: every lane of a row run reads the same slice (one scalar load on lavapipe).
+layout(std140, binding = 8) uniform SliceBlock { SliceInfo slice_info[kMaxSlices]; };
 
 // Sonar-frame position, slant range and validity of a pixel; invalid outside the image or without a hit.
 struct Sample {

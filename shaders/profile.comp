@@ -15,12 +15,16 @@
 
 layout(local_size_x = kWorkgroupSize) in;
 
+layout(constant_id = 2) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
+layout(constant_id = 6) const uint kEchoHalf = 0u;                      // params.echo_half
+// (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
+
 layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 4) readonly buffer EchoBuffer { vec2 echo2[]; };
 layout(std430, binding = 4) readonly buffer EchoHalfBuffer { uint echo_half2[]; }; // accuracy.intermediates = fp16
 
 vec2 load_echo(uint p) {
-    if (params.echo_half != 0u) {
+    if (kEchoHalf != 0u) {
         vec2 v = unpackHalf2x16(echo_half2[p]);
         return vec2(v.x / params.echo_scale, v.y);
     }
@@ -37,11 +41,12 @@ void main() {
     uint bins = params.bins;
     uint base = column * params.bins_padded;
     uint rows = params.rows;
-    uint kernel = params.range_kernel;
     float r_up = 0.0;
     vec2 er = load_echo(column);
     for (uint row = 0u; row < rows; ++row) {
-        float r_down = row + 1u < rows ? load_echo((row + 1u) * columns + column).y : 0.0;
+        // the next row's echo, loaded once: r_down here, er on the next iteration
+        vec2 next = row + 1u < rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
+        float r_down = next.y;
         float e = er.x;
         float r = er.y;
         if (e > 0.0) {
@@ -49,7 +54,7 @@ void main() {
             // rounded exactly as the CPU reference rounds them (a GPU compiler may otherwise contract
             // a*b+c, and an ulp of a bin coordinate moves energy between bins).
             precise float x = range_bin_coord(r, params.range_min_m, params.inv_bin_width_m);
-            if (kernel == kRangeKernelFootprint) {
+            if (kRangeKernel == kRangeKernelFootprint) {
                 precise float extent = pixel_range_extent(r_up, r, r_down, params.edge_relative_jump) *
                                        params.inv_bin_width_m;
                 float width = min(max(extent, 1.0), kMaxFootprintBins);
@@ -63,7 +68,7 @@ void main() {
                     precise float share = footprint_share(lo, hi, inv_width, k, nb) * e;
                     profiles[base + uint(k)] += share;
                 }
-            } else if (kernel == kRangeKernelTent) {
+            } else if (kRangeKernel == kRangeKernelTent) {
                 precise float t = x - 0.5;
                 float k0f = floor(t);
                 precise float w1 = t - k0f;
@@ -83,6 +88,6 @@ void main() {
             }
         }
         r_up = r;
-        er = row + 1u < rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
+        er = next;
     }
 }

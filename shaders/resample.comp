@@ -18,10 +18,34 @@ layout(constant_id = 2) const uint kBeamMajorOut = 1u;        // set by the host
 layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 5) readonly buffer ProfileBuffer { vec4 profiles4[]; };
 layout(std430, binding = 6) writeonly buffer BeamProfileBuffer { float beam_profiles[]; };
-layout(std430, binding = 10) readonly buffer ColumnBeamBuffer { uint column_beam[]; };
-layout(std430, binding = 11) readonly buffer ColumnWeightBuffer { float column_weight[]; };
-layout(std430, binding = 12) readonly buffer BeamBeginBuffer { uint beam_column_begin[]; };
-layout(std430, binding = 13) readonly buffer BeamEndBuffer { uint beam_column_end[]; };
+layout(std430, binding = 6) writeonly buffer BeamProfileBuffer4 { vec4 beam_profiles4[]; }; // beam-major out
+// Per pixel column (beam, weight bits): the column's tent weight goes to `beam`, 1 - weight to the next.
+layout(std430, binding = 10) readonly buffer ColumnTable { uvec2 column_entry[]; };
+// Per beam (first column, end column) of the columns that reach it.
+layout(std430, binding = 11) readonly buffer BeamTable { uvec2 beam_entry[]; };
+// The same tables as uniform blocks where both fit (src/vk/pipelines.h), two entries per uvec4. The
+// beam index is the same for every lane of a workgroup: one scalar load on lavapipe, where a storage
+// load is a loop over the lanes.
+layout(constant_id = 3) const uint kUniformTables = 0u;
+layout(constant_id = 4) const uint kColumnVec4s = 1u;
+layout(constant_id = 5) const uint kBeamVec4s = 1u;
+layout(std140, binding = 14) uniform ColumnBlock { uvec4 column_entry4[kColumnVec4s]; };
+layout(std140, binding = 15) uniform BeamBlock { uvec4 beam_entry4[kBeamVec4s]; };
+
+uvec2 column_at(uint c) {
+    if (kUniformTables != 0u) {
+        uvec4 pair = column_entry4[c >> 1u];
+        return (c & 1u) == 0u ? pair.xy : pair.zw;
+    }
+    return column_entry[c];
+}
+uvec2 beam_at(uint j) {
+    if (kUniformTables != 0u) {
+        uvec4 pair = beam_entry4[j >> 1u];
+        return (j & 1u) == 0u ? pair.xy : pair.zw;
+    }
+    return beam_entry[j];
+}
 
 void main() {
     uint bins = params.bins;
@@ -36,21 +60,21 @@ void main() {
     uint last_beam = min(first_beam + kBeamsPerInvocation, beams);
     for (uint j = first_beam; j < last_beam; ++j) {
         vec4 sum = vec4(0.0);
-        uint end = min(beam_column_end[j], columns);
-        for (uint c = beam_column_begin[j]; c < end; ++c) {
-            uint beam = column_beam[c];
+        uvec2 span = beam_at(j);
+        uint end = min(span.y, columns);
+        for (uint c = span.x; c < end; ++c) {
+            uvec2 entry = column_at(c);
+            uint beam = entry.x;
+            float column_weight = uintBitsToFloat(entry.y);
             // on a full circle the last beam's right neighbour is beam 0 (the seam columns)
             bool next = params.circular != 0u ? (beam + 1u) % beams == j : beam + 1u == j;
-            float w = beam == j ? column_weight[c] : (next ? 1.0 - column_weight[c] : 0.0);
+            float w = beam == j ? column_weight : (next ? 1.0 - column_weight : 0.0);
             sum += w * profiles4[c * quads + q];
         }
         uint k = 4u * q;
         if (kBeamMajorOut != 0u) {
-            uint o = j * params.bins_padded + k;
-            beam_profiles[o] = sum.x;
-            beam_profiles[o + 1u] = sum.y;
-            beam_profiles[o + 2u] = sum.z;
-            beam_profiles[o + 3u] = sum.w;
+            // one vec4 store: lavapipe loops over the lanes once per store, not per component
+            beam_profiles4[j * quads + q] = sum;
         } else {
             for (uint i = 0u; i < 4u && k + i < bins; ++i) {
                 beam_profiles[(k + i) * beams + j] = sum[i];

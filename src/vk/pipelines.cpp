@@ -21,8 +21,7 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, cons
     std::array<VkDescriptorSetLayoutBinding, binding_count> bindings{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
         bindings[i].binding = i;
-        bindings[i].descriptorType =
-            i == binding_params ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        bindings[i].descriptorType = descriptor_type(i);
         bindings[i].descriptorCount = 1;
         bindings[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
     }
@@ -37,12 +36,13 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, cons
 
 Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                               VkPipelineLayout layout, VkShaderModule module,
-                                              std::uint32_t effect_flags, std::uint32_t per_invocation,
-                                              std::uint32_t variant) {
-    const std::array<std::uint32_t, 3> values{effect_flags, per_invocation, variant};
-    const std::array<VkSpecializationMapEntry, 3> entries{{{0, 0, sizeof(std::uint32_t)},
-                                                           {1, sizeof(std::uint32_t), sizeof(std::uint32_t)},
-                                                           {2, 2 * sizeof(std::uint32_t), sizeof(std::uint32_t)}}};
+                                              const Specialization& constants) {
+    const std::array<std::uint32_t, 7> values{
+        constants.effect_flags,   constants.per_invocation, constants.variant,  constants.uniform_tables,
+        constants.table_vec4s[0], constants.table_vec4s[1], constants.echo_half};
+    std::array<VkSpecializationMapEntry, values.size()> entries{};
+    for (std::uint32_t i = 0; i < entries.size(); ++i)
+        entries[i] = {i, static_cast<std::uint32_t>(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
     VkSpecializationInfo specialization{static_cast<std::uint32_t>(entries.size()), entries.data(), sizeof(values),
                                         values.data()};
     VkComputePipelineCreateInfo info{};

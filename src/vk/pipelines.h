@@ -20,15 +20,30 @@ enum Binding : std::uint32_t {
     binding_profiles = 5,
     binding_beam_profiles = 6,
     binding_polar = 7,
-    binding_slice_info = 8,
+    binding_slice_info = 8, // uniform SliceInfo[kMaxSlices] (std140)
     binding_materials = 9,
-    binding_column_beam = 10,
-    binding_column_weight = 11,
-    binding_beam_column_begin = 12,
-    binding_beam_column_end = 13,
-    binding_sidelobe_weight = 14,
-    binding_count = 15,
+    binding_column_table = 10, // uvec2 per pixel column: (beam, weight bits), see resample.comp
+    binding_beam_table = 11,   // uvec2 per beam: (first column, end column)
+    binding_sidelobe_weight = 12,
+    // The same four tables as uniform blocks (below): bound to the same buffers.
+    binding_materials_uniform = 13,
+    binding_column_table_uniform = 14,
+    binding_beam_table_uniform = 15,
+    binding_sidelobe_weight_uniform = 16,
+    binding_count = 17,
 };
+
+// Small read-only tables live in uniform blocks where they fit the device's maxUniformBufferRange: a
+// GPU serves them from its constant cache, and lavapipe (Mesa 22's llvmpipe) turns a uniform-block
+// load at a workgroup-uniform index into one scalar load and a divergent one into a vector gather,
+// where every storage-buffer load is a branchy loop over the lanes. A table that does not fit is read
+// through its storage binding instead; specialization constant 3 tells the shader which (pipelines.h).
+constexpr VkDescriptorType descriptor_type(std::uint32_t binding) {
+    return binding == binding_params || binding == binding_slice_info || binding >= binding_materials_uniform
+               ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER
+               : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+}
+constexpr std::uint32_t kUniformBindings = 2 + (binding_count - binding_materials_uniform);
 
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
@@ -40,13 +55,22 @@ constexpr VkFormat kFaceNormalFormat = VK_FORMAT_R32G32B32A32_SFLOAT; // colour 
 [[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device,
                                                                          const VkAllocationCallbacks* allocator);
 
-// A compute pipeline specialized with constant 0 = `effect_flags` (shared::kEffect* bits) and
-// constant 1 = `per_invocation` (how many pixels/beams one invocation handles, where the shader has it)
-// and constant 2 = `variant` (a per-shader switch, e.g. resample.comp's output layout).
+// Specialization constants of the compute shaders (constant_id = the member's position).
+struct Specialization {
+    std::uint32_t effect_flags = 0;        // 0: shared::kEffect* bits
+    std::uint32_t per_invocation = 1;      // 1: pixels / beams one invocation handles, where the shader has it
+    std::uint32_t variant = 0;             // 2: a per-shader switch, e.g. resample.comp's output layout
+    std::uint32_t uniform_tables = 0;      // 3: 1 = read the tables through their uniform blocks
+    std::uint32_t table_vec4s[2] = {1, 1}; // 4, 5: sizes of those uniform blocks in vec4s (>= 1)
+    std::uint32_t echo_half = 0;           // 6: SonarParams::echo_half (echo.comp, profile.comp)
+};
+// Switches that the shaders could read from the uniform SonarParams are specialization constants
+// instead: lavapipe runs both sides of a branch under a lane mask, loads and stores included, so a
+// uniform branch costs the memory traffic of every path; a constant compiles the others out.
+
 [[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                                             VkPipelineLayout layout, VkShaderModule module,
-                                                            std::uint32_t effect_flags, std::uint32_t per_invocation,
-                                                            std::uint32_t variant = 0);
+                                                            const Specialization& constants);
 
 // Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), and with
 // face_normals 2 = face normal (RGBA32F, colour location 1), all cleared and left in

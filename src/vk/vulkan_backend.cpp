@@ -227,29 +227,59 @@ Result<void> VulkanBackend::create_compute() {
         *w.buffer = std::move(buffer.value());
     }
 
-    // Tables, uploaded once.
+    // Tables, uploaded once. Resample's per-column (beam, weight) and per-beam (first, end column)
+    // pairs are interleaved so one load brings both.
     std::vector<shared::MaterialGpu> materials = plan_.materials;
     if (materials.empty()) {
         materials.push_back(shared::MaterialGpu{0.0f, shared::kScatterConstant, 0.0f, 0.0f}); // nothing reflects
     }
+    // The slice table is a uniform block of kMaxSlices entries (normals.comp); the plan has <= that many.
+    std::vector<shared::SliceInfo> slice_info = plan_.slice_info;
+    slice_info.resize(shared::kMaxSlices, shared::SliceInfo{});
+    std::vector<std::uint32_t> column_table(2 * std::size_t(plan_.columns));
+    for (std::size_t c = 0; c < plan_.columns; ++c) {
+        column_table[2 * c] = plan_.column_beam[c];
+        std::memcpy(&column_table[2 * c + 1], &plan_.column_weight[c], sizeof(float));
+    }
+    std::vector<std::uint32_t> beam_table(2 * std::size_t(plan_.beams));
+    for (std::size_t j = 0; j < plan_.beams; ++j) {
+        beam_table[2 * j] = plan_.beam_column_begin[j];
+        beam_table[2 * j + 1] = plan_.beam_column_end[j];
+    }
+    // A table's uniform view: its size in vec4s, or 0 where it exceeds the device's uniform range.
+    // VKSONAR_TABLES=storage reads every table through its storage binding (tests compare the paths).
+    const char* tables_env = std::getenv("VKSONAR_TABLES");
+    const bool storage_only = tables_env && std::strcmp(tables_env, "storage") == 0;
+    auto uniform_vec4s = [&](std::size_t bytes) -> std::uint32_t {
+        const std::size_t vec4s = (bytes + 15) / 16;
+        return storage_only || vec4s * 16 > context_.properties.limits.maxUniformBufferRange
+                   ? 0u
+                   : static_cast<std::uint32_t>(vec4s);
+    };
+    materials_vec4s_ = uniform_vec4s(bytes_of(materials));
+    column_table_vec4s_ = uniform_vec4s(bytes_of(column_table));
+    beam_table_vec4s_ = uniform_vec4s(bytes_of(beam_table));
+    sidelobe_vec4s_ = uniform_vec4s(bytes_of(plan_.sidelobe_weight));
+
     struct Table {
         Buffer* buffer;
         const void* data;
         std::size_t bytes;
         VkBufferUsageFlags usage;
     };
-    const std::array<Table, 8> tables{{
-        {&params_, &gpu_params_, sizeof(gpu_params_), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT},
-        {&slice_info_, plan_.slice_info.data(), bytes_of(plan_.slice_info), storage},
-        {&materials_, materials.data(), bytes_of(materials), storage},
-        {&column_beam_, plan_.column_beam.data(), bytes_of(plan_.column_beam), storage},
-        {&column_weight_, plan_.column_weight.data(), bytes_of(plan_.column_weight), storage},
-        {&beam_begin_, plan_.beam_column_begin.data(), bytes_of(plan_.beam_column_begin), storage},
-        {&beam_end_, plan_.beam_column_end.data(), bytes_of(plan_.beam_column_end), storage},
-        {&sidelobe_weight_, plan_.sidelobe_weight.data(), bytes_of(plan_.sidelobe_weight), storage},
+    const VkBufferUsageFlags uniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
+    const std::array<Table, 6> tables{{
+        {&params_, &gpu_params_, sizeof(gpu_params_), uniform},
+        {&slice_info_, slice_info.data(), bytes_of(slice_info), uniform},
+        {&materials_, materials.data(), bytes_of(materials), storage | uniform},
+        {&column_table_, column_table.data(), bytes_of(column_table), storage | uniform},
+        {&beam_table_, beam_table.data(), bytes_of(beam_table), storage | uniform},
+        {&sidelobe_weight_, plan_.sidelobe_weight.data(), bytes_of(plan_.sidelobe_weight), storage | uniform},
     }};
     for (const Table& t : tables) {
-        auto buffer = create_buffer(context_, t.bytes, t.usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
+        // Rounded up to whole vec4s: a uniform view covers whole std140 array elements.
+        const std::size_t size = (t.bytes + 15) & ~std::size_t(15);
+        auto buffer = create_buffer(context_, size, t.usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
         if (!buffer) return buffer.error();
         *t.buffer = std::move(buffer.value());
         if (auto r = upload_to_buffer(context_, *t.buffer, t.data, t.bytes); !r) return r;
@@ -287,7 +317,8 @@ Result<void> VulkanBackend::create_compute() {
     compute_layout_ = OwnedPipelineLayout(device, layout, allocator);
 
     std::array<VkDescriptorPoolSize, 2> pool_sizes{
-        {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1}, {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count - 1}}};
+        {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, kUniformBindings},
+         {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count - kUniformBindings}}};
     VkDescriptorPoolCreateInfo pool_info{};
     pool_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
     pool_info.maxSets = 1;
@@ -304,50 +335,74 @@ Result<void> VulkanBackend::create_compute() {
     VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
 
     const std::array<const Buffer*, binding_count> bound{
-        &params_,     &depth_,     &material_id_, &normals_,       &echo_,       &profiles_, &beam_profiles_,  &polar_,
-        &slice_info_, &materials_, &column_beam_, &column_weight_, &beam_begin_, &beam_end_, &sidelobe_weight_};
+        &params_,          &depth_,     &material_id_,  &normals_,    &echo_,           &profiles_,
+        &beam_profiles_,   &polar_,     &slice_info_,   &materials_,  &column_table_,   &beam_table_,
+        &sidelobe_weight_, &materials_, &column_table_, &beam_table_, &sidelobe_weight_};
+    // A uniform view spans its table's vec4s, or only the first when the table is read through its
+    // storage binding (the shader then declares a one-vec4 block and never reads it).
+    const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
+        materials_vec4s_, column_table_vec4s_, beam_table_vec4s_, sidelobe_vec4s_};
     std::array<VkDescriptorBufferInfo, binding_count> infos{};
     std::array<VkWriteDescriptorSet, binding_count> writes{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
-        infos[i] = {bound[i]->get(), 0, VK_WHOLE_SIZE};
+        VkDeviceSize range = VK_WHOLE_SIZE;
+        if (i >= binding_materials_uniform)
+            range = 16 * VkDeviceSize(std::max(uniform_views[i - binding_materials_uniform], 1u));
+        infos[i] = {bound[i]->get(), 0, range};
         writes[i] = {};
         writes[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
         writes[i].dstSet = descriptor_set_;
         writes[i].dstBinding = i;
         writes[i].descriptorCount = 1;
-        writes[i].descriptorType =
-            i == binding_params ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        writes[i].descriptorType = descriptor_type(i);
         writes[i].pBufferInfo = &infos[i];
     }
     vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
 
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
     const std::uint32_t flags = plan_.effects.shader_flags();
-    auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes, std::uint32_t per_invocation,
-                    std::uint32_t variant = 0) -> Result<void> {
+    auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
+                    Specialization constants) -> Result<void> {
         auto module = create_shader_module(device, allocator, code, bytes);
         if (!module) return module.error();
-        auto created = create_compute_pipeline(device, allocator, compute_layout_.get(), module->get(), flags,
-                                               per_invocation, variant);
+        constants.effect_flags = flags;
+        constants.echo_half = gpu_params_.echo_half;
+        auto created = create_compute_pipeline(device, allocator, compute_layout_.get(), module->get(), constants);
         if (!created) return created.error();
         pipeline = std::move(created.value());
         return {};
     };
+    // Where a stage reads two tables, both go through their uniform views or neither does.
+    auto spec = [](std::uint32_t per_invocation, std::uint32_t variant, std::uint32_t a, std::uint32_t b = 1) {
+        Specialization s;
+        s.per_invocation = per_invocation;
+        s.variant = variant;
+        s.uniform_tables = a > 0 && b > 0 ? 1u : 0u;
+        s.table_vec4s[0] = s.uniform_tables ? a : 1u;
+        s.table_vec4s[1] = s.uniform_tables ? b : 1u;
+        return s;
+    };
     if (incidence_) {
         // variant: normal_method, so the pipeline holds only its own stencil (shaders/normals.comp).
-        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), kNormalsRun,
-                          plan_.params.normal_method);
+        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv),
+                          spec(kNormalsRun, plan_.params.normal_method, 0));
             !r)
             return r;
     }
-    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), kEchoPixels); !r) return r;
-    if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), 1); !r) return r;
-    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv), kBeamsPerInvocation,
-                      sidelobes_ ? 1u : 0u);
+    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), spec(kEchoPixels, 0, materials_vec4s_)); !r)
+        return r;
+    if (auto r =
+            make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), spec(1, plan_.params.range_kernel, 0));
+        !r)
+        return r;
+    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv),
+                      spec(kBeamsPerInvocation, sidelobes_ ? 1u : 0u, column_table_vec4s_, beam_table_vec4s_));
         !r)
         return r;
     if (sidelobes_) {
-        if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), kBeamsPerInvocation); !r)
+        if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv),
+                          spec(kBeamsPerInvocation, plan_.beams % 4 == 0 ? 1u : 0u, sidelobe_vec4s_));
+            !r)
             return r;
     }
     return {};

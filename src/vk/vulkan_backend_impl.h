@@ -113,7 +113,10 @@ private:
     OwnedPipeline depth_pipeline_;
 
     Buffer params_, depth_, material_id_, normals_, echo_, profiles_, beam_profiles_, polar_;
-    Buffer slice_info_, materials_, column_beam_, column_weight_, beam_begin_, beam_end_, sidelobe_weight_;
+    Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
+    // Sizes of the tables' uniform views in vec4s, 0 where a table does not fit a uniform block
+    // (then its shader reads the storage binding): see descriptor_type() in pipelines.h.
+    std::uint32_t materials_vec4s_ = 0, column_table_vec4s_ = 0, beam_table_vec4s_ = 0, sidelobe_vec4s_ = 0;
     Buffer readback_;
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;
@@ -122,7 +125,7 @@ private:
     OwnedPipelineLayout compute_layout_;
     OwnedDescriptorPool descriptor_pool_;
     VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE; // freed with the pool
-    shared::SonarParams gpu_params_{}; // plan_.params plus the GPU-only layout fields
+    shared::SonarParams gpu_params_{};                // plan_.params plus the GPU-only layout fields
     OwnedPipeline normals_pipeline_, echo_pipeline_, profile_pipeline_, resample_pipeline_, sidelobe_pipeline_;
 
     OwnedCommandPool command_pool_;
