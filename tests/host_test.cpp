@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "host/host_stages.h"
+#include "host/rng.h"
 
 namespace vksonar {
 namespace {
@@ -44,7 +45,8 @@ Plan test_plan(std::uint32_t beams, std::uint32_t bins, double hfov_deg, double 
         p.beam_angle_rad.push_back(equisine ? std::asin(std::sin(half) * u) : half * u);
     }
     p.bin_width_m = (rmax - rmin) / bins;
-    for (std::uint32_t k = 0; k < bins; ++k) p.bin_range_m.push_back(rmin + (k + 0.5) * p.bin_width_m);
+    for (std::uint32_t k = 0; k < bins; ++k)
+        p.bin_range_m.push_back(rmin + (k + 0.5) * p.bin_width_m);
     p.effects.speckle = false;
     p.effects.ambient_noise = false;
     p.effects.tvg = false;
@@ -71,17 +73,24 @@ struct Moments {
 template <class F> Moments moments(std::size_t n, F&& draw) {
     // Two passes over a stored sample: exact enough (1e6 doubles) and free of cancellation.
     std::vector<double> x(n);
-    for (std::size_t i = 0; i < n; ++i) x[i] = draw(i);
+    for (std::size_t i = 0; i < n; ++i)
+        x[i] = draw(i);
     Moments m;
-    for (double v : x) m.mean += v;
+    for (double v : x)
+        m.mean += v;
     m.mean /= n;
-    for (double v : x) m.var += (v - m.mean) * (v - m.mean);
+    for (double v : x)
+        m.var += (v - m.mean) * (v - m.mean);
     m.var /= (n - 1);
     return m;
 }
 // Key of sample i: spread over beams and bins like a frame does.
-inline std::uint32_t beam_of(std::size_t i) { return static_cast<std::uint32_t>(i % 1024); }
-inline std::uint32_t bin_of(std::size_t i) { return static_cast<std::uint32_t>(i / 1024); }
+inline std::uint32_t beam_of(std::size_t i) {
+    return static_cast<std::uint32_t>(i % 1024);
+}
+inline std::uint32_t bin_of(std::size_t i) {
+    return static_cast<std::uint32_t>(i / 1024);
+}
 
 std::string temp_dir() {
     const fs::path d = fs::temp_directory_path() / ("vksonar_host_test_" + std::to_string(::getpid()));
@@ -201,6 +210,49 @@ TEST(HostNoise, AmbientFloorMeanIsNoiseLevel) {
     EXPECT_NE(f.intensity, g.intensity);
 }
 
+// The default noise (Rayleigh speckle + ambient noise) runs a float, vectorized loop; every cell must
+// equal the model evaluated in double from the same draws, to the float path's four roundings
+// (source * clean, * speckle, + noise * draw, * gain: <= 4 x 2^-24 relative, 3e-7 allowed), with
+// NaN/negative echo as no echo and +inf as FLT_MAX.
+TEST(HostNoise, DefaultFloatPathEqualsTheModelInDouble) {
+    Plan p = test_plan(300, 64, 130, 0.5, 40); // 300 beams: two row chunks, the second partial
+    p.effects.speckle = true;
+    p.effects.ambient_noise = true;
+    p.effects.tvg = true;
+    p.config.speckle = SpeckleModel::rayleigh;
+    p.config.source_level_db = 210;
+    p.config.noise_level_db = 60;
+    p.config.directivity_index_db = 20;
+    p.config.tvg_db_per_decade = 40;
+    Frame f = test_frame(p);
+    for (std::size_t i = 0; i < f.clean.size(); ++i)
+        f.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17)); // 1e-22 .. 1e-6
+    f.clean[7] = std::nanf("");
+    f.clean[8] = -1.0f;
+    f.clean[9] = std::numeric_limits<float>::infinity();
+    const std::uint64_t seed = 5, frame = 2;
+    host::noise_and_gain(p, seed, frame, f);
+
+    const host::rng::FrameKey key = host::rng::frame_key(seed, frame);
+    const double source = std::pow(10.0, 210.0 / 10.0), noise = std::pow(10.0, (60.0 - 20.0) / 10.0);
+    for (std::uint32_t k = 0; k < p.bins; ++k) {
+        const double r = p.bin_range_m[k];
+        const double gain = std::pow(10.0, 40.0 * std::log10(r) / 10.0); // alpha = 0 in this plan
+        for (std::uint32_t j = 0; j < p.beams; ++j) {
+            const std::size_t i = std::size_t(k) * p.beams + j;
+            const double clean = f.clean[i] > 0.0f ? double(f.clean[i]) : 0.0; // NaN, < 0: no echo
+            const double expect = (source * clean * host::rng::exp1_cell32(key, j, k, 0) +
+                                   noise * host::rng::exp1_cell32(key, j, k, 64)) *
+                                  gain;
+            if (std::isinf(expect)) {
+                ASSERT_EQ(f.intensity[i], std::numeric_limits<float>::max()) << "cell " << i;
+                continue;
+            }
+            ASSERT_NEAR(f.intensity[i] / expect, 1.0, 3e-7) << "cell " << i;
+        }
+    }
+}
+
 TEST(HostNoise, RayleighSpeckleHasUnitMeanAndVariance) {
     Plan p = test_plan(512, 512, 130, 0.5, 40);
     p.effects.speckle = true;
@@ -211,7 +263,7 @@ TEST(HostNoise, RayleighSpeckleHasUnitMeanAndVariance) {
     host::noise_and_gain(p, 1, 0, f);
     const Moments m = moments(f.intensity.size(), [&](std::size_t i) { return double(f.intensity[i]); });
     const double n = static_cast<double>(f.intensity.size());
-    EXPECT_NEAR(m.mean, 1.0, 5.0 / std::sqrt(n));         // see HostRng.Exp1MeanAndVariance
+    EXPECT_NEAR(m.mean, 1.0, 5.0 / std::sqrt(n)); // see HostRng.Exp1MeanAndVariance
     EXPECT_NEAR(m.var, 1.0, 5.0 * std::sqrt(8.0 / n));
 }
 
@@ -237,7 +289,8 @@ TEST(HostNoise, GammaAndGaussianSpeckleModels) {
     // |N(1, 0.1)|: folding at 0 is 10 sigma away, so mean 1, variance 0.01; Var((X-1)^2) = 2 sigma^4.
     EXPECT_NEAR(m.mean, 1.0, 5.0 * 0.1 / std::sqrt(n));
     EXPECT_NEAR(m.var, 0.01, 5.0 * std::sqrt(2e-4 / n));
-    for (float v : f.intensity) ASSERT_GE(v, 0.0f);
+    for (float v : f.intensity)
+        ASSERT_GE(v, 0.0f);
 }
 
 TEST(HostNoise, DbOfZeroIsTheFloorNeverNaN) {
@@ -269,7 +322,8 @@ TEST(HostNoise, DisplayWindowMapsDbMinToZeroAndDbMaxToOne) {
     Frame f = test_frame(p);
     // Received levels (dB re 1 uPa) = 100 + 10 log10(clean).
     const double levels[5] = {40, 60, 100, 140, 180};
-    for (int j = 0; j < 5; ++j) f.clean[j] = static_cast<float>(std::pow(10.0, (levels[j] - 100.0) / 10.0));
+    for (int j = 0; j < 5; ++j)
+        f.clean[j] = static_cast<float>(std::pow(10.0, (levels[j] - 100.0) / 10.0));
     host::noise_and_gain(p, 0, 0, f);
     // Tolerance: clean is float (relative 6e-8 -> 2.6e-7 dB -> 3e-9 in display); 1e-6 covers it.
     EXPECT_EQ(f.display[0], 0.0f);
@@ -369,7 +423,9 @@ std::vector<Lit> pixels_where(const host::Image& img, bool (*pred)(const std::ui
             if (pred(&img.rgb[(static_cast<std::size_t>(y) * img.width + x) * 3])) out.push_back({x + 0.5, y + 0.5});
     return out;
 }
-bool not_background(const std::uint8_t* c) { return c[0] > 40 || c[1] > 40 || c[2] > 40; }
+bool not_background(const std::uint8_t* c) {
+    return c[0] > 40 || c[1] > 40 || c[2] > 40;
+}
 
 TEST(HostImages, FanSingleBrightCellLightsTheRightRadiusAndSide) {
     // Non-uniform (equisine) beam table, so the lookup must use the table, not a uniform spacing.
@@ -396,7 +452,7 @@ TEST(HostImages, FanSingleBrightCellLightsTheRightRadiusAndSide) {
         right = std::max(right, l.x);
     }
     const double cx = 0.5 * img.width, cy = bottom; // apex: bottom centre (range_min is ~0)
-    const double scale = (cy - top) / 40.0;        // pixels per metre
+    const double scale = (cy - top) / 40.0;         // pixels per metre
     // The fan is symmetric and +-60 deg wide: half-width R sin 60 (2 px: line width and rounding).
     EXPECT_NEAR(cx - left, 40.0 * std::sin(kPi / 3) * scale, 2.0);
     EXPECT_NEAR(right - cx, 40.0 * std::sin(kPi / 3) * scale, 2.0);
@@ -429,8 +485,8 @@ TEST(HostImages, FanSingleBrightCellLightsTheRightRadiusAndSide) {
             }
         ASSERT_GT(lit.size(), 4u);
         const double r_cell = p.bin_range_m[bin], az_cell = p.beam_angle_rad[beam];
-        const double az_step = std::max(std::abs(p.beam_angle_rad[beam - 1] - az_cell),
-                                        std::abs(p.beam_angle_rad[beam + 1] - az_cell));
+        const double az_step =
+            std::max(std::abs(p.beam_angle_rad[beam - 1] - az_cell), std::abs(p.beam_angle_rad[beam + 1] - az_cell));
         // 2 px: the apex/scale estimate from the image and the pixel size.
         const double r_tol = p.bin_width_m + 2.0 / scale, az_tol = az_step + 2.0 / (scale * r_cell);
         for (const Lit& l : lit) {
@@ -457,7 +513,8 @@ TEST(HostImages, FanWiderThan180IsSquareAndCentred) {
     host::Image img0, img;
     fan.render(f, img0);
     // A ring across all beams at one bin: lit all around the centre, including behind the sonar.
-    for (std::uint32_t j = 0; j < p.beams; ++j) f.display[25 * p.beams + j] = 1.0f;
+    for (std::uint32_t j = 0; j < p.beams; ++j)
+        f.display[25 * p.beams + j] = 1.0f;
     fan.render(f, img);
     const double c = 0.5 * img.width;
     int ahead = 0, behind = 0, port = 0, starboard = 0;
@@ -481,7 +538,8 @@ TEST(HostImages, FanWiderThan180IsSquareAndCentred) {
 TEST(HostFiles, NpyHeaderShapeAndSize) {
     const std::string dir = temp_dir();
     std::vector<float> data(3 * 5 * 2);
-    for (std::size_t i = 0; i < data.size(); ++i) data[i] = static_cast<float>(i) * 0.5f;
+    for (std::size_t i = 0; i < data.size(); ++i)
+        data[i] = static_cast<float>(i) * 0.5f;
     for (std::uint32_t channels : {1u, 2u}) {
         const std::string path = dir + "/a" + std::to_string(channels) + ".npy";
         ASSERT_TRUE(host::write_npy_f32(path, data.data(), 3, 5, channels).ok());
