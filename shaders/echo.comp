@@ -1,5 +1,5 @@
 // Stage 3, echo (docs/pipeline.md §3): per pixel, slant range and the combined sonar equation.
-// Each invocation handles a run of kPixelsPerInvocation consecutive pixels. Output echo2[p] = (energy relative to SL, slant range m).
+// Each invocation handles a run of kPixelsPerInvocation consecutive pixels of one row. Output echo2[p] = (energy relative to SL, slant range m).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
@@ -57,14 +57,14 @@ void material(uint m, out float backscatter_linear, out uint model) {
 // (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range window or
 // without a material. One store at the end, not one per way out: lavapipe runs every branch under a
 // lane mask, and each store is a loop over the lanes.
-vec2 echo_pixel(uint p) {
+vec2 echo_pixel(uint row, uint column) {
+    uint p = row * params.columns + column;
     float d = depth[p];
     if (!(d > 0.0)) {
         return vec2(0.0);
     }
-    uint row = p / params.columns;
-    uint column = p - row * params.columns;
-    float u = pixel_coord(column % params.slice_columns, params.slice_columns, params.tan_half_h);
+    uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
+    float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, params.tan_half_h);
     float v = pixel_coord(row, params.rows, params.tan_half_v);
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
     float r = slant_range(z, u, v);
@@ -91,11 +91,12 @@ vec2 echo_pixel(uint p) {
     return vec2(e, r);
 }
 
+// x: runs of kPixelsPerInvocation columns of one row, y: the row (a 2-D grid: no divide by columns).
 void main() {
-    uint pixels = params.columns * params.rows;
+    uint row = gl_GlobalInvocationID.y;
     uint first = gl_GlobalInvocationID.x * kPixelsPerInvocation;
-    uint last = min(first + kPixelsPerInvocation, pixels);
-    for (uint p = first; p < last; ++p) {
-        store_echo(p, echo_pixel(p));
+    uint last = min(first + kPixelsPerInvocation, params.columns);
+    for (uint column = first; column < last; ++column) {
+        store_echo(row * params.columns + column, echo_pixel(row, column));
     }
 }

@@ -54,7 +54,7 @@ Sample load(int column, int row) {
     if (!(d > 0.0)) {
         return s;
     }
-    uint slice = c / params.slice_columns;
+    uint slice = slice_of_column(c, 1.0 / float(params.slice_columns)); // no integer divide per pixel
     float u = pixel_coord(c - slice * params.slice_columns, params.slice_columns, params.tan_half_h);
     float v = pixel_coord(j, params.rows, params.tan_half_v);
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);

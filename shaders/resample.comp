@@ -66,8 +66,9 @@ void main() {
             uvec2 entry = column_at(c);
             uint beam = entry.x;
             float column_weight = uintBitsToFloat(entry.y);
-            // on a full circle the last beam's right neighbour is beam 0 (the seam columns)
-            bool next = params.circular != 0u ? (beam + 1u) % beams == j : beam + 1u == j;
+            // on a full circle the last beam's right neighbour is beam 0 (the seam columns); written
+            // without `% beams`: lavapipe would divide once per lane
+            bool next = beam + 1u == j || (params.circular != 0u && beam + 1u == beams && j == 0u);
             float w = beam == j ? column_weight : (next ? 1.0 - column_weight : 0.0);
             sum += w * profiles4[c * quads + q];
         }

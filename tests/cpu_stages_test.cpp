@@ -134,7 +134,9 @@ PixelRay pixel_ray(const Plan& plan, std::uint32_t c, std::uint32_t j) {
     return r;
 }
 
-double view_z(const Plan& plan, float d) { return math_f64::view_z_from_depth(d, plan.depth_a, plan.depth_b); }
+double view_z(const Plan& plan, float d) {
+    return math_f64::view_z_from_depth(d, plan.depth_a, plan.depth_b);
+}
 
 struct DepthBuffers {
     std::vector<float> depth;
@@ -154,13 +156,35 @@ DepthBuffers run_depth(const Plan& plan, const SceneData& scene, const Pose& pos
 // A DepthPush whose clip_from_local is the identity: local (x, y, z) = (x_ndc, y_ndc, z_ndc), w = 1.
 shared::DepthPush identity_push(std::uint32_t material_id) {
     shared::DepthPush p{};
-    for (int k = 0; k < 16; ++k) p.clip_from_local[k] = float(kIdentity[k]);
+    for (int k = 0; k < 16; ++k)
+        p.clip_from_local[k] = float(kIdentity[k]);
     p.material_id = material_id;
     return p;
 }
 
 // ---------------------------------------------------------------------------------------------
 // 1. Depth pass
+
+// The shaders find a column's slice by a float multiply (sonar_math.h, slice_of_column): it must equal
+// the integer quotient for every column of up to kMaxSlices slices, at every slice width up to 2048
+// and at the widths near powers of two up to the 2^17 the comment claims.
+TEST(SonarMath, SliceOfColumnEqualsTheIntegerQuotient) {
+    std::vector<std::uint32_t> widths;
+    for (std::uint32_t w = 1; w <= 2048; ++w)
+        widths.push_back(w);
+    for (std::uint32_t p = 12; p <= 17; ++p) {
+        widths.push_back((1u << p) - 1);
+        widths.push_back(1u << p);
+        widths.push_back((1u << p) + 1);
+    }
+    widths.pop_back(); // 2^17 + 1 is past the claim
+    widths.pop_back(); // so is 2^17
+    for (std::uint32_t w : widths) {
+        const float inv = 1.0f / static_cast<float>(w);
+        for (std::uint32_t c = 0; c < w * shared::kMaxSlices; ++c)
+            ASSERT_EQ(math_f32::slice_of_column(c, inv), c / w) << "column " << c << ", slice width " << w;
+    }
+}
 
 TEST(CpuDepth, PlaneFacingSonarCoversExpectedPixelsAtViewZ10) {
     SceneBuilder b;
@@ -286,7 +310,8 @@ std::vector<int> coverage_counts(const Plan& plan, const SceneData& scene, const
         SceneData one = scene;
         one.draws = {scene.draws[i]};
         std::vector<shared::DepthPush> p;
-        for (std::uint32_t s = 0; s < plan.slices; ++s) p.push_back(pushes[s * scene.draws.size() + i]);
+        for (std::uint32_t s = 0; s < plan.slices; ++s)
+            p.push_back(pushes[s * scene.draws.size() + i]);
         std::vector<float> depth(count.size());
         std::vector<std::uint32_t> material(count.size());
         cpu::depth_pass(plan, one, p, depth.data(), material.data());
@@ -324,9 +349,9 @@ TEST(CpuDepth, TopLeftRuleCoversSharedEdgesThroughPixelCentresExactlyOnce) {
         p.insert(p.end(), d.begin(), d.end());
     };
     const std::vector<std::vector<std::array<std::array<float, 3>, 3>>> splits = {
-        {{A, B, C}, {A, C, D}},                   // diagonal A-C, both counter-clockwise on screen
-        {{A, C, B}, {A, C, D}},                   // mixed windings
-        {{A, B, D}, {B, C, D}},                   // diagonal B-D
+        {{A, B, C}, {A, C, D}},                       // diagonal A-C, both counter-clockwise on screen
+        {{A, C, B}, {A, C, D}},                       // mixed windings
+        {{A, B, D}, {B, C, D}},                       // diagonal B-D
         {{A, B, E}, {B, C, E}, {C, D, E}, {D, A, E}}, // fan around a pixel centre
         {{E, B, A}, {C, B, E}, {E, D, C}, {A, D, E}}, // same fan, reversed windings
     };
@@ -361,7 +386,8 @@ TEST(CpuDepth, ScissorConfinesEachSliceToItsOwnColumns) {
     const Plan plan = plan_for(config, b.scene);
     ASSERT_EQ(plan.slices, 2u);
     shared::DepthPush none = identity_push(7);
-    for (float& v : none.clip_from_local) v = 0.0f; // all vertices at w = 0: nothing can be drawn
+    for (float& v : none.clip_from_local)
+        v = 0.0f; // all vertices at w = 0: nothing can be drawn
     const std::vector<shared::DepthPush> pushes = {none, identity_push(7)};
     std::vector<float> depth(std::size_t(plan.rows) * plan.columns);
     std::vector<std::uint32_t> material(depth.size());
@@ -437,14 +463,15 @@ TEST(CpuDepth, DegenerateAndInvalidTrianglesProduceNothing) {
     b.material(-20.0);
     // 0-2: collinear; 3-5: repeated vertex; 6-8: NaN vertex; 9-11: Inf vertex; 12-14: behind the sonar
     // 15-17: a sliver with all three vertices within 1e-9 m of a line.
-    const std::vector<float> pos = {10, -1, 0, 10, 0, 0, 10, 1, 0,            //
-                                    10, -1, -1, 10, 1, 1, 10, 1, 1,           //
-                                    10, -1, -1, nan, 1, 1, 10, 1, -1,         //
-                                    10, -1, -1, 10, inf, 1, 10, 1, -1,        //
-                                    -10, -1, -1, -10, 1, 1, -10, 1, -1,       //
-                                    10, -1, 0, 10, 1, 1e-9f, 10, 0, 0.5e-9f};
+    const std::vector<float> pos = {10,  -1, 0,  10,  0,   0,     10,  1, 0,  //
+                                    10,  -1, -1, 10,  1,   1,     10,  1, 1,  //
+                                    10,  -1, -1, nan, 1,   1,     10,  1, -1, //
+                                    10,  -1, -1, 10,  inf, 1,     10,  1, -1, //
+                                    -10, -1, -1, -10, 1,   1,     -10, 1, -1, //
+                                    10,  -1, 0,  10,  1,   1e-9f, 10,  0, 0.5e-9f};
     std::vector<std::uint32_t> idx;
-    for (std::uint32_t i = 0; i < 18; ++i) idx.push_back(i);
+    for (std::uint32_t i = 0; i < 18; ++i)
+        idx.push_back(i);
     idx.insert(idx.end(), {0, 1, 99}); // index out of range of the vertex array
     b.draw(b.mesh(pos, idx), 0);
     const Plan plan = plan_for(small_config(), b.scene);
@@ -483,8 +510,8 @@ TYPED_TEST(CpuNormals, TiltedPlaneMatchesClosedFormIncidence) {
     std::vector<float> pos;
     for (int k = 0; k < 4; ++k) {
         const double a = (k == 1 || k == 2) ? 30.0 : -30.0, c = k >= 2 ? 30.0 : -30.0;
-        pos.insert(pos.end(), {float(12.0 + a * t1[0] + c * t2[0]), float(a * t1[1] + c * t2[1]),
-                               float(a * t1[2] + c * t2[2])});
+        pos.insert(pos.end(),
+                   {float(12.0 + a * t1[0] + c * t2[0]), float(a * t1[1] + c * t2[1]), float(a * t1[2] + c * t2[2])});
     }
     SceneBuilder b;
     b.draw(b.mesh(pos, {0, 1, 2, 0, 2, 3}), b.material(-20.0));
@@ -502,7 +529,8 @@ TYPED_TEST(CpuNormals, TiltedPlaneMatchesClosedFormIncidence) {
             // Positions carry float depth error (~1e-7 relative, ~1e-6 m) over a neighbour spacing of
             // ~0.2 m: tangents are good to ~1e-5; 1e-3 is the contract's tolerance for planes.
             EXPECT_NEAR(out[4 * p + 3], expected, 1e-3) << "pixel " << c << "," << j;
-            for (int k = 0; k < 3; ++k) EXPECT_NEAR(out[4 * p + k], n[k], 1e-3);
+            for (int k = 0; k < 3; ++k)
+                EXPECT_NEAR(out[4 * p + k], n[k], 1e-3);
             ++checked;
         }
     }
@@ -527,7 +555,8 @@ TYPED_TEST(CpuNormals, DepthDiscontinuityHasNoSpikesOrNaN) {
             const std::size_t p = std::size_t(j) * plan.columns + c;
             ASSERT_GT(d.depth[p], 0.0f);
             const float* q = &out[4 * p];
-            for (int k = 0; k < 4; ++k) ASSERT_TRUE(std::isfinite(q[k])) << c << "," << j;
+            for (int k = 0; k < 4; ++k)
+                ASSERT_TRUE(std::isfinite(q[k])) << c << "," << j;
             EXPECT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2], 1.0, 1e-5); // unit length, float rounding
             EXPECT_GE(q[3], 0.0f);
             EXPECT_LE(q[3], 1.0f);
@@ -542,8 +571,7 @@ TYPED_TEST(CpuNormals, DepthDiscontinuityHasNoSpikesOrNaN) {
             // one-sided difference picks the neighbour of closer range (tolerance: see the plane test).
             EXPECT_NEAR(q[3], expected, 1e-3) << (is_box ? "box" : "wall") << " pixel " << c << "," << j;
             if (is_box) ++box_pixels;
-            if (!is_box && c > 0 && c + 1 < plan.columns &&
-                (d.material[p - 1] == box_m || d.material[p + 1] == box_m))
+            if (!is_box && c > 0 && c + 1 < plan.columns && (d.material[p - 1] == box_m || d.material[p + 1] == box_m))
                 ++wall_edge_pixels;
         }
     }
@@ -559,21 +587,24 @@ TYPED_TEST(CpuNormals, IsolatedPixelsAndLinesFaceTheSonar) {
     const float d = float(plan.depth_b + plan.depth_a / 10.0); // view z = 10 m
     std::vector<float> depth(std::size_t(plan.rows) * plan.columns, 0.0f);
     depth[std::size_t(5) * plan.columns + 7] = d; // isolated pixel
-    for (std::uint32_t c = 20; c < 40; ++c) depth[std::size_t(12) * plan.columns + c] = d; // 1-row line
+    for (std::uint32_t c = 20; c < 40; ++c)
+        depth[std::size_t(12) * plan.columns + c] = d; // 1-row line
     const std::vector<float> out = run_normals_plan(plan, depth, f64);
     for (std::uint32_t j = 0; j < plan.rows; ++j) {
         for (std::uint32_t c = 0; c < plan.columns; ++c) {
             const std::size_t p = std::size_t(j) * plan.columns + c;
             const float* q = &out[4 * p];
             if (depth[p] == 0.0f) {
-                for (int k = 0; k < 4; ++k) EXPECT_EQ(q[k], 0.0f);
+                for (int k = 0; k < 4; ++k)
+                    EXPECT_EQ(q[k], 0.0f);
                 continue;
             }
             // No vertical neighbour: the facing fallback n = -P / r with cos = 1 exactly.
             EXPECT_EQ(q[3], 1.0f);
             const PixelRay ray = pixel_ray(plan, c, j);
             const double len = std::sqrt(ray.D[0] * ray.D[0] + ray.D[1] * ray.D[1] + ray.D[2] * ray.D[2]);
-            for (int k = 0; k < 3; ++k) EXPECT_NEAR(q[k], -ray.D[k] / len, 1e-6); // float rounding of a unit vector
+            for (int k = 0; k < 3; ++k)
+                EXPECT_NEAR(q[k], -ray.D[k] / len, 1e-6); // float rounding of a unit vector
         }
     }
 }
@@ -591,7 +622,8 @@ TYPED_TEST(CpuNormals, GrazingPlaneStaysFiniteAndSmall) {
     for (std::size_t p = 0; p < d.depth.size(); ++p) {
         if (d.depth[p] <= 0.0f) continue;
         ++hits;
-        for (int k = 0; k < 4; ++k) ASSERT_TRUE(std::isfinite(out[4 * p + k]));
+        for (int k = 0; k < 4; ++k)
+            ASSERT_TRUE(std::isfinite(out[4 * p + k]));
         const std::uint32_t c = std::uint32_t(p % plan.columns), j = std::uint32_t(p / plan.columns);
         const PixelRay ray = pixel_ray(plan, c, j);
         const double len = std::sqrt(ray.D[0] * ray.D[0] + ray.D[1] * ray.D[1] + ray.D[2] * ray.D[2]);
@@ -762,8 +794,8 @@ TYPED_TEST_SUITE(CpuEchoTyped, Precisions);
 TYPED_TEST(CpuEchoTyped, PixelMatchesSonarEquationOnHandComputedInputs) {
     using Real = TypeParam;
     SceneBuilder b;
-    b.material(-20.0);                                         // material 0: lambert
-    b.material(-10.0, AcousticMaterial::Model::constant);      // material 1
+    b.material(-20.0);                                    // material 0: lambert
+    b.material(-10.0, AcousticMaterial::Model::constant); // material 1
     b.draw(b.quad_x(10, -1, 1, -1, 1), 0);
     const Plan plan = plan_for(small_config(), b.scene);
     const std::size_t n = std::size_t(plan.rows) * plan.columns;
@@ -781,7 +813,7 @@ TYPED_TEST(CpuEchoTyped, PixelMatchesSonarEquationOnHandComputedInputs) {
     normals[4 * pb + 3] = 0.1f;
     depth[pc] = depth_at(2.0);
     normals[4 * pc + 3] = 0.8f;
-    depth[pd] = depth_at(0.47);  // slant range 0.485 m < range_min 0.5 m (near plane 0.463 m)
+    depth[pd] = depth_at(0.47); // slant range 0.485 m < range_min 0.5 m (near plane 0.463 m)
     material[pd] = 0;
     depth[pe] = depth_at(39.99); // slant range > 40 m off axis
     material[pe] = 0;
@@ -799,7 +831,8 @@ TYPED_TEST(CpuEchoTyped, PixelMatchesSonarEquationOnHandComputedInputs) {
         const double omega = (2 * plan.tan_half_h / plan.slice_columns) * (2 * plan.tan_half_v / plan.rows) /
                              std::pow(1 + u * u + v * v, 1.5);
         const double psi = std::atan2(-v, std::sqrt(1 + u * u));
-        const double bv = math_f64::pattern_power(shared::kPatternSinc, plan.vpattern_k, plan.vpattern_halfwidth_rad, psi);
+        const double bv =
+            math_f64::pattern_power(shared::kPatternSinc, plan.vpattern_k, plan.vpattern_halfwidth_rad, psi);
         double expected = Math<double>::echo_energy(double(plan.materials[m].backscatter_linear), f, omega, r,
                                                     plan.alpha_db_per_m, bv, true, true);
         if (r < 0.5 || r >= 40.0) expected = 0.0;
@@ -836,8 +869,8 @@ TEST(CpuEcho, IncidenceOffIgnoresNormalsAndVerticalPatternOffIsOne) {
     const double u = math_f64::pixel_coord(c, plan.slice_columns, plan.tan_half_h);
     const double v = math_f64::pixel_coord(j, plan.rows, plan.tan_half_v);
     const double r = echo[2 * p + 1];
-    const double omega = math_f64::pixel_solid_angle(u, v, 2 * plan.tan_half_h / plan.slice_columns,
-                                                     2 * plan.tan_half_v / plan.rows);
+    const double omega =
+        math_f64::pixel_solid_angle(u, v, 2 * plan.tan_half_h / plan.slice_columns, 2 * plan.tan_half_v / plan.rows);
     // f = 1, b = 1, no absorption, footprint r^2 Omega without spreading.
     const double expected = plan.materials[0].backscatter_linear * omega * r * r;
     EXPECT_NEAR(echo[2 * p], expected, 2e-7 * expected); // double arithmetic, float storage
@@ -895,9 +928,12 @@ TYPED_TEST(CpuBeamform, TentKernelConservesEnergyAndIsBitIdenticalRunToRun) {
     EXPECT_EQ(0, std::memcmp(a.profiles.data(), again.profiles.data(), a.profiles.size() * sizeof(float)));
 
     double sum_profiles = 0, sum_beams = 0, sum_polar = 0;
-    for (float x : a.profiles) sum_profiles += x;
-    for (float x : a.beams) sum_beams += x;
-    for (float x : a.polar) sum_polar += x;
+    for (float x : a.profiles)
+        sum_profiles += x;
+    for (float x : a.beams)
+        sum_beams += x;
+    for (float x : a.polar)
+        sum_polar += x;
     // ~1400 values of ~0.5 summed per column into ~128 bins: float accumulation error ~ sqrt(rows) eps
     // per bin, float storage 6e-8; 1e-5 relative covers float arithmetic with a wide margin, double
     // arithmetic only sees the float roundings of the stored intermediates (1e-6).
@@ -905,7 +941,8 @@ TYPED_TEST(CpuBeamform, TentKernelConservesEnergyAndIsBitIdenticalRunToRun) {
     EXPECT_NEAR(sum_profiles, total, tol);
     EXPECT_NEAR(sum_beams, total, tol);
     EXPECT_NEAR(sum_polar, total, tol);
-    for (std::size_t i = 0; i < a.polar.size(); ++i) EXPECT_EQ(a.polar[i], a.beams[i]); // pattern off: copy
+    for (std::size_t i = 0; i < a.polar.size(); ++i)
+        EXPECT_EQ(a.polar[i], a.beams[i]); // pattern off: copy
 }
 
 TYPED_TEST(CpuBeamform, RangeKernelsPlaceEnergyInTheContractsBins) {
@@ -923,15 +960,17 @@ TYPED_TEST(CpuBeamform, RangeKernelsPlaceEnergyInTheContractsBins) {
         };
         // column 0: bin centre of bin 10; column 1: a quarter into bin 20; column 2: just above range_min;
         // column 3: just below range_max.
-        const Case cases[4] = {{r0 + 10.5 * w, 1.0}, {r0 + 20.25 * w, 2.0}, {r0 + 0.1 * w, 4.0},
-                               {r0 + (plan.bins - 0.1) * w, 8.0}};
+        const Case cases[4] = {
+            {r0 + 10.5 * w, 1.0}, {r0 + 20.25 * w, 2.0}, {r0 + 0.1 * w, 4.0}, {r0 + (plan.bins - 0.1) * w, 8.0}};
         std::vector<float> echo2(std::size_t(plan.rows) * plan.columns * 2, 0.0f);
         for (int c = 0; c < 4; ++c) {
             echo2[2 * (std::size_t(7) * plan.columns + c)] = float(cases[c].e);
             echo2[2 * (std::size_t(7) * plan.columns + c) + 1] = float(cases[c].r);
         }
         const BeamformOut o = run_beamform<Real>(plan, echo2);
-        auto prof = [&](std::uint32_t k, std::uint32_t c) { return double(o.profiles[std::size_t(k) * plan.columns + c]); };
+        auto prof = [&](std::uint32_t k, std::uint32_t c) {
+            return double(o.profiles[std::size_t(k) * plan.columns + c]);
+        };
         // Tolerances: ranges are stored as float (ulp ~2e-6 m at 20 m, i.e. 7e-6 of a 0.31 m bin).
         const double tol = 1e-4;
         if (kernel == RangeKernel::nearest) {
@@ -944,12 +983,13 @@ TYPED_TEST(CpuBeamform, RangeKernelsPlaceEnergyInTheContractsBins) {
             // t = 19.75: 0.25 to bin 19, 0.75 to bin 20
             EXPECT_NEAR(prof(19, 1), 0.25 * 2.0, tol * 2);
             EXPECT_NEAR(prof(20, 1), 0.75 * 2.0, tol * 2);
-            EXPECT_NEAR(prof(0, 2), 4.0, tol * 4); // share below bin 0 kept in bin 0
+            EXPECT_NEAR(prof(0, 2), 4.0, tol * 4);             // share below bin 0 kept in bin 0
             EXPECT_NEAR(prof(plan.bins - 1, 3), 8.0, tol * 8); // share above the last bin kept
         }
         for (int c = 0; c < 4; ++c) {
             double s = 0;
-            for (std::uint32_t k = 0; k < plan.bins; ++k) s += prof(k, c);
+            for (std::uint32_t k = 0; k < plan.bins; ++k)
+                s += prof(k, c);
             EXPECT_NEAR(s, cases[c].e, 1e-6 * cases[c].e); // nothing lost; float roundings only
         }
     }
@@ -982,9 +1022,11 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
             for (std::uint32_t t = 0; t < plan.sidelobe_taps; ++t) {
                 const std::int64_t src = std::int64_t(j) - K + t;
                 if (src < 0 || src >= std::int64_t(plan.beams)) continue;
-                P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) * o.beams[std::size_t(k) * plan.beams + src];
+                P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) *
+                     o.beams[std::size_t(k) * plan.beams + src];
             }
-            const double gotB = o.beams[std::size_t(k) * plan.beams + j], gotP = o.polar[std::size_t(k) * plan.beams + j];
+            const double gotB = o.beams[std::size_t(k) * plan.beams + j],
+                         gotP = o.polar[std::size_t(k) * plan.beams + j];
             // Sums of <= ~10 positive float terms: float arithmetic is good to ~1e-6 relative.
             EXPECT_NEAR(gotB, B, 2e-6 * B + 1e-30);
             EXPECT_NEAR(gotP, P, 2e-6 * P + 1e-30);
@@ -1000,8 +1042,10 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
 // A seabed tilted down ahead, a box on it and a wall behind: every stage has work to do.
 SceneData test_scene() {
     SceneBuilder b;
-    const std::uint32_t bed = b.material(-30.0), box = b.material(-15.0), wall = b.material(-25.0, AcousticMaterial::Model::constant);
-    b.draw(b.mesh({0.5f, -30.f, -1.0f, 45.f, -30.f, -6.0f, 45.f, 30.f, -6.0f, 0.5f, 30.f, -1.0f}, {0, 1, 2, 0, 2, 3}), bed);
+    const std::uint32_t bed = b.material(-30.0), box = b.material(-15.0),
+                        wall = b.material(-25.0, AcousticMaterial::Model::constant);
+    b.draw(b.mesh({0.5f, -30.f, -1.0f, 45.f, -30.f, -6.0f, 45.f, 30.f, -6.0f, 0.5f, 30.f, -1.0f}, {0, 1, 2, 0, 2, 3}),
+           bed);
     const double lo[3] = {12.0, -1.0, -3.0}, hi[3] = {13.5, 1.5, -1.0};
     b.draw(b.box(lo, hi), box, yaw_translate(20.0, 0, 0, 0));
     b.draw(b.quad_x(0.0, -20.0, 20.0, -8.0, 8.0), wall, yaw_translate(-15.0, 30.0, 0.0, 0.0));
@@ -1033,9 +1077,9 @@ TEST(CpuBackend, RunsTheContractsStagesAndFillsRequestedIntermediates) {
         const std::uint32_t mask = save_depth | save_normals | save_echo | save_profiles;
         auto r = backend->render(pose, mask, frame);
         ASSERT_TRUE(r.ok()) << r.error().message;
-        const std::vector<std::string> expected =
-            incidence ? std::vector<std::string>{"depth", "normals", "echo", "beamform"}
-                      : std::vector<std::string>{"depth", "echo", "beamform"};
+        const std::vector<std::string> expected = incidence
+                                                      ? std::vector<std::string>{"depth", "normals", "echo", "beamform"}
+                                                      : std::vector<std::string>{"depth", "echo", "beamform"};
         EXPECT_EQ(frame.stages_run, expected);
         ASSERT_EQ(frame.times.size(), expected.size());
         for (std::size_t i = 0; i < expected.size(); ++i) {
@@ -1115,7 +1159,8 @@ TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
     EXPECT_LT(max_rel_peak, 1e-5);
     double max_rel_pixel = 0;
     for (std::size_t p = 0; p < f64.echo.size(); p += 2) {
-        if (f64.echo[p] > 0) max_rel_pixel = std::max(max_rel_pixel, std::abs(double(f32.echo[p]) - f64.echo[p]) / f64.echo[p]);
+        if (f64.echo[p] > 0)
+            max_rel_pixel = std::max(max_rel_pixel, std::abs(double(f32.echo[p]) - f64.echo[p]) / f64.echo[p]);
     }
     EXPECT_LT(max_rel_pixel, 1e-4);
     RecordProperty("f32_vs_f64_total", std::to_string(total32 / total64 - 1.0));

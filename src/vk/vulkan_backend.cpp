@@ -55,11 +55,12 @@ Result<void> VulkanBackend::init() {
     }
     const std::uint64_t pixels = std::uint64_t(plan_.columns) * plan_.rows;
     const std::uint64_t largest_dispatch =
-        std::max({std::uint64_t(group_count(pixels / kEchoPixels + 1)),
+        std::max({std::uint64_t(group_count(ceil_div(plan_.columns, kEchoPixels))),
                   std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
                   std::uint64_t(group_count(ceil_div(plan_.bins, 4)))});
     if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
         ceil_div(plan_.beams, kBeamsPerInvocation) > limits.maxComputeWorkGroupCount[1] ||
+        plan_.rows > limits.maxComputeWorkGroupCount[1] || // echo: one row of workgroups per pixel row
         pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +

@@ -95,7 +95,7 @@ void VulkanBackend::record_normals(VkCommandBuffer commands) {
 
 void VulkanBackend::record_echo(VkCommandBuffer commands) {
     bind_compute(commands, echo_pipeline_.get());
-    vkCmdDispatch(commands, group_count(ceil_div(std::uint64_t(plan_.columns) * plan_.rows, kEchoPixels)), 1, 1);
+    vkCmdDispatch(commands, group_count(ceil_div(plan_.columns, kEchoPixels)), plan_.rows, 1);
     compute_barrier(commands, echo_);
 }
 
@@ -292,7 +292,7 @@ void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const 
         float* echo = sized(frame.echo, pixels * 2);
         if (plan_.params.echo_half != 0u) { // two halves per pixel: (energy * echo_scale, range)
             const auto* halves = reinterpret_cast<const std::uint16_t*>(static_cast<const char*>(readback_.mapped) +
-                                                                       echo_region_.offset);
+                                                                        echo_region_.offset);
             for (std::size_t p = 0; p < pixels; ++p) {
                 echo[2 * p] = half_to_float(halves[2 * p]) / plan_.params.echo_scale;
                 echo[2 * p + 1] = half_to_float(halves[2 * p + 1]);
