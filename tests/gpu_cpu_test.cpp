@@ -53,6 +53,28 @@ std::unique_ptr<Pair> render_pair(const std::string& file, const SonarConfig& co
     return pair;
 }
 
+// Cells where either backend's clean scan is above the noise floor NL - DI - SL, and how many of them
+// differ by more than kFrameDbTol (tests/tolerances.h); a value below the floor counts as the floor.
+struct CleanAgreement {
+    std::size_t above = 0, over = 0;
+    double max_db = 0;
+};
+
+CleanAgreement compare_clean(const SonarConfig& config, const Frame& g, const Frame& c) {
+    const double floor =
+        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+    CleanAgreement a;
+    for (std::size_t i = 0; i < g.clean.size(); ++i) {
+        if (g.clean[i] < floor && c.clean[i] < floor) continue;
+        ++a.above;
+        const double d = std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
+                                  to_db(std::max<double>(c.clean[i], floor * 1e-3)));
+        a.max_db = std::max(a.max_db, d);
+        a.over += d > kFrameDbTol;
+    }
+    return a;
+}
+
 class StageTest : public ::testing::TestWithParam<SceneCase> {
 protected:
     void SetUp() override { VKSONAR_REQUIRE_VULKAN(); }
@@ -253,22 +275,11 @@ TEST_P(StageTest, WholeFrameAgrees) {
     const Frame& c = p->cpu->frame;
     // The same RNG draws on both: the ratio of noisy to clean intensity of a cell depends only on
     // (seed, frame, beam, bin), so compare the clean scans and check the noise multipliers.
-    const double floor =
-        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
-    std::size_t above = 0, over = 0;
-    double max_db = 0;
-    for (std::size_t i = 0; i < g.clean.size(); ++i) {
-        if (g.clean[i] < floor && c.clean[i] < floor) continue;
-        ++above;
-        const double d = std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
-                                  to_db(std::max<double>(c.clean[i], floor * 1e-3)));
-        max_db = std::max(max_db, d);
-        over += d > kFrameDbTol;
-    }
+    const CleanAgreement a = compare_clean(config, g, c);
     std::printf("[frame] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().file.c_str(),
-                above, over, kFrameDbTol, max_db);
-    ASSERT_GT(above, 0u);
-    EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above);
+                a.above, a.over, kFrameDbTol, a.max_db);
+    ASSERT_GT(a.above, 0u);
+    EXPECT_LE(static_cast<double>(a.over), kFrameCellBudget * a.above);
 }
 
 std::string scene_name(const ::testing::TestParamInfo<SceneCase>& info) {
@@ -312,26 +323,18 @@ TEST_P(PresetFrameTest, WholeFrameAgrees) {
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;
-    const double floor =
-        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
-    std::size_t above = 0, over = 0, noise_same = 0, noise_compared = 0;
-    double max_db = 0;
+    std::size_t noise_same = 0, noise_compared = 0;
     for (std::size_t i = 0; i < g.clean.size(); ++i) {
         if (g.clean[i] == c.clean[i]) { // identical input -> identical seeded noise, bit for bit
             ++noise_compared;
             noise_same += g.intensity[i] == c.intensity[i];
         }
-        if (g.clean[i] < floor && c.clean[i] < floor) continue;
-        ++above;
-        const double d = std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
-                                  to_db(std::max<double>(c.clean[i], floor * 1e-3)));
-        max_db = std::max(max_db, d);
-        over += d > kFrameDbTol;
     }
-    std::printf("[preset] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().c_str(), above,
-                over, kFrameDbTol, max_db);
-    ASSERT_GT(above, 0u) << "the preset sees nothing of the default scene: move the pose";
-    EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above); // tolerance: tests/tolerances.h
+    const CleanAgreement a = compare_clean(config, g, c);
+    std::printf("[preset] %s: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", GetParam().c_str(),
+                a.above, a.over, kFrameDbTol, a.max_db);
+    ASSERT_GT(a.above, 0u) << "the preset sees nothing of the default scene: move the pose";
+    EXPECT_LE(static_cast<double>(a.over), kFrameCellBudget * a.above); // tolerance: tests/tolerances.h
     EXPECT_EQ(noise_same, noise_compared);
 }
 
@@ -389,19 +392,9 @@ TEST(TableViews, UniformAndStorageTablesGiveTheSameFrame) {
         // the side-lobe pass ran: polar differs from the resampled beam profiles
         EXPECT_NE(uniform->frame.clean, uniform->frame.beam_profiles);
 
-        const Frame& g = uniform->frame;
-        const Frame& c = cpu->frame;
-        const double floor =
-            std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
-        std::size_t above = 0, over = 0;
-        for (std::size_t i = 0; i < g.clean.size(); ++i) {
-            if (g.clean[i] < floor && c.clean[i] < floor) continue;
-            ++above;
-            over += std::abs(to_db(std::max<double>(g.clean[i], floor * 1e-3)) -
-                             to_db(std::max<double>(c.clean[i], floor * 1e-3))) > kFrameDbTol;
-        }
-        ASSERT_GT(above, 0u);
-        EXPECT_LE(static_cast<double>(over), kFrameCellBudget * above); // tolerance: tests/tolerances.h
+        const CleanAgreement a = compare_clean(config, uniform->frame, cpu->frame);
+        ASSERT_GT(a.above, 0u);
+        EXPECT_LE(static_cast<double>(a.over), kFrameCellBudget * a.above); // tolerance: tests/tolerances.h
     }
 }
 
