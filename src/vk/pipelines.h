@@ -37,13 +37,19 @@ enum Binding : std::uint32_t {
 // GPU serves them from its constant cache, and lavapipe (Mesa 22's llvmpipe) turns a uniform-block
 // load at a workgroup-uniform index into one scalar load and a divergent one into a vector gather,
 // where every storage-buffer load is a branchy loop over the lanes. A table that does not fit is read
-// through its storage binding instead; specialization constant 3 tells the shader which (pipelines.h).
+// through its storage binding instead; specialization constant 3 tells the shader which (Specialization).
 constexpr VkDescriptorType descriptor_type(std::uint32_t binding) {
     return binding == binding_params || binding == binding_slice_info || binding >= binding_materials_uniform
                ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER
                : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
 }
-constexpr std::uint32_t kUniformBindings = 2 + (binding_count - binding_materials_uniform);
+constexpr std::uint32_t count_uniform_bindings() {
+    std::uint32_t n = 0;
+    for (std::uint32_t i = 0; i < binding_count; ++i)
+        n += descriptor_type(i) == VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER;
+    return n;
+}
+constexpr std::uint32_t kUniformBindings = count_uniform_bindings(); // for the descriptor pool
 
 constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;

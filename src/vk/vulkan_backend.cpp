@@ -257,10 +257,10 @@ Result<void> VulkanBackend::create_compute() {
                    ? 0u
                    : static_cast<std::uint32_t>(vec4s);
     };
-    materials_vec4s_ = uniform_vec4s(bytes_of(materials));
-    column_table_vec4s_ = uniform_vec4s(bytes_of(column_table));
-    beam_table_vec4s_ = uniform_vec4s(bytes_of(beam_table));
-    sidelobe_vec4s_ = uniform_vec4s(bytes_of(plan_.sidelobe_weight));
+    const std::uint32_t materials_vec4s = uniform_vec4s(bytes_of(materials));
+    const std::uint32_t column_table_vec4s = uniform_vec4s(bytes_of(column_table));
+    const std::uint32_t beam_table_vec4s = uniform_vec4s(bytes_of(beam_table));
+    const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(plan_.sidelobe_weight));
 
     struct Table {
         Buffer* buffer;
@@ -342,7 +342,7 @@ Result<void> VulkanBackend::create_compute() {
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
-        materials_vec4s_, column_table_vec4s_, beam_table_vec4s_, sidelobe_vec4s_};
+        materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s};
     std::array<VkDescriptorBufferInfo, binding_count> infos{};
     std::array<VkWriteDescriptorSet, binding_count> writes{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
@@ -390,19 +390,19 @@ Result<void> VulkanBackend::create_compute() {
             !r)
             return r;
     }
-    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), spec(kEchoPixels, 0, materials_vec4s_)); !r)
+    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), spec(kEchoPixels, 0, materials_vec4s)); !r)
         return r;
     if (auto r =
             make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), spec(1, plan_.params.range_kernel, 0));
         !r)
         return r;
     if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv),
-                      spec(kBeamsPerInvocation, sidelobes_ ? 1u : 0u, column_table_vec4s_, beam_table_vec4s_));
+                      spec(kBeamsPerInvocation, sidelobes_ ? 1u : 0u, column_table_vec4s, beam_table_vec4s));
         !r)
         return r;
     if (sidelobes_) {
         if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv),
-                          spec(kBeamsPerInvocation, plan_.beams % 4 == 0 ? 1u : 0u, sidelobe_vec4s_));
+                          spec(kBeamsPerInvocation, plan_.beams % 4 == 0 ? 1u : 0u, sidelobe_vec4s));
             !r)
             return r;
     }

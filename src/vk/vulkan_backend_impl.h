@@ -114,9 +114,6 @@ private:
 
     Buffer params_, depth_, material_id_, normals_, echo_, profiles_, beam_profiles_, polar_;
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
-    // Sizes of the tables' uniform views in vec4s, 0 where a table does not fit a uniform block
-    // (then its shader reads the storage binding): see descriptor_type() in pipelines.h.
-    std::uint32_t materials_vec4s_ = 0, column_table_vec4s_ = 0, beam_table_vec4s_ = 0, sidelobe_vec4s_ = 0;
     Buffer readback_;
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;
