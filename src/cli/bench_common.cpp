@@ -4,6 +4,7 @@
 #include "cli/bench_common.h"
 #include "cli/inputs.h"
 
+#include <malloc.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -180,6 +181,11 @@ double rss_mib() {
     std::fclose(f);
     if (n != 2) return 0.0;
     return static_cast<double>(resident) * static_cast<double>(::sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
+}
+
+double live_heap_mib() {
+    const struct mallinfo2 info = mallinfo2();
+    return static_cast<double>(info.uordblks + info.hblkhd) / (1024.0 * 1024.0);
 }
 
 std::uint64_t heap_allocations() {

@@ -47,6 +47,10 @@ double stage_ms(const Frame& frame, const std::string& stage); // 0 if the stage
 double median(std::vector<double> values);
 double percentile(std::vector<double> values, double p); // p in [0, 1]
 double rss_mib();                                        // resident set size from /proc/self/statm
+// Bytes malloc'd and not yet freed, all threads and arenas (glibc mallinfo2: in arenas + mmapped), in
+// MiB. Unlike RSS it does not move when the allocator's free space fragments or is trimmed, so the
+// difference over many frames is what somebody (vksonar or the driver) keeps per frame.
+double live_heap_mib();
 // Calls of the global operator new / new[] in this process so far (the CLI replaces them with counting
 // versions): the difference around Renderer::render is what vksonar allocates per frame. Allocations
 // of the Vulkan driver (malloc inside libvulkan / lavapipe) are not counted; RSS covers those.

@@ -76,13 +76,18 @@ int run_bench_speed(const std::vector<std::string>& argv) {
     for (std::uint32_t i = 0; i < kWarmup; ++i)
         timed_render(renderer, setup.pose, frame_index++, frame);
     const double rss_10 = rss_mib();
+    const double live_10 = live_heap_mib();
 
     // After the warm-up: operator new calls inside Renderer::render, and RSS at a few frame counts (a
     // leak grows linearly; driver warm-up flattens out).
     std::uint64_t allocations = 0, counted_frames = 0;
-    std::vector<std::pair<std::uint64_t, double>> rss_checkpoints;
+    struct MemoryCheckpoint {
+        std::uint64_t frame;
+        double rss_mib, live_heap_mib;
+    };
+    std::vector<MemoryCheckpoint> rss_checkpoints;
     rss_checkpoints.reserve(16);
-    rss_checkpoints.emplace_back(frame_index, rss_10);
+    rss_checkpoints.push_back({frame_index, rss_10, live_10});
     std::uint64_t next_checkpoint = 100;
     auto render_counted = [&]() {
         const std::uint64_t before = heap_allocations();
@@ -90,7 +95,7 @@ int run_bench_speed(const std::vector<std::string>& argv) {
         allocations += heap_allocations() - before;
         ++counted_frames;
         if (frame_index == next_checkpoint) {
-            rss_checkpoints.emplace_back(frame_index, rss_mib());
+            rss_checkpoints.push_back({frame_index, rss_mib(), live_heap_mib()});
             next_checkpoint = next_checkpoint == 100 ? 250 : 2 * next_checkpoint; // 100, 250, 500, 1000, 2000...
         }
         return ms;
@@ -144,7 +149,8 @@ int run_bench_speed(const std::vector<std::string>& argv) {
     while (frame_index < memory_frames)
         render_counted();
     const double rss_end = rss_mib();
-    if (rss_checkpoints.back().first != frame_index) rss_checkpoints.emplace_back(frame_index, rss_end);
+    const double live_end = live_heap_mib();
+    if (rss_checkpoints.back().frame != frame_index) rss_checkpoints.push_back({frame_index, rss_end, live_end});
 
     const double full = median(samples.full_ms);
     const double depth = median(samples.depth_ms);
@@ -180,14 +186,25 @@ int run_bench_speed(const std::vector<std::string>& argv) {
                 growth, verdict(growth <= 1.0));
     if (rss_checkpoints.size() >= 3) {
         // From frame 100 on: driver and allocator warm-up is over; what grows now grows per frame.
-        const double steady = rss_end - rss_checkpoints[1].second;
+        const double steady = rss_end - rss_checkpoints[1].rss_mib;
         std::printf("RSS steady state (frame %llu to %llu): %+.3f MiB\n",
-                    static_cast<unsigned long long>(rss_checkpoints[1].first),
+                    static_cast<unsigned long long>(rss_checkpoints[1].frame),
                     static_cast<unsigned long long>(frame_index), steady);
     }
     std::printf("RSS by frame:");
-    for (const auto& [at, mib] : rss_checkpoints)
-        std::printf(" %llu: %s MiB;", static_cast<unsigned long long>(at), fmt(mib, 2).c_str());
+    for (const auto& point : rss_checkpoints)
+        std::printf(" %llu: %s MiB;", static_cast<unsigned long long>(point.frame), fmt(point.rss_mib, 2).c_str());
+    std::printf("\n");
+    // RSS also moves when the allocator's free space fragments: lavapipe mallocs and frees a few MiB per
+    // frame on its own threads (vertex buffers per draw, 64 KiB bin blocks). Live bytes do not.
+    std::printf("live heap (malloc'd, not freed, all threads incl. the driver; mallinfo2) after %u frames: %s MiB; "
+                "after %llu: %s MiB; difference %+.3f MiB\n",
+                kWarmup, fmt(live_10, 3).c_str(), static_cast<unsigned long long>(frame_index),
+                fmt(live_end, 3).c_str(), live_end - live_10);
+    std::printf("live heap by frame:");
+    for (const auto& point : rss_checkpoints)
+        std::printf(" %llu: %s MiB;", static_cast<unsigned long long>(point.frame),
+                    fmt(point.live_heap_mib, 3).c_str());
     std::printf("\n");
     std::printf("heap allocations (operator new) inside Renderer::render after the warm-up: %llu in %llu frames "
                 "(%s per frame)  target 0: %s\n",
