@@ -38,6 +38,7 @@ struct SceneBuilder {
         m.index_count = static_cast<std::uint32_t>(indices.size());
         m.first_vertex = static_cast<std::uint32_t>(scene.positions.size() / 3);
         m.vertex_count = static_cast<std::uint32_t>(positions.size() / 3);
+        set_bounds(m, positions.data());
         scene.positions.insert(scene.positions.end(), positions.begin(), positions.end());
         scene.indices.insert(scene.indices.end(), indices.begin(), indices.end());
         scene.meshes.push_back(m);
@@ -404,6 +405,65 @@ TEST(CpuDepth, ScissorConfinesEachSliceToItsOwnColumns) {
                 EXPECT_EQ(depth[p], 0.5f) << c << "," << j;
                 EXPECT_EQ(material[p], 7u);
             }
+        }
+    }
+}
+
+// cull_depth_draws: a draw is skipped in a slice only where it cannot reach it, so the frame is the
+// same bit for bit; and the draws that geometry puts out of a slice are skipped there.
+TEST(DepthDraws, CullingSkipsWhatCannotBeSeenAndChangesNoPixel) {
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0;                 // 3 slices of 43.3 deg
+    for (const double origin : {0.0, 1e5}) { // far from the world origin: the tolerance must scale
+        SceneBuilder b;
+        b.material(-20.0);
+        auto box_at = [&](double x, double y, double z, double half) {
+            const double lo[3] = {x - half, y - half, z - half}, hi[3] = {x + half, y + half, z + half};
+            b.draw(b.box(lo, hi), 0, yaw_translate(0.0, origin, origin, 0.0));
+        };
+        box_at(15, 0, 0, 0.5);  // 0: straight ahead, +-1.9 deg: the middle slice only
+        box_at(-15, 0, 0, 0.5); // 1: behind the sonar
+        box_at(60, 0, 0, 0.5);  // 2: beyond range_max (40 m)
+        box_at(15, 0, 10, 0.5); // 3: 34 deg above the beam (vfov 10 deg)
+        box_at(0, 0, 0, 1.0);   // 4: the sonar inside it: every slice
+        const double slab_lo[3] = {2, -30, -1.05}, slab_hi[3] = {30, 30, -1};
+        b.draw(b.box(slab_lo, slab_hi), 0, yaw_translate(0.0, origin, origin, 0.0)); // 5: seabed: every slice
+        const Plan plan = plan_for(config, b.scene);
+        ASSERT_EQ(plan.slices, 3u);
+        const std::size_t draws = b.scene.draws.size(), pixels = std::size_t(plan.rows) * plan.columns;
+
+        for (const double yaw : {0.0, 40.0}) {
+            Pose pose;
+            pose.x_m = origin;
+            pose.y_m = origin;
+            pose.yaw_deg = yaw;
+            std::vector<shared::DepthPush> pushes;
+            std::vector<std::uint8_t> drawn;
+            compose_depth_draws(plan, b.scene, pose, pushes);
+            cull_depth_draws(b.scene, pushes, drawn);
+            ASSERT_EQ(drawn.size(), pushes.size());
+            auto is_drawn = [&](std::uint32_t s, std::size_t i) { return drawn[s * draws + i] != 0; };
+            for (std::uint32_t s = 0; s < plan.slices; ++s) {
+                for (std::size_t i : {1, 2, 3})
+                    EXPECT_FALSE(is_drawn(s, i)) << "draw " << i << " slice " << s;
+                for (std::size_t i : {4, 5})
+                    EXPECT_TRUE(is_drawn(s, i)) << "draw " << i << " slice " << s;
+                if (yaw == 0.0) {
+                    const bool middle = std::abs(plan.slice_info[s].center_azimuth_rad) < 1e-9;
+                    EXPECT_EQ(is_drawn(s, 0), middle) << "slice " << s;
+                } else { // the box is at azimuth -40 deg from the sonar: the right-hand slice only
+                    const double centre = plan.slice_info[s].center_azimuth_rad / kDeg;
+                    EXPECT_EQ(is_drawn(s, 0), std::abs(centre + 40.0) < 130.0 / 6.0) << "slice " << s;
+                }
+            }
+            // The same pixels with and without the culling.
+            std::vector<float> depth_all(pixels), depth_culled(pixels);
+            std::vector<std::uint32_t> material_all(pixels), material_culled(pixels);
+            cpu::depth_pass(plan, b.scene, pushes, depth_all.data(), material_all.data());
+            cpu::depth_pass(plan, b.scene, pushes, depth_culled.data(), material_culled.data(), nullptr, drawn.data());
+            EXPECT_EQ(depth_all, depth_culled) << "origin " << origin << " yaw " << yaw;
+            EXPECT_EQ(material_all, material_culled);
+            EXPECT_GT(std::count(material_all.begin(), material_all.end(), 0u), 0); // something was drawn
         }
     }
 }

@@ -19,7 +19,8 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
     for (int col = 0; col < 4; ++col) {
         for (int row = 0; row < 4; ++row) {
             double s = 0;
-            for (int k = 0; k < 4; ++k) s += a[k * 4 + row] * b[col * 4 + k];
+            for (int k = 0; k < 4; ++k)
+                s += a[k * 4 + row] * b[col * 4 + k];
             r[col * 4 + row] = s;
         }
     }
@@ -82,10 +83,54 @@ void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& p
         for (std::uint32_t s = 0; s < plan.slices; ++s) {
             const Mat4 clip_local = multiply(clip_from_sonar(plan, s), sonar_local);
             shared::DepthPush& push = out[s * draws + i];
-            for (int k = 0; k < 16; ++k) push.clip_from_local[k] = static_cast<float>(clip_local[k]);
+            for (int k = 0; k < 16; ++k)
+                push.clip_from_local[k] = static_cast<float>(clip_local[k]);
             push.material_id = d.material;
             push.pad0 = push.pad1 = push.pad2 = 0;
         }
+    }
+}
+
+void cull_depth_draws(const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
+                      std::vector<std::uint8_t>& drawn) {
+    drawn.resize(pushes.size());
+    const std::size_t draws = scene.draws.size();
+    for (std::size_t slot = 0; slot < pushes.size(); ++slot) {
+        drawn[slot] = 1;
+        const std::uint32_t mesh_index = draws ? scene.draws[slot % draws].mesh : ~0u;
+        if (mesh_index >= scene.meshes.size() || !scene.meshes[mesh_index].has_bounds) continue;
+        const MeshRange& mesh = scene.meshes[mesh_index];
+        const float* m = pushes[slot].clip_from_local;
+        unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
+        for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
+            const double p[3] = {corner & 1 ? mesh.bounds_max[0] : mesh.bounds_min[0],
+                                 corner & 2 ? mesh.bounds_max[1] : mesh.bounds_min[1],
+                                 corner & 4 ? mesh.bounds_max[2] : mesh.bounds_min[2]};
+            double c[4], magnitude[4];
+            for (int r = 0; r < 4; ++r) {
+                c[r] = double(m[12 + r]);
+                magnitude[r] = std::abs(c[r]);
+                for (int k = 0; k < 3; ++k) {
+                    const double term = double(m[k * 4 + r]) * p[k];
+                    c[r] += term;
+                    magnitude[r] += std::abs(term);
+                }
+            }
+            // The GPU sums these terms in float: its clip coordinates may differ from c by a few ulp
+            // of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
+            const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);
+            const double tol_y = 1e-5 * (magnitude[1] + magnitude[3]);
+            const double tol_z = 1e-5 * (magnitude[2] + magnitude[3]);
+            unsigned outside = 0;
+            if (c[0] < -c[3] - tol_x) outside |= 0x01u;
+            if (c[0] > c[3] + tol_x) outside |= 0x02u;
+            if (c[1] < -c[3] - tol_y) outside |= 0x04u;
+            if (c[1] > c[3] + tol_y) outside |= 0x08u;
+            if (c[2] > c[3] + tol_z) outside |= 0x10u;
+            if (c[2] < -tol_z) outside |= 0x20u;
+            outside_every_corner &= outside;
+        }
+        drawn[slot] = outside_every_corner == 0u;
     }
 }
 

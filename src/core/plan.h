@@ -37,15 +37,15 @@ struct Plan {
     double slice_width_rad = 0; // horizontal angle covered by one slice
     double vertical_coverage_rad = 0;
     double tan_half_h = 0, tan_half_v = 0;
-    double near_m = 0, far_m = 0;     // depth-pass clip planes (near < range_min so slant ranges are not clipped)
-    double depth_a = 0, depth_b = 0;  // view z = depth_a / (d - depth_b); d = 1 at near, 0 at far
+    double near_m = 0, far_m = 0;    // depth-pass clip planes (near < range_min so slant ranges are not clipped)
+    double depth_a = 0, depth_b = 0; // view z = depth_a / (d - depth_b); d = 1 at near, 0 at far
     std::vector<shared::SliceInfo> slice_info; // slices
 
     // Beams and range bins.
     std::uint32_t beams = 0, bins = 0;
     std::vector<double> beam_angle_rad; // beams, strictly decreasing (port first)
     double bin_width_m = 0;
-    std::vector<double> bin_range_m;    // bin centres
+    std::vector<double> bin_range_m; // bin centres
 
     // Beam patterns.
     double vpattern_k = 0, vpattern_halfwidth_rad = 0;
@@ -61,7 +61,7 @@ struct Plan {
     // Beam j gathers from columns [beam_column_begin[j], beam_column_end[j]).
     std::vector<std::uint32_t> beam_column_begin, beam_column_end;
     // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t).
-    std::uint32_t sidelobe_taps = 1; // 2K + 1
+    std::uint32_t sidelobe_taps = 1;    // 2K + 1
     std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
     // +-180 deg seam. Then column_beam[c] + 1 and the side-lobe source j - K + t wrap modulo beams,
@@ -105,5 +105,13 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad = std::numeric_l
 // no allocation once it has that size.
 void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
                          std::vector<shared::DepthPush>& out);
+// drawn[s * draws + i] = 0 where draw i cannot put a fragment in slice s: its mesh's bounding box,
+// through the composed (float) clip_from_local, lies wholly outside one plane of the clip volume
+// -w <= x, y <= w, 0 <= z <= w (clearly outside: by more than the GPU's rounding of the transform).
+// Then so does each of its triangles, which both rasterizers reject anyway, so the frame is the
+// same; what goes is the per-draw cost (lavapipe shades and bins every vertex it is given). Meshes
+// without bounds are always drawn. drawn is resized to pushes.size(); no allocation once sized.
+void cull_depth_draws(const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
+                      std::vector<std::uint8_t>& drawn);
 
 } // namespace vksonar

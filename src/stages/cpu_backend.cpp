@@ -20,7 +20,9 @@ double ms_since(Clock::time_point start) {
 }
 
 // Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
-template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) { dst.assign(src.begin(), src.end()); }
+template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
+    dst.assign(src.begin(), src.end());
+}
 
 template <class Real> class CpuBackend final : public StageBackend {
 public:
@@ -38,6 +40,7 @@ public:
         if (plan_.effects.incidence && !plan_.face_normals)
             normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
+        drawn_.resize(draws_.size());
     }
 
     Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override {
@@ -45,9 +48,9 @@ public:
         const char* pose_names[6] = {"x", "y", "z", "roll", "pitch", "yaw"};
         for (int i = 0; i < 6; ++i) {
             if (!std::isfinite(pose_values[i])) {
-                return make_error(ErrorCode::invalid_argument,
-                                  std::string("pose: ") + pose_names[i] + " is not finite (" +
-                                      std::to_string(pose_values[i]) + ")");
+                return make_error(ErrorCode::invalid_argument, std::string("pose: ") + pose_names[i] +
+                                                                   " is not finite (" + std::to_string(pose_values[i]) +
+                                                                   ")");
             }
         }
 
@@ -56,7 +59,9 @@ public:
         frame.stages_run.clear();
         auto start = Clock::now();
         compose_depth_draws(plan_, scene_, pose, draws_);
-        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(), plan_.face_normals ? face_.data() : nullptr);
+        cull_depth_draws(scene_, draws_, drawn_);
+        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(), plan_.face_normals ? face_.data() : nullptr,
+                   drawn_.data());
         finish("depth", start, frame);
 
         const float* normals = nullptr;
@@ -108,9 +113,10 @@ private:
         frame.stages_run.emplace_back(stage);
     }
 
-    Plan plan_;               // copied: the backend may outlive the caller's Plan object
-    const SceneData& scene_;  // the scene must outlive the renderer (renderer.h)
+    Plan plan_;              // copied: the backend may outlive the caller's Plan object
+    const SceneData& scene_; // the scene must outlive the renderer (renderer.h)
     std::vector<shared::DepthPush> draws_;
+    std::vector<std::uint8_t> drawn_; // cull_depth_draws: 0 = the draw cannot reach that slice
     std::vector<float> depth_;
     std::vector<std::uint32_t> material_;
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)

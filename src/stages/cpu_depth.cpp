@@ -32,9 +32,7 @@ struct ScreenVertex {
 };
 
 // Outcode bits of the clip volume; a triangle whose three vertices share a bit is invisible.
-enum : unsigned {
-    kOutLeft = 1u, kOutRight = 2u, kOutTop = 4u, kOutBottom = 8u, kOutNear = 16u, kOutFar = 32u
-};
+enum : unsigned { kOutLeft = 1u, kOutRight = 2u, kOutTop = 4u, kOutBottom = 8u, kOutNear = 16u, kOutFar = 32u };
 
 unsigned outcode(const ClipVertex& v) {
     unsigned code = 0;
@@ -201,7 +199,7 @@ bool finite(const ClipVertex& v) {
 } // namespace
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal) {
+                std::uint32_t* material, float* face_normal, const std::uint8_t* drawn) {
     const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
     const std::size_t pixels = static_cast<std::size_t>(rows) * columns;
     std::fill(depth, depth + pixels, 0.0f);
@@ -211,13 +209,14 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
     const std::size_t draw_count = scene.draws.size();
     const double half_w = 0.5 * W, half_h = 0.5 * rows;
     for (std::uint32_t s = 0; s < plan.slices; ++s) {
-        Target target{depth, material, columns, static_cast<std::int64_t>(s) * W,
-                      static_cast<std::int64_t>(s + 1) * W, rows, 0};
+        Target target{depth, material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
+                      rows,  0};
         target.face_normal = face_normal;
         const double x_offset = static_cast<double>(s) * W;
         for (std::size_t i = 0; i < draw_count; ++i) {
             const std::size_t slot = s * draw_count + i;
             if (slot >= draws.size()) break;
+            if (drawn && !drawn[slot]) continue;
             const shared::DepthPush& push = draws[slot];
             const SceneDraw& draw = scene.draws[i];
             if (draw.mesh >= scene.meshes.size()) continue;
@@ -225,7 +224,8 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
             if (static_cast<std::size_t>(mesh.first_index) + mesh.index_count > scene.indices.size()) continue;
             target.material_id = push.material_id;
             double m[16];
-            for (int k = 0; k < 16; ++k) m[k] = push.clip_from_local[k];
+            for (int k = 0; k < 16; ++k)
+                m[k] = push.clip_from_local[k];
 
             const std::size_t vertex_limit = scene.positions.size() / 3;
             const std::uint32_t* idx = scene.indices.data() + mesh.first_index;
@@ -264,7 +264,8 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
                     sv[k] = {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
                 }
                 if (!valid) continue;
-                for (int k = 1; k + 1 < n; ++k) raster_triangle(sv[0], sv[k], sv[k + 1], target);
+                for (int k = 1; k + 1 < n; ++k)
+                    raster_triangle(sv[0], sv[k], sv[k + 1], target);
             }
         }
     }

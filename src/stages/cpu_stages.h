@@ -20,8 +20,10 @@ namespace vksonar::cpu {
 // depth: rows * columns (cleared to 0); material: rows * columns (cleared to kNoMaterial);
 // face_normal: null, or rows * columns * 4 (cleared to 0) receiving the unit plane normal of the
 // winning triangle in clip-linear coordinates (x_clip, y_clip, w_clip), as the GPU's attachment.
+// drawn: null, or one flag per draw slot (cull_depth_draws); a 0 slot is skipped, which changes
+// nothing but the time (its triangles would all be rejected).
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal = nullptr);
+                std::uint32_t* material, float* face_normal = nullptr, const std::uint8_t* drawn = nullptr);
 
 // Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);
@@ -43,8 +45,7 @@ template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar);
 // The same with caller-owned scratch of beamform_scratch_count(plan) values (the overload above allocates it).
 template <class Real>
-void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar,
-              Real* scratch);
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* scratch);
 std::size_t beamform_scratch_count(const Plan& plan);
 
 std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene);

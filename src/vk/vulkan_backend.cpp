@@ -92,6 +92,7 @@ Result<void> VulkanBackend::create_scene_buffers() {
             {mesh.index_count - mesh.index_count % 3, mesh.first_index, static_cast<std::int32_t>(mesh.first_vertex)});
     }
     draw_pushes_.resize(std::size_t(plan_.slices) * scene.draws.size());
+    draws_drawn_.resize(draw_pushes_.size());
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     auto vertices =

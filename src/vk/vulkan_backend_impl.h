@@ -103,6 +103,7 @@ private:
 
     std::vector<DrawRange> draw_ranges_;         // per scene draw
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
+    std::vector<std::uint8_t> draws_drawn_;      // the same slots: 0 = culled this frame
 
     Buffer vertices_, indices_;
     Image depth_image_, material_image_;

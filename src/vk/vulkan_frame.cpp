@@ -53,7 +53,7 @@ void VulkanBackend::record_depth(VkCommandBuffer commands) {
             vkCmdSetScissor(commands, 0, 1, &scissor);
             for (std::size_t i = 0; i < draws; ++i) {
                 const DrawRange& range = draw_ranges_[i];
-                if (range.index_count == 0) {
+                if (range.index_count == 0 || !draws_drawn_[s * draws + i]) {
                     continue;
                 }
                 vkCmdPushConstants(commands, depth_layout_.get(),
@@ -183,6 +183,7 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
     frame.times.clear();
     frame.stages_run.clear();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
+    cull_depth_draws(scene_, draw_pushes_, draws_drawn_);
 
     // Record: one command buffer per stage; the readback goes with the last one.
     std::array<Stage, stage_count> stages{};
