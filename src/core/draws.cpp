@@ -1,5 +1,6 @@
 // compose_depth_draws: world -> sonar -> slice camera -> clip, composed in double and rounded to
 // float once, so a scene 1e5 m from the world origin renders like one at the origin.
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -91,46 +92,79 @@ void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& p
     }
 }
 
-void cull_depth_draws(const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
-                      std::vector<std::uint8_t>& drawn) {
-    drawn.resize(pushes.size());
-    const std::size_t draws = scene.draws.size();
-    for (std::size_t slot = 0; slot < pushes.size(); ++slot) {
-        drawn[slot] = 1;
-        const std::uint32_t mesh_index = draws ? scene.draws[slot % draws].mesh : ~0u;
-        if (mesh_index >= scene.meshes.size() || !scene.meshes[mesh_index].has_bounds) continue;
+void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out) {
+    out.clear();
+    const std::size_t vertex_limit = scene.positions.size() / 3;
+    for (std::size_t i = 0; i < scene.draws.size(); ++i) {
+        const std::uint32_t mesh_index = scene.draws[i].mesh;
+        if (mesh_index >= scene.meshes.size()) continue;
         const MeshRange& mesh = scene.meshes[mesh_index];
-        const float* m = pushes[slot].clip_from_local;
-        unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
-        for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
-            const double p[3] = {corner & 1 ? mesh.bounds_max[0] : mesh.bounds_min[0],
-                                 corner & 2 ? mesh.bounds_max[1] : mesh.bounds_min[1],
-                                 corner & 4 ? mesh.bounds_max[2] : mesh.bounds_min[2]};
-            double c[4], magnitude[4];
-            for (int r = 0; r < 4; ++r) {
-                c[r] = double(m[12 + r]);
-                magnitude[r] = std::abs(c[r]);
-                for (int k = 0; k < 3; ++k) {
-                    const double term = double(m[k * 4 + r]) * p[k];
-                    c[r] += term;
-                    magnitude[r] += std::abs(term);
+        const std::uint32_t index_count = mesh.index_count - mesh.index_count % 3;
+        if (std::size_t(mesh.first_index) + index_count > scene.indices.size()) continue;
+        for (std::uint32_t begin = 0; begin < index_count; begin += 3 * kClusterTriangles) {
+            DepthCluster cluster;
+            cluster.draw = static_cast<std::uint32_t>(i);
+            cluster.first_index = mesh.first_index + begin;
+            cluster.index_count = std::min(3 * kClusterTriangles, index_count - begin);
+            cluster.first_vertex = mesh.first_vertex;
+            bool any = false, valid = true;
+            for (std::uint32_t k = 0; k < cluster.index_count; ++k) {
+                const std::size_t v = std::size_t(mesh.first_vertex) + scene.indices[cluster.first_index + k];
+                if (v >= vertex_limit) {
+                    valid = false;
+                    break;
                 }
+                for (int a = 0; a < 3; ++a) {
+                    const float x = scene.positions[3 * v + std::size_t(a)];
+                    cluster.bounds_min[a] = any ? std::min(cluster.bounds_min[a], x) : x;
+                    cluster.bounds_max[a] = any ? std::max(cluster.bounds_max[a], x) : x;
+                }
+                any = true;
             }
-            // The GPU sums these terms in float: its clip coordinates may differ from c by a few ulp
-            // of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
-            const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);
-            const double tol_y = 1e-5 * (magnitude[1] + magnitude[3]);
-            const double tol_z = 1e-5 * (magnitude[2] + magnitude[3]);
-            unsigned outside = 0;
-            if (c[0] < -c[3] - tol_x) outside |= 0x01u;
-            if (c[0] > c[3] + tol_x) outside |= 0x02u;
-            if (c[1] < -c[3] - tol_y) outside |= 0x04u;
-            if (c[1] > c[3] + tol_y) outside |= 0x08u;
-            if (c[2] > c[3] + tol_z) outside |= 0x10u;
-            if (c[2] < -tol_z) outside |= 0x20u;
-            outside_every_corner &= outside;
+            if (valid && any) out.push_back(cluster);
         }
-        drawn[slot] = outside_every_corner == 0u;
+    }
+}
+
+void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
+                         const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn) {
+    const std::size_t slices = draws ? pushes.size() / draws : 0;
+    drawn.resize(slices * clusters.size());
+    for (std::size_t s = 0; s < slices; ++s) {
+        for (std::size_t c = 0; c < clusters.size(); ++c) {
+            const DepthCluster& cluster = clusters[c];
+            const float* m = pushes[s * draws + cluster.draw].clip_from_local;
+            unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
+            for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
+                const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
+                                     corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
+                                     corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
+                double clip[4], magnitude[4];
+                for (int r = 0; r < 4; ++r) {
+                    clip[r] = double(m[12 + r]);
+                    magnitude[r] = std::abs(clip[r]);
+                    for (int k = 0; k < 3; ++k) {
+                        const double term = double(m[k * 4 + r]) * p[k];
+                        clip[r] += term;
+                        magnitude[r] += std::abs(term);
+                    }
+                }
+                // The GPU sums these terms in float: its clip coordinates may differ from these by a few
+                // ulp of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
+                const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);
+                const double tol_y = 1e-5 * (magnitude[1] + magnitude[3]);
+                const double tol_z = 1e-5 * (magnitude[2] + magnitude[3]);
+                unsigned outside = 0;
+                if (clip[0] < -clip[3] - tol_x) outside |= 0x01u;
+                if (clip[0] > clip[3] + tol_x) outside |= 0x02u;
+                if (clip[1] < -clip[3] - tol_y) outside |= 0x04u;
+                if (clip[1] > clip[3] + tol_y) outside |= 0x08u;
+                if (clip[2] > clip[3] + tol_z) outside |= 0x10u;
+                if (clip[2] < -tol_z) outside |= 0x20u;
+                outside_every_corner &= outside;
+            }
+            drawn[s * clusters.size() + c] = outside_every_corner == 0u;
+        }
     }
 }
 

@@ -105,13 +105,30 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad = std::numeric_l
 // no allocation once it has that size.
 void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
                          std::vector<shared::DepthPush>& out);
-// drawn[s * draws + i] = 0 where draw i cannot put a fragment in slice s: its mesh's bounding box,
-// through the composed (float) clip_from_local, lies wholly outside one plane of the clip volume
-// -w <= x, y <= w, 0 <= z <= w (clearly outside: by more than the GPU's rounding of the transform).
-// Then so does each of its triangles, which both rasterizers reject anyway, so the frame is the
-// same; what goes is the per-draw cost (lavapipe shades and bins every vertex it is given). Meshes
-// without bounds are always drawn. drawn is resized to pushes.size(); no allocation once sized.
-void cull_depth_draws(const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
-                      std::vector<std::uint8_t>& drawn);
+// The depth pass draws each draw's triangles as runs ("clusters") of at most kClusterTriangles
+// consecutive triangles, each with the mesh-local bounding box of its vertices, so that a slice can
+// skip the runs it cannot reach: a large seabed mesh spans every slice, but each of its runs only a
+// few. Draw order and triangle order are kept, so drawing every cluster draws exactly the scene.
+constexpr std::uint32_t kClusterTriangles = 512;
+struct DepthCluster {
+    std::uint32_t draw = 0;         // index into SceneData::draws: its DepthPush
+    std::uint32_t first_index = 0;  // into SceneData::indices
+    std::uint32_t index_count = 0;  // a multiple of 3
+    std::uint32_t first_vertex = 0; // the mesh's, added to every index
+    float bounds_min[3] = {0.0f, 0.0f, 0.0f};
+    float bounds_max[3] = {0.0f, 0.0f, 0.0f};
+};
+// Draws whose mesh or index range is out of bounds, and indices past the vertex data, get no cluster.
+void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out);
+
+// drawn[s * clusters.size() + c] = 0 where cluster c cannot put a fragment in slice s: its bounding
+// box, through the draw's composed (float) clip_from_local, lies wholly outside one plane of the clip
+// volume -w <= x, y <= w, 0 <= z <= w (clearly outside: by more than the GPU's rounding of the
+// transform). Then so does each of its triangles, which both rasterizers reject anyway, so the frame
+// is the same bit for bit; what goes is the cost (lavapipe shades, clips and bins every vertex and
+// triangle it is given, in every slice). pushes: compose_depth_draws's slices * draws table. drawn is
+// resized to slices * clusters; no allocation once sized.
+void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
+                         const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn);
 
 } // namespace vksonar

@@ -589,7 +589,6 @@ private:
         range.index_count = static_cast<std::uint32_t>(indices.size());
         range.first_vertex = static_cast<std::uint32_t>(out_.positions.size() / 3);
         range.vertex_count = vertex_count;
-        set_bounds(range, positions.data());
         out_.positions.insert(out_.positions.end(), positions.begin(), positions.end());
         out_.indices.insert(out_.indices.end(), indices.begin(), indices.end());
         out_.meshes.push_back(range);

@@ -56,7 +56,6 @@ Result<std::uint32_t> Scene::add_mesh(const float* positions_xyz, std::uint32_t 
     range.index_count = index_count;
     range.first_vertex = static_cast<std::uint32_t>(d.positions.size() / 3);
     range.vertex_count = vertex_count;
-    set_bounds(range, positions_xyz);
     d.positions.insert(d.positions.end(), positions_xyz, positions_xyz + 3 * std::size_t(vertex_count));
     d.indices.insert(d.indices.end(), indices, indices + index_count);
     d.meshes.push_back(range);

@@ -40,7 +40,8 @@ public:
         if (plan_.effects.incidence && !plan_.face_normals)
             normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
-        drawn_.resize(draws_.size());
+        build_depth_clusters(scene_, clusters_);
+        clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
     }
 
     Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override {
@@ -59,9 +60,10 @@ public:
         frame.stages_run.clear();
         auto start = Clock::now();
         compose_depth_draws(plan_, scene_, pose, draws_);
-        cull_depth_draws(scene_, draws_, drawn_);
+        cull_depth_clusters(clusters_, scene_.draws.size(), draws_, clusters_drawn_);
+        const DepthClusters clusters{clusters_, clusters_drawn_};
         depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(), plan_.face_normals ? face_.data() : nullptr,
-                   drawn_.data());
+                   &clusters);
         finish("depth", start, frame);
 
         const float* normals = nullptr;
@@ -116,7 +118,8 @@ private:
     Plan plan_;              // copied: the backend may outlive the caller's Plan object
     const SceneData& scene_; // the scene must outlive the renderer (renderer.h)
     std::vector<shared::DepthPush> draws_;
-    std::vector<std::uint8_t> drawn_; // cull_depth_draws: 0 = the draw cannot reach that slice
+    std::vector<DepthCluster> clusters_;
+    std::vector<std::uint8_t> clusters_drawn_; // slices * clusters, 0 = the cluster cannot reach that slice
     std::vector<float> depth_;
     std::vector<std::uint32_t> material_;
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)

@@ -196,10 +196,59 @@ bool finite(const ClipVertex& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
 }
 
+// One run of triangles of one draw (a whole mesh, or one cluster of it) into one slice.
+void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::uint32_t first_vertex,
+                   const std::uint32_t* idx, std::uint32_t index_count, double x_offset, double half_w, double half_h,
+                   Target& target) {
+    target.material_id = push.material_id;
+    double m[16];
+    for (int k = 0; k < 16; ++k)
+        m[k] = push.clip_from_local[k];
+    const std::size_t vertex_limit = scene.positions.size() / 3;
+    for (std::uint32_t tri = 0; tri + 3 <= index_count; tri += 3) {
+        ClipVertex poly[8], tmp[8];
+        bool ok = true;
+        for (int k = 0; k < 3 && ok; ++k) {
+            const std::size_t v = static_cast<std::size_t>(first_vertex) + idx[tri + k];
+            if (v >= vertex_limit) {
+                ok = false;
+                break;
+            }
+            poly[k] = transform(m, scene.positions.data() + 3 * v);
+            ok = finite(poly[k]);
+        }
+        if (!ok) continue;
+        const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
+        if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
+        if (target.face_normal) plane_normal(poly, target.triangle_normal);
+        int n = 3;
+        if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
+            n = clip_against(poly, n, tmp, 0);
+            if (n < 3) continue;
+            n = clip_against(tmp, n, poly, 1);
+            if (n < 3) continue;
+        }
+        ScreenVertex sv[8];
+        bool valid = true;
+        for (int k = 0; k < n; ++k) {
+            const ClipVertex& c = poly[k];
+            if (!(c.w > 0.0)) {
+                valid = false;
+                break;
+            }
+            const double xn = c.x / c.w, yn = c.y / c.w, zn = c.z / c.w;
+            sv[k] = {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
+        }
+        if (!valid) continue;
+        for (int k = 1; k + 1 < n; ++k)
+            raster_triangle(sv[0], sv[k], sv[k + 1], target);
+    }
+}
+
 } // namespace
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal, const std::uint8_t* drawn) {
+                std::uint32_t* material, float* face_normal, const DepthClusters* clusters) {
     const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
     const std::size_t pixels = static_cast<std::size_t>(rows) * columns;
     std::fill(depth, depth + pixels, 0.0f);
@@ -213,60 +262,26 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
                       rows,  0};
         target.face_normal = face_normal;
         const double x_offset = static_cast<double>(s) * W;
+        if (clusters) {
+            const std::size_t count = clusters->runs.size();
+            for (std::size_t c = 0; c < count; ++c) {
+                const DepthCluster& run = clusters->runs[c];
+                const std::size_t slot = s * draw_count + run.draw;
+                if (slot >= draws.size() || !clusters->drawn[s * count + c]) continue;
+                rasterize_run(scene, draws[slot], run.first_vertex, scene.indices.data() + run.first_index,
+                              run.index_count, x_offset, half_w, half_h, target);
+            }
+            continue;
+        }
         for (std::size_t i = 0; i < draw_count; ++i) {
             const std::size_t slot = s * draw_count + i;
             if (slot >= draws.size()) break;
-            if (drawn && !drawn[slot]) continue;
-            const shared::DepthPush& push = draws[slot];
             const SceneDraw& draw = scene.draws[i];
             if (draw.mesh >= scene.meshes.size()) continue;
             const MeshRange& mesh = scene.meshes[draw.mesh];
             if (static_cast<std::size_t>(mesh.first_index) + mesh.index_count > scene.indices.size()) continue;
-            target.material_id = push.material_id;
-            double m[16];
-            for (int k = 0; k < 16; ++k)
-                m[k] = push.clip_from_local[k];
-
-            const std::size_t vertex_limit = scene.positions.size() / 3;
-            const std::uint32_t* idx = scene.indices.data() + mesh.first_index;
-            for (std::uint32_t tri = 0; tri + 3 <= mesh.index_count; tri += 3) {
-                ClipVertex poly[8], tmp[8];
-                bool ok = true;
-                for (int k = 0; k < 3 && ok; ++k) {
-                    const std::size_t v = static_cast<std::size_t>(mesh.first_vertex) + idx[tri + k];
-                    if (v >= vertex_limit) {
-                        ok = false;
-                        break;
-                    }
-                    poly[k] = transform(m, scene.positions.data() + 3 * v);
-                    ok = finite(poly[k]);
-                }
-                if (!ok) continue;
-                const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
-                if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
-                if (face_normal) plane_normal(poly, target.triangle_normal);
-                int n = 3;
-                if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
-                    n = clip_against(poly, n, tmp, 0);
-                    if (n < 3) continue;
-                    n = clip_against(tmp, n, poly, 1);
-                    if (n < 3) continue;
-                }
-                ScreenVertex sv[8];
-                bool valid = true;
-                for (int k = 0; k < n; ++k) {
-                    const ClipVertex& c = poly[k];
-                    if (!(c.w > 0.0)) {
-                        valid = false;
-                        break;
-                    }
-                    const double xn = c.x / c.w, yn = c.y / c.w, zn = c.z / c.w;
-                    sv[k] = {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
-                }
-                if (!valid) continue;
-                for (int k = 1; k + 1 < n; ++k)
-                    raster_triangle(sv[0], sv[k], sv[k + 1], target);
-            }
+            rasterize_run(scene, draws[slot], mesh.first_vertex, scene.indices.data() + mesh.first_index,
+                          mesh.index_count, x_offset, half_w, half_h, target);
         }
     }
 }

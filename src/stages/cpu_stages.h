@@ -20,10 +20,15 @@ namespace vksonar::cpu {
 // depth: rows * columns (cleared to 0); material: rows * columns (cleared to kNoMaterial);
 // face_normal: null, or rows * columns * 4 (cleared to 0) receiving the unit plane normal of the
 // winning triangle in clip-linear coordinates (x_clip, y_clip, w_clip), as the GPU's attachment.
-// drawn: null, or one flag per draw slot (cull_depth_draws); a 0 slot is skipped, which changes
-// nothing but the time (its triangles would all be rejected).
+// clusters: null (every draw's whole mesh), or the scene as build_depth_clusters's runs with
+// cull_depth_clusters's flags: the runs flagged 0 in a slice are skipped there, which changes nothing
+// but the time (each of their triangles would be rejected).
+struct DepthClusters {
+    const std::vector<DepthCluster>& runs;
+    const std::vector<std::uint8_t>& drawn; // slices * runs
+};
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal = nullptr, const std::uint8_t* drawn = nullptr);
+                std::uint32_t* material, float* face_normal = nullptr, const DepthClusters* clusters = nullptr);
 
 // Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);

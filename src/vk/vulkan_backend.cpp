@@ -74,7 +74,6 @@ Result<void> VulkanBackend::init() {
 
 Result<void> VulkanBackend::create_scene_buffers() {
     const SceneData& scene = scene_;
-    draw_ranges_.reserve(scene.draws.size());
     for (std::size_t i = 0; i < scene.draws.size(); ++i) {
         const SceneDraw& draw = scene.draws[i];
         if (draw.mesh >= scene.meshes.size()) {
@@ -88,11 +87,10 @@ Result<void> VulkanBackend::create_scene_buffers() {
             return make_error(ErrorCode::invalid_argument,
                               "scene mesh " + std::to_string(draw.mesh) + ": index or vertex range out of bounds");
         }
-        draw_ranges_.push_back(
-            {mesh.index_count - mesh.index_count % 3, mesh.first_index, static_cast<std::int32_t>(mesh.first_vertex)});
     }
+    build_depth_clusters(scene, clusters_);
     draw_pushes_.resize(std::size_t(plan_.slices) * scene.draws.size());
-    draws_drawn_.resize(draw_pushes_.size());
+    clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     auto vertices =

@@ -53,12 +53,6 @@ struct Region {
     VkDeviceSize bytes = 0;
 };
 
-struct DrawRange {
-    std::uint32_t index_count = 0;
-    std::uint32_t first_index = 0;
-    std::int32_t vertex_offset = 0;
-};
-
 class HostDepthPass; // host_depth.cpp: runs these stages on a host engine's depth image
 
 class VulkanBackend final : public StageBackend {
@@ -101,9 +95,9 @@ private:
     bool face_normals_ = false; // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
 
-    std::vector<DrawRange> draw_ranges_;         // per scene draw
+    std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
-    std::vector<std::uint8_t> draws_drawn_;      // the same slots: 0 = culled this frame
+    std::vector<std::uint8_t> clusters_drawn_;   // slices * clusters: 0 = culled this frame
 
     Buffer vertices_, indices_;
     Image depth_image_, material_image_;

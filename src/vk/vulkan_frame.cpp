@@ -37,8 +37,8 @@ void VulkanBackend::record_depth(VkCommandBuffer commands) {
     begin.clearValueCount = face_normals_ ? 3u : 2u;
     begin.pClearValues = clears.data();
     vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
-    const std::size_t draws = draw_ranges_.size();
-    if (draws > 0) {
+    const std::size_t draws = scene_.draws.size(), clusters = clusters_.size();
+    if (clusters > 0) {
         vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline_.get());
         VkBuffer vertex_buffer = vertices_.get();
         VkDeviceSize zero = 0;
@@ -51,15 +51,18 @@ void VulkanBackend::record_depth(VkCommandBuffer commands) {
                              {plan_.slice_columns, plan_.rows}};
             vkCmdSetViewport(commands, 0, 1, &viewport);
             vkCmdSetScissor(commands, 0, 1, &scissor);
-            for (std::size_t i = 0; i < draws; ++i) {
-                const DrawRange& range = draw_ranges_[i];
-                if (range.index_count == 0 || !draws_drawn_[s * draws + i]) {
-                    continue;
+            std::uint32_t pushed_draw = ~0u; // clusters of one draw are consecutive: one push for them all
+            for (std::size_t c = 0; c < clusters; ++c) {
+                const DepthCluster& cluster = clusters_[c];
+                if (!clusters_drawn_[s * clusters + c]) continue;
+                if (cluster.draw != pushed_draw) {
+                    vkCmdPushConstants(commands, depth_layout_.get(),
+                                       VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                       sizeof(shared::DepthPush), &draw_pushes_[s * draws + cluster.draw]);
+                    pushed_draw = cluster.draw;
                 }
-                vkCmdPushConstants(commands, depth_layout_.get(),
-                                   VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
-                                   sizeof(shared::DepthPush), &draw_pushes_[s * draws + i]);
-                vkCmdDrawIndexed(commands, range.index_count, 1, range.first_index, range.vertex_offset, 0);
+                vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
+                                 static_cast<std::int32_t>(cluster.first_vertex), 0);
             }
         }
     }
@@ -183,7 +186,7 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
     frame.times.clear();
     frame.stages_run.clear();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
-    cull_depth_draws(scene_, draw_pushes_, draws_drawn_);
+    cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
 
     // Record: one command buffer per stage; the readback goes with the last one.
     std::array<Stage, stage_count> stages{};
