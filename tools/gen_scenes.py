@@ -16,6 +16,7 @@ import math
 import os
 import random
 import struct
+import sys
 
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
@@ -320,14 +321,14 @@ def report(path, g, roots):
 
 # ---- bundled scenes -----------------------------------------------------------------------------
 
-def default_scene():
+def default_scene(seabed_quads=48, path=None):
     """Seabed at z = -5 m with concrete pilings, a steel pipe, a crate and a sphere 8-30 m ahead."""
     g = Gltf()
     sand = g.material("seabed_sand", -30, "lambert")
     steel = g.material("steel", -10, "lambert")
     concrete = g.material("concrete", -15, "lambert")
 
-    seabed = g.mesh("seabed", grid(60, 60, 48, 48, seabed_relief(1, 0.06)), sand)
+    seabed = g.mesh("seabed", grid(60, 60, seabed_quads, seabed_quads, seabed_relief(1, 0.06)), sand)
     piling = g.mesh("piling", closed(cylinder(0.4, 10.0, 32)), concrete)  # base at its origin
     pipe = g.mesh("pipe", closed(cylinder(0.5, 6.0, 32, y0=-3.0)), steel)  # centred on its origin
     crate = g.mesh("crate", closed(box(2.0, 1.5, 1.2, y0=0.0)), steel)
@@ -343,7 +344,7 @@ def default_scene():
     nodes.append(pipe_node)
     nodes.append(g.node("crate", crate, t=w2g(15, 6, -5), r=quat_world((0, 0, 1), 20)))
     nodes.append(g.node("sphere", sphere, t=w2g(10, -3, -4)))
-    path = os.path.join(ROOT, "assets/scenes/default.gltf")
+    path = path or os.path.join(ROOT, "assets/scenes/default.gltf")
     g.write_gltf(path, nodes)
     report(path, g, nodes)
 
@@ -601,6 +602,11 @@ def bad_corpus():
 
 
 def main():
+    if len(sys.argv) == 3 and sys.argv[1] == "--heavy":
+        # Not bundled (1.6 MB): the default scene with a 220 x 220-quad seabed, 98k triangles in all, the
+        # load DESIGN §9's prototype was timed at (docs/benchmarks.md, depth-pass culling).
+        default_scene(220, os.path.join(sys.argv[2], "default_98k.gltf"))
+        return
     default_scene()
     harbour_scene()
     tilted_seafloor_scene()
