@@ -17,6 +17,7 @@
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
+#include "vksonar/scene.h"
 
 namespace vksonar {
 namespace {
@@ -410,9 +411,10 @@ TEST(CpuDepth, ScissorConfinesEachSliceToItsOwnColumns) {
 
 // Culling (build_depth_clusters, cull_depth_clusters): composes the pose's draws, culls, and checks
 // that the frame drawn with the culling is the frame drawn without it, bit for bit (a cluster is only
-// skipped where none of its triangles could cover a pixel). Returns the drawn flags.
+// skipped where none of its triangles could cover a pixel). Returns the drawn flags; hits, if given,
+// receives the number of pixels hit (else at least one must be).
 std::vector<std::uint8_t> culled_and_checked(const Plan& plan, const SceneData& scene, const Pose& pose,
-                                             std::vector<DepthCluster>& clusters) {
+                                             std::vector<DepthCluster>& clusters, std::size_t* hits = nullptr) {
     std::vector<shared::DepthPush> pushes;
     std::vector<std::uint8_t> drawn;
     compose_depth_draws(plan, scene, pose, pushes);
@@ -427,7 +429,12 @@ std::vector<std::uint8_t> culled_and_checked(const Plan& plan, const SceneData& 
     cpu::depth_pass(plan, scene, pushes, depth_culled.data(), material_culled.data(), nullptr, &culled);
     EXPECT_EQ(depth_all, depth_culled) << "pose x " << pose.x_m << " yaw " << pose.yaw_deg;
     EXPECT_EQ(material_all, material_culled);
-    EXPECT_GT(std::count(material_all.begin(), material_all.end(), 0u), 0); // something was drawn
+    const auto hit = std::size_t(std::count_if(depth_all.begin(), depth_all.end(), [](float d) { return d > 0.0f; }));
+    if (hits) {
+        *hits = hit;
+    } else {
+        EXPECT_GT(hit, 0u); // something was drawn
+    }
     return drawn;
 }
 
@@ -547,6 +554,42 @@ TEST(DepthClusters, ALargeSeabedIsDrawnOnlyWhereEachSliceSeesIt) {
             EXPECT_LT(drawn_here, std::ptrdiff_t(clusters.size())) << "yaw " << yaw << " slice " << s;
         }
     }
+}
+
+// The bundled scenes seen from random poses (seeded), 130 and 360 degrees: culled frames equal the
+// frames drawn without culling, bit for bit, while the culling does skip clusters.
+TEST(DepthClusters, BundledScenesFromRandomPosesAreTheSameCulled) {
+    std::mt19937 rng(20261123u);
+    std::uniform_real_distribution<double> x(-5.0, 40.0), y(-20.0, 20.0), z(-7.0, 3.0), tilt(-40.0, 40.0),
+        yaw(-180.0, 180.0);
+    std::size_t poses_with_hits = 0, skipped = 0, pairs = 0;
+    for (const char* name : {"default", "harbour", "tilted_seafloor"}) {
+        auto scene = Scene::load_gltf(std::string(VKSONAR_ASSET_DIR "/scenes/") + name + ".gltf");
+        ASSERT_TRUE(scene.ok()) << name;
+        for (const double hfov : {130.0, 360.0}) {
+            SonarConfig config;
+            config.hfov_deg = hfov;
+            const Plan plan = plan_for(config, scene.value().data());
+            for (int i = 0; i < 8; ++i) {
+                Pose pose;
+                pose.x_m = x(rng);
+                pose.y_m = y(rng);
+                pose.z_m = z(rng);
+                pose.roll_deg = tilt(rng);
+                pose.pitch_deg = tilt(rng);
+                pose.yaw_deg = yaw(rng);
+                std::vector<DepthCluster> clusters;
+                std::size_t hits = 0;
+                const std::vector<std::uint8_t> drawn =
+                    culled_and_checked(plan, scene.value().data(), pose, clusters, &hits);
+                poses_with_hits += hits > 0;
+                skipped += std::size_t(std::count(drawn.begin(), drawn.end(), std::uint8_t(0)));
+                pairs += drawn.size();
+            }
+        }
+    }
+    EXPECT_GT(poses_with_hits, 24u); // most of the 48 poses see something
+    EXPECT_GT(skipped, pairs / 4);   // and the culling had work to do
 }
 
 TEST(CpuDepth, MeshFanHasNoGapsOrOverlapsUnderPerspectiveAndFarClipping) {
