@@ -94,6 +94,13 @@ TEST(Config, UnknownKeySuggestsClosest) {
     EXPECT_NE(override_error("rnage_max=3").find("did you mean 'range_max'"), std::string::npos);
 }
 
+// A key is echoed in the message; one holding a newline (JSON "\n") must not break the message into
+// two lines, so control characters come out escaped.
+TEST(Config, ControlCharactersInAKeyAreEscaped) {
+    EXPECT_EQ(apply_error(R"({"hf\nov\u0001": 90})").rfind("test.json: unknown key 'hf\\nov\\x01'", 0), 0u);
+    EXPECT_EQ(override_error("hf\tov=3").rfind("--set hf\\tov=3: unknown key 'hf\\tov'", 0), 0u);
+}
+
 TEST(Config, WrongTypesNameKeyAndValue) {
     const auto beams = apply_error(R"({"beams": "many"})");
     EXPECT_NE(beams.find("test.json"), std::string::npos) << beams;

@@ -369,6 +369,22 @@ std::string temp_path(const std::string& name) {
     return (dir / name).string();
 }
 
+// Warnings are printed one per line like errors, so names and keys from the file are escaped there too.
+TEST(SceneWarnings, ControlCharactersFromTheFileAreEscaped) {
+    std::ifstream in(test_file("bad_gltf/bad_backscatter.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["materials"][0]["name"] = "quay\nwall";
+    doc["materials"][0]["extras"]["vksonar"] = {{"backscatter_db", -20.0}, {"rough\tness", 1}};
+    const std::string path = temp_path("control_chars_in_names.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    EXPECT_EQ(scene.data().materials.at(0).name, "quay\nwall"); // the name itself is kept as written
+    const std::vector<std::string>& w = scene.stats().warnings;
+    ASSERT_EQ(w.size(), 1u);
+    EXPECT_NE(w[0].find("material 0 'quay\\nwall': unknown key extras.vksonar.rough\\tness ignored"), std::string::npos)
+        << w[0];
+}
+
 TEST(SceneGlb, RoundTripMatchesTheGltf) {
     const std::string path = temp_path("plane_roundtrip.glb");
     write_bytes(path, make_plane_glb());
@@ -481,6 +497,9 @@ const BadCase bad_cases[] = {
     {"index_count_not_multiple.gltf", ErrorCode::parse, "multiple of 3"},
     {"position_not_float.gltf", ErrorCode::unsupported, "float VEC3"},
     {"bad_default_scene.gltf", ErrorCode::parse, "scene 3"},
+    // Names from the file are quoted in messages; control characters in them come out escaped.
+    {"newline_in_name.gltf", ErrorCode::parse, "material 0 'quay\\nwall\\x01'"},
+    {"newline_in_extension.gltf", ErrorCode::unsupported, "unsupported required extension KHR_\\nmade_up\\r"},
 };
 
 class BadGltf : public ::testing::TestWithParam<BadCase> {};

@@ -61,8 +61,39 @@ private:
     bool ok_ = true;
 };
 
+namespace detail {
+// Messages quote names and values taken from the input (a glTF material name, a JSON key, a URI), and
+// those may hold a newline or other control characters. Escape them C-style so that a message stays
+// one printable line whatever the input held.
+inline std::string escape_control_chars(std::string text) {
+    std::string::size_type at = 0;
+    while (at < text.size() && static_cast<unsigned char>(text[at]) >= 0x20 && text[at] != 0x7f)
+        ++at;
+    if (at == text.size()) return text; // the common case: nothing to escape, no copy
+    std::string out = text.substr(0, at);
+    static const char hex[] = "0123456789abcdef";
+    for (; at < text.size(); ++at) {
+        const auto c = static_cast<unsigned char>(text[at]);
+        if (c >= 0x20 && c != 0x7f) {
+            out += static_cast<char>(c);
+        } else if (c == '\n') {
+            out += "\\n";
+        } else if (c == '\r') {
+            out += "\\r";
+        } else if (c == '\t') {
+            out += "\\t";
+        } else {
+            out += "\\x";
+            out += hex[c >> 4];
+            out += hex[c & 15];
+        }
+    }
+    return out;
+}
+} // namespace detail
+
 inline Error make_error(ErrorCode code, std::string message, VkResult vk_result = VK_SUCCESS) {
-    return Error{code, std::move(message), vk_result};
+    return Error{code, detail::escape_control_chars(std::move(message)), vk_result};
 }
 
 } // namespace vksonar

@@ -3,10 +3,12 @@
 #include <cstdio>
 #include <exception>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "vksonar/result.h"
 
 namespace {
 
@@ -48,11 +50,9 @@ int dispatch(const std::vector<std::string>& argv) {
                    "'?); run 'vksonar --help'");
 }
 
-// Messages go out as exactly one line.
+// Messages go out as exactly one line, control characters escaped as in every vksonar::Error.
 std::string one_line(std::string text) {
-    for (char& ch : text)
-        if (ch == '\n' || ch == '\r') ch = ' ';
-    return text;
+    return vksonar::detail::escape_control_chars(std::move(text));
 }
 
 } // namespace

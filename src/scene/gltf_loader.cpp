@@ -701,8 +701,8 @@ Result<Scene> Scene::load_gltf(const std::string& path) {
         data.source_path = path;
         const tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, data.stats.warnings);
         Converter(model, data).run();
-        for (std::string& w : data.stats.warnings)
-            w = path + ": " + w;
+        for (std::string& w : data.stats.warnings) // one line each, like errors (names may hold newlines)
+            w = detail::escape_control_chars(path + ": " + w);
         return Result<Scene>(std::move(scene));
     } catch (const LoadFailure& e) {
         return make_error(e.code, path + ": " + e.what);
