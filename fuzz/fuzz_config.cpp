@@ -2,6 +2,7 @@
 // a config that parses and validates must serialize and parse back to the same JSON. The input's
 // lines are also fed to apply_config_override (the --set path).
 // Build: scripts/fuzz.sh (clang, -DVKSONAR_FUZZ=ON). Seeds: fuzz/corpus/config, assets/presets.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -9,6 +10,15 @@
 #include <string>
 
 #include "vksonar/config.h"
+
+namespace {
+
+// Messages are printed one per line: no newline, carriage return or other control character.
+bool one_printable_line(const std::string& text) {
+    return std::none_of(text.begin(), text.end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; });
+}
+
+} // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     const std::string text(reinterpret_cast<const char*>(data), size);
@@ -22,8 +32,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
             const auto again = vksonar::apply_config_json(base, json, "roundtrip.json");
             if (!again.ok() || vksonar::config_to_json(again.value()) != json) std::abort();
         }
-    } else if (parsed.error().message.find('\n') != std::string::npos) {
-        std::abort(); // errors are one line
+    } else if (!one_printable_line(parsed.error().message) || parsed.error().message.rfind("fuzz.json: ", 0) != 0) {
+        std::abort(); // errors are one line that starts with the file's name
     }
 
     std::istringstream lines(text);
@@ -34,6 +44,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         if (next.ok()) {
             config = next.value();
             (void)config.validate();
+        } else if (!one_printable_line(next.error().message)) {
+            std::abort();
         }
     }
     return 0;
