@@ -4,9 +4,10 @@
 #   bash scripts/fuzz.sh                     # CI: a fixed number of inputs from a fixed seed (below)
 #   FUZZ_SECONDS=3600 bash scripts/fuzz.sh   # exploring: a timed run from a random seed whose corpus
 #                                            # grows across runs (see docs/hard_cases.md)
-# The CI run is reproducible: the same seed, input count and empty starting corpus give the same
-# inputs on any machine, so a CI result can be replayed here, and a new finding comes from a change to
-# the code rather than from the luck of a timed run. Findings come from the exploring runs.
+# The CI run tries the same inputs every time (same seed, input count, empty starting corpus and the
+# settings in run_target; checked here and from a fresh clone elsewhere, though a machine with another
+# environment may still differ slightly), so a CI result can be replayed here and a new finding comes
+# from a change to the code rather than from the luck of a timed run. Findings come from exploring.
 # Installs clang and its libFuzzer runtime with apt-get when missing; if that is impossible it prints
 # why and exits 0 (the fuzz job is skipped, not failed). A crash or sanitizer report exits non-zero
 # and leaves the reproducer in $BUILD_DIR/crashes/: add it to tests/data/bad_gltf (or
@@ -80,10 +81,11 @@ run_target() { # target, seed dirs...
     rm -rf "$work"
     # -reload=0: no rereading of the corpus directory once a second (a timing-dependent change of
     # the corpus); -use_cmp=0: no mutations from traced comparison operands, which include pointer
-    # values that differ from run to run under ASLR. With both, the run is the same every time.
+    # values that differ from run to run under ASLR.
     budget=(-runs="${CI_RUNS[$target]}" -seed="$FUZZ_SEED" -reload=0 -use_cmp=0)
     # Address randomization off where allowed: some inlined library code takes address-dependent
-    # branches, which changes coverage and so the inputs that follow.
+    # branches, which changes coverage and so the inputs that follow. With all three, two runs here
+    # end with the same coverage, features and corpus (docs/hard_cases.md).
     if setarch "$(uname -m)" -R true 2>/dev/null; then launcher=(setarch "$(uname -m)" -R); fi
     echo "fuzz: $target, ${CI_RUNS[$target]} inputs from seed $FUZZ_SEED" >&2
   fi
