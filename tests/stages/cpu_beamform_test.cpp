@@ -1,0 +1,315 @@
+// Tests of the CPU beamform stage (src/stages/cpu_beamform.cpp) against docs/pipeline.md §4: energy
+// conservation, resampling weights, side lobes, float vs double.
+// Every tolerance is justified next to it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "cpu_stage_support.h"
+
+namespace vksonar {
+namespace {
+
+using namespace stage_testing;
+
+template <class Real> class CpuBeamform : public ::testing::Test {};
+TYPED_TEST_SUITE(CpuBeamform, Precisions);
+
+struct BeamformOut {
+    std::vector<float> profiles, beams, polar;
+};
+
+template <class Real> BeamformOut run_beamform(const Plan& plan, const std::vector<float>& echo2) {
+    BeamformOut o;
+    o.profiles.assign(std::size_t(plan.bins) * plan.columns, -1.0f);
+    o.beams.assign(std::size_t(plan.bins) * plan.beams, -1.0f);
+    o.polar.assign(std::size_t(plan.bins) * plan.beams, -1.0f);
+    cpu::beamform<Real>(plan, echo2.data(), o.profiles.data(), o.beams.data(), o.polar.data());
+    return o;
+}
+
+// Random echo: energies in (0, 1) at ranges inside the window, a third of the pixels empty.
+std::vector<float> random_echo(const Plan& plan, double* total) {
+    std::mt19937 rng(1234);
+    std::uniform_real_distribution<double> uni(0.0, 1.0);
+    std::vector<float> e(std::size_t(plan.rows) * plan.columns * 2, 0.0f);
+    *total = 0;
+    for (std::size_t p = 0; p < e.size() / 2; ++p) {
+        if (uni(rng) < 0.33) continue;
+        const double r = plan.config.range_min_m + uni(rng) * (plan.config.range_max_m - plan.config.range_min_m);
+        e[2 * p] = float(uni(rng));
+        float rf = float(r);
+        if (rf >= float(plan.config.range_max_m)) rf = std::nextafter(float(plan.config.range_max_m), 0.0f);
+        e[2 * p + 1] = rf;
+        *total += e[2 * p];
+    }
+    return e;
+}
+
+TYPED_TEST(CpuBeamform, TentKernelConservesEnergyAndIsBitIdenticalRunToRun) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    SonarConfig config = small_config();
+    config.effects.horizontal_pattern = EffectMode::off;
+    const Plan plan = plan_for(config, b.scene);
+    double total = 0;
+    const std::vector<float> echo2 = random_echo(plan, &total);
+    const BeamformOut a = run_beamform<Real>(plan, echo2);
+    const BeamformOut again = run_beamform<Real>(plan, echo2);
+    EXPECT_EQ(0, std::memcmp(a.polar.data(), again.polar.data(), a.polar.size() * sizeof(float)));
+    EXPECT_EQ(0, std::memcmp(a.profiles.data(), again.profiles.data(), a.profiles.size() * sizeof(float)));
+
+    double sum_profiles = 0, sum_beams = 0, sum_polar = 0;
+    for (float x : a.profiles)
+        sum_profiles += x;
+    for (float x : a.beams)
+        sum_beams += x;
+    for (float x : a.polar)
+        sum_polar += x;
+    // ~1400 values of ~0.5 summed per column into ~128 bins: float accumulation error ~ sqrt(rows) eps
+    // per bin, float storage 6e-8; 1e-5 relative covers float arithmetic with a wide margin, double
+    // arithmetic only sees the float roundings of the stored intermediates (1e-6).
+    const double tol = (std::is_same_v<Real, double> ? 1e-6 : 1e-5) * total;
+    EXPECT_NEAR(sum_profiles, total, tol);
+    EXPECT_NEAR(sum_beams, total, tol);
+    EXPECT_NEAR(sum_polar, total, tol);
+    for (std::size_t i = 0; i < a.polar.size(); ++i)
+        EXPECT_EQ(a.polar[i], a.beams[i]); // pattern off: copy
+}
+
+TYPED_TEST(CpuBeamform, RangeKernelsPlaceEnergyInTheContractsBins) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    for (RangeKernel kernel : {RangeKernel::nearest, RangeKernel::tent}) {
+        SonarConfig config = small_config();
+        config.range_kernel = kernel;
+        config.effects.horizontal_pattern = EffectMode::off;
+        const Plan plan = plan_for(config, b.scene);
+        const double w = plan.bin_width_m, r0 = plan.config.range_min_m;
+        struct Case {
+            double r, e;
+        };
+        // column 0: bin centre of bin 10; column 1: a quarter into bin 20; column 2: just above range_min;
+        // column 3: just below range_max.
+        const Case cases[4] = {
+            {r0 + 10.5 * w, 1.0}, {r0 + 20.25 * w, 2.0}, {r0 + 0.1 * w, 4.0}, {r0 + (plan.bins - 0.1) * w, 8.0}};
+        std::vector<float> echo2(std::size_t(plan.rows) * plan.columns * 2, 0.0f);
+        for (int c = 0; c < 4; ++c) {
+            echo2[2 * (std::size_t(7) * plan.columns + c)] = float(cases[c].e);
+            echo2[2 * (std::size_t(7) * plan.columns + c) + 1] = float(cases[c].r);
+        }
+        const BeamformOut o = run_beamform<Real>(plan, echo2);
+        auto prof = [&](std::uint32_t k, std::uint32_t c) {
+            return double(o.profiles[std::size_t(k) * plan.columns + c]);
+        };
+        // Tolerances: ranges are stored as float (ulp ~2e-6 m at 20 m, i.e. 7e-6 of a 0.31 m bin).
+        const double tol = 1e-4;
+        if (kernel == RangeKernel::nearest) {
+            EXPECT_EQ(prof(10, 0), 1.0);
+            EXPECT_EQ(prof(20, 1), 2.0);
+            EXPECT_EQ(prof(0, 2), 4.0);
+            EXPECT_EQ(prof(plan.bins - 1, 3), 8.0);
+        } else {
+            EXPECT_NEAR(prof(10, 0), 1.0, tol);
+            // t = 19.75: 0.25 to bin 19, 0.75 to bin 20
+            EXPECT_NEAR(prof(19, 1), 0.25 * 2.0, tol * 2);
+            EXPECT_NEAR(prof(20, 1), 0.75 * 2.0, tol * 2);
+            EXPECT_NEAR(prof(0, 2), 4.0, tol * 4);             // share below bin 0 kept in bin 0
+            EXPECT_NEAR(prof(plan.bins - 1, 3), 8.0, tol * 8); // share above the last bin kept
+        }
+        for (int c = 0; c < 4; ++c) {
+            double s = 0;
+            for (std::uint32_t k = 0; k < plan.bins; ++k)
+                s += prof(k, c);
+            EXPECT_NEAR(s, cases[c].e, 1e-6 * cases[c].e); // nothing lost; float roundings only
+        }
+    }
+}
+
+TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    SonarConfig config = small_config();
+    config.horizontal_beamwidth_deg = 4.0; // several side-lobe taps
+    const Plan plan = plan_for(config, b.scene);
+    ASSERT_TRUE(plan.effects.horizontal_pattern);
+    ASSERT_GT(plan.sidelobe_taps, 3u);
+    double total = 0;
+    const std::vector<float> echo2 = random_echo(plan, &total);
+    const BeamformOut o = run_beamform<Real>(plan, echo2);
+    const std::int64_t K = (plan.sidelobe_taps - 1) / 2;
+    double max_rel = 0;
+    for (std::uint32_t k = 0; k < plan.bins; ++k) {
+        for (std::uint32_t j = 0; j < plan.beams; ++j) {
+            double B = 0; // resample from the definition: every column, weight by the table
+            for (std::uint32_t c = 0; c < plan.columns; ++c) {
+                const double w = plan.column_beam[c] == j       ? plan.column_weight[c]
+                                 : plan.column_beam[c] + 1 == j ? 1.0 - plan.column_weight[c]
+                                                                : 0.0;
+                B += w * o.profiles[std::size_t(k) * plan.columns + c];
+            }
+            double P = 0;
+            for (std::uint32_t t = 0; t < plan.sidelobe_taps; ++t) {
+                const std::int64_t src = std::int64_t(j) - K + t;
+                if (src < 0 || src >= std::int64_t(plan.beams)) continue;
+                P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) *
+                     o.beams[std::size_t(k) * plan.beams + src];
+            }
+            const double gotB = o.beams[std::size_t(k) * plan.beams + j],
+                         gotP = o.polar[std::size_t(k) * plan.beams + j];
+            // Sums of <= ~10 positive float terms: float arithmetic is good to ~1e-6 relative.
+            EXPECT_NEAR(gotB, B, 2e-6 * B + 1e-30);
+            EXPECT_NEAR(gotP, P, 2e-6 * P + 1e-30);
+            if (P > 0) max_rel = std::max(max_rel, std::abs(gotP - P) / P);
+        }
+    }
+    this->RecordProperty("max_rel_sidelobe", std::to_string(max_rel));
+}
+
+// Backend
+
+// A seabed tilted down ahead, a box on it and a wall behind: every stage has work to do.
+SceneData test_scene() {
+    SceneBuilder b;
+    const std::uint32_t bed = b.material(-30.0), box = b.material(-15.0),
+                        wall = b.material(-25.0, AcousticMaterial::Model::constant);
+    b.draw(b.mesh({0.5f, -30.f, -1.0f, 45.f, -30.f, -6.0f, 45.f, 30.f, -6.0f, 0.5f, 30.f, -1.0f}, {0, 1, 2, 0, 2, 3}),
+           bed);
+    const double lo[3] = {12.0, -1.0, -3.0}, hi[3] = {13.5, 1.5, -1.0};
+    b.draw(b.box(lo, hi), box, yaw_translate(20.0, 0, 0, 0));
+    b.draw(b.quad_x(0.0, -20.0, 20.0, -8.0, 8.0), wall, yaw_translate(-15.0, 30.0, 0.0, 0.0));
+    return b.scene;
+}
+
+Frame sized_frame(const Plan& plan) {
+    Frame f;
+    f.beams = plan.beams;
+    f.bins = plan.bins;
+    f.columns = plan.columns;
+    f.rows = plan.rows;
+    f.clean.resize(std::size_t(plan.bins) * plan.beams);
+    return f;
+}
+
+TEST(CpuBackend, RunsTheContractsStagesAndFillsRequestedIntermediates) {
+    const SceneData scene = test_scene();
+    for (bool incidence : {true, false}) {
+        SonarConfig config = small_config();
+        config.effects.incidence = incidence ? EffectMode::on : EffectMode::off;
+        const Plan plan = plan_for(config, scene);
+        auto backend = cpu::make_backend(plan, scene);
+        ASSERT_TRUE(backend);
+        EXPECT_STREQ(backend->name(), "cpu");
+        Frame frame = sized_frame(plan);
+        Pose pose;
+        pose.yaw_deg = 5.0;
+        const std::uint32_t mask = save_depth | save_normals | save_echo | save_profiles;
+        auto r = backend->render(pose, mask, frame);
+        ASSERT_TRUE(r.ok()) << r.error().message;
+        const std::vector<std::string> expected = incidence
+                                                      ? std::vector<std::string>{"depth", "normals", "echo", "beamform"}
+                                                      : std::vector<std::string>{"depth", "echo", "beamform"};
+        EXPECT_EQ(frame.stages_run, expected);
+        ASSERT_EQ(frame.times.size(), expected.size());
+        for (std::size_t i = 0; i < expected.size(); ++i) {
+            EXPECT_EQ(frame.times[i].stage, expected[i]);
+            EXPECT_GE(frame.times[i].ms, 0.0);
+        }
+        const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
+        EXPECT_EQ(frame.depth.size(), pixels);
+        EXPECT_EQ(frame.material.size(), pixels);
+        EXPECT_EQ(frame.normals.size(), incidence ? 4 * pixels : 0u);
+        EXPECT_EQ(frame.echo.size(), 2 * pixels);
+        EXPECT_EQ(frame.profiles.size(), std::size_t(plan.bins) * plan.columns);
+        EXPECT_EQ(frame.beam_profiles.size(), std::size_t(plan.bins) * plan.beams);
+        ASSERT_EQ(frame.clean.size(), std::size_t(plan.bins) * plan.beams);
+        double sum = 0;
+        for (float x : frame.clean) {
+            ASSERT_TRUE(std::isfinite(x));
+            ASSERT_GE(x, 0.0f);
+            sum += x;
+        }
+        EXPECT_GT(sum, 0.0);
+
+        // Same pose again: bit-identical scan, and no new buffers (the frame's data pointer is kept).
+        const std::vector<float> first = frame.clean;
+        const float* data = frame.clean.data();
+        frame.times.clear();
+        frame.stages_run.clear();
+        auto r2 = backend->render(pose, mask, frame);
+        ASSERT_TRUE(r2.ok());
+        EXPECT_EQ(frame.clean.data(), data);
+        EXPECT_EQ(0, std::memcmp(first.data(), frame.clean.data(), first.size() * sizeof(float)));
+    }
+}
+
+TEST(CpuBackend, NonFinitePoseIsAnErrorNamingTheField) {
+    const SceneData scene = test_scene();
+    const Plan plan = plan_for(small_config(), scene);
+    auto backend = cpu::make_backend(plan, scene);
+    Frame frame = sized_frame(plan);
+    Pose pose;
+    pose.pitch_deg = std::numeric_limits<double>::quiet_NaN();
+    auto r = backend->render(pose, 0, frame);
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("pitch"), std::string::npos) << r.error().message;
+}
+
+TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
+    const SceneData scene = test_scene();
+    SonarConfig config = small_config();
+    config.cpu_precision = Precision::f32;
+    const Plan p32 = plan_for(config, scene);
+    config.cpu_precision = Precision::f64;
+    const Plan p64 = plan_for(config, scene);
+    Frame f32 = sized_frame(p32), f64 = sized_frame(p64);
+    Pose pose;
+    pose.yaw_deg = -3.0;
+    ASSERT_TRUE(cpu::make_backend(p32, scene)->render(pose, save_echo, f32).ok());
+    ASSERT_TRUE(cpu::make_backend(p64, scene)->render(pose, save_echo, f64).ok());
+    double total32 = 0, total64 = 0, peak = 0;
+    for (std::size_t i = 0; i < f64.clean.size(); ++i) {
+        total32 += f32.clean[i];
+        total64 += f64.clean[i];
+        peak = std::max(peak, double(f64.clean[i]));
+    }
+    ASSERT_GT(total64, 0.0);
+    // Per cell, relative to the scan's peak: a cell that holds only a small tent share of a pixel
+    // has an ill-conditioned relative error (its share moves with the pixel's range), so cells are
+    // compared against the peak.
+    double max_rel_peak = 0;
+    for (std::size_t i = 0; i < f64.clean.size(); ++i) {
+        max_rel_peak = std::max(max_rel_peak, std::abs(double(f32.clean[i]) - f64.clean[i]) / peak);
+    }
+    // Both share the float depth buffer, so the differences are float arithmetic in the later
+    // stages: per-pixel energies agree to a few 1e-6 (about ten roundings and an exp of ~-4), and a
+    // range moved by float rounding (~1e-6 of a bin) moves that much of a pixel's tent weight.
+    EXPECT_NEAR(total32 / total64, 1.0, 1e-5);
+    EXPECT_LT(max_rel_peak, 1e-5);
+    double max_rel_pixel = 0;
+    for (std::size_t p = 0; p < f64.echo.size(); p += 2) {
+        if (f64.echo[p] > 0)
+            max_rel_pixel = std::max(max_rel_pixel, std::abs(double(f32.echo[p]) - f64.echo[p]) / f64.echo[p]);
+    }
+    EXPECT_LT(max_rel_pixel, 1e-4);
+    RecordProperty("f32_vs_f64_total", std::to_string(total32 / total64 - 1.0));
+    RecordProperty("f32_vs_f64_max_cell_over_peak", std::to_string(max_rel_peak));
+    RecordProperty("f32_vs_f64_max_pixel", std::to_string(max_rel_pixel));
+    std::printf("f32 vs f64: total %.3g, max cell / peak %.3g, max pixel %.3g\n", total32 / total64 - 1.0, max_rel_peak,
+                max_rel_pixel);
+}
+
+} // namespace
+} // namespace vksonar

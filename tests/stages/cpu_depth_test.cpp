@@ -1,0 +1,338 @@
+// Tests of the CPU depth pass (src/stages/cpu_depth.cpp) against docs/pipeline.md §1, on scenes
+// built by hand as SceneData: fill rule, reversed-Z, slices, clipping, degenerate triangles.
+// Every tolerance is justified next to it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "cpu_stage_support.h"
+
+namespace vksonar {
+namespace {
+
+using namespace stage_testing;
+
+// The shaders find a column's slice by a float multiply (sonar_math.h, slice_of_column): it must equal
+// the integer quotient for every column of up to kMaxSlices slices, at every slice width up to 2048
+// and at the widths near powers of two up to the 2^17 the comment claims.
+TEST(SonarMath, SliceOfColumnEqualsTheIntegerQuotient) {
+    std::vector<std::uint32_t> widths;
+    for (std::uint32_t w = 1; w <= 2048; ++w)
+        widths.push_back(w);
+    for (std::uint32_t p = 12; p <= 17; ++p) {
+        widths.push_back((1u << p) - 1);
+        widths.push_back(1u << p);
+        widths.push_back((1u << p) + 1);
+    }
+    widths.pop_back(); // 2^17 + 1 is past the claim
+    widths.pop_back(); // so is 2^17
+    for (std::uint32_t w : widths) {
+        const float inv = 1.0f / static_cast<float>(w);
+        for (std::uint32_t c = 0; c < w * shared::kMaxSlices; ++c)
+            ASSERT_EQ(math_f32::slice_of_column(c, inv), c / w) << "column " << c << ", slice width " << w;
+    }
+}
+
+TEST(CpuDepth, PlaneFacingSonarCoversExpectedPixelsAtViewZ10) {
+    SceneBuilder b;
+    const std::uint32_t m = b.material(-20.0);
+    b.draw(b.quad_x(10.0, -2.0, 2.0, -0.5, 0.5), m);
+    const Plan plan = plan_for(small_config(), b.scene);
+    ASSERT_EQ(plan.slices, 1u);
+    const DepthBuffers out = run_depth(plan, b.scene);
+    int covered = 0, checked = 0;
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const std::size_t p = std::size_t(j) * plan.columns + c;
+            const PixelRay ray = pixel_ray(plan, c, j);
+            // The pixel-centre ray meets x = 10 at (y, z) = 10 (D_y, D_z).
+            const double y = 10.0 * ray.D[1], z = 10.0 * ray.D[2];
+            const double margin = std::min(2.0 - std::abs(y), 0.5 - std::abs(z));
+            // 1 mm from the rectangle's edge: float vertices and matrices move edges by ~1e-6 m.
+            if (std::abs(margin) < 1e-3) continue;
+            ++checked;
+            const bool inside = margin > 0;
+            EXPECT_EQ(out.depth[p] > 0.0f, inside) << "pixel " << c << "," << j;
+            if (inside) {
+                ++covered;
+                EXPECT_EQ(out.material[p], m);
+                // float depth: d ~ 0.033 has ulp ~4e-9, i.e. ~1e-7 relative in view z, plus float matrix
+                // entries (~6e-8 each); 1e-5 leaves two orders of margin.
+                EXPECT_NEAR(view_z(plan, out.depth[p]) / 10.0, 1.0, 1e-5);
+            } else {
+                EXPECT_EQ(out.depth[p], 0.0f);
+                EXPECT_EQ(out.material[p], shared::kNoMaterial);
+            }
+        }
+    }
+    EXPECT_GT(covered, 50);
+    EXPECT_GT(checked, int(plan.rows * plan.columns) - 20);
+}
+
+TEST(CpuDepth, SonarInsideClosedBoxCoversEverySliceWithClippedTriangles) {
+    SceneBuilder b;
+    const double lo[3] = {-10, -10, -10}, hi[3] = {10, 10, 10};
+    b.draw(b.box(lo, hi), b.material(-20.0));
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0;
+    config.beams = 64;
+    config.pixels_per_beam = 1.0;
+    const Plan plan = plan_for(config, b.scene);
+    ASSERT_EQ(plan.slices, 3u);
+    const DepthBuffers out = run_depth(plan, b.scene);
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const std::size_t p = std::size_t(j) * plan.columns + c;
+            const PixelRay ray = pixel_ray(plan, c, j);
+            const double expected = 10.0 / std::max({std::abs(ray.D[0]), std::abs(ray.D[1]), std::abs(ray.D[2])});
+            ASSERT_GT(out.depth[p], 0.0f) << "hole at pixel " << c << "," << j;
+            ASSERT_EQ(out.material[p], 0u);
+            // see PlaneFacingSonar...: float depth gives ~1e-7 relative in view z.
+            EXPECT_NEAR(view_z(plan, out.depth[p]) / expected, 1.0, 1e-5) << "pixel " << c << "," << j;
+        }
+    }
+}
+
+TEST(CpuDepth, NearerSurfaceWinsInEitherDrawOrder) {
+    for (int order = 0; order < 2; ++order) {
+        SceneBuilder b;
+        const std::uint32_t near_m = b.material(-20.0), far_m = b.material(-30.0);
+        const std::uint32_t near_q = b.quad_x(6.0, -1.0, 1.0, -0.4, 0.4);
+        const std::uint32_t far_q = b.quad_x(8.0, -3.0, 3.0, -1.0, 1.0);
+        if (order == 0) {
+            b.draw(near_q, near_m);
+            b.draw(far_q, far_m);
+        } else {
+            b.draw(far_q, far_m);
+            b.draw(near_q, near_m);
+        }
+        const Plan plan = plan_for(small_config(), b.scene);
+        const DepthBuffers out = run_depth(plan, b.scene);
+        int near_pixels = 0, far_pixels = 0;
+        for (std::uint32_t j = 0; j < plan.rows; ++j) {
+            for (std::uint32_t c = 0; c < plan.columns; ++c) {
+                const std::size_t p = std::size_t(j) * plan.columns + c;
+                const PixelRay ray = pixel_ray(plan, c, j);
+                const bool in_near = std::abs(6.0 * ray.D[1]) < 0.99 && std::abs(6.0 * ray.D[2]) < 0.39;
+                const bool in_far = std::abs(8.0 * ray.D[1]) < 2.99 && std::abs(8.0 * ray.D[2]) < 0.99;
+                if (in_near) {
+                    ++near_pixels;
+                    EXPECT_EQ(out.material[p], near_m) << "order " << order;
+                    EXPECT_NEAR(view_z(plan, out.depth[p]), 6.0, 6e-5); // 1e-5 relative, as above
+                } else if (in_far) {
+                    ++far_pixels;
+                    EXPECT_EQ(out.material[p], far_m) << "order " << order;
+                    EXPECT_NEAR(view_z(plan, out.depth[p]), 8.0, 8e-5);
+                }
+            }
+        }
+        EXPECT_GT(near_pixels, 20);
+        EXPECT_GT(far_pixels, 20);
+    }
+}
+
+TEST(CpuDepth, EqualDepthKeepsTheFirstDrawBecauseTheTestIsStrict) {
+    SceneBuilder b;
+    const std::uint32_t first = b.material(-20.0), second = b.material(-30.0);
+    const std::uint32_t q = b.quad_x(10.0, -2.0, 2.0, -1.0, 1.0);
+    b.draw(q, first);
+    b.draw(q, second); // identical geometry: identical depths, GREATER fails
+    const Plan plan = plan_for(small_config(), b.scene);
+    const DepthBuffers out = run_depth(plan, b.scene);
+    int hits = 0;
+    for (std::size_t p = 0; p < out.depth.size(); ++p) {
+        if (out.depth[p] > 0.0f) {
+            ++hits;
+            EXPECT_EQ(out.material[p], first);
+        }
+    }
+    EXPECT_GT(hits, 100);
+}
+
+// Renders each draw alone (identity matrices in `pushes`) and returns per-pixel coverage counts.
+std::vector<int> coverage_counts(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
+                                 std::vector<std::vector<bool>>* masks = nullptr) {
+    std::vector<int> count(std::size_t(plan.rows) * plan.columns, 0);
+    for (std::size_t i = 0; i < scene.draws.size(); ++i) {
+        SceneData one = scene;
+        one.draws = {scene.draws[i]};
+        std::vector<shared::DepthPush> p;
+        for (std::uint32_t s = 0; s < plan.slices; ++s)
+            p.push_back(pushes[s * scene.draws.size() + i]);
+        std::vector<float> depth(count.size());
+        std::vector<std::uint32_t> material(count.size());
+        cpu::depth_pass(plan, one, p, depth.data(), material.data());
+        std::vector<bool> mask(count.size());
+        for (std::size_t k = 0; k < count.size(); ++k) {
+            mask[k] = depth[k] > 0.0f;
+            count[k] += mask[k];
+        }
+        if (masks) masks->push_back(mask);
+    }
+    return count;
+}
+
+TEST(CpuDepth, TopLeftRuleCoversSharedEdgesThroughPixelCentresExactlyOnce) {
+    // Identity clip matrix: screen x = (x_ndc + 1) W / 2, y = (y_ndc + 1) H / 2 with W = 64, H = 32, so
+    // vertices at dyadic screen positions are exact and the edges below run through pixel centres.
+    SceneBuilder b;
+    b.material(-20.0);
+    const Plan plan = plan_for(small_config(), b.scene);
+    ASSERT_EQ(plan.columns, 64u);
+    ASSERT_EQ(plan.rows, 32u);
+    auto ndc = [&](double sx, double sy) {
+        return std::array<float, 3>{float(sx * 2.0 / plan.columns - 1.0), float(sy * 2.0 / plan.rows - 1.0), 0.5f};
+    };
+    // Square with corners at pixel centres (2.5, 1.5) .. (10.5, 9.5): by the top-left rule it covers
+    // columns 2..9 and rows 1..8 (left and top edges in, right and bottom edges out).
+    const std::array<float, 3> A = ndc(2.5, 1.5), B = ndc(10.5, 1.5), C = ndc(10.5, 9.5), D = ndc(2.5, 9.5);
+    // Also a horizontal and a vertical shared edge through pixel centres: a square split into 4 by
+    // its centre E = (6.5, 5.5).
+    const std::array<float, 3> E = ndc(6.5, 5.5);
+    auto tri = [](std::vector<float>& p, const std::array<float, 3>& a, const std::array<float, 3>& c,
+                  const std::array<float, 3>& d) {
+        p.insert(p.end(), a.begin(), a.end());
+        p.insert(p.end(), c.begin(), c.end());
+        p.insert(p.end(), d.begin(), d.end());
+    };
+    const std::vector<std::vector<std::array<std::array<float, 3>, 3>>> splits = {
+        {{A, B, C}, {A, C, D}},                       // diagonal A-C, both counter-clockwise on screen
+        {{A, C, B}, {A, C, D}},                       // mixed windings
+        {{A, B, D}, {B, C, D}},                       // diagonal B-D
+        {{A, B, E}, {B, C, E}, {C, D, E}, {D, A, E}}, // fan around a pixel centre
+        {{E, B, A}, {C, B, E}, {E, D, C}, {A, D, E}}, // same fan, reversed windings
+    };
+    for (std::size_t k = 0; k < splits.size(); ++k) {
+        SceneBuilder sb;
+        sb.material(-20.0);
+        std::vector<shared::DepthPush> pushes;
+        for (const auto& t : splits[k]) {
+            std::vector<float> p;
+            tri(p, t[0], t[1], t[2]);
+            sb.draw(sb.mesh(p, {0, 1, 2}), 0);
+            pushes.push_back(identity_push(0));
+        }
+        const std::vector<int> count = coverage_counts(plan, sb.scene, pushes);
+        for (std::uint32_t j = 0; j < plan.rows; ++j) {
+            for (std::uint32_t c = 0; c < plan.columns; ++c) {
+                const bool inside = c >= 2 && c <= 9 && j >= 1 && j <= 8;
+                EXPECT_EQ(count[std::size_t(j) * plan.columns + c], inside ? 1 : 0)
+                    << "split " << k << " pixel " << c << "," << j;
+            }
+        }
+    }
+}
+
+TEST(CpuDepth, ScissorConfinesEachSliceToItsOwnColumns) {
+    SonarConfig config = small_config();
+    config.hfov_deg = 100.0; // 2 slices
+    SceneBuilder b;
+    b.material(-20.0);
+    // One triangle far larger than the viewport (NDC +-4), drawn only in slice 1.
+    b.draw(b.mesh({-4.f, -4.f, 0.5f, 4.f, -4.f, 0.5f, 0.f, 4.f, 0.5f}, {0, 1, 2}), 0);
+    const Plan plan = plan_for(config, b.scene);
+    ASSERT_EQ(plan.slices, 2u);
+    shared::DepthPush none = identity_push(7);
+    for (float& v : none.clip_from_local)
+        v = 0.0f; // all vertices at w = 0: nothing can be drawn
+    const std::vector<shared::DepthPush> pushes = {none, identity_push(7)};
+    std::vector<float> depth(std::size_t(plan.rows) * plan.columns);
+    std::vector<std::uint32_t> material(depth.size());
+    cpu::depth_pass(plan, b.scene, pushes, depth.data(), material.data());
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const std::size_t p = std::size_t(j) * plan.columns + c;
+            const bool slice1 = c >= plan.slice_columns;
+            // The triangle (screen y from 0 at the top) covers the centre rows of slice 1 fully.
+            if (!slice1) {
+                EXPECT_EQ(depth[p], 0.0f) << c << "," << j;
+                EXPECT_EQ(material[p], shared::kNoMaterial);
+            } else if (j >= plan.rows / 4 && j < 3 * plan.rows / 4) {
+                EXPECT_EQ(depth[p], 0.5f) << c << "," << j;
+                EXPECT_EQ(material[p], 7u);
+            }
+        }
+    }
+}
+
+TEST(CpuDepth, MeshFanHasNoGapsOrOverlapsUnderPerspectiveAndFarClipping) {
+    // A 24-triangle disc of radius 8 m centred 35 m ahead, turned 60 deg about z so that it crosses the
+    // far plane (40 m): clipped fan triangles must still tile the disc exactly once.
+    const int n = 24;
+    const double R = 8.0;
+    std::vector<float> pos = {0.f, 0.f, 0.f};
+    for (int i = 0; i < n; ++i) {
+        const double a = 2 * kPi * i / n + 0.1;
+        pos.insert(pos.end(), {0.f, float(R * std::cos(a)), float(R * std::sin(a))});
+    }
+    SceneBuilder b;
+    const std::uint32_t mat = b.material(-20.0);
+    const Mat4 place = yaw_translate(60.0, 35.0, 0.0, 0.0);
+    for (int i = 0; i < n; ++i) {
+        std::vector<std::uint32_t> t = {0, std::uint32_t(1 + i), std::uint32_t(1 + (i + 1) % n)};
+        if (i % 3 == 0) std::swap(t[1], t[2]); // mixed windings
+        b.draw(b.mesh(pos, t), mat, place);
+    }
+    const Plan plan = plan_for(small_config(), b.scene);
+    std::vector<shared::DepthPush> pushes;
+    compose_depth_draws(plan, b.scene, Pose{}, pushes);
+    const std::vector<int> count = coverage_counts(plan, b.scene, pushes);
+    const double yaw = 60.0 * kDeg;
+    const double normal[3] = {std::cos(yaw), std::sin(yaw), 0.0}; // disc plane: local x axis
+    const double inner = R * std::cos(kPi / n);                   // inscribed radius of the polygon
+    int inside = 0, clipped = 0;
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const int k = count[std::size_t(j) * plan.columns + c];
+            ASSERT_LE(k, 1) << "double coverage at " << c << "," << j;
+            const PixelRay ray = pixel_ray(plan, c, j);
+            // P = z D on the plane n . (P - centre) = 0
+            const double z = (normal[0] * 35.0) / (normal[0] * ray.D[0] + normal[1] * ray.D[1]);
+            const double P[3] = {z * ray.D[0] - 35.0, z * ray.D[1], z * ray.D[2]};
+            const double radius = std::sqrt(P[0] * P[0] + P[1] * P[1] + P[2] * P[2]);
+            if (radius < inner - 0.01 && z < plan.far_m - 0.01 && z > 0) {
+                ++inside;
+                EXPECT_EQ(k, 1) << "gap at " << c << "," << j;
+            }
+            if (radius < inner - 0.01 && z > plan.far_m + 0.01) {
+                ++clipped;
+                EXPECT_EQ(k, 0) << "beyond the far plane at " << c << "," << j;
+            }
+        }
+    }
+    EXPECT_GT(inside, 200);
+    EXPECT_GT(clipped, 20);
+}
+
+TEST(CpuDepth, DegenerateAndInvalidTrianglesProduceNothing) {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    SceneBuilder b;
+    b.material(-20.0);
+    // 0-2: collinear; 3-5: repeated vertex; 6-8: NaN vertex; 9-11: Inf vertex; 12-14: behind the sonar
+    // 15-17: a sliver with all three vertices within 1e-9 m of a line.
+    const std::vector<float> pos = {10,  -1, 0,  10,  0,   0,     10,  1, 0,  //
+                                    10,  -1, -1, 10,  1,   1,     10,  1, 1,  //
+                                    10,  -1, -1, nan, 1,   1,     10,  1, -1, //
+                                    10,  -1, -1, 10,  inf, 1,     10,  1, -1, //
+                                    -10, -1, -1, -10, 1,   1,     -10, 1, -1, //
+                                    10,  -1, 0,  10,  1,   1e-9f, 10,  0, 0.5e-9f};
+    std::vector<std::uint32_t> idx;
+    for (std::uint32_t i = 0; i < 18; ++i)
+        idx.push_back(i);
+    idx.insert(idx.end(), {0, 1, 99}); // index out of range of the vertex array
+    b.draw(b.mesh(pos, idx), 0);
+    const Plan plan = plan_for(small_config(), b.scene);
+    const DepthBuffers out = run_depth(plan, b.scene);
+    for (std::size_t p = 0; p < out.depth.size(); ++p) {
+        ASSERT_EQ(out.depth[p], 0.0f) << "pixel " << p;
+        ASSERT_EQ(out.material[p], shared::kNoMaterial);
+    }
+}
+
+} // namespace
+} // namespace vksonar
