@@ -7,13 +7,22 @@
 //
 // Output: beam-major B[j * bins_padded + k] (vec4 stores) when the side-lobe pass follows, else the
 // public range-major B[k * beams + j], which is then the polar scan itself.
+//
+// Two ways to walk the columns, the same sums in the same order (src/vk/resample_walk.cpp):
+// - gather: each beam sums its own span of columns, so a column that feeds two beams is loaded twice;
+// - walk (where the host found that every run's columns feed its beams in order, as they do on any
+//   fan short of a full circle): the run's columns are loaded once, each adding its weight to its
+//   beam's sum and its 1 - weight to a running sum that starts the next beam. On lavapipe a storage
+//   load is a loop over the lanes, so this halves the stage's cost there.
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
 
 layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = 1) const uint kBeamsPerInvocation = 16u; // set by the host
-layout(constant_id = 2) const uint kBeamMajorOut = 1u;        // set by the host: the side-lobe pass follows
+layout(constant_id = 2) const uint kVariant = 1u;             // set by the host: the two bits below
+const bool kBeamMajorOut = (kVariant & 1u) != 0u;              // the side-lobe pass follows
+const bool kWalk = (kVariant & 2u) != 0u;                      // walk the run's columns once (see above)
 
 layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = 5) readonly buffer ProfileBuffer { vec4 profiles4[]; };
@@ -47,39 +56,79 @@ uvec2 beam_at(uint j) {
     return beam_entry[j];
 }
 
-void main() {
-    uint bins = params.bins;
-    uint beams = params.beams;
-    uint columns = params.columns;
-    uint quads = params.bins_padded / 4u; // vec4s per column
-    uint q = gl_GlobalInvocationID.x;
-    uint first_beam = gl_WorkGroupID.y * kBeamsPerInvocation;
-    if (q >= quads || first_beam >= beams) {
-        return;
+void store_beam(uint j, uint q, vec4 sum) {
+    if (kBeamMajorOut) {
+        // one vec4 store: lavapipe loops over the lanes once per store, not per component
+        beam_profiles4[j * (params.bins_padded / 4u) + q] = sum;
+    } else {
+        uint k = 4u * q;
+        for (uint i = 0u; i < 4u && k + i < params.bins; ++i) {
+            beam_profiles[(k + i) * params.beams + j] = sum[i];
+        }
     }
-    uint last_beam = min(first_beam + kBeamsPerInvocation, beams);
+}
+
+// Beam j's share of column c: w(c, j) of docs/pipeline.md §4.
+float gather_weight(uvec2 entry, uint j) {
+    uint beam = entry.x;
+    float column_weight = uintBitsToFloat(entry.y);
+    // on a full circle the last beam's right neighbour is beam 0 (the seam columns); written
+    // without `% beams`: lavapipe would divide once per lane
+    bool next = beam + 1u == j || (params.circular != 0u && beam + 1u == params.beams && j == 0u);
+    return beam == j ? column_weight : (next ? 1.0 - column_weight : 0.0);
+}
+
+void gather(uint q, uint first_beam, uint last_beam) {
+    uint columns = params.columns;
+    uint quads = params.bins_padded / 4u;
     for (uint j = first_beam; j < last_beam; ++j) {
         vec4 sum = vec4(0.0);
         uvec2 span = beam_at(j);
         uint end = min(span.y, columns);
         for (uint c = span.x; c < end; ++c) {
-            uvec2 entry = column_at(c);
-            uint beam = entry.x;
-            float column_weight = uintBitsToFloat(entry.y);
-            // on a full circle the last beam's right neighbour is beam 0 (the seam columns); written
-            // without `% beams`: lavapipe would divide once per lane
-            bool next = beam + 1u == j || (params.circular != 0u && beam + 1u == beams && j == 0u);
-            float w = beam == j ? column_weight : (next ? 1.0 - column_weight : 0.0);
-            sum += w * profiles4[c * quads + q];
+            sum += gather_weight(column_at(c), j) * profiles4[c * quads + q];
         }
-        uint k = 4u * q;
-        if (kBeamMajorOut != 0u) {
-            // one vec4 store: lavapipe loops over the lanes once per store, not per component
-            beam_profiles4[j * quads + q] = sum;
-        } else {
-            for (uint i = 0u; i < 4u && k + i < bins; ++i) {
-                beam_profiles[(k + i) * beams + j] = sum[i];
+        store_beam(j, q, sum);
+    }
+}
+
+// The host checked that beam j's span is the columns of beam j - 1 (first beam of the run only:
+// later ones were walked already, their 1 - weight shares are in `carry`) and then its own, up to
+// its end. So each beam adds the same terms in the same order as gather().
+void walk(uint q, uint first_beam, uint last_beam) {
+    uint columns = params.columns;
+    uint quads = params.bins_padded / 4u;
+    uint c = beam_at(first_beam).x;
+    vec4 carry = vec4(0.0);
+    for (uint j = first_beam; j < last_beam; ++j) {
+        vec4 sum = carry;
+        carry = vec4(0.0);
+        uint end = min(beam_at(j).y, columns);
+        for (; c < end; ++c) {
+            uvec2 entry = column_at(c);
+            float column_weight = uintBitsToFloat(entry.y);
+            bool own = entry.x == j;
+            vec4 profile = profiles4[c * quads + q];
+            sum += (own ? column_weight : 1.0 - column_weight) * profile;
+            if (own) {
+                carry += (1.0 - column_weight) * profile;
             }
         }
+        store_beam(j, q, sum);
+    }
+}
+
+void main() {
+    uint quads = params.bins_padded / 4u; // vec4s per column
+    uint q = gl_GlobalInvocationID.x;
+    uint first_beam = gl_WorkGroupID.y * kBeamsPerInvocation;
+    if (q >= quads || first_beam >= params.beams) {
+        return;
+    }
+    uint last_beam = min(first_beam + kBeamsPerInvocation, params.beams);
+    if (kWalk) {
+        walk(q, first_beam, last_beam);
+    } else {
+        gather(q, first_beam, last_beam);
     }
 }

@@ -9,6 +9,8 @@
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 #include "test_support.h"
+#include "vk/resample_walk.h"
+#include "vk/vulkan_backend_impl.h"
 #include "tolerances.h"
 
 namespace vksonar::testing {
@@ -396,6 +398,69 @@ TEST(TableViews, UniformAndStorageTablesGiveTheSameFrame) {
         ASSERT_GT(a.above, 0u);
         EXPECT_LE(static_cast<double>(a.over), kFrameCellBudget * a.above); // tolerance: tests/tolerances.h
     }
+}
+
+// resample.comp walks each run's columns once where the host proves (resample_can_walk) that this adds
+// the same terms in the same order as gathering each beam's span: the two must give the same bits.
+// Cases: side lobes on (beam-major output) and off (range-major output), a beam count that leaves a
+// partial run (130), one pixel column per beam, and an equi-sine beam table.
+TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    struct Case {
+        const char* name;
+        std::uint32_t beams;
+        bool side_lobes;
+        double pixels_per_beam;
+        BeamSpacing spacing;
+    };
+    const Case cases[] = {{"512 beams, side lobes", 512, true, 2.0, BeamSpacing::equiangular},
+                          {"130 beams, no side lobes", 130, false, 2.0, BeamSpacing::equiangular},
+                          {"1 column per beam", 256, true, 1.0, BeamSpacing::equiangular},
+                          {"equi-sine table", 200, true, 2.0, BeamSpacing::equisine}};
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.name);
+        SonarConfig config = quiet_config();
+        config.beams = k.beams;
+        config.pixels_per_beam = k.pixels_per_beam;
+        config.beam_spacing = k.spacing;
+        config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
+        auto plan = make_plan(config, scene.value().data());
+        ASSERT_TRUE(plan) << plan.error().message;
+        EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation)); // else this compares gather with itself
+        auto walked = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
+        ::setenv("VKSONAR_RESAMPLE", "gather", 1);
+        auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
+        ::unsetenv("VKSONAR_RESAMPLE");
+        ASSERT_TRUE(walked && gathered);
+        EXPECT_EQ(walked->frame.beam_profiles, gathered->frame.beam_profiles);
+        EXPECT_EQ(walked->frame.clean, gathered->frame.clean);
+        const auto lit = std::count_if(walked->frame.beam_profiles.begin(), walked->frame.beam_profiles.end(),
+                                       [](float v) { return v > 0.0f; });
+        EXPECT_GT(lit, 1000); // the scene is in view: equal frames are not two empty ones
+    }
+}
+
+// Where the walk would add different terms, the host keeps the gather: a full circle (beams 0 and
+// beams-1 gather from every column), and a span that holds a column giving its beam nothing.
+TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
+    Scene scene;
+    SonarConfig config = quiet_config();
+    auto fan = make_plan(config, scene.data());
+    ASSERT_TRUE(fan) << fan.error().message;
+    ASSERT_TRUE(vk::resample_can_walk(fan.value(), vk::kBeamsPerInvocation));
+    config.hfov_deg = 360.0;
+    auto circle = make_plan(config, scene.data());
+    ASSERT_TRUE(circle) << circle.error().message;
+    EXPECT_FALSE(vk::resample_can_walk(circle.value(), vk::kBeamsPerInvocation));
+    // Beam 40's span reaches back over beam 38's columns, which give beam 40 nothing.
+    Plan widened = fan.value();
+    widened.beam_column_begin[40] = widened.beam_column_begin[39];
+    EXPECT_FALSE(vk::resample_can_walk(widened, vk::kBeamsPerInvocation));
 }
 
 TEST(NoiseAcrossBackends, SameSeedSameNoiseMultipliers) {

@@ -12,6 +12,7 @@
 #include "vk/commands.h"
 #include "vk/handles.h"
 #include "vk/pipelines.h"
+#include "vk/resample_walk.h"
 #include "vk/resources.h"
 #include "vk/vk_error.h"
 #include "vk/vulkan_backend_impl.h"
@@ -395,8 +396,15 @@ Result<void> VulkanBackend::create_compute() {
             make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), spec(1, plan_.params.range_kernel, 0));
         !r)
         return r;
+    // resample.comp's variant: bit 0 beam-major output (the side-lobe pass follows), bit 1 walk each
+    // run's columns once where that adds the same terms in the same order as the gather
+    // (src/vk/resample_walk.h). VKSONAR_RESAMPLE=gather keeps the gather (tests compare the two).
+    const char* resample_env = std::getenv("VKSONAR_RESAMPLE");
+    const bool force_gather = resample_env && std::strcmp(resample_env, "gather") == 0;
+    const std::uint32_t resample_variant =
+        (sidelobes_ ? 1u : 0u) | (!force_gather && resample_can_walk(plan_, kBeamsPerInvocation) ? 2u : 0u);
     if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv),
-                      spec(kBeamsPerInvocation, sidelobes_ ? 1u : 0u, column_table_vec4s, beam_table_vec4s));
+                      spec(kBeamsPerInvocation, resample_variant, column_table_vec4s, beam_table_vec4s));
         !r)
         return r;
     if (sidelobes_) {
