@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "cli_support.h"
 #include "config/config_keys.h"
 
 namespace fs = std::filesystem;
@@ -36,28 +37,9 @@ struct CliRun {
     }
 };
 
-std::string quote(const std::string& arg) {
-    std::string quoted = "'";
-    for (char ch : arg) {
-        if (ch == '\'')
-            quoted += "'\\''";
-        else
-            quoted += ch;
-    }
-    return quoted + "'";
-}
-
-std::string read_text(const fs::path& path) {
-    std::ifstream file(path, std::ios::binary);
-    std::stringstream text;
-    text << file.rdbuf();
-    return text.str();
-}
-
-void write_text(const fs::path& path, const std::string& text) {
-    std::ofstream file(path, std::ios::binary);
-    file << text;
-}
+using vksonar::testing::quote;
+using vksonar::testing::read_text;
+using vksonar::testing::write_text;
 
 class Cli : public ::testing::Test {
 protected:

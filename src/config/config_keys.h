@@ -3,6 +3,7 @@
 // so a key cannot exist in one of them and not in the others.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -44,6 +45,9 @@ const ConfigKey* find(std::string_view name);
 bool is_group(std::string_view prefix);
 // The valid key closest to `name` by edit distance (for "did you mean" hints).
 std::string closest(std::string_view name);
+
+// Levenshtein distance: single-character insertions, deletions and substitutions.
+std::size_t edit_distance(std::string_view a, std::string_view b);
 // Turns the text of a --set value into the JSON value the key's setter expects
 // ("512" -> 512, "nan" -> NaN, "auto" -> "auto", "1,2,3" -> [1,2,3]).
 Json parse_override_value(const ConfigKey& key, const std::string& text);

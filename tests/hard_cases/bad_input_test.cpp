@@ -15,6 +15,8 @@
 
 #include <gtest/gtest.h>
 
+#include "cli_support.h"
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -26,28 +28,9 @@ struct CliResult {
     std::string err;
 };
 
-std::string quote(const std::string& arg) {
-    std::string quoted = "'";
-    for (char ch : arg) {
-        if (ch == '\'')
-            quoted += "'\\''";
-        else
-            quoted += ch;
-    }
-    return quoted + "'";
-}
-
-std::string read_text(const fs::path& path) {
-    std::ifstream file(path, std::ios::binary);
-    std::stringstream text;
-    text << file.rdbuf();
-    return text.str();
-}
-
-void write_text(const fs::path& path, const std::string& text) {
-    std::ofstream file(path, std::ios::binary);
-    file << text;
-}
+using vksonar::testing::quote;
+using vksonar::testing::read_text;
+using vksonar::testing::write_text;
 
 class BadInput : public ::testing::Test {
 protected:
