@@ -97,7 +97,7 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
 // where f = cos(theta) for Lambert (so grazing goes smoothly to 0 and never divides by zero).
 // Spreading off keeps the footprint r^2 Omega but drops the r^-4 two-way loss.
 VKS_FN REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid_angle, REAL range_m,
-                 REAL alpha_db_per_m, REAL vertical_power, bool spreading, bool absorption) {
+                        REAL alpha_db_per_m, REAL vertical_power, bool spreading, bool absorption) {
     REAL e = backscatter_linear * scatter_factor * solid_angle * vertical_power;
     if (spreading) {
         e = e / (range_m * range_m);

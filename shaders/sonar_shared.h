@@ -16,9 +16,9 @@ using uint = std::uint32_t;
 #define VKS_CONST const
 #endif
 
-VKS_CONST uint kWorkgroupSize = 64u;          // 1-D compute workgroups (per pixel, per column, per cell)
-VKS_CONST uint kMaxSlices = 16u;              // hfov 360 deg at >= 22.5 deg per slice
-VKS_CONST uint kNoMaterial = 0xffffffffu;     // material attachment clear value: no geometry hit
+VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
+VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 VKS_CONST float kPi = 3.14159265358979323846f;
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
@@ -71,9 +71,9 @@ struct SonarParams {
     uint effect_flags;
     uint sidelobe_taps; // 2K+1 taps of the side-lobe kernel along beams
 
-    float tan_half_h;  // tan(slice width / 2): horizontal half extent of one slice, focal-normalized
-    float tan_half_v;  // tan(vertical coverage / 2)
-    float depth_a;     // view z = depth_a / (d - depth_b) for reversed-Z depth d (see sonar_math.h)
+    float tan_half_h; // tan(slice width / 2): horizontal half extent of one slice, focal-normalized
+    float tan_half_v; // tan(vertical coverage / 2)
+    float depth_a;    // view z = depth_a / (d - depth_b) for reversed-Z depth d (see sonar_math.h)
     float depth_b;
 
     float range_min_m;
@@ -86,10 +86,10 @@ struct SonarParams {
     uint range_kernel;
     uint normal_method;
 
-    float edge_relative_jump; // neighbours whose range differs by more than this fraction are not the same surface
+    float edge_relative_jump;     // neighbours whose range differs by more than this fraction are not the same surface
     float vpattern_halfwidth_rad; // for the box pattern
-    uint bins_padded; // GPU only: bins rounded up to a multiple of 4 (vec4 layouts of the beamform stage)
-    uint circular;    // 1 for a full circle (hfov 360): beam 0 and the last beam are neighbours
+    uint bins_padded;             // GPU only: bins rounded up to a multiple of 4 (vec4 layouts of the beamform stage)
+    uint circular;                // 1 for a full circle (hfov 360): beam 0 and the last beam are neighbours
 
     uint echo_half;   // 1: echo buffer stored as two halves (energy * echo_scale, range), see echo.comp
     float echo_scale; // power of 2 that brings the brightest possible pixel energy to ~2^15

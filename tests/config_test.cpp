@@ -33,7 +33,9 @@ std::string override_error(const std::string& text) {
     return result.ok() ? std::string() : result.error().message;
 }
 
-TEST(Config, DefaultsAreValid) { EXPECT_EQ(SonarConfig{}.validate(), ""); }
+TEST(Config, DefaultsAreValid) {
+    EXPECT_EQ(SonarConfig{}.validate(), "");
+}
 
 TEST(Config, TableKeysAreUniqueAndRoundTrip) {
     std::set<std::string> names;
@@ -176,9 +178,9 @@ TEST(Config, JsonRoundTrip) {
 
 TEST(Presets, AllLoadValidateAndCiteASource) {
     const auto names = preset_names();
-    for (const char* expected : {"default", "oculus_m750d_lf", "oculus_m750d_hf", "oculus_m1200d_lf",
-                                 "oculus_m1200d_hf", "gemini_720is", "blueview_m900_90", "blueview_p900_130",
-                                 "aris_explorer_3000"})
+    for (const char* expected :
+         {"default", "oculus_m750d_lf", "oculus_m750d_hf", "oculus_m1200d_lf", "oculus_m1200d_hf", "gemini_720is",
+          "blueview_m900_90", "blueview_p900_130", "aris_explorer_3000"})
         EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
     for (const auto& name : names) {
         auto preset = load_preset(name);

@@ -9,9 +9,9 @@
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 #include "test_support.h"
+#include "tolerances.h"
 #include "vk/resample_walk.h"
 #include "vk/vulkan_backend_impl.h"
-#include "tolerances.h"
 
 namespace vksonar::testing {
 namespace {
@@ -431,7 +431,8 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
         config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
         auto plan = make_plan(config, scene.value().data());
         ASSERT_TRUE(plan) << plan.error().message;
-        EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation)); // else this compares gather with itself
+        EXPECT_TRUE(
+            vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation)); // else this compares gather with itself
         auto walked = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
         ::setenv("VKSONAR_RESAMPLE", "gather", 1);
         auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);

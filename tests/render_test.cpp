@@ -57,11 +57,13 @@ TEST_P(RenderTest, PlaneAt10mLandsInItsRangeBinAndBeams) {
     for (std::uint32_t j = 0; j < f.beams; ++j) {
         const double a = plan.beam_angle_rad[j];
         double beam_energy = 0;
-        for (std::uint32_t k = 0; k < f.bins; ++k) beam_energy += f.clean[k * f.beams + j];
+        for (std::uint32_t k = 0; k < f.bins; ++k)
+            beam_energy += f.clean[k * f.beams + j];
         if (std::abs(a) > half_extent + spacing) {
             EXPECT_EQ(beam_energy, 0.0) << "beam " << j << " at " << a << " rad";
             // Exp(1) noise exceeds 30 x its mean with probability e^-30: never in 262k cells.
-            for (std::uint32_t k = 0; k < f.bins; ++k) ASSERT_LT(f.intensity[k * f.beams + j], 30.0 * noise_floor);
+            for (std::uint32_t k = 0; k < f.bins; ++k)
+                ASSERT_LT(f.intensity[k * f.beams + j], 30.0 * noise_floor);
         } else if (std::abs(a) < half_extent - spacing) {
             EXPECT_GT(beam_energy, 0.0) << "beam " << j;
             ++lit_beams;
@@ -77,7 +79,8 @@ TEST_P(RenderTest, PlaneAt10mLandsInItsRangeBinAndBeams) {
     // Nothing beyond the plane's far corner (sqrt(10^2 + 2^2 + 2^2) m) plus one bin.
     const int last = bin_of(plan, std::sqrt(108.0)) + 1;
     for (std::uint32_t k = static_cast<std::uint32_t>(last) + 1; k < f.bins; ++k) {
-        for (std::uint32_t j = 0; j < f.beams; ++j) ASSERT_EQ(f.clean[k * f.beams + j], 0.0f);
+        for (std::uint32_t j = 0; j < f.beams; ++j)
+            ASSERT_EQ(f.clean[k * f.beams + j], 0.0f);
     }
 }
 
@@ -115,7 +118,8 @@ TEST_P(RenderTest, RangeWindowAndFovChangeTheGeometry) {
         int n = 0;
         for (std::uint32_t j = 0; j < f.beams; ++j) {
             double e = 0;
-            for (std::uint32_t k = 0; k < f.bins; ++k) e += f.clean[k * f.beams + j];
+            for (std::uint32_t k = 0; k < f.bins; ++k)
+                e += f.clean[k * f.beams + j];
             n += e > 0;
         }
         return n;
@@ -190,7 +194,7 @@ TEST_P(RenderTest, DrawTransformIsHonoured) {
     }
     ASSERT_GT(total, 0.0);
     const double spacing = plan.beam_angle_rad[0] - plan.beam_angle_rad[1];
-    EXPECT_NEAR(azimuth / total, a, spacing);         // symmetric target: centroid on its axis
+    EXPECT_NEAR(azimuth / total, a, spacing);           // symmetric target: centroid on its axis
     EXPECT_NEAR(range / total, 15.0, plan.bin_width_m); // 1 m square at 15 m: ranges 15.000..15.017
 }
 

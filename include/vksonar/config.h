@@ -17,7 +17,7 @@ enum class EffectMode : std::uint8_t { automatic, on, off };
 
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct EffectsConfig {
-    EffectMode incidence = EffectMode::automatic;          // Lambert cos(theta); auto: on if a material is angle-dependent
+    EffectMode incidence = EffectMode::automatic; // Lambert cos(theta); auto: on if a material is angle-dependent
     EffectMode vertical_pattern = EffectMode::automatic;   // b_v(psi)^2; auto: on
     EffectMode horizontal_pattern = EffectMode::automatic; // side lobes along beams; auto: on
     EffectMode spreading = EffectMode::automatic;          // r^-4; auto: on
@@ -45,7 +45,7 @@ enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 struct SonarConfig {
     std::string name = "default";
     std::string description;
-    std::string source; // where the device figures come from (presets cite it)
+    std::string source;                   // where the device figures come from (presets cite it)
     SonarMode mode = SonarMode::physical; // JSON key `mode`: "physical" | "uuv-legacy" | "gtri-legacy"
 
     // Geometry (DESIGN §2). Azimuth is positive to port; beam 0 is the port-most beam.
@@ -77,21 +77,21 @@ struct SonarConfig {
 
     // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
     SpeckleModel speckle = SpeckleModel::rayleigh;
-    double speckle_looks = 1.0;         // L for the gamma model
+    double speckle_looks = 1.0;          // L for the gamma model
     double speckle_gaussian_sigma = 0.1; // for the legacy gaussian model: |N(1, sigma)|
-    double tvg_db_per_decade = 20.0;    // TVG = k log10 r + 2 alpha r
+    double tvg_db_per_decade = 20.0;     // TVG = k log10 r + 2 alpha r
 
     // Display (host stage 6).
-    double db_min = 60.0; // dB re 1 uPa mapped to 0
+    double db_min = 60.0;  // dB re 1 uPa mapped to 0
     double db_max = 140.0; // mapped to 1
     Colormap colormap = Colormap::sonar;
     std::uint32_t fan_width_px = 1024;
 
     // Accuracy knobs (DESIGN §5).
-    double pixels_per_beam = 2.0;        // horizontal oversampling (pixel columns per beam spacing)
-    std::uint32_t rows_per_vfov = 64;    // pixel rows per vertical beamwidth
-    double vertical_coverage = 2.0;      // depth pass covers this many vertical beamwidths
-    double max_slice_deg = 60.0;         // widest frustum slice
+    double pixels_per_beam = 2.0;     // horizontal oversampling (pixel columns per beam spacing)
+    std::uint32_t rows_per_vfov = 64; // pixel rows per vertical beamwidth
+    double vertical_coverage = 2.0;   // depth pass covers this many vertical beamwidths
+    double max_slice_deg = 60.0;      // widest frustum slice
     NormalMethod normal_method = NormalMethod::sobel3;
     RangeKernel range_kernel = RangeKernel::footprint;
     double sidelobe_kernel_beamwidths = 3.0; // side-lobe kernel reaches +- this many beamwidths

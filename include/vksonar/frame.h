@@ -48,12 +48,12 @@ struct Frame {
     std::vector<float> display;
 
     // Intermediates, filled when requested in RendererOptions::save_mask (else empty).
-    std::vector<float> depth;    // rows * columns reversed-Z depth, 0 = no hit
+    std::vector<float> depth;            // rows * columns reversed-Z depth, 0 = no hit
     std::vector<std::uint32_t> material; // rows * columns material id, 0xffffffff = no hit
-    std::vector<float> normals;  // rows * columns * 4: nx ny nz (sonar frame) cos_incidence
-    std::vector<float> echo;     // rows * columns * 2: energy, slant range m
-    std::vector<float> profiles; // bins * columns
-    std::vector<float> beam_profiles; // bins * beams, before the side-lobe convolution
+    std::vector<float> normals;          // rows * columns * 4: nx ny nz (sonar frame) cos_incidence
+    std::vector<float> echo;             // rows * columns * 2: energy, slant range m
+    std::vector<float> profiles;         // bins * columns
+    std::vector<float> beam_profiles;    // bins * beams, before the side-lobe convolution
 
     std::vector<StageTime> times;
     std::vector<EffectState> effects;

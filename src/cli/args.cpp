@@ -67,7 +67,8 @@ Args parse_args(const std::vector<std::string>& args, const std::vector<OptionSp
         const auto spec = std::find_if(specs.begin(), specs.end(), [&](const OptionSpec& s) { return name == s.name; });
         if (spec == specs.end()) {
             std::vector<std::string> names;
-            for (const auto& s : specs) names.emplace_back(s.name);
+            for (const auto& s : specs)
+                names.emplace_back(s.name);
             const std::string hint = closest_word(name, names);
             throw BadInput(command + ": unknown option '" + name + "'" +
                            (hint.empty() ? std::string() : " (did you mean '" + hint + "'?)"));
@@ -96,8 +97,7 @@ double parse_double(const std::string& text, const std::string& what) {
     errno = 0;
     char* end = nullptr;
     const double value = t.empty() ? 0.0 : std::strtod(t.c_str(), &end);
-    if (t.empty() || end != t.c_str() + t.size())
-        throw BadInput(what + ": '" + text + "' is not a number");
+    if (t.empty() || end != t.c_str() + t.size()) throw BadInput(what + ": '" + text + "' is not a number");
     if (!std::isfinite(value) || errno == ERANGE) throw BadInput(what + ": '" + text + "' is not a finite number");
     return value;
 }

@@ -40,8 +40,7 @@ struct Args {
 // Parses `args` (after the subcommand) against `specs`. Accepts "--opt value" and "--opt=value".
 // Throws BadInput for an unknown option (naming the closest one), a missing value, or a repeated
 // single-valued option.
-Args parse_args(const std::vector<std::string>& args, const std::vector<OptionSpec>& specs,
-                const std::string& command);
+Args parse_args(const std::vector<std::string>& args, const std::vector<OptionSpec>& specs, const std::string& command);
 
 // The candidate closest to `word` by edit distance (empty if there are no candidates).
 std::string closest_word(const std::string& word, const std::vector<std::string>& candidates);

@@ -15,12 +15,15 @@ namespace {
 
 std::string shape_text(const std::vector<std::size_t>& shape) {
     std::string text = "(";
-    for (std::size_t i = 0; i < shape.size(); ++i) text += (i ? ", " : "") + std::to_string(shape[i]);
+    for (std::size_t i = 0; i < shape.size(); ++i)
+        text += (i ? ", " : "") + std::to_string(shape[i]);
     return text + (shape.size() == 1 ? ",)" : ")");
 }
 
 // 10 log10 of an intensity; zero and negative intensities sit at the bottom of the dB scale.
-double to_db(double intensity) { return 10.0 * std::log10(std::max(intensity, 1e-300)); }
+double to_db(double intensity) {
+    return 10.0 * std::log10(std::max(intensity, 1e-300));
+}
 
 } // namespace
 
@@ -28,11 +31,10 @@ int run_compare(const std::vector<std::string>& argv) {
     const Args args =
         parse_args(argv, {{"--tol", true, false}, {"--floor", true, false}, {"--help", false, false}}, "compare");
     if (args.has("--help")) {
-        std::printf(
-            "usage: vksonar compare A.npy B.npy [--tol DB] [--floor DB]\n"
-            "  A is the reference. Prints max abs difference, RMSE, the max dB difference over elements\n"
-            "  where either scan is above the floor, and PSNR (peak of A). Exits 1 if the max dB\n"
-            "  difference exceeds --tol (default 1 dB). --floor defaults to the peak minus 60 dB.\n");
+        std::printf("usage: vksonar compare A.npy B.npy [--tol DB] [--floor DB]\n"
+                    "  A is the reference. Prints max abs difference, RMSE, the max dB difference over elements\n"
+                    "  where either scan is above the floor, and PSNR (peak of A). Exits 1 if the max dB\n"
+                    "  difference exceeds --tol (default 1 dB). --floor defaults to the peak minus 60 dB.\n");
         return 0;
     }
     if (args.positional.size() != 2)
@@ -88,8 +90,10 @@ int run_compare(const std::vector<std::string>& argv) {
     std::printf("max_db_diff:  %.4f dB (floor %.2f dB, %zu elements above it", max_db, floor_db, above_floor);
     if (max_db > 0) std::printf(", worst at flat index %zu", max_db_index);
     std::printf(")\n");
-    if (rmse > 0 && peak_a > 0) std::printf("psnr:         %.2f dB\n", 20.0 * std::log10(peak_a / rmse));
-    else std::printf("psnr:         inf\n");
+    if (rmse > 0 && peak_a > 0)
+        std::printf("psnr:         %.2f dB\n", 20.0 * std::log10(peak_a / rmse));
+    else
+        std::printf("psnr:         inf\n");
     if (non_finite) std::printf("non_finite:   %zu elements (NaN/Inf in either file)\n", non_finite);
 
     const bool pass = non_finite == 0 && max_db <= tolerance_db;

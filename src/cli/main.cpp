@@ -12,6 +12,8 @@
 
 namespace {
 
+// One line of the usage text per source line.
+// clang-format off
 constexpr const char* kUsage =
     "usage: vksonar <command> [options]\n"
     "\n"
@@ -23,6 +25,7 @@ constexpr const char* kUsage =
     "  bench     benchmarks: speed | effects | accuracy\n"
     "\n"
     "Run 'vksonar <command> --help' for the options of a command.\n";
+// clang-format on
 
 int dispatch(const std::vector<std::string>& argv) {
     using namespace vksonar::cli;

@@ -19,10 +19,13 @@ std::string dict_value(const std::string& header, const std::string& key, const 
     auto start = header.find(':', at);
     if (start == std::string::npos) throw BadInput(path + ": malformed .npy header");
     ++start;
-    while (start < header.size() && header[start] == ' ') ++start;
+    while (start < header.size() && header[start] == ' ')
+        ++start;
     std::size_t end;
-    if (start < header.size() && header[start] == '(') end = header.find(')', start) + 1;
-    else end = header.find_first_of(",}", start);
+    if (start < header.size() && header[start] == '(')
+        end = header.find(')', start) + 1;
+    else
+        end = header.find_first_of(",}", start);
     if (end == std::string::npos || end == 0) throw BadInput(path + ": malformed .npy header");
     return header.substr(start, end - start);
 }
@@ -79,23 +82,34 @@ NpyArray read_npy(const std::string& path) {
     }
 
     std::size_t element = 0;
-    if (array.dtype == "<f4") element = 4;
-    else if (array.dtype == "<f8") element = 8;
-    else if (array.dtype == "<u2") element = 2;
-    else if (array.dtype == "|u1" || array.dtype == "<u1") element = 1;
-    else if (array.dtype == "<i4") element = 4;
-    else throw BadInput(path + ": unsupported dtype '" + array.dtype + "' (float32, float64, uint16, uint8, int32)");
+    if (array.dtype == "<f4")
+        element = 4;
+    else if (array.dtype == "<f8")
+        element = 8;
+    else if (array.dtype == "<u2")
+        element = 2;
+    else if (array.dtype == "|u1" || array.dtype == "<u1")
+        element = 1;
+    else if (array.dtype == "<i4")
+        element = 4;
+    else
+        throw BadInput(path + ": unsupported dtype '" + array.dtype + "' (float32, float64, uint16, uint8, int32)");
 
     const std::size_t data_offset = offset + header_length;
     if (bytes.size() - data_offset != count * element)
         throw BadInput(path + ": expected " + std::to_string(count * element) + " data bytes for shape " + shape +
                        ", found " + std::to_string(bytes.size() - data_offset));
     const std::vector<char> raw(bytes.begin() + static_cast<std::ptrdiff_t>(data_offset), bytes.end());
-    if (array.dtype == "<f4") convert<float>(raw, array.values);
-    else if (array.dtype == "<f8") convert<double>(raw, array.values);
-    else if (array.dtype == "<u2") convert<std::uint16_t>(raw, array.values);
-    else if (array.dtype == "<i4") convert<std::int32_t>(raw, array.values);
-    else convert<std::uint8_t>(raw, array.values);
+    if (array.dtype == "<f4")
+        convert<float>(raw, array.values);
+    else if (array.dtype == "<f8")
+        convert<double>(raw, array.values);
+    else if (array.dtype == "<u2")
+        convert<std::uint16_t>(raw, array.values);
+    else if (array.dtype == "<i4")
+        convert<std::int32_t>(raw, array.values);
+    else
+        convert<std::uint8_t>(raw, array.values);
     return array;
 }
 

@@ -9,9 +9,9 @@
 namespace vksonar::cli {
 
 struct NpyArray {
-    std::string dtype;               // as in the header, e.g. "<f4"
-    std::vector<std::size_t> shape;  // C order
-    std::vector<double> values;      // converted to double, in file order
+    std::string dtype;              // as in the header, e.g. "<f4"
+    std::vector<std::size_t> shape; // C order
+    std::vector<double> values;     // converted to double, in file order
 };
 
 // Reads `path`. Throws BadInput naming the file and what is wrong.

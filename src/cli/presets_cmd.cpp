@@ -12,8 +12,8 @@
 namespace vksonar::cli {
 
 int run_presets(const std::vector<std::string>& argv) {
-    const Args args = parse_args(argv, {{"--show", true, false}, {"--keys", false, false}, {"--help", false, false}},
-                                 "presets");
+    const Args args =
+        parse_args(argv, {{"--show", true, false}, {"--keys", false, false}, {"--help", false, false}}, "presets");
     if (args.has("--help")) {
         std::printf("usage: vksonar presets [--show NAME]\n"
                     "  (no option)   list the presets with a one-line description\n"
@@ -34,7 +34,8 @@ int run_presets(const std::vector<std::string>& argv) {
     }
     const auto names = preset_names();
     std::size_t width = 0;
-    for (const auto& name : names) width = std::max(width, name.size());
+    for (const auto& name : names)
+        width = std::max(width, name.size());
     for (const auto& name : names) {
         auto preset = load_preset(name);
         if (!preset) throw Failure(preset.error().message);

@@ -81,8 +81,8 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
         return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
     }
     if (!root.is_object())
-        return make_error(ErrorCode::parse, origin + ": expected a JSON object of config keys, got " +
-                                                std::string(root.type_name()));
+        return make_error(ErrorCode::parse,
+                          origin + ": expected a JSON object of config keys, got " + std::string(root.type_name()));
     SonarConfig config = base;
     std::string problem = apply_object(config, root, "");
     if (!problem.empty()) return make_error(ErrorCode::invalid_argument, origin + ": " + problem);
@@ -115,11 +115,13 @@ Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::st
     const std::string name = key_equals_value.substr(0, equals);
     const std::string value = key_equals_value.substr(equals + 1);
     const auto* key = config_keys::find(name);
-    if (!key) return make_error(ErrorCode::invalid_argument, "--set " + key_equals_value + ": " + unknown_key_message(name));
+    if (!key)
+        return make_error(ErrorCode::invalid_argument, "--set " + key_equals_value + ": " + unknown_key_message(name));
     SonarConfig config = base;
     std::string problem = key->set(config, config_keys::parse_override_value(*key, value));
     if (!problem.empty())
-        return make_error(ErrorCode::invalid_argument, "--set " + key_equals_value + ": key '" + name + "': " + problem);
+        return make_error(ErrorCode::invalid_argument,
+                          "--set " + key_equals_value + ": key '" + name + "': " + problem);
     return config;
 }
 

@@ -46,15 +46,11 @@ template <> struct EnumNames<Colormap> {
 template <> struct EnumNames<IntermediatePrecision> {
     static constexpr std::array<const char*, 2> names{"fp32", "fp16"};
 };
-template <> struct EnumNames<Precision> {
-    static constexpr std::array<const char*, 2> names{"float", "double"};
-};
+template <> struct EnumNames<Precision> { static constexpr std::array<const char*, 2> names{"float", "double"}; };
 template <> struct EnumNames<SonarMode> {
     static constexpr std::array<const char*, 3> names{"physical", "uuv-legacy", "gtri-legacy"};
 };
-template <> struct EnumNames<EffectMode> {
-    static constexpr std::array<const char*, 3> names{"auto", "on", "off"};
-};
+template <> struct EnumNames<EffectMode> { static constexpr std::array<const char*, 3> names{"auto", "on", "off"}; };
 
 template <class E> std::string choices_text() {
     std::string text;
@@ -67,14 +63,18 @@ template <class E> std::string choices_text() {
 
 // ---- generic accessors -------------------------------------------------------------------------
 
-template <double SonarConfig::*M> Json get_number(const SonarConfig& c) { return c.*M; }
+template <double SonarConfig::*M> Json get_number(const SonarConfig& c) {
+    return c.*M;
+}
 template <double SonarConfig::*M> std::string set_number(SonarConfig& c, const Json& v) {
     if (!v.is_number()) return "expected a number, got " + describe(v);
     c.*M = v.get<double>();
     return {};
 }
 
-template <std::uint32_t SonarConfig::*M> Json get_count(const SonarConfig& c) { return c.*M; }
+template <std::uint32_t SonarConfig::*M> Json get_count(const SonarConfig& c) {
+    return c.*M;
+}
 template <std::uint32_t SonarConfig::*M> std::string set_count(SonarConfig& c, const Json& v) {
     if (!v.is_number()) return "expected a whole number, got " + describe(v);
     const double x = v.get<double>();
@@ -85,7 +85,9 @@ template <std::uint32_t SonarConfig::*M> std::string set_count(SonarConfig& c, c
     return {};
 }
 
-template <std::string SonarConfig::*M> Json get_text(const SonarConfig& c) { return c.*M; }
+template <std::string SonarConfig::*M> Json get_text(const SonarConfig& c) {
+    return c.*M;
+}
 template <std::string SonarConfig::*M> std::string set_text(SonarConfig& c, const Json& v) {
     if (!v.is_string()) return "expected a string, got " + describe(v);
     c.*M = v.get<std::string>();
@@ -126,7 +128,9 @@ template <EffectMode EffectsConfig::*M> std::string set_effect(SonarConfig& c, c
 
 // ---- special keys ------------------------------------------------------------------------------
 
-Json get_beam_angles(const SonarConfig& c) { return c.beam_angles_deg; }
+Json get_beam_angles(const SonarConfig& c) {
+    return c.beam_angles_deg;
+}
 std::string set_beam_angles(SonarConfig& c, const Json& v) {
     if (!v.is_array()) return "expected an array of angles in degrees, got " + describe(v);
     std::vector<double> angles;
@@ -160,20 +164,26 @@ std::string set_absorption(SonarConfig& c, const Json& v) {
 
 // ---- the table ---------------------------------------------------------------------------------
 
-#define VKS_NUMBER(key, member, unit, doc) \
-    ConfigKey { key, KeyType::number, unit, "", doc, &get_number<&SonarConfig::member>, &set_number<&SonarConfig::member> }
-#define VKS_COUNT(key, member, unit, doc) \
-    ConfigKey { key, KeyType::count, unit, "", doc, &get_count<&SonarConfig::member>, &set_count<&SonarConfig::member> }
-#define VKS_TEXT(key, member, doc) \
-    ConfigKey { key, KeyType::text, "", "", doc, &get_text<&SonarConfig::member>, &set_text<&SonarConfig::member> }
-#define VKS_ENUM(key, E, member, choices, doc)                                                                  \
-    ConfigKey {                                                                                                 \
+#define VKS_NUMBER(key, member, unit, doc)                                                                             \
+    ConfigKey {                                                                                                        \
+        key, KeyType::number, unit, "", doc, &get_number<&SonarConfig::member>, &set_number<&SonarConfig::member>      \
+    }
+#define VKS_COUNT(key, member, unit, doc)                                                                              \
+    ConfigKey {                                                                                                        \
+        key, KeyType::count, unit, "", doc, &get_count<&SonarConfig::member>, &set_count<&SonarConfig::member>         \
+    }
+#define VKS_TEXT(key, member, doc)                                                                                     \
+    ConfigKey {                                                                                                        \
+        key, KeyType::text, "", "", doc, &get_text<&SonarConfig::member>, &set_text<&SonarConfig::member>              \
+    }
+#define VKS_ENUM(key, E, member, choices, doc)                                                                         \
+    ConfigKey {                                                                                                        \
         key, KeyType::choice, "", choices, doc, &get_enum<E, &SonarConfig::member>, &set_enum<E, &SonarConfig::member> \
     }
-#define VKS_EFFECT(name, doc)                                                                                       \
-    ConfigKey {                                                                                                     \
-        "effects." #name, KeyType::choice, "", "auto|on|off", doc, &get_effect<&EffectsConfig::name>,               \
-            &set_effect<&EffectsConfig::name>                                                                       \
+#define VKS_EFFECT(name, doc)                                                                                          \
+    ConfigKey {                                                                                                        \
+        "effects." #name, KeyType::choice, "", "auto|on|off", doc, &get_effect<&EffectsConfig::name>,                  \
+            &set_effect<&EffectsConfig::name>                                                                          \
     }
 
 std::vector<ConfigKey> make_table() {
@@ -252,7 +262,9 @@ std::vector<ConfigKey> make_table() {
 
         VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a drawn material is angle-dependent)"),
         VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),
-        VKS_EFFECT(horizontal_pattern, "Side lobes along beams (auto: on; main lobe only when the side lobes stay below the display window)"),
+        VKS_EFFECT(
+            horizontal_pattern,
+            "Side lobes along beams (auto: on; main lobe only when the side lobes stay below the display window)"),
         VKS_EFFECT(spreading, "Two-way spherical spreading r^-4 (auto: on)"),
         VKS_EFFECT(absorption, "Absorption (auto: on if 2 alpha range_max >= 0.1 dB)"),
         VKS_EFFECT(speckle, "Speckle (auto: on)"),
@@ -278,8 +290,10 @@ bool parse_double(const std::string& text, double& out) {
 std::string markdown_cell(std::string text) {
     std::string out;
     for (char ch : text) {
-        if (ch == '|') out += "\\|";
-        else out += ch;
+        if (ch == '|')
+            out += "\\|";
+        else
+            out += ch;
     }
     return out;
 }
@@ -345,7 +359,8 @@ Json parse_override_value(const ConfigKey& key, const std::string& text) {
     double number = 0;
     switch (key.type) {
     case KeyType::text:
-    case KeyType::choice: return text;
+    case KeyType::choice:
+        return text;
     case KeyType::number:
     case KeyType::count:
         if (parse_double(text, number)) return number;
@@ -366,8 +381,10 @@ Json parse_override_value(const ConfigKey& key, const std::string& text) {
             const auto first = item.find_first_not_of(" \t");
             const auto last = item.find_last_not_of(" \t");
             item = first == std::string::npos ? std::string() : item.substr(first, last - first + 1);
-            if (parse_double(item, number)) list.push_back(number);
-            else list.push_back(item);
+            if (parse_double(item, number))
+                list.push_back(number);
+            else
+                list.push_back(item);
         }
         if (!any && body.find_first_not_of(" \t") != std::string::npos) return text;
         return list;
@@ -384,12 +401,24 @@ std::string reference_markdown() {
     for (const auto& key : all()) {
         std::string type;
         switch (key.type) {
-        case KeyType::number: type = "number"; break;
-        case KeyType::count: type = "integer"; break;
-        case KeyType::text: type = "string"; break;
-        case KeyType::choice: type = key.choices; break;
-        case KeyType::number_list: type = "array of numbers"; break;
-        case KeyType::number_or_auto: type = "number or \"auto\""; break;
+        case KeyType::number:
+            type = "number";
+            break;
+        case KeyType::count:
+            type = "integer";
+            break;
+        case KeyType::text:
+            type = "string";
+            break;
+        case KeyType::choice:
+            type = key.choices;
+            break;
+        case KeyType::number_list:
+            type = "array of numbers";
+            break;
+        case KeyType::number_or_auto:
+            type = "number or \"auto\"";
+            break;
         }
         std::string default_text = key.get(defaults).dump();
         if (default_text == "\"\"" || default_text == "[]") default_text = "(empty)";

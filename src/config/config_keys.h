@@ -26,7 +26,7 @@ enum class KeyType {
 };
 
 struct ConfigKey {
-    const char* name;    // JSON key, dotted for nested groups ("display.db_min")
+    const char* name; // JSON key, dotted for nested groups ("display.db_min")
     KeyType type;
     const char* unit;    // "deg", "m", "Hz", "dB re 1 uPa at 1 m", ... or "" for none
     const char* choices; // "box|sinc|hann|gaussian" for choice keys, else ""

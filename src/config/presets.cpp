@@ -13,7 +13,8 @@ const std::vector<std::pair<std::string_view, std::string_view>>& embedded_prese
 
 std::vector<std::string> preset_names() {
     std::vector<std::string> names;
-    for (const auto& [name, text] : embedded_presets()) names.emplace_back(name);
+    for (const auto& [name, text] : embedded_presets())
+        names.emplace_back(name);
     return names; // sorted by the generator
 }
 
@@ -29,7 +30,8 @@ Result<SonarConfig> load_preset(const std::string& name) {
         return config;
     }
     std::string valid;
-    for (const auto& preset_name : preset_names()) valid += (valid.empty() ? "" : ", ") + preset_name;
+    for (const auto& preset_name : preset_names())
+        valid += (valid.empty() ? "" : ", ") + preset_name;
     return make_error(ErrorCode::invalid_argument, "unknown preset '" + name + "' (valid presets: " + valid + ")");
 }
 

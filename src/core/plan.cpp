@@ -323,8 +323,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     // effect on auto the kernel then stops at the first null (main lobe only).
     std::string lobes_why;
     if (c.effects.horizontal_pattern == EffectMode::automatic) {
-        const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.horizontal_pattern),
-                                                       p.hpattern_k, p.hpattern_halfwidth_rad, reach);
+        const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.horizontal_pattern), p.hpattern_k,
+                                                       p.hpattern_halfwidth_rad, reach);
         const double window_db = c.db_max - c.db_min;
         if (lobes.first_null_rad > 0.0 && lobes.peak_sidelobe_db < -window_db) {
             reach = std::min(reach, lobes.first_null_rad);
@@ -431,7 +431,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.echo_half = c.intermediates == IntermediatePrecision::fp16 ? 1u : 0u;
     {
         double brightest = 0.0;
-        for (const auto& m : p.materials) brightest = std::max(brightest, double(m.backscatter_linear));
+        for (const auto& m : p.materials)
+            brightest = std::max(brightest, double(m.backscatter_linear));
         const double omega = (2.0 * p.tan_half_h / p.slice_columns) * (2.0 * p.tan_half_v / p.rows);
         const double r = e.spreading ? c.range_min_m : c.range_max_m;
         const double peak = brightest * omega * (e.spreading ? 1.0 / (r * r) : r * r);

@@ -172,8 +172,12 @@ Result<GpuBufferView> Renderer::polar_buffer() const {
     return pass->polar_buffer();
 }
 
-const SonarConfig& Renderer::config() const { return impl_->plan.config; }
+const SonarConfig& Renderer::config() const {
+    return impl_->plan.config;
+}
 
-const Plan& renderer_plan(const Renderer& renderer) { return renderer.impl_->plan; }
+const Plan& renderer_plan(const Renderer& renderer) {
+    return renderer.impl_->plan;
+}
 
 } // namespace vksonar

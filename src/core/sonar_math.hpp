@@ -29,6 +29,8 @@ using std::abs, std::atan, std::cos, std::exp, std::max, std::min, std::sin, std
 #undef VKS_ATAN2
 
 // math<Real>::fn selects the precision in templated CPU code.
+// The table below reads best as laid out by hand.
+// clang-format off
 template <class Real> struct Math;
 template <> struct Math<float> {
 #define VKS_FORWARD(fn) template <class... A> static auto fn(A... a) { return math_f32::fn(a...); }
@@ -48,5 +50,6 @@ template <> struct Math<double> {
     VKS_FORWARD(face_normal_sonar_z)
 #undef VKS_FORWARD
 };
+// clang-format on
 
 } // namespace vksonar

@@ -15,16 +15,16 @@ struct Knot {
 // matplotlib's viridis sampled at 16 evenly spaced points (t = i / 15; R's viridis(16)), linearly
 // interpolated between them: within ~2 levels of the 256-entry table everywhere.
 constexpr Knot kViridis[] = {
-    {68, 1, 84},    {72, 26, 108},  {71, 47, 125},  {65, 68, 135},  {57, 86, 140},   {49, 104, 142},
-    {42, 120, 142}, {35, 136, 142}, {31, 152, 139}, {34, 168, 132}, {53, 183, 121},  {84, 197, 104},
+    {68, 1, 84},    {72, 26, 108},  {71, 47, 125},  {65, 68, 135},  {57, 86, 140},  {49, 104, 142},
+    {42, 120, 142}, {35, 136, 142}, {31, 152, 139}, {34, 168, 132}, {53, 183, 121}, {84, 197, 104},
     {122, 209, 81}, {165, 219, 54}, {210, 226, 27}, {253, 231, 37},
 };
 
 // "Sonar display" amber ramp: black -> dark brown -> orange -> amber -> pale yellow/white
 // (evenly spaced knots).
 constexpr Knot kSonar[] = {
-    {0, 0, 0}, {40, 16, 2}, {96, 42, 6}, {168, 80, 10}, {232, 128, 18}, {255, 180, 60}, {255, 222, 140},
-    {255, 250, 225},
+    {0, 0, 0},      {40, 16, 2},    {96, 42, 6},     {168, 80, 10},
+    {232, 128, 18}, {255, 180, 60}, {255, 222, 140}, {255, 250, 225},
 };
 
 template <std::size_t N> Rgb8 interpolate(const Knot (&table)[N], float v) {
@@ -39,7 +39,9 @@ template <std::size_t N> Rgb8 interpolate(const Knot (&table)[N], float v) {
     return {channel(a.r, b.r), channel(a.g, b.g), channel(a.b, b.b)};
 }
 
-inline std::uint8_t to8(float x) { return static_cast<std::uint8_t>(std::clamp(x, 0.0f, 1.0f) * 255.0f + 0.5f); }
+inline std::uint8_t to8(float x) {
+    return static_cast<std::uint8_t>(std::clamp(x, 0.0f, 1.0f) * 255.0f + 0.5f);
+}
 
 } // namespace
 
@@ -50,8 +52,10 @@ Rgb8 colormap(Colormap map, float value01) {
         const std::uint8_t g = to8(v);
         return {g, g, g};
     }
-    case Colormap::viridis: return interpolate(kViridis, v);
-    case Colormap::sonar: return interpolate(kSonar, v);
+    case Colormap::viridis:
+        return interpolate(kViridis, v);
+    case Colormap::sonar:
+        return interpolate(kSonar, v);
     case Colormap::jet:
         // MATLAB jet: dark blue -> blue -> cyan -> yellow -> red -> dark red.
         return {to8(1.5f - std::abs(4.0f * v - 3.0f)), to8(1.5f - std::abs(4.0f * v - 2.0f)),

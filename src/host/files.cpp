@@ -1,9 +1,9 @@
 // Output files: PNG, NumPy .npy, PLY point cloud and meta.json. Every error names the path.
 #include <cerrno>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
-#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -79,9 +79,9 @@ std::string npy_header(const char* descr, std::uint32_t rows, std::uint32_t cols
 Result<void> write_png(const std::string& path, const Image& image) {
     const std::size_t n = static_cast<std::size_t>(image.width) * image.height * 3;
     if (image.width == 0 || image.height == 0 || image.rgb.size() < n)
-        return make_error(ErrorCode::invalid_argument,
-                          "cannot write " + path + ": image is empty or smaller than " +
-                              std::to_string(image.width) + "x" + std::to_string(image.height));
+        return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": image is empty or smaller than " +
+                                                           std::to_string(image.width) + "x" +
+                                                           std::to_string(image.height));
     // Encode in memory, then write with stdio so that a failure reports the OS reason.
     std::vector<unsigned char> png;
     auto sink = [](void* context, void* data, int size) {
@@ -89,8 +89,8 @@ Result<void> write_png(const std::string& path, const Image& image) {
         const auto* bytes = static_cast<const unsigned char*>(data);
         out->insert(out->end(), bytes, bytes + size);
     };
-    const int ok = stbi_write_png_to_func(sink, &png, static_cast<int>(image.width), static_cast<int>(image.height),
-                                          3, image.rgb.data(), static_cast<int>(image.width * 3));
+    const int ok = stbi_write_png_to_func(sink, &png, static_cast<int>(image.width), static_cast<int>(image.height), 3,
+                                          image.rgb.data(), static_cast<int>(image.width * 3));
     if (!ok || png.empty()) return make_error(ErrorCode::internal, "cannot write " + path + ": PNG encoding failed");
     return write_file(path, nullptr, 0, png.data(), png.size());
 }
@@ -103,8 +103,7 @@ Result<void> write_npy_f32(const std::string& path, const float* data, std::uint
     return write_file(path, header.data(), header.size(), data, count * sizeof(float));
 }
 
-Result<void> write_npy_u16(const std::string& path, const std::uint16_t* data, std::uint32_t rows,
-                           std::uint32_t cols) {
+Result<void> write_npy_u16(const std::string& path, const std::uint16_t* data, std::uint32_t rows, std::uint32_t cols) {
     const std::size_t count = static_cast<std::size_t>(rows) * cols;
     if (count && !data) return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": no data");
     const std::string header = npy_header("<u2", rows, cols, 1);
@@ -116,9 +115,9 @@ Result<void> write_cloud_ply(const std::string& path, const Plan& plan, const Fr
     const std::size_t n = beams * bins;
     if (frame.display.size() < n || frame.intensity.size() < n || plan.beam_angle_rad.size() < beams ||
         plan.bin_range_m.size() < bins)
-        return make_error(ErrorCode::invalid_argument,
-                          "cannot write " + path + ": frame does not match the plan (" + std::to_string(beams) +
-                              " beams x " + std::to_string(bins) + " bins)");
+        return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": frame does not match the plan (" +
+                                                           std::to_string(beams) + " beams x " + std::to_string(bins) +
+                                                           " bins)");
     std::vector<float> points;
     points.reserve(4 * 1024);
     for (std::size_t k = 0; k < bins; ++k) {
@@ -186,7 +185,8 @@ Result<void> write_meta_json(const std::string& path, const Plan& plan, const Fr
     m["beam_angles_rad"] = std::move(angles);
     m["beam_directions"] = std::move(directions);
     json ranges = json::array();
-    for (std::size_t k = 0; k < plan.bins && k < plan.bin_range_m.size(); ++k) ranges.push_back(plan.bin_range_m[k]);
+    for (std::size_t k = 0; k < plan.bins && k < plan.bin_range_m.size(); ++k)
+        ranges.push_back(plan.bin_range_m[k]);
     m["ranges_m"] = std::move(ranges);
     m["range_min_m"] = cfg.range_min_m;
     m["range_max_m"] = cfg.range_max_m;
@@ -199,7 +199,8 @@ Result<void> write_meta_json(const std::string& path, const Plan& plan, const Fr
     m["frame_index"] = frame.frame_index;
     json effects = json::object();
     const std::vector<EffectState>& states = frame.effects.empty() ? plan.effects.states : frame.effects;
-    for (const EffectState& e : states) effects[e.name] = {{"on", e.on}, {"why", e.why}};
+    for (const EffectState& e : states)
+        effects[e.name] = {{"on", e.on}, {"why", e.why}};
     m["effects"] = std::move(effects);
     m["stages_run"] = frame.stages_run;
     json timings = json::object();
@@ -214,9 +215,9 @@ Result<void> write_meta_json(const std::string& path, const Plan& plan, const Fr
     if (!extra_json_fields.empty()) {
         json extra = json::parse(extra_json_fields, nullptr, /*allow_exceptions=*/false);
         if (extra.is_discarded() || !extra.is_object())
-            return make_error(ErrorCode::internal,
-                              "cannot write " + path + ": extra fields are not a JSON object");
-        for (auto it = extra.begin(); it != extra.end(); ++it) m[it.key()] = it.value();
+            return make_error(ErrorCode::internal, "cannot write " + path + ": extra fields are not a JSON object");
+        for (auto it = extra.begin(); it != extra.end(); ++it)
+            m[it.key()] = it.value();
     }
     const std::string text = m.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
     return write_file(path, nullptr, 0, text.data(), text.size());

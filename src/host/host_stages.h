@@ -16,9 +16,10 @@ namespace vksonar::host {
 double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream);
 // Samplers on top of uniform01 (still counter-based: same key -> same draw). `stream` is the first
 // stream used; exp1 uses 1 stream, normal01 2, gamma_unit_mean kGammaStreams.
-constexpr std::uint32_t kGammaAttempts = 16;                      // Marsaglia-Tsang tries before the mean
-constexpr std::uint32_t kGammaStreams = 3 * kGammaAttempts + 1;   // 3 per try + 1 for looks < 1
-double sample_exp1(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream);
+constexpr std::uint32_t kGammaAttempts = 16;                    // Marsaglia-Tsang tries before the mean
+constexpr std::uint32_t kGammaStreams = 3 * kGammaAttempts + 1; // 3 per try + 1 for looks < 1
+double sample_exp1(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
+                   std::uint32_t stream);
 double sample_normal01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
                        std::uint32_t stream);
 // Gamma(looks, 1/looks): mean 1, variance 1/looks.

@@ -28,12 +28,13 @@ inline void put(Image& out, std::size_t pixel, Rgb8 c) {
     p[2] = c.b;
 }
 
-inline float finite_or_zero(float v) { return std::isfinite(v) ? v : 0.0f; }
+inline float finite_or_zero(float v) {
+    return std::isfinite(v) ? v : 0.0f;
+}
 
 // Interval of a sorted table containing x: returns i0 and t with x = table[i0] + t (table[i0+1] - table[i0]),
 // clamped to the ends (t = 0 at either end). `decreasing` selects the order of the table.
-void locate(const std::vector<double>& table, std::size_t n, double x, bool decreasing, std::int32_t& i0,
-            float& t) {
+void locate(const std::vector<double>& table, std::size_t n, double x, bool decreasing, std::int32_t& i0, float& t) {
     if (n <= 1) {
         i0 = 0;
         t = 0.0f;
@@ -211,8 +212,12 @@ FanRenderer::FanRenderer(const Plan& plan) {
     }
 }
 
-std::uint32_t FanRenderer::width() const { return width_; }
-std::uint32_t FanRenderer::height() const { return height_; }
+std::uint32_t FanRenderer::width() const {
+    return width_;
+}
+std::uint32_t FanRenderer::height() const {
+    return height_;
+}
 
 void FanRenderer::render(const Frame& frame, Image& out) const {
     ensure_size(out, width_, height_);
@@ -231,8 +236,10 @@ void FanRenderer::render(const Frame& frame, Image& out) const {
             const std::size_t ka = static_cast<std::size_t>(bin0_[p]);
             const std::size_t kb = ka + 1 < bins_ ? ka + 1 : ka;
             const float tj = beam_t_[p], tk = bin_t_[p];
-            const float v_near = (1.0f - tj) * finite_or_zero(d[ka * beams + ja]) + tj * finite_or_zero(d[ka * beams + jb]);
-            const float v_far = (1.0f - tj) * finite_or_zero(d[kb * beams + ja]) + tj * finite_or_zero(d[kb * beams + jb]);
+            const float v_near =
+                (1.0f - tj) * finite_or_zero(d[ka * beams + ja]) + tj * finite_or_zero(d[ka * beams + jb]);
+            const float v_far =
+                (1.0f - tj) * finite_or_zero(d[kb * beams + ja]) + tj * finite_or_zero(d[kb * beams + jb]);
             c = colormap(colormap_, (1.0f - tk) * v_near + tk * v_far);
         }
         if (overlay_[p]) {

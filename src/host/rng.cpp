@@ -14,8 +14,7 @@ constexpr double kTwoPi = 6.283185307179586476925286766559;
 
 } // namespace
 
-double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin,
-                 std::uint32_t stream) {
+double uniform01(std::uint64_t seed, std::uint64_t frame, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream) {
     return rng::uniform01(rng::frame_key(seed, frame), beam, bin, stream);
 }
 

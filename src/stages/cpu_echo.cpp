@@ -69,12 +69,12 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
             std::uint32_t m = material[p];
             if (m == shared::kNoMaterial || m >= material_count) m = 0;
             const shared::MaterialGpu& mat = plan.materials[m];
-            const Real f = incidence && mat.model == shared::kScatterLambert ? static_cast<Real>(normals4[4 * p + 3])
-                                                                             : Real(1);
+            const Real f =
+                incidence && mat.model == shared::kScatterLambert ? static_cast<Real>(normals4[4 * p + 3]) : Real(1);
             const Real omega = M::pixel_solid_angle(u, v, du, dv);
             const Real b = vertical ? M::pattern_power(vshape, vk, vhalf, M::pixel_elevation(u, v)) : Real(1);
-            const Real e = M::echo_energy(static_cast<Real>(mat.backscatter_linear), f, omega, r, alpha, b, spreading,
-                                          absorption);
+            const Real e =
+                M::echo_energy(static_cast<Real>(mat.backscatter_linear), f, omega, r, alpha, b, spreading, absorption);
             out[0] = static_cast<float>(e);
             out[1] = static_cast<float>(r);
         }
