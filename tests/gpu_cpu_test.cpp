@@ -431,8 +431,8 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
         config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
         auto plan = make_plan(config, scene.value().data());
         ASSERT_TRUE(plan) << plan.error().message;
-        EXPECT_TRUE(
-            vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation)); // else this compares gather with itself
+        // Else the renders below would compare the gather with itself.
+        EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation));
         auto walked = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
         ::setenv("VKSONAR_RESAMPLE", "gather", 1);
         auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
