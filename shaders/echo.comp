@@ -42,16 +42,26 @@ layout(std140, binding = 13) uniform MaterialBlock { MaterialGpu materials_u[kMa
 uint material_count() {
     return kUniformTables != 0u ? kMaterialCount : uint(materials.length());
 }
-// (backscatter_linear, model), member by member: a struct copied whole between the std140 and std430
-// blocks is an OpStore of mismatched types before SPIR-V 1.4.
-void material(uint m, out float backscatter_linear, out uint model) {
+// 1 when a material of the scene has the rough model (set by the host): only then does the pipeline
+// carry the facet term's exponential and the two extra table reads.
+layout(constant_id = 2) const uint kRoughMaterials = 0u;
+
+// The table entry, member by member: a struct copied whole between the std140 and std430 blocks is
+// an OpStore of mismatched types before SPIR-V 1.4.
+MaterialGpu material(uint m) {
+    MaterialGpu g;
     if (kUniformTables != 0u) {
-        backscatter_linear = materials_u[m].backscatter_linear;
-        model = materials_u[m].model;
+        g.backscatter_linear = materials_u[m].backscatter_linear;
+        g.model = materials_u[m].model;
+        g.specular_ratio = kRoughMaterials != 0u ? materials_u[m].specular_ratio : 0.0;
+        g.inv_two_slope_sq = kRoughMaterials != 0u ? materials_u[m].inv_two_slope_sq : 0.0;
     } else {
-        backscatter_linear = materials[m].backscatter_linear;
-        model = materials[m].model;
+        g.backscatter_linear = materials[m].backscatter_linear;
+        g.model = materials[m].model;
+        g.specular_ratio = kRoughMaterials != 0u ? materials[m].specular_ratio : 0.0;
+        g.inv_two_slope_sq = kRoughMaterials != 0u ? materials[m].inv_two_slope_sq : 0.0;
     }
+    return g;
 }
 
 // (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range window or
@@ -72,11 +82,11 @@ vec2 echo_pixel(uint row, uint column) {
     if (r < params.range_min_m || r >= params.range_max_m || m >= material_count()) {
         return vec2(0.0, r); // kNoMaterial is >= any material count
     }
-    float backscatter_linear;
-    uint model;
-    material(m, backscatter_linear, model);
+    MaterialGpu mat = material(m);
     float scatter = 1.0;
-    if (kIncidence && model == kScatterLambert) {
+    if (kIncidence && kRoughMaterials != 0u) {
+        scatter = scatter_factor(mat.model, normals4[p].w, mat.specular_ratio, mat.inv_two_slope_sq);
+    } else if (kIncidence && mat.model == kScatterLambert) {
         scatter = normals4[p].w;
     }
     float omega = pixel_solid_angle(u, v, 2.0 * params.tan_half_h / float(params.slice_columns),
@@ -86,7 +96,7 @@ vec2 echo_pixel(uint row, uint column) {
         vertical = pattern_power(params.vpattern_shape, params.vpattern_k, params.vpattern_halfwidth_rad,
                                  pixel_elevation(u, v));
     }
-    float e = echo_energy(backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
+    float e = echo_energy(mat.backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
                           kSpreading, kAbsorption);
     return vec2(e, r);
 }

@@ -111,6 +111,34 @@ VKS_FN REAL echo_energy(REAL backscatter_linear, REAL scatter_factor, REAL solid
     return e;
 }
 
+// Facet (Kirchhoff, geometric-optics) term of a rough interface with Gaussian slopes of rms m, as a
+// multiple of its value at normal incidence and divided by cos(theta) like every f:
+//   exp(-tan^2(theta) / (2 m^2)) / cos^5(theta),  c = cos(theta), inv_two_slope_sq = 1 / (2 m^2).
+// Exactly 0 where the exponential is below e^-80 (that also covers c = 0 and NaN), so the cos^5
+// never divides by a number near zero: with m <= 1 a non-zero value needs c > 0.078.
+// sin^2 as (1 - c)(1 + c): 1 - c is exact for c >= 0.5, where 1 - c^2 would cancel (float, c = 0.999:
+// 3e-5 relative error in tan^2 against ~1e-7).
+VKS_FN REAL specular_facet(REAL c, REAL inv_two_slope_sq) {
+    REAL c2 = c * c;
+    REAL t = (REAL(1) - c) * (REAL(1) + c) * inv_two_slope_sq; // tan^2 / (2 m^2), times c^2
+    if (!(t < REAL(80) * c2)) {
+        return REAL(0);
+    }
+    return exp(-t / c2) / (c2 * c2 * c);
+}
+
+// Scattering factor f(theta) = s(theta) / (10^(mu/10) cos(theta)) of a material model (kScatter*) at
+// cosine of incidence c: the factor that multiplies 10^(mu/10) Omega r^-2 in echo_energy().
+VKS_FN REAL scatter_factor(uint model, REAL c, REAL specular_ratio, REAL inv_two_slope_sq) {
+    if (model == 0u) { // lambert
+        return c;
+    }
+    if (model == 2u) { // rough: lambert + facet term
+        return c + specular_ratio * specular_facet(c, inv_two_slope_sq);
+    }
+    return REAL(1); // constant
+}
+
 // Fractional range-bin coordinate: bin k covers [range_min + k w, range_min + (k+1) w). Takes 1 / w:
 // a multiplication is correctly rounded on every Vulkan device, a division is not.
 VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL inv_bin_width_m) {

@@ -38,7 +38,10 @@ VKS_CONST uint kPatternGaussian = 3u; // exp(-k a^2): no side lobes
 // Scattering models (Material.model). The value stored is f(theta) = s(theta) / cos(theta),
 // the factor that multiplies 10^(mu/10) * Omega * r^-2 in the combined sonar equation.
 VKS_CONST uint kScatterLambert = 0u;  // s = mu cos^2(theta) -> f = cos(theta): angle-dependent
-VKS_CONST uint kScatterConstant = 1u; // f = 1: angle-independent, needs no normals
+VKS_CONST uint kScatterConstant = 1u; // f = 1: angle-independent, needs no normals (= Lommel-Seeliger, monostatic)
+// Lambert plus the facet (Kirchhoff) term of a rough interface with Gaussian slopes:
+// f = cos(theta) + specular_ratio * specular_facet(cos(theta), inv_two_slope_sq) (sonar_math.h).
+VKS_CONST uint kScatterRough = 2u;
 
 // Range kernels K_r.
 VKS_CONST uint kRangeKernelNearest = 0u;
@@ -117,8 +120,10 @@ static_assert(sizeof(SliceInfo) == 16, "SliceInfo must match std430");
 struct MaterialGpu {
     float backscatter_linear; // 10^(backscatter_db / 10)
     uint model;               // kScatter*
-    float pad0;
-    float pad1;
+    // kScatterRough only (0 otherwise): R^2 / (8 pi m^2) / backscatter_linear, the facet term's
+    // strength at normal incidence relative to the Lambert term, and 1 / (2 m^2) for rms slope m.
+    float specular_ratio;
+    float inv_two_slope_sq;
 };
 #ifdef __cplusplus
 static_assert(sizeof(MaterialGpu) == 16, "MaterialGpu must match std430");

@@ -287,6 +287,49 @@ TEST(SceneMaterials, ExtrasParsedAndDefaultsApplied) {
     EXPECT_TRUE(warned("roughness")) << "unknown extras.vksonar key is reported";
 }
 
+TEST(SceneMaterials, ScatteringModelsAndFacetParameters) {
+    const Scene scene = load_ok(test_file("scenes/rough_materials.gltf"));
+    const auto& mats = scene.materials();
+    ASSERT_EQ(mats.size(), 4u);
+    EXPECT_EQ(mats[0].model, AcousticMaterial::Model::rough);
+    EXPECT_DOUBLE_EQ(mats[0].backscatter_db, -31.0);
+    EXPECT_DOUBLE_EQ(mats[0].rms_slope, 0.15);
+    EXPECT_DOUBLE_EQ(mats[0].reflection_db, -9.0);
+    EXPECT_EQ(mats[1].model, AcousticMaterial::Model::constant) << "lommel_seeliger is the constant model's name too";
+    EXPECT_EQ(mats[2].model, AcousticMaterial::Model::lambert);
+    EXPECT_EQ(mats[3].model, AcousticMaterial::Model::rough);
+    EXPECT_DOUBLE_EQ(mats[3].rms_slope, AcousticMaterial{}.rms_slope) << "documented default";
+    EXPECT_DOUBLE_EQ(mats[3].reflection_db, AcousticMaterial{}.reflection_db) << "documented default";
+
+    // A facet parameter on a model that ignores it is said once, naming the material and the key.
+    const std::vector<std::string>& w = scene.stats().warnings;
+    const auto count = std::count_if(w.begin(), w.end(), [](const std::string& s) {
+        return s.find("'mud'") != std::string::npos && s.find("extras.vksonar.rms_slope ignored") != std::string::npos;
+    });
+    EXPECT_EQ(count, 1) << ::testing::PrintToString(w);
+    EXPECT_EQ(w.size(), 1u) << ::testing::PrintToString(w);
+}
+
+TEST(SceneMaterials, ValidateNamesTheRoughModelsBadParameter) {
+    AcousticMaterial m;
+    m.model = AcousticMaterial::Model::rough;
+    EXPECT_EQ(m.validate(), "");
+    for (double slope : {0.0, 0.0099, 1.01, -0.1, std::nan(""), std::numeric_limits<double>::infinity()}) {
+        m.rms_slope = slope;
+        EXPECT_NE(m.validate().find("rms_slope = "), std::string::npos) << slope;
+    }
+    m.rms_slope = 0.01;
+    EXPECT_EQ(m.validate(), "") << "the lower bound is allowed";
+    m.rms_slope = 1.0;
+    EXPECT_EQ(m.validate(), "") << "the upper bound is allowed";
+    for (double db : {0.5, std::nan(""), -std::numeric_limits<double>::infinity()}) {
+        m.reflection_db = db;
+        EXPECT_NE(m.validate().find("reflection_db = "), std::string::npos) << db;
+    }
+    m.model = AcousticMaterial::Model::lambert;
+    EXPECT_EQ(m.validate(), "") << "lambert does not use the facet parameters";
+}
+
 TEST(ScenePrimitives, IndexTypesStripsFansAndSkipping) {
     const Scene scene = load_ok(test_file("scenes/primitives.gltf"));
     const SceneData& d = scene.data();
@@ -493,6 +536,9 @@ const BadCase bad_cases[] = {
     {"bad_mesh_index.gltf", ErrorCode::parse, "mesh 5 does not exist"},
     {"bad_backscatter.gltf", ErrorCode::parse, "backscatter_db"},
     {"bad_model.gltf", ErrorCode::parse, "phong"},
+    {"bad_rms_slope.gltf", ErrorCode::parse, "material 0 'glass': extras.vksonar.rms_slope = 0 (expected 0.01 to 1)"},
+    {"bad_reflection.gltf", ErrorCode::parse, "extras.vksonar.reflection_db = 3 (expected a finite value <= 0"},
+    {"bad_rms_slope_type.gltf", ErrorCode::parse, "extras.vksonar.rms_slope = \"smooth\" is not a finite number"},
     {"missing_asset.gltf", ErrorCode::parse, "asset"},
     {"index_count_not_multiple.gltf", ErrorCode::parse, "multiple of 3"},
     {"position_not_float.gltf", ErrorCode::unsupported, "float VEC3"},

@@ -63,17 +63,12 @@ private:
 // A rectangle of width x height metres, centred at `centre` (world), facing the -x direction
 // (towards a sonar at the origin looking along +x), optionally rotated by yaw_deg about z.
 inline void add_quad(Scene& scene, double cx, double cy, double cz, double width_m, double height_m,
-                     double backscatter_db = -20.0, double yaw_deg = 0.0,
-                     AcousticMaterial::Model model = AcousticMaterial::Model::lambert) {
+                     const AcousticMaterial& material, double yaw_deg = 0.0) {
     const float hw = static_cast<float>(width_m / 2), hh = static_cast<float>(height_m / 2);
     const float positions[] = {0, -hw, -hh, 0, hw, -hh, 0, hw, hh, 0, -hw, hh};
     const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
     auto mesh = scene.add_mesh(positions, 4, indices, 6);
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
-    AcousticMaterial material;
-    material.name = "quad";
-    material.backscatter_db = backscatter_db;
-    material.model = model;
     SceneDraw draw;
     draw.mesh = mesh.value();
     draw.material = scene.add_material(material);
@@ -82,6 +77,16 @@ inline void add_quad(Scene& scene, double cx, double cy, double cz, double width
                              0,           0,           1, 0, cx,           cy,          cz, 1};
     auto added = scene.add_draw(draw);
     ASSERT_TRUE(added.ok()) << added.error().message;
+}
+
+inline void add_quad(Scene& scene, double cx, double cy, double cz, double width_m, double height_m,
+                     double backscatter_db = -20.0, double yaw_deg = 0.0,
+                     AcousticMaterial::Model model = AcousticMaterial::Model::lambert) {
+    AcousticMaterial material;
+    material.name = "quad";
+    material.backscatter_db = backscatter_db;
+    material.model = model;
+    add_quad(scene, cx, cy, cz, width_m, height_m, material, yaw_deg);
 }
 
 // The default preset with every noise source off: the clean, deterministic model.

@@ -464,6 +464,21 @@ def primitives():
                  scene_extras={"vksonar": {"effects": {"speckle": "off", "tvg": "on"}}})
 
 
+def rough_materials():
+    """The scattering models' glTF spelling: rough with and without its parameters, the Lommel-Seeliger
+    name, and a facet parameter on a model that ignores it (a warning)."""
+    g = Gltf()
+    sand = g.material("sand", extras={"vksonar": {"backscatter_db": -31, "model": "rough", "rms_slope": 0.15,
+                                                  "reflection_db": -9}})
+    rock = g.material("rock", -18, "lommel_seeliger")
+    mud = g.material("mud", extras={"vksonar": {"backscatter_db": -27, "model": "lambert", "rms_slope": 0.2}})
+    pipe = g.material("pipe", -12, "rough")
+    tri = [(0, 0, 0), (1, 0, 0), (1, 0, 1)]
+    prims = [g.primitive(tri, [(0, 2, 1)], m) for m in (sand, rock, mud, pipe)]
+    g.meshes.append({"name": "four", "primitives": prims})
+    g.write_gltf(os.path.join(ROOT, "tests/data/scenes/rough_materials.gltf"), [g.node("four", 0)])
+
+
 # ---- malformed corpus ---------------------------------------------------------------------------
 
 def triangle_gltf():
@@ -583,6 +598,18 @@ def bad_corpus():
     put("bad_model.gltf", doc)
 
     g, doc = base()
+    doc["materials"] = [{"name": "glass", "extras": {"vksonar": {"model": "rough", "rms_slope": 0}}}]
+    put("bad_rms_slope.gltf", doc)
+
+    g, doc = base()
+    doc["materials"] = [{"name": "louder", "extras": {"vksonar": {"model": "rough", "reflection_db": 3}}}]
+    put("bad_reflection.gltf", doc)
+
+    g, doc = base()
+    doc["materials"] = [{"name": "vague", "extras": {"vksonar": {"model": "rough", "rms_slope": "smooth"}}}]
+    put("bad_rms_slope_type.gltf", doc)
+
+    g, doc = base()
     doc.pop("asset")
     put("missing_asset.gltf", doc)
 
@@ -598,6 +625,16 @@ def bad_corpus():
     g, doc = base()
     doc["scene"] = 3
     put("bad_default_scene.gltf", doc)
+
+    # Names from the file with control characters: the error must still be one line.
+    g, doc = base()
+    doc["materials"] = [{"name": "quay\nwall\x01", "extras": {"vksonar": {"backscatter_db": "loud"}}}]
+    doc["meshes"][0]["primitives"][0]["material"] = 0
+    put("newline_in_name.gltf", doc)
+
+    g, doc = base()
+    doc["extensionsRequired"] = ["KHR_\nmade_up\r"]
+    put("newline_in_extension.gltf", doc)
     print("%-45s %6d files" % (os.path.relpath(d, ROOT), len(os.listdir(d))))
 
 
@@ -613,6 +650,7 @@ def main():
     plane_10m()
     node_transform()
     primitives()
+    rough_materials()
     bad_corpus()
 
 

@@ -17,11 +17,23 @@ namespace vksonar {
 // Acoustic material, read from glTF material extras: {"vksonar": {"backscatter_db": -27, "model": "lambert"}}.
 // Default (a material whose extras say nothing, and the implicit "default" material given to primitives
 // without one): backscatter_db = -30 dB, model = lambert (a mid value for sand/silt seabeds).
+// Scattering strength per unit area at incidence theta (from the surface normal):
+//   lambert   s = mu cos^2(theta)
+//   constant  s = mu cos(theta): the echo of a pixel does not depend on theta (the monostatic
+//             Lommel-Seeliger law; glTF also accepts "lommel_seeliger")
+//   rough     s = mu cos^2(theta) + R^2 exp(-tan^2(theta) / (2 m^2)) / (8 pi m^2 cos^4(theta)): Lambert
+//             plus the Kirchhoff facet term of an interface with Gaussian slopes of rms m and pressure
+//             reflection coefficient R at normal incidence (the near-specular lobe of smooth surfaces)
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct AcousticMaterial {
     std::string name;
     double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr
-    enum class Model : std::uint8_t { lambert, constant } model = Model::lambert;
+    enum class Model : std::uint8_t { lambert, constant, rough } model = Model::lambert;
+    double rms_slope = 0.1;      // rough only: m, rms slope of the interface along one axis (0.01 to 1)
+    double reflection_db = -8.0; // rough only: 10 log10 R^2 (<= 0; -8 dB is medium sand, -1 dB steel)
+
+    // The first problem in words ("rms_slope = 0 (expected 0.01 to 1)"), or empty.
+    std::string validate() const;
 };
 
 // One drawable: a range of a mesh's triangles placed by a world matrix.

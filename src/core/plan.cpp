@@ -13,7 +13,8 @@
 namespace vksonar {
 namespace {
 
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
 // Absorption below this over the two-way range window is invisible on any display: DESIGN §4.
 constexpr double kAbsorptionAutoThresholdDb = 0.1;
 // Neighbours whose slant range differs by more than 5% are treated as another surface by the
@@ -153,6 +154,16 @@ HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_widt
     }
     lobes.peak_sidelobe_db = peak > 0.0 ? 10.0 * std::log10(peak) : -std::numeric_limits<double>::infinity();
     return lobes;
+}
+
+// Largest scattering factor f over all incidences (docs/pipeline.md §3): 1 for lambert and constant;
+// for rough, 1 + specular_ratio * the peak of specular_facet(c, a) = exp(-a (1/c^2 - 1)) / c^5,
+// which is 1 at c = 1 when a = 1 / (2 m^2) >= 2.5, else exp(a - 2.5) / (0.4 a)^2.5 at c^2 = 0.4 a.
+double scatter_factor_peak(const shared::MaterialGpu& m) {
+    if (m.model != shared::kScatterRough) return 1.0;
+    const double a = m.inv_two_slope_sq;
+    const double facet = a >= 2.5 ? 1.0 : std::exp(a - 2.5) / std::pow(0.4 * a, 2.5);
+    return 1.0 + m.specular_ratio * facet;
 }
 
 void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
@@ -298,11 +309,23 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         if (d.material < drawn.size()) drawn[d.material] = true;
     for (std::size_t i = 0; i < scene.materials.size(); ++i) {
         const AcousticMaterial& m = scene.materials[i];
+        // Engines fill materials by hand (Scene::add_material); the glTF loader has checked its own.
+        if (const std::string problem = m.validate(); !problem.empty())
+            return make_error(ErrorCode::invalid_argument,
+                              "material " + std::to_string(i) + " '" + m.name + "': " + problem);
         const double db = std::isfinite(m.backscatter_db) ? m.backscatter_db : c.default_backscatter_db;
-        const std::uint32_t model =
-            m.model == AcousticMaterial::Model::lambert ? shared::kScatterLambert : shared::kScatterConstant;
-        any_angle_dependent |= drawn[i] && model == shared::kScatterLambert;
-        p.materials.push_back({static_cast<float>(std::pow(10.0, db / 10.0)), model, 0.0f, 0.0f});
+        const double backscatter_linear = std::pow(10.0, db / 10.0);
+        shared::MaterialGpu gpu{static_cast<float>(backscatter_linear), shared::kScatterConstant, 0.0f, 0.0f};
+        if (m.model == AcousticMaterial::Model::lambert) gpu.model = shared::kScatterLambert;
+        if (m.model == AcousticMaterial::Model::rough) {
+            gpu.model = shared::kScatterRough;
+            const double slope_sq = m.rms_slope * m.rms_slope;
+            const double facet_peak = std::pow(10.0, m.reflection_db / 10.0) / (8.0 * kPi * slope_sq);
+            gpu.specular_ratio = static_cast<float>(facet_peak / backscatter_linear);
+            gpu.inv_two_slope_sq = static_cast<float>(0.5 / slope_sq);
+        }
+        any_angle_dependent |= drawn[i] && gpu.model != shared::kScatterConstant;
+        p.materials.push_back(gpu);
     }
 
     // Effects (DESIGN §4).
@@ -432,7 +455,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     {
         double brightest = 0.0;
         for (const auto& m : p.materials)
-            brightest = std::max(brightest, double(m.backscatter_linear));
+            brightest = std::max(brightest, m.backscatter_linear * scatter_factor_peak(m));
         const double omega = (2.0 * p.tan_half_h / p.slice_columns) * (2.0 * p.tan_half_v / p.rows);
         const double r = e.spreading ? c.range_min_m : c.range_max_m;
         const double peak = brightest * omega * (e.spreading ? 1.0 / (r * r) : r * r);

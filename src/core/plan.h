@@ -95,6 +95,9 @@ struct HorizontalLobes {
     double peak_sidelobe_db = 0.0;
 };
 HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double reach_rad);
+// Largest scattering factor f(theta) of a material over all incidences (1 unless model is rough):
+// the plan scales fp16 echo storage by the brightest pixel it can produce.
+double scatter_factor_peak(const shared::MaterialGpu& material);
 // Beamform tables from p.column_azimuth_rad and p.beam_angle_rad (tent between the two nearest beam
 // centres, edge columns to the edge beams, across the seam on a full circle): column_beam,
 // column_weight, beam_column_begin/end. Columns with |azimuth| > exclude_beyond_rad feed no beam.

@@ -38,7 +38,7 @@ template <> struct Math<float> {
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
-    VKS_FORWARD(face_normal_sonar_z)
+    VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
 #undef VKS_FORWARD
 };
 template <> struct Math<double> {
@@ -47,7 +47,7 @@ template <> struct Math<double> {
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
-    VKS_FORWARD(face_normal_sonar_z)
+    VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
 #undef VKS_FORWARD
 };
 // clang-format on

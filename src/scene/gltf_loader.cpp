@@ -140,6 +140,8 @@ private:
             m.name = src.name.empty() ? "material " + std::to_string(i) : src.name;
             const std::string where = "material " + std::to_string(i) + " '" + m.name + "'";
             if (!src.extras_json_string.empty()) apply_acoustic_extras(json::parse(src.extras_json_string), m, where);
+            if (const std::string problem = m.validate(); !problem.empty())
+                fail(ErrorCode::parse, where + ": extras.vksonar." + problem);
             out_.materials.push_back(m);
         }
     }
@@ -149,25 +151,38 @@ private:
         const auto it = extras.find("vksonar");
         if (it == extras.end()) return;
         if (!it->is_object()) fail(ErrorCode::parse, where + ": extras.vksonar is not an object");
+        const auto finite_number = [&](const json& value, const std::string& key) {
+            if (!value.is_number() || !std::isfinite(value.get<double>()))
+                fail(ErrorCode::parse,
+                     where + ": extras.vksonar." + key + " = " + value.dump() + " is not a finite number");
+            return value.get<double>();
+        };
+        std::vector<std::string> facet_keys; // rough-model parameters, checked against the model below
         for (const auto& [key, value] : it->items()) {
             if (key == "backscatter_db") {
-                if (!value.is_number() || !std::isfinite(value.get<double>()))
-                    fail(ErrorCode::parse,
-                         where + ": extras.vksonar.backscatter_db = " + value.dump() + " is not a finite number");
-                m.backscatter_db = value.get<double>();
+                m.backscatter_db = finite_number(value, key);
+            } else if (key == "rms_slope" || key == "reflection_db") {
+                (key == "rms_slope" ? m.rms_slope : m.reflection_db) = finite_number(value, key);
+                facet_keys.push_back(key);
             } else if (key == "model") {
                 const std::string model = value.is_string() ? value.get<std::string>() : value.dump();
                 if (model == "lambert")
                     m.model = AcousticMaterial::Model::lambert;
-                else if (model == "constant")
+                else if (model == "constant" || model == "lommel_seeliger")
                     m.model = AcousticMaterial::Model::constant;
+                else if (model == "rough")
+                    m.model = AcousticMaterial::Model::rough;
                 else
-                    fail(ErrorCode::parse, where + ": extras.vksonar.model = " + value.dump() +
-                                               " (expected \"lambert\" or \"constant\")");
+                    fail(ErrorCode::parse,
+                         where + ": extras.vksonar.model = " + value.dump() +
+                             " (expected \"lambert\", \"constant\", \"lommel_seeliger\" or \"rough\")");
             } else {
                 warn(where + ": unknown key extras.vksonar." + key + " ignored");
             }
         }
+        if (m.model != AcousticMaterial::Model::rough)
+            for (const std::string& key : facet_keys)
+                warn(where + ": extras.vksonar." + key + " ignored (only the \"rough\" model uses it)");
     }
 
     std::uint32_t material_index(int gltf_material) {

@@ -1,6 +1,7 @@
 // Scene: ownership of SceneData and the engine-facing builder (add_mesh / add_material / add_draw).
 // The glTF loader (gltf_loader.cpp) fills the same SceneData directly, after its own validation.
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <utility>
@@ -87,6 +88,24 @@ Result<void> Scene::add_draw(const SceneDraw& draw) {
     d.draws.push_back(draw);
     d.stats.draws = static_cast<std::uint32_t>(d.draws.size());
     d.stats.triangles += d.meshes[draw.mesh].index_count / 3;
+    return {};
+}
+
+namespace {
+std::string number(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%g", v);
+    return text;
+}
+} // namespace
+
+std::string AcousticMaterial::validate() const {
+    if (model != Model::rough) return {}; // the facet parameters mean nothing to the other models
+    // m < 0.01 (0.6 deg) makes a mirror whose lobe no pixel grid resolves; m > 1 (45 deg) is past
+    // where the Kirchhoff approximation holds (and would make the facet term's peak unbounded).
+    if (!(rms_slope >= 0.01 && rms_slope <= 1.0)) return "rms_slope = " + number(rms_slope) + " (expected 0.01 to 1)";
+    if (!(reflection_db <= 0.0) || !std::isfinite(reflection_db))
+        return "reflection_db = " + number(reflection_db) + " (expected a finite value <= 0: R^2 <= 1)";
     return {};
 }
 

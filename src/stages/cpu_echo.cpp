@@ -69,8 +69,10 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
             std::uint32_t m = material[p];
             if (m == shared::kNoMaterial || m >= material_count) m = 0;
             const shared::MaterialGpu& mat = plan.materials[m];
-            const Real f =
-                incidence && mat.model == shared::kScatterLambert ? static_cast<Real>(normals4[4 * p + 3]) : Real(1);
+            const Real f = incidence ? M::scatter_factor(mat.model, static_cast<Real>(normals4[4 * p + 3]),
+                                                         static_cast<Real>(mat.specular_ratio),
+                                                         static_cast<Real>(mat.inv_two_slope_sq))
+                                     : Real(1);
             const Real omega = M::pixel_solid_angle(u, v, du, dv);
             const Real b = vertical ? M::pattern_power(vshape, vk, vhalf, M::pixel_elevation(u, v)) : Real(1);
             const Real e =

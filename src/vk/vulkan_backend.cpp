@@ -390,7 +390,12 @@ Result<void> VulkanBackend::create_compute() {
             !r)
             return r;
     }
-    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), spec(kEchoPixels, 0, materials_vec4s)); !r)
+    // echo.comp's variant: 1 when some material has the rough model (its facet term is compiled in).
+    const bool rough = std::any_of(plan_.materials.begin(), plan_.materials.end(),
+                                   [](const shared::MaterialGpu& m) { return m.model == shared::kScatterRough; });
+    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv),
+                      spec(kEchoPixels, rough ? 1u : 0u, materials_vec4s));
+        !r)
         return r;
     if (auto r =
             make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), spec(1, plan_.params.range_kernel, 0));
