@@ -353,9 +353,13 @@ def harbour_scene():
     """A quay wall across the view at x = 18-20 m, a pier with piles reaching towards the sonar, seabed at -8 m."""
     g = Gltf()
     sand = g.material("seabed_silt", -32, "lambert")
-    concrete = g.material("concrete", -15, "lambert")
+    # Cast concrete and a steel crate: smooth enough for a near-specular lobe (the rough model's facet
+    # term) where the sonar sees them face-on.
+    concrete = g.material("concrete", extras={"vksonar": {"backscatter_db": -15, "model": "rough", "rms_slope": 0.08,
+                                                          "reflection_db": -3}})
     timber = g.material("timber", -20, "lambert")
-    steel = g.material("steel", -10, "lambert")
+    steel = g.material("steel", extras={"vksonar": {"backscatter_db": -10, "model": "rough", "rms_slope": 0.1,
+                                                    "reflection_db": -1}})
 
     seabed = g.mesh("seabed", grid(80, 80, 40, 40, seabed_relief(2, 0.05)), sand)
     # Wall: 2 m thick (x), 80 m long (y), 10 m high (z).

@@ -260,7 +260,7 @@ std::vector<ConfigKey> make_table() {
                  "halves its memory traffic and rounds both to 11 significant bits"),
         VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),
 
-        VKS_EFFECT(incidence, "Lambert cos(theta) term (auto: on if a drawn material is angle-dependent)"),
+        VKS_EFFECT(incidence, "cos(theta) terms, the normals pass (auto: on if a drawn material is lambert or rough)"),
         VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),
         VKS_EFFECT(
             horizontal_pattern,
