@@ -132,6 +132,67 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
     EXPECT_LT(min_cos, std::sin(1.0 * kDeg)) << "the view must reach grazing (psi -> asin(h / range_max))";
 }
 
+TEST_P(HardCase, RoughSeabedAtGrazingIsFiniteAndTurnsIntoLambertExactly) {
+    // The grazing seabed of the test above, once Lambert and once rough with the widest lobe allowed
+    // (m = 1) and a perfect reflector (R^2 = 1): the facet term exp(-tan^2 / (2 m^2)) / cos^5 must stay
+    // finite as cos -> 0.0083 and be exactly 0 past its cut (exponent argument 80: cos < 0.0787 at
+    // m = 1), so there the rough echo is the Lambert echo to the bit.
+    SonarConfig config = small_config();
+    config.effects.vertical_pattern = EffectMode::off;
+    config.effects.horizontal_pattern = EffectMode::off;
+    config.effects.absorption = EffectMode::off;
+    config.range_max_m = 60.0;
+    const double h = 0.5;
+    std::unique_ptr<Rendered> rendered[2];
+    for (int rough = 0; rough < 2; ++rough) {
+        Scene scene;
+        const float seabed[] = {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0};
+        const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
+        auto mesh = scene.add_mesh(seabed, 4, indices, 6);
+        ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+        AcousticMaterial material;
+        material.backscatter_db = -20.0;
+        if (rough) {
+            material.model = AcousticMaterial::Model::rough;
+            material.rms_slope = 1.0;
+            material.reflection_db = 0.0;
+        }
+        SceneDraw draw;
+        draw.mesh = mesh.value();
+        draw.material = scene.add_material(material);
+        draw.world_from_local = translation(0, 0, -h);
+        ASSERT_TRUE(scene.add_draw(draw).ok());
+        rendered[rough] = render_checked(GetParam(), config, scene); // every stage finite
+        ASSERT_TRUE(rendered[rough]);
+    }
+    const Frame& lambert = rendered[0]->frame;
+    const Frame& rough = rendered[1]->frame;
+    const shared::MaterialGpu& mat = renderer_plan(rendered[1]->renderer).materials.back(); // after "default"
+    ASSERT_EQ(mat.model, shared::kScatterRough);
+    int cut = 0, lobe = 0;
+    for (std::size_t p = 0; p < lambert.echo.size() / 2; ++p) {
+        if (lambert.echo[2 * p] <= 0) continue;
+        const double c = rough.normals[4 * p + 3];
+        ASSERT_EQ(c, lambert.normals[4 * p + 3]) << "same geometry, same normals";
+        const double a = mat.inv_two_slope_sq;
+        if ((1 - c * c) * a >= 80 * c * c) {
+            EXPECT_EQ(rough.echo[2 * p], lambert.echo[2 * p]) << "pixel " << p << " cos " << c;
+            ++cut;
+        } else {
+            // rough / lambert = f / cos = 1 + ratio exp(-(1/c^2 - 1) a) / c^6, in double from the cosine; the
+            // float path's exponent argument (<= 80) carries ~4 roundings: 80 * 2.4e-7 relative on the facet term.
+            const double facet = mat.specular_ratio * std::exp(-(1 / (c * c) - 1) * a) / std::pow(c, 6);
+            const double got = double(rough.echo[2 * p]) / lambert.echo[2 * p];
+            EXPECT_NEAR(got, 1 + facet, 2e-5 * facet + 1e-6) << "pixel " << p << " cos " << c;
+            ++lobe;
+        }
+    }
+    std::printf("[rough grazing] %d pixels past the facet cut (bit-equal to Lambert), %d on the lobe's tail\n", cut,
+                lobe);
+    EXPECT_GT(cut, 100) << "the view must reach past the cut";
+    EXPECT_GT(lobe, 10) << "and the lobe's tail before it";
+}
+
 TEST_P(HardCase, GrazingPlateEchoTendsToZeroMonotonicallyInAngle) {
     SonarConfig config = small_config();
     config.effects.vertical_pattern = EffectMode::off;
