@@ -76,19 +76,32 @@ DbDiff compare_db(const Frame& a, const Frame& b, double floor_rel, double over_
 
 // ---- grazing incidence ---------------------------------------------------------------------------
 
-TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
-    // A flat seabed h = 1 m below the sonar. A pixel at elevation -psi hits it at r = h / sin(psi) with
-    // cos(incidence) = sin(psi), so E_p / Omega_p = mu sin(psi) / r^2 = mu sin^3(psi) / h^2: it goes to 0
-    // smoothly as the ray approaches the horizon. Patterns and absorption off to isolate the geometry.
+// A flat seabed h = 0.5 m below a level sonar that sees it out to 60 m (cos incidence down to 0.0083),
+// with patterns and absorption off to isolate the geometry.
+constexpr double kSeabedDepth = 0.5;
+SonarConfig grazing_seabed_config() {
     SonarConfig config = small_config();
     config.effects.vertical_pattern = EffectMode::off;
     config.effects.horizontal_pattern = EffectMode::off;
     config.effects.absorption = EffectMode::off;
     config.range_max_m = 60.0;
-    const double h = 0.5, mu_db = -20.0;
+    return config;
+}
+void add_grazing_seabed(Scene& scene, const AcousticMaterial& material) {
+    add_mesh_draw(scene, {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0}, {0, 1, 2, 0, 2, 3},
+                  translation(0, 0, -kSeabedDepth), material);
+}
+
+TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
+    // A pixel at elevation -psi hits the seabed at r = h / sin(psi) with cos(incidence) = sin(psi), so
+    // E_p / Omega_p = mu sin(psi) / r^2 = mu sin^3(psi) / h^2: it goes to 0 smoothly as the ray approaches
+    // the horizon.
+    const SonarConfig config = grazing_seabed_config();
+    const double h = kSeabedDepth, mu_db = -20.0;
     Scene scene;
-    add_mesh_draw(scene, {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0}, {0, 1, 2, 0, 2, 3}, translation(0, 0, -h),
-                  mu_db);
+    AcousticMaterial material;
+    material.backscatter_db = mu_db;
+    add_grazing_seabed(scene, material);
     auto r = render_checked(GetParam(), config, scene);
     ASSERT_TRUE(r);
     const Plan& plan = renderer_plan(r->renderer);
@@ -133,23 +146,14 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
 }
 
 TEST_P(HardCase, RoughSeabedAtGrazingIsFiniteAndTurnsIntoLambertExactly) {
-    // The grazing seabed of the test above, once Lambert and once rough with the widest lobe allowed
+    // The grazing seabed, once Lambert and once rough with the widest lobe allowed
     // (m = 1) and a perfect reflector (R^2 = 1): the facet term exp(-tan^2 / (2 m^2)) / cos^5 must stay
     // finite as cos -> 0.0083 and be exactly 0 past its cut (exponent argument 80: cos < 0.0787 at
     // m = 1), so there the rough echo is the Lambert echo to the bit.
-    SonarConfig config = small_config();
-    config.effects.vertical_pattern = EffectMode::off;
-    config.effects.horizontal_pattern = EffectMode::off;
-    config.effects.absorption = EffectMode::off;
-    config.range_max_m = 60.0;
-    const double h = 0.5;
+    const SonarConfig config = grazing_seabed_config();
     std::unique_ptr<Rendered> rendered[2];
     for (int rough = 0; rough < 2; ++rough) {
         Scene scene;
-        const float seabed[] = {0.2f, -80, 0, 80, -80, 0, 80, 80, 0, 0.2f, 80, 0};
-        const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
-        auto mesh = scene.add_mesh(seabed, 4, indices, 6);
-        ASSERT_TRUE(mesh.ok()) << mesh.error().message;
         AcousticMaterial material;
         material.backscatter_db = -20.0;
         if (rough) {
@@ -157,11 +161,7 @@ TEST_P(HardCase, RoughSeabedAtGrazingIsFiniteAndTurnsIntoLambertExactly) {
             material.rms_slope = 1.0;
             material.reflection_db = 0.0;
         }
-        SceneDraw draw;
-        draw.mesh = mesh.value();
-        draw.material = scene.add_material(material);
-        draw.world_from_local = translation(0, 0, -h);
-        ASSERT_TRUE(scene.add_draw(draw).ok());
+        add_grazing_seabed(scene, material);
         rendered[rough] = render_checked(GetParam(), config, scene); // every stage finite
         ASSERT_TRUE(rendered[rough]);
     }

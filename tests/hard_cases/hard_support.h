@@ -97,21 +97,26 @@ inline std::unique_ptr<Rendered> render_checked(Backend backend, const SonarConf
 
 // Adds a mesh drawn with a column-major world matrix and a material of the given strength.
 inline void add_mesh_draw(Scene& scene, const std::vector<float>& positions, const std::vector<std::uint32_t>& indices,
-                          const std::array<double, 16>& world_from_local, double backscatter_db = -20.0,
-                          AcousticMaterial::Model model = AcousticMaterial::Model::lambert) {
+                          const std::array<double, 16>& world_from_local, const AcousticMaterial& material) {
     auto mesh = scene.add_mesh(positions.data(), static_cast<std::uint32_t>(positions.size() / 3), indices.data(),
                                static_cast<std::uint32_t>(indices.size()));
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
-    AcousticMaterial material;
-    material.name = "m" + std::to_string(scene.materials().size());
-    material.backscatter_db = backscatter_db;
-    material.model = model;
     SceneDraw draw;
     draw.mesh = mesh.value();
     draw.material = scene.add_material(material);
     draw.world_from_local = world_from_local;
     auto added = scene.add_draw(draw);
     ASSERT_TRUE(added.ok()) << added.error().message;
+}
+
+inline void add_mesh_draw(Scene& scene, const std::vector<float>& positions, const std::vector<std::uint32_t>& indices,
+                          const std::array<double, 16>& world_from_local, double backscatter_db = -20.0,
+                          AcousticMaterial::Model model = AcousticMaterial::Model::lambert) {
+    AcousticMaterial material;
+    material.name = "m" + std::to_string(scene.materials().size());
+    material.backscatter_db = backscatter_db;
+    material.model = model;
+    add_mesh_draw(scene, positions, indices, world_from_local, material);
 }
 
 inline std::array<double, 16> translation(double x, double y, double z) {
