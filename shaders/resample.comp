@@ -18,6 +18,9 @@
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
+#define REAL float
+#define VKS_ATAN2 atan
+#include "sonar_math.h"
 
 layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = 1) const uint kBeamsPerInvocation = 16u; // set by the host
@@ -71,12 +74,9 @@ void store_beam(uint j, uint q, vec4 sum) {
 
 // Beam j's share of column c: w(c, j) of docs/pipeline.md §4.
 float gather_weight(uvec2 entry, uint j) {
-    uint beam = entry.x;
+    uint share = resample_share(entry.x, j, params.beams, params.circular != 0u);
     float column_weight = uintBitsToFloat(entry.y);
-    // on a full circle the last beam's right neighbour is beam 0 (the seam columns); written
-    // without `% beams`: lavapipe would divide once per lane
-    bool next = beam + 1u == j || (params.circular != 0u && beam + 1u == params.beams && j == 0u);
-    return beam == j ? column_weight : (next ? 1.0 - column_weight : 0.0);
+    return share == 1u ? column_weight : (share == 2u ? 1.0 - column_weight : 0.0);
 }
 
 void gather(uint q, uint first_beam, uint last_beam) {

@@ -139,6 +139,18 @@ VKS_FN REAL scatter_factor(uint model, REAL c, REAL specular_ratio, REAL inv_two
     return REAL(1); // constant
 }
 
+// Which share of a column's range profile beam j adds in the resample (docs/pipeline.md §4), for a
+// column assigned to beam `column_beam`: 1 = column_weight (its own beam), 2 = 1 - column_weight (the
+// next beam; on a full circle beam 0 follows the last one, across the seam), 0 = none. Written without
+// `% beams`: lavapipe would divide once per lane.
+VKS_FN uint resample_share(uint column_beam, uint j, uint beams, bool circular) {
+    if (column_beam == j) {
+        return 1u;
+    }
+    bool next = column_beam + 1u == j || (circular && column_beam + 1u == beams && j == 0u);
+    return next ? 2u : 0u;
+}
+
 // Fractional range-bin coordinate: bin k covers [range_min + k w, range_min + (k+1) w). Takes 1 / w:
 // a multiplication is correctly rounded on every Vulkan device, a division is not.
 VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL inv_bin_width_m) {

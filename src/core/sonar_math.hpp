@@ -39,6 +39,7 @@ template <> struct Math<float> {
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
     VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
+    VKS_FORWARD(resample_share)
 #undef VKS_FORWARD
 };
 template <> struct Math<double> {
@@ -48,6 +49,7 @@ template <> struct Math<double> {
     VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
     VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
+    VKS_FORWARD(resample_share)
 #undef VKS_FORWARD
 };
 // clang-format on

@@ -83,10 +83,9 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
         for (std::uint32_t j = 0; j < beams; ++j) {
             Real sum = Real(0);
             for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c) {
-                const std::uint32_t b = plan.column_beam[c];
+                const std::uint32_t share = M::resample_share(plan.column_beam[c], j, beams, plan.circular);
                 const Real cw = static_cast<Real>(plan.column_weight[c]);
-                const bool next = plan.circular ? (b + 1) % beams == j : b + 1 == j; // wraps on a full circle
-                const Real w = b == j ? cw : (next ? Real(1) - cw : Real(0));
+                const Real w = share == 1 ? cw : (share == 2 ? Real(1) - cw : Real(0));
                 sum += w * static_cast<Real>(prof[c]);
             }
             beam_profiles[static_cast<std::size_t>(k) * beams + j] = static_cast<float>(sum);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <vector>
 
+#include "core/sonar_math.hpp"
+
 namespace vksonar::vk {
 namespace {
 
@@ -15,11 +17,10 @@ struct Term {
     bool operator==(const Term& other) const { return column == other.column && share == other.share; }
 };
 
-// w(c, j) of docs/pipeline.md §4, as resample.comp's gather() computes it.
+// w(c, j) of docs/pipeline.md §4, by the rule resample.comp's gather() and the CPU reference use.
 Share gathered_share(const Plan& plan, std::uint32_t column, std::uint32_t beam) {
-    const std::uint32_t b = plan.column_beam[column];
-    const bool next = b + 1 == beam || (plan.circular && b + 1 == plan.beams && beam == 0);
-    return b == beam ? Share::weight : (next ? Share::rest : Share::none);
+    const std::uint32_t share = math_f32::resample_share(plan.column_beam[column], beam, plan.beams, plan.circular);
+    return share == 1 ? Share::weight : (share == 2 ? Share::rest : Share::none);
 }
 
 } // namespace
