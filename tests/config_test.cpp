@@ -262,6 +262,30 @@ TEST(Validate, NamesFieldAndValue) {
     EXPECT_NE(table.validate().find("does not match beam_angles"), std::string::npos);
 }
 
+// DESIGN §2: bins derived from the bandwidth, delta r = c / 2B (0.2-60 m at 30 kHz: 2.5 cm, 2392 bins).
+TEST(Validate, BandwidthDerivesTheRangeBins) {
+    SonarConfig c;
+    c.range_min_m = 0.2;
+    c.range_max_m = 60.0;
+    c.sound_speed_mps = 1500.0;
+    c.bins = 1024;
+    EXPECT_EQ(c.range_bins(), 1024u) << "bandwidth 0: bins as given";
+    c.bandwidth_hz = 30e3;
+    EXPECT_EQ(c.validate(), "");
+    EXPECT_EQ(c.range_bins(), 2392u); // 59.8 m / 0.025 m
+    c.bandwidth_hz = 1.0;             // c / 2B = 750 m, far wider than the window: one bin
+    EXPECT_EQ(c.range_bins(), 1u);
+    c.sound_speed_mps = 1480.0;
+    c.bandwidth_hz = 20e3; // 59.8 / 0.037 = 1616.2 -> 1616
+    EXPECT_EQ(c.range_bins(), 1616u);
+    EXPECT_EQ(invalid("bandwidth=-1"), "bandwidth = -1: must be >= 0 Hz (0: use bins)");
+    EXPECT_NE(invalid("bandwidth=nan").find("bandwidth"), std::string::npos);
+    // 39.5 m at c / 2B = 0.15 mm: 263k bins, over the limit; the message gives the count and c / 2B.
+    const std::string too_many = invalid("bandwidth=5e6");
+    EXPECT_NE(too_many.find("bandwidth = 5000000: gives 263333 range bins of c / 2B = 0.00015 m"), std::string::npos)
+        << too_many;
+}
+
 TEST(Reference, DocsConfigMdIsInSyncWithTheTable) {
     const std::string table = config_keys::reference_markdown();
     for (const auto& key : config_keys::all())

@@ -60,6 +60,7 @@ struct SonarConfig {
     double range_min_m = 0.5;
     double range_max_m = 40.0;
     double sound_speed_mps = 1500.0;
+    double bandwidth_hz = 0.0; // > 0: the range bins follow the resolution c / 2B instead of `bins`
 
     // Sonar equation (DESIGN §3). Levels in dB re 1 uPa (at 1 m for SL).
     double source_level_db = 210.0;
@@ -102,6 +103,11 @@ struct SonarConfig {
 
     // Returns the first problem in words (field and value), or an empty string if the config is usable.
     std::string validate() const;
+
+    // Number of range bins: `bins`, or with bandwidth_hz > 0 the window (range_max - range_min) over the
+    // range resolution c / 2B, rounded to the nearest integer and at least 1 (the bins then tile the
+    // window exactly, within half a bin of c / 2B each). Meaningful for a config that validates.
+    std::uint32_t range_bins() const;
 };
 
 // Loading: presets are embedded in the library; files are JSON. Errors name file, key and value.

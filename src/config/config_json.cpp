@@ -1,5 +1,6 @@
 // SonarConfig <-> JSON (files, --set overrides, meta.json) and SonarConfig::validate().
 // Every key goes through the table in config_keys.cpp.
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -140,6 +141,12 @@ std::string config_to_json(const SonarConfig& config) {
     return root.dump(2);
 }
 
+std::uint32_t SonarConfig::range_bins() const {
+    if (!(bandwidth_hz > 0)) return bins;
+    const double derived = std::round((range_max_m - range_min_m) * 2.0 * bandwidth_hz / sound_speed_mps);
+    return static_cast<std::uint32_t>(std::clamp(derived, 1.0, 65536.0));
+}
+
 std::string SonarConfig::validate() const {
     Checker c;
 
@@ -173,6 +180,15 @@ std::string SonarConfig::validate() const {
                 "range_max / range_min must be at most 1e6 (range_min = " + format_number(range_min_m) +
                     " m); raise range_min");
     c.check(sound_speed_mps > 0, "sound_speed", sound_speed_mps, "must be > 0 m/s");
+    c.check(bandwidth_hz >= 0, "bandwidth", bandwidth_hz, "must be >= 0 Hz (0: use bins)");
+    if (c.problem.empty() && bandwidth_hz > 0) {
+        // The count as a double first (range_bins() clamps): a tiny c / 2B would overflow the integer.
+        const double resolution_m = sound_speed_mps / (2.0 * bandwidth_hz);
+        const double derived = std::round((range_max_m - range_min_m) * 2.0 * bandwidth_hz / sound_speed_mps);
+        c.check(derived <= 65536, "bandwidth", bandwidth_hz,
+                "gives " + format_number(derived) + " range bins of c / 2B = " + format_number(resolution_m) +
+                    " m over the range window; at most 65536");
+    }
     if (!c.problem.empty()) return c.problem;
 
     if (!beam_angles_deg.empty()) {

@@ -210,6 +210,9 @@ std::vector<ConfigKey> make_table() {
         VKS_NUMBER("range_min", range_min_m, "m", "Start of the range window, > 0"),
         VKS_NUMBER("range_max", range_max_m, "m", "End of the range window, > range_min"),
         VKS_NUMBER("sound_speed", sound_speed_mps, "m/s", "Speed of sound in water"),
+        VKS_NUMBER("bandwidth", bandwidth_hz, "Hz",
+                   "Pulse bandwidth B; > 0: range bins of the resolution c / 2B over the window (rounded), "
+                   "replacing bins; 0: use bins"),
 
         VKS_NUMBER("source_level", source_level_db, "dB re 1 uPa at 1 m", "Source level SL"),
         VKS_NUMBER("noise_level", noise_level_db, "dB re 1 uPa", "Ambient noise level NL"),

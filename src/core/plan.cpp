@@ -228,7 +228,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     if (!beams_or) return beams_or.error();
     p.beam_angle_rad = std::move(beams_or.value());
     p.beams = static_cast<std::uint32_t>(p.beam_angle_rad.size());
-    p.bins = c.bins;
+    p.bins = c.range_bins();
 
     // Pixel grid: enough columns that pixels_per_beam of them fall in the finer of the beam spacing and
     // the beamwidth, split into slices no wider than max_slice_deg.
