@@ -94,6 +94,7 @@ vec2 echo_pixel(uint row, uint column) {
     float vertical = 1.0;
     if (kVerticalPattern) {
         vertical = pattern_power(params.vpattern_shape, params.vpattern_k, params.vpattern_halfwidth_rad,
+                                 params.vpattern_chebyshev_a,
                                  pixel_elevation(u, v));
     }
     float e = echo_energy(mat.backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,

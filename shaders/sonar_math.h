@@ -70,8 +70,11 @@ VKS_FN REAL sinc_of(REAL x) {
 
 // Beam pattern power (1 on axis) at angle a off the beam axis.
 // k: pattern constant computed on the host so that the power is 0.5 at +-beamwidth/2
-// (sinc/hann: k = x_3dB / sin(bw/2); gaussian: k = ln 2 / (bw/2)^2); box: half_width.
-VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
+// (sinc/hann/chebyshev: k = x_3dB / sin(bw/2); gaussian: k = ln 2 / (bw/2)^2); box: half_width.
+// chebyshev_a: A = acosh(R) of the chebyshev pattern (R = main-lobe / side-lobe amplitude), whose
+// amplitude is cosh(sqrt(A^2 - x^2)) / cosh(A) in the main lobe (x < A) and cos(sqrt(x^2 - A^2)) / cosh(A)
+// beyond it: side lobes of exactly 1 / R, the first null at x = sqrt(A^2 + (pi/2)^2).
+VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a, REAL a) {
     if (shape == 0u) { // box
         return abs(a) <= half_width ? REAL(1) : REAL(0);
     }
@@ -79,6 +82,12 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL a) {
         return exp(-k * a * a);
     }
     REAL x = k * sin(a);
+    if (shape == 4u) { // chebyshev
+        REAL d = chebyshev_a * chebyshev_a - x * x;
+        REAL amp_cheb = d >= REAL(0) ? cosh(sqrt(d)) : cos(sqrt(-d));
+        amp_cheb = amp_cheb / cosh(chebyshev_a);
+        return amp_cheb * amp_cheb;
+    }
     REAL amp = sinc_of(x);
     if (shape == 2u) { // hann-tapered aperture: sinc(x) / (1 - (x/pi)^2), removable singularity at x = pi
         REAL t = x / REAL(3.14159265358979323846);

@@ -34,6 +34,9 @@ VKS_CONST uint kPatternBox = 0u;      // 1 inside +-beamwidth/2, 0 outside (lega
 VKS_CONST uint kPatternSinc = 1u;     // uniform line array: sinc^2(k sin a)
 VKS_CONST uint kPatternHann = 2u;     // Hann-tapered aperture: lower side lobes, wider main lobe
 VKS_CONST uint kPatternGaussian = 3u; // exp(-k a^2): no side lobes
+// Dolph-Chebyshev shading in its large-array limit: every side lobe at the same set level, the
+// narrowest main lobe for that level. Its second parameter is A = acosh(R), R = 10^(-level_db / 20).
+VKS_CONST uint kPatternChebyshev = 4u;
 
 // Scattering models (Material.model). The value stored is f(theta) = s(theta) / cos(theta),
 // the factor that multiplies 10^(mu/10) * Omega * r^-2 in the combined sonar equation.
@@ -99,7 +102,7 @@ struct SonarParams {
     // 1 / bin_width_m rounded once on the host: both backends multiply by it. A GPU may divide with an
     // error of ulps (Vulkan allows 2.5), and a bin coordinate off by ulps moves energy between bins.
     float inv_bin_width_m;
-    float pad3;
+    float vpattern_chebyshev_a; // A = acosh(R) of a chebyshev vertical pattern (pattern_power), else 0
 };
 #ifdef __cplusplus
 static_assert(sizeof(SonarParams) == 28 * 4, "SonarParams must match the GLSL std140 block");

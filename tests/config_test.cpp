@@ -279,6 +279,9 @@ TEST(Validate, BandwidthDerivesTheRangeBins) {
     c.bandwidth_hz = 20e3; // 59.8 / 0.037 = 1616.2 -> 1616
     EXPECT_EQ(c.range_bins(), 1616u);
     EXPECT_EQ(invalid("bandwidth=-1"), "bandwidth = -1: must be >= 0 Hz (0: use bins)");
+    // Chebyshev side-lobe levels: the -3 dB beamwidth needs them below -3 dB; -10 dB keeps margin.
+    EXPECT_EQ(invalid("horizontal_sidelobe_db=-5"), "horizontal_sidelobe_db = -5: must be in [-100, -10] dB");
+    EXPECT_EQ(invalid("vertical_sidelobe_db=-120"), "vertical_sidelobe_db = -120: must be in [-100, -10] dB");
     EXPECT_NE(invalid("bandwidth=nan").find("bandwidth"), std::string::npos);
     // 39.5 m at c / 2B = 0.15 mm: 263k bins, over the limit; the message gives the count and c / 2B.
     const std::string too_many = invalid("bandwidth=5e6");

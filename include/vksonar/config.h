@@ -27,7 +27,7 @@ struct EffectsConfig {
     EffectMode tvg = EffectMode::automatic;                // time-varied gain; auto: off
 };
 
-enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian };
+enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian, chebyshev };
 enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
 enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
@@ -75,6 +75,8 @@ struct SonarConfig {
 
     BeamPattern vertical_pattern = BeamPattern::sinc;
     BeamPattern horizontal_pattern = BeamPattern::sinc;
+    double vertical_sidelobe_db = -30.0;   // chebyshev only: the equal side-lobe level, dB re the main lobe
+    double horizontal_sidelobe_db = -30.0; // chebyshev only: likewise for the horizontal pattern
 
     // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
     SpeckleModel speckle = SpeckleModel::rayleigh;

@@ -181,6 +181,12 @@ std::string SonarConfig::validate() const {
                     " m); raise range_min");
     c.check(sound_speed_mps > 0, "sound_speed", sound_speed_mps, "must be > 0 m/s");
     c.check(bandwidth_hz >= 0, "bandwidth", bandwidth_hz, "must be >= 0 Hz (0: use bins)");
+    // Chebyshev side lobes: below -10 dB so that the -3 dB beamwidth lies in the main lobe; above
+    // -100 dB, where acosh(R) and cosh stay well inside float range on the GPU.
+    c.check(vertical_sidelobe_db >= -100 && vertical_sidelobe_db <= -10, "vertical_sidelobe_db", vertical_sidelobe_db,
+            "must be in [-100, -10] dB");
+    c.check(horizontal_sidelobe_db >= -100 && horizontal_sidelobe_db <= -10, "horizontal_sidelobe_db",
+            horizontal_sidelobe_db, "must be in [-100, -10] dB");
     if (c.problem.empty() && bandwidth_hz > 0) {
         // The count as a double first (range_bins() clamps): a tiny c / 2B would overflow the integer.
         const double resolution_m = sound_speed_mps / (2.0 * bandwidth_hz);

@@ -26,7 +26,7 @@ std::string describe(const Json& value) {
 
 template <class E> struct EnumNames;
 template <> struct EnumNames<BeamPattern> {
-    static constexpr std::array<const char*, 4> names{"box", "sinc", "hann", "gaussian"};
+    static constexpr std::array<const char*, 5> names{"box", "sinc", "hann", "gaussian", "chebyshev"};
 };
 template <> struct EnumNames<BeamSpacing> {
     static constexpr std::array<const char*, 2> names{"equiangular", "equisine"};
@@ -227,10 +227,14 @@ std::vector<ConfigKey> make_table() {
         VKS_NUMBER("water_depth", water_depth_m, "m", "Depth of the sonar (for auto absorption)"),
         VKS_NUMBER("ph", ph, "", "pH (for auto absorption)"),
 
-        VKS_ENUM("vertical_pattern", BeamPattern, vertical_pattern, "box|sinc|hann|gaussian",
+        VKS_ENUM("vertical_pattern", BeamPattern, vertical_pattern, "box|sinc|hann|gaussian|chebyshev",
                  "Shape of the vertical beam pattern b_v"),
-        VKS_ENUM("horizontal_pattern", BeamPattern, horizontal_pattern, "box|sinc|hann|gaussian",
+        VKS_ENUM("horizontal_pattern", BeamPattern, horizontal_pattern, "box|sinc|hann|gaussian|chebyshev",
                  "Shape of the horizontal beam pattern b_h (side lobes)"),
+        VKS_NUMBER("vertical_sidelobe_db", vertical_sidelobe_db, "dB",
+                   "Side-lobe level of a chebyshev vertical pattern (all equal), re the main lobe, -100 to -10"),
+        VKS_NUMBER("horizontal_sidelobe_db", horizontal_sidelobe_db, "dB",
+                   "Side-lobe level of a chebyshev horizontal pattern (all equal), re the main lobe, -100 to -10"),
 
         VKS_ENUM("speckle", SpeckleModel, speckle, "rayleigh|gamma|gaussian",
                  "Speckle model: Exp(1) intensity, Gamma(L, 1/L), or legacy |N(1, sigma)|"),

@@ -107,7 +107,11 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
     return db_per_km / 1000.0;
 }
 
-double pattern_constant(BeamPattern shape, double beamwidth_rad) {
+double chebyshev_a(double sidelobe_db) {
+    return std::acosh(std::pow(10.0, -sidelobe_db / 20.0));
+}
+
+double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshev_a_value) {
     const double half = 0.5 * beamwidth_rad;
     switch (shape) {
     case BeamPattern::box:
@@ -115,13 +119,17 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad) {
     case BeamPattern::gaussian:
         return std::log(2.0) / (half * half);
     case BeamPattern::sinc:
-    case BeamPattern::hann: {
-        // Find x in (0, pi) where the power pattern (same formula as the shaders, via k = 1 and the
-        // angle asin(x) scaled out) falls to 0.5, then k = x / sin(half).
-        const std::uint32_t id = shape == BeamPattern::sinc ? shared::kPatternSinc : shared::kPatternHann;
-        auto power_at_x = [id](double x) {
+    case BeamPattern::hann:
+    case BeamPattern::chebyshev: {
+        // Find x in (0, 3) where the power pattern (same formula as the shaders, via k = 1 and the
+        // angle asin(x) scaled out) falls to 0.5, then k = x / sin(half). Each pattern falls
+        // monotonically to its first null past x = 3 (chebyshev: x = sqrt(A^2 + (pi/2)^2) >= 1.57,
+        // and its side lobes stay below 0.5 for levels under -3 dB), so the bisection finds the
+        // main lobe's half-power point.
+        const std::uint32_t id = static_cast<std::uint32_t>(shape);
+        auto power_at_x = [id, chebyshev_a_value](double x) {
             // pattern_power evaluates k * sin(a); with a = pi/2 and k = x this is exactly x.
-            return math_f64::pattern_power(id, x, 0.0, 3.14159265358979323846 / 2.0);
+            return math_f64::pattern_power(id, x, 0.0, chebyshev_a_value, 3.14159265358979323846 / 2.0);
         };
         double lo = 0.0, hi = 3.0;
         for (int i = 0; i < 100; ++i) {
@@ -134,17 +142,18 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad) {
     return 0.0;
 }
 
-HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double reach_rad) {
+HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double chebyshev_a_value,
+                                 double reach_rad) {
     // Walk out from the axis in steps of 1/200 of the reach: the first local minimum is the first
     // null, the largest value beyond it the strongest side lobe (none for monotone patterns).
     HorizontalLobes lobes;
     constexpr int kSteps = 2000;
-    double previous = math_f64::pattern_power(shape, k, half_width_rad, 0.0);
+    double previous = math_f64::pattern_power(shape, k, half_width_rad, chebyshev_a_value, 0.0);
     bool falling = true;
     double peak = 0.0;
     for (int i = 1; i <= kSteps; ++i) {
         const double a = reach_rad * i / kSteps;
-        const double value = math_f64::pattern_power(shape, k, half_width_rad, a);
+        const double value = math_f64::pattern_power(shape, k, half_width_rad, chebyshev_a_value, a);
         if (falling && value > previous) {
             falling = false;
             lobes.first_null_rad = reach_rad * (i - 1) / kSteps;
@@ -290,9 +299,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
 
     // Beam patterns.
     const double vfov = c.vfov_deg * kDegToRad;
-    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov);
+    p.vpattern_chebyshev_a = c.vertical_pattern == BeamPattern::chebyshev ? chebyshev_a(c.vertical_sidelobe_db) : 0.0;
+    p.hpattern_chebyshev_a =
+        c.horizontal_pattern == BeamPattern::chebyshev ? chebyshev_a(c.horizontal_sidelobe_db) : 0.0;
+    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
     p.vpattern_halfwidth_rad = 0.5 * vfov;
-    p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw);
+    p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw, p.hpattern_chebyshev_a);
     p.hpattern_halfwidth_rad = 0.5 * hbw;
 
     // Materials: one per scene material, or the config default if the scene has none.
@@ -347,7 +359,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     std::string lobes_why;
     if (c.effects.horizontal_pattern == EffectMode::automatic) {
         const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.horizontal_pattern), p.hpattern_k,
-                                                       p.hpattern_halfwidth_rad, reach);
+                                                       p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, reach);
         const double window_db = c.db_max - c.db_min;
         if (lobes.first_null_rad > 0.0 && lobes.peak_sidelobe_db < -window_db) {
             reach = std::min(reach, lobes.first_null_rad);
@@ -409,9 +421,10 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
             if (p.circular) sep = std::remainder(sep, 2.0 * 3.14159265358979323846); // into [-pi, pi]
             float w = 1.0f;
             if (half_taps > 0) {
-                w = std::abs(sep) <= reach + 1e-12 ? static_cast<float>(math_f64::pattern_power(
-                                                         hshape, p.hpattern_k, p.hpattern_halfwidth_rad, sep))
-                                                   : 0.0f;
+                w = std::abs(sep) <= reach + 1e-12
+                        ? static_cast<float>(math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad,
+                                                                     p.hpattern_chebyshev_a, sep))
+                        : 0.0f;
             }
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
         }
@@ -463,6 +476,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         g.echo_scale = std::ldexp(1.0f, std::clamp(exponent, -120, 120));
     }
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
+    g.vpattern_chebyshev_a = static_cast<float>(p.vpattern_chebyshev_a);
     return p;
 }
 

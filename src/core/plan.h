@@ -48,8 +48,8 @@ struct Plan {
     std::vector<double> bin_range_m; // bin centres
 
     // Beam patterns.
-    double vpattern_k = 0, vpattern_halfwidth_rad = 0;
-    double hpattern_k = 0, hpattern_halfwidth_rad = 0;
+    double vpattern_k = 0, vpattern_halfwidth_rad = 0, vpattern_chebyshev_a = 0;
+    double hpattern_k = 0, hpattern_halfwidth_rad = 0, hpattern_chebyshev_a = 0;
     double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
 
     // Beamform tables. Column c (azimuth column_azimuth_rad[c]) gives weight column_weight[c] to beam
@@ -87,14 +87,18 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
                                   double ph, double sound_speed_mps);
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
-double pattern_constant(BeamPattern shape, double beamwidth_rad);
+double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshev_a = 0.0);
+// A = acosh(R) of a chebyshev pattern whose side lobes are all at sidelobe_db (power, dB re the main
+// lobe): R = 10^(-sidelobe_db / 20) is the amplitude ratio of main lobe to side lobes.
+double chebyshev_a(double sidelobe_db);
 // The horizontal power pattern's first null (0 if it has none within reach_rad, e.g. gaussian or box)
 // and its strongest side lobe beyond it in dB re the axis (-inf if none), found by sampling.
 struct HorizontalLobes {
     double first_null_rad = 0.0;
     double peak_sidelobe_db = 0.0;
 };
-HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double reach_rad);
+HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double chebyshev_a,
+                                 double reach_rad);
 // Largest scattering factor f(theta) of a material over all incidences (1 unless model is rough):
 // the plan scales fp16 echo storage by the brightest pixel it can produce.
 double scatter_factor_peak(const shared::MaterialGpu& material);

@@ -12,7 +12,7 @@ namespace vksonar {
 
 namespace math_f32 {
 using shared::uint;
-using std::abs, std::atan, std::cos, std::exp, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::max, std::min, std::sin, std::sqrt;
 #define REAL float
 #include "sonar_math.h"
 #undef REAL
@@ -20,7 +20,7 @@ using std::abs, std::atan, std::cos, std::exp, std::max, std::min, std::sin, std
 
 namespace math_f64 {
 using shared::uint;
-using std::abs, std::atan, std::cos, std::exp, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::max, std::min, std::sin, std::sqrt;
 #define REAL double
 #include "sonar_math.h"
 #undef REAL

@@ -16,7 +16,7 @@ template <class Real>
 void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
-    Real tan_h, tan_v, depth_a, depth_b, range_min, range_max, alpha, vk, vhalf;
+    Real tan_h, tan_v, depth_a, depth_b, range_min, range_max, alpha, vk, vhalf, vcheb;
     if constexpr (std::is_same_v<Real, float>) {
         tan_h = g.tan_half_h;
         tan_v = g.tan_half_v;
@@ -27,6 +27,7 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
         alpha = g.alpha_db_per_m;
         vk = g.vpattern_k;
         vhalf = g.vpattern_halfwidth_rad;
+        vcheb = g.vpattern_chebyshev_a;
     } else {
         tan_h = plan.tan_half_h;
         tan_v = plan.tan_half_v;
@@ -37,6 +38,7 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
         alpha = plan.alpha_db_per_m;
         vk = plan.vpattern_k;
         vhalf = plan.vpattern_halfwidth_rad;
+        vcheb = plan.vpattern_chebyshev_a;
     }
     const std::uint32_t vshape = g.vpattern_shape;
     const bool incidence = plan.effects.incidence && normals4 != nullptr;
@@ -74,7 +76,7 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
                                                          static_cast<Real>(mat.inv_two_slope_sq))
                                      : Real(1);
             const Real omega = M::pixel_solid_angle(u, v, du, dv);
-            const Real b = vertical ? M::pattern_power(vshape, vk, vhalf, M::pixel_elevation(u, v)) : Real(1);
+            const Real b = vertical ? M::pattern_power(vshape, vk, vhalf, vcheb, M::pixel_elevation(u, v)) : Real(1);
             const Real e =
                 M::echo_energy(static_cast<Real>(mat.backscatter_linear), f, omega, r, alpha, b, spreading, absorption);
             out[0] = static_cast<float>(e);

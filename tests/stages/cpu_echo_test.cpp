@@ -75,7 +75,7 @@ TYPED_TEST(CpuEchoTyped, PixelMatchesSonarEquationOnHandComputedInputs) {
                              std::pow(1 + u * u + v * v, 1.5);
         const double psi = std::atan2(-v, std::sqrt(1 + u * u));
         const double bv =
-            math_f64::pattern_power(shared::kPatternSinc, plan.vpattern_k, plan.vpattern_halfwidth_rad, psi);
+            math_f64::pattern_power(shared::kPatternSinc, plan.vpattern_k, plan.vpattern_halfwidth_rad, 0.0, psi);
         double expected =
             Math<double>::echo_energy(double(mat.backscatter_linear), f, omega, r, plan.alpha_db_per_m, bv, true, true);
         if (r < 0.5 || r >= 40.0) expected = 0.0;
