@@ -42,9 +42,13 @@ layout(std140, binding = 13) uniform MaterialBlock { MaterialGpu materials_u[kMa
 uint material_count() {
     return kUniformTables != 0u ? kMaterialCount : uint(materials.length());
 }
-// 1 when a material of the scene has the rough model (set by the host): only then does the pipeline
-// carry the facet term's exponential and the two extra table reads.
-layout(constant_id = 2) const uint kRoughMaterials = 0u;
+// Set by the host. Bit 0: a material of the scene has the rough model; only then does the pipeline
+// carry the facet term's exponential and the two extra table reads. Bits 1-3: params.vpattern_shape,
+// so that pattern_power() keeps only that shape's code (a uniform branch runs every shape's code on
+// lavapipe: the chebyshev branch made echo ~10 % slower for a sinc pattern).
+layout(constant_id = 2) const uint kVariant = 2u;
+const uint kRoughMaterials = kVariant & 1u;
+const uint kVerticalShape = (kVariant >> 1u) & 7u;
 
 // The table entry, member by member: a struct copied whole between the std140 and std430 blocks is
 // an OpStore of mismatched types before SPIR-V 1.4.
@@ -93,7 +97,7 @@ vec2 echo_pixel(uint row, uint column) {
                                     2.0 * params.tan_half_v / float(params.rows));
     float vertical = 1.0;
     if (kVerticalPattern) {
-        vertical = pattern_power(params.vpattern_shape, params.vpattern_k, params.vpattern_halfwidth_rad,
+        vertical = pattern_power(kVerticalShape, params.vpattern_k, params.vpattern_halfwidth_rad,
                                  params.vpattern_chebyshev_a,
                                  pixel_elevation(u, v));
     }
