@@ -122,10 +122,10 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshe
     case BeamPattern::hann:
     case BeamPattern::chebyshev: {
         // Find x in (0, 3) where the power pattern (same formula as the shaders, via k = 1 and the
-        // angle asin(x) scaled out) falls to 0.5, then k = x / sin(half). Each pattern falls
-        // monotonically to its first null past x = 3 (chebyshev: x = sqrt(A^2 + (pi/2)^2) >= 1.57,
-        // and its side lobes stay below 0.5 for levels under -3 dB), so the bisection finds the
-        // main lobe's half-power point.
+        // angle asin(x) scaled out) falls to 0.5, then k = x / sin(half). On (0, 3) the power is above
+        // 0.5 only from the axis to that point: sinc and hann reach their first nulls past x = 3, and
+        // chebyshev's side lobes (past x = sqrt(A^2 + (pi/2)^2), which may be < 3) stay at their
+        // level, below -10 dB; so the bisection finds the main lobe's half-power point.
         const std::uint32_t id = static_cast<std::uint32_t>(shape);
         auto power_at_x = [id, chebyshev_a_value](double x) {
             // pattern_power evaluates k * sin(a); with a = pi/2 and k = x this is exactly x.
