@@ -48,6 +48,12 @@ std::string format_number(double value) {
     return out.str();
 }
 
+// The range window over the resolution c / 2B, rounded: as a double, so that validate() can name a
+// count too large for the integer.
+double bins_from_bandwidth(const SonarConfig& c) {
+    return std::round((c.range_max_m - c.range_min_m) * 2.0 * c.bandwidth_hz / c.sound_speed_mps);
+}
+
 // Helpers for validate(): each returns true when the check fails and fills `problem`.
 struct Checker {
     std::string problem;
@@ -143,8 +149,7 @@ std::string config_to_json(const SonarConfig& config) {
 
 std::uint32_t SonarConfig::range_bins() const {
     if (!(bandwidth_hz > 0)) return bins;
-    const double derived = std::round((range_max_m - range_min_m) * 2.0 * bandwidth_hz / sound_speed_mps);
-    return static_cast<std::uint32_t>(std::clamp(derived, 1.0, 65536.0));
+    return static_cast<std::uint32_t>(std::clamp(bins_from_bandwidth(*this), 1.0, 65536.0));
 }
 
 std::string SonarConfig::validate() const {
@@ -188,9 +193,8 @@ std::string SonarConfig::validate() const {
     c.check(horizontal_sidelobe_db >= -100 && horizontal_sidelobe_db <= -10, "horizontal_sidelobe_db",
             horizontal_sidelobe_db, "must be in [-100, -10] dB");
     if (c.problem.empty() && bandwidth_hz > 0) {
-        // The count as a double first (range_bins() clamps): a tiny c / 2B would overflow the integer.
         const double resolution_m = sound_speed_mps / (2.0 * bandwidth_hz);
-        const double derived = std::round((range_max_m - range_min_m) * 2.0 * bandwidth_hz / sound_speed_mps);
+        const double derived = bins_from_bandwidth(*this);
         c.check(derived <= 65536, "bandwidth", bandwidth_hz,
                 "gives " + format_number(derived) + " range bins of c / 2B = " + format_number(resolution_m) +
                     " m over the range window; at most 65536");
