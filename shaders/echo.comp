@@ -68,8 +68,8 @@ MaterialGpu material(uint m) {
     return g;
 }
 
-// (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range window or
-// without a material. One store at the end, not one per way out: lavapipe runs every branch under a
+// (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range gate (the
+// window widened by the range kernel's half width, SonarParams) or without a material. One store at the end, not one per way out: lavapipe runs every branch under a
 // lane mask, and each store is a loop over the lanes.
 vec2 echo_pixel(uint row, uint column) {
     uint p = row * params.columns + column;
@@ -83,7 +83,7 @@ vec2 echo_pixel(uint row, uint column) {
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
     float r = slant_range(z, u, v);
     uint m = material_id[p];
-    if (r < params.range_min_m || r >= params.range_max_m || m >= material_count()) {
+    if (r < params.gate_min_m || r >= params.gate_max_m || m >= material_count()) {
         return vec2(0.0, r); // kNoMaterial is >= any material count
     }
     MaterialGpu mat = material(m);

@@ -36,9 +36,9 @@ void main() {
     }
     float out_depth = 0.0;
     if (hit && z > 0.0 && !isinf(z)) {
-        // Beyond far (range_max) this is <= 0: no hit, as the depth pass's far plane would clip it.
-        // Nearer than the near plane it exceeds 1; clamped, the pixel lies at near, short of range_min,
-        // so the echo stage gives it no energy (the depth pass would have clipped it instead).
+        // Beyond far (the range gate's far edge) this is <= 0: no hit, as the depth pass's far plane
+        // would clip it. Nearer than the near plane it exceeds 1; clamped, the pixel lies at near, short
+        // of the gate, so the echo stage gives it no energy (the depth pass would have clipped it instead).
         out_depth = min(params.depth_a / z + params.depth_b, 1.0);
     }
     out_depth = max(out_depth, 0.0);

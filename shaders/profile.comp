@@ -41,12 +41,15 @@ void main() {
     uint bins = params.bins;
     uint base = column * params.bins_padded;
     uint rows = params.rows;
-    float r_up = 0.0;
+    // A window of five rows of this column's echo (energy, range): two above, this one, two below
+    // (range 0 = no hit or outside the image).
+    vec2 up2 = vec2(0.0);
+    vec2 up = vec2(0.0);
     vec2 er = load_echo(column);
+    vec2 next = rows > 1u ? load_echo(columns + column) : vec2(0.0);
     for (uint row = 0u; row < rows; ++row) {
-        // the next row's echo, loaded once: r_down here, er on the next iteration
-        vec2 next = row + 1u < rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
-        float r_down = next.y;
+        // the echo two rows down, loaded once: down2 here, down on the next row, er after that
+        vec2 next2 = row + 2u < rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
         float e = er.x;
         float r = er.y;
         if (e > 0.0) {
@@ -54,32 +57,49 @@ void main() {
             // rounded exactly as the CPU reference rounds them (a GPU compiler may otherwise contract
             // a*b+c, and an ulp of a bin coordinate moves energy between bins).
             precise float x = range_bin_coord(r, params.range_min_m, params.inv_bin_width_m);
+            int nb = int(bins);
             if (kRangeKernel == kRangeKernelFootprint) {
-                precise float extent = pixel_range_extent(r_up, r, r_down, params.edge_relative_jump) *
-                                       params.inv_bin_width_m;
-                float width = min(max(extent, 1.0), kMaxFootprintBins);
-                precise float lo = x - 0.5 * width;
-                precise float hi = x + 0.5 * width;
-                float inv_width = 1.0 / width;
-                int nb = int(bins);
-                int k_first = int(floor(min(max(lo, 0.0), float(nb - 1))));
-                int k_last = int(floor(min(max(hi, 0.0), float(nb - 1))));
+                float jump = params.edge_relative_jump;
+                float inv_bw = params.inv_bin_width_m;
+                float a = footprint_edge_offset(up.y, up2.y, r, next.y, jump);
+                float b = footprint_edge_offset(next.y, next2.y, r, up.y, jump);
+                precise float xl = x + footprint_lo(a, b) * inv_bw;
+                precise float xh = x + footprint_hi(a, b) * inv_bw;
+                precise float centre = 0.5 * (xl + xh);
+                float width = min(max(xh - xl, 1.0), kMaxFootprintBins);
+                precise float lo = centre - 0.5 * width;
+                precise float hi = centre + 0.5 * width;
+                // the density's slope from the neighbours' footprints (both on this surface)
+                float g = 0.0;
+                if (a != 0.0 && b != 0.0 && up2.y > 0.0 && next2.y > 0.0) {
+                    precise float w_up = 0.5 * abs(up2.y - r) * inv_bw;
+                    precise float w_down = 0.5 * abs(r - next2.y) * inv_bw;
+                    // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
+                    precise float span = (2.0 * (up.y - next.y) + (up2.y - next2.y)) * (0.25 * inv_bw);
+                    g = footprint_log_slope(up.x, w_up, next.x, w_down, span, width);
+                }
+                float inv_norm = 1.0 / (width * sinhc_of(0.5 * g * width));
+                // only the bins of the window: the rest of the footprint is gated away
+                int k_first = max(int(floor(lo)), 0);
+                int k_last = min(int(floor(hi)), nb - 1);
                 for (int k = k_first; k <= k_last; ++k) {
-                    precise float share = footprint_share(lo, hi, inv_width, k, nb) * e;
+                    precise float share = footprint_share(lo, hi, centre, g, inv_norm, k) * e;
                     profiles[base + uint(k)] += share;
                 }
             } else if (kRangeKernel == kRangeKernelTent) {
                 precise float t = x - 0.5;
                 float k0f = floor(t);
                 precise float w1 = t - k0f;
-                // a share below bin 0 goes to bin 0, above the last bin to the last bin: energy is kept
-                int k0 = int(clamp(k0f, -1.0, float(bins)));
-                uint b0 = uint(clamp(k0, 0, int(bins) - 1));
-                uint b1 = uint(clamp(k0 + 1, 0, int(bins) - 1));
+                // a share outside the window is gated away
+                int k0 = int(clamp(k0f, -2.0, float(bins)));
                 precise float share0 = (1.0 - w1) * e;
                 precise float share1 = w1 * e;
-                profiles[base + b0] += share0;
-                profiles[base + b1] += share1;
+                if (k0 >= 0 && k0 < nb) {
+                    profiles[base + uint(k0)] += share0;
+                }
+                if (k0 + 1 >= 0 && k0 + 1 < nb) {
+                    profiles[base + uint(k0 + 1)] += share1;
+                }
             } else {
                 float kf = floor(x);
                 if (kf >= 0.0 && kf < float(bins)) {
@@ -87,7 +107,9 @@ void main() {
                 }
             }
         }
-        r_up = r;
+        up2 = up;
+        up = er;
         er = next;
+        next = next2;
     }
 }

@@ -166,32 +166,87 @@ VKS_FN REAL range_bin_coord(REAL range_m, REAL range_min_m, REAL inv_bin_width_m
     return (range_m - range_min_m) * inv_bin_width_m;
 }
 
-// Range extent (m) of a pixel from the slant ranges of its row neighbours (0 = no hit): half the
-// spread between the neighbours on the same surface (|r_q - r| <= jump_rel r), the one-sided step at
-// an edge, 0 for an isolated pixel. Used by the footprint range kernel.
-VKS_FN REAL pixel_range_extent(REAL r_up, REAL r, REAL r_down, REAL jump_rel) {
-    REAL jump = jump_rel * r;
-    bool up = r_up > REAL(0) && abs(r_up - r) <= jump;
-    bool down = r_down > REAL(0) && abs(r_down - r) <= jump;
-    if (up && down) {
-        return REAL(0.5) * abs(r_down - r_up);
-    }
-    if (up) {
-        return abs(r_up - r);
-    }
-    if (down) {
-        return abs(r_down - r);
-    }
-    return REAL(0);
+// Two range steps along a column are steps over the same smooth surface if they go the same way and
+// neither is more than twice the other. On a flat seabed seen at depression angle b with rows dB apart
+// the ratio of consecutive steps is about 1 + 2 dB / b: 1.1 at 6 degrees with 0.3-degree rows, 2 only
+// below b = 2 dB (a fraction of a degree). At an occlusion edge the step to the surface behind is many
+// times the step along the surface in front, or goes the other way.
+VKS_FN bool steps_agree(REAL s, REAL t) {
+    REAL as = abs(s);
+    REAL at = abs(t);
+    return s * t > REAL(0) && as <= REAL(2) * at && at <= REAL(2) * as;
 }
 
-// Share of a box [lo, hi] (bin coordinates, 1 / (hi - lo) = inv_width) that falls into bin k of
-// `bins`; bin 0 also takes everything below the grid and the last bin everything above, so the
-// shares of bins 0..bins-1 always sum to 1 (energy is kept).
-VKS_FN REAL footprint_share(REAL lo, REAL hi, REAL inv_width, int k, int bins) {
-    REAL cell_lo = k == 0 ? lo : REAL(k);
-    REAL cell_hi = k == bins - 1 ? hi : REAL(k + 1);
-    return max(min(hi, cell_hi) - max(lo, cell_lo), REAL(0)) * inv_width;
+// Offset (m, signed) from a pixel's range r to its edge towards row neighbour q (range r_q, 0 = no hit):
+// half the step to q if q lies on the same surface, else 0. Same surface: the step is within
+// jump_rel * r (a surface facing the sonar), or it agrees (steps_agree) with the next step beyond q
+// (r_beyond, the neighbour's own neighbour on that side) or with the step from the opposite neighbour
+// (r_opposite) to r. The second rule keeps a grazing seabed whole where its range steps between rows
+// are larger than the jump threshold (far out, or at a coarse row grid): with the threshold alone its
+// pixels lose their footprint and each puts all its energy into one bin, leaving the bins between empty.
+VKS_FN REAL footprint_edge_offset(REAL r_q, REAL r_beyond, REAL r, REAL r_opposite, REAL jump_rel) {
+    if (!(r_q > REAL(0))) {
+        return REAL(0);
+    }
+    REAL s = r_q - r;
+    bool same = abs(s) <= jump_rel * r || (r_beyond > REAL(0) && steps_agree(s, r_beyond - r_q)) ||
+                (r_opposite > REAL(0) && steps_agree(s, r - r_opposite));
+    return same ? REAL(0.5) * s : REAL(0);
+}
+
+// The pixel's range footprint [r + footprint_lo(a, b), r + footprint_hi(a, b)] from its two edge
+// offsets a (towards the row above) and b (below): the range interval between its edges, and the pixel's
+// own range in it. A side without a neighbour on the same surface mirrors the other side (an edge pixel
+// spans as far either way); with neither, the footprint is the point r (the kernel widens it to a bin).
+VKS_FN REAL footprint_lo(REAL a, REAL b) {
+    REAL a2 = a != REAL(0) ? a : -b;
+    REAL b2 = b != REAL(0) ? b : -a;
+    return min(min(a2, b2), REAL(0));
+}
+VKS_FN REAL footprint_hi(REAL a, REAL b) {
+    REAL a2 = a != REAL(0) ? a : -b;
+    REAL b2 = b != REAL(0) ? b : -a;
+    return max(max(a2, b2), REAL(0));
+}
+
+// sinh(y) / y, without 0/0 at y = 0 or cancellation near it (series below |y| = 0.5: error < 1e-9).
+VKS_FN REAL sinhc_of(REAL y) {
+    if (abs(y) < REAL(0.5)) {
+        REAL y2 = y * y;
+        return REAL(1) + y2 / REAL(6) * (REAL(1) + y2 / REAL(20) * (REAL(1) + y2 / REAL(42)));
+    }
+    return (exp(y) - exp(-y)) / (REAL(2) * y);
+}
+
+// Slope g (per bin) of the log energy density along range inside a pixel's footprint of `width` bins,
+// from the densities of its row neighbours: rho = e / w (energy over footprint width, bins), their centres
+// `span` bins apart (up minus down). The density of a surface's echo changes fast along range where the
+// rows are sparse (a grazing seabed: r^-5 from spreading and incidence, plus the rows' own spacing), and
+// a flat box over a footprint of metres leaves a saw-tooth of +-0.5 dB across the bins. 0 (a flat box)
+// where a neighbour is missing or empty; |g| is capped at 1 per bin and at 8 over the footprint, so the
+// density never spans more than e^8 across a pixel.
+VKS_FN REAL footprint_log_slope(REAL e_up, REAL w_up, REAL e_down, REAL w_down, REAL span, REAL width) {
+    if (!(e_up > REAL(0) && e_down > REAL(0) && w_up > REAL(0) && w_down > REAL(0) && abs(span) > REAL(0))) {
+        return REAL(0);
+    }
+    REAL g = log((e_up * w_down) / (e_down * w_up)) / span;
+    REAL cap = min(REAL(1), REAL(8) / width);
+    return min(max(g, -cap), cap);
+}
+
+// Share of a pixel's footprint [lo, hi] (bin coordinates, centre c = (lo + hi) / 2) that falls into bin
+// k, with the energy density along range proportional to exp(g (x - c)); inv_norm =
+// 1 / ((hi - lo) sinhc(g (hi - lo) / 2)) normalizes its integral over the footprint to 1. With g = 0 this
+// is the box: (overlap length) / (hi - lo). The range window gates: what lies below bin 0 or above the
+// last bin is not recorded, so the shares of the bins add up to the part of the footprint inside.
+VKS_FN REAL footprint_share(REAL lo, REAL hi, REAL centre, REAL g, REAL inv_norm, int k) {
+    REAL a = max(lo, REAL(k));
+    REAL b = min(hi, REAL(k + 1));
+    if (!(b > a)) {
+        return REAL(0);
+    }
+    REAL half_len = REAL(0.5) * (b - a);
+    return (b - a) * exp(g * (a + half_len - centre)) * sinhc_of(g * half_len) * inv_norm;
 }
 
 // Cosine of incidence of a unit normal n already turned to face the sonar, at a pixel of sonar-frame

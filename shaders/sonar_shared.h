@@ -49,11 +49,11 @@ VKS_CONST uint kScatterRough = 2u;
 // Range kernels K_r.
 VKS_CONST uint kRangeKernelNearest = 0u;
 VKS_CONST uint kRangeKernelTent = 1u;
-// Box over the pixel's own range extent (half the range step to its row neighbours on the same
+// Box over the pixel's own range extent (from its edges half way to its row neighbours on the same
 // surface), at least one bin wide. At one bin it is the tent; wider, it fills the range gaps that a
 // coarse row grid leaves on a grazing seabed (without it the fan shows bright/dark stripes there).
 VKS_CONST uint kRangeKernelFootprint = 2u;
-VKS_CONST float kMaxFootprintBins = 64.0f; // caps the per-pixel loop; wider footprints are truncated to it
+VKS_CONST float kMaxFootprintBins = 256.0f; // caps the per-pixel loop; wider footprints are truncated to it
 
 // Normal methods.
 VKS_CONST uint kNormalsSobel3 = 0u;
@@ -103,9 +103,17 @@ struct SonarParams {
     // error of ulps (Vulkan allows 2.5), and a bin coordinate off by ulps moves energy between bins.
     float inv_bin_width_m;
     float vpattern_chebyshev_a; // A = acosh(R) of a chebyshev vertical pattern (pattern_power), else 0
+
+    // The echo stage's range gate [gate_min_m, gate_max_m): the window widened by the half width of
+    // the widest range kernel, so that a pixel just outside the window still puts the part of its
+    // footprint that lies inside into the edge bins (and the part outside is dropped, not folded in).
+    float gate_min_m;
+    float gate_max_m;
+    uint pad0;
+    uint pad1;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SonarParams) == 28 * 4, "SonarParams must match the GLSL std140 block");
+static_assert(sizeof(SonarParams) == 32 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
 // Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.

@@ -99,11 +99,12 @@ Result<Plan> make_host_depth_plan(const SonarConfig& config, const HostDepthDesc
     p.tan_half_h = tan_half_h;
     p.tan_half_v = tan_half_v;
     p.slice_info.assign(1, shared::SliceInfo{0.0f, 1.0f, 0.0f, 0.0f});
-    // Same clip planes rule as make_plan (the corner ray reaches range_min at the near plane), for the
-    // import pass's conversion to vksonar's reversed-Z convention.
+    // Same clip planes rule as make_plan (the corner ray reaches the range gate's near edge at the near
+    // plane; the far plane at its far edge), for the import pass's conversion to vksonar's reversed-Z
+    // convention: a texel nearer than the near plane is clamped to it and so falls short of the gate.
     const double corner = std::sqrt(1.0 + tan_half_h * tan_half_h + tan_half_v * tan_half_v);
-    p.near_m = 0.999 * config.range_min_m / corner;
-    p.far_m = config.range_max_m;
+    p.near_m = 0.999 * p.gate_min_m / corner;
+    p.far_m = p.gate_max_m;
     p.depth_a = p.near_m * p.far_m / (p.far_m - p.near_m);
     p.depth_b = -p.near_m / (p.far_m - p.near_m);
 

@@ -284,15 +284,26 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                            static_cast<float>(std::sin(centre)), 0.0f};
     }
 
-    // Clip planes: the corner ray of a slice reaches range_min at view z = range_min / |(u, v, 1)|, so the
-    // near plane sits there (slightly closer) and the echo stage cuts at the exact slant range.
+    p.bin_width_m = (c.range_max_m - c.range_min_m) / p.bins;
+    // The range gate: a footprint reaches at most kMaxFootprintBins / 2 bins from its pixel, a tent one
+    // bin, the nearest bin none. Below range_min the gate stops at half of it (the near plane must stay
+    // in front of the sonar; footprints are narrow that close).
+    const double kernel_half_bins = c.range_kernel == RangeKernel::footprint ? 0.5 * shared::kMaxFootprintBins
+                                    : c.range_kernel == RangeKernel::tent    ? 1.0
+                                                                             : 0.0;
+    p.gate_margin_m = kernel_half_bins * p.bin_width_m;
+    p.gate_min_m = std::max(c.range_min_m - p.gate_margin_m, 0.5 * c.range_min_m);
+    p.gate_max_m = c.range_max_m + p.gate_margin_m;
+
+    // Clip planes: the corner ray of a slice reaches gate_min at view z = gate_min / |(u, v, 1)|, so the
+    // near plane sits there (slightly closer), the far plane at gate_max, and the echo stage cuts at the
+    // exact slant range.
     const double corner = std::sqrt(1.0 + p.tan_half_h * p.tan_half_h + p.tan_half_v * p.tan_half_v);
-    p.near_m = 0.999 * c.range_min_m / corner;
-    p.far_m = c.range_max_m;
+    p.near_m = 0.999 * p.gate_min_m / corner;
+    p.far_m = p.gate_max_m;
     p.depth_a = p.near_m * p.far_m / (p.far_m - p.near_m);
     p.depth_b = -p.near_m / (p.far_m - p.near_m);
 
-    p.bin_width_m = (c.range_max_m - c.range_min_m) / p.bins;
     p.bin_range_m.resize(p.bins);
     for (std::uint32_t k = 0; k < p.bins; ++k)
         p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
@@ -445,6 +456,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.depth_b = static_cast<float>(p.depth_b);
     g.range_min_m = static_cast<float>(c.range_min_m);
     g.range_max_m = static_cast<float>(c.range_max_m);
+    g.gate_min_m = static_cast<float>(p.gate_min_m);
+    g.gate_max_m = static_cast<float>(p.gate_max_m);
     g.bin_width_m = static_cast<float>(p.bin_width_m);
     g.inv_bin_width_m = static_cast<float>(1.0 / p.bin_width_m);
     g.alpha_db_per_m = static_cast<float>(p.alpha_db_per_m);
@@ -462,7 +475,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.circular = p.circular ? 1u : 0u;
     // fp16 echo storage: scale energies by a power of 2 (exact both ways) so that the brightest
     // possible pixel (brightest material, facing, on axis, the largest pixel solid angle, at the
-    // near edge of the window, or the far edge without spreading) lands near 2^15 < 65504. Echoes
+    // near edge of the gate, or the far edge without spreading) lands near 2^15 < 65504. Echoes
     // more than ~2^40 (120 dB) below it underflow to 0.
     g.echo_half = c.intermediates == IntermediatePrecision::fp16 ? 1u : 0u;
     {
@@ -470,7 +483,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         for (const auto& m : p.materials)
             brightest = std::max(brightest, m.backscatter_linear * scatter_factor_peak(m));
         const double omega = (2.0 * p.tan_half_h / p.slice_columns) * (2.0 * p.tan_half_v / p.rows);
-        const double r = e.spreading ? c.range_min_m : c.range_max_m;
+        const double r = e.spreading ? p.gate_min_m : p.gate_max_m; // the gate's edges: echo computes there
         const double peak = brightest * omega * (e.spreading ? 1.0 / (r * r) : r * r);
         const int exponent = peak > 0.0 ? static_cast<int>(std::floor(std::log2(32768.0 / peak))) : 0;
         g.echo_scale = std::ldexp(1.0f, std::clamp(exponent, -120, 120));

@@ -45,6 +45,10 @@ struct Plan {
     std::uint32_t beams = 0, bins = 0;
     std::vector<double> beam_angle_rad; // beams, strictly decreasing (port first)
     double bin_width_m = 0;
+    // The echo stage's range gate: the window widened by the range kernel's widest half width
+    // (gate_margin_m), so that a footprint straddling range_min or range_max puts its inside part into
+    // the edge bin. The depth pass's clip planes enclose the gate.
+    double gate_margin_m = 0, gate_min_m = 0, gate_max_m = 0;
     std::vector<double> bin_range_m; // bin centres
 
     // Beam patterns.

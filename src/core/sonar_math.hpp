@@ -12,7 +12,7 @@ namespace vksonar {
 
 namespace math_f32 {
 using shared::uint;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::log, std::max, std::min, std::sin, std::sqrt;
 #define REAL float
 #include "sonar_math.h"
 #undef REAL
@@ -20,7 +20,7 @@ using std::abs, std::atan, std::cos, std::cosh, std::exp, std::max, std::min, st
 
 namespace math_f64 {
 using shared::uint;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::log, std::max, std::min, std::sin, std::sqrt;
 #define REAL double
 #include "sonar_math.h"
 #undef REAL
@@ -36,7 +36,8 @@ template <> struct Math<float> {
 #define VKS_FORWARD(fn) template <class... A> static auto fn(A... a) { return math_f32::fn(a...); }
     VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
-    VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
+    VKS_FORWARD(range_bin_coord) VKS_FORWARD(footprint_edge_offset) VKS_FORWARD(footprint_lo)
+    VKS_FORWARD(footprint_hi) VKS_FORWARD(footprint_share) VKS_FORWARD(footprint_log_slope) VKS_FORWARD(sinhc_of)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
     VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
     VKS_FORWARD(resample_share)
@@ -46,7 +47,8 @@ template <> struct Math<double> {
 #define VKS_FORWARD(fn) template <class... A> static auto fn(A... a) { return math_f64::fn(a...); }
     VKS_FORWARD(pixel_coord) VKS_FORWARD(pixel_solid_angle) VKS_FORWARD(view_z_from_depth) VKS_FORWARD(slant_range)
     VKS_FORWARD(pixel_azimuth) VKS_FORWARD(pixel_elevation) VKS_FORWARD(pattern_power) VKS_FORWARD(echo_energy)
-    VKS_FORWARD(range_bin_coord) VKS_FORWARD(pixel_range_extent) VKS_FORWARD(footprint_share)
+    VKS_FORWARD(range_bin_coord) VKS_FORWARD(footprint_edge_offset) VKS_FORWARD(footprint_lo)
+    VKS_FORWARD(footprint_hi) VKS_FORWARD(footprint_share) VKS_FORWARD(footprint_log_slope) VKS_FORWARD(sinhc_of)
     VKS_FORWARD(incidence_cos) VKS_FORWARD(face_normal_sonar_x) VKS_FORWARD(face_normal_sonar_y)
     VKS_FORWARD(face_normal_sonar_z) VKS_FORWARD(specular_facet) VKS_FORWARD(scatter_factor)
     VKS_FORWARD(resample_share)

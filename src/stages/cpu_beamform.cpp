@@ -43,30 +43,50 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
             if (!(e > Real(0))) continue;
             const Real r = static_cast<Real>(e2[2 * c + 1]);
             const Real x = M::range_bin_coord(r, range_min, inv_bin_width);
+            const int nb = static_cast<int>(bins);
             if (footprint) {
                 if (std::isnan(x)) continue;
-                const Real r_up = j > 0 ? static_cast<Real>(e2[2 * c + 1 - 2 * std::size_t(C)]) : Real(0);
-                const Real r_down = j + 1 < R ? static_cast<Real>(e2[2 * c + 1 + 2 * std::size_t(C)]) : Real(0);
-                const Real extent = M::pixel_range_extent(r_up, r, r_down, jump_rel) * inv_bin_width;
-                const Real width = std::min(std::max(extent, Real(1)), static_cast<Real>(shared::kMaxFootprintBins));
-                const Real lo = x - Real(0.5) * width, hi = x + Real(0.5) * width, inv_width = Real(1) / width;
-                const int nb = static_cast<int>(bins);
-                const int k_first = static_cast<int>(std::floor(std::min(std::max(lo, Real(0)), Real(nb - 1))));
-                const int k_last = static_cast<int>(std::floor(std::min(std::max(hi, Real(0)), Real(nb - 1))));
+                // the same five-row window as profile.comp (energy, range; 0 = no hit or outside the image)
+                const auto row_echo = [&](std::int64_t row, int part) {
+                    return row >= 0 && row < static_cast<std::int64_t>(R)
+                               ? static_cast<Real>(echo2[2 * (static_cast<std::size_t>(row) * C + c) + part])
+                               : Real(0);
+                };
+                const std::int64_t jj = j;
+                const Real r_up2 = row_echo(jj - 2, 1), r_up = row_echo(jj - 1, 1);
+                const Real r_down = row_echo(jj + 1, 1), r_down2 = row_echo(jj + 2, 1);
+                const Real a = M::footprint_edge_offset(r_up, r_up2, r, r_down, jump_rel);
+                const Real b = M::footprint_edge_offset(r_down, r_down2, r, r_up, jump_rel);
+                const Real xl = x + M::footprint_lo(a, b) * inv_bin_width;
+                const Real xh = x + M::footprint_hi(a, b) * inv_bin_width;
+                const Real centre = Real(0.5) * (xl + xh);
+                const Real width = std::min(std::max(xh - xl, Real(1)), static_cast<Real>(shared::kMaxFootprintBins));
+                const Real lo = centre - Real(0.5) * width, hi = centre + Real(0.5) * width;
+                Real g = 0;
+                if (a != Real(0) && b != Real(0) && r_up2 > Real(0) && r_down2 > Real(0)) {
+                    const Real w_up = Real(0.5) * std::abs(r_up2 - r) * inv_bin_width;
+                    const Real w_down = Real(0.5) * std::abs(r - r_down2) * inv_bin_width;
+                    // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
+                    const Real span = (Real(2) * (r_up - r_down) + (r_up2 - r_down2)) * (Real(0.25) * inv_bin_width);
+                    g = M::footprint_log_slope(row_echo(jj - 1, 0), w_up, row_echo(jj + 1, 0), w_down, span, width);
+                }
+                const Real inv_norm = Real(1) / (width * M::sinhc_of(Real(0.5) * g * width));
+                // only the bins of the window: the rest of the footprint is gated away
+                const int k_first = std::max(static_cast<int>(std::floor(lo)), 0);
+                const int k_last = std::min(static_cast<int>(std::floor(hi)), nb - 1);
                 for (int k = k_first; k <= k_last; ++k)
-                    acc[static_cast<std::size_t>(k) * C + c] += M::footprint_share(lo, hi, inv_width, k, nb) * e;
+                    acc[static_cast<std::size_t>(k) * C + c] += M::footprint_share(lo, hi, centre, g, inv_norm, k) * e;
             } else if (tent) {
                 Real t = x - Real(0.5);
                 if (std::isnan(t)) continue;
-                // Far outside the grid every share lands on an edge bin anyway; keep floor() in int range.
+                // Far outside the grid both shares are gated away anyway; keep floor() in int range.
                 t = std::min(std::max(t, Real(-4)), static_cast<Real>(bins) + Real(4));
                 const Real kf = std::floor(t);
                 const Real w1 = t - kf;
                 const std::int64_t k0 = static_cast<std::int64_t>(kf);
-                const std::int64_t k1 = k0 + 1;
-                acc[static_cast<std::size_t>(std::min(std::max(k0, std::int64_t(0)), last)) * C + c] +=
-                    (Real(1) - w1) * e;
-                acc[static_cast<std::size_t>(std::min(std::max(k1, std::int64_t(0)), last)) * C + c] += w1 * e;
+                // a share outside the window is gated away
+                if (k0 >= 0 && k0 <= last) acc[static_cast<std::size_t>(k0) * C + c] += (Real(1) - w1) * e;
+                if (k0 + 1 >= 0 && k0 + 1 <= last) acc[static_cast<std::size_t>(k0 + 1) * C + c] += w1 * e;
             } else {
                 if (!(x >= Real(0) && x < static_cast<Real>(bins))) continue;
                 const std::int64_t k = static_cast<std::int64_t>(std::floor(x));

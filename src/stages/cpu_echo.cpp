@@ -16,14 +16,14 @@ template <class Real>
 void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
-    Real tan_h, tan_v, depth_a, depth_b, range_min, range_max, alpha, vk, vhalf, vcheb;
+    Real tan_h, tan_v, depth_a, depth_b, gate_min, gate_max, alpha, vk, vhalf, vcheb; // gate: Plan::gate_min_m
     if constexpr (std::is_same_v<Real, float>) {
         tan_h = g.tan_half_h;
         tan_v = g.tan_half_v;
         depth_a = g.depth_a;
         depth_b = g.depth_b;
-        range_min = g.range_min_m;
-        range_max = g.range_max_m;
+        gate_min = g.gate_min_m;
+        gate_max = g.gate_max_m;
         alpha = g.alpha_db_per_m;
         vk = g.vpattern_k;
         vhalf = g.vpattern_halfwidth_rad;
@@ -33,8 +33,8 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
         tan_v = plan.tan_half_v;
         depth_a = plan.depth_a;
         depth_b = plan.depth_b;
-        range_min = plan.config.range_min_m;
-        range_max = plan.config.range_max_m;
+        gate_min = plan.gate_min_m;
+        gate_max = plan.gate_max_m;
         alpha = plan.alpha_db_per_m;
         vk = plan.vpattern_k;
         vhalf = plan.vpattern_halfwidth_rad;
@@ -63,7 +63,7 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
             const Real u = M::pixel_coord(c % W, W, tan_h);
             const Real z = M::view_z_from_depth(static_cast<Real>(d), depth_a, depth_b);
             const Real r = M::slant_range(z, u, v);
-            if (r < range_min || r >= range_max || material_count == 0) {
+            if (r < gate_min || r >= gate_max || material_count == 0) {
                 out[0] = 0.0f;
                 out[1] = static_cast<float>(r);
                 continue;

@@ -237,9 +237,41 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMaxIsOutAndJustInsideLandsInTheLastBin) {
     SonarConfig config = small_config();
     Scene at_max;
     add_quad(at_max, config.range_max_m, 0.0, 0.0, 20.0, 20.0); // every slant range >= range_max
-    auto a = render_checked(GetParam(), config, at_max);
-    ASSERT_TRUE(a);
-    EXPECT_EQ(total(a->frame.clean), 0.0) << "r >= range_max is outside the window";
+    {
+        // The nearest-bin kernel records a point return in its own bin only: nothing at r >= range_max.
+        SonarConfig nearest = config;
+        nearest.range_kernel = RangeKernel::nearest;
+        auto a = render_checked(GetParam(), nearest, at_max);
+        ASSERT_TRUE(a);
+        EXPECT_EQ(total(a->frame.clean), 0.0) << "r >= range_max is outside the window";
+    }
+    // The tent kernel (small_config) splits a return between the two nearest bin centres: on axis, at
+    // exactly range_max, half goes to the last bin and half beyond the window, where it is dropped. So
+    // the last bin gets half of what the same plate gives at the last bin's centre, where all of it
+    // lands there, times the two-way loss over the half bin between (r^-2 of a facing plate's pixels,
+    // whose solid angles are the same, and the absorption). Off axis the rays are longer (the plate's
+    // edge rays by 3e-4 relative: 0.2 % less share for the last bin): 1 % covers it.
+    Scene at_centre;
+    const double w = (config.range_max_m - config.range_min_m) / config.bins;
+    add_quad(at_centre, config.range_max_m - 0.5 * w, 0.0, 0.0, 0.5, 1.0);
+    Scene small_at_max;
+    add_quad(small_at_max, config.range_max_m, 0.0, 0.0, 0.5, 1.0);
+    auto centre = render_checked(GetParam(), config, at_centre);
+    auto edge = render_checked(GetParam(), config, small_at_max);
+    ASSERT_TRUE(centre && edge);
+    const auto last_bin = [](const Frame& f) {
+        double s = 0;
+        for (std::uint32_t j = 0; j < f.beams; ++j)
+            s += f.clean[std::size_t(f.bins - 1) * f.beams + j];
+        return s;
+    };
+    const double r_c = config.range_max_m - 0.5 * w, r_m = config.range_max_m;
+    const double expected =
+        0.5 * (r_c * r_c) / (r_m * r_m) * std::pow(10.0, -2.0 * config.absorption_db_per_m * (r_m - r_c) / 10.0);
+    ASSERT_GT(last_bin(centre->frame), 0.0);
+    EXPECT_NEAR(last_bin(edge->frame) / last_bin(centre->frame), expected, 0.01 * expected);
+    EXPECT_NEAR(last_bin(edge->frame), total(edge->frame.clean), 1e-6 * total(edge->frame.clean))
+        << "nothing of it anywhere but the last bin";
 
     // A plate 10 mm inside range_max on axis, covering only the 2 x 2 pixels around the axis
     // (+-0.23 deg, +-0.63 deg): their rays are 1.05e-4 longer than the axis, so their slant ranges are

@@ -278,7 +278,11 @@ TEST(CpuDepth, MeshFanHasNoGapsOrOverlapsUnderPerspectiveAndFarClipping) {
         if (i % 3 == 0) std::swap(t[1], t[2]); // mixed windings
         b.draw(b.mesh(pos, t), mat, place);
     }
-    const Plan plan = plan_for(small_config(), b.scene);
+    // The nearest-bin kernel needs no range gate beyond the window, so the far plane is range_max.
+    SonarConfig config = small_config();
+    config.range_kernel = RangeKernel::nearest;
+    const Plan plan = plan_for(config, b.scene);
+    ASSERT_EQ(plan.far_m, config.range_max_m);
     std::vector<shared::DepthPush> pushes;
     compose_depth_draws(plan, b.scene, Pose{}, pushes);
     const std::vector<int> count = coverage_counts(plan, b.scene, pushes);

@@ -209,9 +209,11 @@ TEST(CpuEcho, RoughMaterialTableIncidenceRuleAndHalfScale) {
     EXPECT_NEAR(mat.inv_two_slope_sq, 200.0, 1e-5);
 
     // fp16: the brightest pixel the plan can produce (the facet peak, at m = 0.05 at normal incidence,
-    // on axis, at range_min) times echo_scale lands in (2^14, 2^15] (docs/pipeline.md §3).
+    // on axis, at the near edge of the range gate, where the echo stage still computes: range_min less
+    // the kernel's half width) times echo_scale lands in (2^14, 2^15] (docs/pipeline.md §3).
     const double omega = (2 * plan.tan_half_h / plan.slice_columns) * (2 * plan.tan_half_v / plan.rows);
-    const double r = plan.config.range_min_m;
+    const double r = plan.gate_min_m;
+    EXPECT_LT(r, plan.config.range_min_m);
     const double brightest = double(mat.backscatter_linear) * (1.0 + ratio) * omega / (r * r);
     EXPECT_GT(brightest * plan.params.echo_scale, 16384.0);
     EXPECT_LE(brightest * plan.params.echo_scale, 32768.0 * (1 + 1e-6));
