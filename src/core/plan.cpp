@@ -435,6 +435,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     resolve(e.tvg, c.effects.tvg, false, "tvg", "raw received levels; turn on for display gain", e.states);
     // What the echo stage applies and TVG compensates: nothing when the effect is off (plan.h).
     p.alpha_db_per_m = e.absorption ? alpha : 0.0;
+    p.validity = model_validity(c, scene.materials);
 
     // Beamform tables: tent from pixel columns onto the beam table.
     p.column_azimuth_rad.resize(p.columns);
