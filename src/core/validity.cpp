@@ -1,5 +1,5 @@
 // model_validity: each model a frame uses, checked against the domain where it holds (validity.h).
-// The figures and their sources are stated next to each check; docs/pipeline.md ("Validity domains")
+// The figures and their sources are stated next to each check; README.md ("Where the models hold")
 // repeats them for readers of meta.json.
 #include "vksonar/validity.h"
 
