@@ -153,6 +153,9 @@ TEST_F(Cli, ValuesOutsidePhysicsAreRefused) {
     expect_bad_render({"--set", "sound_speed=1e9"}, {"sound_speed = 1000000000", "[1400, 1650] m/s"});
     write_text(dir_ / "hot.json", R"({"temperature": 95})");
     expect_bad_render({"--config", (dir_ / "hot.json").string()}, {"hot.json", "temperature = 95", "[-2.5, 40]"});
+    // A depth pass no device can hold is refused with its size before anything is allocated.
+    expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32"},
+                      {"range-profile buffer would hold 4.29549 GB"});
 }
 
 TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
