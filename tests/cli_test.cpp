@@ -146,11 +146,68 @@ TEST_F(Cli, InvalidValues) {
     expect_bad_render({"--config", (dir_ / "zero_beams.json").string()}, {"zero_beams.json", "beams = 0"});
 }
 
+// Issue 25: a value outside physics is refused (exit 2, one line naming key, value and range, nothing
+// written); a model outside its domain is one warning line and an entry in meta.json's "validity".
+TEST_F(Cli, ValuesOutsidePhysicsAreRefused) {
+    expect_bad_render({"--set", "source_level=400"}, {"source_level = 400", "[100, 260]"});
+    expect_bad_render({"--set", "sound_speed=1e9"}, {"sound_speed = 1000000000", "[1400, 1650] m/s"});
+    write_text(dir_ / "hot.json", R"({"temperature": 95})");
+    expect_bad_render({"--config", (dir_ / "hot.json").string()}, {"hot.json", "temperature = 95", "[-2.5, 40]"});
+    // A depth pass no device can hold is refused with its size before anything is allocated.
+    expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32"},
+                      {"range-profile buffer would hold 4.29549 GB"});
+}
+
+TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
+    auto render = [&](const std::string& name, const std::vector<std::string>& sets) {
+        std::vector<std::string> args = {
+            "render",  "--backend", "cpu",      "--scene", (dir_ / "quad.gltf").string(), "--set",
+            "bins=32", "--set",     "beams=16", "--set",   "display.fan_width=64"};
+        for (const auto& s : sets) {
+            args.push_back("--set");
+            args.push_back(s);
+        }
+        args.push_back("--out");
+        args.push_back((dir_ / name).string());
+        return run(args);
+    };
+    // Inside every domain: no warning, and every entry says ok.
+    const CliRun inside = render("inside", {"range_min=6"});
+    ASSERT_EQ(inside.exit_code, 0) << inside.err;
+    EXPECT_EQ(inside.err, "");
+    const auto meta = nlohmann::json::parse(read_text(dir_ / "inside" / "meta.json"));
+    ASSERT_TRUE(meta["validity"].is_array());
+    ASSERT_EQ(meta["validity"].size(), 2u) << meta["validity"].dump();
+    for (const auto& entry : meta["validity"]) {
+        EXPECT_EQ(entry["ok"], true) << entry.dump();
+        for (const char* field : {"model", "key", "value", "domain", "action"})
+            EXPECT_TRUE(entry.contains(field)) << field;
+    }
+    // Outside two domains: one warning line per model, and the list says which.
+    const CliRun outside = render("outside", {"range_min=1", "frequency=3e6"});
+    ASSERT_EQ(outside.exit_code, 0) << outside.err;
+    const auto lines = outside.err_lines();
+    ASSERT_EQ(lines.size(), 2u) << outside.err;
+    EXPECT_EQ(lines[0].rfind("warning: francois_garrison: frequency = 3e+06 ", 0), 0u) << lines[0];
+    EXPECT_EQ(lines[1].rfind("warning: far_field_beam_pattern: range_min = 1 ", 0), 0u) << lines[1];
+    const auto list = nlohmann::json::parse(read_text(dir_ / "outside" / "meta.json"))["validity"];
+    ASSERT_EQ(list.size(), 2u);
+    EXPECT_EQ(list[0]["model"], "francois_garrison");
+    EXPECT_EQ(list[0]["ok"], false);
+    EXPECT_EQ(list[0]["key"], "frequency");
+    EXPECT_EQ(list[0]["value"], 3e6);
+    EXPECT_NE(list[0]["action"].get<std::string>().find("extrapolates"), std::string::npos);
+    EXPECT_EQ(list[1]["model"], "far_field_beam_pattern");
+    EXPECT_EQ(list[1]["ok"], false);
+}
+
 TEST_F(Cli, SkippedPrimitivesAreReportedAsWarnings) {
     // POINTS, LINES and an all-degenerate primitive: the render succeeds and says what it skipped.
     const fs::path out = dir_ / "out";
     const CliRun r = run({"render", "--backend", "cpu", "--scene",
-                          std::string(VKSONAR_TEST_DIR) + "/data/scenes/primitives.gltf", "--out", out.string()});
+                          std::string(VKSONAR_TEST_DIR) + "/data/scenes/primitives.gltf", "--set",
+                          "range_min=6", // past the far-field distance: the loader's are the only warnings
+                          "--out", out.string()});
     EXPECT_EQ(r.exit_code, 0) << r.err;
     std::size_t warnings = 0;
     for (const std::string& line : r.err_lines()) {
@@ -183,8 +240,9 @@ TEST_F(Cli, UnwritableOutputDirectory) {
     // An existing output folder with a directory where fan.png goes: exit 2, named, no stray files.
     const fs::path taken = dir_ / "taken";
     fs::create_directories(taken / "fan.png");
-    const CliRun r =
-        run({"render", "--backend", "cpu", "--scene", (dir_ / "quad.gltf").string(), "--out", taken.string()});
+    const CliRun r = run({"render", "--backend", "cpu", "--scene", (dir_ / "quad.gltf").string(), "--set",
+                          "range_min=6", // inside every model's domain: the error is the only line
+                          "--out", taken.string()});
     EXPECT_EQ(r.exit_code, 2) << r.err;
     ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
     EXPECT_NE(r.err.find("fan.png: a directory is in the way"), std::string::npos) << r.err;
@@ -354,7 +412,10 @@ TEST_F(Cli, RenderWritesEveryOutput) {
                           "--out",
                           out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    EXPECT_EQ(r.err, "");
+    // Nothing on stderr but the one validity warning every default-based render prints (range_min
+    // inside the far-field distance; assets/presets/default.json says why).
+    ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
+    EXPECT_EQ(r.err_lines()[0].rfind("warning: far_field_beam_pattern: range_min = 0.5 ", 0), 0u) << r.err;
     for (const char* name : {"fan.png", "polar.png", "polar.npy", "polar_u16.npy", "meta.json", "depth.npy",
                              "normals.npy", "echo.npy", "cloud.ply"})
         EXPECT_TRUE(fs::is_regular_file(out / name)) << name;
@@ -455,7 +516,10 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
                           "--set", "beams=16", "--set", "display.fan_width=64", "--trajectory",
                           (dir_ / "poses.csv").string(), "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    EXPECT_EQ(r.err, "") << "progress must only be shown on a terminal";
+    // Progress must only be shown on a terminal: stderr holds the far-field warning and nothing else.
+    ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
+    EXPECT_EQ(r.err_lines()[0].rfind("warning: far_field_beam_pattern: ", 0), 0u) << r.err;
+    EXPECT_EQ(r.err.find("frame"), std::string::npos) << r.err;
     EXPECT_TRUE(fs::is_regular_file(out / "frame_000003" / "polar.npy"));
     EXPECT_TRUE(fs::is_regular_file(out / "frame_000004" / "meta.json"));
     EXPECT_FALSE(fs::exists(out / "frame_000001"));

@@ -598,6 +598,11 @@ def bad_corpus():
     put("bad_backscatter.gltf", doc)
 
     g, doc = base()
+    doc["materials"] = [{"name": "mirror", "extras": {"vksonar": {"backscatter_db": 6}}}]
+    doc["meshes"][0]["primitives"][0]["material"] = 0
+    put("backscatter_above_0db.gltf", doc)
+
+    g, doc = base()
     doc["materials"] = [{"name": "shiny", "extras": {"vksonar": {"model": "phong"}}}]
     put("bad_model.gltf", doc)
 

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "vksonar/config.h"
 #include "vksonar/context.h"
@@ -16,6 +17,7 @@
 #include "vksonar/host_depth.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"
+#include "vksonar/validity.h"
 
 namespace vksonar {
 
@@ -79,6 +81,9 @@ public:
     [[nodiscard]] Result<GpuBufferView> polar_buffer() const;
 
     const SonarConfig& config() const;
+    // Each model this renderer's frames use, checked against its validity domain (validity.h): the
+    // entries with ok == false are what the CLI prints as warnings and meta.json lists under "validity".
+    const std::vector<ModelValidity>& validity() const;
 
 private:
     friend const Plan& renderer_plan(const Renderer&);

@@ -7,3 +7,4 @@
 #include "vksonar/renderer.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"
+#include "vksonar/validity.h"

@@ -535,6 +535,9 @@ int run_render(const std::vector<std::string>& argv) {
         throw Failure(e.message + (backend == Backend::vulkan ? " (try --backend cpu)" : ""));
     }
     const Plan& plan = renderer_plan(renderer.value());
+    // A model taken outside its domain: one line each, before any frame (meta.json lists them all).
+    for (const ModelValidity& v : renderer->validity())
+        if (!v.ok) std::fprintf(stderr, "warning: %s\n", v.warning().c_str());
     const host::FanRenderer fan(plan);
     LegacyState legacy_state;
     legacy_state.mode = plan.config.mode;

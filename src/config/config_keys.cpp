@@ -164,13 +164,14 @@ std::string set_absorption(SonarConfig& c, const Json& v) {
 
 // ---- the table ---------------------------------------------------------------------------------
 
-#define VKS_NUMBER(key, member, unit, doc)                                                                             \
+#define VKS_NUMBER(key, member, unit, doc, range)                                                                      \
     ConfigKey {                                                                                                        \
-        key, KeyType::number, unit, "", doc, &get_number<&SonarConfig::member>, &set_number<&SonarConfig::member>      \
+        key, KeyType::number, unit, "", doc, &get_number<&SonarConfig::member>, &set_number<&SonarConfig::member>,     \
+            range                                                                                                      \
     }
-#define VKS_COUNT(key, member, unit, doc)                                                                              \
+#define VKS_COUNT(key, member, unit, doc, range)                                                                       \
     ConfigKey {                                                                                                        \
-        key, KeyType::count, unit, "", doc, &get_count<&SonarConfig::member>, &set_count<&SonarConfig::member>         \
+        key, KeyType::count, unit, "", doc, &get_count<&SonarConfig::member>, &set_count<&SonarConfig::member>, range  \
     }
 #define VKS_TEXT(key, member, doc)                                                                                     \
     ConfigKey {                                                                                                        \
@@ -186,6 +187,17 @@ std::string set_absorption(SonarConfig& c, const Json& v) {
             &set_effect<&EffectsConfig::name>                                                                          \
     }
 
+// Ranges: [lo, hi], (lo, hi], [lo, hi), (lo, hi).
+constexpr KeyRange closed(double lo, double hi, const char* why) {
+    return {lo, hi, false, false, why};
+}
+constexpr KeyRange open_low(double lo, double hi, const char* why) {
+    return {lo, hi, true, false, why};
+}
+constexpr KeyRange open_both(double lo, double hi, const char* why) {
+    return {lo, hi, true, true, why};
+}
+
 std::vector<ConfigKey> make_table() {
     return {
         VKS_TEXT("name", name, "Preset or device name"),
@@ -194,66 +206,121 @@ std::vector<ConfigKey> make_table() {
         VKS_ENUM("mode", SonarMode, mode, "physical|uuv-legacy|gtri-legacy",
                  "Image model: the physical model, or a step-by-step legacy plugin (docs/legacy.md)"),
 
-        VKS_NUMBER("frequency", frequency_hz, "Hz", "Centre frequency (sets absorption and wavelength)"),
-        VKS_NUMBER("hfov", hfov_deg, "deg", "Horizontal field of view, (0, 360]"),
-        VKS_NUMBER("vfov", vfov_deg, "deg", "Vertical beamwidth (two-way -3 dB), (0, 180)"),
-        VKS_NUMBER("horizontal_beamwidth", horizontal_beamwidth_deg, "deg",
-                   "Two-way -3 dB receive beamwidth of one beam"),
-        VKS_COUNT("beams", beams, "", "Number of beams (set by beam_angles when that table is given)"),
+        VKS_NUMBER("frequency", frequency_hz, "Hz", "Centre frequency (sets absorption and wavelength)",
+                   closed(1e3, 1e7,
+                          "1 kHz (1.5 m wavelength) to 10 MHz, where water absorbs about 30 dB/m (Francois-Garrison's "
+                          "pure-water term): the span of active sonar")),
+        VKS_NUMBER("hfov", hfov_deg, "deg", "Horizontal field of view, (0, 360]",
+                   open_low(0, 360, "a fan is at most a full circle")),
+        VKS_NUMBER("vfov", vfov_deg, "deg", "Vertical beamwidth (two-way -3 dB), (0, 180)",
+                   open_both(0, 180, "a vertical beam spans less than from straight down to straight up")),
+        VKS_NUMBER(
+            "horizontal_beamwidth", horizontal_beamwidth_deg, "deg", "Two-way -3 dB receive beamwidth of one beam",
+            open_low(0, 180,
+                     "as vfov; and at most hfov (a beam wider than the whole fan: checked with the other keys)")),
+        VKS_COUNT("beams", beams, "", "Number of beams (set by beam_angles when that table is given)",
+                  closed(1, 16384, "one beam to one per column of the widest depth pass (16384 columns)")),
         VKS_ENUM("beam_spacing", BeamSpacing, beam_spacing, "equiangular|equisine",
                  "Beam centres uniform in angle, or uniform in sine of the angle"),
         ConfigKey{"beam_angles", KeyType::number_list, "deg", "",
                   "Explicit beam-centre table, port first (strictly decreasing, within +-hfov/2); overrides "
                   "beams and beam_spacing when non-empty",
                   &get_beam_angles, &set_beam_angles},
-        VKS_COUNT("bins", bins, "", "Number of range bins"),
-        VKS_NUMBER("range_min", range_min_m, "m", "Start of the range window, > 0"),
-        VKS_NUMBER("range_max", range_max_m, "m", "End of the range window, > range_min"),
-        VKS_NUMBER("sound_speed", sound_speed_mps, "m/s", "Speed of sound in water"),
+        VKS_COUNT("bins", bins, "", "Number of range bins",
+                  closed(1, 65536, "one bin to 65536 (the largest polar scan vksonar allocates)")),
+        VKS_NUMBER("range_min", range_min_m, "m", "Start of the range window, > 0",
+                   open_both(0, 1e5, "in front of the array; and below range_max")),
+        VKS_NUMBER("range_max", range_max_m, "m", "End of the range window, > range_min",
+                   open_low(0, 1e5, "100 km: past the reach of any active sonar")),
+        VKS_NUMBER("sound_speed", sound_speed_mps, "m/s", "Speed of sound in water",
+                   closed(1400, 1650,
+                          "fresh water at 0 degC (1402 m/s) to seawater at full ocean depth (about 1640 m/s; "
+                          "Mackenzie, JASA 70(3) 1981)")),
         VKS_NUMBER("bandwidth", bandwidth_hz, "Hz",
                    "Pulse bandwidth B; > 0: range bins of the resolution c / 2B over the window (rounded), "
-                   "replacing bins; 0: use bins"),
+                   "replacing bins; 0: use bins",
+                   closed(0, 2e7,
+                          "0: use bins; at most twice the frequency, so that the band f +- B/2 stays above 0 Hz "
+                          "(checked with frequency)")),
 
-        VKS_NUMBER("source_level", source_level_db, "dB re 1 uPa at 1 m", "Source level SL"),
-        VKS_NUMBER("noise_level", noise_level_db, "dB re 1 uPa", "Ambient noise level NL"),
-        VKS_NUMBER("directivity_index", directivity_index_db, "dB", "Receive directivity index DI"),
+        VKS_NUMBER("source_level", source_level_db, "dB re 1 uPa at 1 m", "Source level SL",
+                   closed(100, 260,
+                          "below 100 dB no echo clears the sea's noise; the loudest sonars reach about 240 dB, and "
+                          "near 260 dB the water cavitates and linear acoustics fails")),
+        VKS_NUMBER("noise_level", noise_level_db, "dB re 1 uPa", "Ambient noise level NL",
+                   closed(0, 180,
+                          "0 dB is below the thermal noise of any sonar band; storms, rain, shipping and snapping "
+                          "shrimp stay well below 180 dB")),
+        VKS_NUMBER("directivity_index", directivity_index_db, "dB", "Receive directivity index DI",
+                   closed(0, 80,
+                          "0 dB: an omnidirectional receiver; 80 dB: past a 1 m x 1 m aperture at 3 MHz (4 pi A / "
+                          "lambda^2 = 77 dB)")),
         VKS_NUMBER("default_backscatter", default_backscatter_db, "dB",
-                   "Backscatter strength of materials whose glTF extras say nothing"),
+                   "Backscatter strength of materials whose glTF extras say nothing",
+                   closed(-100, 0,
+                          "0 dB (1 m^2 per m^2 per sr) is past a perfect Lambertian reflector (-5 dB); below -100 dB "
+                          "no echo reaches a display")),
         ConfigKey{"absorption", KeyType::number_or_auto, "dB/m", "",
                   "One-way absorption, or \"auto\" for Francois-Garrison from frequency and the water below",
-                  &get_absorption, &set_absorption},
-        VKS_NUMBER("temperature", temperature_c, "degC", "Water temperature (for auto absorption)"),
-        VKS_NUMBER("salinity", salinity_ppt, "ppt", "Salinity (for auto absorption)"),
-        VKS_NUMBER("water_depth", water_depth_m, "m", "Depth of the sonar (for auto absorption)"),
-        VKS_NUMBER("ph", ph, "", "pH (for auto absorption)"),
+                  &get_absorption, &set_absorption,
+                  closed(0, 100, "no loss to three times Francois-Garrison at 10 MHz (about 30 dB/m)")},
+        VKS_NUMBER("temperature", temperature_c, "degC", "Water temperature (for auto absorption)",
+                   closed(-2.5, 40,
+                          "seawater freezes near -1.9 degC; 40 degC is above the warmest natural water (shallow "
+                          "lagoons, about 35 degC)")),
+        VKS_NUMBER("salinity", salinity_ppt, "ppt", "Salinity (for auto absorption)",
+                   closed(0, 45, "fresh water to the saltiest open sea (Red Sea, about 41 ppt)")),
+        VKS_NUMBER("water_depth", water_depth_m, "m", "Depth of the sonar (for auto absorption)",
+                   closed(0, 11000, "the surface to the Challenger Deep (about 10 935 m)")),
+        VKS_NUMBER("ph", ph, "", "pH (for auto absorption)",
+                   closed(6, 9, "natural waters: seawater 7.5 to 8.4, fresh water mostly 6 to 9")),
 
         VKS_ENUM("vertical_pattern", BeamPattern, vertical_pattern, "box|sinc|hann|gaussian|chebyshev",
                  "Shape of the vertical beam pattern b_v"),
         VKS_ENUM("horizontal_pattern", BeamPattern, horizontal_pattern, "box|sinc|hann|gaussian|chebyshev",
                  "Shape of the horizontal beam pattern b_h (side lobes)"),
         VKS_NUMBER("vertical_sidelobe_db", vertical_sidelobe_db, "dB",
-                   "Side-lobe level of a chebyshev vertical pattern (all equal), re the main lobe, -100 to -10"),
+                   "Side-lobe level of a chebyshev vertical pattern (all equal), re the main lobe, -100 to -10",
+                   closed(-100, -10,
+                          "below -10 dB the -3 dB beamwidth lies in the main lobe; above -100 dB acosh(R) and cosh "
+                          "stay inside float range on the GPU")),
         VKS_NUMBER("horizontal_sidelobe_db", horizontal_sidelobe_db, "dB",
-                   "Side-lobe level of a chebyshev horizontal pattern (all equal), re the main lobe, -100 to -10"),
+                   "Side-lobe level of a chebyshev horizontal pattern (all equal), re the main lobe, -100 to -10",
+                   closed(-100, -10, "as vertical_sidelobe_db")),
 
         VKS_ENUM("speckle", SpeckleModel, speckle, "rayleigh|gamma|gaussian",
                  "Speckle model: Exp(1) intensity, Gamma(L, 1/L), or legacy |N(1, sigma)|"),
-        VKS_NUMBER("speckle_looks", speckle_looks, "", "Number of looks L of the gamma model, > 0"),
-        VKS_NUMBER("speckle_sigma", speckle_gaussian_sigma, "", "Sigma of the legacy gaussian model, >= 0"),
+        VKS_NUMBER("speckle_looks", speckle_looks, "", "Number of looks L of the gamma model, > 0",
+                   closed(1, 1000, "at least one look (fewer is not averaging); 1000 looks leave 0.14 dB of speckle")),
+        VKS_NUMBER("speckle_sigma", speckle_gaussian_sigma, "", "Sigma of the legacy gaussian model, >= 0",
+                   closed(0, 10,
+                          "0: no speckle; far above 1, |N(1, sigma)| is a half-normal gain, not speckle (the legacy "
+                          "plugin uses 0.1)")),
         VKS_NUMBER("tvg_db_per_decade", tvg_db_per_decade, "dB/decade",
-                   "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)"),
+                   "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)",
+                   closed(0, 60,
+                          "0: none; 20 (area) to 40 (point targets, two-way spherical spreading) are the spreading "
+                          "laws; 60 is past all of them")),
 
-        VKS_NUMBER("display.db_min", db_min, "dB re 1 uPa", "Intensity shown as black (display value 0)"),
-        VKS_NUMBER("display.db_max", db_max, "dB re 1 uPa", "Intensity shown as full scale (display value 1)"),
+        VKS_NUMBER(
+            "display.db_min", db_min, "dB re 1 uPa", "Intensity shown as black (display value 0)",
+            closed(-100, 300, "dB re 1 uPa: below any noise floor to beyond any sound in water; below display.db_max")),
+        VKS_NUMBER("display.db_max", db_max, "dB re 1 uPa", "Intensity shown as full scale (display value 1)",
+                   closed(-100, 300, "as display.db_min")),
         VKS_ENUM("display.colormap", Colormap, colormap, "gray|viridis|sonar|jet", "Colormap of the PNG images"),
-        VKS_COUNT("display.fan_width", fan_width_px, "px", "Width of the fan image"),
+        VKS_COUNT("display.fan_width", fan_width_px, "px", "Width of the fan image",
+                  closed(16, 16384, "a readable fan to the largest image vksonar writes")),
 
         VKS_NUMBER("accuracy.pixels_per_beam", pixels_per_beam, "",
-                   "Depth-pass pixel columns per beam spacing (horizontal oversampling), > 0"),
-        VKS_COUNT("accuracy.rows_per_vfov", rows_per_vfov, "", "Depth-pass pixel rows per vertical beamwidth, >= 1"),
+                   "Depth-pass pixel columns per beam spacing (horizontal oversampling), > 0",
+                   open_low(0, 64, "above 0; past 64 columns per beam the pass costs without resolving more")),
+        VKS_COUNT("accuracy.rows_per_vfov", rows_per_vfov, "", "Depth-pass pixel rows per vertical beamwidth, >= 1",
+                  closed(1, 4096, "one row to the tallest depth pass (4096 rows)")),
         VKS_NUMBER("accuracy.vertical_coverage", vertical_coverage, "",
-                   "Depth pass covers this many vertical beamwidths (pattern tails), >= 1"),
-        VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]"),
+                   "Depth pass covers this many vertical beamwidths (pattern tails), >= 1",
+                   closed(1, 10, "the beam itself to its pattern tails 10 beamwidths out")),
+        VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]",
+                   open_low(0, 120, "a perspective slice wider than 120 deg stretches its edge pixels by over 4x")),
         VKS_ENUM("accuracy.normal_method", NormalMethod, normal_method, "sobel3|sobel5|geometric",
                  "Normal estimation: Sobel 3x3 / 5x5 on depth, or the triangles' face normals (not with a host depth "
                  "image)"),
@@ -261,7 +328,8 @@ std::vector<ConfigKey> make_table() {
                  "Range kernel K_r: nearest bin, split between the two nearest bins, or spread over the "
                  "pixel's own range extent (at least one bin)"),
         VKS_NUMBER("accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "",
-                   "Side-lobe kernel reaches +- this many beamwidths, >= 0"),
+                   "Side-lobe kernel reaches +- this many beamwidths, >= 0",
+                   closed(0, 1000, "0: main lobe only; 1000 beamwidths is past any fan")),
         VKS_ENUM("accuracy.intermediates", IntermediatePrecision, intermediates, "fp32|fp16",
                  "Storage of the per-pixel echo buffer (energy scaled by a power of 2, slant range); fp16 "
                  "halves its memory traffic and rounds both to 11 significant bits"),
@@ -305,7 +373,40 @@ std::string markdown_cell(std::string text) {
     return out;
 }
 
+std::string format_number(double value) {
+    std::ostringstream out;
+    out.precision(10);
+    out << value;
+    return out.str();
+}
+
 } // namespace
+
+std::string range_text(const KeyRange& range) {
+    const bool low = range.min > -std::numeric_limits<double>::infinity();
+    const bool high = range.max < std::numeric_limits<double>::infinity();
+    if (low && high)
+        return std::string(range.min_open ? "(" : "[") + format_number(range.min) + ", " + format_number(range.max) +
+               (range.max_open ? ")" : "]");
+    if (low) return std::string(range.min_open ? "> " : ">= ") + format_number(range.min);
+    if (high) return std::string(range.max_open ? "< " : "<= ") + format_number(range.max);
+    return "any";
+}
+
+std::string check_ranges(const SonarConfig& config) {
+    for (const auto& key : all()) {
+        if (!key.range.bounded()) continue;
+        const Json value = key.get(config);
+        if (!value.is_number()) continue; // text, choices, lists, and "auto"
+        const double x = value.get<double>();
+        if (!key.range.contains(x)) {
+            std::string unit = key.unit;
+            return std::string(key.name) + " = " + format_number(x) + ": must be in " + range_text(key.range) +
+                   (unit.empty() ? "" : " " + unit);
+        }
+    }
+    return {};
+}
 
 std::size_t edit_distance(std::string_view a, std::string_view b) {
     std::vector<std::size_t> row(b.size() + 1);
@@ -403,8 +504,8 @@ Json parse_override_value(const ConfigKey& key, const std::string& text) {
 std::string reference_markdown() {
     const SonarConfig defaults;
     std::string out;
-    out += "| key | type | unit | default | description |\n";
-    out += "|---|---|---|---|---|\n";
+    out += "| key | type | unit | default | range | description | why this range |\n";
+    out += "|---|---|---|---|---|---|---|\n";
     for (const auto& key : all()) {
         std::string type;
         switch (key.type) {
@@ -430,7 +531,9 @@ std::string reference_markdown() {
         std::string default_text = key.get(defaults).dump();
         if (default_text == "\"\"" || default_text == "[]") default_text = "(empty)";
         out += "| `" + std::string(key.name) + "` | " + markdown_cell(type) + " | " + markdown_cell(key.unit) + " | " +
-               markdown_cell(default_text) + " | " + markdown_cell(key.doc) + " |\n";
+               markdown_cell(default_text) + " | " +
+               (key.range.bounded() ? markdown_cell(range_text(key.range)) : std::string()) + " | " +
+               markdown_cell(key.doc) + " | " + markdown_cell(key.range.reason) + " |\n";
     }
     return out;
 }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstddef>
+#include <limits>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -25,6 +26,22 @@ enum class KeyType {
     number_or_auto, // a number, or the string "auto"
 };
 
+// The physical range of a numeric key: validate() refuses a value outside it ("source_level = 400: must
+// be in [100, 260] dB re 1 uPa at 1 m"), and the config reference prints it with its reason. Counts and
+// "auto"-or-number keys are checked the same way (the auto value is not a number and is not checked).
+struct KeyRange {
+    double min = -std::numeric_limits<double>::infinity();
+    double max = std::numeric_limits<double>::infinity();
+    bool min_open = false, max_open = false; // true: the bound itself is outside ("(0, 360]")
+    const char* reason = "";                 // one line: the physics or the source behind the bounds
+    bool contains(double x) const { return (min_open ? x > min : x >= min) && (max_open ? x < max : x <= max); }
+    bool bounded() const {
+        return min > -std::numeric_limits<double>::infinity() || max < std::numeric_limits<double>::infinity();
+    }
+};
+// "[100, 260]", "(0, 360]", ">= 0".
+std::string range_text(const KeyRange& range);
+
 struct ConfigKey {
     const char* name; // JSON key, dotted for nested groups ("display.db_min")
     KeyType type;
@@ -35,7 +52,12 @@ struct ConfigKey {
     // Stores `value` into the config. Returns an empty string, or what is wrong with the value
     // ("expected a number, got \"many\"").
     std::string (*set)(SonarConfig&, const Json& value);
+    KeyRange range{}; // numeric keys only; unbounded for text and choice keys
 };
+
+// The first key whose numeric value lies outside its range, as "key = value: must be in [lo, hi] unit",
+// or empty. NaN and infinities fail every range.
+std::string check_ranges(const SonarConfig& config);
 
 // The table, in reference order.
 const std::vector<ConfigKey>& all();

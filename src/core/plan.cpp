@@ -7,6 +7,8 @@
 #include <limits>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
 
@@ -69,6 +71,41 @@ void resolve(bool& on, EffectMode mode, bool auto_value, const char* name, const
         on = mode == EffectMode::on;
         states.push_back({name, on, on ? "on in config" : "off in config"});
     }
+}
+
+std::string gigabytes(double bytes) {
+    return fmt(bytes / 1e9) + " GB";
+}
+
+// Refuses, before anything is allocated, a depth pass whose buffers no machine here can hold: the
+// range-profile buffer (bins x columns floats) past the 4 GiB that any Vulkan device can bind as one
+// storage buffer (maxStorageBufferRange is a 32-bit count), or all per-ping buffers together past
+// half this machine's physical memory (the CPU backend and lavapipe keep them in host memory).
+Result<void> check_memory(const Plan& p) {
+    const double pixels = double(p.columns) * p.rows;
+    const double padded_bins = double((p.bins + 3u) & ~3u);
+    const double profiles = padded_bins * p.columns * 4.0;
+    // Per pixel: depth, material id, normals + cos, echo (energy, range), face normals: 48 bytes.
+    // Per polar cell: beam profiles, polar, clean, intensity, display and the staging copy: 24 bytes.
+    const double total = pixels * 48.0 + profiles + padded_bins * p.beams * 24.0;
+    const std::string grid = std::to_string(p.columns) + " x " + std::to_string(p.rows) + " pixels, " +
+                             std::to_string(p.bins) + " bins x " + std::to_string(p.beams) + " beams";
+    if (profiles > 4294967295.0)
+        return make_error(ErrorCode::invalid_argument,
+                          "config: the range-profile buffer would hold " + gigabytes(profiles) + " (" +
+                              std::to_string(p.bins) + " bins x " + std::to_string(p.columns) +
+                              " pixel columns), past the 4 GiB a Vulkan device can bind; lower bins (or bandwidth) "
+                              "or accuracy.pixels_per_beam");
+    const long pages = ::sysconf(_SC_PHYS_PAGES), page_size = ::sysconf(_SC_PAGE_SIZE);
+    if (pages > 0 && page_size > 0) {
+        const double memory = double(pages) * double(page_size);
+        if (total > 0.5 * memory)
+            return make_error(ErrorCode::invalid_argument,
+                              "config: the depth pass and its buffers would need " + gigabytes(total) + " (" + grid +
+                                  "), more than half of this machine's " + gigabytes(memory) +
+                                  "; lower accuracy.pixels_per_beam, accuracy.rows_per_vfov or bins");
+    }
+    return {};
 }
 
 } // namespace
@@ -276,6 +313,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                               fmt(rows) + " rows; at most " + std::to_string(kMaxRows));
     }
     p.rows = std::max(2u, static_cast<std::uint32_t>(rows));
+    if (auto fits = check_memory(p); !fits) return fits.error();
 
     p.slice_info.resize(p.slices);
     for (std::uint32_t s = 0; s < p.slices; ++s) {
@@ -408,6 +446,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     resolve(e.tvg, c.effects.tvg, false, "tvg", "raw received levels; turn on for display gain", e.states);
     // What the echo stage applies and TVG compensates: nothing when the effect is off (plan.h).
     p.alpha_db_per_m = e.absorption ? alpha : 0.0;
+    p.validity = model_validity(c, scene.materials);
 
     // Beamform tables: tent from pixel columns onto the beam table.
     p.column_azimuth_rad.resize(p.columns);

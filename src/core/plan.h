@@ -14,6 +14,7 @@
 #include "vksonar/frame.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"
+#include "vksonar/validity.h"
 
 namespace vksonar {
 
@@ -76,6 +77,8 @@ struct Plan {
     std::vector<shared::MaterialGpu> materials;
 
     ResolvedEffects effects;
+    // Each model this plan uses, checked against its validity domain (validity.h; meta.json "validity").
+    std::vector<ModelValidity> validity;
     // The depth pass records each pixel's face normal (normal_method = geometric with the incidence
     // effect on); otherwise no attachment is created, recorded or copied.
     bool face_normals = false;

@@ -176,6 +176,10 @@ const SonarConfig& Renderer::config() const {
     return impl_->plan.config;
 }
 
+const std::vector<ModelValidity>& Renderer::validity() const {
+    return impl_->plan.validity;
+}
+
 const Plan& renderer_plan(const Renderer& renderer) {
     return renderer.impl_->plan;
 }

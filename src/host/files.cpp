@@ -202,6 +202,16 @@ Result<void> write_meta_json(const std::string& path, const Plan& plan, const Fr
     for (const EffectState& e : states)
         effects[e.name] = {{"on", e.on}, {"why", e.why}};
     m["effects"] = std::move(effects);
+    // Where the numbers are a model's and where they are its extrapolation (validity.h).
+    json validity = json::array();
+    for (const ModelValidity& v : plan.validity)
+        validity.push_back({{"model", v.model},
+                            {"ok", v.ok},
+                            {"key", v.key},
+                            {"value", v.value},
+                            {"domain", v.domain},
+                            {"action", v.action}});
+    m["validity"] = std::move(validity);
     m["stages_run"] = frame.stages_run;
     json timings = json::object();
     for (const StageTime& t : frame.times) {

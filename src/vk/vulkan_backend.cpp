@@ -67,6 +67,18 @@ Result<void> VulkanBackend::init() {
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");
     }
+    // The largest polar-side storage buffers (bins padded to 4, as create_compute makes them): the
+    // range profiles, one per pixel column, and the beam profiles. Refused before any allocation.
+    const std::uint64_t bins_padded = (std::uint64_t(plan_.bins) + 3u) & ~std::uint64_t(3);
+    const std::uint64_t profile_bytes = bins_padded * std::max(plan_.columns, plan_.beams) * sizeof(float);
+    if (profile_bytes > limits.maxStorageBufferRange) {
+        return make_error(ErrorCode::unsupported,
+                          "vulkan backend: the range-profile buffer would hold " + std::to_string(profile_bytes) +
+                              " bytes (" + std::to_string(plan_.bins) + " bins x " +
+                              std::to_string(std::max(plan_.columns, plan_.beams)) +
+                              " columns), past the device's limit of " + std::to_string(limits.maxStorageBufferRange) +
+                              " bytes (lower bins or accuracy.pixels_per_beam, or use --backend cpu)");
+    }
     if (auto r = create_scene_buffers(); !r) return r;
     if (auto r = create_depth_pass(); !r) return r;
     if (auto r = create_compute(); !r) return r;

@@ -1,0 +1,168 @@
+// model_validity: each model a frame uses, checked against the domain where it holds (validity.h).
+// The figures and their sources are stated next to each check; README.md ("Where the models hold")
+// repeats them for readers of meta.json.
+#include "vksonar/validity.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace vksonar {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDegToRad = kPi / 180.0;
+
+std::string fmt(double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.4g", v);
+    return buf;
+}
+
+// One interval check of a model: the first key outside its interval decides the model's entry.
+struct Interval {
+    const char* key;
+    double value;
+    double lo, hi;
+    const char* unit;
+};
+
+std::string interval_text(const Interval& i) {
+    return std::string(i.key) + " in [" + fmt(i.lo) + ", " + fmt(i.hi) + "]" + (*i.unit ? " " : "") + i.unit;
+}
+
+// Francois & Garrison, JASA 72(3) 896 and 72(6) 1879 (1982): the total-absorption equation is stated
+// for 200 Hz to 1 MHz and about 5 % accurate there. Its oceanographic limits, as the NPL technical
+// guide "Calculation of absorption of sound in seawater" quotes them: where the MgSO4 term dominates
+// (up to 500 kHz) -2 to 22 degC, 30 to 35 ppt, 0 to 3.5 km; above 500 kHz, where the pure-water term
+// dominates, 0 to 30 degC, 0 to 40 ppt, 0 to 10 km. pH enters only the boric-acid term (below ~10 kHz);
+// 7.7 to 8.3 is the span of ocean pH over which Ainslie & McColm (JASA 103(3) 1998) compared their
+// simplified formula with it, used here for the lower band only.
+ModelValidity francois_garrison(const SonarConfig& c) {
+    const bool high = c.frequency_hz > 500e3;
+    std::vector<Interval> checks = {{"frequency", c.frequency_hz, 200.0, 1e6, "Hz"}};
+    if (high) {
+        checks.push_back({"temperature", c.temperature_c, 0.0, 30.0, "degC"});
+        checks.push_back({"salinity", c.salinity_ppt, 0.0, 40.0, "ppt"});
+        checks.push_back({"water_depth", c.water_depth_m, 0.0, 10000.0, "m"});
+    } else {
+        checks.push_back({"temperature", c.temperature_c, -2.0, 22.0, "degC"});
+        checks.push_back({"salinity", c.salinity_ppt, 30.0, 35.0, "ppt"});
+        checks.push_back({"water_depth", c.water_depth_m, 0.0, 3500.0, "m"});
+        checks.push_back({"ph", c.ph, 7.7, 8.3, ""});
+    }
+    std::string domain;
+    for (const Interval& i : checks)
+        domain += (domain.empty() ? "" : ", ") + interval_text(i);
+    domain += high ? " (above 500 kHz)" : " (up to 500 kHz)";
+    ModelValidity v{"francois_garrison", true, "frequency", c.frequency_hz, domain, "none"};
+    for (const Interval& i : checks) {
+        if (i.value >= i.lo && i.value <= i.hi) continue;
+        v.ok = false;
+        v.key = i.key;
+        v.value = i.value;
+        v.action = std::string(i.key) == "frequency" && i.value > i.hi
+                       ? "extrapolates the fit: its pure-water f^2 term, which dominates there, is the classical "
+                         "viscous law and still the best model available"
+                       : "extrapolates the fit (about 5 % accurate inside its domain, unknown outside)";
+        break;
+    }
+    return v;
+}
+
+// Beam patterns are far-field (Fraunhofer) patterns. A beamwidth theta (the configured -3 dB width, in
+// radians) implies the aperture of a uniform line array, L = 0.886 lambda / theta; the pattern holds
+// beyond about L^2 / lambda. (theta is the two-way width: the one-way width of the same array is up to
+// sqrt(2) wider, so L and the distance are upper estimates: a warning errs on the safe side.)
+ModelValidity far_field(const SonarConfig& c) {
+    const double lambda = c.sound_speed_mps / c.frequency_hz;
+    double aperture = 0.0;
+    const char* which = "horizontal_beamwidth";
+    if (c.effects.horizontal_pattern != EffectMode::off)
+        aperture = 0.886 * lambda / (c.horizontal_beamwidth_deg * kDegToRad);
+    if (c.effects.vertical_pattern != EffectMode::off) {
+        const double vertical = 0.886 * lambda / (c.vfov_deg * kDegToRad);
+        if (vertical > aperture) {
+            aperture = vertical;
+            which = "vfov";
+        }
+    }
+    const double distance = aperture * aperture / lambda;
+    ModelValidity v{"far_field_beam_pattern",
+                    c.range_min_m >= distance,
+                    "range_min",
+                    c.range_min_m,
+                    "range_min >= L^2 / lambda = " + fmt(distance) + " m (aperture L = 0.886 lambda / " + which +
+                        " = " + fmt(aperture) + " m, lambda = " + fmt(lambda) + " m)",
+                    "none"};
+    if (!v.ok)
+        v.action = "uses the far-field pattern at every range: nearer than " + fmt(distance) +
+                   " m an unfocused array's beam is wider than modelled (a focusing or lens sonar's is not)";
+    return v;
+}
+
+// Chebyshev patterns use the large-array limit of Dolph-Chebyshev: an N-element array's
+// T_{N-1}(cosh(A / (N-1)) cos(u)) becomes cos(sqrt(x^2 - A^2)) through acosh(1 + e) ~ sqrt(2 e), which
+// errs by about e / 12 (1 % at A / (N-1) = 0.5). N is estimated from the beamwidth as a half-wavelength
+// spaced array of the uniform aperture above: N = 2 L / lambda = 1.772 / theta (a Chebyshev taper
+// widens the beam, so the real N is larger and this errs on the safe side). Domain: N - 1 >= 2 A.
+ModelValidity chebyshev(const char* key, double beamwidth_deg, double sidelobe_db) {
+    const double elements = 1.772 / (beamwidth_deg * kDegToRad);
+    const double a = std::acosh(std::pow(10.0, -sidelobe_db / 20.0));
+    const double needed = 1.0 + 2.0 * a;
+    ModelValidity v{"chebyshev_large_array",
+                    elements >= needed,
+                    key,
+                    beamwidth_deg,
+                    "about N = 1.772 / " + std::string(key) + " = " + fmt(elements) +
+                        " half-wavelength elements >= 1 + 2 acosh(10^(-sidelobe_db/20)) = " + fmt(needed) +
+                        " (side lobes " + fmt(sidelobe_db) + " dB)",
+                    "none"};
+    if (!v.ok)
+        v.action = "uses the large-array pattern: an array of about " + fmt(elements) +
+                   " elements has a wider main lobe and uneven side lobes";
+    return v;
+}
+
+// The rough model's facet term is the Kirchhoff (tangent-plane) approximation in its geometric-optics
+// form, without shadowing or multiple scattering. Both stay small near the specular direction while
+// the rms slope is below about 0.5 (27 deg), a common rule of thumb; validate() already refuses slopes
+// past 1 (45 deg). Grazing angles below about 2 atan(m), where shadowing grows, depend on the scene
+// and are not checked per pixel.
+ModelValidity rough_facet(std::size_t index, const AcousticMaterial& m) {
+    constexpr double kMaxSlope = 0.5;
+    ModelValidity v{"rough_facet",
+                    m.rms_slope <= kMaxSlope,
+                    "material " + std::to_string(index) + " '" + m.name + "' rms_slope",
+                    m.rms_slope,
+                    "rms_slope <= " + fmt(kMaxSlope) + " (and grazing angles above about 2 atan(rms_slope); not " +
+                        "checked per pixel)",
+                    "none"};
+    if (!v.ok) v.action = "uses the single-scattering facet term without shadowing or multiple scattering";
+    return v;
+}
+
+} // namespace
+
+std::string ModelValidity::warning() const {
+    std::string text =
+        model + ": " + key + " = " + fmt(value) + " is outside the model's domain (" + domain + "); vksonar " + action;
+    return detail::escape_control_chars(std::move(text)); // one line, whatever a material's name holds
+}
+
+std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials) {
+    std::vector<ModelValidity> out;
+    if (c.absorption_db_per_m < 0.0 && c.effects.absorption != EffectMode::off) out.push_back(francois_garrison(c));
+    if (c.effects.vertical_pattern != EffectMode::off || c.effects.horizontal_pattern != EffectMode::off)
+        out.push_back(far_field(c));
+    if (c.vertical_pattern == BeamPattern::chebyshev && c.effects.vertical_pattern != EffectMode::off)
+        out.push_back(chebyshev("vfov", c.vfov_deg, c.vertical_sidelobe_db));
+    if (c.horizontal_pattern == BeamPattern::chebyshev && c.effects.horizontal_pattern != EffectMode::off)
+        out.push_back(chebyshev("horizontal_beamwidth", c.horizontal_beamwidth_deg, c.horizontal_sidelobe_db));
+    if (c.effects.incidence != EffectMode::off)
+        for (std::size_t i = 0; i < materials.size(); ++i)
+            if (materials[i].model == AcousticMaterial::Model::rough) out.push_back(rough_facet(i, materials[i]));
+    return out;
+}
+
+} // namespace vksonar

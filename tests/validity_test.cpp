@@ -1,0 +1,232 @@
+// Physical ranges of every key (validate() refuses a value just outside, naming the key) and the
+// validity domains of the models a frame uses (model_validity: just inside ok, just outside not).
+#include <cmath>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "config/config_keys.h"
+#include "core/plan.h"
+#include "scene/scene_data.h"
+#include "vksonar/config.h"
+#include "vksonar/validity.h"
+
+namespace vksonar {
+namespace {
+
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+
+std::string number_text(double x, bool count) {
+    if (count) return std::to_string(static_cast<long long>(x));
+    char text[64];
+    std::snprintf(text, sizeof text, "%.17g", x);
+    return text;
+}
+
+// The problem of `name=value` on the default config: the setter's or validate()'s, or empty.
+std::string problem_of(const std::string& name, const std::string& value) {
+    auto set = apply_config_override(SonarConfig{}, name + "=" + value);
+    if (!set) return set.error().message;
+    return set->validate();
+}
+
+// For every bounded key: a value just outside each finite bound is refused with the key's name and
+// the range; the bound itself (closed) or a value just inside (open) passes the key's own range check.
+TEST(KeyRanges, EveryKeyJustOutsideItsRangeIsRefusedByName) {
+    std::size_t checked = 0;
+    for (const auto& key : config_keys::all()) {
+        if (!key.range.bounded()) continue;
+        const bool count = key.type == config_keys::KeyType::count;
+        const config_keys::KeyRange& r = key.range;
+        const auto step = [count](double x) { return count ? 1.0 : std::max(std::abs(x) * 1e-6, 1e-6); };
+        for (const bool low : {true, false}) {
+            const double bound = low ? r.min : r.max;
+            if (!std::isfinite(bound)) continue;
+            const bool open = low ? r.min_open : r.max_open;
+            const double outside = open ? bound : (low ? bound - step(bound) : bound + step(bound));
+            if (count && outside < 0) continue; // a negative count is refused by the setter's type check
+            const std::string text = number_text(outside, count);
+            const std::string problem = problem_of(key.name, text);
+            ASSERT_FALSE(problem.empty()) << key.name << " = " << text << " was accepted";
+            EXPECT_NE(problem.find(key.name), std::string::npos) << problem;
+            // validate()'s message names the value and the range (the setter's, for absorption < 0,
+            // names the value).
+            if (problem.rfind("--set", 0) != 0) {
+                EXPECT_EQ(problem.rfind(std::string(key.name) + " = ", 0), 0u) << problem;
+                EXPECT_NE(problem.find(config_keys::range_text(r)), std::string::npos) << problem;
+            }
+            const double inside = open ? (low ? bound + step(bound) : bound - step(bound)) : bound;
+            const std::string inside_problem = problem_of(key.name, number_text(inside, count));
+            EXPECT_EQ(inside_problem.find("must be in"), std::string::npos)
+                << key.name << " = " << inside << ": " << inside_problem;
+            ++checked;
+        }
+        EXPECT_NE(std::string(r.reason), "") << key.name << " has a range without a reason";
+    }
+    EXPECT_GE(checked, 60u); // about two bounds for each of the 31 numeric keys
+}
+
+TEST(KeyRanges, TheIssueExamplesAndTheCrossKeyRules) {
+    EXPECT_EQ(problem_of("source_level", "400"), "source_level = 400: must be in [100, 260] dB re 1 uPa at 1 m");
+    EXPECT_EQ(problem_of("sound_speed", "1e9"), "sound_speed = 1000000000: must be in [1400, 1650] m/s");
+    EXPECT_EQ(problem_of("bandwidth", "1600000"),
+              "bandwidth = 1600000: must be at most twice the frequency (1500000 Hz): the band f +- B/2 would reach "
+              "below 0 Hz");
+    EXPECT_EQ(problem_of("bandwidth", "1500000").find("twice the frequency"), std::string::npos);
+    EXPECT_EQ(problem_of("horizontal_beamwidth", "131"),
+              "horizontal_beamwidth = 131: must be at most hfov (130 degrees): a beam wider than the whole fan");
+    EXPECT_EQ(problem_of("horizontal_beamwidth", "130"), "");
+    EXPECT_NE(problem_of("display.db_min", "140").find("display.db_max = 140: must be greater than display.db_min"),
+              std::string::npos);
+}
+
+// A depth pass whose range-profile buffer no Vulkan device can bind is refused by make_plan, before
+// anything is allocated, with its size.
+TEST(KeyRanges, ADepthPassPastTheBufferLimitIsRefusedWithItsSize) {
+    SonarConfig c;
+    c.bins = 65536;
+    c.pixels_per_beam = 32; // 32 x 512 = 16384 columns: 65536 x 16384 floats = 4.3 GB
+    ASSERT_EQ(c.validate(), "");
+    SceneData scene;
+    auto plan = make_plan(c, scene);
+    ASSERT_FALSE(plan.ok());
+    EXPECT_NE(
+        plan.error().message.find("range-profile buffer would hold 4.29549 GB (65536 bins x 16386 pixel columns)"),
+        std::string::npos)
+        << plan.error().message;
+    c.bins = 4096; // 268 MB: fine
+    EXPECT_TRUE(make_plan(c, scene).ok());
+}
+
+// A copy: the lists are temporaries.
+std::optional<ModelValidity> find_model(const std::vector<ModelValidity>& list, const std::string& model) {
+    for (const auto& v : list)
+        if (v.model == model) return v;
+    return std::nullopt;
+}
+
+// A config inside every domain: the default with range_min past the far-field distance.
+SonarConfig inside_config() {
+    SonarConfig c;
+    c.range_min_m = 6.0; // L^2 / lambda = 5.15 m for 1 deg at 750 kHz
+    return c;
+}
+
+TEST(Validity, InsideEveryDomainEveryEntryIsOk) {
+    const auto list = model_validity(inside_config());
+    ASSERT_EQ(list.size(), 2u);
+    for (const auto& v : list) {
+        EXPECT_TRUE(v.ok) << v.warning();
+        EXPECT_EQ(v.action, "none");
+        EXPECT_FALSE(v.domain.empty());
+    }
+}
+
+TEST(Validity, FrancoisGarrisonFrequencyAndWater) {
+    SonarConfig c = inside_config();
+    c.frequency_hz = 1e6;
+    EXPECT_TRUE(find_model(model_validity(c), "francois_garrison")->ok);
+    c.frequency_hz = 1.001e6;
+    auto v = find_model(model_validity(c), "francois_garrison");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+    EXPECT_EQ(v->key, "frequency");
+    EXPECT_EQ(v->value, 1.001e6);
+    EXPECT_NE(v->action.find("extrapolates"), std::string::npos);
+    const std::string warning = v->warning();
+    EXPECT_EQ(warning.find('\n'), std::string::npos);
+    EXPECT_NE(warning.find("francois_garrison: frequency = 1.001e+06"), std::string::npos) << warning;
+    EXPECT_NE(warning.find("[200, 1e+06] Hz"), std::string::npos) << warning;
+
+    // Up to 500 kHz the MgSO4 limits hold: 22 degC inside, 22.5 outside; 30 ppt inside, 29.9 outside.
+    c.frequency_hz = 300e3;
+    c.temperature_c = 22.0;
+    EXPECT_TRUE(find_model(model_validity(c), "francois_garrison")->ok);
+    c.temperature_c = 22.5;
+    EXPECT_EQ(find_model(model_validity(c), "francois_garrison")->key, "temperature");
+    EXPECT_FALSE(find_model(model_validity(c), "francois_garrison")->ok);
+    c.temperature_c = 10.0;
+    c.salinity_ppt = 29.9;
+    EXPECT_EQ(find_model(model_validity(c), "francois_garrison")->key, "salinity");
+    // Above 500 kHz the pure-water limits: 29.9 ppt is inside.
+    c.frequency_hz = 600e3;
+    EXPECT_TRUE(find_model(model_validity(c), "francois_garrison")->ok);
+    // An explicit absorption uses no model.
+    c.absorption_db_per_m = 0.1;
+    EXPECT_FALSE(find_model(model_validity(c), "francois_garrison").has_value());
+}
+
+TEST(Validity, FarFieldDistanceOfTheImpliedAperture) {
+    SonarConfig c = inside_config();
+    const double lambda = c.sound_speed_mps / c.frequency_hz;
+    const double aperture = 0.886 * lambda / (c.horizontal_beamwidth_deg * kDeg);
+    const double distance = aperture * aperture / lambda;
+    EXPECT_NEAR(distance, 5.154, 0.001);
+    c.range_min_m = distance * 1.001;
+    EXPECT_TRUE(find_model(model_validity(c), "far_field_beam_pattern")->ok);
+    c.range_min_m = distance * 0.999;
+    auto v = find_model(model_validity(c), "far_field_beam_pattern");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+    EXPECT_EQ(v->key, "range_min");
+    EXPECT_NE(v->domain.find("5.154 m"), std::string::npos) << v->domain;
+    // Without beam patterns the model is not used.
+    c.effects.horizontal_pattern = EffectMode::off;
+    c.effects.vertical_pattern = EffectMode::off;
+    EXPECT_FALSE(find_model(model_validity(c), "far_field_beam_pattern").has_value());
+}
+
+TEST(Validity, ChebyshevNeedsEnoughElements) {
+    SonarConfig c = inside_config();
+    c.vertical_pattern = BeamPattern::chebyshev; // -30 dB: A = acosh(31.6) = 4.15, N >= 9.29
+    const double a = std::acosh(std::pow(10.0, 30.0 / 20.0));
+    const double limit_deg = 1.772 / (1.0 + 2.0 * a) / kDeg; // 10.9 deg
+    c.vfov_deg = limit_deg * 0.999;
+    auto v = find_model(model_validity(c), "chebyshev_large_array");
+    ASSERT_TRUE(v);
+    EXPECT_TRUE(v->ok) << v->warning();
+    c.vfov_deg = limit_deg * 1.001;
+    v = find_model(model_validity(c), "chebyshev_large_array");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+    EXPECT_EQ(v->key, "vfov");
+    c.vertical_pattern = BeamPattern::sinc;
+    EXPECT_FALSE(find_model(model_validity(c), "chebyshev_large_array").has_value());
+}
+
+TEST(Validity, RoughFacetSlope) {
+    AcousticMaterial rough;
+    rough.name = "rock";
+    rough.model = AcousticMaterial::Model::rough;
+    rough.rms_slope = 0.5;
+    AcousticMaterial lambert; // no facet term: no entry
+    const SonarConfig c = inside_config();
+    auto list = model_validity(c, {lambert, rough});
+    auto v = find_model(list, "rough_facet");
+    ASSERT_TRUE(v);
+    EXPECT_TRUE(v->ok);
+    rough.rms_slope = 0.51;
+    list = model_validity(c, {lambert, rough});
+    v = find_model(list, "rough_facet");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+    EXPECT_EQ(v->key, "material 1 'rock' rms_slope");
+    EXPECT_EQ(v->value, 0.51);
+}
+
+// make_plan records the list the CLI prints and meta.json writes.
+TEST(Validity, ThePlanCarriesTheList) {
+    SceneData scene;
+    SonarConfig c = inside_config();
+    c.frequency_hz = 2e6;
+    auto plan = make_plan(c, scene);
+    ASSERT_TRUE(plan.ok()) << plan.error().message;
+    auto v = find_model(plan->validity, "francois_garrison");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+}
+
+} // namespace
+} // namespace vksonar
