@@ -90,11 +90,14 @@ run_target() { # target, seed dirs...
     echo "fuzz: $target, ${CI_RUNS[$target]} inputs from seed $FUZZ_SEED" >&2
   fi
   mkdir -p "$work"
-  # -rss_limit_mb / -timeout: a huge allocation or a hang is a finding too (bounded time per input).
+  # -rss_limit_mb / -malloc_limit_mb / -timeout: a hang, a large resident set or any single allocation
+  # past 256 MB is a finding too. Inputs are at most 64 kB and every size a file declares (a buffer's
+  # byteLength, a GLB chunk, an accessor's count) is checked against the bytes present before anything
+  # of that size is allocated, so no input should ask for more than a few MB.
   local start_target
   start_target=$(date +%s)
   if ! "${launcher[@]}" "$BUILD_DIR/fuzz/$target" "$work" "$@" "${budget[@]}" -timeout=10 \
-      -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 -artifact_prefix="$BUILD_DIR/crashes/$target-" \
+      -rss_limit_mb=2048 -malloc_limit_mb=256 -max_len=65536 -print_final_stats=1 -artifact_prefix="$BUILD_DIR/crashes/$target-" \
       2>"$BUILD_DIR/$target.log"; then
     tail -50 "$BUILD_DIR/$target.log" >&2
     echo "fuzz: $target FAILED; reproducer(s) in $BUILD_DIR/crashes/" >&2

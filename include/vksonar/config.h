@@ -103,6 +103,10 @@ struct SonarConfig {
 
     EffectsConfig effects;
 
+    // The folder every file named inside the scene (external buffers) must lie in; empty: the scene
+    // file's own folder (SceneLoadOptions::asset_root; the CLI's --asset-root overrides it).
+    std::string asset_root;
+
     // Returns the first problem in words (field and value), or an empty string if the config is usable.
     std::string validate() const;
 

@@ -55,6 +55,18 @@ struct SceneStats {
 
 struct SceneData; // internal
 
+// How Scene::load_gltf treats the files a scene names (external buffers), for scenes nobody here wrote.
+// A buffer's uri is relative to the scene file's folder; it is resolved (symlinks and ".." followed)
+// and must lie inside asset_root, be a regular file (not a directory, FIFO or device, which is opened
+// without blocking to find out) and hold exactly the buffer's byteLength bytes, at most 2 GiB; anything
+// else fails with a one-line error naming the uri. Images are never read (vksonar uses no textures).
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
+struct SceneLoadOptions {
+    // The folder every file named inside the scene must lie in; empty: the scene file's own folder.
+    // Widen it for layouts that share buffers between folders (the CLI's --asset-root).
+    std::string asset_root;
+};
+
 // Thread-safety: safe to read from many threads at once, to write from one; it must not change while a
 // Renderer made from it exists.
 class Scene {
@@ -65,7 +77,7 @@ public:
     Scene& operator=(Scene&&) noexcept;
 
     // Loads .gltf or .glb. Fails with a one-line error naming the file and what is wrong.
-    [[nodiscard]] static Result<Scene> load_gltf(const std::string& path);
+    [[nodiscard]] static Result<Scene> load_gltf(const std::string& path, const SceneLoadOptions& options = {});
 
     // Builds a scene from arrays an engine already has: positions xyz (mesh-local), triangle indices.
     // Adds one mesh and returns its index; then place it with add_draw.

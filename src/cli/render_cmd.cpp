@@ -37,7 +37,7 @@ constexpr const char* kUsage =
     "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
     "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
-    "                      [--save fan,polar,depth,normals,echo,cloud,...] --out DIR\n"
+    "                      [--save fan,polar,depth,normals,echo,cloud,...] [--asset-root DIR] --out DIR\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
@@ -56,6 +56,8 @@ constexpr const char* kUsage =
     "                written. Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the\n"
     "                legacy image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
+    "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
+    "                '..' resolved (default: the scene file's folder; config key asset_root)\n"
     "  --out         output directory (created)\n";
 
 const std::vector<std::string> kSaveItems = {"fan",  "polar", "depth",     "normals",
@@ -419,6 +421,7 @@ int run_render(const std::vector<std::string>& argv) {
                                   {"--backend", true, false},
                                   {"--save", true, true},
                                   {"--out", true, false},
+                                  {"--asset-root", true, false},
                                   {"--help", false, false}},
                                  "render");
     if (args.has("--help")) {
@@ -499,7 +502,8 @@ int run_render(const std::vector<std::string>& argv) {
         return config;
     };
     SonarConfig config = apply_user_layers(preset);
-    auto scene = Scene::load_gltf(scene_path);
+    const std::string asset_root = args.value("--asset-root", config.asset_root);
+    auto scene = Scene::load_gltf(scene_path, SceneLoadOptions{asset_root});
     if (!scene) {
         if (default_scene) throw Failure(scene.error().message);
         throw BadInput(scene.error().message);
@@ -515,6 +519,7 @@ int run_render(const std::vector<std::string>& argv) {
         if (!layered) throw BadInput(layered.error().message);
         config = apply_user_layers(layered.value());
     }
+    config.asset_root = asset_root; // meta.json's config says which folder the scene's files came from
 
     // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
     OutputDir out_dir(args.value("--out"));

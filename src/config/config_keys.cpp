@@ -345,6 +345,9 @@ std::vector<ConfigKey> make_table() {
         VKS_EFFECT(speckle, "Speckle (auto: on)"),
         VKS_EFFECT(ambient_noise, "Ambient noise floor (auto: on)"),
         VKS_EFFECT(tvg, "Time-varied gain (auto: off)"),
+
+        VKS_TEXT("asset_root", asset_root,
+                 "Folder that files named inside the scene must lie in (empty: the scene's folder; CLI --asset-root)"),
     };
 }
 

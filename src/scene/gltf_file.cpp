@@ -12,6 +12,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <nlohmann/json.hpp>
 
@@ -120,24 +125,179 @@ void check_required_extensions(const json& doc) {
     }
 }
 
-// External buffers are looked up only next to the scene file (tinygltf would also try the current
-// directory), and a missing one is remembered so it can be reported as an I/O error.
-struct ExternalFiles {
-    std::string base_dir;
-    std::vector<std::string> missing;
+// Files named inside a scene (external buffers) are read by these callbacks, never by tinygltf 2.7's own
+// (which sizes a directory as 2^63 - 1 bytes, blocks forever opening a FIFO, and follows any path).
+// check_external_buffers resolves each buffer's uri before tinygltf runs and refuses, with the uri in
+// the message, what is not a plain file of the declared size inside the asset root; FileExists then
+// answers yes only for the exact paths it accepted, and ReadWholeFile opens them again with the same
+// checks (the file may have changed in between) and reads exactly the declared bytes.
+struct ExternalBuffer {
+    std::string uri;            // as written in the scene, for messages
+    std::filesystem::path file; // resolved: absolute, no symlink, no "..", inside the asset root
+    std::uint64_t byte_length;  // what the buffer declares
 };
 
-bool file_exists_beside_scene(const std::string& path, void* user) {
+struct ExternalFiles {
+    std::map<std::string, ExternalBuffer> by_joined_path; // keyed by the path tinygltf will ask for
+    std::string error;                                    // the first refusal while tinygltf reads
+};
+
+// tinygltf 2.7's uri decoding (dlib::urldecode), so that the path checked here is the one it asks for.
+std::string url_decode(const std::string& uri) {
+    auto hex = [](char c) -> unsigned {
+        if (c >= '0' && c <= '9') return unsigned(c - '0');
+        if (c >= 'a' && c <= 'f') return unsigned(c - 'a' + 10);
+        if (c >= 'A' && c <= 'F') return unsigned(c - 'A' + 10);
+        return 0;
+    };
+    std::string out;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        if (uri[i] == '+') {
+            out += ' ';
+        } else if (uri[i] == '%' && uri.size() > i + 2) {
+            out += static_cast<char>((hex(uri[i + 1]) << 4) | hex(uri[i + 2]));
+            i += 2;
+        } else {
+            out += uri[i];
+        }
+    }
+    return out;
+}
+
+bool has_scheme(const std::string& uri) {
+    const std::size_t colon = uri.find(':');
+    if (colon == std::string::npos || colon == 0 || !std::isalpha(static_cast<unsigned char>(uri[0]))) return false;
+    return std::all_of(uri.begin(), uri.begin() + static_cast<std::ptrdiff_t>(colon), [](char c) {
+        return std::isalnum(static_cast<unsigned char>(c)) || c == '+' || c == '-' || c == '.';
+    });
+}
+
+bool lies_inside(const std::filesystem::path& file, const std::filesystem::path& root) {
+    auto f = file.begin();
+    for (auto r = root.begin(); r != root.end(); ++r, ++f) {
+        if (r->empty()) continue; // a trailing separator
+        if (f == file.end() || *f != *r) return false;
+    }
+    return true;
+}
+
+// Opens a resolved external file without blocking (a FIFO or device would block in open()), without
+// following a symlink that appeared since it was resolved, and checks that it is a regular file of
+// exactly `byte_length` bytes. Returns the descriptor, or -1 with `why` set.
+int open_checked(const ExternalBuffer& b, std::string& why) {
+    why.clear();
+    const int fd = ::open(b.file.c_str(), O_RDONLY | O_NONBLOCK | O_NOFOLLOW | O_CLOEXEC | O_NOCTTY);
+    if (fd < 0) {
+        why = std::string("cannot open: ") + std::strerror(errno);
+        return -1;
+    }
+    struct stat st {};
+    if (::fstat(fd, &st) != 0)
+        why = std::string("cannot stat: ") + std::strerror(errno);
+    else if (S_ISDIR(st.st_mode))
+        why = "is a directory";
+    else if (!S_ISREG(st.st_mode))
+        why = "is not a regular file";
+    if (!why.empty()) {
+        ::close(fd);
+        return -1;
+    }
+    if (std::uint64_t(st.st_size) != b.byte_length) {
+        why = "is " + std::to_string(st.st_size) + " bytes, byteLength says " + std::to_string(b.byte_length);
+        ::close(fd);
+        return -1;
+    }
+    return fd;
+}
+
+std::string refusal(std::size_t index, const std::string& uri, const std::string& why) {
+    return "buffer " + std::to_string(index) + " uri '" + uri + "' " + why;
+}
+
+// Every external buffer of `doc`, checked before tinygltf reads any (see ExternalFiles).
+ExternalFiles check_external_buffers(const json& doc, const std::string& base_dir, const std::string& asset_root) {
+    ExternalFiles files;
+    const auto buffers = doc.find("buffers");
+    if (buffers == doc.end() || !buffers->is_array()) return files; // tinygltf reports what is wrong
+    std::error_code ec;
+    const std::string root_text = asset_root.empty() ? base_dir : asset_root;
+    const std::filesystem::path root = std::filesystem::canonical(root_text, ec);
+    if (ec || !std::filesystem::is_directory(root, ec))
+        fail(ErrorCode::io, "asset root '" + root_text + "' is not a folder (" +
+                                (ec ? ec.message() : std::string("not a directory")) + ")");
+    for (std::size_t i = 0; i < buffers->size(); ++i) {
+        const json& buffer = (*buffers)[i];
+        if (!buffer.is_object()) continue;
+        const auto uri_it = buffer.find("uri");
+        if (uri_it == buffer.end() || !uri_it->is_string()) continue;
+        const std::string uri = uri_it->get<std::string>();
+        if (uri.empty() || uri.rfind("data:", 0) == 0) continue; // a GLB's BIN chunk, or embedded data
+        const std::string decoded = url_decode(uri);
+        if (decoded.find('\0') != std::string::npos) fail(ErrorCode::parse, refusal(i, uri, "holds a NUL byte"));
+        if (has_scheme(decoded))
+            fail(ErrorCode::unsupported, refusal(i, uri, "is not a relative path (only files beside the scene are read)"));
+        if (decoded.front() == '/')
+            fail(ErrorCode::unsupported, refusal(i, uri, "is an absolute path (uris are relative to the scene's folder)"));
+        const auto length_it = buffer.find("byteLength");
+        if (length_it == buffer.end() || !length_it->is_number_unsigned() || length_it->get<std::uint64_t>() == 0)
+            fail(ErrorCode::parse, "buffer " + std::to_string(i) + " byteLength is missing or not a positive integer");
+        const std::uint64_t byte_length = length_it->get<std::uint64_t>();
+        if (byte_length > max_file_bytes)
+            fail(ErrorCode::unsupported, refusal(i, uri, "declares " + std::to_string(byte_length) +
+                                                             " bytes, over the 2 GiB limit of a file vksonar reads"));
+        const std::string joined = base_dir.back() == '/' ? base_dir + decoded : base_dir + "/" + decoded;
+        const std::filesystem::path file = std::filesystem::canonical(joined, ec); // symlinks and ".." resolved
+        if (ec) fail(ErrorCode::io, refusal(i, uri, "not found in " + base_dir + " (" + ec.message() + ")"));
+        if (!lies_inside(file, root))
+            fail(ErrorCode::io, refusal(i, uri, "lies outside the asset root " + root.string() +
+                                                    (asset_root.empty() ? " (use --asset-root)" : "")));
+        ExternalBuffer b{uri, file, byte_length};
+        std::string why;
+        const int fd = open_checked(b, why);
+        // A size that disagrees is the scene's inconsistency (as a short GLB chunk is); the rest is I/O.
+        if (fd < 0) fail(why.find("byteLength") != std::string::npos ? ErrorCode::parse : ErrorCode::io, refusal(i, uri, why));
+        ::close(fd);
+        files.by_joined_path.emplace(joined, std::move(b));
+    }
+    return files;
+}
+
+bool external_file_exists(const std::string& path, void* user) {
+    return static_cast<ExternalFiles*>(user)->by_joined_path.count(path) != 0;
+}
+
+bool read_external_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
     auto* files = static_cast<ExternalFiles*>(user);
-    const std::string prefix = files->base_dir + "/";
-    if (path.compare(0, prefix.size(), prefix) != 0) return false;
-    const bool exists = tinygltf::FileExists(path, nullptr);
-    if (!exists) files->missing.push_back(path.substr(prefix.size()));
-    return exists;
+    const auto it = files->by_joined_path.find(path);
+    std::string why = "was not checked"; // cannot happen: FileExists said no
+    int fd = -1;
+    if (it != files->by_joined_path.end()) fd = open_checked(it->second, why);
+    if (fd >= 0) {
+        out->assign(static_cast<std::size_t>(it->second.byte_length), 0);
+        std::size_t done = 0;
+        while (done < out->size()) {
+            const ssize_t n = ::read(fd, out->data() + done, out->size() - done);
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) break;
+            done += static_cast<std::size_t>(n);
+        }
+        ::close(fd);
+        if (done == out->size()) return true;
+        why = "was shorter than byteLength while it was read (changed on disk?)";
+    }
+    const std::string uri = it != files->by_joined_path.end() ? it->second.uri : path;
+    if (files->error.empty()) files->error = "buffer uri '" + uri + "' " + why;
+    if (err) *err = why;
+    return false;
 }
 
 std::string expand_nothing(const std::string& path, void*) {
     return path;
+}
+
+bool refuse_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+    if (err) *err = "vksonar writes no glTF files";
+    return false;
 }
 
 // vksonar uses no textures; images are accepted and their bytes dropped.
@@ -146,13 +306,12 @@ bool ignore_image(tinygltf::Image*, const int, std::string*, std::string*, int, 
 }
 
 tinygltf::Model run_tinygltf(const std::vector<unsigned char>& bytes, bool binary, const std::string& base_dir,
-                             std::vector<std::string>& warnings) {
-    ExternalFiles files{base_dir, {}};
+                             ExternalFiles& files, std::vector<std::string>& warnings) {
     tinygltf::FsCallbacks fs{};
-    fs.FileExists = &file_exists_beside_scene;
+    fs.FileExists = &external_file_exists;
     fs.ExpandFilePath = &expand_nothing;
-    fs.ReadWholeFile = &tinygltf::ReadWholeFile;
-    fs.WriteWholeFile = &tinygltf::WriteWholeFile;
+    fs.ReadWholeFile = &read_external_file;
+    fs.WriteWholeFile = &refuse_write;
     fs.user_data = &files;
 
     tinygltf::TinyGLTF loader;
@@ -168,8 +327,7 @@ tinygltf::Model run_tinygltf(const std::vector<unsigned char>& bytes, bool binar
                                                         reinterpret_cast<const char*>(bytes.data()), size, base_dir);
     if (!warn.empty()) warnings.push_back("glTF: " + one_line(warn));
     if (!ok) {
-        if (!files.missing.empty())
-            fail(ErrorCode::io, "external buffer '" + files.missing.front() + "' not found in " + base_dir);
+        if (!files.error.empty()) fail(ErrorCode::io, files.error);
         fail(ErrorCode::parse, one_line(err.empty() ? std::string("tinygltf failed without a message") : err));
     }
     return model;
@@ -209,7 +367,7 @@ std::string one_line(const std::string& text, std::size_t max_chars) {
     return out;
 }
 
-tinygltf::Model read_model(const std::string& path, std::vector<std::string>& warnings) {
+tinygltf::Model read_model(const std::string& path, const std::string& asset_root, std::vector<std::string>& warnings) {
     std::vector<unsigned char> bytes = read_file(path);
     const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
     if (has_extension(path, ".glb") && !binary)
@@ -218,7 +376,8 @@ tinygltf::Model read_model(const std::string& path, std::vector<std::string>& wa
     check_required_extensions(doc);
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
-    return run_tinygltf(bytes, binary, base_dir, warnings);
+    ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
+    return run_tinygltf(bytes, binary, base_dir, files, warnings);
 }
 
 } // namespace vksonar::gltf

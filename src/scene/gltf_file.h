@@ -36,8 +36,10 @@ struct LoadFailure {
 std::string one_line(const std::string& text, std::size_t max_chars = 300);
 
 // Reads and checks the file at `path` (size, GLB container, JSON nesting depth, required extensions)
-// and has tinygltf parse it, buffers included, looking for external buffers only next to the file.
-// tinygltf's warnings are appended to `warnings`. Throws LoadFailure.
-tinygltf::Model read_model(const std::string& path, std::vector<std::string>& warnings);
+// and has tinygltf parse it, buffers included. An external buffer's uri is relative to the file's
+// folder and must resolve (symlinks and ".." followed) to a regular file of exactly its byteLength
+// inside `asset_root` (empty: the file's folder); images are never read. tinygltf's warnings are
+// appended to `warnings`. Throws LoadFailure.
+tinygltf::Model read_model(const std::string& path, const std::string& asset_root, std::vector<std::string>& warnings);
 
 } // namespace vksonar::gltf

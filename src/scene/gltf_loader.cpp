@@ -490,12 +490,12 @@ private:
 
 } // namespace
 
-Result<Scene> Scene::load_gltf(const std::string& path) {
+Result<Scene> Scene::load_gltf(const std::string& path, const SceneLoadOptions& options) {
     try {
         Scene scene;
         SceneData& data = *scene.data_;
         data.source_path = path;
-        const tinygltf::Model model = gltf::read_model(path, data.stats.warnings);
+        const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
         Converter(model, data).run();
         for (std::string& w : data.stats.warnings) // one line each, like errors (names may hold newlines)
             w = detail::escape_control_chars(path + ": " + w);
