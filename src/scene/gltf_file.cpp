@@ -235,27 +235,32 @@ ExternalFiles check_external_buffers(const json& doc, const std::string& base_di
         const std::string decoded = url_decode(uri);
         if (decoded.find('\0') != std::string::npos) fail(ErrorCode::parse, refusal(i, uri, "holds a NUL byte"));
         if (has_scheme(decoded))
-            fail(ErrorCode::unsupported, refusal(i, uri, "is not a relative path (only files beside the scene are read)"));
+            fail(ErrorCode::unsupported,
+                 refusal(i, uri, "is not a relative path (only files beside the scene are read)"));
         if (decoded.front() == '/')
-            fail(ErrorCode::unsupported, refusal(i, uri, "is an absolute path (uris are relative to the scene's folder)"));
+            fail(ErrorCode::unsupported,
+                 refusal(i, uri, "is an absolute path (uris are relative to the scene's folder)"));
         const auto length_it = buffer.find("byteLength");
         if (length_it == buffer.end() || !length_it->is_number_unsigned() || length_it->get<std::uint64_t>() == 0)
             fail(ErrorCode::parse, "buffer " + std::to_string(i) + " byteLength is missing or not a positive integer");
         const std::uint64_t byte_length = length_it->get<std::uint64_t>();
         if (byte_length > max_file_bytes)
-            fail(ErrorCode::unsupported, refusal(i, uri, "declares " + std::to_string(byte_length) +
-                                                             " bytes, over the 2 GiB limit of a file vksonar reads"));
+            fail(ErrorCode::unsupported, refusal(i, uri,
+                                                 "declares " + std::to_string(byte_length) +
+                                                     " bytes, over the 2 GiB limit of a file vksonar reads"));
         const std::string joined = base_dir.back() == '/' ? base_dir + decoded : base_dir + "/" + decoded;
         const std::filesystem::path file = std::filesystem::canonical(joined, ec); // symlinks and ".." resolved
         if (ec) fail(ErrorCode::io, refusal(i, uri, "not found in " + base_dir + " (" + ec.message() + ")"));
         if (!lies_inside(file, root))
-            fail(ErrorCode::io, refusal(i, uri, "lies outside the asset root " + root.string() +
-                                                    (asset_root.empty() ? " (use --asset-root)" : "")));
+            fail(ErrorCode::io, refusal(i, uri,
+                                        "lies outside the asset root " + root.string() +
+                                            (asset_root.empty() ? " (use --asset-root)" : "")));
         ExternalBuffer b{uri, file, byte_length};
         std::string why;
         const int fd = open_checked(b, why);
         // A size that disagrees is the scene's inconsistency (as a short GLB chunk is); the rest is I/O.
-        if (fd < 0) fail(why.find("byteLength") != std::string::npos ? ErrorCode::parse : ErrorCode::io, refusal(i, uri, why));
+        if (fd < 0)
+            fail(why.find("byteLength") != std::string::npos ? ErrorCode::parse : ErrorCode::io, refusal(i, uri, why));
         ::close(fd);
         files.by_joined_path.emplace(joined, std::move(b));
     }
