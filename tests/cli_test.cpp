@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -402,7 +403,7 @@ TEST_F(Cli, RenderWritesEveryOutput) {
                           "--set",
                           "effects.speckle=off",
                           "--save",
-                          "depth,normals",
+                          "default,depth,normals",
                           "--save",
                           "echo,cloud",
                           "--pose",
@@ -525,6 +526,84 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     EXPECT_FALSE(fs::exists(out / "frame_000001"));
     const auto meta = nlohmann::json::parse(read_text(out / "frame_000004" / "meta.json"));
     EXPECT_EQ(meta["frame_index"], 4);
+}
+
+// Issue 20: --save selects exactly what is written (meta.json always); without it, the default set.
+TEST_F(Cli, SaveWritesExactlyWhatIsListed) {
+    auto files_of = [&](const std::vector<std::string>& save) {
+        const fs::path out = dir_ / ("save_" + std::to_string(save.size()) + (save.empty() ? "" : save[0]));
+        std::vector<std::string> args = {
+            "render",   "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu",       "--set", "bins=32", "--set",
+            "beams=16", "--set",   "display.fan_width=64",        "--out",     out.string()};
+        for (const std::string& item : save) {
+            args.push_back("--save");
+            args.push_back(item);
+        }
+        const CliRun r = run(args);
+        EXPECT_EQ(r.exit_code, 0) << r.err;
+        std::set<std::string> names;
+        for (const auto& entry : fs::directory_iterator(out))
+            names.insert(entry.path().filename().string());
+        return names;
+    };
+    using Names = std::set<std::string>;
+    EXPECT_EQ(files_of({}), (Names{"fan.png", "meta.json", "polar.npy", "polar.png", "polar_u16.npy"}));
+    EXPECT_EQ(files_of({"polar"}), (Names{"meta.json", "polar.npy"}));
+    EXPECT_EQ(files_of({"depth"}), (Names{"depth.npy", "meta.json"}));
+    EXPECT_EQ(files_of({"polar_u16,fan", "polar_png"}), (Names{"fan.png", "meta.json", "polar.png", "polar_u16.npy"}));
+    EXPECT_EQ(files_of({"default", "echo"}),
+              (Names{"echo.npy", "fan.png", "meta.json", "polar.npy", "polar.png", "polar_u16.npy"}));
+}
+
+// Frames are written on a background thread: every line of the trajectory is on disk, in its own
+// folder, equal to the same pose rendered alone (the frame index is the line, so the noise is too).
+TEST_F(Cli, TrajectoryFramesAreWrittenWholeAndInOrder) {
+    std::string poses = "x,y,z,roll,pitch,yaw\n";
+    for (int i = 0; i < 8; ++i)
+        poses += std::to_string(0.1 * i) + ",0,0,0,0," + std::to_string(i) + "\n";
+    write_text(dir_ / "poses.csv", poses);
+    const std::vector<std::string> common = {
+        "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set", "beams=16", "--save",
+        "polar"};
+    std::vector<std::string> args = {"render", "--trajectory", (dir_ / "poses.csv").string(), "--out",
+                                     (dir_ / "traj").string()};
+    args.insert(args.end(), common.begin(), common.end());
+    ASSERT_EQ(run(args).exit_code, 0);
+    for (int i = 0; i < 8; ++i) {
+        const fs::path frame = dir_ / "traj" / ("frame_00000" + std::to_string(i + 2));
+        ASSERT_TRUE(fs::is_regular_file(frame / "polar.npy")) << frame;
+        EXPECT_EQ(nlohmann::json::parse(read_text(frame / "meta.json"))["frame_index"], i + 2);
+    }
+    // Line 6 alone: the single-pose path numbers its frame 0, so render it as a one-line trajectory.
+    write_text(dir_ / "one.csv", "x,y,z,roll,pitch,yaw\n\n\n\n\n" + std::to_string(0.1 * 4) + ",0,0,0,0,4\n");
+    args = {"render", "--trajectory", (dir_ / "one.csv").string(), "--out", (dir_ / "one").string()};
+    args.insert(args.end(), common.begin(), common.end());
+    ASSERT_EQ(run(args).exit_code, 0);
+    EXPECT_EQ(read_text(dir_ / "one" / "frame_000006" / "polar.npy"),
+              read_text(dir_ / "traj" / "frame_000006" / "polar.npy"));
+}
+
+// A frame that cannot be written stops the run with one line; the frames before it stay whole.
+TEST_F(Cli, AWriteErrorStopsTheTrajectoryAndKeepsWhatWasWritten) {
+    std::string poses;
+    for (int i = 0; i < 6; ++i)
+        poses += "0,0,0,0,0," + std::to_string(i) + "\n";
+    write_text(dir_ / "poses.csv", poses);
+    fs::create_directories(dir_ / "traj");
+    write_text(dir_ / "traj" / "frame_000004", "a file where frame 4's folder goes");
+    const CliRun r = run({"render", "--trajectory", (dir_ / "poses.csv").string(), "--out", (dir_ / "traj").string(),
+                          "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set",
+                          "beams=16", "--save", "polar", "--set", "range_min=6"});
+    EXPECT_NE(r.exit_code, 0);
+    ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
+    EXPECT_NE(r.err.find("frame_000004"), std::string::npos) << r.err;
+    for (int line = 1; line <= 3; ++line) {
+        const fs::path frame = dir_ / "traj" / ("frame_00000" + std::to_string(line));
+        EXPECT_TRUE(fs::is_regular_file(frame / "polar.npy")) << frame;
+        EXPECT_TRUE(fs::is_regular_file(frame / "meta.json")) << frame;
+    }
+    EXPECT_FALSE(fs::exists(dir_ / "traj" / "frame_000005"));
+    EXPECT_FALSE(fs::exists(dir_ / "traj" / "frame_000006"));
 }
 
 TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {

@@ -470,7 +470,7 @@ protected:
 TEST_F(LegacyCli, UuvWritesTheLegacyImageAndIntermediates) {
     const fs::path out = dir_ / "uuv";
     const LegacyCliRun run = run_cli({"render", "--sonar", "uuv-legacy", "--backend", "cpu", "--save",
-                                      "normals,multibeam,raw_scan,cloud", "--out", out.string()},
+                                      "default,normals,multibeam,raw_scan,cloud", "--out", out.string()},
                                      dir_);
     ASSERT_EQ(run.exit_code, 0) << run.err;
     EXPECT_EQ(png_size(out / "fan.png"), std::make_pair(578u, 400u));
@@ -489,7 +489,8 @@ TEST_F(LegacyCli, UuvWritesTheLegacyImageAndIntermediates) {
 TEST_F(LegacyCli, GtriWritesA600SquareImageAndItsCloud) {
     const fs::path out = dir_ / "gtri";
     const LegacyCliRun run = run_cli(
-        {"render", "--sonar", "gtri-legacy", "--backend", "cpu", "--save", "cloud", "--out", out.string()}, dir_);
+        {"render", "--sonar", "gtri-legacy", "--backend", "cpu", "--save", "fan,polar,cloud", "--out", out.string()},
+        dir_);
     ASSERT_EQ(run.exit_code, 0) << run.err;
     EXPECT_EQ(png_size(out / "fan.png"), std::make_pair(600u, 600u));
     EXPECT_GT(ply_vertices(out / "cloud.ply"), 1000);

@@ -22,6 +22,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/inputs.h"
+#include "cli/write_behind.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
@@ -37,7 +38,8 @@ constexpr const char* kUsage =
     "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
     "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
-    "                      [--save fan,polar,depth,normals,echo,cloud,...] [--asset-root DIR] --out DIR\n"
+    "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
+    "                      --out DIR\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
@@ -51,19 +53,25 @@ constexpr const char* kUsage =
     "                frames go to DIR/frame_NNNNNN/ with NNNNNN the line number\n"
     "  --seed        noise seed (default 1)\n"
     "  --backend     vulkan (default) or cpu\n"
-    "  --save        extra outputs: depth (depth.npy, view range m), normals (normals.npy), echo (echo.npy),\n"
-    "                cloud (cloud.ply); fan.png, polar.png, polar.npy, polar_u16.npy and meta.json are always\n"
-    "                written. Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the\n"
-    "                legacy image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
+    "  --save        what to write, a comma list (repeatable); meta.json is always written. Without --save:\n"
+    "                fan.png, polar.npy, polar.png and polar_u16.npy (the set 'default'). With it, exactly\n"
+    "                what is listed: default, fan (fan.png), polar (polar.npy), polar_png (polar.png),\n"
+    "                polar_u16 (polar_u16.npy), depth (depth.npy, view range m), normals (normals.npy),\n"
+    "                echo (echo.npy), cloud (cloud.ply); e.g. --save polar for a dataset, --save default,depth.\n"
+    "                Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the legacy\n"
+    "                image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
     "                '..' resolved (default: the scene file's folder; config key asset_root)\n"
     "  --out         output directory (created)\n";
 
-const std::vector<std::string> kSaveItems = {"fan",  "polar", "depth",     "normals",
-                                             "echo", "cloud", "multibeam", "raw_scan"};
+const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
+                                             "normals", "echo", "cloud", "multibeam", "raw_scan"};
 
+// What a render writes. meta.json always (it says what the arrays are); the rest as --save lists it,
+// or, without --save, the default set.
 struct SaveSet {
+    bool fan = true, polar = true, polar_png = true, polar_u16 = true; // the default set
     bool depth = false, normals = false, echo = false, cloud = false;
     bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
     std::uint32_t mask() const {
@@ -80,10 +88,22 @@ struct TrajectoryPose {
 
 SaveSet parse_save(const std::vector<std::string>& values) {
     SaveSet save;
+    if (values.empty()) return save;
+    save.fan = save.polar = save.polar_png = save.polar_u16 = false; // exactly what is listed
     for (const auto& value : values) {
         for (const auto& item : split(value, ',')) {
             if (item.empty()) continue;
-            if (item == "depth")
+            if (item == "default")
+                save.fan = save.polar = save.polar_png = save.polar_u16 = true;
+            else if (item == "fan")
+                save.fan = true;
+            else if (item == "polar")
+                save.polar = true;
+            else if (item == "polar_png")
+                save.polar_png = true;
+            else if (item == "polar_u16")
+                save.polar_u16 = true;
+            else if (item == "depth")
                 save.depth = true;
             else if (item == "normals")
                 save.normals = true;
@@ -95,12 +115,11 @@ SaveSet parse_save(const std::vector<std::string>& values) {
                 save.multibeam = true;
             else if (item == "raw_scan")
                 save.raw_scan = true;
-            else if (item == "fan" || item == "polar")
-                continue; // always written
             else
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
                                closest_word(item, kSaveItems) +
-                               "'? valid: fan,polar,depth,normals,echo,cloud,multibeam,raw_scan)");
+                               "'? valid: default,fan,polar,polar_png,polar_u16,depth,normals,echo,cloud,multibeam,"
+                               "raw_scan)");
         }
     }
     return save;
@@ -319,7 +338,8 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     };
     if (L.mode == SonarMode::uuv_legacy) {
         legacy::uuv_legacy(L.depth.data(), plan.columns, plan.rows, hfov, frame.seed, frame.frame_index, L.uuv);
-        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
+        if (out.save.fan)
+            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
         const legacy::UuvImages& u = L.uuv;
         if (out.save.normals) {
             L.gray.width = u.width;
@@ -351,7 +371,8 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     } else {
         legacy::gtri_cloud_from_frame(plan, frame, L.cloud);
         legacy::gtri_legacy(L.cloud, hfov, plan.config.range_max_m, frame.seed, frame.frame_index, L.gtri);
-        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
+        if (out.save.fan)
+            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
         if (out.save.cloud)
             write_ply("gtri-legacy cloud in the sonar frame: x forward, y port (left), z up; intensity = retro 0..255");
     }
@@ -361,23 +382,28 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
     const Plan& plan = out.plan;
     if (out.legacy) {
         write_legacy(*out.legacy, out, dir, frame);
-    } else {
+    } else if (out.save.fan) {
         out.fan.render(frame, out.image);
         write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
     }
-    host::polar_image(plan, frame, out.image);
-    write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
-    write_atomically(dir / "polar.npy", [&](const std::string& p) {
-        return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
-    });
-    out.quantized.resize(frame.display.size());
-    for (std::size_t i = 0; i < frame.display.size(); ++i) {
-        const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
-        out.quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
+    if (out.save.polar_png) {
+        host::polar_image(plan, frame, out.image);
+        write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
     }
-    write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
-        return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
-    });
+    if (out.save.polar)
+        write_atomically(dir / "polar.npy", [&](const std::string& p) {
+            return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
+        });
+    if (out.save.polar_u16) {
+        out.quantized.resize(frame.display.size());
+        for (std::size_t i = 0; i < frame.display.size(); ++i) {
+            const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
+            out.quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
+        }
+        write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
+            return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
+        });
+    }
     if (out.save.depth) {
         depth_to_view_range(plan, frame, out.view_range);
         write_atomically(dir / "depth.npy", [&](const std::string& p) {
@@ -557,37 +583,54 @@ int run_render(const std::vector<std::string>& argv) {
                     {},
                     {},
                     plan.config.mode != SonarMode::physical ? &legacy_state : nullptr};
-    Frame frame = renderer->make_frame();
-
-    // 7. Frames.
+    // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of
+    //    three frames, so rendering goes on while the previous frames are written.
     const bool trajectory = args.has("--trajectory");
+    std::vector<Frame> slots;
+    for (std::size_t i = 0; i < std::min<std::size_t>(3, poses.size()); ++i)
+        slots.push_back(renderer->make_frame());
+    WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
+        fs::path dir = out_dir.path();
+        if (trajectory) {
+            dir /= frame_dir_name(slot.line);
+            std::error_code ec;
+            fs::create_directories(dir, ec);
+            if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
+        }
+        write_frame(outputs, dir, slot.frame, slot.pose);
+        out_dir.keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
+    });
     const bool progress = trajectory && ::isatty(::fileno(stderr));
     const auto start = std::chrono::steady_clock::now();
+    auto last_progress = start;
+    auto show_progress = [&](bool final) {
+        const auto now = std::chrono::steady_clock::now();
+        if (!progress || (!final && now - last_progress < std::chrono::milliseconds(250))) return;
+        last_progress = now;
+        const std::uint64_t done = writer.written();
+        const double seconds = std::chrono::duration<double>(now - start).count();
+        const double rate = seconds > 0 ? static_cast<double>(done) / seconds : 0.0;
+        const double left = rate > 0 ? static_cast<double>(poses.size() - done) / rate : 0.0;
+        std::fprintf(stderr, "\rvksonar: %llu/%zu frames written, %.1f frames/s, %.0f s left   ",
+                     static_cast<unsigned long long>(done), poses.size(), rate, left);
+        std::fflush(stderr);
+    };
     for (std::size_t i = 0; i < poses.size(); ++i) {
         const TrajectoryPose& item = poses[i];
-        auto rendered = renderer->render(item.pose, item.line, frame);
+        WriteBehind::Slot& slot = writer.acquire(); // rethrows a write error: the run stops there
+        auto rendered = renderer->render(item.pose, item.line, slot.frame);
         if (!rendered) {
             const std::string where =
                 trajectory ? args.value("--trajectory") + ":" + std::to_string(item.line) + ": " : std::string();
             throw Failure(where + rendered.error().message);
         }
-        fs::path dir = out_dir.path();
-        if (trajectory) {
-            dir /= frame_dir_name(item.line);
-            std::error_code ec;
-            fs::create_directories(dir, ec);
-            if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
-        }
-        write_frame(outputs, dir, frame, item.pose);
-        out_dir.keep();
-        if (progress) {
-            const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-            std::fprintf(stderr, "\rvksonar: frame %zu/%zu (line %llu), %.1f frames/s", i + 1, poses.size(),
-                         static_cast<unsigned long long>(item.line),
-                         seconds > 0 ? static_cast<double>(i + 1) / seconds : 0.0);
-            std::fflush(stderr);
-        }
+        slot.pose = item.pose;
+        slot.line = item.line;
+        writer.submit();
+        show_progress(false);
     }
+    writer.finish();
+    show_progress(true);
     if (progress) std::fputc('\n', stderr);
     return 0;
 }
