@@ -7,11 +7,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <optional>
 #include <string>
 #include <system_error>
@@ -21,6 +23,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/dataset_h5.h"
 #include "cli/inputs.h"
 #include "cli/write_behind.h"
 #include "core/plan.h"
@@ -39,7 +42,7 @@ constexpr const char* kUsage =
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
     "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
     "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
-    "                      --out DIR\n"
+    "                      [--compress] --out DIR|FILE.h5\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
@@ -63,7 +66,10 @@ constexpr const char* kUsage =
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
     "                '..' resolved (default: the scene file's folder; config key asset_root)\n"
-    "  --out         output directory (created)\n";
+    "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
+    "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
+    "                --save polar (default) and polar_u16 only)\n"
+    "  --compress    .h5 only: lossless shuffle + deflate on the frame arrays\n";
 
 const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
                                              "normals", "echo", "cloud", "multibeam", "raw_scan"};
@@ -202,6 +208,84 @@ private:
     fs::path created_;
     bool keep_ = false;
 };
+
+// ---- one dataset file ---------------------------------------------------------------------------
+
+bool is_dataset_path(const std::string& path) {
+    std::string ext = fs::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext == ".h5" || ext == ".hdf5";
+}
+
+// A dataset holds the polar arrays; images and per-pixel intermediates go to per-frame folders.
+void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
+    if (!listed) save = SaveSet{false, true, false, false};
+    const char* other = save.fan         ? "fan"
+                        : save.polar_png ? "polar_png"
+                        : save.depth     ? "depth"
+                        : save.normals   ? "normals"
+                        : save.echo      ? "echo"
+                        : save.cloud     ? "cloud"
+                        : save.multibeam ? "multibeam"
+                        : save.raw_scan  ? "raw_scan"
+                                         : nullptr;
+    if (other)
+        throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
+                       ") holds polar and polar_u16 only; write per-frame folders (--out DIR) for the rest");
+    if (!save.polar && !save.polar_u16)
+        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16)");
+    if (!hdf5_available())
+        throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
+}
+
+// The dataset file's path: its folder must exist and be writable before anything renders; the file
+// is removed again unless keep() is called (a frame is in it).
+class DatasetFile {
+public:
+    explicit DatasetFile(const fs::path& path) : path_(path) {
+        std::error_code ec;
+        const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
+        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + path.string() + ": no folder " + folder.string());
+        if (fs::is_directory(path, ec)) throw BadInput("--out " + path.string() + ": is a directory");
+        if (::access(folder.c_str(), W_OK) != 0)
+            throw BadInput("--out " + path.string() + ": the folder is not writable");
+    }
+    ~DatasetFile() {
+        std::error_code ec;
+        if (!keep_) fs::remove(path_, ec);
+    }
+    DatasetFile(const DatasetFile&) = delete;
+    DatasetFile& operator=(const DatasetFile&) = delete;
+    void keep() { keep_ = true; }
+
+private:
+    fs::path path_;
+    bool keep_ = false;
+};
+
+DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::string& backend,
+                         const std::string& device, std::uint64_t seed) {
+    DatasetMeta meta;
+    meta.config_json = config_to_json(plan.config);
+    nlohmann::ordered_json effects = nlohmann::ordered_json::object();
+    for (const EffectState& e : plan.effects.states)
+        effects[e.name] = {{"on", e.on}, {"why", e.why}};
+    meta.effects_json = effects.dump();
+    nlohmann::ordered_json validity = nlohmann::ordered_json::array();
+    for (const ModelValidity& v : plan.validity)
+        validity.push_back({{"model", v.model},
+                            {"ok", v.ok},
+                            {"key", v.key},
+                            {"value", v.value},
+                            {"domain", v.domain},
+                            {"action", v.action}});
+    meta.validity_json = validity.dump();
+    meta.scene = scene;
+    meta.backend = backend;
+    meta.device = device;
+    meta.seed = seed;
+    return meta;
+}
 
 // Writes through `write(temporary path)`, then renames onto `path`.
 template <class WriteFn> void write_atomically(const fs::path& path, WriteFn&& write) {
@@ -378,6 +462,15 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     }
 }
 
+// polar_u16: the display value [0, 1] as 0..65535.
+void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized) {
+    quantized.resize(frame.display.size());
+    for (std::size_t i = 0; i < frame.display.size(); ++i) {
+        const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
+        quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
+    }
+}
+
 void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose) {
     const Plan& plan = out.plan;
     if (out.legacy) {
@@ -395,11 +488,7 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
             return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
         });
     if (out.save.polar_u16) {
-        out.quantized.resize(frame.display.size());
-        for (std::size_t i = 0; i < frame.display.size(); ++i) {
-            const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
-            out.quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
-        }
+        quantize_display(frame, out.quantized);
         write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
             return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
         });
@@ -448,6 +537,7 @@ int run_render(const std::vector<std::string>& argv) {
                                   {"--save", true, true},
                                   {"--out", true, false},
                                   {"--asset-root", true, false},
+                                  {"--compress", false, false},
                                   {"--help", false, false}},
                                  "render");
     if (args.has("--help")) {
@@ -467,7 +557,12 @@ int run_render(const std::vector<std::string>& argv) {
     else if (backend_name != "vulkan")
         throw BadInput("--backend: '" + backend_name + "' is not a backend (vulkan or cpu)");
     const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
-    const SaveSet save = parse_save(args.values("--save"));
+    SaveSet save = parse_save(args.values("--save"));
+    const std::string out_path = args.value("--out");
+    const bool dataset = is_dataset_path(out_path);
+    if (dataset) check_dataset_save(save, !args.values("--save").empty(), out_path);
+    if (args.has("--compress") && !dataset)
+        throw BadInput("--compress: only a .h5 dataset is compressed (--out FILE.h5)");
 
     // 2. Scene (its effects sit between the preset and the config file).
     const bool default_scene = !args.has("--scene");
@@ -548,7 +643,12 @@ int run_render(const std::vector<std::string>& argv) {
     config.asset_root = asset_root; // meta.json's config says which folder the scene's files came from
 
     // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
-    OutputDir out_dir(args.value("--out"));
+    std::optional<OutputDir> out_dir;
+    std::optional<DatasetFile> dataset_file;
+    if (dataset)
+        dataset_file.emplace(out_path);
+    else
+        out_dir.emplace(out_path);
 
     // 6. Device and renderer.
     Context context = make_context(backend);
@@ -589,8 +689,31 @@ int run_render(const std::vector<std::string>& argv) {
     std::vector<Frame> slots;
     for (std::size_t i = 0; i < std::min<std::size_t>(3, poses.size()); ++i)
         slots.push_back(renderer->make_frame());
+    std::unique_ptr<DatasetWriter> dataset_writer;
+    if (dataset) {
+        DatasetMeta meta = dataset_meta(plan, scene_path, backend_name, device, seed);
+        DatasetOptions options;
+        options.polar_u16 = save.polar_u16;
+        options.compress = args.has("--compress");
+        auto created = DatasetWriter::create(out_path, plan, meta, options);
+        if (!created) throw Failure(created.error().message);
+        dataset_writer = std::move(created.value());
+    }
+    std::uint64_t ordinal = 0; // frames written so far (writer thread only)
     WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
-        fs::path dir = out_dir.path();
+        if (dataset_writer) {
+            const std::uint16_t* u16 = nullptr;
+            if (save.polar_u16) {
+                quantize_display(slot.frame, outputs.quantized);
+                u16 = outputs.quantized.data();
+            }
+            auto appended = dataset_writer->append(slot.frame, slot.pose, static_cast<double>(ordinal), u16);
+            if (!appended) throw Failure(appended.error().message);
+            ++ordinal;
+            dataset_file->keep(); // only this thread calls keep(); read after the join
+            return;
+        }
+        fs::path dir = out_dir->path();
         if (trajectory) {
             dir /= frame_dir_name(slot.line);
             std::error_code ec;
@@ -598,7 +721,7 @@ int run_render(const std::vector<std::string>& argv) {
             if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
         }
         write_frame(outputs, dir, slot.frame, slot.pose);
-        out_dir.keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
+        out_dir->keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
     });
     const bool progress = trajectory && ::isatty(::fileno(stderr));
     const auto start = std::chrono::steady_clock::now();
@@ -630,6 +753,8 @@ int run_render(const std::vector<std::string>& argv) {
         show_progress(false);
     }
     writer.finish();
+    if (dataset_writer)
+        if (auto closed = dataset_writer->close(); !closed) throw Failure(closed.error().message);
     show_progress(true);
     if (progress) std::fputc('\n', stderr);
     return 0;

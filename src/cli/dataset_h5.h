@@ -1,0 +1,56 @@
+// One HDF5 file per trajectory (`vksonar render --out run.h5`): the frames as arrays a Python user
+// reads with h5py, the constant metadata once. Layout (docs/datasets.md), names as in meta.json:
+//   /polar        float32 [frames, bins, beams]  received intensity, uPa^2 (polar.npy of each frame)
+//   /polar_u16    uint16  [frames, bins, beams]  display value x 65535 (only with --save polar_u16)
+//   /pose         float64 [frames, 6]            x_m, y_m, z_m, roll_deg, pitch_deg, yaw_deg
+//   /frame_index  uint64  [frames]               the trajectory line: the noise stream of the frame
+//   /time         float64 [frames]               s, from the trajectory's time column, else the ordinal
+//   /beam_angles_rad [beams], /ranges_m [bins]
+//   attributes of /: format, frames_written, complete, beams, bins, bin_width_m, range_min_m, ...,
+//   config, effects, validity (JSON text), seed, backend, device, scene.
+// Each frame is one chunk; the file is flushed after every frame and `frames_written` says how many
+// are whole, so a run that is killed leaves a readable file of the frames before it. `complete` turns
+// 1 only when the run ends without an error.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/plan.h"
+#include "vksonar/frame.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"
+
+namespace vksonar::cli {
+
+struct DatasetOptions {
+    bool polar_u16 = false; // also write /polar_u16
+    bool compress = false;  // shuffle + deflate level 4 on the frame arrays (lossless)
+    bool has_time = false;  // /time holds the trajectory's times, else the frame ordinal
+};
+
+// Everything meta.json holds that does not change between frames, as JSON text per attribute.
+struct DatasetMeta {
+    std::string config_json, effects_json, validity_json;
+    std::string scene, backend, device;
+    std::uint64_t seed = 0;
+};
+
+// True when this build can write HDF5 (Debian's libhdf5-dev was found at configure time).
+bool hdf5_available();
+
+class DatasetWriter {
+public:
+    // Creates (or truncates) `path`. Fails with one line naming the file.
+    static Result<std::unique_ptr<DatasetWriter>> create(const std::string& path, const Plan& plan,
+                                                         const DatasetMeta& meta, const DatasetOptions& options);
+    virtual ~DatasetWriter() = default;
+    // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on.
+    virtual Result<void> append(const Frame& frame, const Pose& pose, double time_s,
+                                const std::uint16_t* display_u16) = 0;
+    // Marks the file complete and closes it.
+    virtual Result<void> close() = 0;
+};
+
+} // namespace vksonar::cli

@@ -1,0 +1,122 @@
+"""The HDF5 dataset file (`vksonar render --out run.h5`), read back with h5py the way a user does.
+
+Run by ctest (tests/CMakeLists.txt) with an interpreter that imports numpy and h5py:
+    python3 tests/python/check_dataset.py path/to/vksonar
+Checks, each of which can fail:
+  - every frame of the file equals polar.npy / polar_u16.npy of the per-frame folders of the same
+    trajectory and seed, bit for bit; compressed equals uncompressed;
+  - pose, frame_index, time, the tables and the attributes say what was rendered;
+  - a run killed half way leaves a readable file: frames_written whole frames, equal to the same
+    frames of an uninterrupted run, and complete = 0;
+  - what a dataset cannot hold is refused with one line (exit 2) and no file is left.
+"""
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import h5py
+import numpy as np
+
+CLI = sys.argv[1]
+SMALL = ["--backend", "cpu", "--set", "bins=64", "--set", "beams=32", "--set", "range_min=6", "--seed", "5"]
+failures = []
+
+
+def check(condition, what):
+    if not condition:
+        failures.append(what)
+        print("FAIL:", what)
+
+
+def render(args, expect=0):
+    run = subprocess.run([CLI, "render"] + args, capture_output=True, text=True)
+    check(run.returncode == expect, f"exit {run.returncode} (expected {expect}) for {args}: {run.stderr}")
+    return run
+
+
+with tempfile.TemporaryDirectory() as tmp:
+    poses = os.path.join(tmp, "poses.csv")
+    lines = ["x,y,z,roll,pitch,yaw"] + [f"{0.2 * i},0,{-0.1 * i},0,10,{3 * i}" for i in range(6)]
+    with open(poses, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    folder = os.path.join(tmp, "frames")
+    render(["--trajectory", poses, "--out", folder, "--save", "polar,polar_u16"] + SMALL)
+    plain = os.path.join(tmp, "run.h5")
+    render(["--trajectory", poses, "--out", plain, "--save", "polar,polar_u16"] + SMALL)
+    packed = os.path.join(tmp, "packed.h5")
+    render(["--trajectory", poses, "--out", packed, "--save", "polar,polar_u16", "--compress"] + SMALL)
+
+    with h5py.File(plain, "r") as f, h5py.File(packed, "r") as g:
+        check(f["polar"].shape == (6, 64, 32) and f["polar"].dtype == np.float32, f"polar {f['polar'].shape}")
+        check(f["polar_u16"].dtype == np.uint16, "polar_u16 dtype")
+        check(f.attrs["frames_written"] == 6 and f.attrs["complete"] == 1, "frames_written / complete")
+        check(f.attrs["format"] == "vksonar-dataset-1", "format")
+        check(f.attrs["seed"] == 5 and f.attrs["bins"] == 64 and f.attrs["beams"] == 32, "seed / bins / beams")
+        check(f["ranges_m"].shape == (64,) and f["beam_angles_rad"].shape == (32,), "tables")
+        check(list(f["frame_index"][:]) == [2, 3, 4, 5, 6, 7], f"frame_index {f['frame_index'][:]}")
+        check(np.array_equal(f["time"][:], np.arange(6.0)), "time is the ordinal without a time column")
+        for i in range(6):
+            line = i + 2
+            expected_pose = [0.2 * i, 0, -0.1 * i, 0, 10, 3 * i]
+            check(np.allclose(f["pose"][i], expected_pose, rtol=0, atol=1e-12), f"pose {i}: {f['pose'][i]}")
+            frame = os.path.join(folder, f"frame_{line:06d}")
+            check(np.array_equal(f["polar"][i], np.load(os.path.join(frame, "polar.npy"))), f"polar {i}")
+            check(np.array_equal(f["polar_u16"][i], np.load(os.path.join(frame, "polar_u16.npy"))), f"u16 {i}")
+            check(np.array_equal(g["polar"][i], f["polar"][i]), f"compressed polar {i}")
+        check(g["polar"].compression == "gzip" and f["polar"].compression is None, "compression")
+        check(f["polar"].chunks == (1, 64, 32), f"one chunk per frame: {f['polar'].chunks}")
+        import json
+        config = json.loads(f.attrs["config"])
+        check(config["bins"] == 64 and config["range_min"] == 6, "config attribute")
+
+    # Killed half way: the frames written before the kill are whole and readable.
+    long_poses = os.path.join(tmp, "long.csv")
+    with open(long_poses, "w") as f:
+        f.write("\n".join(f"{0.001 * i},0,0,0,10,{0.01 * i}" for i in range(3000)) + "\n")
+    killed = os.path.join(tmp, "killed.h5")
+    process = subprocess.Popen([CLI, "render", "--trajectory", long_poses, "--out", killed] + SMALL,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while time.time() < deadline and process.poll() is None:
+        if os.path.exists(killed) and os.path.getsize(killed) > 200_000:
+            break
+        time.sleep(0.02)
+    still_running = process.poll() is None
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    check(still_running, "the long run ended before it could be killed (make the trajectory longer)")
+    with h5py.File(killed, "r") as f:
+        written = int(f.attrs["frames_written"])
+        check(f.attrs["complete"] == 0, "a killed run is not complete")
+        check(0 < written < 3000, f"frames_written {written}")
+        check(f["polar"].shape[0] >= written, "polar holds frames_written frames")
+        first = list(f["frame_index"][:written])
+        check(first == list(range(1, written + 1)), "frame_index of the whole frames")
+        whole = f["polar"][:written]
+    # The same frames of an uninterrupted run.
+    head = os.path.join(tmp, "head.csv")
+    with open(long_poses) as src, open(head, "w") as dst:
+        dst.writelines(src.readlines()[:written])
+    reference = os.path.join(tmp, "head.h5")
+    render(["--trajectory", head, "--out", reference] + SMALL)
+    with h5py.File(reference, "r") as f:
+        check(np.array_equal(f["polar"][:], whole), f"the {written} frames before the kill equal a whole run's")
+    print(f"killed run: {written} whole frames readable")
+
+    # Refused: one line, exit 2, no file.
+    bad = os.path.join(tmp, "bad.h5")
+    run = render(["--out", bad, "--save", "fan"] + SMALL, expect=2)
+    check(run.stderr.count("\n") == 1 and "--save fan" in run.stderr, f"one line naming --save fan: {run.stderr}")
+    check(not os.path.exists(bad), "no file left after a refusal")
+    run = render(["--out", os.path.join(tmp, "dir_out"), "--compress"] + SMALL, expect=2)
+    check("--compress" in run.stderr, f"--compress without .h5: {run.stderr}")
+    run = render(["--out", os.path.join(tmp, "no_such_folder", "x.h5")] + SMALL, expect=2)
+    check("no_such_folder" in run.stderr, f"missing folder named: {run.stderr}")
+
+if failures:
+    print(f"{len(failures)} check(s) failed")
+    sys.exit(1)
+print("dataset file: all checks passed")
