@@ -52,7 +52,8 @@ constexpr const char* kUsage =
     "  --quality     accuracy preset: fast | balanced (default knobs) | accurate (docs/accuracy.md)\n"
     "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down\n"
     "                (default for the bundled scene: 0,0,0,0,10,0; otherwise 0,0,0,0,0,0)\n"
-    "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed);\n"
+    "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed; a header\n"
+    "                t,x,y,z,roll,pitch,yaw adds a time in s before each pose: meta.json time_s, the .h5 time);\n"
     "                frames go to DIR/frame_NNNNNN/ with NNNNNN the line number\n"
     "  --seed        noise seed (default 1)\n"
     "  --backend     vulkan (default) or cpu\n"
@@ -88,7 +89,17 @@ struct SaveSet {
 struct TrajectoryPose {
     Pose pose;
     std::uint64_t line = 0;
+    double time_s = 0.0; // the trajectory's time column, when it has one
 };
+
+// A trajectory whose header's first column is t, time or time_s has a time (s) before each pose.
+bool header_names_time(const std::string& header) {
+    std::string first = header.substr(0, header.find(','));
+    first.erase(0, first.find_first_not_of(" \t"));
+    first.erase(first.find_last_not_of(" \t") + 1);
+    std::transform(first.begin(), first.end(), first.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return first == "t" || first == "time" || first == "time_s";
+}
 
 // ---- inputs ------------------------------------------------------------------------------------
 
@@ -131,13 +142,15 @@ SaveSet parse_save(const std::vector<std::string>& values) {
     return save;
 }
 
-std::vector<TrajectoryPose> read_trajectory(const std::string& path) {
+// The poses of a trajectory file, and whether it has a time column (header `t,x,y,z,roll,pitch,yaw`).
+std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed) {
     std::ifstream file(path);
     if (!file) throw BadInput("--trajectory " + path + ": cannot open");
     std::vector<TrajectoryPose> poses;
     std::string line;
     std::uint64_t number = 0;
     bool seen_data = false;
+    timed = false;
     while (std::getline(file, line)) {
         ++number;
         if (!line.empty() && line.back() == '\r') line.pop_back();
@@ -147,10 +160,22 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path) {
         // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw").
         if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos) {
             seen_data = true;
+            timed = header_names_time(line);
             continue;
         }
         seen_data = true;
-        poses.push_back({parse_pose(line, where), number});
+        TrajectoryPose item;
+        item.line = number;
+        std::string pose_text = line;
+        if (timed) {
+            const std::size_t comma = line.find(',');
+            item.time_s = parse_double(line.substr(0, comma), where + ": time");
+            if (!poses.empty() && item.time_s < poses.back().time_s)
+                throw BadInput(where + ": time " + line.substr(0, comma) + " is before the previous line's");
+            pose_text = comma == std::string::npos ? std::string() : line.substr(comma + 1);
+        }
+        item.pose = parse_pose(pose_text, where);
+        poses.push_back(item);
     }
     if (file.bad()) throw BadInput("--trajectory " + path + ": read error");
     if (poses.empty()) throw BadInput("--trajectory " + path + ": no poses in the file");
@@ -333,10 +358,12 @@ struct Outputs {
     LegacyState* legacy = nullptr; // set in legacy modes
 };
 
-std::string extra_meta_fields(const Outputs& out, const Pose& pose) {
+// `time_s`: the trajectory's time column, or null when it has none.
+std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
     nlohmann::ordered_json extra;
     extra["config"] = nlohmann::ordered_json::parse(out.config_json);
     extra["scene"] = out.scene_path;
+    if (time_s) extra["time_s"] = *time_s;
     extra["pose"] = {{"x_m", pose.x_m},
                      {"y_m", pose.y_m},
                      {"z_m", pose.z_m},
@@ -471,7 +498,7 @@ void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized)
     }
 }
 
-void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose) {
+void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s) {
     const Plan& plan = out.plan;
     if (out.legacy) {
         write_legacy(*out.legacy, out, dir, frame);
@@ -510,7 +537,7 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
     if (out.save.cloud && !out.legacy)
         write_atomically(dir / "cloud.ply",
                          [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
-    const std::string extra = extra_meta_fields(out, pose);
+    const std::string extra = extra_meta_fields(out, pose, time_s);
     write_atomically(dir / "meta.json",
                      [&](const std::string& p) { return host::write_meta_json(p, plan, frame, extra); });
 }
@@ -574,8 +601,9 @@ int run_render(const std::vector<std::string>& argv) {
 
     // 3. Poses.
     std::vector<TrajectoryPose> poses;
+    bool timed = false; // the trajectory has a time column
     if (args.has("--trajectory")) {
-        poses = read_trajectory(args.value("--trajectory"));
+        poses = read_trajectory(args.value("--trajectory"), timed);
     } else if (args.has("--pose")) {
         poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
     } else {
@@ -695,6 +723,7 @@ int run_render(const std::vector<std::string>& argv) {
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;
         options.compress = args.has("--compress");
+        options.has_time = timed;
         auto created = DatasetWriter::create(out_path, plan, meta, options);
         if (!created) throw Failure(created.error().message);
         dataset_writer = std::move(created.value());
@@ -707,7 +736,8 @@ int run_render(const std::vector<std::string>& argv) {
                 quantize_display(slot.frame, outputs.quantized);
                 u16 = outputs.quantized.data();
             }
-            auto appended = dataset_writer->append(slot.frame, slot.pose, static_cast<double>(ordinal), u16);
+            const double time = timed ? slot.time_s : static_cast<double>(ordinal);
+            auto appended = dataset_writer->append(slot.frame, slot.pose, time, u16);
             if (!appended) throw Failure(appended.error().message);
             ++ordinal;
             dataset_file->keep(); // only this thread calls keep(); read after the join
@@ -720,7 +750,7 @@ int run_render(const std::vector<std::string>& argv) {
             fs::create_directories(dir, ec);
             if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
         }
-        write_frame(outputs, dir, slot.frame, slot.pose);
+        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr);
         out_dir->keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
     });
     const bool progress = trajectory && ::isatty(::fileno(stderr));
@@ -749,6 +779,7 @@ int run_render(const std::vector<std::string>& argv) {
         }
         slot.pose = item.pose;
         slot.line = item.line;
+        slot.time_s = item.time_s;
         writer.submit();
         show_progress(false);
     }

@@ -29,6 +29,7 @@ public:
         Frame frame;
         Pose pose;
         std::uint64_t line = 0; // the trajectory line (the frame index)
+        double time_s = 0.0;    // the trajectory's time column, if any
     };
     using WriteFn = std::function<void(const Slot&)>;
 

@@ -17,6 +17,8 @@ import sys
 import tempfile
 import time
 
+import json
+
 import h5py
 import numpy as np
 
@@ -68,9 +70,24 @@ with tempfile.TemporaryDirectory() as tmp:
             check(np.array_equal(g["polar"][i], f["polar"][i]), f"compressed polar {i}")
         check(g["polar"].compression == "gzip" and f["polar"].compression is None, "compression")
         check(f["polar"].chunks == (1, 64, 32), f"one chunk per frame: {f['polar'].chunks}")
-        import json
         config = json.loads(f.attrs["config"])
         check(config["bins"] == 64 and config["range_min"] == 6, "config attribute")
+
+    # A time column (header t / time / time_s) fills /time and each folder's meta.json time_s.
+    timed = os.path.join(tmp, "timed.csv")
+    with open(timed, "w") as f:
+        f.write("time,x,y,z,roll,pitch,yaw\n0.0,0,0,0,0,10,0\n0.1,0.5,0,0,0,10,5\n0.25,1,0,0,0,10,10\n")
+    render(["--trajectory", timed, "--out", os.path.join(tmp, "timed.h5")] + SMALL)
+    render(["--trajectory", timed, "--out", os.path.join(tmp, "timed"), "--save", "polar"] + SMALL)
+    with h5py.File(os.path.join(tmp, "timed.h5"), "r") as f:
+        check(np.array_equal(f["time"][:], [0.0, 0.1, 0.25]), f"time column: {f['time'][:]}")
+        check(f.attrs["time_unit"].startswith("s "), "time_unit")
+    with open(os.path.join(tmp, "timed", "frame_000003", "meta.json")) as f:
+        check(json.load(f)["time_s"] == 0.1, "meta.json time_s")
+    with open(timed, "a") as f:
+        f.write("0.2,0,0,0,0,10,0\n")
+    run = render(["--trajectory", timed, "--out", os.path.join(tmp, "backwards.h5")] + SMALL, expect=2)
+    check("timed.csv:5: time 0.2 is before" in run.stderr, f"time going backwards: {run.stderr}")
 
     # Killed half way: the frames written before the kill are whole and readable.
     long_poses = os.path.join(tmp, "long.csv")
