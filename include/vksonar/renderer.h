@@ -52,6 +52,11 @@ public:
     // A frame sized for this renderer (the only allocation; reuse it for every render).
     Frame make_frame() const;
 
+    // The noise seed (RendererOptions::seed): (seed, frame_index) key the noise of every frame, so a
+    // frame is reproducible from the two alone. Changing it costs nothing.
+    void set_seed(std::uint64_t seed);
+    std::uint64_t seed() const;
+
     // Renders the scene from `pose` into `frame`. frame_index keys the noise RNG with the seed.
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
 

@@ -396,29 +396,6 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
     return extra.dump();
 }
 
-// Reversed-Z depth -> slant range along each pixel's ray (0 where nothing was hit). Same formulas as
-// shaders/sonar_math.h (pixel_coord, view_z_from_depth, slant_range), in double.
-void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range) {
-    range.assign(frame.depth.size(), 0.0f);
-    const std::uint32_t width = plan.slice_columns ? plan.slice_columns : 1;
-    auto pixel_coord = [](std::uint32_t i, std::uint32_t n, double tan_half) {
-        return (2.0 * (i + 0.5) / n - 1.0) * tan_half;
-    };
-    for (std::uint32_t row = 0; row < frame.rows; ++row) {
-        const double v = pixel_coord(row, frame.rows, plan.tan_half_v);
-        for (std::uint32_t column = 0; column < frame.columns; ++column) {
-            const std::size_t p = static_cast<std::size_t>(row) * frame.columns + column;
-            if (p >= frame.depth.size()) return;
-            const double d = frame.depth[p];
-            if (!(d > 0.0) || d <= plan.depth_b) continue;
-            const double u = pixel_coord(column % width, width, plan.tan_half_h);
-            const double view_z = plan.depth_a / (d - plan.depth_b);
-            const double r = view_z * std::sqrt(1.0 + u * u + v * v);
-            range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;
-        }
-    }
-}
-
 // One channel of floats as a grey PNG: value in [0, 1] -> 0..255 (the plugin's convertTo(CV_8U, 255)).
 void gray_image(const float* values, std::size_t stride, std::uint32_t width, std::uint32_t height,
                 host::Image& image) {
@@ -489,15 +466,6 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     }
 }
 
-// polar_u16: the display value [0, 1] as 0..65535.
-void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized) {
-    quantized.resize(frame.display.size());
-    for (std::size_t i = 0; i < frame.display.size(); ++i) {
-        const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
-        quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
-    }
-}
-
 void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s) {
     const Plan& plan = out.plan;
     if (out.legacy) {
@@ -515,13 +483,13 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
             return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
         });
     if (out.save.polar_u16) {
-        quantize_display(frame, out.quantized);
+        host::quantize_display(frame, out.quantized);
         write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
             return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
         });
     }
     if (out.save.depth) {
-        depth_to_view_range(plan, frame, out.view_range);
+        host::depth_to_view_range(plan, frame, out.view_range);
         write_atomically(dir / "depth.npy", [&](const std::string& p) {
             return host::write_npy_f32(p, out.view_range.data(), frame.rows, frame.columns);
         });
@@ -733,7 +701,7 @@ int run_render(const std::vector<std::string>& argv) {
         if (dataset_writer) {
             const std::uint16_t* u16 = nullptr;
             if (save.polar_u16) {
-                quantize_display(slot.frame, outputs.quantized);
+                host::quantize_display(slot.frame, outputs.quantized);
                 u16 = outputs.quantized.data();
             }
             const double time = timed ? slot.time_s : static_cast<double>(ordinal);

@@ -59,6 +59,14 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
     return r;
 }
 
+void Renderer::set_seed(std::uint64_t seed) {
+    impl_->options.seed = seed;
+}
+
+std::uint64_t Renderer::seed() const {
+    return impl_->options.seed;
+}
+
 Frame Renderer::make_frame() const {
     const Plan& p = impl_->plan;
     const std::uint32_t mask = impl_->options.save_mask;

@@ -1,4 +1,5 @@
 // Output files: PNG, NumPy .npy, PLY point cloud and meta.json. Every error names the path.
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstddef>
@@ -161,8 +162,7 @@ Result<void> write_points_ply(const std::string& path, const float* xyzi, std::s
     return write_file(path, header.data(), header.size(), xyzi, count * 4 * sizeof(float));
 }
 
-Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
-                             const std::string& extra_json_fields) {
+std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields) {
     using json = nlohmann::ordered_json; // keeps the documented field order in the file
     const SonarConfig& cfg = plan.config;
     constexpr double kDeg = 3.14159265358979323846 / 180.0;
@@ -224,13 +224,49 @@ Result<void> write_meta_json(const std::string& path, const Plan& plan, const Fr
 
     if (!extra_json_fields.empty()) {
         json extra = json::parse(extra_json_fields, nullptr, /*allow_exceptions=*/false);
-        if (extra.is_discarded() || !extra.is_object())
-            return make_error(ErrorCode::internal, "cannot write " + path + ": extra fields are not a JSON object");
+        if (extra.is_discarded() || !extra.is_object()) return {};
         for (auto it = extra.begin(); it != extra.end(); ++it)
             m[it.key()] = it.value();
     }
-    const std::string text = m.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+    return m.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
+Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
+                             const std::string& extra_json_fields) {
+    const std::string text = meta_json_text(plan, frame, extra_json_fields);
+    if (text.empty())
+        return make_error(ErrorCode::internal, "cannot write " + path + ": extra fields are not a JSON object");
     return write_file(path, nullptr, 0, text.data(), text.size());
+}
+
+void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized) {
+    quantized.resize(frame.display.size());
+    for (std::size_t i = 0; i < frame.display.size(); ++i) {
+        const float value = std::isfinite(frame.display[i]) ? std::clamp(frame.display[i], 0.0f, 1.0f) : 0.0f;
+        quantized[i] = static_cast<std::uint16_t>(std::lround(value * 65535.0f));
+    }
+}
+
+// Same formulas as shaders/sonar_math.h (pixel_coord, view_z_from_depth, slant_range), in double.
+void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range) {
+    range.assign(frame.depth.size(), 0.0f);
+    const std::uint32_t width = plan.slice_columns ? plan.slice_columns : 1;
+    auto pixel_coord = [](std::uint32_t i, std::uint32_t n, double tan_half) {
+        return (2.0 * (i + 0.5) / n - 1.0) * tan_half;
+    };
+    for (std::uint32_t row = 0; row < frame.rows; ++row) {
+        const double v = pixel_coord(row, frame.rows, plan.tan_half_v);
+        for (std::uint32_t column = 0; column < frame.columns; ++column) {
+            const std::size_t p = static_cast<std::size_t>(row) * frame.columns + column;
+            if (p >= frame.depth.size()) return;
+            const double d = frame.depth[p];
+            if (!(d > 0.0) || d <= plan.depth_b) continue;
+            const double u = pixel_coord(column % width, width, plan.tan_half_h);
+            const double view_z = plan.depth_a / (d - plan.depth_b);
+            const double r = view_z * std::sqrt(1.0 + u * u + v * v);
+            range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;
+        }
+    }
 }
 
 } // namespace vksonar::host

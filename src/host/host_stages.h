@@ -78,5 +78,13 @@ private:
 // meta.json: beam angles, bin ranges, resolved config, effects, stage times, seed, frame convention.
 [[nodiscard]] Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
                                            const std::string& extra_json_fields);
+// The same JSON as text (the Python module's Frame.meta); empty if `extra_json_fields` is not an object.
+std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields);
+
+// Arrays as the CLI writes them (polar_u16.npy, depth.npy), shared with the Python module.
+// polar_u16: the display value [0, 1] as 0..65535 (non-finite as 0).
+void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized);
+// Reversed-Z depth -> slant range (m) along each pixel's ray, 0 where nothing was hit.
+void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range);
 
 } // namespace vksonar::host

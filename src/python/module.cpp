@@ -1,0 +1,369 @@
+// The Python module `vksonar` (pybind11): scenes, configs and renderers as Python objects, frames as
+// numpy arrays. docs/python.md is the user's guide; tests/python/test_module.py checks it against the
+// CLI's files.
+//
+// Ownership: a Frame owns its vksonar::Frame; its arrays are numpy views of that memory (no copy) that
+// keep the Frame alive, so they stay valid after the next render(), which renders into a new Frame
+// unless `out=` hands one back to reuse. A Renderer keeps its Context and Scene alive. Errors are
+// exceptions with the CLI's one-line messages: bad input (a file, a key, a value) is ValueError,
+// anything else RuntimeError; nothing aborts the interpreter. render() releases the GIL.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/plan.h"
+#include "core/renderer_access.h"
+#include "host/host_stages.h"
+#include "scene/scene_data.h"
+#include "vksonar/vksonar.h"
+
+namespace py = pybind11;
+using namespace vksonar;
+
+namespace {
+
+[[noreturn]] void raise(const Error& e) {
+    switch (e.code) {
+    case ErrorCode::invalid_argument:
+    case ErrorCode::parse:
+    case ErrorCode::unsupported:
+    case ErrorCode::io:
+        throw py::value_error(e.message);
+    default:
+        throw std::runtime_error(e.message);
+    }
+}
+
+template <class T> T take(Result<T>&& r) {
+    if (!r) raise(r.error());
+    return std::move(r.value());
+}
+
+void check(const Result<void>& r) {
+    if (!r) raise(r.error());
+}
+
+// ---- Config ----------------------------------------------------------------------------------------
+
+struct ConfigObject {
+    SonarConfig config;
+
+    static ConfigObject preset(const std::string& name) { return {take(load_preset(name))}; }
+    // Keys as in a config file (nested dicts for groups, "effects": {...}), over a preset.
+    static ConfigObject from_dict(const py::dict& keys, const std::string& base) {
+        const std::string text = py::module_::import("json").attr("dumps")(keys).cast<std::string>();
+        ConfigObject c{take(apply_config_json(take(load_preset(base)), text, "dict"))};
+        c.validate();
+        return c;
+    }
+    // One key as --set takes it ("effects.speckle", "off").
+    void set(const std::string& key, const py::object& value) {
+        std::string text;
+        if (py::isinstance<py::str>(value))
+            text = value.cast<std::string>();
+        else
+            text = py::str(py::module_::import("json").attr("dumps")(value)).cast<std::string>();
+        ConfigObject changed{take(apply_config_override(config, key + "=" + text))};
+        changed.validate(); // the config stays as it was when the new value is refused
+        config = std::move(changed.config);
+    }
+    void quality(const std::string& name) { config = take(apply_quality(config, name)); }
+    void validate() const {
+        if (std::string problem = config.validate(); !problem.empty())
+            throw py::value_error("invalid config: " + problem);
+    }
+    py::dict to_dict() const {
+        return py::module_::import("json").attr("loads")(config_to_json(config)).cast<py::dict>();
+    }
+};
+
+// ---- Scene -----------------------------------------------------------------------------------------
+
+struct SceneObject {
+    Scene scene;
+
+    static std::shared_ptr<SceneObject> load(const std::string& path, const std::string& asset_root) {
+        auto s = std::make_shared<SceneObject>();
+        s->scene = take(Scene::load_gltf(path, SceneLoadOptions{asset_root}));
+        return s;
+    }
+
+    // One mesh from numpy arrays: vertices [n, 3] (metres, sonar world frame: x forward, y port, z up),
+    // triangle indices [m, 3] (or flat), one material, drawn once with a 4x4 row-major transform.
+    static std::shared_ptr<SceneObject>
+    from_arrays(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices,
+                const py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>& indices,
+                double backscatter_db,
+                const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform) {
+        auto s = std::make_shared<SceneObject>();
+        s->add(vertices, indices, backscatter_db, transform);
+        return s;
+    }
+
+    std::uint32_t add(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices,
+                      const py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>& indices,
+                      double backscatter_db,
+                      const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform) {
+        if (vertices.ndim() != 2 || vertices.shape(1) != 3)
+            throw py::value_error("vertices: expected shape (n, 3), got " + shape_text(vertices));
+        if (indices.size() % 3 != 0)
+            throw py::value_error("indices: " + std::to_string(indices.size()) + " values, not whole triangles");
+        const auto mesh = take(scene.add_mesh(vertices.data(), static_cast<std::uint32_t>(vertices.shape(0)),
+                                              indices.data(), static_cast<std::uint32_t>(indices.size())));
+        AcousticMaterial material;
+        material.name = "from_arrays";
+        material.backscatter_db = backscatter_db;
+        if (std::string problem = material.validate(); !problem.empty())
+            throw py::value_error("backscatter_db: " + problem);
+        SceneDraw draw;
+        draw.mesh = mesh;
+        draw.material = scene.add_material(material);
+        if (transform) {
+            if (transform->ndim() != 2 || transform->shape(0) != 4 || transform->shape(1) != 4)
+                throw py::value_error("transform: expected shape (4, 4), got " + shape_text(*transform));
+            for (int r = 0; r < 4; ++r)
+                for (int c = 0; c < 4; ++c)
+                    draw.world_from_local[std::size_t(c * 4 + r)] = transform->at(r, c); // column-major
+        }
+        check(scene.add_draw(draw));
+        return mesh;
+    }
+
+    template <class A> static std::string shape_text(const A& a) {
+        std::string t = "(";
+        for (py::ssize_t i = 0; i < a.ndim(); ++i)
+            t += (i ? ", " : "") + std::to_string(a.shape(i));
+        return t + ")";
+    }
+};
+
+// ---- Frame and Renderer ----------------------------------------------------------------------------
+
+struct FrameObject {
+    Frame frame;
+    const Plan* plan = nullptr;
+    py::object renderer; // keeps the plan (and the fan lookup) alive while this frame exists
+    std::vector<std::uint16_t> u16;
+    std::vector<float> range;
+    host::Image fan_image;
+    bool u16_ready = false, range_ready = false, fan_ready = false;
+    Pose pose;
+};
+
+struct RendererObject {
+    std::shared_ptr<Context> context;
+    std::shared_ptr<SceneObject> scene;
+    Renderer renderer;
+    std::unique_ptr<host::FanRenderer> fan;
+    std::string backend;
+    std::string config_json;
+};
+
+// A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`.
+template <class T> py::array view(std::vector<T>& data, std::vector<py::ssize_t> shape, const py::object& owner) {
+    if (data.empty()) return py::none();
+    return py::array_t<T>(shape, data.data(), owner);
+}
+
+py::object frame_meta(FrameObject& f) {
+    const py::module_ json = py::module_::import("json");
+    py::dict extra;
+    extra["config"] = json.attr("loads")(config_to_json(f.plan->config));
+    extra["backend"] = f.renderer.cast<RendererObject&>().backend;
+    extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
+                             py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
+                             py::arg("yaw_deg") = f.pose.yaw_deg);
+    const std::string text = host::meta_json_text(*f.plan, f.frame, json.attr("dumps")(extra).cast<std::string>());
+    return json.attr("loads")(text);
+}
+
+} // namespace
+
+PYBIND11_MODULE(vksonar, m) {
+    m.doc() = "vksonar: a physically based imaging-sonar simulator (docs/python.md)";
+
+    py::class_<ConfigObject>(m, "Config", "A sonar config: a preset plus keys, validated as the CLI does.")
+        .def(py::init([] { return ConfigObject::preset("default"); }))
+        .def_static("preset", &ConfigObject::preset, py::arg("name") = "default", "A bundled preset by name.")
+        .def_static("from_dict", &ConfigObject::from_dict, py::arg("keys"), py::arg("base") = "default",
+                    "Keys as in a config file (nested dicts for groups) over the preset `base`.")
+        .def_static("presets", &preset_names, "The bundled presets' names.")
+        .def("set", &ConfigObject::set, py::arg("key"), py::arg("value"), "One key as --set takes it.")
+        .def("quality", &ConfigObject::quality, py::arg("name"), "fast | balanced | accurate (the accuracy keys).")
+        .def("to_dict", &ConfigObject::to_dict, "The resolved config, as meta.json's `config`.")
+        .def("__repr__", [](const ConfigObject& c) { return "vksonar.Config('" + c.config.name + "')"; });
+
+    py::class_<SceneObject, std::shared_ptr<SceneObject>>(m, "Scene", "A scene: a glTF file or meshes from arrays.")
+        .def(py::init([] { return std::make_shared<SceneObject>(); }))
+        .def_static("load", &SceneObject::load, py::arg("path"), py::arg("asset_root") = "",
+                    "Loads .gltf / .glb; files it names must lie inside asset_root (default: its folder).")
+        .def_static("from_arrays", &SceneObject::from_arrays, py::arg("vertices"), py::arg("indices"),
+                    py::arg("backscatter_db") = -30.0, py::arg("transform") = py::none(),
+                    "One mesh: vertices (n, 3) float, indices (m, 3) uint32, a Lambert material, a 4x4 transform.")
+        .def("add", &SceneObject::add, py::arg("vertices"), py::arg("indices"), py::arg("backscatter_db") = -30.0,
+             py::arg("transform") = py::none(), "Adds one more mesh, material and draw; returns the mesh index.")
+        .def_property_readonly("triangles", [](const SceneObject& s) { return s.scene.stats().triangles; })
+        .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene.stats().warnings; });
+
+    py::class_<FrameObject, std::shared_ptr<FrameObject>>(m, "Frame", "One rendered ping. Arrays are views, no copy.")
+        .def_property_readonly(
+            "polar",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.intensity, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: received intensity, uPa^2 (polar.npy)")
+        .def_property_readonly(
+            "clean",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.clean, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: the echo before noise, relative to the source level")
+        .def_property_readonly(
+            "display",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.display, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: the display value in [0, 1]")
+        .def_property_readonly(
+            "polar_u16",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                if (!f.u16_ready) host::quantize_display(f.frame, f.u16);
+                f.u16_ready = true;
+                return view(f.u16, {f.frame.bins, f.frame.beams}, self);
+            },
+            "uint16 [bins, beams]: display x 65535 (polar_u16.npy)")
+        .def_property_readonly(
+            "depth",
+            [](py::object self) -> py::object {
+                auto& f = self.cast<FrameObject&>();
+                if (f.frame.depth.empty()) return py::none();
+                if (!f.range_ready) host::depth_to_view_range(*f.plan, f.frame, f.range);
+                f.range_ready = true;
+                return view(f.range, {f.frame.rows, f.frame.columns}, self);
+            },
+            "float32 [rows, columns]: slant range (m), 0 = no hit (depth.npy; outputs=['depth'])")
+        .def_property_readonly(
+            "normals",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.normals, {f.frame.rows, f.frame.columns, 4}, self);
+            },
+            "float32 [rows, columns, 4]: normal and cos incidence (outputs=['normals'])")
+        .def_property_readonly(
+            "echo",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.echo, {f.frame.rows, f.frame.columns, 2}, self);
+            },
+            "float32 [rows, columns, 2]: energy, slant range (outputs=['echo'])")
+        .def_property_readonly(
+            "fan",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                if (!f.fan_ready) f.renderer.cast<RendererObject&>().fan->render(f.frame, f.fan_image);
+                f.fan_ready = true;
+                return view(f.fan_image.rgb, {f.fan_image.height, f.fan_image.width, 3}, self);
+            },
+            "uint8 [height, width, 3]: the fan image (fan.png)")
+        .def_property_readonly("beam_angles_rad",
+                               [](py::object self) {
+                                   auto& f = self.cast<FrameObject&>();
+                                   return view(f.frame.beam_angles_rad, {f.frame.beams}, self);
+                               })
+        .def_property_readonly("ranges_m",
+                               [](py::object self) {
+                                   auto& f = self.cast<FrameObject&>();
+                                   return view(f.frame.bin_ranges_m, {f.frame.bins}, self);
+                               })
+        .def_property_readonly("frame_index", [](const FrameObject& f) { return f.frame.frame_index; })
+        .def_property_readonly("seed", [](const FrameObject& f) { return f.frame.seed; })
+        .def_property_readonly(
+            "meta", [](FrameObject& f) { return frame_meta(f); }, "meta.json's fields as a dict");
+
+    py::class_<RendererObject, std::shared_ptr<RendererObject>>(m, "Renderer", "One simulated sonar over one scene.")
+        .def(py::init([](std::shared_ptr<SceneObject> scene, const ConfigObject& config, const std::string& backend,
+                         std::uint64_t seed, const std::vector<std::string>& outputs) {
+                 if (!scene) throw py::value_error("scene: None");
+                 config.validate();
+                 RendererOptions options;
+                 if (backend == "cpu")
+                     options.backend = Backend::cpu;
+                 else if (backend != "vulkan")
+                     throw py::value_error("backend: '" + backend + "' is not a backend (vulkan or cpu)");
+                 options.seed = seed;
+                 for (const std::string& o : outputs) {
+                     if (o == "depth")
+                         options.save_mask |= save_depth;
+                     else if (o == "normals")
+                         options.save_mask |= save_normals;
+                     else if (o == "echo")
+                         options.save_mask |= save_echo;
+                     else
+                         throw py::value_error("outputs: unknown '" + o + "' (depth, normals, echo)");
+                 }
+                 auto r = std::make_shared<RendererObject>();
+                 r->scene = std::move(scene);
+                 r->backend = backend;
+                 r->context = std::make_shared<Context>(
+                     options.backend == Backend::cpu ? Context::cpu_only() : take(Context::create(ContextOptions{})));
+                 r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
+                 r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
+                 return r;
+             }),
+             py::arg("scene"), py::arg("config") = ConfigObject::preset("default"), py::arg("backend") = "vulkan",
+             py::arg("seed") = 1, py::arg("outputs") = std::vector<std::string>{})
+        .def(
+            "render",
+            [](py::object self, const std::vector<double>& pose, std::uint64_t frame_index,
+               std::optional<std::uint64_t> seed, std::shared_ptr<FrameObject> out) {
+                auto& r = self.cast<RendererObject&>();
+                if (pose.size() != 6)
+                    throw py::value_error("pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
+                                          std::to_string(pose.size()));
+                if (seed) r.renderer.set_seed(*seed);
+                if (!out) {
+                    out = std::make_shared<FrameObject>();
+                    out->frame = r.renderer.make_frame();
+                } else if (out->renderer.ptr() != self.ptr()) {
+                    throw py::value_error("out: a Frame of another Renderer");
+                }
+                out->plan = &renderer_plan(r.renderer);
+                out->renderer = self;
+                out->pose = Pose{pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]};
+                out->u16_ready = out->range_ready = out->fan_ready = false;
+                Result<void> rendered;
+                {
+                    py::gil_scoped_release unlocked; // other Python threads run while the sonar renders
+                    rendered = r.renderer.render(out->pose, frame_index, out->frame);
+                }
+                check(rendered);
+                return out;
+            },
+            py::arg("pose"), py::arg("frame") = 0, py::arg("seed") = py::none(), py::arg("out") = nullptr,
+            "Renders one ping from pose (x, y, z, roll, pitch, yaw); frame keys the noise with the seed. "
+            "Returns a new Frame, or fills `out` (a Frame of this renderer) to reuse its memory.")
+        .def_property_readonly("bins", [](const RendererObject& r) { return renderer_plan(r.renderer).bins; })
+        .def_property_readonly("beams", [](const RendererObject& r) { return renderer_plan(r.renderer).beams; })
+        .def_property_readonly("seed", [](const RendererObject& r) { return r.renderer.seed(); })
+        .def_property_readonly("backend", [](const RendererObject& r) { return r.backend; })
+        .def("validity", [](const RendererObject& r) {
+            py::list out;
+            for (const ModelValidity& v : r.renderer.validity())
+                out.append(py::dict(py::arg("model") = v.model, py::arg("ok") = v.ok, py::arg("key") = v.key,
+                                    py::arg("value") = v.value, py::arg("domain") = v.domain,
+                                    py::arg("action") = v.action));
+            return out;
+        });
+}

@@ -1,0 +1,154 @@
+"""The Python module against the CLI's files for the same inputs, its errors and its numpy layouts.
+
+Run by ctest (`python_module`, tests/CMakeLists.txt) with PYTHONPATH at the built module and
+VKSONAR_CLI at the built executable.
+"""
+import json
+import os
+import struct
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import vksonar
+
+CLI = os.environ["VKSONAR_CLI"]
+ASSETS = os.environ["VKSONAR_ASSET_DIR"]
+SCENE = os.path.join(ASSETS, "scenes", "default.gltf")
+KEYS = {"bins": 64, "beams": 48, "range_min": 6, "display.fan_width": 256}
+POSE = (0.5, -0.2, 0.1, 0.0, 10.0, 3.0)
+
+
+def small_config():
+    config = vksonar.Config.preset("default")
+    for key, value in KEYS.items():
+        config.set(key, value)
+    return config
+
+
+def cli(tmp_path, *extra):
+    args = [CLI, "render", "--scene", SCENE, "--backend", "cpu", "--seed", "9", "--out", str(tmp_path)]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    run = subprocess.run(args + ["--pose", ",".join(str(v) for v in POSE)] + list(extra),
+                         capture_output=True, text=True)
+    return run
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    return vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9,
+                            outputs=["depth", "normals", "echo"])
+
+
+def test_arrays_equal_the_cli_files(tmp_path, renderer):
+    assert cli(tmp_path, "--save", "default,depth,normals,echo").returncode == 0
+    frame = renderer.render(POSE, frame=0)
+    assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    assert np.array_equal(frame.polar_u16, np.load(tmp_path / "polar_u16.npy"))
+    assert np.array_equal(frame.depth, np.load(tmp_path / "depth.npy"))
+    assert np.array_equal(frame.normals, np.load(tmp_path / "normals.npy"))
+    assert np.array_equal(frame.echo, np.load(tmp_path / "echo.npy"))
+    width, height = struct.unpack(">II", (tmp_path / "fan.png").read_bytes()[16:24])  # the PNG's IHDR
+    assert frame.fan.shape == (height, width, 3)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert frame.meta["ranges_m"] == meta["ranges_m"]
+    assert frame.meta["beam_angles_rad"] == meta["beam_angles_rad"]
+    assert frame.meta["config"] == meta["config"]
+    assert frame.meta["seed"] == 9 and frame.meta["pose"]["yaw_deg"] == 3.0
+
+
+def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
+    frame = renderer.render(POSE, frame=0)
+    polar = frame.polar
+    assert polar.dtype == np.float32 and polar.shape == (64, 48) and polar.flags["C_CONTIGUOUS"]
+    assert frame.polar_u16.dtype == np.uint16 and frame.fan.dtype == np.uint8
+    assert frame.depth.shape == frame.normals.shape[:2] and frame.normals.shape[2] == 4
+    assert frame.echo.shape[2] == 2
+    assert frame.ranges_m.shape == (64,) and frame.beam_angles_rad.shape == (48,)
+    assert np.shares_memory(polar, frame.polar)  # a view of the frame, not a copy
+    kept = polar.copy()
+    del frame
+    other = renderer.render((0, 0, 0, 0, 10, 20), frame=1)  # a new frame: the old arrays stay
+    assert np.array_equal(polar, kept) and not np.array_equal(other.polar, kept)
+    reused = renderer.render(POSE, frame=0, out=other)  # out= reuses a frame's memory
+    assert reused is other and np.array_equal(other.polar, kept)
+
+
+def test_seed_and_frame_index_key_the_noise(renderer):
+    a = renderer.render(POSE, frame=3).polar
+    b = renderer.render(POSE, frame=3, seed=9).polar
+    c = renderer.render(POSE, frame=4).polar
+    d = renderer.render(POSE, frame=3, seed=10).polar
+    renderer.render(POSE, frame=0, seed=9)
+    assert np.array_equal(a, b) and not np.array_equal(a, c) and not np.array_equal(a, d)
+
+
+def test_errors_are_the_cli_messages(tmp_path):
+    run = cli(tmp_path, "--set", "source_level=400")
+    assert run.returncode == 2
+    with pytest.raises(ValueError) as error:
+        small_config().set("source_level", 400)
+    assert run.stderr.strip() == "error: " + str(error.value)
+    config = small_config()
+    with pytest.raises(ValueError):
+        config.set("source_level", 400)
+    assert config.to_dict()["source_level"] != 400  # a refused value leaves the config as it was
+    with pytest.raises(ValueError, match="did you mean"):
+        config.set("sorce_level", 200)
+    with pytest.raises(ValueError, match="unknown preset 'nope'"):
+        vksonar.Config.preset("nope")
+    with pytest.raises(ValueError, match="missing.gltf: file not found"):
+        vksonar.Scene.load(str(tmp_path / "missing.gltf"))
+    with pytest.raises(ValueError, match="not a backend"):
+        vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend="gpu")
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend="cpu")
+    with pytest.raises(ValueError, match="needs 6 numbers"):
+        renderer.render((0, 0, 0))
+    with pytest.raises(ValueError, match=r"vertices: expected shape \(n, 3\)"):
+        vksonar.Scene.from_arrays(np.zeros((4, 2)), np.zeros((1, 3), np.uint32))
+    with pytest.raises(ValueError):
+        vksonar.Scene.from_arrays(np.zeros((3, 3)), np.array([[0, 1, 7]], np.uint32))  # index out of range
+
+
+def test_a_scene_from_arrays_echoes_at_its_range():
+    # A 4 m x 4 m plate facing the sonar 12 m ahead (sonar frame: x forward, y port, z up).
+    vertices = np.array([[12, -2, -2], [12, 2, -2], [12, 2, 2], [12, -2, 2]], np.float32)
+    indices = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+    config = vksonar.Config.from_dict({"bins": 128, "range_min": 1, "range_max": 20,
+                                       "effects": {"speckle": "off", "ambient_noise": "off"}})
+    frame = vksonar.Renderer(vksonar.Scene.from_arrays(vertices, indices), config, backend="cpu").render(
+        (0, 0, 0, 0, 0, 0))
+    peak_bin = int(np.argmax(frame.polar.max(axis=1)))
+    assert abs(frame.ranges_m[peak_bin] - 12.0) <= 20.0 / 128  # the plate's range, within a bin
+    moved = np.eye(4)
+    moved[0, 3] = 4.0  # the same plate 4 m further through the transform
+    frame = vksonar.Renderer(vksonar.Scene.from_arrays(vertices, indices, transform=moved), config,
+                             backend="cpu").render((0, 0, 0, 0, 0, 0))
+    assert abs(frame.ranges_m[int(np.argmax(frame.polar.max(axis=1)))] - 16.0) <= 20.0 / 128
+
+
+def test_render_releases_the_gil():
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), vksonar.Config.preset("default"), backend="cpu")
+    start = time.perf_counter()
+    renderer.render((0, 0, 0, 0, 10, 0))
+    render_s = time.perf_counter() - start
+    done = threading.Event()
+
+    def work():
+        renderer.render((0, 0, 0, 0, 10, 1), frame=1)
+        done.set()
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    longest_gap, last = 0.0, time.perf_counter()
+    while not done.is_set():
+        now = time.perf_counter()
+        longest_gap, last = max(longest_gap, now - last), now
+    thread.join()
+    # Holding the GIL, render() would stop this loop for the whole render; released, the loop only
+    # waits for the interpreter's switch interval (5 ms) when the other thread runs Python code.
+    assert longest_gap < max(0.5 * render_s, 0.012), f"loop stalled {longest_gap:.4f} s of a {render_s:.4f} s render"
