@@ -49,6 +49,7 @@ struct SceneStats {
     std::uint64_t triangles = 0; // drawn triangles (instances counted)
     std::uint32_t meshes = 0;
     std::uint32_t draws = 0;
+    std::uint64_t instances = 0;          // EXT_mesh_gpu_instancing instances (each one draw of a shared mesh)
     std::uint32_t skipped_primitives = 0; // points/lines and degenerate-only primitives, skipped with a warning
     std::vector<std::string> warnings;
 };

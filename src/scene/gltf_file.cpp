@@ -115,14 +115,93 @@ json parse_json(const std::string& text) {
     }
 }
 
-void check_required_extensions(const json& doc) {
-    const auto it = doc.find("extensionsRequired");
-    if (it == doc.end()) return;
-    if (!it->is_array()) fail(ErrorCode::parse, "extensionsRequired is not an array");
-    for (const json& name : *it) {
-        fail(ErrorCode::unsupported,
-             "unsupported required extension " + (name.is_string() ? name.get<std::string>() : name.dump()));
+// What vksonar does with each glTF extension (README, "glTF extensions"). A sonar reads geometry
+// only: an extension is decoded if it changes geometry and vksonar reads it, accepted with one warning
+// if it only changes appearance (materials, textures, lights, cameras, metadata), and refused if it
+// changes geometry and vksonar cannot read it, required or not, since drawing without it would be a
+// silently wrong image. An unknown extension is refused when the file requires it, else warned about.
+enum class ExtensionUse { decoded, appearance, refused };
+
+ExtensionUse extension_use(const std::string& name) {
+    static const char* const decoded[] = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"};
+    static const char* const refused[] = {"KHR_draco_mesh_compression", "EXT_meshopt_compression",
+                                          "KHR_meshopt_compression"};
+    static const char* const appearance_prefixes[] = {"KHR_materials_", "KHR_texture_", "EXT_texture_",
+                                                      "MSFT_texture_",  "KHR_lights_",  "EXT_lights_"};
+    static const char* const appearance[] = {"KHR_xmp",
+                                             "KHR_xmp_json_ld",
+                                             "MSFT_packing_normalRoughnessMetallic",
+                                             "MSFT_packing_occlusionRoughnessMetallic",
+                                             "KHR_animation_pointer",
+                                             "EXT_materials_bump"};
+    for (const char* d : decoded)
+        if (name == d) return ExtensionUse::decoded;
+    for (const char* r : refused)
+        if (name == r) return ExtensionUse::refused;
+    for (const char* p : appearance_prefixes)
+        if (name.rfind(p, 0) == 0) return ExtensionUse::appearance;
+    for (const char* a : appearance)
+        if (name == a) return ExtensionUse::appearance;
+    return ExtensionUse::refused; // unknown: refused if required (the caller decides)
+}
+
+std::string join(const std::vector<std::string>& names) {
+    std::string out;
+    for (const std::string& n : names)
+        out += (out.empty() ? "" : ", ") + n;
+    return out;
+}
+
+// Every extension the file uses or requires, sorted into the three uses above: refusals are one
+// error naming all of them; appearance-only and unknown optional ones one warning line each kind.
+void check_extensions(const json& doc, std::vector<std::string>& warnings) {
+    std::vector<std::string> required, used;
+    for (const char* key : {"extensionsRequired", "extensionsUsed"}) {
+        const auto it = doc.find(key);
+        if (it == doc.end()) continue;
+        if (!it->is_array()) fail(ErrorCode::parse, std::string(key) + " is not an array");
+        for (const json& name : *it) {
+            std::string text = name.is_string() ? name.get<std::string>() : name.dump();
+            std::vector<std::string>& list = std::string(key) == "extensionsRequired" ? required : used;
+            if (std::find(list.begin(), list.end(), text) == list.end()) list.push_back(std::move(text));
+        }
     }
+    for (const std::string& name : required)
+        if (std::find(used.begin(), used.end(), name) == used.end()) used.push_back(name);
+    std::vector<std::string> refused, appearance, unknown_optional;
+    for (const std::string& name : used) {
+        const bool is_required = std::find(required.begin(), required.end(), name) != required.end();
+        switch (extension_use(name)) {
+        case ExtensionUse::decoded:
+            break;
+        case ExtensionUse::appearance:
+            appearance.push_back(name);
+            break;
+        case ExtensionUse::refused: {
+            const bool known =
+                name == "KHR_draco_mesh_compression" || name.find("meshopt_compression") != std::string::npos;
+            if (known || is_required)
+                refused.push_back(name);
+            else
+                unknown_optional.push_back(name);
+            break;
+        }
+        }
+    }
+    if (refused.size() == 1)
+        fail(ErrorCode::unsupported,
+             std::string("unsupported ") +
+                 (std::find(required.begin(), required.end(), refused[0]) != required.end() ? "required " : "") +
+                 "extension " + refused[0] + " (it changes geometry and this build does not decode it)");
+    if (refused.size() > 1)
+        fail(ErrorCode::unsupported,
+             "unsupported extensions " + join(refused) + " (they change geometry and this build does not decode them)");
+    if (!appearance.empty())
+        warnings.push_back("extensions that only change appearance, which a sonar does not see, ignored: " +
+                           join(appearance));
+    if (!unknown_optional.empty())
+        warnings.push_back("unknown optional extensions ignored (the file does not require them): " +
+                           join(unknown_optional));
 }
 
 // Files named inside a scene (external buffers) are read by these callbacks, never by tinygltf 2.7's own
@@ -378,7 +457,7 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     if (has_extension(path, ".glb") && !binary)
         fail(ErrorCode::parse, "not a binary glTF (bad magic; expected 'glTF')");
     const json doc = parse_json(binary ? glb_json_chunk(bytes) : std::string(bytes.begin(), bytes.end()));
-    check_required_extensions(doc);
+    check_extensions(doc, warnings);
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
     ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "scene/gltf_accessors.h"
 #include "scene/gltf_file.h"
 #include "scene/scene_data.h"
 #include "vksonar/scene.h"
@@ -20,6 +21,7 @@
 namespace vksonar {
 namespace {
 
+using gltf::component_bytes;
 using gltf::fail;
 using gltf::LoadFailure;
 using gltf::one_line;
@@ -46,69 +48,6 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
 const Mat4& world_from_gltf() {
     static const Mat4 m{1, 0, 0, 0, /**/ 0, 0, 1, 0, /**/ 0, -1, 0, 0, /**/ 0, 0, 0, 1};
     return m;
-}
-
-// ---- accessors ---------------------------------------------------------------------------------
-
-struct AccessorView {
-    const unsigned char* data = nullptr; // first element
-    std::size_t stride = 0;
-    std::size_t count = 0;
-};
-
-std::size_t component_bytes(int component_type) {
-    switch (component_type) {
-    case TINYGLTF_COMPONENT_TYPE_BYTE:
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-        return 1;
-    case TINYGLTF_COMPONENT_TYPE_SHORT:
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
-        return 2;
-    case TINYGLTF_COMPONENT_TYPE_INT:
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-    case TINYGLTF_COMPONENT_TYPE_FLOAT:
-        return 4;
-    default:
-        return 0;
-    }
-}
-
-// Checks, without overflow, that every element of the accessor lies inside its buffer view and
-// the view inside its buffer: offset + stride * (count - 1) + element_size <= available.
-AccessorView view_accessor(const tinygltf::Model& model, int index, std::size_t element_bytes,
-                           const std::string& where) {
-    if (index < 0 || std::size_t(index) >= model.accessors.size())
-        fail(ErrorCode::parse, where + " does not exist (" + std::to_string(model.accessors.size()) + " accessors)");
-    const tinygltf::Accessor& acc = model.accessors[std::size_t(index)];
-    if (acc.sparse.isSparse) fail(ErrorCode::unsupported, where + " is sparse (not supported)");
-    if (acc.bufferView < 0 || std::size_t(acc.bufferView) >= model.bufferViews.size())
-        fail(ErrorCode::parse, where + " has no valid bufferView (" + std::to_string(acc.bufferView) + ")");
-    const tinygltf::BufferView& bv = model.bufferViews[std::size_t(acc.bufferView)];
-    const std::string bv_name = "bufferView " + std::to_string(acc.bufferView);
-    if (bv.buffer < 0 || std::size_t(bv.buffer) >= model.buffers.size())
-        fail(ErrorCode::parse, where + ": " + bv_name + " refers to missing buffer " + std::to_string(bv.buffer));
-    const std::vector<unsigned char>& buffer = model.buffers[std::size_t(bv.buffer)].data;
-    if (bv.byteOffset > buffer.size() || bv.byteLength > buffer.size() - bv.byteOffset)
-        fail(ErrorCode::parse, where + ": " + bv_name + " (offset " + std::to_string(bv.byteOffset) + ", length " +
-                                   std::to_string(bv.byteLength) + ") runs past the end of buffer " +
-                                   std::to_string(bv.buffer) + " (" + std::to_string(buffer.size()) + " bytes)");
-    AccessorView view;
-    view.count = acc.count;
-    view.stride = bv.byteStride != 0 ? bv.byteStride : element_bytes;
-    if (view.stride < element_bytes)
-        fail(ErrorCode::parse, where + ": byteStride " + std::to_string(view.stride) +
-                                   " is smaller than the element (" + std::to_string(element_bytes) + " bytes)");
-    if (acc.count == 0) return view;
-    const std::size_t available = bv.byteLength;
-    const bool fits = acc.byteOffset <= available && element_bytes <= available - acc.byteOffset &&
-                      acc.count - 1 <= (available - acc.byteOffset - element_bytes) / view.stride;
-    if (!fits)
-        fail(ErrorCode::parse, where + ": count " + std::to_string(acc.count) + " at offset " +
-                                   std::to_string(acc.byteOffset) + " (stride " + std::to_string(view.stride) +
-                                   ") does not fit in " + bv_name + " (" + std::to_string(available) +
-                                   " bytes); buffer shorter than the accessor claims");
-    view.data = buffer.data() + bv.byteOffset + acc.byteOffset;
-    return view;
 }
 
 // ---- conversion ---------------------------------------------------------------------------------
@@ -303,13 +242,67 @@ private:
             const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
             const Mat4 world = multiply(item.parent, local_matrix(node, where));
             if (node.skin >= 0) warn(where + ": skin ignored (drawn in its bind pose)");
-            if (node.mesh >= 0)
-                add_draws(node.mesh, world, where);
-            else if (node.mesh < -1)
+            if (node.mesh >= 0 && !node.weights.empty())
+                warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
+            if (node.mesh >= 0) {
+                const std::vector<Mat4> instances = instance_matrices(node, where);
+                if (instances.empty()) add_draws(node.mesh, world, where);
+                for (const Mat4& instance : instances)
+                    add_draws(node.mesh, multiply(world, instance), where);
+            } else if (node.mesh < -1)
                 fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
                 stack.push_back({*c, world});
         }
+    }
+
+    // EXT_mesh_gpu_instancing: one matrix per instance from its TRANSLATION, ROTATION (a unit
+    // quaternion, float or normalized integers) and SCALE accessors; empty without the extension.
+    // Each instance becomes a draw of the same mesh: the mesh is stored once.
+    std::vector<Mat4> instance_matrices(const tinygltf::Node& node, const std::string& where) {
+        const auto ext = node.extensions.find("EXT_mesh_gpu_instancing");
+        if (ext == node.extensions.end()) return {};
+        const std::string ext_where = where + ": EXT_mesh_gpu_instancing";
+        const tinygltf::Value& attributes = ext->second.Get("attributes");
+        if (!attributes.IsObject()) fail(ErrorCode::parse, ext_where + " has no attributes object");
+        std::vector<double> t, r, s;
+        std::size_t count = 0;
+        bool any = false;
+        auto read = [&](const char* name, int components, std::vector<double>& out) {
+            if (!attributes.Has(name)) return;
+            const tinygltf::Value& index = attributes.Get(name);
+            if (!index.IsInt() && !index.IsNumber())
+                fail(ErrorCode::parse, ext_where + "." + name + " is not an index");
+            const int accessor = index.GetNumberAsInt();
+            const std::string attr_where = ext_where + "." + name + " accessor " + std::to_string(accessor);
+            out = gltf::read_accessor(model_, accessor, attr_where);
+            const tinygltf::Accessor& acc = model_.accessors[std::size_t(accessor)];
+            if (gltf::type_components(acc.type) != components)
+                fail(ErrorCode::parse, attr_where + " is not VEC" + std::to_string(components));
+            check_finite(out, attr_where);
+            const std::size_t n = out.size() / std::size_t(components);
+            if (any && n != count)
+                fail(ErrorCode::parse,
+                     attr_where + " has " + std::to_string(n) + " instances, the others " + std::to_string(count));
+            count = n;
+            any = true;
+        };
+        read("TRANSLATION", 3, t);
+        read("ROTATION", 4, r);
+        read("SCALE", 3, s);
+        if (!any) fail(ErrorCode::parse, ext_where + " has no TRANSLATION, ROTATION or SCALE");
+        std::vector<Mat4> matrices(count);
+        for (std::size_t i = 0; i < count; ++i) {
+            tinygltf::Node trs;
+            if (!t.empty())
+                trs.translation.assign(t.begin() + std::ptrdiff_t(3 * i), t.begin() + std::ptrdiff_t(3 * i + 3));
+            if (!r.empty())
+                trs.rotation.assign(r.begin() + std::ptrdiff_t(4 * i), r.begin() + std::ptrdiff_t(4 * i + 4));
+            if (!s.empty()) trs.scale.assign(s.begin() + std::ptrdiff_t(3 * i), s.begin() + std::ptrdiff_t(3 * i + 3));
+            matrices[i] = local_matrix(trs, ext_where + " instance " + std::to_string(i));
+        }
+        out_.stats.instances += count;
+        return matrices;
     }
 
     void add_draws(int mesh_index, const Mat4& world, const std::string& where) {
@@ -332,6 +325,7 @@ private:
     std::vector<PrimitiveOut> convert_mesh(int mesh_index) {
         std::vector<PrimitiveOut> prims;
         const tinygltf::Mesh& mesh = model_.meshes[std::size_t(mesh_index)];
+        current_mesh_weights_ = mesh.weights;
         for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
             const std::string where = "mesh " + std::to_string(mesh_index) + " primitive " + std::to_string(p);
             if (std::optional<PrimitiveOut> out = convert_primitive(mesh.primitives[p], where)) prims.push_back(*out);
@@ -359,27 +353,15 @@ private:
         const auto position = prim.attributes.find("POSITION");
         if (position == prim.attributes.end()) fail(ErrorCode::parse, where + ": missing POSITION attribute");
         const std::string pos_where = where + ": POSITION accessor " + std::to_string(position->second);
-        const AccessorView pos_view = view_accessor(model_, position->second, 12, pos_where);
-        const tinygltf::Accessor& pos_acc = model_.accessors[std::size_t(position->second)];
-        if (pos_acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || pos_acc.type != TINYGLTF_TYPE_VEC3)
-            fail(ErrorCode::unsupported, pos_where + " is not float VEC3");
-        if (pos_view.count == 0) {
+        std::vector<float> positions = read_positions(position->second, pos_where);
+        if (positions.empty()) {
             skip(where, "no vertices");
             return std::nullopt;
         }
-        if (pos_view.count > std::numeric_limits<std::uint32_t>::max())
+        if (positions.size() / 3 > std::numeric_limits<std::uint32_t>::max())
             fail(ErrorCode::unsupported, pos_where + ": more than 2^32 vertices");
-        const auto vertex_count = static_cast<std::uint32_t>(pos_view.count);
-
-        std::vector<float> positions(std::size_t(vertex_count) * 3);
-        for (std::uint32_t v = 0; v < vertex_count; ++v) {
-            float xyz[3];
-            std::memcpy(xyz, pos_view.data + pos_view.stride * v, sizeof xyz);
-            if (!std::isfinite(xyz[0]) || !std::isfinite(xyz[1]) || !std::isfinite(xyz[2]))
-                fail(ErrorCode::parse, pos_where + " has " + (std::isnan(xyz[0] + xyz[1] + xyz[2]) ? "NaN" : "Inf") +
-                                           " at vertex " + std::to_string(v));
-            std::copy(xyz, xyz + 3, &positions[std::size_t(v) * 3]);
-        }
+        const auto vertex_count = static_cast<std::uint32_t>(positions.size() / 3);
+        apply_morph_targets(prim, positions, where);
 
         std::vector<std::uint32_t> indices = read_indices(prim, vertex_count, where);
         indices = to_triangle_list(std::move(indices), prim.mode, where);
@@ -420,31 +402,66 @@ private:
             fail(ErrorCode::parse,
                  idx_where + " does not exist (" + std::to_string(model_.accessors.size()) + " accessors)");
         const tinygltf::Accessor& acc = model_.accessors[std::size_t(prim.indices)];
-        const std::size_t bytes = component_bytes(acc.componentType);
-        if (acc.type != TINYGLTF_TYPE_SCALAR || bytes == 0 || acc.componentType == TINYGLTF_COMPONENT_TYPE_BYTE ||
-            acc.componentType == TINYGLTF_COMPONENT_TYPE_SHORT || acc.componentType == TINYGLTF_COMPONENT_TYPE_INT ||
-            acc.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT)
+        if (acc.type != TINYGLTF_TYPE_SCALAR || (acc.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+                                                 acc.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                                                 acc.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
             fail(ErrorCode::parse, idx_where + " is not an unsigned byte/short/int SCALAR");
-        const AccessorView view = view_accessor(model_, prim.indices, bytes, idx_where);
-        indices.resize(view.count);
-        for (std::size_t i = 0; i < view.count; ++i) {
-            const unsigned char* p = view.data + view.stride * i;
-            std::uint32_t value = 0;
-            if (bytes == 1) {
-                value = *p;
-            } else if (bytes == 2) {
-                std::uint16_t v16;
-                std::memcpy(&v16, p, 2);
-                value = v16;
-            } else {
-                std::memcpy(&value, p, 4);
-            }
-            if (value >= vertex_count)
-                fail(ErrorCode::parse, idx_where + ": index " + std::to_string(i) + " = " + std::to_string(value) +
+        const std::vector<double> values = gltf::read_accessor(model_, prim.indices, idx_where);
+        indices.resize(values.size());
+        for (std::size_t i = 0; i < values.size(); ++i) {
+            if (values[i] >= vertex_count)
+                fail(ErrorCode::parse, idx_where + ": index " + std::to_string(i) + " = " +
+                                           std::to_string(static_cast<std::uint64_t>(values[i])) +
                                            " is out of range (" + std::to_string(vertex_count) + " vertices)");
-            indices[i] = value;
+            indices[i] = static_cast<std::uint32_t>(values[i]);
         }
         return indices;
+    }
+
+    // POSITION (or a morph target's displacement): float VEC3, or an integer type of
+    // KHR_mesh_quantization (byte, short, unsigned or not, normalized or not; the node transform
+    // gltfpack writes dequantizes them). Sparse accessors and accessors without data are read too.
+    std::vector<float> read_positions(int accessor, const std::string& where) {
+        if (accessor < 0 || std::size_t(accessor) >= model_.accessors.size())
+            fail(ErrorCode::parse,
+                 where + " does not exist (" + std::to_string(model_.accessors.size()) + " accessors)");
+        const tinygltf::Accessor& acc = model_.accessors[std::size_t(accessor)];
+        const bool quantized = acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT;
+        const bool declared = std::find(model_.extensionsUsed.begin(), model_.extensionsUsed.end(),
+                                        "KHR_mesh_quantization") != model_.extensionsUsed.end();
+        if (acc.type != TINYGLTF_TYPE_VEC3 || component_bytes(acc.componentType) == 0 ||
+            acc.componentType == TINYGLTF_COMPONENT_TYPE_INT ||
+            acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT || (quantized && !declared))
+            fail(ErrorCode::unsupported, where + " is not float VEC3 (byte and short positions need "
+                                                 "KHR_mesh_quantization in extensionsUsed)");
+        const std::vector<double> values = gltf::read_accessor(model_, accessor, where);
+        std::vector<float> positions(values.size());
+        for (std::size_t i = 0; i < values.size(); ++i) {
+            if (!std::isfinite(values[i]))
+                fail(ErrorCode::parse,
+                     where + " has " + (std::isnan(values[i]) ? "NaN" : "Inf") + " at vertex " + std::to_string(i / 3));
+            positions[i] = static_cast<float>(values[i]);
+        }
+        return positions;
+    }
+
+    // Morph targets at the mesh's default weights (glTF: mesh.weights, 0 when absent): each target's
+    // POSITION displacement times its weight. Animation is not read: the default pose is drawn.
+    void apply_morph_targets(const tinygltf::Primitive& prim, std::vector<float>& positions, const std::string& where) {
+        if (prim.targets.empty()) return;
+        const std::vector<double>& weights = current_mesh_weights_;
+        for (std::size_t t = 0; t < prim.targets.size(); ++t) {
+            const double weight = t < weights.size() ? weights[t] : 0.0;
+            const auto it = prim.targets[t].find("POSITION");
+            if (it == prim.targets[t].end() || weight == 0.0) continue;
+            const std::string target_where = where + ": morph target " + std::to_string(t) + " POSITION";
+            const std::vector<float> delta = read_positions(it->second, target_where);
+            if (delta.size() != positions.size())
+                fail(ErrorCode::parse, target_where + " has " + std::to_string(delta.size() / 3) +
+                                           " vertices, POSITION " + std::to_string(positions.size() / 3));
+            for (std::size_t i = 0; i < positions.size(); ++i)
+                positions[i] = static_cast<float>(positions[i] + weight * delta[i]);
+        }
     }
 
     static std::vector<std::uint32_t> to_triangle_list(std::vector<std::uint32_t> in, int mode,
@@ -486,6 +503,7 @@ private:
     SceneData& out_;
     std::optional<std::uint32_t> default_material_;
     std::vector<std::optional<std::vector<PrimitiveOut>>> mesh_cache_;
+    std::vector<double> current_mesh_weights_; // the morph weights of the mesh being converted
 };
 
 } // namespace
