@@ -606,6 +606,58 @@ TEST_F(Cli, AWriteErrorStopsTheTrajectoryAndKeepsWhatWasWritten) {
     EXPECT_FALSE(fs::exists(dir_ / "traj" / "frame_000006"));
 }
 
+// Issue 28: seeing your own scene. `info SCENE` prints what the scene holds; a scene far out of
+// proportion with the range window gets one warning naming scene.scale; --pose frame finds it.
+TEST_F(Cli, InfoScaleAndFramingForAStrangersScene) {
+    const CliRun info = run({"info", (dir_ / "quad.gltf").string()});
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    EXPECT_NE(info.out.find("x 10.000 .. 10.000, y -5.000 .. 5.000, z -3.000 .. 3.000"), std::string::npos) << info.out;
+    EXPECT_NE(info.out.find("triangles: 2 drawn"), std::string::npos) << info.out;
+    EXPECT_NE(info.out.find("extensions: none"), std::string::npos) << info.out;
+    EXPECT_EQ(run({"info", (dir_ / "none.gltf").string()}).exit_code, 2);
+
+    // The quad as if modelled in millimetres (x 1000: 11.7 km across): one warning naming the fix.
+    const std::vector<std::string> common = {"render",    "--scene",     (dir_ / "quad.gltf").string(),
+                                             "--backend", "cpu",         "--set",
+                                             "bins=32",   "--set",       "beams=16",
+                                             "--set",     "range_min=6", "--save",
+                                             "polar"};
+    auto with = [&](std::vector<std::string> extra, const char* out) {
+        std::vector<std::string> args = common;
+        args.insert(args.end(), extra.begin(), extra.end());
+        args.push_back("--out");
+        args.push_back((dir_ / out).string());
+        return run(args);
+    };
+    const CliRun huge = with({"--set", "scene.scale=1000"}, "huge");
+    ASSERT_EQ(huge.exit_code, 0) << huge.err;
+    ASSERT_EQ(huge.err_lines().size(), 1u) << huge.err;
+    EXPECT_NE(huge.err.find("scene.scale=0.001"), std::string::npos) << huge.err;
+    const CliRun fine = with({"--set", "scene.scale=1"}, "fine");
+    EXPECT_EQ(fine.err_lines().size(), 0u) << fine.err;
+
+    // Scaled to 10 km away the quad is out of view from the origin; --pose frame brings it in.
+    auto energy = [&](const char* out) {
+        const std::string bytes = read_text(dir_ / out / "polar.npy");
+        const std::size_t header = bytes.find('\n') + 1;
+        double total = 0;
+        for (std::size_t i = header; i + 4 <= bytes.size(); i += 4) {
+            float v;
+            std::memcpy(&v, bytes.data() + i, 4);
+            total += v;
+        }
+        return total;
+    };
+    const CliRun framed =
+        with({"--set", "scene.scale=1000", "--set", "effects.ambient_noise=off", "--pose", "frame"}, "framed");
+    ASSERT_EQ(framed.exit_code, 0) << framed.err;
+    EXPECT_NE(framed.err.find("--pose frame: "), std::string::npos) << framed.err;
+    const CliRun unframed = with({"--set", "scene.scale=1000", "--set", "effects.ambient_noise=off"}, "unframed");
+    ASSERT_EQ(unframed.exit_code, 0) << unframed.err;
+    EXPECT_GT(energy("framed"), 0.0);
+    EXPECT_EQ(energy("unframed"), 0.0);
+}
+
 TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
     const fs::path out = dir_ / "accurate";
     const CliRun r =

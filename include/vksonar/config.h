@@ -103,9 +103,11 @@ struct SonarConfig {
 
     EffectsConfig effects;
 
-    // The folder every file named inside the scene (external buffers) must lie in; empty: the scene
-    // file's own folder (SceneLoadOptions::asset_root; the CLI's --asset-root overrides it).
-    std::string asset_root;
+    // How the CLI loads the scene (SceneLoadOptions): the folder every file named inside it (external
+    // buffers) must lie in, empty: the scene file's own folder (--asset-root overrides it); and a
+    // uniform scale for a model exported in other units (0.001 for millimetres).
+    std::string scene_asset_root;
+    double scene_scale = 1.0;
 
     // Returns the first problem in words (field and value), or an empty string if the config is usable.
     std::string validate() const;

@@ -50,6 +50,7 @@ struct SceneStats {
     std::uint32_t meshes = 0;
     std::uint32_t draws = 0;
     std::uint64_t instances = 0;          // EXT_mesh_gpu_instancing instances (each one draw of a shared mesh)
+    std::vector<std::string> extensions;  // glTF extensions the file uses
     std::uint32_t skipped_primitives = 0; // points/lines and degenerate-only primitives, skipped with a warning
     std::vector<std::string> warnings;
 };
@@ -66,6 +67,16 @@ struct SceneLoadOptions {
     // The folder every file named inside the scene must lie in; empty: the scene file's own folder.
     // Widen it for layouts that share buffers between folders (the CLI's --asset-root).
     std::string asset_root;
+    // Uniform scale applied to the whole scene (0.001: a model exported in millimetres).
+    double scale = 1.0;
+};
+
+// The axis-aligned box around every drawn triangle, world frame (m); empty when nothing is drawn.
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
+struct SceneBounds {
+    bool empty = true;
+    double min_m[3] = {0, 0, 0}, max_m[3] = {0, 0, 0};
+    double diagonal_m() const;
 };
 
 // Thread-safety: safe to read from many threads at once, to write from one; it must not change while a
@@ -88,6 +99,8 @@ public:
     [[nodiscard]] Result<void> add_draw(const SceneDraw& draw);
 
     const SceneStats& stats() const;
+    // Every drawn vertex through its draw's transform (linear in vertices x draws).
+    SceneBounds bounds() const;
     const std::vector<AcousticMaterial>& materials() const;
     // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
     const std::string& effects_json() const;

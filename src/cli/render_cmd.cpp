@@ -50,7 +50,8 @@ constexpr const char* kUsage =
     "  --set         one config key, dotted for groups: --set effects.speckle=off --set display.db_min=50\n"
     "                precedence: preset < scene effects < --config < --quality < --set\n"
     "  --quality     accuracy preset: fast | balanced (default knobs) | accurate (docs/accuracy.md)\n"
-    "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down\n"
+    "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down;\n"
+    "                'frame': placed so the scene's bounding box fills the field of view inside the range window\n"
     "                (default for the bundled scene: 0,0,0,0,10,0; otherwise 0,0,0,0,0,0)\n"
     "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed; a header\n"
     "                t,x,y,z,roll,pitch,yaw adds a time in s before each pose: meta.json time_s, the .h5 time);\n"
@@ -66,7 +67,7 @@ constexpr const char* kUsage =
     "                image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
-    "                '..' resolved (default: the scene file's folder; config key asset_root)\n"
+    "                '..' resolved (default: the scene file's folder; config key scene.asset_root)\n"
     "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
     "                --save polar (default) and polar_u16 only)\n"
@@ -233,6 +234,58 @@ private:
     fs::path created_;
     bool keep_ = false;
 };
+
+// ---- seeing your own scene -----------------------------------------------------------------------
+
+// A scene far out of proportion with the range window is most often in other units: one warning
+// naming the likely mistake and the key that fixes it.
+void warn_if_unit_mistake(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
+    const double size = scene.bounds().diagonal_m(), window = config.range_max_m;
+    if (size <= 0.0 || !(window > 0.0)) return;
+    char line[400];
+    if (size > 200.0 * window && size > 5000.0)
+        std::snprintf(line, sizeof line,
+                      "%s is %.0f m across, %.0f times range_max (%.0f m): if it was modelled in millimetres "
+                      "(centimetres), --set scene.scale=0.001 (0.01) brings it to metres",
+                      scene_path.c_str(), size, size / window, window);
+    else if (size < window / 1000.0)
+        std::snprintf(line, sizeof line,
+                      "%s is %.3g m across, a %.0fth of range_max (%.0f m): if it was modelled in kilometres, "
+                      "--set scene.scale=1000 brings it to metres",
+                      scene_path.c_str(), size, window / size, window);
+    else
+        return;
+    std::fprintf(stderr, "warning: %s\n", line);
+}
+
+// --pose frame: the sonar looks along +x at the bounding box's centre from the distance where the
+// box's width fills the horizontal field of view (not nearer than range_min, not farther than the
+// middle of the range window, so a box larger than the window shows its middle), pitched down by half
+// the vertical beamwidth (as sonars are usually mounted) and raised so that this pitch hits the centre.
+Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
+    const SceneBounds b = scene.bounds();
+    if (b.empty) throw BadInput("--pose frame: " + scene_path + " has nothing to frame");
+    constexpr double kPi = 3.14159265358979323846;
+    const double cx = 0.5 * (b.min_m[0] + b.max_m[0]), cy = 0.5 * (b.min_m[1] + b.max_m[1]);
+    const double cz = 0.5 * (b.min_m[2] + b.max_m[2]);
+    const double half_width = 0.5 * std::max(b.max_m[1] - b.min_m[1], 1e-3);
+    const double half_depth = 0.5 * (b.max_m[0] - b.min_m[0]);
+    const double half_fov = 0.5 * std::min(config.hfov_deg, 170.0) * kPi / 180.0;
+    const double fit = std::max(half_width / std::tan(half_fov), config.range_min_m * 1.05) + half_depth;
+    const double distance = std::min(fit, 0.5 * (config.range_min_m + config.range_max_m));
+    const double pitch = 0.5 * std::min(config.vfov_deg, 60.0) * kPi / 180.0;
+    Pose pose;
+    pose.x_m = cx - distance;
+    pose.y_m = cy;
+    pose.z_m = cz + distance * std::tan(pitch);
+    pose.pitch_deg = pitch * 180.0 / kPi;
+    const double far = std::hypot(distance + half_depth, pose.z_m - b.min_m[2]);
+    std::fprintf(stderr, "vksonar: --pose frame: %.3f,%.3f,%.3f,0,%.2f,0 (%s)\n", pose.x_m, pose.y_m, pose.z_m,
+                 pose.pitch_deg,
+                 far > config.range_max_m ? "the box reaches beyond range_max: its middle is framed"
+                                          : "the whole box lies inside the range window");
+    return pose;
+}
 
 // ---- one dataset file ---------------------------------------------------------------------------
 
@@ -569,9 +622,13 @@ int run_render(const std::vector<std::string>& argv) {
 
     // 3. Poses.
     std::vector<TrajectoryPose> poses;
-    bool timed = false; // the trajectory has a time column
+    bool timed = false;      // the trajectory has a time column
+    bool frame_pose = false; // --pose frame
     if (args.has("--trajectory")) {
         poses = read_trajectory(args.value("--trajectory"), timed);
+    } else if (args.has("--pose") && args.value("--pose") == "frame") {
+        frame_pose = true; // computed from the scene once it is loaded
+        poses.push_back({Pose{}, 0});
     } else if (args.has("--pose")) {
         poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
     } else {
@@ -619,8 +676,8 @@ int run_render(const std::vector<std::string>& argv) {
         return config;
     };
     SonarConfig config = apply_user_layers(preset);
-    const std::string asset_root = args.value("--asset-root", config.asset_root);
-    auto scene = Scene::load_gltf(scene_path, SceneLoadOptions{asset_root});
+    const std::string asset_root = args.value("--asset-root", config.scene_asset_root);
+    auto scene = Scene::load_gltf(scene_path, SceneLoadOptions{asset_root, config.scene_scale});
     if (!scene) {
         if (default_scene) throw Failure(scene.error().message);
         throw BadInput(scene.error().message);
@@ -636,7 +693,9 @@ int run_render(const std::vector<std::string>& argv) {
         if (!layered) throw BadInput(layered.error().message);
         config = apply_user_layers(layered.value());
     }
-    config.asset_root = asset_root; // meta.json's config says which folder the scene's files came from
+    config.scene_asset_root = asset_root; // meta.json's config says which folder the scene's files came from
+    warn_if_unit_mistake(scene.value(), config, scene_path);
+    if (frame_pose) poses = {{pose_framing(scene.value(), config, scene_path), 0, 0.0}};
 
     // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
     std::optional<OutputDir> out_dir;

@@ -346,8 +346,11 @@ std::vector<ConfigKey> make_table() {
         VKS_EFFECT(ambient_noise, "Ambient noise floor (auto: on)"),
         VKS_EFFECT(tvg, "Time-varied gain (auto: off)"),
 
-        VKS_TEXT("asset_root", asset_root,
+        VKS_TEXT("scene.asset_root", scene_asset_root,
                  "Folder that files named inside the scene must lie in (empty: the scene's folder; CLI --asset-root)"),
+        VKS_NUMBER(
+            "scene.scale", scene_scale, "", "Scale applied to the scene as it loads (0.001: a model in mm)",
+            closed(1e-6, 1e6, "a unit mistake is at most km for mm (1e6); beyond that it is not a unit mistake")),
     };
 }
 

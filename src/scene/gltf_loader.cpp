@@ -50,6 +50,13 @@ const Mat4& world_from_gltf() {
     return m;
 }
 
+// The world transform times a uniform scale (SceneLoadOptions::scale).
+Mat4 scaled(Mat4 m, double scale) {
+    for (int i = 0; i < 12; ++i)
+        m[std::size_t(i)] *= scale;
+    return m;
+}
+
 // ---- conversion ---------------------------------------------------------------------------------
 
 struct PrimitiveOut {
@@ -59,7 +66,7 @@ struct PrimitiveOut {
 
 class Converter {
 public:
-    Converter(const tinygltf::Model& model, SceneData& out) : model_(model), out_(out) {}
+    Converter(const tinygltf::Model& model, SceneData& out, double scale) : model_(model), out_(out), scale_(scale) {}
 
     void run() {
         convert_materials();
@@ -229,7 +236,7 @@ private:
         };
         std::vector<Item> stack;
         for (auto it = roots.rbegin(); it != roots.rend(); ++it)
-            stack.push_back({*it, world_from_gltf()});
+            stack.push_back({*it, scaled(world_from_gltf(), scale_)});
         while (!stack.empty()) {
             const Item item = stack.back();
             stack.pop_back();
@@ -504,6 +511,7 @@ private:
     std::optional<std::uint32_t> default_material_;
     std::vector<std::optional<std::vector<PrimitiveOut>>> mesh_cache_;
     std::vector<double> current_mesh_weights_; // the morph weights of the mesh being converted
+    double scale_ = 1.0;                       // SceneLoadOptions::scale
 };
 
 } // namespace
@@ -513,8 +521,12 @@ Result<Scene> Scene::load_gltf(const std::string& path, const SceneLoadOptions& 
         Scene scene;
         SceneData& data = *scene.data_;
         data.source_path = path;
+        if (!(options.scale > 0.0) || !std::isfinite(options.scale))
+            return make_error(ErrorCode::invalid_argument,
+                              path + ": scale " + std::to_string(options.scale) + " is not a positive finite number");
         const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
-        Converter(model, data).run();
+        Converter(model, data, options.scale).run();
+        data.stats.extensions = model.extensionsUsed;
         for (std::string& w : data.stats.warnings) // one line each, like errors (names may hold newlines)
             w = detail::escape_control_chars(path + ": " + w);
         return Result<Scene>(std::move(scene));

@@ -1,5 +1,6 @@
 // Scene: ownership of SceneData and the engine-facing builder (add_mesh / add_material / add_draw).
 // The glTF loader (gltf_loader.cpp) fills the same SceneData directly, after its own validation.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -113,6 +114,33 @@ std::string AcousticMaterial::validate() const {
     if (!(reflection_db <= 0.0 && reflection_db >= -100.0))
         return "reflection_db = " + number(reflection_db) + " (expected -100 to 0 dB: R^2 <= 1)";
     return {};
+}
+
+double SceneBounds::diagonal_m() const {
+    if (empty) return 0.0;
+    const double dx = max_m[0] - min_m[0], dy = max_m[1] - min_m[1], dz = max_m[2] - min_m[2];
+    return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+SceneBounds Scene::bounds() const {
+    SceneBounds b;
+    const SceneData& d = *data_;
+    for (const SceneDraw& draw : d.draws) {
+        if (draw.mesh >= d.meshes.size()) continue;
+        const MeshRange& mesh = d.meshes[draw.mesh];
+        const auto& m = draw.world_from_local; // column-major
+        for (std::uint32_t v = 0; v < mesh.vertex_count; ++v) {
+            const float* p = &d.positions[(std::size_t(mesh.first_vertex) + v) * 3];
+            for (int row = 0; row < 3; ++row) {
+                const double w = m[std::size_t(row)] * p[0] + m[std::size_t(4 + row)] * p[1] +
+                                 m[std::size_t(8 + row)] * p[2] + m[std::size_t(12 + row)];
+                b.min_m[row] = b.empty ? w : std::min(b.min_m[row], w);
+                b.max_m[row] = b.empty ? w : std::max(b.max_m[row], w);
+            }
+            b.empty = false;
+        }
+    }
+    return b;
 }
 
 const SceneStats& Scene::stats() const {

@@ -169,7 +169,7 @@ TEST_F(SceneFiles, TheCliRefusesAndAcceptsWithAssetRoot) {
     EXPECT_EQ(render(" --asset-root " + quote(root_.string())), 0) << read_text(root_ / "err.txt");
     EXPECT_TRUE(fs::exists(out / "polar.npy"));
     fs::remove_all(out);
-    EXPECT_EQ(render(" --set asset_root=" + quote(root_.string())), 0) << read_text(root_ / "err.txt");
+    EXPECT_EQ(render(" --set scene.asset_root=" + quote(root_.string())), 0) << read_text(root_ / "err.txt");
 }
 
 } // namespace
