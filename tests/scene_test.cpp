@@ -531,7 +531,7 @@ const BadCase bad_cases[] = {
     {"wrong_size_bin.gltf", ErrorCode::parse, "wrong_size.bin"},
     {"bad_data_uri.gltf", ErrorCode::parse, "decode"},
     {"draco_required.gltf", ErrorCode::unsupported, "unsupported required extension KHR_draco_mesh_compression"},
-    {"meshopt_required.gltf", ErrorCode::unsupported, "unsupported required extension EXT_meshopt_compression"},
+    {"meshopt_bad_stream.gltf", ErrorCode::parse, "EXT_meshopt_compression: the compressed data does not decode"},
     {"node_cycle.gltf", ErrorCode::parse, "cycle"},
     {"bad_mesh_index.gltf", ErrorCode::parse, "mesh 5 does not exist"},
     {"bad_backscatter.gltf", ErrorCode::parse, "backscatter_db"},

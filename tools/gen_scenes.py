@@ -577,12 +577,23 @@ def bad_corpus():
     doc["buffers"][0]["byteLength"] = len(g.buf) + 4
     put("bad_data_uri.gltf", doc)
 
-    for name, ext in [("draco_required.gltf", "KHR_draco_mesh_compression"),
-                      ("meshopt_required.gltf", "EXT_meshopt_compression")]:
-        g, doc = base()
-        doc["extensionsUsed"] = [ext]
-        doc["extensionsRequired"] = [ext]
-        put(name, doc)
+    g, doc = base()
+    doc["extensionsUsed"] = ["KHR_draco_mesh_compression"]
+    doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    put("draco_required.gltf", doc)
+
+    # EXT_meshopt_compression whose compressed stream is not one: the positions' view is decoded from
+    # the first 12 bytes of the data buffer into a fallback buffer, and those bytes are no meshopt stream.
+    g, doc = base()
+    doc["extensionsUsed"] = ["EXT_meshopt_compression"]
+    doc["extensionsRequired"] = ["EXT_meshopt_compression"]
+    view = doc["bufferViews"][0]
+    doc["buffers"].append({"byteLength": view["byteLength"], "extensions": {"EXT_meshopt_compression": {"fallback": True}}})
+    view["extensions"] = {"EXT_meshopt_compression": {"buffer": 0, "byteOffset": 0, "byteLength": 12,
+                                                      "byteStride": 12, "count": 3, "mode": "ATTRIBUTES"}}
+    view["buffer"] = len(doc["buffers"]) - 1
+    view["byteOffset"] = 0
+    put("meshopt_bad_stream.gltf", doc)
 
     g, doc = base()
     doc["nodes"] = [{"name": "a", "children": [1]}, {"name": "b", "mesh": 0, "children": [0]}]

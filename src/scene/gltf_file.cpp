@@ -4,6 +4,7 @@
 // extensions, which would otherwise fail later with a less useful message.
 #define TINYGLTF_IMPLEMENTATION
 #include "scene/gltf_file.h"
+#include "scene/gltf_meshopt.h"
 
 #include <algorithm>
 #include <cctype>
@@ -124,8 +125,8 @@ enum class ExtensionUse { decoded, appearance, refused };
 
 ExtensionUse extension_use(const std::string& name) {
     static const char* const decoded[] = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"};
-    static const char* const refused[] = {"KHR_draco_mesh_compression", "EXT_meshopt_compression",
-                                          "KHR_meshopt_compression"};
+    static const char* const refused[] = {"KHR_draco_mesh_compression", "KHR_meshopt_compression"};
+    if (name == "EXT_meshopt_compression") return meshopt_available() ? ExtensionUse::decoded : ExtensionUse::refused;
     static const char* const appearance_prefixes[] = {"KHR_materials_", "KHR_texture_", "EXT_texture_",
                                                       "MSFT_texture_",  "KHR_lights_",  "EXT_lights_"};
     static const char* const appearance[] = {"KHR_xmp",
@@ -417,6 +418,31 @@ tinygltf::Model run_tinygltf(const std::vector<unsigned char>& bytes, bool binar
     return model;
 }
 
+// The file's bytes with its JSON replaced: the text itself, or a GLB with a new JSON chunk (padded
+// with spaces to 4 bytes, as the container asks) before the original BIN chunk.
+std::vector<unsigned char> with_json(const std::vector<unsigned char>& bytes, bool binary, const std::string& text) {
+    if (!binary) return std::vector<unsigned char>(text.begin(), text.end());
+    std::string padded = text;
+    while (padded.size() % 4)
+        padded += ' ';
+    const std::size_t old_json = read_u32_le(&bytes[12]);
+    const std::size_t rest = bytes.size() - 20 - old_json; // the BIN chunk, header included, or nothing
+    const std::size_t total = 20 + padded.size() + rest;
+    if (total > max_file_bytes) fail(ErrorCode::unsupported, "file is larger than 2 GiB");
+    std::vector<unsigned char> out(total);
+    auto put_u32 = [&](std::size_t at, std::uint32_t v) {
+        for (int i = 0; i < 4; ++i)
+            out[at + std::size_t(i)] = static_cast<unsigned char>(v >> (8 * i));
+    };
+    std::memcpy(out.data(), bytes.data(), 8); // magic, version
+    put_u32(8, static_cast<std::uint32_t>(total));
+    put_u32(12, static_cast<std::uint32_t>(padded.size()));
+    put_u32(16, 0x4E4F534Au);
+    std::memcpy(out.data() + 20, padded.data(), padded.size());
+    std::memcpy(out.data() + 20 + padded.size(), bytes.data() + 20 + old_json, rest);
+    return out;
+}
+
 bool has_extension(const std::string& path, const char* ext) {
     std::string e = std::filesystem::path(path).extension().string();
     std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
@@ -461,7 +487,12 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
     ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
-    return run_tinygltf(bytes, binary, base_dir, files, warnings);
+    json edited = doc;
+    const MeshoptPlan meshopt = prepare_meshopt(edited);
+    if (!meshopt.empty()) bytes = with_json(bytes, binary, edited.dump());
+    tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, files, warnings);
+    decode_meshopt(meshopt, model);
+    return model;
 }
 
 } // namespace vksonar::gltf
