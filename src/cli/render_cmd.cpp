@@ -401,6 +401,8 @@ struct Outputs {
     const SaveSet& save;
     const host::FanRenderer& fan;
     std::string config_json;
+    nlohmann::ordered_json config_parsed; // config_json parsed once (meta.json's "config" every frame)
+    std::string meta_plan_part;           // host::meta_json_plan_part(plan), made once
     std::string scene_path;
     std::string backend;
     std::string device;
@@ -414,7 +416,7 @@ struct Outputs {
 // `time_s`: the trajectory's time column, or null when it has none.
 std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
     nlohmann::ordered_json extra;
-    extra["config"] = nlohmann::ordered_json::parse(out.config_json);
+    extra["config"] = out.config_parsed;
     extra["scene"] = out.scene_path;
     if (time_s) extra["time_s"] = *time_s;
     extra["pose"] = {{"x_m", pose.x_m},
@@ -559,8 +561,9 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
         write_atomically(dir / "cloud.ply",
                          [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
     const std::string extra = extra_meta_fields(out, pose, time_s);
-    write_atomically(dir / "meta.json",
-                     [&](const std::string& p) { return host::write_meta_json(p, plan, frame, extra); });
+    write_atomically(dir / "meta.json", [&](const std::string& p) {
+        return host::write_meta_json(p, plan, frame, extra, &out.meta_plan_part);
+    });
 }
 
 std::string frame_dir_name(std::uint64_t line) {
@@ -727,10 +730,13 @@ int run_render(const std::vector<std::string>& argv) {
     const host::FanRenderer fan(plan);
     LegacyState legacy_state;
     legacy_state.mode = plan.config.mode;
+    const std::string config_text = config_to_json(plan.config);
     Outputs outputs{plan,
                     save,
                     fan,
-                    config_to_json(plan.config),
+                    config_text,
+                    nlohmann::ordered_json::parse(config_text),
+                    host::meta_json_plan_part(plan),
                     scene_path,
                     backend_name,
                     device,

@@ -162,7 +162,7 @@ Result<void> write_points_ply(const std::string& path, const float* xyzi, std::s
     return write_file(path, header.data(), header.size(), xyzi, count * 4 * sizeof(float));
 }
 
-std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields) {
+std::string meta_json_plan_part(const Plan& plan) {
     using json = nlohmann::ordered_json; // keeps the documented field order in the file
     const SonarConfig& cfg = plan.config;
     constexpr double kDeg = 3.14159265358979323846 / 180.0;
@@ -195,6 +195,15 @@ std::string meta_json_text(const Plan& plan, const Frame& frame, const std::stri
     m["sound_speed_mps"] = cfg.sound_speed_mps;
     m["tx_beamwidths_rad"] = std::move(tx);
     m["rx_beamwidths_rad"] = std::move(rx);
+    std::string text = m.dump(2, ' ', false, json::error_handler_t::replace);
+    text.resize(text.size() - 2); // the closing "\n}": the frame's fields follow
+    return text;
+}
+
+std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields,
+                           const std::string* plan_part) {
+    using json = nlohmann::ordered_json;
+    json m = json::object();
     m["seed"] = frame.seed;
     m["frame_index"] = frame.frame_index;
     json effects = json::object();
@@ -228,12 +237,14 @@ std::string meta_json_text(const Plan& plan, const Frame& frame, const std::stri
         for (auto it = extra.begin(); it != extra.end(); ++it)
             m[it.key()] = it.value();
     }
-    return m.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+    // The frame's fields dumped on their own have the indentation they have inside the whole object.
+    const std::string frame_part = m.dump(2, ' ', false, json::error_handler_t::replace);
+    return (plan_part ? *plan_part : meta_json_plan_part(plan)) + ",\n" + frame_part.substr(2) + "\n";
 }
 
 Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
-                             const std::string& extra_json_fields) {
-    const std::string text = meta_json_text(plan, frame, extra_json_fields);
+                             const std::string& extra_json_fields, const std::string* plan_part) {
+    const std::string text = meta_json_text(plan, frame, extra_json_fields, plan_part);
     if (text.empty())
         return make_error(ErrorCode::internal, "cannot write " + path + ": extra fields are not a JSON object");
     return write_file(path, nullptr, 0, text.data(), text.size());

@@ -77,9 +77,15 @@ private:
                                             const std::string& comment);
 // meta.json: beam angles, bin ranges, resolved config, effects, stage times, seed, frame convention.
 [[nodiscard]] Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
-                                           const std::string& extra_json_fields);
+                                           const std::string& extra_json_fields,
+                                           const std::string* plan_part = nullptr);
 // The same JSON as text (the Python module's Frame.meta); empty if `extra_json_fields` is not an object.
-std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields);
+// `plan_part`: meta_json_plan_part(plan), made once for a run of frames (its beam and range tables are
+// most of the file and the same every frame).
+std::string meta_json_text(const Plan& plan, const Frame& frame, const std::string& extra_json_fields,
+                           const std::string* plan_part = nullptr);
+// The fields of meta.json that come from the plan alone, as the start of the JSON text.
+std::string meta_json_plan_part(const Plan& plan);
 
 // Arrays as the CLI writes them (polar_u16.npy, depth.npy), shared with the Python module.
 // polar_u16: the display value [0, 1] as 0..65535 (non-finite as 0).
