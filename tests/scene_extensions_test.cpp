@@ -376,6 +376,36 @@ TEST_F(SceneExtensions, GltfpackQuantizedHarbourRendersLikeTheOriginal) {
     }
 }
 
+// Materials from files nobody wrote for a sonar: extras.vksonar first, else the name's keyword, else the
+// default, whose names one warning lists.
+TEST_F(SceneExtensions, MaterialsWithoutExtrasAreMappedByNameOrListedOnce) {
+    Doc d;
+    const int pos = quad_positions(d), idx = quad_indices(d);
+    d.doc["materials"] = {{{"name", "Steel_Hull.001"}},
+                          {{"name", "seabed sand"}},
+                          {{"name", "Paint"}},
+                          {{"name", "Material.002"}},
+                          {{"name", "rock but told"}, {"extras", {{"vksonar", {{"backscatter_db", -33}}}}}}};
+    for (int m = 0; m < 5; ++m) {
+        d.doc["meshes"].push_back(
+            {{"primitives", {{{"attributes", {{"POSITION", pos}}}, {"indices", idx}, {"material", m}}}}});
+        d.node({{"mesh", m}, {"translation", {12 + m, 0, 0}}});
+    }
+    const auto a = load("materials.gltf", d.text());
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    const auto& m = a->materials();
+    ASSERT_GE(m.size(), 5u);
+    EXPECT_EQ(m[0].model, AcousticMaterial::Model::rough);
+    EXPECT_EQ(m[0].backscatter_db, -10.0);
+    EXPECT_EQ(m[0].name, "Steel_Hull.001");
+    EXPECT_EQ(m[1].backscatter_db, -27.0);
+    EXPECT_EQ(m[2].backscatter_db, -30.0); // the default
+    EXPECT_EQ(m[4].backscatter_db, -33.0); // its extras win over its name
+    EXPECT_EQ(m[4].model, AcousticMaterial::Model::lambert);
+    ASSERT_EQ(a->stats().warnings.size(), 1u);
+    EXPECT_NE(a->stats().warnings[0].find("'Paint', 'Material.002'"), std::string::npos) << a->stats().warnings[0];
+}
+
 // Every drawn triangle as its three world-space corners (double, from float positions), rotated to
 // start at its smallest corner (the winding kept), sorted: the scene's geometry whatever its order.
 std::vector<std::array<double, 9>> triangle_set(const Scene& scene) {

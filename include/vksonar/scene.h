@@ -6,6 +6,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,6 +36,14 @@ struct AcousticMaterial {
     // The first problem in words ("rms_slope = 0 (expected 0.01 to 1)"), or empty.
     std::string validate() const;
 };
+
+// The acoustic material a glTF material's name suggests, for scenes exported without extras.vksonar:
+// the first keyword found in the lower-cased name (steel, iron, metal, aluminium: rough, -10 dB;
+// concrete, stone, rock, boulder, brick: rough, -15 dB; gravel, shell: -20 dB; wood, timber: -20 dB;
+// sand: -27 dB; mud, silt, clay: -35 dB; rubber, plastic, pvc: -25 dB; glass: rough, -15 dB). The
+// levels are typical high-frequency (100 kHz - 1 MHz) backscatter at moderate grazing angles, within
+// the spread the literature reports for each class (docs/materials.md); empty when none matches.
+[[nodiscard]] std::optional<AcousticMaterial> acoustic_material_by_name(const std::string& name);
 
 // One drawable: a range of a mesh's triangles placed by a world matrix.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.

@@ -79,17 +79,34 @@ public:
 private:
     void warn(std::string text) { out_.stats.warnings.push_back(std::move(text)); }
 
+    // A material's acoustics: its extras.vksonar when it has them, else its name looked up in
+    // acoustic_material_by_name (scene.h), else the default (Lambert, -30 dB). The names that fell to
+    // the default are listed in one warning, so a scene from elsewhere is never mapped in silence.
     void convert_materials() {
+        std::string unmapped;
         for (std::size_t i = 0; i < model_.materials.size(); ++i) {
             const tinygltf::Material& src = model_.materials[i];
             AcousticMaterial m;
             m.name = src.name.empty() ? "material " + std::to_string(i) : src.name;
             const std::string where = "material " + std::to_string(i) + " '" + m.name + "'";
-            if (!src.extras_json_string.empty()) apply_acoustic_extras(json::parse(src.extras_json_string), m, where);
+            const json extras = src.extras_json_string.empty() ? json() : json::parse(src.extras_json_string);
+            if (extras.is_object() && extras.contains("vksonar")) {
+                apply_acoustic_extras(extras, m, where);
+            } else if (const std::optional<AcousticMaterial> known = acoustic_material_by_name(m.name)) {
+                const std::string name = m.name;
+                m = *known;
+                m.name = name;
+            } else {
+                unmapped += (unmapped.empty() ? "" : ", ") + ("'" + m.name + "'");
+            }
             if (const std::string problem = m.validate(); !problem.empty())
                 fail(ErrorCode::parse, where + ": extras.vksonar." + problem);
             out_.materials.push_back(m);
         }
+        if (!unmapped.empty())
+            warn("materials without extras.vksonar whose names match no acoustic material use the default "
+                 "(lambert, -30 dB): " +
+                 unmapped);
     }
 
     void apply_acoustic_extras(const json& extras, AcousticMaterial& m, const std::string& where) {

@@ -1,6 +1,7 @@
 // Scene: ownership of SceneData and the engine-facing builder (add_mesh / add_material / add_draw).
 // The glTF loader (gltf_loader.cpp) fills the same SceneData directly, after its own validation.
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -141,6 +142,46 @@ SceneBounds Scene::bounds() const {
         }
     }
     return b;
+}
+
+std::optional<AcousticMaterial> acoustic_material_by_name(const std::string& name) {
+    struct Entry {
+        const char* keyword;
+        double backscatter_db;
+        AcousticMaterial::Model model;
+        double rms_slope, reflection_db; // rough only
+    };
+    using Model = AcousticMaterial::Model;
+    // clang-format off
+    static const Entry kTable[] = {
+        {"steel", -10, Model::rough, 0.05, -1},   {"iron", -10, Model::rough, 0.05, -1},
+        {"metal", -10, Model::rough, 0.05, -1},   {"alumin", -10, Model::rough, 0.05, -1},
+        {"concrete", -15, Model::rough, 0.1, -6}, {"stone", -15, Model::rough, 0.15, -6},
+        {"rock", -15, Model::rough, 0.2, -6},     {"boulder", -15, Model::rough, 0.2, -6},
+        {"brick", -15, Model::rough, 0.1, -6},    {"glass", -15, Model::rough, 0.02, -4},
+        {"gravel", -20, Model::lambert, 0, 0},    {"shell", -20, Model::lambert, 0, 0},
+        {"wood", -20, Model::lambert, 0, 0},      {"timber", -20, Model::lambert, 0, 0},
+        {"rubber", -25, Model::lambert, 0, 0},    {"plastic", -25, Model::lambert, 0, 0},
+        {"pvc", -25, Model::lambert, 0, 0},       {"sand", -27, Model::lambert, 0, 0},
+        {"mud", -35, Model::lambert, 0, 0},       {"silt", -35, Model::lambert, 0, 0},
+        {"clay", -35, Model::lambert, 0, 0},
+    };
+    // clang-format on
+    std::string lower = name;
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    for (const Entry& e : kTable) {
+        if (lower.find(e.keyword) == std::string::npos) continue;
+        AcousticMaterial m;
+        m.name = name;
+        m.backscatter_db = e.backscatter_db;
+        m.model = e.model;
+        if (e.model == Model::rough) {
+            m.rms_slope = e.rms_slope;
+            m.reflection_db = e.reflection_db;
+        }
+        return m;
+    }
+    return std::nullopt;
 }
 
 const SceneStats& Scene::stats() const {
