@@ -29,6 +29,7 @@
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
+#include "host/meta_fields.h"
 #include "legacy/legacy.h"
 #include "vksonar/vksonar.h"
 
@@ -345,19 +346,8 @@ DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::
                          const std::string& device, std::uint64_t seed) {
     DatasetMeta meta;
     meta.config_json = config_to_json(plan.config);
-    nlohmann::ordered_json effects = nlohmann::ordered_json::object();
-    for (const EffectState& e : plan.effects.states)
-        effects[e.name] = {{"on", e.on}, {"why", e.why}};
-    meta.effects_json = effects.dump();
-    nlohmann::ordered_json validity = nlohmann::ordered_json::array();
-    for (const ModelValidity& v : plan.validity)
-        validity.push_back({{"model", v.model},
-                            {"ok", v.ok},
-                            {"key", v.key},
-                            {"value", v.value},
-                            {"domain", v.domain},
-                            {"action", v.action}});
-    meta.validity_json = validity.dump();
+    meta.effects_json = host::effects_json(plan.effects.states).dump();
+    meta.validity_json = host::validity_json(plan.validity).dump();
     meta.scene = scene;
     meta.backend = backend;
     meta.device = device;

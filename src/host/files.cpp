@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "host/host_stages.h"
+#include "host/meta_fields.h"
 
 #if defined(__GNUC__)
 #pragma GCC diagnostic push
@@ -206,21 +207,8 @@ std::string meta_json_text(const Plan& plan, const Frame& frame, const std::stri
     json m = json::object();
     m["seed"] = frame.seed;
     m["frame_index"] = frame.frame_index;
-    json effects = json::object();
-    const std::vector<EffectState>& states = frame.effects.empty() ? plan.effects.states : frame.effects;
-    for (const EffectState& e : states)
-        effects[e.name] = {{"on", e.on}, {"why", e.why}};
-    m["effects"] = std::move(effects);
-    // Where the numbers are a model's and where they are its extrapolation (validity.h).
-    json validity = json::array();
-    for (const ModelValidity& v : plan.validity)
-        validity.push_back({{"model", v.model},
-                            {"ok", v.ok},
-                            {"key", v.key},
-                            {"value", v.value},
-                            {"domain", v.domain},
-                            {"action", v.action}});
-    m["validity"] = std::move(validity);
+    m["effects"] = effects_json(frame.effects.empty() ? plan.effects.states : frame.effects);
+    m["validity"] = validity_json(plan.validity);
     m["stages_run"] = frame.stages_run;
     json timings = json::object();
     for (const StageTime& t : frame.times) {

@@ -1,0 +1,35 @@
+// meta.json's "effects" and "validity" as JSON values, shared by meta.json (files.cpp) and the HDF5
+// dataset's attributes (src/cli/render_cmd.cpp), so both say the same thing the same way.
+#pragma once
+
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "vksonar/frame.h"
+#include "vksonar/validity.h"
+
+namespace vksonar::host {
+
+// {"name": {"on": bool, "why": "..."}, ...} in the plan's effect order.
+inline nlohmann::ordered_json effects_json(const std::vector<EffectState>& states) {
+    nlohmann::ordered_json effects = nlohmann::ordered_json::object();
+    for (const EffectState& e : states)
+        effects[e.name] = {{"on", e.on}, {"why", e.why}};
+    return effects;
+}
+
+// Where the numbers are a model's and where they are its extrapolation (validity.h).
+inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& models) {
+    nlohmann::ordered_json validity = nlohmann::ordered_json::array();
+    for (const ModelValidity& v : models)
+        validity.push_back({{"model", v.model},
+                            {"ok", v.ok},
+                            {"key", v.key},
+                            {"value", v.value},
+                            {"domain", v.domain},
+                            {"action", v.action}});
+    return validity;
+}
+
+} // namespace vksonar::host
