@@ -658,6 +658,16 @@ TEST_F(Cli, InfoScaleAndFramingForAStrangersScene) {
     EXPECT_EQ(energy("unframed"), 0.0);
 }
 
+// bench load on a small grid: every form loads (gltfpack's two where it is installed) and says so.
+TEST_F(Cli, BenchLoadTimesEachForm) {
+    const CliRun r = run({"bench", "load", "--grid", "40"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("| plain (float) |"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("| quantized (KHR_mesh_quantization) |"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("| meshopt (EXT_meshopt_compression) |"), std::string::npos) << r.out;
+    EXPECT_EQ(run({"bench", "load", "--grid", "1"}).exit_code, 2);
+}
+
 TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
     const fs::path out = dir_ / "accurate";
     const CliRun r =

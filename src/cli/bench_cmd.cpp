@@ -1,4 +1,4 @@
-// `vksonar bench speed|effects|accuracy`: argument dispatch to the bench_*.cpp bodies.
+// `vksonar bench speed|effects|accuracy|load`: argument dispatch to the bench_*.cpp bodies.
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -12,14 +12,16 @@
 namespace vksonar::cli {
 
 int run_bench(const std::vector<std::string>& argv) {
-    static const std::vector<std::string> modes = {"speed", "effects", "accuracy"};
+    static const std::vector<std::string> modes = {"speed", "effects", "accuracy", "load"};
     if (argv.empty() || argv[0] == "--help") {
-        std::fprintf(argv.empty() ? stderr : stdout,
-                     "usage: vksonar bench: speed|effects|accuracy\n"
-                     "  speed     per-stage and full-frame times, frames/s, full/depth ratio, RSS growth\n"
-                     "  effects   cost of each effect, on vs off, interleaved\n"
-                     "  accuracy  error vs time over the accuracy knobs against a CPU double reference (CSV + SVG)\n"
-                     "Run 'vksonar bench MODE --help' for the options of a mode.\n");
+        std::fprintf(
+            argv.empty() ? stderr : stdout,
+            "usage: vksonar bench: speed|effects|accuracy|load\n"
+            "  speed     per-stage and full-frame times, frames/s, full/depth ratio, RSS growth\n"
+            "  effects   cost of each effect, on vs off, interleaved\n"
+            "  accuracy  error vs time over the accuracy knobs against a CPU double reference (CSV + SVG)\n"
+            "  load      load time and memory of a million-triangle scene as plain, quantized and meshopt glTF\n"
+            "Run 'vksonar bench MODE --help' for the options of a mode.\n");
         return argv.empty() ? 2 : 0;
     }
     const std::string& mode = argv[0];
@@ -28,7 +30,8 @@ int run_bench(const std::vector<std::string>& argv) {
         known = known || m == mode;
     if (!known)
         throw BadInput("bench: unknown mode '" + mode + "' (did you mean '" + closest_word(mode, modes) +
-                       "'?); usage: vksonar bench: speed|effects|accuracy");
+                       "'?); usage: vksonar bench: speed|effects|accuracy|load");
+    if (mode == "load") return run_bench_load(std::vector<std::string>(argv.begin() + 1, argv.end()));
 #ifdef VKSONAR_HAVE_BENCHMARK
     const std::vector<std::string> rest(argv.begin() + 1, argv.end());
     if (mode == "speed") return bench::run_bench_speed(rest);

@@ -12,5 +12,6 @@ int run_presets(const std::vector<std::string>& args);
 int run_info(const std::vector<std::string>& args);
 int run_compare(const std::vector<std::string>& args);
 int run_bench(const std::vector<std::string>& args);
+int run_bench_load(const std::vector<std::string>& args); // bench_load.cpp; needs no Google Benchmark
 
 } // namespace vksonar::cli
