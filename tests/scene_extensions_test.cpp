@@ -406,6 +406,24 @@ TEST_F(SceneExtensions, MaterialsWithoutExtrasAreMappedByNameOrListedOnce) {
     EXPECT_NE(a->stats().warnings[0].find("'Paint', 'Material.002'"), std::string::npos) << a->stats().warnings[0];
 }
 
+// A committed meshopt file (tests/data/scenes/plane_10m_meshopt.glb: `gltfpack -ke -km -c` of
+// plane_10m.gltf, also a seed of the glTF fuzzer) loads to its source's plate, within half the 14-bit
+// quantization step of its 4 m extent (1.2e-4 m).
+TEST_F(SceneExtensions, CommittedMeshoptPlateEqualsItsSource) {
+    const auto plain = Scene::load_gltf(VKSONAR_TEST_DIR "/data/scenes/plane_10m.gltf");
+    const auto packed = Scene::load_gltf(VKSONAR_TEST_DIR "/data/scenes/plane_10m_meshopt.glb");
+    ASSERT_TRUE(plain.ok()) << plain.error().message;
+    ASSERT_TRUE(packed.ok()) << packed.error().message;
+    const SceneBounds a = plain->bounds(), b = packed->bounds();
+    for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(b.min_m[k], a.min_m[k], 1.3e-4) << k;
+        EXPECT_NEAR(b.max_m[k], a.max_m[k], 1.3e-4) << k;
+    }
+    EXPECT_EQ(packed->stats().triangles, plain->stats().triangles);
+    EXPECT_EQ(packed->stats().extensions,
+              (std::vector<std::string>{"KHR_mesh_quantization", "EXT_meshopt_compression"}));
+}
+
 // Every drawn triangle as its three world-space corners (double, from float positions), rotated to
 // start at its smallest corner (the winding kept), sorted: the scene's geometry whatever its order.
 std::vector<std::array<double, 9>> triangle_set(const Scene& scene) {
