@@ -310,7 +310,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     // come from there, lost 5-20 dB). And at every azimuth of a slice: a perspective slice sees its edge
     // columns' rays at lower elevations (tan(elevation) = v / sqrt(1 + u^2)), so v reaches further by
     // sqrt(1 + tan_half_h^2) to hold the elevation there (a 60-degree slice's edges saw only +-17.5 of
-    // +-20 degrees). The legacy modes keep their plugins' plain vertical field of view.
+    // +-20 degrees). The null is found by sampling (horizontal_lobes: steps of 0.045 deg); gaussian and
+    // box patterns have none. Rows keep rows_per_vfov per beamwidth of the centre column's coverage
+    // (docs/pipeline.md). The legacy modes keep their plugins' plain vertical field of view.
     const double vfov = c.vfov_deg * kDegToRad;
     p.vpattern_chebyshev_a = c.vertical_pattern == BeamPattern::chebyshev ? chebyshev_a(c.vertical_sidelobe_db) : 0.0;
     p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
@@ -319,9 +321,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     double tan_half_v = std::tan(half_coverage);
     if (c.mode == SonarMode::physical) {
         if (c.effects.vertical_pattern != EffectMode::off) {
-            const HorizontalLobes lobes =
-                horizontal_lobes(static_cast<std::uint32_t>(c.vertical_pattern), p.vpattern_k, p.vpattern_halfwidth_rad,
-                                 p.vpattern_chebyshev_a, 0.5 * kPi);
+            const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.vertical_pattern), p.vpattern_k,
+                                                           p.vpattern_halfwidth_rad, p.vpattern_chebyshev_a, 0.5 * kPi);
             half_coverage = std::max(half_coverage, lobes.first_null_rad);
         }
         half_coverage = std::min(half_coverage, 85.0 * kDegToRad);
