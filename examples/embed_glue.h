@@ -26,20 +26,27 @@ inline vksonar::SonarConfig demo_config() {
     config.range_max_m = 40.0;
     config.horizontal_beamwidth_deg = 1.0;
     config.default_backscatter_db = -30.0;
+    // +-25 deg: past the sinc pattern's first null (23.1 deg for a 20-degree beam), so this, not the
+    // null, sets the depth pass's vertical coverage and engine_options_for can state it in closed form.
+    config.vertical_coverage = 2.5;
     config.effects.speckle = vksonar::EffectMode::off;
     config.effects.ambient_noise = vksonar::EffectMode::off;
     config.effects.tvg = vksonar::EffectMode::off;
     return config;
 }
 
-// The engine camera that sees exactly the standalone render's pixel grid (one slice).
+// The engine camera that sees exactly the standalone render's pixel grid (one slice). The vertical
+// coverage rule of docs/pipeline.md for a config whose vertical_coverage x vfov / 2 lies past the vertical
+// pattern's first null (demo_config): tan(vertical_coverage x vfov / 2), times sqrt(1 + tan_half_h^2) so
+// that the slice's edge columns reach that elevation too.
 inline EngineOptions engine_options_for(const vksonar::SonarConfig& config, const vksonar::Frame& standalone) {
     const double d = 3.14159265358979323846 / 180.0;
     EngineOptions options;
     options.width = standalone.columns;
     options.height = standalone.rows;
     options.tan_half_h = std::tan(0.5 * config.hfov_deg * d);
-    options.tan_half_v = std::tan(0.5 * std::min(config.vfov_deg * config.vertical_coverage, 170.0) * d);
+    options.tan_half_v = std::tan(0.5 * std::min(config.vfov_deg * config.vertical_coverage, 170.0) * d) *
+                         std::sqrt(1.0 + options.tan_half_h * options.tan_half_h);
     return options;
 }
 

@@ -83,7 +83,9 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a,
     }
     REAL x = k * sin(a);
     if (shape == 4u) { // chebyshev
-        REAL d = chebyshev_a * chebyshev_a - x * x;
+        // (A - x)(A + x), not A^2 - x^2: near x = A (the edge of the main lobe, and past it towards the
+        // first null) the squares cancel and float would lose most of the difference's digits.
+        REAL d = (chebyshev_a - x) * (chebyshev_a + x);
         REAL amp_cheb = d >= REAL(0) ? cosh(sqrt(d)) : cos(sqrt(-d));
         amp_cheb = amp_cheb / cosh(chebyshev_a);
         return amp_cheb * amp_cheb;

@@ -232,17 +232,23 @@ TEST_P(EffectsTest, EveryRenderReportsItsOwnStagesOnce) {
 // ---- vertical beam pattern -------------------------------------------------------------------------
 
 TEST_P(EffectsTest, VerticalPatternWeightsEachPixelByThePatternAtItsElevation) {
-    // A quad taller than the depth pass's vertical coverage (2 x 20 deg) at 10 m.
+    // A quad taller than the depth pass's vertical coverage at 10 m (+-31 deg).
     Scene scene;
     add_quad(scene, 10.0, 0.0, 0.0, 2.0, 12.0);
     SonarConfig on = clean_config(), off = clean_config();
     on.effects.vertical_pattern = EffectMode::on;
     off.effects.vertical_pattern = EffectMode::off;
+    // The same pixel grid both ways: with the pattern on the coverage reaches at least its first null
+    // (23.1 deg for this 20-degree sinc), off it is vertical_coverage x vfov / 2. 2.5 beamwidths (+-25 deg,
+    // past the null) is the larger of the two either way, so both renders share rows and tan_half_v.
+    on.vertical_coverage = off.vertical_coverage = 2.5;
     ASSERT_EQ(on.vertical_pattern, BeamPattern::sinc);
     auto a = render_once(GetParam(), on, scene, {}, kEchoAndDepth);
     auto b = render_once(GetParam(), off, scene, {}, kEchoAndDepth);
     ASSERT_TRUE(a && b);
     const Plan& plan = renderer_plan(a->renderer);
+    ASSERT_EQ(plan.rows, renderer_plan(b->renderer).rows);
+    ASSERT_EQ(plan.tan_half_v, renderer_plan(b->renderer).tan_half_v);
     const double vfov = plan.config.vfov_deg * kDeg;
     std::size_t checked = 0;
     double min_expected = 1.0;
@@ -259,7 +265,7 @@ TEST_P(EffectsTest, VerticalPatternWeightsEachPixelByThePatternAtItsElevation) {
         ++checked;
     }
     EXPECT_GT(checked, 10000u);
-    EXPECT_LT(min_expected, 0.1); // the quad reaches +-20 deg elevation, past the pattern's first null
+    EXPECT_LT(min_expected, 0.1); // the quad fills the coverage, past the pattern's first null
 }
 
 TEST_P(EffectsTest, VerticalPatternHalvesATargetAtHalfTheBeamwidth) {
@@ -268,6 +274,9 @@ TEST_P(EffectsTest, VerticalPatternHalvesATargetAtHalfTheBeamwidth) {
     SonarConfig on = clean_config(), off = clean_config();
     on.effects.vertical_pattern = EffectMode::on;
     off.effects.vertical_pattern = EffectMode::off;
+    // The same pixel grid both ways (the pattern's first null, 23.1 deg, sets the coverage when it is on;
+    // 2.5 beamwidths lies past it), so the target's partly covered edge rows are the same pixels in both.
+    on.vertical_coverage = off.vertical_coverage = 2.5;
     const double half = 0.5 * on.vfov_deg * kDeg;
     for (const double elevation : {0.0, half}) {
         // 0.35 m at 10 m spans +-1 deg of elevation: over that span the sinc^2's curvature changes the
@@ -293,10 +302,19 @@ TEST_P(EffectsTest, VerticalPatternOffIsAnAllOnePattern) {
     off.vertical_coverage = 1.0;
     box.effects.vertical_pattern = EffectMode::on;
     box.vertical_pattern = BeamPattern::box;
-    box.vertical_coverage = 1.0; // every pixel centre lies inside +-vfov/2
+    box.vertical_coverage = 1.0; // a box has no null: both cover +-vfov/2 at the slices' edge columns
+    // Every pixel centre must lie inside +-vfov/2. The coverage holds that elevation at a slice's edge
+    // columns, so towards its centre column v reaches sqrt(1 + tan^2(half slice)) higher: 15-degree
+    // slices stretch it by 1.008, less than the half row the outermost pixel centres keep from the edge
+    // (1 - 1 / rows, 65 rows). With 60-degree slices (1.076) the top and bottom rows' centre columns see
+    // past +-vfov/2, where the box is 0.
+    off.max_slice_deg = box.max_slice_deg = 15.0;
     auto a = render_once(GetParam(), off, scene, {}, save_echo);
     auto b = render_once(GetParam(), box, scene, {}, save_echo);
     ASSERT_TRUE(a && b);
+    const Plan& plan = renderer_plan(b->renderer);
+    const double top_v = plan.tan_half_v * (1.0 - 1.0 / plan.rows);
+    ASSERT_LE(std::atan(top_v), 0.5 * box.vfov_deg * kDeg) << "a pixel centre lies outside the box";
     EXPECT_GT(sum(a->frame.clean), 0.0);
     EXPECT_TRUE(same_bits(a->frame.echo, b->frame.echo));
     EXPECT_TRUE(same_bits(a->frame.clean, b->frame.clean));

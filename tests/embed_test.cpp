@@ -123,8 +123,13 @@ TEST_P(EmbedMatchTest, ProcessMatchesStandaloneRender) {
     ASSERT_EQ(embedded.columns, reference.columns);
     ASSERT_EQ(embedded.rows, reference.rows);
 
-    // Depth: same hit/miss except on a thin band along edges; view z agrees in the interior.
+    // The host camera is the standalone grid's (host::engine_options_for states its coverage rule).
     const Plan& plan = renderer_plan(*standalone);
+    ASSERT_EQ(plan.slices, 1u);
+    ASSERT_NEAR(options.tan_half_h, plan.tan_half_h, 1e-12 * plan.tan_half_h);
+    ASSERT_NEAR(options.tan_half_v, plan.tan_half_v, 1e-12 * plan.tan_half_v);
+
+    // Depth: same hit/miss except on a thin band along edges; view z agrees in the interior.
     std::size_t hits = 0, mismatched = 0;
     double max_rel = 0, max_host_ulps = 0;
     // Standard-Z host depth resolves z only to one host depth ulp (kHostStandardZUlps): the relative

@@ -74,8 +74,10 @@ TEST(Fp16Echo, GpuMatchesCpuReferenceWithinOneHalfUlp) {
 
 // On the same input the fp16 echo is the fp32 echo rounded to 11 significant bits: relative error
 // <= 2^-11 for energy (the power-of-2 scale is exact) and range; energies more than 2^29 below the
-// brightest possible pixel are subnormal halves (absolute step 2^-24 / scale), more than 2^40 below
-// it they underflow to 0 (none in this scene).
+// brightest possible pixel are subnormal halves (absolute step 2^-24 / scale), and those below half
+// that step, 2^-25 / scale, round to 0. Some do in this scene: the depth pass covers the vertical
+// pattern out to its first null, where the pixels' energy goes to 0 with the pattern. Any other
+// zero would be a bug, so each one is checked against that threshold.
 TEST(Fp16Echo, QuantizationIsHalfAnUlpOfBinary16) {
     SonarConfig config = quiet_config();
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
@@ -90,22 +92,29 @@ TEST(Fp16Echo, QuantizationIsHalfAnUlpOfBinary16) {
     const auto& b = half->frame.echo;
     ASSERT_EQ(a.size(), b.size());
     // Subnormal halves (scaled energy below 2^-14) keep an absolute step of 2^-24 / scale instead.
-    const double smallest_normal = std::ldexp(1.0, -14) / renderer_plan(half->renderer).params.echo_scale;
+    const double echo_scale = renderer_plan(half->renderer).params.echo_scale;
+    const double smallest_normal = std::ldexp(1.0, -14) / echo_scale;
+    const double rounds_to_zero = std::ldexp(1.0, -25) / echo_scale; // half the smallest subnormal (ties to even)
     double max_rel = 0, max_range_rel = 0;
-    std::size_t changed = 0, lit = 0, subnormal = 0;
+    std::size_t changed = 0, lit = 0, subnormal = 0, underflowed = 0;
     for (std::size_t i = 0; i < a.size(); i += 2) {
         if (a[i] > 0) {
             ++lit;
-            ASSERT_GT(b[i], 0.0f) << "pixel " << i / 2 << " underflowed";
+            if (b[i] == 0.0f) {
+                ++underflowed;
+                ASSERT_LE(a[i], rounds_to_zero) << "pixel " << i / 2 << " underflowed";
+            }
             subnormal += a[i] < smallest_normal;
             max_rel = std::max(max_rel, std::abs(double(b[i]) - a[i]) / std::max(double(a[i]), smallest_normal));
         }
         if (a[i + 1] > 0) max_range_rel = std::max(max_range_rel, std::abs(double(b[i + 1]) - a[i + 1]) / a[i + 1]);
         changed += a[i] != b[i];
     }
-    std::printf("[fp16 quantization] %zu lit pixels (%zu subnormal), %zu changed, max rel energy %.2e, range %.2e\n",
-                lit, subnormal, changed, max_rel, max_range_rel);
+    std::printf("[fp16 quantization] %zu lit pixels (%zu subnormal, %zu rounded to 0), %zu changed, max rel energy "
+                "%.2e, range %.2e\n",
+                lit, subnormal, underflowed, changed, max_rel, max_range_rel);
     ASSERT_GT(lit, 1000u);
+    EXPECT_LT(underflowed, lit / 100); // only pixels next to the pattern's null, a thin band of rows
     EXPECT_LE(max_rel, std::ldexp(1.0, -11));
     EXPECT_LE(max_range_rel, std::ldexp(1.0, -11));
     EXPECT_GT(changed, lit / 2); // it does quantize

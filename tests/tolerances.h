@@ -54,6 +54,17 @@ constexpr double kGeometricCosTol = 5e-4;
 // the relative error is measured against max(value, 1e-6 x frame peak).
 constexpr double kEchoRelTol = 1e-4;
 constexpr double kEchoRelFloor = 1e-6;
+// The vertical pattern's power b (1 on its axis) from identical inputs, absolute, as a share of the
+// pixel's echo without the pattern (E0 = E / b). The depth pass covers the pattern out to its first null
+// (src/core/plan.cpp), where b -> 0 and no relative tolerance holds: b is a function of
+// x = k sin(psi), psi from atan2, and the driver's sin/atan2 put ~2e-6 relative error into x, so b
+// carries an absolute error |db/dx| x 2e-6, which falls only as sqrt(b) towards a null (up to ~2e-6 on
+// the main lobe's flank, where b ~ 0.5 keeps it inside kEchoRelTol). Largest measured on lavapipe where the relative
+// tolerance fails: sinc (bundled scenes) 1.7e-7 of E0 at b = 1.7e-3; -35 dB chebyshev 1.3e-6 at
+// b = 9.4e-3 (its main lobe's skirt, cosh(sqrt((A - x)(A + x))) with A - x small). A pixel passes if it
+// agrees within kEchoRelTol of its value or within kVerticalPatternAbsTol x E0: 5e-6, -53 dB of the
+// beam's peak, about 4x the largest measured.
+constexpr double kVerticalPatternAbsTol = 5e-6;
 constexpr double kRangeAbsTolM = 1e-4; // slant range of up to 120 m in float: ulp 7.6e-6 m
 
 // Beamform from identical echo: the same sums in the same order in float. Bin coordinates multiply

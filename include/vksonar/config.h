@@ -93,7 +93,7 @@ struct SonarConfig {
     // Accuracy knobs (DESIGN §5).
     double pixels_per_beam = 2.0;     // horizontal oversampling (pixel columns per beam spacing)
     std::uint32_t rows_per_vfov = 64; // pixel rows per vertical beamwidth
-    double vertical_coverage = 2.0;   // depth pass covers this many vertical beamwidths
+    double vertical_coverage = 2.0;   // depth pass covers at least this many vertical beamwidths
     double max_slice_deg = 60.0;      // widest frustum slice
     NormalMethod normal_method = NormalMethod::sobel3;
     RangeKernel range_kernel = RangeKernel::footprint;

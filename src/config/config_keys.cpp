@@ -317,7 +317,8 @@ std::vector<ConfigKey> make_table() {
         VKS_COUNT("accuracy.rows_per_vfov", rows_per_vfov, "", "Depth-pass pixel rows per vertical beamwidth, >= 1",
                   closed(1, 4096, "one row to the tallest depth pass (4096 rows)")),
         VKS_NUMBER("accuracy.vertical_coverage", vertical_coverage, "",
-                   "Depth pass covers this many vertical beamwidths (pattern tails), >= 1",
+                   "Depth pass covers at least this many vertical beamwidths, >= 1; physical mode: also the "
+                   "vertical pattern to its first null, at every azimuth of a slice",
                    closed(1, 10, "the beam itself to its pattern tails 10 beamwidths out")),
         VKS_NUMBER("accuracy.max_slice", max_slice_deg, "deg", "Widest perspective slice of the depth pass, (0, 120]",
                    open_low(0, 120, "a perspective slice wider than 120 deg stretches its edge pixels by over 4x")),

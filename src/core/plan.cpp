@@ -304,8 +304,32 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.slice_width_rad = hfov / p.slices;
     p.tan_half_h = std::tan(0.5 * p.slice_width_rad);
 
-    p.vertical_coverage_rad = std::min(c.vfov_deg * c.vertical_coverage, 170.0) * kDegToRad;
-    p.tan_half_v = std::tan(0.5 * p.vertical_coverage_rad);
+    // Vertical coverage (physical mode): at least vertical_coverage beamwidths and, with the vertical
+    // pattern on, its main lobe out to the first null, where the pattern's power reaches 0 (cut at
+    // 20 deg, the sinc pattern of a 20-degree beam is still at -17 dB: the first seabed returns, which
+    // come from there, lost 5-20 dB). And at every azimuth of a slice: a perspective slice sees its edge
+    // columns' rays at lower elevations (tan(elevation) = v / sqrt(1 + u^2)), so v reaches further by
+    // sqrt(1 + tan_half_h^2) to hold the elevation there (a 60-degree slice's edges saw only +-17.5 of
+    // +-20 degrees). The null is found by sampling (horizontal_lobes: steps of 0.045 deg); gaussian and
+    // box patterns have none. Rows keep rows_per_vfov per beamwidth of the centre column's coverage
+    // (docs/pipeline.md). The legacy modes keep their plugins' plain vertical field of view.
+    const double vfov = c.vfov_deg * kDegToRad;
+    p.vpattern_chebyshev_a = c.vertical_pattern == BeamPattern::chebyshev ? chebyshev_a(c.vertical_sidelobe_db) : 0.0;
+    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
+    p.vpattern_halfwidth_rad = 0.5 * vfov;
+    double half_coverage = 0.5 * std::min(c.vfov_deg * c.vertical_coverage, 170.0) * kDegToRad;
+    double tan_half_v = std::tan(half_coverage);
+    if (c.mode == SonarMode::physical) {
+        if (c.effects.vertical_pattern != EffectMode::off) {
+            const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.vertical_pattern), p.vpattern_k,
+                                                           p.vpattern_halfwidth_rad, p.vpattern_chebyshev_a, 0.5 * kPi);
+            half_coverage = std::max(half_coverage, lobes.first_null_rad);
+        }
+        half_coverage = std::min(half_coverage, 85.0 * kDegToRad);
+        tan_half_v = std::tan(half_coverage) * std::sqrt(1.0 + p.tan_half_h * p.tan_half_h);
+    }
+    p.tan_half_v = tan_half_v;
+    p.vertical_coverage_rad = 2.0 * std::atan(p.tan_half_v); // at the slice's centre column
     const double rows = std::ceil(c.rows_per_vfov * p.vertical_coverage_rad / (c.vfov_deg * kDegToRad));
     if (rows > kMaxRows) {
         return make_error(ErrorCode::invalid_argument,
@@ -346,13 +370,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     for (std::uint32_t k = 0; k < p.bins; ++k)
         p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
 
-    // Beam patterns.
-    const double vfov = c.vfov_deg * kDegToRad;
-    p.vpattern_chebyshev_a = c.vertical_pattern == BeamPattern::chebyshev ? chebyshev_a(c.vertical_sidelobe_db) : 0.0;
+    // Beam patterns (the vertical one's constants are set with the vertical coverage above).
     p.hpattern_chebyshev_a =
         c.horizontal_pattern == BeamPattern::chebyshev ? chebyshev_a(c.horizontal_sidelobe_db) : 0.0;
-    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
-    p.vpattern_halfwidth_rad = 0.5 * vfov;
     p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw, p.hpattern_chebyshev_a);
     p.hpattern_halfwidth_rad = 0.5 * hbw;
 

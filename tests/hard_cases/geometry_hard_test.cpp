@@ -96,7 +96,10 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
     // A pixel at elevation -psi hits the seabed at r = h / sin(psi) with cos(incidence) = sin(psi), so
     // E_p / Omega_p = mu sin(psi) / r^2 = mu sin^3(psi) / h^2: it goes to 0 smoothly as the ray approaches
     // the horizon.
-    const SonarConfig config = grazing_seabed_config();
+    SonarConfig config = grazing_seabed_config();
+    // Rows fine enough that some lie between the horizon and 1 degree below it (the row spacing near the
+    // horizon is 2 tan_half_v / rows: 1.3 degrees at 16 rows per beamwidth, 0.65 at 32).
+    config.rows_per_vfov = 32;
     const double h = kSeabedDepth, mu_db = -20.0;
     Scene scene;
     AcousticMaterial material;
@@ -108,6 +111,19 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
     const Frame& f = r->frame;
     const double mu = std::pow(10.0, mu_db / 10.0);
     const double du = 2 * plan.tan_half_h / plan.slice_columns, dv = 2 * plan.tan_half_v / plan.rows;
+    // The most grazing pixel of this grid: the smallest sin(psi) of a pixel-centre ray that meets the
+    // seabed inside the range gate (slant range h / sin(psi) < gate_max: the echo stage's cut, a kernel
+    // half-width past range_max).
+    double grazing_cos = 1;
+    for (std::uint32_t c = 0; c < plan.columns; ++c) {
+        const double u = (2.0 * (c % plan.slice_columns + 0.5) / plan.slice_columns - 1) * plan.tan_half_h;
+        for (std::uint32_t j = 0; j < plan.rows; ++j) {
+            const double v = (2.0 * (j + 0.5) / plan.rows - 1) * plan.tan_half_v;
+            const double sin_psi = v / std::sqrt(1 + u * u + v * v);
+            if (sin_psi > 0 && h / sin_psi < plan.gate_max_m) grazing_cos = std::min(grazing_cos, sin_psi);
+        }
+    }
+    ASSERT_LT(grazing_cos, std::sin(1.0 * kDeg)) << "the grid must reach grazing (psi -> asin(h / range_max))";
     double max_rel = 0, min_cos = 1;
     int columns_checked = 0;
     for (std::uint32_t c = 0; c < plan.columns; ++c) {
@@ -142,7 +158,8 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
     }
     std::printf("[grazing seabed] max rel error of E/Omega %.2e, smallest cos %.4f\n", max_rel, min_cos);
     EXPECT_EQ(columns_checked, int(plan.columns));
-    EXPECT_LT(min_cos, std::sin(1.0 * kDeg)) << "the view must reach grazing (psi -> asin(h / range_max))";
+    // The most grazing pixel is seen, with the Sobel's cos (1e-3 absolute on an exact plane).
+    EXPECT_NEAR(min_cos, grazing_cos, 1e-3) << "the view must reach grazing (psi -> asin(h / range_max))";
 }
 
 TEST_P(HardCase, RoughSeabedAtGrazingIsFiniteAndTurnsIntoLambertExactly) {
@@ -245,12 +262,16 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMaxIsOutAndJustInsideLandsInTheLastBin) {
         ASSERT_TRUE(a);
         EXPECT_EQ(total(a->frame.clean), 0.0) << "r >= range_max is outside the window";
     }
-    // The tent kernel (small_config) splits a return between the two nearest bin centres: on axis, at
-    // exactly range_max, half goes to the last bin and half beyond the window, where it is dropped. So
-    // the last bin gets half of what the same plate gives at the last bin's centre, where all of it
-    // lands there, times the two-way loss over the half bin between (r^-2 of a facing plate's pixels,
-    // whose solid angles are the same, and the absorption). Off axis the rays are longer (the plate's
-    // edge rays by 3e-4 relative: 0.2 % less share for the last bin): 1 % covers it.
+    // The default footprint kernel on a facing plate (its pixels' ranges equal: a footprint of one bin)
+    // is the tent, which splits a return between the two nearest bin centres: on axis, at exactly
+    // range_max, half goes to the last bin and half beyond the window, where it is dropped. So the last
+    // bin gets half of what the same plate gives at the last bin's centre, where all of it lands there,
+    // times the two-way loss over the half bin between (r^-2 of a facing plate's pixels, whose solid
+    // angles are the same, and the absorption). The plates (0.5 x 1 m at 40 m) cover the pixels
+    // nearest the axis, whose rays are longer than the axis by L = |(u, v, 1)|: at slant range r L each
+    // gives the last bin (centre r_c) the share 1 - (r L - r_c) / w of the tent (the rest lies past it),
+    // 1 % less of it for L - 1 = 8e-5 at this grid; that share is part of the expected ratio.
+    ASSERT_EQ(config.range_kernel, RangeKernel::footprint);
     Scene at_centre;
     const double w = (config.range_max_m - config.range_min_m) / config.bins;
     add_quad(at_centre, config.range_max_m - 0.5 * w, 0.0, 0.0, 0.5, 1.0);
@@ -259,6 +280,25 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMaxIsOutAndJustInsideLandsInTheLastBin) {
     auto centre = render_checked(GetParam(), config, at_centre);
     auto edge = render_checked(GetParam(), config, small_at_max);
     ASSERT_TRUE(centre && edge);
+    // The pixel rays that meet the plate at range_max (half sizes 0.25 m across, 0.5 m up): all at the
+    // same |u| and |v| (the grid is symmetric about the axis), so one L for all of them.
+    const Plan& plan = renderer_plan(edge->renderer);
+    double L = 0;
+    std::size_t covered = 0;
+    for (std::uint32_t j = 0; j < plan.rows; ++j) {
+        for (std::uint32_t c = 0; c < plan.columns; ++c) {
+            const double u = (2.0 * (c + 0.5) / plan.columns - 1) * plan.tan_half_h;
+            const double v = (2.0 * (j + 0.5) / plan.rows - 1) * plan.tan_half_v;
+            if (std::abs(u) * config.range_max_m >= 0.25 || std::abs(v) * config.range_max_m >= 0.5) continue;
+            const double length = std::sqrt(1 + u * u + v * v);
+            if (covered++ > 0) {
+                ASSERT_NEAR(length, L, 1e-12) << "pixels at different distances from the axis";
+            }
+            L = length;
+        }
+    }
+    ASSERT_EQ(plan.slices, 1u);
+    ASSERT_GT(covered, 0u);
     const auto last_bin = [](const Frame& f) {
         double s = 0;
         for (std::uint32_t j = 0; j < f.beams; ++j)
@@ -266,16 +306,18 @@ TEST_P(HardCase, SurfaceExactlyAtRangeMaxIsOutAndJustInsideLandsInTheLastBin) {
         return s;
     };
     const double r_c = config.range_max_m - 0.5 * w, r_m = config.range_max_m;
-    const double expected =
-        0.5 * (r_c * r_c) / (r_m * r_m) * std::pow(10.0, -2.0 * config.absorption_db_per_m * (r_m - r_c) / 10.0);
+    const double share_edge = 1 - (r_m * L - r_c) / w, share_centre = 1 - (r_c * L - r_c) / w;
+    const double expected = share_edge / share_centre * (r_c * r_c) / (r_m * r_m) *
+                            std::pow(10.0, -2.0 * config.absorption_db_per_m * (r_m - r_c) / 10.0);
     ASSERT_GT(last_bin(centre->frame), 0.0);
     EXPECT_NEAR(last_bin(edge->frame) / last_bin(centre->frame), expected, 0.01 * expected);
     EXPECT_NEAR(last_bin(edge->frame), total(edge->frame.clean), 1e-6 * total(edge->frame.clean))
         << "nothing of it anywhere but the last bin";
 
-    // A plate 10 mm inside range_max on axis, covering only the 2 x 2 pixels around the axis
-    // (+-0.23 deg, +-0.63 deg): their rays are 1.05e-4 longer than the axis, so their slant ranges are
-    // 39.99 * 1.000105 = 39.9942 m < range_max, inside the last bin [39.69, 40) m; nothing out of bounds.
+    // A plate 10 mm inside range_max on axis, covering the same pixels nearest the axis: their rays are
+    // L times the axis (8e-5 longer at this grid), so their slant ranges are 39.99 L = 39.993 m < range_max,
+    // inside the last bin [39.69, 40) m; nothing out of bounds.
+    ASSERT_LT((config.range_max_m - 1e-2) * L, config.range_max_m);
     Scene inside;
     add_quad(inside, config.range_max_m - 1e-2, 0.0, 0.0, 0.5, 1.0);
     auto b = render_checked(GetParam(), config, inside);
@@ -361,20 +403,34 @@ TEST_P(HardCase, SonarInsideAClosedBoxSeesWallsAllAroundAtTheRightRanges) {
     ASSERT_TRUE(r);
     const Plan& plan = renderer_plan(r->renderer);
     const Frame& f = r->frame;
-    std::size_t hits = 0;
-    double r_min = 1e9, r_max = 0;
+    std::size_t hits = 0, wrong = 0;
+    double r_min = 1e9, r_max = 0, farthest = 0;
     for (std::size_t p = 0; p < f.depth.size(); ++p) {
         hits += f.depth[p] > 0;
+        // Each pixel-centre ray D = f_s + u r_s + v d (docs/pipeline.md) leaves the box (walls at 5 m) at
+        // slant range 5 |D| / max(|D_x|, |D_y|, |D_z|): its range, whatever the grid's coverage.
+        const std::uint32_t c = std::uint32_t(p % plan.columns), j = std::uint32_t(p / plan.columns);
+        const double u = (2.0 * (c % plan.slice_columns + 0.5) / plan.slice_columns - 1) * plan.tan_half_h;
+        const double v = (2.0 * (j + 0.5) / plan.rows - 1) * plan.tan_half_v;
+        const double phi = plan.slice_info[c / plan.slice_columns].center_azimuth_rad;
+        const double D[3] = {std::cos(phi) + u * std::sin(phi), std::sin(phi) - u * std::cos(phi), -v};
+        const double expected = 5.0 * std::sqrt(D[0] * D[0] + D[1] * D[1] + D[2] * D[2]) /
+                                std::max({std::abs(D[0]), std::abs(D[1]), std::abs(D[2])});
+        farthest = std::max(farthest, expected);
         if (f.echo[2 * p] > 0) {
             r_min = std::min(r_min, double(f.echo[2 * p + 1]));
             r_max = std::max(r_max, double(f.echo[2 * p + 1]));
+            // Float depth: 1e-4 relative (tolerances.h).
+            wrong += std::abs(f.echo[2 * p + 1] - expected) > 1e-4 * expected;
         }
     }
     EXPECT_EQ(hits, f.depth.size()) << "every ray hits a wall";
-    // Walls at 5 m; the farthest point inside the vertical coverage (+-20 deg) is a vertical edge at
-    // 5 sqrt(2) / cos(20 deg) m. Float depth: 1e-4 relative (tolerances.h).
+    EXPECT_EQ(wrong, 0u) << "pixels whose slant range is not their ray's exit from the box";
+    // Walls at 5 m; the farthest pixel ray leaves through a vertical edge (5 sqrt(2) horizontally) at
+    // the top or bottom of the coverage.
     EXPECT_GE(r_min, 5.0 * (1 - 1e-4));
-    EXPECT_LE(r_max, 5.0 * std::sqrt(2.0) / std::cos(20 * kDeg) * (1 + 1e-4));
+    EXPECT_LE(r_max, farthest * (1 + 1e-4));
+    EXPECT_GT(farthest, 5.0 * std::sqrt(2.0));
     const int k_lo = int((5.0 - config.range_min_m) / plan.bin_width_m) - 1;
     const int k_hi = int((r_max - config.range_min_m) / plan.bin_width_m) + 1;
     double outside = 0;
