@@ -1,5 +1,5 @@
 // Legacy modes (src/legacy, docs/legacy.md): the uuv_simulator and GTRI chains step by step. Every
-// expected value comes from shared/design/LEGACY.md or a closed form written out here, never from a
+// expected value comes from docs/legacy.md or a closed form written out here, never from a
 // previous run of the code under test.
 #include <sys/wait.h>
 #include <unistd.h>

@@ -1,5 +1,5 @@
 // GTRI-based sonar (gtri_based_fls, from SyllogismRXS syllo-gazebo), step by step as
-// shared/design/LEGACY.md describes it: point cloud -> x jitter -> 600x600 image of radius-1 discs ->
+// docs/legacy.md describes it: point cloud -> x jitter -> 600x600 image of radius-1 discs ->
 // 3x3 median -> jet -> black outside the fan -> 180-degree rotation. Also the two legacy point clouds
 // built from vksonar's depth pass.
 #include <algorithm>

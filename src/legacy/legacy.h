@@ -1,4 +1,4 @@
-// Legacy modes (docs/legacy.md, shared/design/LEGACY.md): step-by-step reproductions of the
+// Legacy modes (docs/legacy.md): step-by-step reproductions of the
 // uuv_simulator image sonar (gazebo_ros_image_sonar) and the GTRI-based sonar, so users of those Gazebo
 // plugins get the picture they know. Own code written from the plugins' published notes; no OpenCV.
 //

@@ -1,4 +1,4 @@
-// uuv_simulator image sonar (gazebo_ros_image_sonar), step by step as shared/design/LEGACY.md describes
+// uuv_simulator image sonar (gazebo_ros_image_sonar), step by step as docs/legacy.md describes
 // it: depth -> normals -> "multibeam" SNR -> 400-row raw scan -> visual scan. The plugin's quirks are
 // kept on purpose (min-max normalizations, 17 m range, off-by-one principal point, overwrite projection);
 // the only departures are where the plugin produced NaN or undefined behaviour (documented in legacy.h).

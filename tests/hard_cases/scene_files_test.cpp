@@ -51,8 +51,8 @@ protected:
         root_ = fs::temp_directory_path() / ("vksonar_scene_files_" + std::to_string(::getpid()) + "_" + info->name());
         fs::remove_all(root_);
         fs::create_directories(root_ / "scenes" / "sub");
-        fs::create_directories(root_ / "shared");
-        write_text(root_ / "shared" / "triangle.bin", triangle_bytes());
+        fs::create_directories(root_ / "elsewhere");
+        write_text(root_ / "elsewhere" / "triangle.bin", triangle_bytes());
     }
     void TearDown() override { fs::remove_all(root_); }
 
@@ -109,13 +109,13 @@ TEST_F(SceneFiles, AFifoIsRefusedWithoutBlocking) {
 
 TEST_F(SceneFiles, PathsLeavingTheAssetRootAreRefused) {
     // ".." to a real file of exactly the right size outside the scene's folder.
-    expect_refused(load("../shared/triangle.bin"), "../shared/triangle.bin", "lies outside the asset root");
-    expect_refused(load("sub/../../shared/triangle.bin"), "sub/../../shared/triangle.bin", "(use --asset-root)");
+    expect_refused(load("../elsewhere/triangle.bin"), "../elsewhere/triangle.bin", "lies outside the asset root");
+    expect_refused(load("sub/../../elsewhere/triangle.bin"), "sub/../../elsewhere/triangle.bin", "(use --asset-root)");
     // A symlink inside the folder to a file outside it.
-    fs::create_symlink(root_ / "shared" / "triangle.bin", root_ / "scenes" / "link.bin");
+    fs::create_symlink(root_ / "elsewhere" / "triangle.bin", root_ / "scenes" / "link.bin");
     expect_refused(load("link.bin"), "link.bin", "lies outside the asset root");
     // Absolute paths and URLs, whatever they point at.
-    const std::string absolute = (root_ / "shared" / "triangle.bin").string();
+    const std::string absolute = (root_ / "elsewhere" / "triangle.bin").string();
     expect_refused(load(absolute), absolute, "is an absolute path");
     expect_refused(load("file://" + absolute), "file://" + absolute, "is not a relative path");
 }
@@ -123,20 +123,20 @@ TEST_F(SceneFiles, PathsLeavingTheAssetRootAreRefused) {
 TEST_F(SceneFiles, TheAssetRootWidensToAParentFolder) {
     SceneLoadOptions parent;
     parent.asset_root = root_.string();
-    for (const std::string uri : {"../shared/triangle.bin"}) {
+    for (const std::string uri : {"../elsewhere/triangle.bin"}) {
         const Result<Scene> r = load(uri, parent);
         ASSERT_TRUE(r.ok()) << uri << ": " << r.error().message;
         EXPECT_EQ(r->data().positions.size(), 9u);
     }
-    fs::create_symlink(root_ / "shared" / "triangle.bin", root_ / "scenes" / "link.bin");
+    fs::create_symlink(root_ / "elsewhere" / "triangle.bin", root_ / "scenes" / "link.bin");
     EXPECT_TRUE(load("link.bin", parent).ok());
     // Still not beyond the widened root, and a root that is not a folder is named.
     SceneLoadOptions scenes_only;
     scenes_only.asset_root = (root_ / "scenes").string();
-    expect_refused(load("../shared/triangle.bin", scenes_only), "../shared/triangle.bin", "lies outside");
+    expect_refused(load("../elsewhere/triangle.bin", scenes_only), "../elsewhere/triangle.bin", "lies outside");
     SceneLoadOptions missing;
     missing.asset_root = (root_ / "nowhere").string();
-    const Result<Scene> r = load("../shared/triangle.bin", missing);
+    const Result<Scene> r = load("../elsewhere/triangle.bin", missing);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("asset root '" + missing.asset_root + "' is not a folder"), std::string::npos)
         << r.error().message;
@@ -153,7 +153,7 @@ TEST_F(SceneFiles, ASizeOtherThanByteLengthIsRefusedBeforeItIsRead) {
 // The CLI: exit 2 naming the uri and nothing written; the same scene renders once --asset-root names
 // the parent.
 TEST_F(SceneFiles, TheCliRefusesAndAcceptsWithAssetRoot) {
-    write_text(scene(), triangle_gltf("../shared/triangle.bin"));
+    write_text(scene(), triangle_gltf("../elsewhere/triangle.bin"));
     const fs::path out = root_ / "out";
     auto render = [&](const std::string& extra) {
         const std::string command = std::string(VKSONAR_CLI) + " render --backend cpu --set range_min=6 --scene " +
@@ -164,7 +164,7 @@ TEST_F(SceneFiles, TheCliRefusesAndAcceptsWithAssetRoot) {
     };
     EXPECT_EQ(render(""), 2);
     const std::string err = read_text(root_ / "err.txt");
-    EXPECT_NE(err.find("uri '../shared/triangle.bin' lies outside the asset root"), std::string::npos) << err;
+    EXPECT_NE(err.find("uri '../elsewhere/triangle.bin' lies outside the asset root"), std::string::npos) << err;
     EXPECT_FALSE(fs::exists(out));
     EXPECT_EQ(render(" --asset-root " + quote(root_.string())), 0) << read_text(root_ / "err.txt");
     EXPECT_TRUE(fs::exists(out / "polar.npy"));
