@@ -98,15 +98,13 @@ public:
              count("beams", plan.beams) && count("bins", plan.bins) && number("bin_width_m", plan.bin_width_m) &&
              number("range_min_m", c.range_min_m) && number("range_max_m", c.range_max_m) &&
              number("frequency_hz", c.frequency_hz) && number("sound_speed_mps", c.sound_speed_mps) &&
-             count("seed", plan_seed_) && text("config", meta.config_json) && text("effects", meta.effects_json) &&
+             count("seed", meta.seed) && text("config", meta.config_json) && text("effects", meta.effects_json) &&
              text("validity", meta.validity_json) && text("scene", meta.scene) && text("backend", meta.backend) &&
              text("device", meta.device) && count("frames_written", 0) && count("complete", 0);
         if (!ok) return fail("cannot write the dataset's layout");
         if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0) return fail("cannot flush");
         return {};
     }
-
-    void set_seed(std::uint64_t seed) { plan_seed_ = seed; }
 
     Result<void> append(const Frame& frame, const Pose& pose, double time_s,
                         const std::uint16_t* display_u16) override {
@@ -207,7 +205,6 @@ private:
     }
 
     std::string path_;
-    std::uint64_t plan_seed_ = 0;
     Hid file_;
     RowDataset polar_, polar_u16_, pose_, frame_index_, time_;
     hsize_t frames_ = 0;
@@ -218,7 +215,6 @@ private:
 Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& path, const Plan& plan,
                                                              const DatasetMeta& meta, const DatasetOptions& options) {
     auto writer = std::make_unique<H5Writer>(path);
-    writer->set_seed(meta.seed);
     if (auto opened = writer->open(plan, meta, options); !opened) return opened.error();
     return std::unique_ptr<DatasetWriter>(std::move(writer));
 }

@@ -121,7 +121,7 @@ json parse_json(const std::string& text) {
 // if it only changes appearance (materials, textures, lights, cameras, metadata), and refused if it
 // changes geometry and vksonar cannot read it, required or not, since drawing without it would be a
 // silently wrong image. An unknown extension is refused when the file requires it, else warned about.
-enum class ExtensionUse { decoded, appearance, refused };
+enum class ExtensionUse { decoded, appearance, refused, unknown };
 
 ExtensionUse extension_use(const std::string& name) {
     static const char* const decoded[] = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"};
@@ -143,7 +143,7 @@ ExtensionUse extension_use(const std::string& name) {
         if (name.rfind(p, 0) == 0) return ExtensionUse::appearance;
     for (const char* a : appearance)
         if (name == a) return ExtensionUse::appearance;
-    return ExtensionUse::refused; // unknown: refused if required (the caller decides)
+    return ExtensionUse::unknown; // refused if the file requires it (the caller decides)
 }
 
 std::string join(const std::vector<std::string>& names) {
@@ -178,15 +178,12 @@ void check_extensions(const json& doc, std::vector<std::string>& warnings) {
         case ExtensionUse::appearance:
             appearance.push_back(name);
             break;
-        case ExtensionUse::refused: {
-            const bool known =
-                name == "KHR_draco_mesh_compression" || name.find("meshopt_compression") != std::string::npos;
-            if (known || is_required)
-                refused.push_back(name);
-            else
-                unknown_optional.push_back(name);
+        case ExtensionUse::refused:
+            refused.push_back(name);
             break;
-        }
+        case ExtensionUse::unknown:
+            (is_required ? refused : unknown_optional).push_back(name);
+            break;
         }
     }
     if (refused.size() == 1)
@@ -482,14 +479,13 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
     if (has_extension(path, ".glb") && !binary)
         fail(ErrorCode::parse, "not a binary glTF (bad magic; expected 'glTF')");
-    const json doc = parse_json(binary ? glb_json_chunk(bytes) : std::string(bytes.begin(), bytes.end()));
+    json doc = parse_json(binary ? glb_json_chunk(bytes) : std::string(bytes.begin(), bytes.end()));
     check_extensions(doc, warnings);
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
     ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
-    json edited = doc;
-    const MeshoptPlan meshopt = prepare_meshopt(edited);
-    if (!meshopt.empty()) bytes = with_json(bytes, binary, edited.dump());
+    const MeshoptPlan meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
+    if (!meshopt.empty()) bytes = with_json(bytes, binary, doc.dump());
     tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, files, warnings);
     decode_meshopt(meshopt, model);
     return model;

@@ -139,10 +139,8 @@ void decode_meshopt(const MeshoptPlan& plan, tinygltf::Model& model) {
                                        std::to_string(needed[b]) + " bytes but hold " + std::to_string(held[b]));
         model.buffers[b].data.assign(std::min(needed[b], declared), 0);
     }
-    for (const MeshoptView& d : plan.views) {
+    for (const MeshoptView& d : plan.views) { // every index and range checked in the loop above
         const std::string where = "bufferView " + std::to_string(d.view) + " EXT_meshopt_compression";
-        if (d.source_buffer < 0 || std::size_t(d.source_buffer) >= model.buffers.size())
-            fail(ErrorCode::parse, where + ": buffer " + std::to_string(d.source_buffer) + " does not exist");
         const std::vector<unsigned char>& source = model.buffers[std::size_t(d.source_buffer)].data;
         const tinygltf::BufferView& view = model.bufferViews[std::size_t(d.view)];
         std::vector<unsigned char>& target = model.buffers[std::size_t(view.buffer)].data;
