@@ -5,7 +5,7 @@
 // includes it once with REAL = float. Only scalar code that is valid in both languages goes here:
 // REAL(x) casts, sqrt/sin/cos/exp/pow/abs/min/max, VKS_ATAN2 for the two-argument arctangent.
 //
-// Geometry conventions (docs/conventions.md): sonar frame x forward, y left (port), z up.
+// Geometry conventions (README, "Frames, units and outputs"): sonar frame x forward, y left (port), z up.
 // A slice camera looks along its centre azimuth; pixel (column c, row j) of a slice with W columns
 // and H rows has focal-normalized coordinates u (to the right) and v (downward):
 //   u = (2 (c + 0.5) / W - 1) tan_half_h,  v = (2 (j + 0.5) / H - 1) tan_half_v

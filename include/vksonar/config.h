@@ -127,7 +127,8 @@ struct SonarConfig {
 [[nodiscard]] Result<SonarConfig> apply_config_file(const SonarConfig& base, const std::string& path);
 // Applies one `key=value` override (dotted keys, e.g. effects.speckle=off).
 [[nodiscard]] Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::string& key_equals_value);
-// Accuracy presets fast | balanced (the defaults) | accurate: sets the accuracy.* keys (docs/accuracy.md).
+// Accuracy presets fast | balanced (the defaults) | accurate: sets the accuracy.* keys (README, "Accuracy and what it
+// costs").
 [[nodiscard]] Result<SonarConfig> apply_quality(const SonarConfig& base, const std::string& name);
 [[nodiscard]] std::vector<std::string> quality_names();
 // The `key=value` overrides a quality stands for (empty for an unknown name).

@@ -50,7 +50,7 @@ constexpr const char* kUsage =
     "  --config      JSON file of config keys applied on top (see docs/config.md)\n"
     "  --set         one config key, dotted for groups: --set effects.speckle=off --set display.db_min=50\n"
     "                precedence: preset < scene effects < --config < --quality < --set\n"
-    "  --quality     accuracy preset: fast | balanced (default knobs) | accurate (docs/accuracy.md)\n"
+    "  --quality     accuracy preset: fast | balanced (default knobs) | accurate (README: Accuracy)\n"
     "  --pose        sonar pose: metres and degrees, R = Rz(yaw) Ry(pitch) Rx(roll), positive pitch = nose down;\n"
     "                'frame': placed so the scene's bounding box fills the field of view inside the range window\n"
     "                (default for the bundled scene: 0,0,0,0,10,0; otherwise 0,0,0,0,0,0)\n"
