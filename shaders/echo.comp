@@ -6,6 +6,7 @@
 #define REAL float
 #define VKS_ATAN2 atan
 #include "sonar_math.h"
+#include "sonar_kernels.h"
 
 layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = 0) const uint kEffectFlags = 0u;
@@ -68,9 +69,37 @@ MaterialGpu material(uint m) {
     return g;
 }
 
-// (energy relative to SL, slant range); (0, 0) without a hit, (0, r) outside the range gate (the
-// window widened by the range kernel's half width, SonarParams) or without a material. One store at the end, not one per way out: lavapipe runs every branch under a
-// lane mask, and each store is a loop over the lanes.
+EchoConstants echo_constants() {
+    EchoConstants k;
+    k.tan_half_h = params.tan_half_h;
+    k.tan_half_v = params.tan_half_v;
+    k.pixel_du = 2.0 * params.tan_half_h / float(params.slice_columns);
+    k.pixel_dv = 2.0 * params.tan_half_v / float(params.rows);
+    k.depth_a = params.depth_a;
+    k.depth_b = params.depth_b;
+    k.gate_min_m = params.gate_min_m;
+    k.gate_max_m = params.gate_max_m;
+    k.alpha_db_per_m = params.alpha_db_per_m;
+    k.vpattern_k = params.vpattern_k;
+    k.vpattern_halfwidth_rad = params.vpattern_halfwidth_rad;
+    k.vpattern_chebyshev_a = params.vpattern_chebyshev_a;
+    return k;
+}
+
+EchoTerms echo_terms() {
+    EchoTerms t;
+    t.incidence = kIncidence;
+    t.rough_materials = kRoughMaterials != 0u;
+    t.vertical_pattern = kVerticalPattern;
+    t.vertical_shape = kVerticalShape;
+    t.spreading = kSpreading;
+    t.absorption = kAbsorption;
+    return t;
+}
+
+// (energy relative to SL, slant range) of a pixel (sonar_kernels.h), (0, 0) without a hit. One store
+// at the end, not one per way out: lavapipe runs every branch under a lane mask, and each store is a
+// loop over the lanes.
 vec2 echo_pixel(uint row, uint column) {
     uint p = row * params.columns + column;
     float d = depth[p];
@@ -80,30 +109,9 @@ vec2 echo_pixel(uint row, uint column) {
     uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
     float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, params.tan_half_h);
     float v = pixel_coord(row, params.rows, params.tan_half_v);
-    float z = view_z_from_depth(d, params.depth_a, params.depth_b);
-    float r = slant_range(z, u, v);
-    uint m = material_id[p];
-    if (r < params.gate_min_m || r >= params.gate_max_m || m >= material_count()) {
-        return vec2(0.0, r); // kNoMaterial is >= any material count
-    }
-    MaterialGpu mat = material(m);
-    float scatter = 1.0;
-    if (kIncidence && kRoughMaterials != 0u) {
-        scatter = scatter_factor(mat.model, normals4[p].w, mat.specular_ratio, mat.inv_two_slope_sq);
-    } else if (kIncidence && mat.model == kScatterLambert) {
-        scatter = normals4[p].w;
-    }
-    float omega = pixel_solid_angle(u, v, 2.0 * params.tan_half_h / float(params.slice_columns),
-                                    2.0 * params.tan_half_v / float(params.rows));
-    float vertical = 1.0;
-    if (kVerticalPattern) {
-        vertical = pattern_power(kVerticalShape, params.vpattern_k, params.vpattern_halfwidth_rad,
-                                 params.vpattern_chebyshev_a,
-                                 pixel_elevation(u, v));
-    }
-    float e = echo_energy(mat.backscatter_linear, scatter, omega, r, params.alpha_db_per_m, vertical,
-                          kSpreading, kAbsorption);
-    return vec2(e, r);
+    MaterialGpu mat = material(material_index(material_id[p], material_count()));
+    float cos_incidence = kIncidence ? normals4[p].w : 0.0;
+    return echo_of_pixel(echo_constants(), echo_terms(), d, u, v, mat, cos_incidence);
 }
 
 // x: runs of kPixelsPerInvocation columns of one row, y: the row (a 2-D grid: no divide by columns).

@@ -3,7 +3,9 @@
 // No include guard on purpose: C++ includes this file twice, with REAL = float and REAL = double,
 // inside namespaces vksonar::math_f32 / vksonar::math_f64 (see src/core/sonar_math.hpp). GLSL
 // includes it once with REAL = float. Only scalar code that is valid in both languages goes here:
-// REAL(x) casts, sqrt/sin/cos/exp/pow/abs/min/max, VKS_ATAN2 for the two-argument arctangent.
+// REAL(x) casts, sqrt/sin/cos/exp/pow/abs/min/max, VKS_ATAN2 for the two-argument arctangent, and the
+// named constants of sonar_shared.h (never their literal values: src/core/plan.cpp maps the public
+// enums onto those names, with static_asserts).
 //
 // Geometry conventions (README, "Frames, units and outputs"): sonar frame x forward, y left (port), z up.
 // A slice camera looks along its centre azimuth; pixel (column c, row j) of a slice with W columns
@@ -75,14 +77,14 @@ VKS_FN REAL sinc_of(REAL x) {
 // amplitude is cosh(sqrt(A^2 - x^2)) / cosh(A) in the main lobe (x < A) and cos(sqrt(x^2 - A^2)) / cosh(A)
 // beyond it: side lobes of exactly 1 / R, the first null at x = sqrt(A^2 + (pi/2)^2).
 VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a, REAL a) {
-    if (shape == 0u) { // box
+    if (shape == kPatternBox) {
         return abs(a) <= half_width ? REAL(1) : REAL(0);
     }
-    if (shape == 3u) { // gaussian
+    if (shape == kPatternGaussian) {
         return exp(-k * a * a);
     }
     REAL x = k * sin(a);
-    if (shape == 4u) { // chebyshev
+    if (shape == kPatternChebyshev) {
         // (A - x)(A + x), not A^2 - x^2: near x = A (the edge of the main lobe, and past it towards the
         // first null) the squares cancel and float would lose most of the difference's digits.
         REAL d = (chebyshev_a - x) * (chebyshev_a + x);
@@ -91,8 +93,8 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a,
         return amp_cheb * amp_cheb;
     }
     REAL amp = sinc_of(x);
-    if (shape == 2u) { // hann-tapered aperture: sinc(x) / (1 - (x/pi)^2), removable singularity at x = pi
-        REAL t = x / REAL(3.14159265358979323846);
+    if (shape == kPatternHann) {                   // sinc(x) / (1 - (x/pi)^2), removable singularity at x = pi
+        REAL t = x / REAL(3.14159265358979323846); // not kPi: a float
         REAL den = REAL(1) - t * t;
         if (abs(den) < REAL(1e-4)) {
             amp = REAL(0.5);
@@ -141,13 +143,13 @@ VKS_FN REAL specular_facet(REAL c, REAL inv_two_slope_sq) {
 // Scattering factor f(theta) = s(theta) / (10^(mu/10) cos(theta)) of a material model (kScatter*) at
 // cosine of incidence c: the factor that multiplies 10^(mu/10) Omega r^-2 in echo_energy().
 VKS_FN REAL scatter_factor(uint model, REAL c, REAL specular_ratio, REAL inv_two_slope_sq) {
-    if (model == 0u) { // lambert
+    if (model == kScatterLambert) {
         return c;
     }
-    if (model == 2u) { // rough: lambert + facet term
+    if (model == kScatterRough) { // lambert + facet term
         return c + specular_ratio * specular_facet(c, inv_two_slope_sq);
     }
-    return REAL(1); // constant
+    return REAL(1); // kScatterConstant
 }
 
 // Which share of a column's range profile beam j adds in the resample (docs/pipeline.md §4), for a

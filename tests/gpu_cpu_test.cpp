@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "core/sonar_math.hpp"
+#include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
 #include "test_support.h"
 #include "tolerances.h"
@@ -423,6 +424,39 @@ TEST(Determinism, TwoVulkanRunsAreBitIdentical) {
     EXPECT_EQ(a->frame.clean, b->frame.clean);
     EXPECT_EQ(a->frame.intensity, b->frame.intensity);
     EXPECT_GT(sum(a->frame.clean), 0.0);
+}
+
+// A hit pixel whose material id lies outside the plan's table reflects with material 0 (the
+// config's default backscatter) on both backends: the shared kernel's material_index(). The two
+// backends once disagreed here (the GPU gave such a pixel no energy, the CPU material 0). The stale id
+// cannot come from the public API (Scene::add_draw refuses it), so the test writes it into the draw.
+TEST(MaterialIds, OutOfRangeIdReflectsWithMaterialZeroOnBothBackends) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    const SonarConfig config = quiet_config();
+    auto make_scene = [](std::uint32_t drawn_material) {
+        Scene scene;
+        // materials: 0 the scene's implicit default, 1 and 2 these quads' (-20 and -5 dB)
+        add_quad(scene, 10.0, 0.0, 0.0, 6.0, 3.0, -20.0);
+        add_quad(scene, 14.0, 3.0, 0.0, 2.0, 2.0, -5.0);
+        auto& draws = const_cast<SceneData&>(scene.data()).draws;
+        draws[0].material = drawn_material;
+        return scene;
+    };
+    const Scene reference = make_scene(0u);
+    for (std::uint32_t stale : {3u, 7u, shared::kNoMaterial}) {
+        const Scene scene = make_scene(stale);
+        for (Backend backend : {Backend::vulkan, Backend::cpu}) {
+            auto expected = render_once(backend, config, reference);
+            auto got = render_once(backend, config, scene);
+            ASSERT_TRUE(expected && got);
+            // the quad at 10 m is there, at material 0's level, bit for bit (same backend, same input)
+            ASSERT_EQ(scene.materials().size(), 3u);
+            EXPECT_GT(sum(got->frame.clean), 0.0);
+            EXPECT_EQ(got->frame.clean, expected->frame.clean)
+                << "material id " << stale << ", backend " << (backend == Backend::vulkan ? "vulkan" : "cpu");
+        }
+    }
 }
 
 // The material, resample and side-lobe tables are read through uniform blocks where they fit the

@@ -15,6 +15,35 @@
 namespace vksonar {
 namespace {
 
+// The public enums and the shaders' constants (sonar_shared.h) are the same numbers, checked here:
+// adding a model or a shape to one without the other fails to compile.
+constexpr std::uint32_t shader_id(BeamPattern shape) {
+    return static_cast<std::uint32_t>(shape);
+}
+static_assert(shader_id(BeamPattern::box) == shared::kPatternBox &&
+              shader_id(BeamPattern::sinc) == shared::kPatternSinc &&
+              shader_id(BeamPattern::hann) == shared::kPatternHann &&
+              shader_id(BeamPattern::gaussian) == shared::kPatternGaussian &&
+              shader_id(BeamPattern::chebyshev) == shared::kPatternChebyshev);
+constexpr std::uint32_t shader_id(AcousticMaterial::Model model) {
+    return static_cast<std::uint32_t>(model);
+}
+static_assert(shader_id(AcousticMaterial::Model::lambert) == shared::kScatterLambert &&
+              shader_id(AcousticMaterial::Model::constant) == shared::kScatterConstant &&
+              shader_id(AcousticMaterial::Model::rough) == shared::kScatterRough);
+constexpr std::uint32_t shader_id(RangeKernel kernel) {
+    return static_cast<std::uint32_t>(kernel);
+}
+static_assert(shader_id(RangeKernel::nearest) == shared::kRangeKernelNearest &&
+              shader_id(RangeKernel::tent) == shared::kRangeKernelTent &&
+              shader_id(RangeKernel::footprint) == shared::kRangeKernelFootprint);
+constexpr std::uint32_t shader_id(NormalMethod method) {
+    return static_cast<std::uint32_t>(method);
+}
+static_assert(shader_id(NormalMethod::sobel3) == shared::kNormalsSobel3 &&
+              shader_id(NormalMethod::sobel5) == shared::kNormalsSobel5 &&
+              shader_id(NormalMethod::geometric) == shared::kNormalsGeometric);
+
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDegToRad = kPi / 180.0;
 // Absorption below this over the two-way range window is invisible on any display: DESIGN §4.
@@ -321,7 +350,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     double tan_half_v = std::tan(half_coverage);
     if (c.mode == SonarMode::physical) {
         if (c.effects.vertical_pattern != EffectMode::off) {
-            const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.vertical_pattern), p.vpattern_k,
+            const HorizontalLobes lobes = horizontal_lobes(shader_id(c.vertical_pattern), p.vpattern_k,
                                                            p.vpattern_halfwidth_rad, p.vpattern_chebyshev_a, 0.5 * kPi);
             half_coverage = std::max(half_coverage, lobes.first_null_rad);
         }
@@ -396,10 +425,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                               "material " + std::to_string(i) + " '" + m.name + "': " + problem);
         const double db = std::isfinite(m.backscatter_db) ? m.backscatter_db : c.default_backscatter_db;
         const double backscatter_linear = std::pow(10.0, db / 10.0);
-        shared::MaterialGpu gpu{static_cast<float>(backscatter_linear), shared::kScatterConstant, 0.0f, 0.0f};
-        if (m.model == AcousticMaterial::Model::lambert) gpu.model = shared::kScatterLambert;
+        shared::MaterialGpu gpu{static_cast<float>(backscatter_linear), shader_id(m.model), 0.0f, 0.0f};
         if (m.model == AcousticMaterial::Model::rough) {
-            gpu.model = shared::kScatterRough;
+            p.rough_materials = true;
             const double slope_sq = m.rms_slope * m.rms_slope;
             const double facet_peak = std::pow(10.0, m.reflection_db / 10.0) / (8.0 * kPi * slope_sq);
             gpu.specular_ratio = static_cast<float>(facet_peak / backscatter_linear);
@@ -427,7 +455,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     // effect on auto the kernel then stops at the first null (main lobe only).
     std::string lobes_why;
     if (c.effects.horizontal_pattern == EffectMode::automatic) {
-        const HorizontalLobes lobes = horizontal_lobes(static_cast<std::uint32_t>(c.horizontal_pattern), p.hpattern_k,
+        const HorizontalLobes lobes = horizontal_lobes(shader_id(c.horizontal_pattern), p.hpattern_k,
                                                        p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, reach);
         const double window_db = c.db_max - c.db_min;
         if (lobes.first_null_rad > 0.0 && lobes.peak_sidelobe_db < -window_db) {
@@ -481,7 +509,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     if (!e.horizontal_pattern) half_taps = 0;
     p.sidelobe_taps = 2 * half_taps + 1;
     p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
-    const std::uint32_t hshape = static_cast<std::uint32_t>(c.horizontal_pattern);
+    const std::uint32_t hshape = shader_id(c.horizontal_pattern);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
             std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
@@ -521,13 +549,9 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     g.inv_bin_width_m = static_cast<float>(1.0 / p.bin_width_m);
     g.alpha_db_per_m = static_cast<float>(p.alpha_db_per_m);
     g.vpattern_k = static_cast<float>(p.vpattern_k);
-    g.vpattern_shape = static_cast<std::uint32_t>(c.vertical_pattern);
-    g.range_kernel = c.range_kernel == RangeKernel::footprint ? shared::kRangeKernelFootprint
-                     : c.range_kernel == RangeKernel::tent    ? shared::kRangeKernelTent
-                                                              : shared::kRangeKernelNearest;
-    g.normal_method = c.normal_method == NormalMethod::sobel5      ? shared::kNormalsSobel5
-                      : c.normal_method == NormalMethod::geometric ? shared::kNormalsGeometric
-                                                                   : shared::kNormalsSobel3;
+    g.vpattern_shape = shader_id(c.vertical_pattern);
+    g.range_kernel = shader_id(c.range_kernel);
+    g.normal_method = shader_id(c.normal_method);
     // The face-normal attachment costs a colour target and a copy per frame: only when it is used.
     p.face_normals = e.incidence && c.normal_method == NormalMethod::geometric;
     g.edge_relative_jump = kEdgeRelativeJump;

@@ -75,6 +75,7 @@ struct Plan {
 
     // Acoustic materials as uploaded (index = material id written by the depth pass).
     std::vector<shared::MaterialGpu> materials;
+    bool rough_materials = false; // a material has kScatterRough: the echo kernel carries the facet term
 
     ResolvedEffects effects;
     // Each model this plan uses, checked against its validity domain (validity.h; meta.json "validity").

@@ -16,71 +16,62 @@ template <class Real>
 void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
-    Real tan_h, tan_v, depth_a, depth_b, gate_min, gate_max, alpha, vk, vhalf, vcheb; // gate: Plan::gate_min_m
+    typename M::EchoConstants k;
     if constexpr (std::is_same_v<Real, float>) {
-        tan_h = g.tan_half_h;
-        tan_v = g.tan_half_v;
-        depth_a = g.depth_a;
-        depth_b = g.depth_b;
-        gate_min = g.gate_min_m;
-        gate_max = g.gate_max_m;
-        alpha = g.alpha_db_per_m;
-        vk = g.vpattern_k;
-        vhalf = g.vpattern_halfwidth_rad;
-        vcheb = g.vpattern_chebyshev_a;
+        k = {g.tan_half_h,
+             g.tan_half_v,
+             0.0f,
+             0.0f,
+             g.depth_a,
+             g.depth_b,
+             g.gate_min_m,
+             g.gate_max_m,
+             g.alpha_db_per_m,
+             g.vpattern_k,
+             g.vpattern_halfwidth_rad,
+             g.vpattern_chebyshev_a};
     } else {
-        tan_h = plan.tan_half_h;
-        tan_v = plan.tan_half_v;
-        depth_a = plan.depth_a;
-        depth_b = plan.depth_b;
-        gate_min = plan.gate_min_m;
-        gate_max = plan.gate_max_m;
-        alpha = plan.alpha_db_per_m;
-        vk = plan.vpattern_k;
-        vhalf = plan.vpattern_halfwidth_rad;
-        vcheb = plan.vpattern_chebyshev_a;
+        k = {plan.tan_half_h,
+             plan.tan_half_v,
+             0.0,
+             0.0,
+             plan.depth_a,
+             plan.depth_b,
+             plan.gate_min_m,
+             plan.gate_max_m,
+             plan.alpha_db_per_m,
+             plan.vpattern_k,
+             plan.vpattern_halfwidth_rad,
+             plan.vpattern_chebyshev_a};
     }
-    const std::uint32_t vshape = g.vpattern_shape;
-    const bool incidence = plan.effects.incidence && normals4 != nullptr;
-    const bool vertical = plan.effects.vertical_pattern;
-    const bool spreading = plan.effects.spreading;
-    const bool absorption = plan.effects.absorption;
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
-    const Real du = Real(2) * tan_h / static_cast<Real>(W);
-    const Real dv = Real(2) * tan_v / static_cast<Real>(R);
-    const std::size_t material_count = plan.materials.size();
+    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(W);
+    k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(R);
+    const typename M::EchoTerms terms{plan.effects.incidence && normals4 != nullptr,
+                                      plan.rough_materials,
+                                      plan.effects.vertical_pattern,
+                                      g.vpattern_shape,
+                                      plan.effects.spreading,
+                                      plan.effects.absorption};
+    const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
 
     for (std::uint32_t j = 0; j < R; ++j) {
-        const Real v = M::pixel_coord(j, R, tan_v);
+        const Real v = M::pixel_coord(j, R, k.tan_half_v);
         for (std::uint32_t c = 0; c < C; ++c) {
             const std::size_t p = static_cast<std::size_t>(j) * C + c;
             float* out = echo2 + 2 * p;
             const float d = depth[p];
-            if (!(d > 0.0f)) {
-                out[0] = out[1] = 0.0f;
-                continue;
-            }
-            const Real u = M::pixel_coord(c % W, W, tan_h);
-            const Real z = M::view_z_from_depth(static_cast<Real>(d), depth_a, depth_b);
-            const Real r = M::slant_range(z, u, v);
-            if (r < gate_min || r >= gate_max || material_count == 0) {
+            if (!(d > 0.0f) || material_count == 0) {
                 out[0] = 0.0f;
-                out[1] = static_cast<float>(r);
+                out[1] = 0.0f;
                 continue;
             }
-            std::uint32_t m = material[p];
-            if (m == shared::kNoMaterial || m >= material_count) m = 0;
-            const shared::MaterialGpu& mat = plan.materials[m];
-            const Real f = incidence ? M::scatter_factor(mat.model, static_cast<Real>(normals4[4 * p + 3]),
-                                                         static_cast<Real>(mat.specular_ratio),
-                                                         static_cast<Real>(mat.inv_two_slope_sq))
-                                     : Real(1);
-            const Real omega = M::pixel_solid_angle(u, v, du, dv);
-            const Real b = vertical ? M::pattern_power(vshape, vk, vhalf, vcheb, M::pixel_elevation(u, v)) : Real(1);
-            const Real e =
-                M::echo_energy(static_cast<Real>(mat.backscatter_linear), f, omega, r, alpha, b, spreading, absorption);
-            out[0] = static_cast<float>(e);
-            out[1] = static_cast<float>(r);
+            const Real u = M::pixel_coord(c % W, W, k.tan_half_h);
+            const shared::MaterialGpu& mat = plan.materials[M::material_index(material[p], material_count)];
+            const Real cos_incidence = terms.incidence ? static_cast<Real>(normals4[4 * p + 3]) : Real(0);
+            const auto e = M::echo_of_pixel(k, terms, static_cast<Real>(d), u, v, mat, cos_incidence);
+            out[0] = static_cast<float>(e.x);
+            out[1] = static_cast<float>(e.y);
         }
     }
     if (g.echo_half != 0u) {

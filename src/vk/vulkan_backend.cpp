@@ -404,9 +404,7 @@ Result<void> VulkanBackend::create_compute() {
     }
     // echo.comp's variant: bit 0 when some material has the rough model (its facet term is compiled
     // in), bits 1-3 the vertical pattern's shape (only its code is compiled in).
-    const bool rough = std::any_of(plan_.materials.begin(), plan_.materials.end(),
-                                   [](const shared::MaterialGpu& m) { return m.model == shared::kScatterRough; });
-    const std::uint32_t echo_variant = (rough ? 1u : 0u) | (plan_.params.vpattern_shape << 1);
+    const std::uint32_t echo_variant = (plan_.rough_materials ? 1u : 0u) | (plan_.params.vpattern_shape << 1);
     if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv),
                       spec(kEchoPixels, echo_variant, materials_vec4s));
         !r)

@@ -1,0 +1,261 @@
+// The per-pixel kernels of the stages, written once for GLSL and C++: the shaders call them on the
+// GPU, the CPU backend (src/stages/cpu_*.cpp) calls the same functions in its loops. What differs
+// between the backends is only how a kernel's inputs are loaded and where its result is stored.
+//
+// Included after sonar_math.h, in the same way (no include guard; C++ includes it once per REAL inside
+// math_f32 / math_f64, src/core/sonar_math.hpp). Vector types are GLSL's vec2/vec3/vec4; in C++ they
+// are GLM's of the working precision (glm::vec3 or glm::dvec3), with the same operators and the
+// functions dot, cross and length. Two macros cover what the languages spell differently:
+//   VKS_OUT(T)   an out parameter (GLSL `out T`, C++ `T&`);
+//   VKS_PRECISE  a value that must not be contracted into a fused multiply-add (GLSL `precise`; the C++
+//                library is compiled with -ffp-contract=off, CMakeLists.txt), so both round alike.
+
+#ifndef REAL
+#error "define REAL (float or double) before including sonar_kernels.h"
+#endif
+#ifdef __cplusplus
+#define VKS_FN inline
+#define VKS_OUT(T) T&
+#define VKS_PRECISE
+#else
+#define VKS_FN
+#define VKS_OUT(T) out T
+#define VKS_PRECISE precise
+#endif
+
+// ---------------------------------------------------------------------------------------------
+// Pixel positions (stages 2 and 3)
+
+// Sonar-frame direction of pixel (u, v) of the slice whose centre azimuth has cosine cs and sine sn,
+// scaled so that its view-space z is 1: f_s + u r_s + v d with f_s = (cs, sn, 0), r_s = (sn, -cs, 0),
+// d = (0, 0, -1). The pixel's position is view_z * pixel_ray(...).
+VKS_FN vec3 pixel_ray(REAL u, REAL v, REAL cs, REAL sn) {
+    return vec3(cs + u * sn, sn - u * cs, -v);
+}
+
+// A reconstructed pixel: sonar-frame position, slant range, and whether the depth pass hit anything
+// there (false outside the image too).
+struct Sample {
+    vec3 pos;
+    REAL range;
+    bool valid;
+};
+
+VKS_FN Sample no_sample() {
+    Sample s;
+    s.pos = vec3(REAL(0), REAL(0), REAL(0));
+    s.range = REAL(0);
+    s.valid = false;
+    return s;
+}
+
+// The pixel at view z along `ray` (pixel_ray).
+VKS_FN Sample sample_at(REAL view_z, vec3 ray) {
+    Sample s;
+    s.pos = view_z * ray;
+    s.range = length(s.pos);
+    s.valid = true;
+    return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Normals (stage 2): Sobel 3x3 / 5x5 on reconstructed positions, one-sided differences near depth
+// edges, and a facing-the-sonar fallback. Output (n.x, n.y, n.z, cos incidence).
+
+// Faces the sonar: never brighter than a surface seen head on.
+VKS_FN vec4 facing_normal(Sample p) {
+    return vec4(-p.pos / p.range, REAL(1));
+}
+
+// n normalized and turned to face the sonar, with its cosine of incidence; a degenerate n (zero, or
+// not finite) gives the facing fallback.
+VKS_FN vec4 oriented_normal(Sample p, vec3 n) {
+    REAL len = length(n);
+    if (!(len > REAL(0) && len < REAL(1e30))) {
+        return facing_normal(p);
+    }
+    n = n / len;
+    if (dot(n, p.pos) > REAL(0)) {
+        n = -n;
+    }
+    return vec4(n, incidence_cos(dot(n, p.pos), p.range));
+}
+
+// q is on the same surface as a pixel of range range_p: hit, and its range within `jump` metres.
+VKS_FN bool same_surface(Sample q, REAL range_p, REAL jump) {
+    return q.valid && abs(q.range - range_p) <= jump;
+}
+
+// One-sided difference along an axis towards the valid neighbour of closer range (ties: the + side).
+// False when neither neighbour is valid.
+VKS_FN bool one_sided_tangent(Sample minus, Sample centre, Sample plus, VKS_OUT(vec3) t) {
+    if (plus.valid && (!minus.valid || abs(plus.range - centre.range) <= abs(minus.range - centre.range))) {
+        t = plus.pos - centre.pos;
+        return true;
+    }
+    if (minus.valid) {
+        t = centre.pos - minus.pos;
+        return true;
+    }
+    t = vec3(REAL(0), REAL(0), REAL(0));
+    return false;
+}
+
+// A window column: rows j-1, j, j+1 of one pixel column.
+struct Column3 {
+    Sample up;
+    Sample mid;
+    Sample down;
+};
+
+// Sobel 3x3 normal of the centre pixel c.mid (valid) from the columns left, centre and right of it,
+// where all 8 neighbours are on its surface; else one-sided differences, else facing.
+VKS_FN vec4 sobel3_normal(Column3 l, Column3 c, Column3 r, REAL edge_relative_jump) {
+    Sample p = c.mid;
+    REAL jump = edge_relative_jump * p.range;
+    bool smooth_region = same_surface(l.up, p.range, jump) && same_surface(l.mid, p.range, jump) &&
+                         same_surface(l.down, p.range, jump) && same_surface(c.up, p.range, jump) &&
+                         same_surface(c.down, p.range, jump) && same_surface(r.up, p.range, jump) &&
+                         same_surface(r.mid, p.range, jump) && same_surface(r.down, p.range, jump);
+    vec3 tx;
+    vec3 ty;
+    if (smooth_region) {
+        tx = (r.up.pos - l.up.pos) + REAL(2) * (r.mid.pos - l.mid.pos) + (r.down.pos - l.down.pos);
+        ty = (l.down.pos - l.up.pos) + REAL(2) * (c.down.pos - c.up.pos) + (r.down.pos - r.up.pos);
+    } else {
+        bool has_x = one_sided_tangent(l.mid, p, r.mid, tx);
+        bool has_y = one_sided_tangent(c.up, p, c.down, ty);
+        if (!has_x || !has_y) {
+            return facing_normal(p);
+        }
+    }
+    return oriented_normal(p, cross(tx, ty));
+}
+
+// sobel5: a window column of rows j-2 .. j+2.
+struct Column5 {
+    Sample up2;
+    Sample up;
+    Sample mid;
+    Sample down;
+    Sample down2;
+};
+
+VKS_FN Column3 inner_column(Column5 k) {
+    Column3 col;
+    col.up = k.up;
+    col.mid = k.mid;
+    col.down = k.down;
+    return col;
+}
+
+VKS_FN bool column_same_surface(Column5 k, REAL range_p, REAL jump) {
+    return same_surface(k.up2, range_p, jump) && same_surface(k.up, range_p, jump) &&
+           same_surface(k.mid, range_p, jump) && same_surface(k.down, range_p, jump) &&
+           same_surface(k.down2, range_p, jump);
+}
+
+// Derivative (-1 -2 0 2 1) as differences of symmetric pairs: the large positions cancel before the
+// weights multiply.
+VKS_FN vec3 derivative5(Sample m2, Sample m1, Sample p1, Sample p2) {
+    return REAL(2) * (p1.pos - m1.pos) + (p2.pos - m2.pos);
+}
+
+// Sobel 5x5 where all 24 neighbours are on the centre pixel's surface, else exactly sobel3_normal.
+// Smoothing (1 4 6 4 1), summed from the -2 side (docs/pipeline.md §2).
+VKS_FN vec4 sobel5_normal(Column5 l2, Column5 l1, Column5 c, Column5 r1, Column5 r2, REAL edge_relative_jump) {
+    Sample p = c.mid;
+    REAL jump = edge_relative_jump * p.range;
+    bool smooth5 = column_same_surface(l2, p.range, jump) && column_same_surface(l1, p.range, jump) &&
+                   same_surface(c.up2, p.range, jump) && same_surface(c.up, p.range, jump) &&
+                   same_surface(c.down, p.range, jump) && same_surface(c.down2, p.range, jump) &&
+                   column_same_surface(r1, p.range, jump) && column_same_surface(r2, p.range, jump);
+    if (!smooth5) {
+        return sobel3_normal(inner_column(l1), inner_column(c), inner_column(r1), edge_relative_jump);
+    }
+    vec3 tx = derivative5(l2.up2, l1.up2, r1.up2, r2.up2);
+    tx = tx + REAL(4) * derivative5(l2.up, l1.up, r1.up, r2.up);
+    tx = tx + REAL(6) * derivative5(l2.mid, l1.mid, r1.mid, r2.mid);
+    tx = tx + REAL(4) * derivative5(l2.down, l1.down, r1.down, r2.down);
+    tx = tx + derivative5(l2.down2, l1.down2, r1.down2, r2.down2);
+    vec3 ty = derivative5(l2.up2, l2.up, l2.down, l2.down2);
+    ty = ty + REAL(4) * derivative5(l1.up2, l1.up, l1.down, l1.down2);
+    ty = ty + REAL(6) * derivative5(c.up2, c.up, c.down, c.down2);
+    ty = ty + REAL(4) * derivative5(r1.up2, r1.up, r1.down, r1.down2);
+    ty = ty + derivative5(r2.up2, r2.up, r2.down, r2.down2);
+    return oriented_normal(p, cross(tx, ty));
+}
+
+// normal_method = geometric: the depth pass's face normal q (clip-linear coordinates, sonar_math.h)
+// of a pixel in the slice at (cs, sn), mapped to the sonar frame and oriented.
+VKS_FN vec4 geometric_normal(Sample p, vec3 q, REAL tan_half_h, REAL tan_half_v, REAL cs, REAL sn) {
+    vec3 n = vec3(face_normal_sonar_x(q.x, q.z, tan_half_h, cs, sn), face_normal_sonar_y(q.x, q.z, tan_half_h, cs, sn),
+                  face_normal_sonar_z(q.y, tan_half_v));
+    return oriented_normal(p, n);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Echo (stage 3): the combined sonar equation of one pixel.
+
+// The echo stage's per-frame constants in the working precision (the GPU's float SonarParams; the
+// CPU's float path reads the same floats, its double path the Plan's doubles).
+struct EchoConstants {
+    REAL tan_half_h;
+    REAL tan_half_v;
+    REAL pixel_du; // 2 tan_half_h / slice_columns
+    REAL pixel_dv; // 2 tan_half_v / rows
+    REAL depth_a;
+    REAL depth_b;
+    REAL gate_min_m; // the range gate (SonarParams)
+    REAL gate_max_m;
+    REAL alpha_db_per_m;
+    REAL vpattern_k;
+    REAL vpattern_halfwidth_rad;
+    REAL vpattern_chebyshev_a;
+};
+
+// Which of the echo equation's terms a pipeline carries (the effect bits and the scene's materials).
+struct EchoTerms {
+    bool incidence;       // kEffectIncidence: the scattering factor of the material at cos_incidence
+    bool rough_materials; // a material of the scene has kScatterRough (else the facet term is compiled out)
+    bool vertical_pattern;
+    uint vertical_shape; // kPattern*
+    bool spreading;
+    bool absorption;
+};
+
+// The material a hit pixel reflects with: its id, or material 0 (the config's default backscatter)
+// where the id is outside the table (a host depth image, or kNoMaterial under a hit).
+VKS_FN uint material_index(uint material_id, uint material_count) {
+    return material_id < material_count ? material_id : 0u;
+}
+
+// (energy relative to SL, slant range) of the pixel (u, v) at reversed-Z depth d > 0 with material
+// `mat`; (0, r) outside the range gate. cos_incidence is read only with terms.incidence.
+VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL v, MaterialGpu mat,
+                          REAL cos_incidence) {
+    REAL z = view_z_from_depth(d, k.depth_a, k.depth_b);
+    REAL r = slant_range(z, u, v);
+    if (r < k.gate_min_m || r >= k.gate_max_m) {
+        return vec2(REAL(0), r);
+    }
+    REAL scatter = REAL(1);
+    if (terms.incidence && terms.rough_materials) {
+        scatter = scatter_factor(mat.model, cos_incidence, REAL(mat.specular_ratio), REAL(mat.inv_two_slope_sq));
+    } else if (terms.incidence && mat.model == kScatterLambert) {
+        scatter = cos_incidence;
+    }
+    REAL omega = pixel_solid_angle(u, v, k.pixel_du, k.pixel_dv);
+    REAL vertical = REAL(1);
+    if (terms.vertical_pattern) {
+        vertical = pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
+                                 pixel_elevation(u, v));
+    }
+    REAL e = echo_energy(REAL(mat.backscatter_linear), scatter, omega, r, k.alpha_db_per_m, vertical, terms.spreading,
+                         terms.absorption);
+    return vec2(e, r);
+}
+
+#undef VKS_FN
+#undef VKS_OUT
+#undef VKS_PRECISE
