@@ -256,6 +256,97 @@ VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL
     return vec2(e, r);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Range kernel (stage 4a): how one pixel's echo spreads over the range bins of its column's profile.
+
+// The bins [k_first, k_last] a pixel's echo goes to (inside the window: what lies outside is gated
+// away; none when k_first > k_last) and what range_share needs to split it.
+struct RangeSpread {
+    uint kernel; // kRangeKernel*
+    int k_first;
+    int k_last;
+    int tent_k0;  // tent: the lower of its two bins (may lie outside the window)
+    REAL tent_w1; // tent: the share of bin tent_k0 + 1
+    REAL lo;      // footprint: [lo, hi] in bin coordinates, its centre, log-density slope g, 1 / integral
+    REAL hi;
+    REAL centre;
+    REAL g;
+    REAL inv_norm;
+};
+
+// The spread of pixel `er` = (energy, range) from the five-row window of its column (up2, up: the rows
+// above; down, down2: below; range 0 = no hit or outside the image). range_min_m, inv_bin_width_m:
+// SonarParams; jump_rel: edge_relative_jump.
+VKS_FN RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, vec2 down, vec2 down2, REAL range_min_m,
+                                REAL inv_bin_width_m, REAL jump_rel, uint bins) {
+    RangeSpread s;
+    s.kernel = kernel;
+    s.k_first = 0;
+    s.k_last = -1;
+    s.tent_k0 = 0;
+    s.tent_w1 = REAL(0);
+    s.lo = REAL(0);
+    s.hi = REAL(0);
+    s.centre = REAL(0);
+    s.g = REAL(0);
+    s.inv_norm = REAL(0);
+    REAL r = er.y;
+    VKS_PRECISE REAL x = range_bin_coord(r, range_min_m, inv_bin_width_m);
+    if (isnan(x)) {
+        return s;
+    }
+    int nb = int(bins);
+    if (kernel == kRangeKernelFootprint) {
+        REAL a = footprint_edge_offset(up.y, up2.y, r, down.y, jump_rel);
+        REAL b = footprint_edge_offset(down.y, down2.y, r, up.y, jump_rel);
+        VKS_PRECISE REAL xl = x + footprint_lo(a, b) * inv_bin_width_m;
+        VKS_PRECISE REAL xh = x + footprint_hi(a, b) * inv_bin_width_m;
+        VKS_PRECISE REAL centre = REAL(0.5) * (xl + xh);
+        REAL width = min(max(xh - xl, REAL(1)), REAL(kMaxFootprintBins));
+        VKS_PRECISE REAL lo = centre - REAL(0.5) * width;
+        VKS_PRECISE REAL hi = centre + REAL(0.5) * width;
+        // the density's slope from the neighbours' footprints (both on this surface)
+        REAL g = REAL(0);
+        if (a != REAL(0) && b != REAL(0) && up2.y > REAL(0) && down2.y > REAL(0)) {
+            VKS_PRECISE REAL w_up = REAL(0.5) * abs(up2.y - r) * inv_bin_width_m;
+            VKS_PRECISE REAL w_down = REAL(0.5) * abs(r - down2.y) * inv_bin_width_m;
+            // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
+            VKS_PRECISE REAL span = (REAL(2) * (up.y - down.y) + (up2.y - down2.y)) * (REAL(0.25) * inv_bin_width_m);
+            g = footprint_log_slope(up.x, w_up, down.x, w_down, span, width);
+        }
+        s.lo = lo;
+        s.hi = hi;
+        s.centre = centre;
+        s.g = g;
+        s.inv_norm = REAL(1) / (width * sinhc_of(REAL(0.5) * g * width));
+        s.k_first = max(int(floor(lo)), 0);
+        s.k_last = min(int(floor(hi)), nb - 1);
+    } else if (kernel == kRangeKernelTent) {
+        // Far outside the window both shares are gated away anyway; the clamp keeps floor() in int range.
+        VKS_PRECISE REAL t = min(max(x - REAL(0.5), REAL(-2)), REAL(bins) + REAL(1));
+        REAL k0f = floor(t);
+        s.tent_w1 = t - k0f;
+        s.tent_k0 = int(k0f);
+        s.k_first = max(s.tent_k0, 0);
+        s.k_last = min(s.tent_k0 + 1, nb - 1);
+    } else if (x >= REAL(0) && x < REAL(bins)) { // nearest
+        s.k_first = int(floor(x));
+        s.k_last = s.k_first;
+    }
+    return s;
+}
+
+// The share of the pixel's energy that bin k (in [k_first, k_last]) receives.
+VKS_FN REAL range_share(RangeSpread s, int k) {
+    if (s.kernel == kRangeKernelFootprint) {
+        return footprint_share(s.lo, s.hi, s.centre, s.g, s.inv_norm, k);
+    }
+    if (s.kernel == kRangeKernelTent) {
+        return k == s.tent_k0 ? REAL(1) - s.tent_w1 : s.tent_w1;
+    }
+    return REAL(1);
+}
+
 #undef VKS_FN
 #undef VKS_OUT
 #undef VKS_PRECISE

@@ -21,7 +21,8 @@ namespace vksonar {
 namespace math_f32 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::log, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
+    std::sin, std::sqrt;
 using vec2 = glm::vec2;
 using vec3 = glm::vec3;
 using vec4 = glm::vec4;
@@ -35,7 +36,8 @@ using vec4 = glm::vec4;
 namespace math_f64 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::log, std::max, std::min, std::sin, std::sqrt;
+using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
+    std::sin, std::sqrt;
 using vec2 = glm::dvec2;
 using vec3 = glm::dvec3;
 using vec4 = glm::dvec4;
@@ -55,7 +57,7 @@ using vec4 = glm::dvec4;
 #define VKS_MATH_TABLE(ns)                                                                                           \
     using vec2 = ns::vec2; using vec3 = ns::vec3; using vec4 = ns::vec4;                                             \
     using Sample = ns::Sample; using Column3 = ns::Column3; using Column5 = ns::Column5;                              \
-    using EchoConstants = ns::EchoConstants; using EchoTerms = ns::EchoTerms;                                        \
+    using EchoConstants = ns::EchoConstants; using EchoTerms = ns::EchoTerms; using RangeSpread = ns::RangeSpread;      \
     VKS_FORWARD(ns, pixel_coord) VKS_FORWARD(ns, pixel_solid_angle) VKS_FORWARD(ns, view_z_from_depth)               \
     VKS_FORWARD(ns, slant_range) VKS_FORWARD(ns, pixel_azimuth) VKS_FORWARD(ns, pixel_elevation)                     \
     VKS_FORWARD(ns, pattern_power) VKS_FORWARD(ns, echo_energy) VKS_FORWARD(ns, range_bin_coord)                     \
@@ -66,7 +68,8 @@ using vec4 = glm::dvec4;
     VKS_FORWARD(ns, resample_share) VKS_FORWARD(ns, pixel_ray) VKS_FORWARD(ns, no_sample)                            \
     VKS_FORWARD(ns, sample_at) VKS_FORWARD(ns, facing_normal) VKS_FORWARD(ns, oriented_normal)                       \
     VKS_FORWARD(ns, sobel3_normal) VKS_FORWARD(ns, sobel5_normal) VKS_FORWARD(ns, geometric_normal)                  \
-    VKS_FORWARD(ns, material_index) VKS_FORWARD(ns, echo_of_pixel)
+    VKS_FORWARD(ns, material_index) VKS_FORWARD(ns, echo_of_pixel) VKS_FORWARD(ns, range_spread)       \
+    VKS_FORWARD(ns, range_share)
 #define VKS_FORWARD(ns, fn) template <class... A> static decltype(auto) fn(A&&... a) { return ns::fn(static_cast<A&&>(a)...); }
 template <class Real> struct Math;
 template <> struct Math<float> { VKS_MATH_TABLE(math_f32) };

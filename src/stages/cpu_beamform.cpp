@@ -26,14 +26,14 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
         range_min = plan.config.range_min_m;
         inv_bin_width = Real(1) / plan.bin_width_m;
     }
-    const bool tent = plan.params.range_kernel == shared::kRangeKernelTent;
-    const bool footprint = plan.params.range_kernel == shared::kRangeKernelFootprint;
+    const std::uint32_t kernel = plan.params.range_kernel;
     const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
-    const std::int64_t last = static_cast<std::int64_t>(bins) - 1;
+    using vec2 = typename M::vec2;
 
-    // profile: per column, rows in increasing order. The loops run row-major for locality; every
+    // profile: per column, rows in increasing order, each pixel spread by range_spread / range_share
+    // (shaders/sonar_kernels.h, as profile.comp). The loops run row-major for locality; every
     // accumulator (bin k, column c) still receives its additions in increasing row order (and, within
-    // a row, the k0 share before the k0 + 1 share), so the sums are the per-column sums of the contract.
+    // a row, in increasing bin order), so the sums are the per-column sums of the contract.
     const std::size_t cells = static_cast<std::size_t>(bins) * C;
     std::fill(acc, acc + cells, Real(0));
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
@@ -41,57 +41,18 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
         for (std::uint32_t c = 0; c < C; ++c) {
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
-            const Real r = static_cast<Real>(e2[2 * c + 1]);
-            const Real x = M::range_bin_coord(r, range_min, inv_bin_width);
-            const int nb = static_cast<int>(bins);
-            if (footprint) {
-                if (std::isnan(x)) continue;
-                // the same five-row window as profile.comp (energy, range; 0 = no hit or outside the image)
-                const auto row_echo = [&](std::int64_t row, int part) {
-                    return row >= 0 && row < static_cast<std::int64_t>(R)
-                               ? static_cast<Real>(echo2[2 * (static_cast<std::size_t>(row) * C + c) + part])
-                               : Real(0);
-                };
-                const std::int64_t jj = j;
-                const Real r_up2 = row_echo(jj - 2, 1), r_up = row_echo(jj - 1, 1);
-                const Real r_down = row_echo(jj + 1, 1), r_down2 = row_echo(jj + 2, 1);
-                const Real a = M::footprint_edge_offset(r_up, r_up2, r, r_down, jump_rel);
-                const Real b = M::footprint_edge_offset(r_down, r_down2, r, r_up, jump_rel);
-                const Real xl = x + M::footprint_lo(a, b) * inv_bin_width;
-                const Real xh = x + M::footprint_hi(a, b) * inv_bin_width;
-                const Real centre = Real(0.5) * (xl + xh);
-                const Real width = std::min(std::max(xh - xl, Real(1)), static_cast<Real>(shared::kMaxFootprintBins));
-                const Real lo = centre - Real(0.5) * width, hi = centre + Real(0.5) * width;
-                Real g = 0;
-                if (a != Real(0) && b != Real(0) && r_up2 > Real(0) && r_down2 > Real(0)) {
-                    const Real w_up = Real(0.5) * std::abs(r_up2 - r) * inv_bin_width;
-                    const Real w_down = Real(0.5) * std::abs(r - r_down2) * inv_bin_width;
-                    // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
-                    const Real span = (Real(2) * (r_up - r_down) + (r_up2 - r_down2)) * (Real(0.25) * inv_bin_width);
-                    g = M::footprint_log_slope(row_echo(jj - 1, 0), w_up, row_echo(jj + 1, 0), w_down, span, width);
-                }
-                const Real inv_norm = Real(1) / (width * M::sinhc_of(Real(0.5) * g * width));
-                // only the bins of the window: the rest of the footprint is gated away
-                const int k_first = std::max(static_cast<int>(std::floor(lo)), 0);
-                const int k_last = std::min(static_cast<int>(std::floor(hi)), nb - 1);
-                for (int k = k_first; k <= k_last; ++k)
-                    acc[static_cast<std::size_t>(k) * C + c] += M::footprint_share(lo, hi, centre, g, inv_norm, k) * e;
-            } else if (tent) {
-                Real t = x - Real(0.5);
-                if (std::isnan(t)) continue;
-                // Far outside the grid both shares are gated away anyway; keep floor() in int range.
-                t = std::min(std::max(t, Real(-4)), static_cast<Real>(bins) + Real(4));
-                const Real kf = std::floor(t);
-                const Real w1 = t - kf;
-                const std::int64_t k0 = static_cast<std::int64_t>(kf);
-                // a share outside the window is gated away
-                if (k0 >= 0 && k0 <= last) acc[static_cast<std::size_t>(k0) * C + c] += (Real(1) - w1) * e;
-                if (k0 + 1 >= 0 && k0 + 1 <= last) acc[static_cast<std::size_t>(k0 + 1) * C + c] += w1 * e;
-            } else {
-                if (!(x >= Real(0) && x < static_cast<Real>(bins))) continue;
-                const std::int64_t k = static_cast<std::int64_t>(std::floor(x));
-                if (k >= 0 && k <= last) acc[static_cast<std::size_t>(k) * C + c] += e;
-            }
+            // the five-row window of profile.comp (energy, range; 0 = no hit or outside the image)
+            const auto row_echo = [&](std::int64_t row) {
+                if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
+                const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
+                return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
+            };
+            const std::int64_t jj = j;
+            const typename M::RangeSpread spread =
+                M::range_spread(kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, static_cast<Real>(e2[2 * c + 1])),
+                                row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width, jump_rel, bins);
+            for (int k = spread.k_first; k <= spread.k_last; ++k)
+                acc[static_cast<std::size_t>(k) * C + c] += M::range_share(spread, k) * e;
         }
     }
     for (std::size_t i = 0; i < cells; ++i)
