@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "stages/cpu_stages.h"
+#include "stages/stage_table.h"
 
 namespace vksonar::cpu {
 namespace {
@@ -58,34 +59,13 @@ public:
         // A frame reused across renders reports this render's stages only (capacity is kept).
         frame.times.clear();
         frame.stages_run.clear();
-        auto start = Clock::now();
-        compose_depth_draws(plan_, scene_, pose, draws_);
-        cull_depth_clusters(clusters_, scene_.draws.size(), draws_, clusters_drawn_);
-        const DepthClusters clusters{clusters_, clusters_drawn_};
-        depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(), plan_.face_normals ? face_.data() : nullptr,
-                   &clusters);
-        finish("depth", start, frame);
-
-        const float* normals = nullptr;
-        if (plan_.effects.incidence) {
-            start = Clock::now();
-            if (plan_.face_normals) {
-                cpu::geometric_normals<Real>(plan_, depth_.data(), face_.data(), normals_.data());
-            } else {
-                cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
-            }
-            normals = normals_.data();
-            finish("normals", start, frame);
+        for (const StageInfo& stage : kStageTable) {
+            if (!stage.runs(plan_)) continue;
+            const auto start = Clock::now();
+            run(stage.id, pose);
+            frame.times.push_back({stage.name, ms_since(start)});
+            frame.stages_run.emplace_back(stage.name);
         }
-
-        start = Clock::now();
-        cpu::echo<Real>(plan_, depth_.data(), material_.data(), normals, echo_.data());
-        finish("echo", start, frame);
-
-        start = Clock::now();
-        cpu::beamform<Real>(plan_, echo_.data(), profiles_.data(), beam_profiles_.data(), polar_.data(),
-                            scratch_.data());
-        finish("beamform", start, frame);
 
         store(frame.clean, polar_);
         if (save_mask & save_depth) {
@@ -110,9 +90,33 @@ public:
     const char* name() const override { return "cpu"; }
 
 private:
-    static void finish(const char* stage, Clock::time_point start, Frame& frame) {
-        frame.times.push_back({stage, ms_since(start)});
-        frame.stages_run.emplace_back(stage);
+    // One stage of kStageTable on this backend's buffers.
+    void run(StageId stage, const Pose& pose) {
+        switch (stage) {
+        case StageId::depth: {
+            compose_depth_draws(plan_, scene_, pose, draws_);
+            cull_depth_clusters(clusters_, scene_.draws.size(), draws_, clusters_drawn_);
+            const DepthClusters clusters{clusters_, clusters_drawn_};
+            depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(),
+                       plan_.face_normals ? face_.data() : nullptr, &clusters);
+            break;
+        }
+        case StageId::normals:
+            if (plan_.face_normals) {
+                cpu::geometric_normals<Real>(plan_, depth_.data(), face_.data(), normals_.data());
+            } else {
+                cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
+            }
+            break;
+        case StageId::echo: // normals only where the normals stage ran (incidence on)
+            cpu::echo<Real>(plan_, depth_.data(), material_.data(), plan_.effects.incidence ? normals_.data() : nullptr,
+                            echo_.data());
+            break;
+        case StageId::beamform:
+            cpu::beamform<Real>(plan_, echo_.data(), profiles_.data(), beam_profiles_.data(), polar_.data(),
+                                scratch_.data());
+            break;
+        }
     }
 
     Plan plan_;              // copied: the backend may outlive the caller's Plan object

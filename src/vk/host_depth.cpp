@@ -293,38 +293,28 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t s
     frame.stages_run.clear();
     bind_image(image);
 
-    // One command buffer per stage, submitted one at a time and timed on the host (the backend's
+    // One command buffer per stage of kStageTable (the import of the host's image in the depth stage's
+    // place) and one for the readback, submitted one at a time and timed on the host (the backend's
     // timestamp path is tied to its own render(); a submit costs ~10 us against stages of ms).
-    constexpr int import_stage = 0, normals_stage = 1, echo_stage = 2, beamform_stage = 3, readback_stage = 4,
-                  stage_total = 5;
-    static_assert(stage_total <= int(stage_count), "the backend allocates stage_count command buffers");
-    constexpr std::array<const char*, std::size_t(stage_total)> names{"import", "normals", "echo", "beamform",
-                                                                      "readback"};
+    std::array<const StageInfo*, kStageCount> stages{};
+    std::uint32_t stage_total = 0;
+    for (const StageInfo& stage : kStageTable)
+        if (stage.runs(b.plan_)) stages[stage_total++] = &stage;
     VKS_VK_TRY(vkResetCommandPool(context.device, b.command_pool_.get(), 0));
-    std::array<double, std::size_t(stage_total)> stage_ms{};
-    for (int stage = import_stage; stage < stage_total; ++stage) {
-        if (stage == normals_stage && !b.incidence_) continue;
-        VkCommandBuffer commands = b.command_buffers_[stage];
+    for (std::uint32_t i = 0; i <= stage_total; ++i) {
+        VkCommandBuffer commands = b.command_buffers_[i];
         VkCommandBufferBeginInfo begin{};
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
-        switch (stage) {
-        case import_stage:
+        static_assert(kStageTable[0].id == StageId::depth, "the import takes the first stage's place");
+        const bool import = i == 0;
+        if (import) {
             record_import(commands, image);
-            break;
-        case normals_stage:
-            b.record_normals(commands);
-            break;
-        case echo_stage:
-            b.record_echo(commands);
-            break;
-        case beamform_stage:
-            b.record_beamform(commands);
-            break;
-        default:
+        } else if (i < stage_total) {
+            b.record_stage(commands, stages[i]->id);
+        } else {
             b.record_readback(commands, save_mask);
-            break;
         }
         VKS_VK_TRY(vkEndCommandBuffer(commands));
 
@@ -334,7 +324,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t s
         submit.commandBufferCount = 1;
         submit.pCommandBuffers = &commands;
         const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
-        if (stage == import_stage && image.wait_semaphore != VK_NULL_HANDLE) {
+        if (import && image.wait_semaphore != VK_NULL_HANDLE) {
             submit.waitSemaphoreCount = 1;
             submit.pWaitSemaphores = &image.wait_semaphore;
             submit.pWaitDstStageMask = &wait_stage;
@@ -343,10 +333,10 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t s
         VKS_VK_TRY(vkResetFences(context.device, 1, &fence));
         VKS_VK_TRY(queue_submit(context, submit, fence));
         VKS_VK_TRY(vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));
-        stage_ms[stage] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-        if (stage != readback_stage) {
-            frame.times.push_back(StageTime{names[stage], stage_ms[stage]});
-            frame.stages_run.emplace_back(names[stage]);
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        if (i < stage_total) { // the readback is a transfer, not a stage
+            frame.times.push_back(StageTime{stages[i]->host_depth_name, ms});
+            frame.stages_run.emplace_back(stages[i]->host_depth_name);
         }
     }
     copy_frame_out(save_mask, frame);
@@ -363,10 +353,14 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     // The previous ping has finished (one ping in flight), so the event can be reset from the host.
     VKS_VK_TRY(vkResetEvent(b.context_.device, o.done.get()));
     bind_image(image);
-    record_import(commands, image);
-    if (b.incidence_) b.record_normals(commands);
-    b.record_echo(commands);
-    b.record_beamform(commands);
+    for (const StageInfo& stage : kStageTable) {
+        if (!stage.runs(b.plan_)) continue;
+        if (stage.id == StageId::depth) {
+            record_import(commands, image); // the host's image in the depth pass's place
+        } else {
+            b.record_stage(commands, stage.id);
+        }
+    }
     b.record_readback(commands, save_mask);
     // The polar scan stays readable by whatever the host records next (e.g. a fragment shader drawing it).
     const Buffer& polar = b.sidelobes_ ? b.polar_ : b.beam_profiles_;

@@ -446,7 +446,7 @@ Result<void> VulkanBackend::create_commands() {
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
     allocate_info.commandPool = pool;
     allocate_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    allocate_info.commandBufferCount = stage_count;
+    allocate_info.commandBufferCount = kCommandBufferCount;
     VKS_VK_TRY(vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
 
     VkFenceCreateInfo fence_info{};
@@ -470,7 +470,7 @@ Result<void> VulkanBackend::create_commands() {
         VkQueryPoolCreateInfo query_info{};
         query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
         query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
-        query_info.queryCount = stage_count + 1;
+        query_info.queryCount = kCommandBufferCount + 1;
         VkQueryPool query_pool = VK_NULL_HANDLE;
         VKS_VK_TRY(vkCreateQueryPool(device, &query_info, allocator, &query_pool));
         query_pool_ = OwnedQueryPool(device, query_pool, allocator);

@@ -10,6 +10,7 @@
 #include "scene/scene_data.h"
 #include "sonar_shared.h"
 #include "stages/stage_backend.h"
+#include "stages/stage_table.h"
 #include "vk/handles.h"
 #include "vk/resources.h"
 
@@ -28,8 +29,8 @@ constexpr std::uint32_t kBeamsPerInvocation = 16;
 
 // The timed stages, in order. Each is recorded into its own command buffer so that, without
 // timestamp queries, they can be submitted and timed one by one.
-enum Stage : std::uint32_t { stage_depth, stage_normals, stage_echo, stage_beamform, stage_readback, stage_count };
-constexpr std::array<const char*, stage_count> kStageNames{"depth", "normals", "echo", "beamform", "readback"};
+// One command buffer per stage of kStageTable, and one for the readback.
+constexpr std::uint32_t kCommandBufferCount = static_cast<std::uint32_t>(kStageCount) + 1;
 
 constexpr VkPipelineStageFlags kComputeOrTransfer =
     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
@@ -73,6 +74,9 @@ private:
     Result<void> create_compute();
     Result<void> create_commands();
 
+    // One stage of kStageTable (the depth stage is the depth pass; the host-depth path records its
+    // import in its place).
+    void record_stage(VkCommandBuffer commands, StageId stage);
     void record_depth(VkCommandBuffer commands);
     void record_normals(VkCommandBuffer commands);
     void record_echo(VkCommandBuffer commands);
@@ -121,11 +125,10 @@ private:
     OwnedPipeline normals_pipeline_, echo_pipeline_, profile_pipeline_, resample_pipeline_, sidelobe_pipeline_;
 
     OwnedCommandPool command_pool_;
-    std::array<VkCommandBuffer, stage_count> command_buffers_{}; // freed with the pool
+    std::array<VkCommandBuffer, kCommandBufferCount> command_buffers_{}; // freed with the pool
     OwnedFence fence_;
     OwnedQueryPool query_pool_;
     std::uint32_t queries_written_ = 0;
-    std::array<Stage, stage_count> query_stage_{}; // the stage that ends at timestamp i + 1
 };
 
 } // namespace vksonar::vk

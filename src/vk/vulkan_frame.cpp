@@ -125,6 +125,23 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     }
 }
 
+void VulkanBackend::record_stage(VkCommandBuffer commands, StageId stage) {
+    switch (stage) {
+    case StageId::depth:
+        record_depth(commands);
+        break;
+    case StageId::normals:
+        record_normals(commands);
+        break;
+    case StageId::echo:
+        record_echo(commands);
+        break;
+    case StageId::beamform:
+        record_beamform(commands);
+        break;
+    }
+}
+
 void VulkanBackend::record_readback(VkCommandBuffer commands, std::uint32_t save_mask) {
     VkBuffer target = readback_.get();
     auto copy = [&](const Buffer& source, const Region& region) {
@@ -188,18 +205,16 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
 
-    // Record: one command buffer per stage; the readback goes with the last one.
-    std::array<Stage, stage_count> stages{};
+    // Record: one command buffer per stage of kStageTable that this plan runs, then one for the readback.
+    std::array<StageId, kStageCount> stages{};
     std::uint32_t stage_total = 0;
-    stages[stage_total++] = stage_depth;
-    if (incidence_) stages[stage_total++] = stage_normals;
-    stages[stage_total++] = stage_echo;
-    stages[stage_total++] = stage_beamform;
-    stages[stage_total++] = stage_readback;
+    for (const StageInfo& stage : kStageTable)
+        if (stage.runs(plan_)) stages[stage_total++] = stage.id;
+    const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
     VKS_VK_TRY(vkResetCommandPool(context_.device, command_pool_.get(), 0));
-    std::array<VkCommandBuffer, stage_count> recorded{};
-    for (std::uint32_t i = 0; i < stage_total; ++i) {
+    std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
+    for (std::uint32_t i = 0; i < buffer_total; ++i) {
         VkCommandBuffer commands = command_buffers_[i];
         recorded[i] = commands;
         VkCommandBufferBeginInfo begin{};
@@ -207,27 +222,13 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
-            vkCmdResetQueryPool(commands, query_pool_.get(), 0, stage_count + 1);
+            vkCmdResetQueryPool(commands, query_pool_.get(), 0, kCommandBufferCount + 1);
             vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
-        switch (stages[i]) {
-        case stage_depth:
-            record_depth(commands);
-            break;
-        case stage_normals:
-            record_normals(commands);
-            break;
-        case stage_echo:
-            record_echo(commands);
-            break;
-        case stage_beamform:
-            record_beamform(commands);
-            break;
-        case stage_readback:
+        if (i < stage_total) {
+            record_stage(commands, stages[i]);
+        } else {
             record_readback(commands, save_mask);
-            break;
-        case stage_count:
-            break;
         }
         if (timestamps_) {
             vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
@@ -235,35 +236,34 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
         VKS_VK_TRY(vkEndCommandBuffer(commands));
     }
 
-    // Submit: all at once with timestamps, else one stage at a time, timed on the host.
-    std::array<double, stage_count> stage_ms{};
+    // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
+    std::array<double, kCommandBufferCount> stage_ms{};
     if (timestamps_) {
-        if (auto r = submit_and_wait(recorded.data(), stage_total); !r) return r;
-        std::array<std::uint64_t, stage_count + 1> ticks{};
-        VKS_VK_TRY(vkGetQueryPoolResults(context_.device, query_pool_.get(), 0, stage_total + 1,
+        if (auto r = submit_and_wait(recorded.data(), buffer_total); !r) return r;
+        std::array<std::uint64_t, kCommandBufferCount + 1> ticks{};
+        VKS_VK_TRY(vkGetQueryPoolResults(context_.device, query_pool_.get(), 0, buffer_total + 1,
                                          sizeof(std::uint64_t) * ticks.size(), ticks.data(), sizeof(std::uint64_t),
                                          VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
         const std::uint64_t mask = context_.timestamp_valid_bits >= 64
                                        ? ~std::uint64_t(0)
                                        : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
         const double ns_per_tick = context_.properties.limits.timestampPeriod;
-        for (std::uint32_t i = 0; i < stage_total; ++i) {
+        for (std::uint32_t i = 0; i < buffer_total; ++i) {
             const std::uint64_t elapsed = ((ticks[i + 1] & mask) - (ticks[i] & mask)) & mask;
             stage_ms[i] = double(elapsed) * ns_per_tick * 1e-6;
         }
     } else {
-        for (std::uint32_t i = 0; i < stage_total; ++i) {
+        for (std::uint32_t i = 0; i < buffer_total; ++i) {
             const auto start = std::chrono::steady_clock::now();
             if (auto r = submit_and_wait(&recorded[i], 1); !r) return r;
             stage_ms[i] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         }
     }
+    // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
-        if (stages[i] == stage_readback) {
-            continue; // a transfer, not a stage of the pipeline
-        }
-        frame.times.push_back(StageTime{kStageNames[stages[i]], stage_ms[i]});
-        frame.stages_run.emplace_back(kStageNames[stages[i]]);
+        const char* name = kStageTable[static_cast<std::size_t>(stages[i])].name;
+        frame.times.push_back(StageTime{name, stage_ms[i]});
+        frame.stages_run.emplace_back(name);
     }
 
     copy_frame_out(save_mask, frame);
