@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# House style (STYLE.md rule 10): every tracked C/C++ source and header, the GLSL/C++ shared headers
+# House style (.clang-format): every tracked C/C++ source and header, the GLSL/C++ shared headers
 # included, is exactly as clang-format writes it with the repo's .clang-format. Lists the files that
 # are not and exits 1 (fix: clang-format -i FILE). Run by ctest as `clang_format`.
 # Other clang-format versions lay some constructs out differently, so the check runs only with

@@ -243,7 +243,7 @@ TEST(Validate, NamesFieldAndValue) {
     EXPECT_NE(invalid("beam_angles=-10,0,10").find("strictly decreasing"), std::string::npos);
     EXPECT_NE(invalid("beam_angles=80,0,-10").find("outside"), std::string::npos);
 
-    // The hard cases of DESIGN §6 stay valid.
+    // The hard cases of docs/hard_cases.md stay valid.
     SonarConfig wide;
     wide.hfov_deg = 360;
     wide.beams = 4096;
@@ -262,7 +262,8 @@ TEST(Validate, NamesFieldAndValue) {
     EXPECT_NE(table.validate().find("does not match beam_angles"), std::string::npos);
 }
 
-// DESIGN §2: bins derived from the bandwidth, delta r = c / 2B (0.2-60 m at 30 kHz: 2.5 cm, 2392 bins).
+// docs/pipeline.md, "Frames and grids": bins derived from the bandwidth, delta r = c / 2B (0.2-60 m at 30 kHz: 2.5 cm,
+// 2392 bins).
 TEST(Validate, BandwidthDerivesTheRangeBins) {
     SonarConfig c;
     c.range_min_m = 0.2;

@@ -1,6 +1,6 @@
-// Effects on demand (DESIGN §4, issue 5), on both backends. For each effect:
+// Effects on demand (README "Effects: only what the scene calls for", issue 5), on both backends. For each effect:
 //  - on vs off changes the output the way the model says (the expected values come from the model's
-//    closed form in DESIGN §3 / docs/pipeline.md, evaluated here in double, not from the code under test);
+//    closed form in README "The model" / docs/pipeline.md, evaluated here in double, not from the code under test);
 //  - off leaves the rest of the frame exactly as a run where the effect was never considered (a
 //    config in which the effect's term is the identity, or the stages upstream of the effect);
 //  - `auto` resolves from scene + config with a reason, and the plan builds only the passes it needs
@@ -33,7 +33,7 @@ std::string backend_param_name(const ::testing::TestParamInfo<Backend>& info) {
     return info.param == Backend::vulkan ? "vulkan" : "cpu";
 }
 
-// ---- closed forms (DESIGN §3, docs/pipeline.md "Frames and grids"), in double ----------------------
+// ---- closed forms (README "The model", docs/pipeline.md "Frames and grids"), in double ----------------------
 
 // sinc^2(x) = 0.5: the half-power point of a uniform line array.
 double sinc_half_power_x() {
@@ -156,7 +156,7 @@ TEST_P(EffectsTest, IncidenceIsLambertCosineOnAndFlatOff) {
     EXPECT_TRUE(same_bits(a->frame.depth, b->frame.depth));
 
     // Lambert: s(theta) = mu cos^2(theta); with the footprint's 1/cos(theta) the pixel echo scales by
-    // cos(theta) (DESIGN §3). Off: scatter factor 1. So E_on / E_off = cos(theta), with theta between
+    // cos(theta) (README "The model"). Off: scatter factor 1. So E_on / E_off = cos(theta), with theta between
     // the pixel ray and the plane normal n = (cos yaw, sin yaw, 0).
     const Plan& plan = renderer_plan(a->renderer);
     const double n[3] = {std::cos(yaw * kDeg), std::sin(yaw * kDeg), 0.0};

@@ -48,7 +48,7 @@ host::Rgb8 pixel(const host::Image& image, std::uint32_t row, std::uint32_t col)
 // ---- uuv_simulator image sonar -------------------------------------------------------------------
 
 TEST(LegacyUuv, RawScanSizeFormula) {
-    // LEGACY.md step 3: cols = 2 * int(400 sin(hfov/2)) + 20, rows = 400. For the notes' 88.6 deg:
+    // docs/legacy.md, step 3: cols = 2 * int(400 sin(hfov/2)) + 20, rows = 400. For the notes' 88.6 deg:
     // 400 sin(44.3 deg) = 279.37 -> 2 * 279 + 20 = 578.
     EXPECT_EQ(uuv_scan_columns(88.6 * kDeg), 578u);
     for (double hfov_deg : {10.0, 45.0, 88.6, 130.0, 170.0}) {
@@ -74,7 +74,7 @@ TEST(LegacyUuv, RawScanSizeFormula) {
 }
 
 TEST(LegacyUuv, ColormapAndBackgroundAtBreakpoints) {
-    // LEGACY.md step 4, each channel truncated like the plugin's double -> uchar conversion:
+    // docs/legacy.md, step 4, each channel truncated like the plugin's double -> uchar conversion:
     // a = 0.5 (a < 0.8): (1.25, 0.78, 0.50) * 0.5 * 255 = (159.375, 99.45, 63.75) -> (159, 99, 63).
     expect_rgb(uuv_color(0.5f), 159, 99, 63, "a = 0.5");
     // a = 0.9 (0.8 <= a < 1): (0.9, 1.88*0.9 - 0.88, 1.99 - 1.99*0.9) * 255 = (229.5-, 207.06, 50.75)

@@ -149,8 +149,8 @@ TEST_P(RenderTest, RangeWindowAndFovChangeTheGeometry) {
     ASSERT_TRUE(d);
     EXPECT_EQ(sum(d->frame.clean), 0.0);
 
-    // Bins from the bandwidth (DESIGN §2): c / 2B = 1500 / 40e3 = 3.75 cm, 1053 bins over 39.5 m; the
-    // plane lands in the bin of 10 m on that grid, (10 - 0.5) / 0.0375 = 253.
+    // Bins from the bandwidth (docs/pipeline.md, "Frames and grids"): c / 2B = 1500 / 40e3 = 3.75 cm, 1053 bins
+    // over 39.5 m; the plane lands in the bin of 10 m on that grid, (10 - 0.5) / 0.0375 = 253.
     SonarConfig from_bandwidth = base;
     from_bandwidth.bandwidth_hz = 20e3;
     auto w = render_once(GetParam(), from_bandwidth, scene);

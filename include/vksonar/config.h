@@ -12,7 +12,8 @@
 
 namespace vksonar {
 
-// Each effect of DESIGN §4. `automatic` is resolved from scene + config into on/off with a reason.
+// Each effect of README "Effects: only what the scene calls for". `automatic` is resolved from scene + config into
+// on/off with a reason.
 enum class EffectMode : std::uint8_t { automatic, on, off };
 
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
@@ -37,7 +38,7 @@ enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
 enum class Precision : std::uint8_t { f32, f64 };
 // Storage of the per-pixel echo buffer (energy, slant range) between the echo and profile passes.
 enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
-// What the renderer reproduces: the physical model (DESIGN §3), or one of the two legacy Gazebo plugins
+// What the renderer reproduces: the physical model (README "The model"), or one of the two legacy Gazebo plugins
 // step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
 enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 
@@ -48,7 +49,7 @@ struct SonarConfig {
     std::string source;                   // where the device figures come from (presets cite it)
     SonarMode mode = SonarMode::physical; // JSON key `mode`: "physical" | "uuv-legacy" | "gtri-legacy"
 
-    // Geometry (DESIGN §2). Azimuth is positive to port; beam 0 is the port-most beam.
+    // Geometry (docs/pipeline.md, "Frames and grids"). Azimuth is positive to port; beam 0 is the port-most beam.
     double frequency_hz = 750e3;
     double hfov_deg = 130.0;
     double vfov_deg = 20.0;                // two-way -3 dB vertical beamwidth
@@ -62,7 +63,7 @@ struct SonarConfig {
     double sound_speed_mps = 1500.0;
     double bandwidth_hz = 0.0; // > 0: the range bins follow the resolution c / 2B instead of `bins`
 
-    // Sonar equation (DESIGN §3). Levels in dB re 1 uPa (at 1 m for SL).
+    // Sonar equation (README "The model"). Levels in dB re 1 uPa (at 1 m for SL).
     double source_level_db = 210.0;
     double noise_level_db = 60.0;
     double directivity_index_db = 20.0;
@@ -90,7 +91,7 @@ struct SonarConfig {
     Colormap colormap = Colormap::sonar;
     std::uint32_t fan_width_px = 1024;
 
-    // Accuracy knobs (DESIGN §5).
+    // Accuracy knobs (README "Accuracy and what it costs").
     double pixels_per_beam = 2.0;     // horizontal oversampling (pixel columns per beam spacing)
     std::uint32_t rows_per_vfov = 64; // pixel rows per vertical beamwidth
     double vertical_coverage = 2.0;   // depth pass covers at least this many vertical beamwidths

@@ -1,5 +1,5 @@
-// `vksonar bench accuracy` (DESIGN §5, issue 6): error vs time over the accuracy knobs, against the CPU
-// backend in double precision at the highest settings, with every noise source off.
+// `vksonar bench accuracy` (README "Accuracy and what it costs", issue 6): error vs time over the accuracy knobs,
+// against the CPU backend in double precision at the highest settings, with every noise source off.
 #ifdef VKSONAR_HAVE_BENCHMARK
 
 #include <algorithm>

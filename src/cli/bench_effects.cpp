@@ -1,5 +1,5 @@
-// `vksonar bench effects`: the cost of each effect (DESIGN §4), on vs off in the same run, interleaved,
-// with an off-vs-off pair of identical renderers as the noise reference.
+// `vksonar bench effects`: the cost of each effect (README "Effects: only what the scene calls for"), on vs off in the
+// same run, interleaved, with an off-vs-off pair of identical renderers as the noise reference.
 #ifdef VKSONAR_HAVE_BENCHMARK
 
 #include <algorithm>

@@ -4,13 +4,12 @@
 #include <array>
 #include <cmath>
 
+#include "core/angles.h"
 #include "core/plan.h"
 #include "scene/scene_data.h"
 
 namespace vksonar {
 namespace {
-
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
 // Column-major 4x4 in double.
 using Mat4 = std::array<double, 16>;

@@ -8,14 +8,12 @@
 #include <cstdio>
 #include <limits>
 
+#include "core/angles.h"
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
 
 namespace vksonar {
 namespace {
-
-constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
 
 std::string fmt(double v) {
     char buf[64];

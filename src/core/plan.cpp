@@ -9,6 +9,7 @@
 
 #include <unistd.h>
 
+#include "core/angles.h"
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
 
@@ -44,9 +45,8 @@ static_assert(shader_id(NormalMethod::sobel3) == shared::kNormalsSobel3 &&
               shader_id(NormalMethod::sobel5) == shared::kNormalsSobel5 &&
               shader_id(NormalMethod::geometric) == shared::kNormalsGeometric);
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
-// Absorption below this over the two-way range window is invisible on any display: DESIGN §4.
+// Absorption below this over the two-way range window is invisible on any display: README "Effects: only what the scene
+// calls for".
 constexpr double kAbsorptionAutoThresholdDb = 0.1;
 // Neighbours whose slant range differs by more than 5% are treated as another surface by the
 // Sobel stage (docs/pipeline.md §2); the one-sided fallback handles them.
@@ -437,7 +437,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         p.materials.push_back(gpu);
     }
 
-    // Effects (DESIGN §4).
+    // Effects (README "Effects: only what the scene calls for").
     const double alpha = c.absorption_db_per_m >= 0.0
                              ? c.absorption_db_per_m
                              : francois_garrison_db_per_m(c.frequency_hz, c.temperature_c, c.salinity_ppt,

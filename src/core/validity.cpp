@@ -7,11 +7,10 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/angles.h"
+
 namespace vksonar {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDegToRad = kPi / 180.0;
 
 std::string fmt(double v) {
     char buf[64];

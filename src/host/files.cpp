@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/angles.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
 
@@ -166,7 +167,6 @@ Result<void> write_points_ply(const std::string& path, const float* xyzi, std::s
 std::string meta_json_plan_part(const Plan& plan) {
     using json = nlohmann::ordered_json; // keeps the documented field order in the file
     const SonarConfig& cfg = plan.config;
-    constexpr double kDeg = 3.14159265358979323846 / 180.0;
     json m = json::object();
     m["format"] = "vksonar-frame-1";
     m["frame_convention"] =
@@ -180,8 +180,8 @@ std::string meta_json_plan_part(const Plan& plan) {
         const double a = plan.beam_angle_rad[j];
         angles.push_back(a);
         directions.push_back({{"x", 0.0}, {"y", -std::sin(a)}, {"z", std::cos(a)}});
-        tx.push_back(cfg.vfov_deg * kDeg);
-        rx.push_back(cfg.horizontal_beamwidth_deg * kDeg);
+        tx.push_back(cfg.vfov_deg * kDegToRad);
+        rx.push_back(cfg.horizontal_beamwidth_deg * kDegToRad);
     }
     m["beam_angles_rad"] = std::move(angles);
     m["beam_directions"] = std::move(directions);

@@ -3,12 +3,12 @@
 #include <cmath>
 #include <cstddef>
 
+#include "core/angles.h"
 #include "host/host_stages.h"
 
 namespace vksonar::host {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr Rgb8 kBackground{14, 18, 24};
 constexpr Rgb8 kOverlay{200, 200, 200};
 constexpr float kOverlayAlpha = 0.55f;   // overlay = mix(data colour, light grey, alpha)

@@ -47,15 +47,6 @@ inline double exp1(FrameKey key, std::uint32_t beam, std::uint32_t bin, std::uin
     return -std::log(uniform01(key, beam, bin, stream));
 }
 
-// Exp(1) in float, for the per-cell loop of the noise stage (a float log costs a third of a double
-// one there): the top 24 bits, centred in their cell, so u lies in [2^-25, 1 - 2^-25] and the draw
-// in (3e-8, 17.3]. The cut tail (P = 3e-8) shifts the mean by < 1e-6.
-inline float exp1f(FrameKey key, std::uint32_t beam, std::uint32_t bin, std::uint32_t stream) {
-    const auto bits = static_cast<std::uint32_t>(hash_cell(key, beam, bin, stream) >> 40);
-    const float u = (static_cast<float>(bits) + 0.5f) * (1.0f / 16777216.0f);
-    return -std::log(u);
-}
-
 // ---- The per-cell draws of the noise stage: 32-bit and branch-free, so the compiler vectorizes a
 // row of them. Keyed like the rest: a pure function of (seed, frame, beam, bin, stream).
 

@@ -8,13 +8,13 @@
 #include <limits>
 #include <vector>
 
+#include "core/angles.h"
 #include "legacy/legacy.h"
 #include "sonar_shared.h"
 
 namespace vksonar::legacy {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kDegPerRad = 180.0 / kPi;
 
 // Replicated border, as the plugin's filter2D / erode with BORDER_REPLICATE.

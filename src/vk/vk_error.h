@@ -25,12 +25,3 @@ inline Error vk_error(VkResult result, const char* call) {
             return ::vksonar::vk::vk_error(vks_result_, #call);                                                        \
         }                                                                                                              \
     } while (0)
-
-// Propagates the error of a Result<...> expression.
-#define VKS_TRY(expr)                                                                                                  \
-    do {                                                                                                               \
-        auto vks_status_ = (expr);                                                                                     \
-        if (!vks_status_.ok()) {                                                                                       \
-            return vks_status_.error();                                                                                \
-        }                                                                                                              \
-    } while (0)

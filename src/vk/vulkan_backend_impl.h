@@ -21,7 +21,7 @@ struct VulkanContext;
 namespace vksonar::vk {
 
 // Work per invocation (specialization constant 1 of the shaders): more work per invocation pays on
-// lavapipe (DESIGN §9) and costs nothing on a GPU at these sizes.
+// lavapipe (docs/benchmarks.md) and costs nothing on a GPU at these sizes.
 constexpr std::uint32_t kNormalsRun = 8; // pixels of one row per normals invocation
 constexpr std::uint32_t kEchoPixels = 4; // consecutive pixels per echo invocation
 // Beams per resample/sidelobe workgroup (each invocation one bin of them); sidelobe.comp holds at most 32.

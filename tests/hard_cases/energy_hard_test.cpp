@@ -1,4 +1,4 @@
-// DESIGN §6 hard cases, energy: a very bright target beside a dark one, millions of pixels in one
+// Hard cases (docs/hard_cases.md), energy: a very bright target beside a dark one, millions of pixels in one
 // range bin, pixel solid angles converging as resolution doubles, energy in = energy out for a box
 // vertical pattern, echo falling with range, and depth discontinuities (no Sobel spikes).
 #include <algorithm>

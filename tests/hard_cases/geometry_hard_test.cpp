@@ -1,4 +1,4 @@
-// DESIGN §6 hard cases, geometry: grazing incidence, surfaces at the edges of the range window,
+// Hard cases (docs/hard_cases.md), geometry: grazing incidence, surfaces at the edges of the range window,
 // nothing in view, the sonar inside a closed mesh, degenerate triangles, a scene 1e5 m from the
 // origin, moving scene and sonar together, range_max/range_min = 1e4, hfov 360 and 1 degree,
 // 1 and 4096 beams. Every case runs on both backends and checks every stage for NaN/Inf.
@@ -469,8 +469,8 @@ TEST_P(HardCase, DegenerateTrianglesAddNothing) {
 // ---- far from the origin, rigid motion ---------------------------------------------------------------
 
 // Renders structured_scene placed by `place` from pose `place * local_pose` and compares with the scene
-// at the origin seen from local_pose. The host composes view x model in double (DESIGN §2), so the
-// float matrices uploaded differ by rounding only.
+// at the origin seen from local_pose. The host composes view x model in double (docs/pipeline.md, "Frames and grids"),
+// so the float matrices uploaded differ by rounding only.
 void expect_same_frame_when_moved_together(Backend backend, const Pose& move, const char* label,
                                            double max_db_allowed) {
     SonarConfig config = small_config();

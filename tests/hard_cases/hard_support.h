@@ -1,4 +1,4 @@
-// Helpers for the numerical hard cases of DESIGN §6 (tests/hard_cases/*): small configs, scenes
+// Helpers for the numerical hard cases of docs/hard_cases.md (tests/hard_cases/*): small configs, scenes
 // built in code, a render that keeps every intermediate, and the "no NaN/Inf in any stage" check.
 #pragma once
 
