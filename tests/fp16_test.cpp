@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "core/half.h"
+#include "core/host_plan.h"
 #include "stages/cpu_stages.h"
 #include "test_support.h"
 #include "tolerances.h"
@@ -118,6 +119,34 @@ TEST(Fp16Echo, QuantizationIsHalfAnUlpOfBinary16) {
     EXPECT_LE(max_rel, std::ldexp(1.0, -11));
     EXPECT_LE(max_range_rel, std::ldexp(1.0, -11));
     EXPECT_GT(changed, lit / 2); // it does quantize
+}
+
+// The fp16 echo scale follows the pixel grid it is used on. A host depth image of few, large pixels
+// (a coarse engine camera) collects far more energy per pixel than vksonar's own grid: the brightest
+// pixel it can produce, computed here from the image's geometry, must still fit a half (< 65504)
+// after scaling, and the scale must not waste range either (> 2^14, the scale brings it near 2^15).
+// The host-depth plan once kept the scale of vksonar's own grid: 2^8 too large for this image.
+TEST(Fp16Echo, HostDepthScaleFitsTheHostImagesPixels) {
+    SonarConfig config = quiet_config();
+    config.intermediates = IntermediatePrecision::fp16;
+    HostDepthDesc desc;
+    desc.width = 48;
+    desc.height = 12;
+    desc.fx_px = 0.5 * desc.width / std::tan(70.0 * 3.14159265358979323846 / 180.0);  // +-70 deg
+    desc.fy_px = 0.5 * desc.height / std::tan(15.0 * 3.14159265358979323846 / 180.0); // +-15 deg
+    desc.cx_px = 0.5 * desc.width;
+    desc.cy_px = 0.5 * desc.height;
+    auto plan = make_host_depth_plan(config, desc);
+    ASSERT_TRUE(plan.ok()) << plan.error().message;
+    // Brightest pixel: the centre pixel (largest solid angle), facing (Lambert f = 1), on the vertical
+    // axis, at the nearest range the echo stage keeps (its gate), the default backscatter.
+    const double du = 2.0 * (0.5 * desc.width / desc.fx_px) / desc.width;
+    const double dv = 2.0 * (0.5 * desc.height / desc.fy_px) / desc.height;
+    const double r = plan->gate_min_m;
+    const double brightest = std::pow(10.0, config.default_backscatter_db / 10.0) * du * dv / (r * r);
+    const double scaled = brightest * plan->params.echo_scale;
+    EXPECT_LT(scaled, 65504.0) << "echo_scale " << plan->params.echo_scale;
+    EXPECT_GT(scaled, 16384.0) << "echo_scale " << plan->params.echo_scale;
 }
 
 } // namespace

@@ -661,7 +661,7 @@ def bad_corpus():
 def main():
     if len(sys.argv) == 3 and sys.argv[1] == "--heavy":
         # Not bundled (1.6 MB): the default scene with a 220 x 220-quad seabed, 98k triangles in all, the
-        # load DESIGN §9's prototype was timed at (docs/benchmarks.md, depth-pass culling).
+        # load the early prototype was timed at (docs/benchmarks.md, depth-pass culling).
         default_scene(220, os.path.join(sys.argv[2], "default_98k.gltf"))
         return
     default_scene()

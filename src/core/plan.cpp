@@ -291,20 +291,13 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
     }
 }
 
-Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
-    if (std::string problem = config.validate(); !problem.empty()) {
-        return make_error(ErrorCode::invalid_argument, "config: " + problem);
-    }
-    Plan p;
-    p.config = config;
-    const SonarConfig& c = config;
+// make_plan, as named steps (each reads the config from p.config and what the steps before it set).
+namespace {
 
-    auto beams_or = beam_table(c);
-    if (!beams_or) return beams_or.error();
-    p.beam_angle_rad = std::move(beams_or.value());
-    p.beams = static_cast<std::uint32_t>(p.beam_angle_rad.size());
-    p.bins = c.range_bins();
-
+// Step: vksonar's own pixel grid and the vertical pattern's constants (its coverage reaches the
+// pattern's first null).
+Result<void> plan_pixel_grid(Plan& p) {
+    const SonarConfig& c = p.config;
     // Pixel grid: enough columns that pixels_per_beam of them fall in the finer of the beam spacing and
     // the beamwidth, split into slices no wider than max_slice_deg.
     const double hfov = c.hfov_deg * kDegToRad;
@@ -366,7 +359,6 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                               fmt(rows) + " rows; at most " + std::to_string(kMaxRows));
     }
     p.rows = std::max(2u, static_cast<std::uint32_t>(rows));
-    if (auto fits = check_memory(p); !fits) return fits.error();
 
     p.slice_info.resize(p.slices);
     for (std::uint32_t s = 0; s < p.slices; ++s) {
@@ -375,6 +367,31 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
                            static_cast<float>(std::sin(centre)), 0.0f};
     }
 
+    return {};
+}
+
+// Step, instead of plan_pixel_grid: a host engine's pixel grid (one slice) and the vertical
+// pattern's constants.
+void use_host_grid(Plan& p, const HostPixelGrid& grid) {
+    const SonarConfig& c = p.config;
+    const double vfov = c.vfov_deg * kDegToRad;
+    p.vpattern_chebyshev_a = c.vertical_pattern == BeamPattern::chebyshev ? chebyshev_a(c.vertical_sidelobe_db) : 0.0;
+    p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
+    p.vpattern_halfwidth_rad = 0.5 * vfov;
+    p.slices = 1;
+    p.slice_columns = grid.columns;
+    p.columns = grid.columns;
+    p.rows = grid.rows;
+    p.tan_half_h = grid.tan_half_h;
+    p.tan_half_v = grid.tan_half_v;
+    p.slice_width_rad = 2.0 * std::atan(grid.tan_half_h);
+    p.vertical_coverage_rad = 2.0 * std::atan(grid.tan_half_v);
+    p.slice_info.assign(1, shared::SliceInfo{0.0f, 1.0f, 0.0f, 0.0f});
+}
+
+// Step: the range window: bin width, the echo stage's gate, bin centres.
+void plan_range_window(Plan& p) {
+    const SonarConfig& c = p.config;
     p.bin_width_m = (c.range_max_m - c.range_min_m) / p.bins;
     // The range gate: a footprint reaches at most kMaxFootprintBins / 2 bins from its pixel, a tent one
     // bin, the nearest bin none. Below range_min the gate stops at half of it (the near plane must stay
@@ -386,6 +403,13 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.gate_min_m = std::max(c.range_min_m - p.gate_margin_m, 0.5 * c.range_min_m);
     p.gate_max_m = c.range_max_m + p.gate_margin_m;
 
+    p.bin_range_m.resize(p.bins);
+    for (std::uint32_t k = 0; k < p.bins; ++k)
+        p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
+}
+
+// Step (after the pixel grid and the gate): the depth pass's clip planes.
+void plan_clip_planes(Plan& p) {
     // Clip planes: the corner ray of a slice reaches gate_min at view z = gate_min / |(u, v, 1)|, so the
     // near plane sits there (slightly closer), the far plane at gate_max, and the echo stage cuts at the
     // exact slant range.
@@ -394,19 +418,23 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.far_m = p.gate_max_m;
     p.depth_a = p.near_m * p.far_m / (p.far_m - p.near_m);
     p.depth_b = -p.near_m / (p.far_m - p.near_m);
+}
 
-    p.bin_range_m.resize(p.bins);
-    for (std::uint32_t k = 0; k < p.bins; ++k)
-        p.bin_range_m[k] = c.range_min_m + (k + 0.5) * p.bin_width_m;
-
-    // Beam patterns (the vertical one's constants are set with the vertical coverage above).
+// Step: the horizontal pattern's constants.
+void plan_horizontal_pattern(Plan& p) {
+    const SonarConfig& c = p.config;
+    const double hbw = c.horizontal_beamwidth_deg * kDegToRad;
     p.hpattern_chebyshev_a =
         c.horizontal_pattern == BeamPattern::chebyshev ? chebyshev_a(c.horizontal_sidelobe_db) : 0.0;
     p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw, p.hpattern_chebyshev_a);
     p.hpattern_halfwidth_rad = 0.5 * hbw;
+}
 
+// Step: the acoustic materials as uploaded. any_angle_dependent: a drawn material depends on incidence.
+Result<void> plan_materials(Plan& p, const SceneData& scene, bool& any_angle_dependent) {
+    const SonarConfig& c = p.config;
     // Materials: one per scene material, or the config default if the scene has none.
-    bool any_angle_dependent = false;
+    any_angle_dependent = false;
     if (scene.materials.empty()) {
         p.materials.push_back(
             {static_cast<float>(std::pow(10.0, c.default_backscatter_db / 10.0)), shared::kScatterLambert, 0.0f, 0.0f});
@@ -437,6 +465,13 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
         p.materials.push_back(gpu);
     }
 
+    return {};
+}
+
+// Step: the effects on demand, and the side-lobe kernel's half width in beams (0: none).
+std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_dependent, double& reach) {
+    const SonarConfig& c = p.config;
+    const double hbw = c.horizontal_beamwidth_deg * kDegToRad;
     // Effects (README "Effects: only what the scene calls for").
     const double alpha = c.absorption_db_per_m >= 0.0
                              ? c.absorption_db_per_m
@@ -449,7 +484,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     for (std::uint32_t j = 1; j < p.beams; ++j) {
         min_spacing = std::min(min_spacing, p.beam_angle_rad[j - 1] - p.beam_angle_rad[j]);
     }
-    double reach = c.sidelobe_kernel_beamwidths * hbw;
+    reach = c.sidelobe_kernel_beamwidths * hbw;
     // Side lobes that stay below the display floor even for a target at the top of the display window
     // (strongest side lobe, dB re the main lobe, below -(db_max - db_min)) show nothing: with the
     // effect on auto the kernel then stops at the first null (main lobe only).
@@ -496,17 +531,25 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     p.alpha_db_per_m = e.absorption ? alpha : 0.0;
     p.validity = model_validity(c, scene.materials);
 
-    // Beamform tables: tent from pixel columns onto the beam table.
+    return e.horizontal_pattern ? half_taps : 0;
+}
+
+// Step: which beams each pixel column feeds (tent on the beam table). Columns at |azimuth| beyond
+// exclude_beyond_rad feed none.
+void plan_column_tables(Plan& p, double exclude_beyond_rad) {
     p.column_azimuth_rad.resize(p.columns);
     for (std::uint32_t col = 0; col < p.columns; ++col) {
         const std::uint32_t s = col / p.slice_columns;
         const double u = math_f64::pixel_coord(col % p.slice_columns, p.slice_columns, p.tan_half_h);
         p.column_azimuth_rad[col] = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
     }
-    assign_columns_to_beams(p);
+    assign_columns_to_beams(p, exclude_beyond_rad);
+}
 
+// Step: the side-lobe kernel along beams.
+void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach) {
+    const SonarConfig& c = p.config;
     // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their angular separation.
-    if (!e.horizontal_pattern) half_taps = 0;
     p.sidelobe_taps = 2 * half_taps + 1;
     p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
     const std::uint32_t hshape = shader_id(c.horizontal_pattern);
@@ -527,7 +570,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
         }
     }
+}
 
+// Step, last: the compute stages' uniform block, from the finished plan.
+void plan_gpu_params(Plan& p) {
+    const SonarConfig& c = p.config;
+    const ResolvedEffects& e = p.effects;
     shared::SonarParams& g = p.params;
     g.columns = p.columns;
     g.rows = p.rows;
@@ -573,6 +621,42 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene) {
     }
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
     g.vpattern_chebyshev_a = static_cast<float>(p.vpattern_chebyshev_a);
+}
+
+} // namespace
+
+Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const HostPixelGrid* host_grid) {
+    if (std::string problem = config.validate(); !problem.empty()) {
+        return make_error(ErrorCode::invalid_argument, "config: " + problem);
+    }
+    Plan p;
+    p.config = config;
+
+    auto beams_or = beam_table(config);
+    if (!beams_or) return beams_or.error();
+    p.beam_angle_rad = std::move(beams_or.value());
+    p.beams = static_cast<std::uint32_t>(p.beam_angle_rad.size());
+    p.bins = config.range_bins();
+
+    if (host_grid != nullptr) {
+        use_host_grid(p, *host_grid);
+    } else if (auto grid = plan_pixel_grid(p); !grid) {
+        return grid.error();
+    }
+    if (auto fits = check_memory(p); !fits) return fits.error();
+    plan_range_window(p);
+    plan_clip_planes(p);
+    plan_horizontal_pattern(p);
+    bool any_angle_dependent = false;
+    if (auto materials = plan_materials(p, scene, any_angle_dependent); !materials) return materials.error();
+    double reach = 0.0;
+    const std::uint32_t half_taps = plan_effects(p, scene, any_angle_dependent, reach);
+    // A host camera may see beyond the sonar's fan: those columns feed no beam (make_plan's own grid
+    // folds its few edge columns into the edge beams).
+    plan_column_tables(p, host_grid != nullptr ? 0.5 * config.hfov_deg * kDegToRad
+                                               : std::numeric_limits<double>::infinity());
+    plan_sidelobe_kernel(p, half_taps, reach);
+    plan_gpu_params(p);
     return p;
 }
 

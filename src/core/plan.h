@@ -86,8 +86,18 @@ struct Plan {
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
 
-// Validates the config and derives the plan. Errors name the config field and value.
-[[nodiscard]] Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene);
+// A pixel grid given from outside instead of vksonar's own (a host engine's depth image, host_plan.h):
+// one slice of columns x rows pixels whose centre rays span +-tan_half_h, +-tan_half_v (focal-normalized).
+struct HostPixelGrid {
+    std::uint32_t columns = 0, rows = 0;
+    double tan_half_h = 0, tan_half_v = 0;
+};
+
+// Validates the config and derives the plan, in named steps (plan.cpp): beams and bins, the pixel grid
+// (vksonar's own, or host_grid), the range window and clip planes, patterns, materials, effects, the
+// beamform tables, and the GPU parameters last. Errors name the config field and value.
+[[nodiscard]] Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene,
+                                     const HostPixelGrid* host_grid = nullptr);
 
 // Francois & Garrison (1982) absorption in dB/m for frequency (Hz), temperature (C), salinity (ppt),
 // depth (m), pH and sound speed (m/s).
