@@ -389,11 +389,11 @@ Result<void> Writer::close() {
         s.end_record(r);
     }
     // Footer; its CRC covers the summary and the Footer up to summary_offset_start.
-    const std::size_t footer = s.begin_record(op_footer);
+    s.u8(op_footer);
+    s.u64(8 + 8 + 4); // the length is known before the CRC that covers it
     s.u64(summary_start);
     s.u64(summary_offset_start);
     s.u32(crc32(summary.data(), summary.size()));
-    s.end_record(footer);
     s.raw(kMagic, sizeof kMagic);
     if (auto written = put(summary, false); !written) return written;
     std::FILE* f = file_;
