@@ -7,6 +7,9 @@ PACKAGES=(cmake ninja-build g++ pkg-config libvulkan-dev mesa-vulkan-drivers vul
           gltfpack libmeshoptimizer-dev libzstd-dev nodejs npm)
 missing=()
 for p in "${PACKAGES[@]}"; do
+  # node and npm from elsewhere (e.g. a nodejs package that bundles npm and conflicts with Debian's) will do.
+  [ "$p" = nodejs ] && command -v node >/dev/null 2>&1 && continue
+  [ "$p" = npm ] && command -v npm >/dev/null 2>&1 && continue
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if [ ${#missing[@]} -gt 0 ]; then
