@@ -24,6 +24,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/dataset_h5.h"
+#include "cli/dataset_mcap.h"
 #include "cli/inputs.h"
 #include "cli/write_behind.h"
 #include "core/plan.h"
@@ -43,7 +44,8 @@ constexpr const char* kUsage =
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
     "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
     "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
-    "                      [--compress] --out DIR|FILE.h5\n"
+    "                      [--compress] [--ros-prefix /TOPIC] [--ros-frame ID] [--rate HZ]\n"
+    "                      [--ros-sonar-dtype float32|uint16] --out DIR|FILE.h5|FILE.mcap\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
@@ -72,7 +74,14 @@ constexpr const char* kUsage =
     "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
     "                --save polar (default) and polar_u16 only)\n"
-    "  --compress    .h5 only: lossless shuffle + deflate on the frame arrays\n";
+    "                or a FILE.mcap: one ROS 2 bag (rosbag2 MCAP: ros2 bag play, Foxglove; docs/ros2.md) of\n"
+    "                marine_acoustic_msgs/ProjectedSonarImage, the fan and polar sensor_msgs/Image, /tf and, with\n"
+    "                --save cloud, a PointCloud2 (--save polar, fan, polar_u16, cloud pick the topics)\n"
+    "  --compress    .h5: lossless shuffle + deflate on the frame arrays; .mcap: zstd chunks\n"
+    "  --ros-prefix  .mcap: topic prefix (default /vksonar: /vksonar/sonar_image, /vksonar/fan, ...)\n"
+    "  --ros-frame   .mcap: the sonar's frame id (default sonar; its child sonar_acoustic is Z forward, X up)\n"
+    "  --rate        .mcap: frames per second when the trajectory has no time column (default 10)\n"
+    "  --ros-sonar-dtype .mcap: ProjectedSonarImage data as float32 (uPa^2, default) or uint16 (display)\n";
 
 const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
                                              "normals", "echo", "cloud", "multibeam", "raw_scan"};
@@ -290,10 +299,40 @@ Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::stri
 
 // ---- one dataset file ---------------------------------------------------------------------------
 
-bool is_dataset_path(const std::string& path) {
+std::string lower_extension(const std::string& path) {
     std::string ext = fs::path(path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+bool is_dataset_path(const std::string& path) {
+    const std::string ext = lower_extension(path);
     return ext == ".h5" || ext == ".hdf5";
+}
+bool is_mcap_path(const std::string& path) {
+    return lower_extension(path) == ".mcap";
+}
+
+// A bag holds the sonar image, the fan, the polar display and the cloud; the rest needs folders.
+McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path) {
+    if (!listed) save = SaveSet{true, true, false, true};
+    const char* other = save.depth       ? "depth"
+                        : save.normals   ? "normals"
+                        : save.echo      ? "echo"
+                        : save.multibeam ? "multibeam"
+                        : save.raw_scan  ? "raw_scan"
+                                         : nullptr;
+    if (other)
+        throw BadInput(std::string("--save ") + other + ": a ROS 2 bag (" + path +
+                       ") holds polar, fan, polar_u16 (or polar_png) and cloud; write per-frame folders (--out DIR) "
+                       "for the rest");
+    McapOptions options;
+    options.sonar_image = save.polar;
+    options.fan = save.fan;
+    options.polar = save.polar_u16 || save.polar_png;
+    options.cloud = save.cloud;
+    if (!options.sonar_image && !options.fan && !options.polar && !options.cloud)
+        throw BadInput("--save: nothing for the bag " + path + " (polar, fan, polar_u16, cloud)");
+    return options;
 }
 
 // A dataset holds the polar arrays; images and per-pixel intermediates go to per-frame folders.
@@ -315,6 +354,54 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
         throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16)");
     if (!hdf5_available())
         throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
+}
+
+// --out FILE.mcap: the topics (--save), names (--ros-prefix, --ros-frame) and dtype of the bag.
+McapOptions mcap_options(const Args& args, SaveSet& save, const std::string& path) {
+    McapOptions options = check_mcap_save(save, !args.values("--save").empty(), path);
+    options.prefix = args.value("--ros-prefix", options.prefix);
+    while (options.prefix.size() > 1 && options.prefix.back() == '/')
+        options.prefix.pop_back();
+    auto valid_name = [](const std::string& name, bool slashes) {
+        if (name.empty()) return false;
+        for (unsigned char c : name)
+            if (!(std::isalnum(c) || c == '_' || (slashes && c == '/'))) return false;
+        return true;
+    };
+    if (options.prefix == "/") options.prefix.clear();
+    if (!options.prefix.empty() && (options.prefix[0] != '/' || !valid_name(options.prefix, true) ||
+                                    options.prefix.find("//") != std::string::npos))
+        throw BadInput("--ros-prefix: '" + options.prefix +
+                       "' is not a ROS topic namespace (/name/..., letters, digits, _)");
+    options.frame = args.value("--ros-frame", options.frame);
+    if (!valid_name(options.frame, false) || std::isdigit(static_cast<unsigned char>(options.frame[0])))
+        throw BadInput("--ros-frame: '" + options.frame + "' is not a frame id (letters, digits, _)");
+    const std::string dtype = args.value("--ros-sonar-dtype", "float32");
+    if (dtype != "float32" && dtype != "uint16")
+        throw BadInput("--ros-sonar-dtype: '" + dtype + "' (float32 or uint16)");
+    options.sonar_u16 = dtype == "uint16";
+    if (args.has("--rate")) {
+        const double rate = parse_double(args.value("--rate"), "--rate");
+        if (!(rate > 0.0)) throw BadInput("--rate: " + args.value("--rate") + " is not a positive rate (frames/s)");
+    }
+    if (args.has("--compress") && !mcap_zstd_available())
+        throw BadInput("--compress: this build has no zstd for " + path + " (install libzstd-dev and rebuild)");
+    return options;
+}
+
+// ROS time stamps (builtin_interfaces/Time: int32 s) hold 0 .. 2^31 - 1 s; --rate needs no time column.
+void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const Args& args) {
+    const std::string& path = args.value("--trajectory");
+    if (timed && args.has("--rate"))
+        throw BadInput("--rate: " + path + " has a time column, which sets the time stamps");
+    if (!timed) return;
+    for (const TrajectoryPose& p : poses)
+        if (!(p.time_s >= 0.0 && p.time_s <= 2147483647.0)) {
+            char value[64];
+            std::snprintf(value, sizeof value, "%.17g", p.time_s);
+            throw BadInput(path + ":" + std::to_string(p.line) + ": time " + value +
+                           " is outside a ROS time stamp's 0 .. 2147483647 s");
+        }
 }
 
 // The dataset file's path: its folder must exist and be writable before anything renders; the file
@@ -579,6 +666,10 @@ int run_render(const std::vector<std::string>& argv) {
                                   {"--out", true, false},
                                   {"--asset-root", true, false},
                                   {"--compress", false, false},
+                                  {"--ros-prefix", true, false},
+                                  {"--ros-frame", true, false},
+                                  {"--rate", true, false},
+                                  {"--ros-sonar-dtype", true, false},
                                   {"--help", false, false}},
                                  "render");
     if (args.has("--help")) {
@@ -601,9 +692,14 @@ int run_render(const std::vector<std::string>& argv) {
     SaveSet save = parse_save(args.values("--save"));
     const std::string out_path = args.value("--out");
     const bool dataset = is_dataset_path(out_path);
+    const bool bag = is_mcap_path(out_path);
     if (dataset) check_dataset_save(save, !args.values("--save").empty(), out_path);
-    if (args.has("--compress") && !dataset)
-        throw BadInput("--compress: only a .h5 dataset is compressed (--out FILE.h5)");
+    std::optional<McapOptions> bag_options;
+    if (bag) bag_options = mcap_options(args, save, out_path);
+    for (const char* option : {"--ros-prefix", "--ros-frame", "--rate", "--ros-sonar-dtype"})
+        if (args.has(option) && !bag) throw BadInput(std::string(option) + ": only for a ROS 2 bag (--out FILE.mcap)");
+    if (args.has("--compress") && !dataset && !bag)
+        throw BadInput("--compress: only a .h5 dataset or a .mcap bag is compressed (--out FILE.h5|FILE.mcap)");
 
     // 2. Scene (its effects sit between the preset and the config file).
     const bool default_scene = !args.has("--scene");
@@ -619,6 +715,7 @@ int run_render(const std::vector<std::string>& argv) {
     bool frame_pose = false; // --pose frame
     if (args.has("--trajectory")) {
         poses = read_trajectory(args.value("--trajectory"), timed);
+        if (bag) check_bag_times(poses, timed, args);
     } else if (args.has("--pose") && args.value("--pose") == "frame") {
         frame_pose = true; // computed from the scene once it is loaded
         poses.push_back({Pose{}, 0});
@@ -687,13 +784,16 @@ int run_render(const std::vector<std::string>& argv) {
         config = apply_user_layers(layered.value());
     }
     config.scene_asset_root = asset_root; // meta.json's config says which folder the scene's files came from
+    if (bag && config.mode != SonarMode::physical)
+        throw BadInput("--out " + out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
+                       (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
     warn_if_unit_mistake(scene.value(), config, scene_path);
     if (frame_pose) poses = {{pose_framing(scene.value(), config, scene_path), 0, 0.0}};
 
     // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
     std::optional<OutputDir> out_dir;
     std::optional<DatasetFile> dataset_file;
-    if (dataset)
+    if (dataset || bag)
         dataset_file.emplace(out_path);
     else
         out_dir.emplace(out_path);
@@ -751,8 +851,30 @@ int run_render(const std::vector<std::string>& argv) {
         if (!created) throw Failure(created.error().message);
         dataset_writer = std::move(created.value());
     }
+    std::unique_ptr<McapDatasetWriter> bag_writer;
+    if (bag) {
+        bag_options->zstd = args.has("--compress");
+        bag_options->library = "vksonar 0.1.0 (its own MCAP writer)";
+        auto created = McapDatasetWriter::create(out_path, plan, *bag_options);
+        if (!created) throw Failure(created.error().message);
+        bag_writer = std::move(created.value());
+    }
+    const double bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
     std::uint64_t ordinal = 0; // frames written so far (writer thread only)
     WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
+        if (bag_writer) {
+            const bool u16 = bag_options->polar || bag_options->sonar_u16;
+            if (u16) host::quantize_display(slot.frame, outputs.quantized);
+            if (bag_options->fan) outputs.fan.render(slot.frame, outputs.image);
+            const double seconds = timed ? slot.time_s : static_cast<double>(ordinal) / bag_rate;
+            const auto stamp_ns = static_cast<std::uint64_t>(std::llround(seconds * 1e9));
+            auto appended = bag_writer->append(slot.frame, slot.pose, stamp_ns, &outputs.image,
+                                               u16 ? outputs.quantized.data() : nullptr);
+            if (!appended) throw Failure(appended.error().message);
+            ++ordinal;
+            dataset_file->keep();
+            return;
+        }
         if (dataset_writer) {
             const std::uint16_t* u16 = nullptr;
             if (save.polar_u16) {
@@ -809,6 +931,8 @@ int run_render(const std::vector<std::string>& argv) {
     writer.finish();
     if (dataset_writer)
         if (auto closed = dataset_writer->close(); !closed) throw Failure(closed.error().message);
+    if (bag_writer)
+        if (auto closed = bag_writer->close(); !closed) throw Failure(closed.error().message);
     show_progress(true);
     if (progress) std::fputc('\n', stderr);
     return 0;

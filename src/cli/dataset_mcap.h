@@ -1,0 +1,54 @@
+// One rosbag2-compatible MCAP file per run (`vksonar render --out run.mcap`): what `ros2 bag play`,
+// `ros2 bag info` and Foxglove open. Profile ros2, schemas ros2msg (the .msg with its dependencies,
+// as rosbag2 stores them), messages cdr. Topics (docs/ros2.md), PREFIX = --ros-prefix:
+//   PREFIX/sonar_image  marine_acoustic_msgs/msg/ProjectedSonarImage  frame FRAME_acoustic
+//   PREFIX/fan          sensor_msgs/msg/Image rgb8 (fan.png)          frame FRAME
+//   PREFIX/polar        sensor_msgs/msg/Image mono16 (polar_u16.npy)  frame FRAME
+//   PREFIX/points       sensor_msgs/msg/PointCloud2 x,y,z,intensity (cloud.ply; with --save cloud)
+//   /tf                 tf2_msgs/msg/TFMessage: world -> FRAME, the pose of each frame
+//   /tf_static          tf2_msgs/msg/TFMessage: FRAME -> FRAME_acoustic (Z forward, X up), once
+// Every message of a frame has the frame's time stamp (header.stamp, log and publish time).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/plan.h"
+#include "host/host_stages.h"
+#include "vksonar/frame.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"
+
+namespace vksonar::cli {
+
+struct McapOptions {
+    std::string prefix = "/vksonar"; // topic prefix
+    std::string frame = "sonar";     // the sonar's frame id (REP-103: x forward, y port, z up)
+    std::string world_frame = "world";
+    bool sonar_image = true; // PREFIX/sonar_image
+    bool sonar_u16 = false;  // its data as uint16 display values instead of float32 uPa^2
+    bool fan = true;         // PREFIX/fan
+    bool polar = true;       // PREFIX/polar
+    bool cloud = false;      // PREFIX/points
+    bool zstd = false;       // zstd chunk compression
+    std::string library;     // the MCAP header's library field
+};
+
+bool mcap_zstd_available();
+
+class McapDatasetWriter {
+public:
+    // Creates (or truncates) `path` and registers the topics. Fails with one line naming the file.
+    static Result<std::unique_ptr<McapDatasetWriter>> create(const std::string& path, const Plan& plan,
+                                                             const McapOptions& options);
+    virtual ~McapDatasetWriter() = default;
+    // Appends one frame at `stamp_ns`: `fan` when options.fan, `display_u16` (bins * beams) when
+    // options.polar or sonar_u16. Whole frames end a batch: a killed run leaves the chunks before it.
+    virtual Result<void> append(const Frame& frame, const Pose& pose, std::uint64_t stamp_ns, const host::Image* fan,
+                                const std::uint16_t* display_u16) = 0;
+    // Writes the summary and closes the file.
+    virtual Result<void> close() = 0;
+};
+
+} // namespace vksonar::cli
