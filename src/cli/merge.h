@@ -18,16 +18,16 @@ struct ShardInput {
     ShardRecord shard;
     Identity identity; // must equal the other shards' (shard.h)
     std::string backend, device;
-    std::uint64_t frames = 0;    // whole frames on disk
-    std::string first_missing;   // the first frame that is not (when frames < the block), for the error
+    std::uint64_t frames = 0;  // whole frames on disk
+    std::string first_missing; // the first frame that is not (when frames < the block), for the error
 };
 
 struct MergeFormat {
-    const char* name;                                  // "frame folders", "HDF5"
-    bool (*accepts)(const std::string& path);          // is this path a shard output of this format?
-    bool (*output_ok)(const std::string& out);         // may OUT be written in this format?
-    const char* output_hint;                           // what OUT must look like, for the error
-    ShardInput (*read)(const std::string& path);       // throws BadInput with one line naming the path
+    const char* name;                            // "frame folders", "HDF5"
+    bool (*accepts)(const std::string& path);    // is this path a shard output of this format?
+    bool (*output_ok)(const std::string& out);   // may OUT be written in this format?
+    const char* output_hint;                     // what OUT must look like, for the error
+    ShardInput (*read)(const std::string& path); // throws BadInput with one line naming the path
     // Writes OUT from `shards`, sorted by index and already checked: no gap, no overlap, one run, all
     // complete. Throws BadInput/Failure; leaves nothing at OUT on failure.
     void (*merge)(const std::vector<ShardInput>& shards, const std::string& out);

@@ -103,8 +103,7 @@ void folder_merge(const std::vector<ShardInput>& shards, const std::string& out)
         nlohmann::ordered_json merged;
         merged["format"] = "vksonar-merge-1";
         merged["frames"] = shards[0].shard.total;
-        merged["trajectory"] = {{"path", shards[0].shard.trajectory},
-                                {"fnv1a64", shards[0].shard.trajectory_hash}};
+        merged["trajectory"] = {{"path", shards[0].shard.trajectory}, {"fnv1a64", shards[0].shard.trajectory_hash}};
         merged["shards"] = list;
         std::ofstream file(temporary / "merged.json", std::ios::binary);
         file << merged.dump(2) << "\n";
@@ -153,9 +152,8 @@ std::vector<ShardInput> check_shards(std::vector<ShardInput> shards) {
     for (std::uint64_t i = 0, k = 0; i < count; ++i) {
         if (k >= shards.size() || shards[k].shard.index != i) {
             const auto [first, end] = shard_block(i, count, total);
-            throw BadInput("merge: shard " + std::to_string(i) + "/" + std::to_string(count) +
-                           " is missing (given: " + have + "): a gap of frames " + std::to_string(first) + ".." +
-                           std::to_string(end - 1));
+            throw BadInput("merge: shard " + std::to_string(i) + "/" + std::to_string(count) + " is missing (given: " +
+                           have + "): a gap of frames " + std::to_string(first) + ".." + std::to_string(end - 1));
         }
         const ShardInput& s = shards[k++];
         if (s.shard.first != next)
@@ -174,8 +172,9 @@ std::vector<ShardInput> check_shards(std::vector<ShardInput> shards) {
     for (const ShardInput& s : shards)
         devices.insert(s.device);
     if (devices.size() > 1)
-        std::fprintf(stderr, "warning: merge: the shards ran on %zu devices: frames agree within the renderer's "
-                             "tolerance, not bit for bit, across devices\n",
+        std::fprintf(stderr,
+                     "warning: merge: the shards ran on %zu devices: frames agree within the renderer's "
+                     "tolerance, not bit for bit, across devices\n",
                      devices.size());
     return shards;
 }
@@ -201,7 +200,8 @@ int run_merge(const std::vector<std::string>& argv) {
         const MergeFormat* found = nullptr;
         for (const MergeFormat& f : kFormats)
             if (!found && f.accepts(path)) found = &f;
-        if (!found) throw BadInput("merge: " + path + ": not a shard's output (a folder with shard.json or a .h5 file)");
+        if (!found)
+            throw BadInput("merge: " + path + ": not a shard's output (a folder with shard.json or a .h5 file)");
         if (format && found != format)
             throw BadInput("merge: " + path + " is " + found->name + " but " + format_path + " is " + format->name +
                            ": merge shards of one format");
@@ -209,7 +209,8 @@ int run_merge(const std::vector<std::string>& argv) {
         format_path = path;
     }
     if (!format->output_ok(out))
-        throw BadInput("merge: OUT " + out + ": the shards are " + format->name + "; OUT must be " + format->output_hint);
+        throw BadInput("merge: OUT " + out + ": the shards are " + format->name + "; OUT must be " +
+                       format->output_hint);
     std::vector<ShardInput> shards;
     for (const std::string& path : paths)
         shards.push_back(format->read(path));

@@ -41,7 +41,8 @@ bool h5_merge_output_ok(const std::string& out) {
 ShardInput h5_merge_read(const std::string& path) {
     auto info = read_dataset_info(path);
     if (!info) throw BadInput("merge: " + info.error().message);
-    if (!info->shard) throw BadInput("merge: " + path + ": not a shard (no shard_index attribute): render it with --shard");
+    if (!info->shard)
+        throw BadInput("merge: " + path + ": not a shard (no shard_index attribute): render it with --shard");
     ShardInput in;
     in.path = path;
     in.shard = *info->shard;
@@ -49,7 +50,8 @@ ShardInput h5_merge_read(const std::string& path) {
     in.backend = info->backend;
     in.device = info->device;
     in.frames = info->frames_written;
-    if (in.frames < in.shard.end - in.shard.first) in.first_missing = "frame ordinal " + std::to_string(in.shard.first + in.frames);
+    if (in.frames < in.shard.end - in.shard.first)
+        in.first_missing = "frame ordinal " + std::to_string(in.shard.first + in.frames);
     return in;
 }
 
@@ -121,7 +123,8 @@ void merge_into(const std::vector<ShardInput>& shards, const std::string& tempor
         // Shard 0's file may hold rows after frames_written (a frame cut off before a resume): drop them.
         hsize_t at = shards[0].frames;
         out_rows.dims[0] = at;
-        if (H5Dset_extent(out_rows.set.get(), out_rows.dims.data()) < 0) throw fail("cannot resize /" + std::string(name));
+        if (H5Dset_extent(out_rows.set.get(), out_rows.dims.data()) < 0)
+            throw fail("cannot resize /" + std::string(name));
         for (std::size_t k = 1; k < shards.size(); ++k) {
             const Hid in(H5Fopen(shards[k].path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
             Rows in_rows;
@@ -135,7 +138,8 @@ void merge_into(const std::vector<ShardInput>& shards, const std::string& tempor
             for (hsize_t row = 0; row < shards[k].frames; ++row) {
                 out_rows.dims[0] = at + 1;
                 if (!row_io(in_rows, row, buffer.data(), false))
-                    throw BadInput("merge: " + shards[k].path + ": cannot read /" + name + " row " + std::to_string(row));
+                    throw BadInput("merge: " + shards[k].path + ": cannot read /" + name + " row " +
+                                   std::to_string(row));
                 if (H5Dset_extent(out_rows.set.get(), out_rows.dims.data()) < 0 ||
                     !row_io(out_rows, at, buffer.data(), true))
                     throw fail("cannot append to /" + std::string(name));
@@ -174,9 +178,8 @@ void merge_into(const std::vector<ShardInput>& shards, const std::string& tempor
 
 void h5_merge(const std::vector<ShardInput>& shards, const std::string& out) {
     const fs::path target(out);
-    const fs::path temporary =
-        (target.has_parent_path() ? target.parent_path() : fs::path(".")) /
-        (".~" + target.filename().string() + ".merging-" + std::to_string(::getpid()));
+    const fs::path temporary = (target.has_parent_path() ? target.parent_path() : fs::path(".")) /
+                               (".~" + target.filename().string() + ".merging-" + std::to_string(::getpid()));
     std::error_code ec;
     fs::copy_file(shards[0].path, temporary, fs::copy_options::overwrite_existing, ec);
     if (ec) throw Failure("merge: cannot write " + temporary.string() + ": " + ec.message());

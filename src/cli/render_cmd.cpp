@@ -387,10 +387,16 @@ std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, cons
 // The --save set as a canonical list (a shard's identity).
 std::string save_list(const SaveSet& s) {
     std::string list;
-    const std::pair<bool, const char*> items[] = {
-        {s.fan, "fan"},       {s.polar, "polar"},     {s.polar_png, "polar_png"}, {s.polar_u16, "polar_u16"},
-        {s.depth, "depth"},   {s.normals, "normals"}, {s.echo, "echo"},           {s.cloud, "cloud"},
-        {s.multibeam, "multibeam"}, {s.raw_scan, "raw_scan"}};
+    const std::pair<bool, const char*> items[] = {{s.fan, "fan"},
+                                                  {s.polar, "polar"},
+                                                  {s.polar_png, "polar_png"},
+                                                  {s.polar_u16, "polar_u16"},
+                                                  {s.depth, "depth"},
+                                                  {s.normals, "normals"},
+                                                  {s.echo, "echo"},
+                                                  {s.cloud, "cloud"},
+                                                  {s.multibeam, "multibeam"},
+                                                  {s.raw_scan, "raw_scan"}};
     for (const auto& [on, name] : items)
         if (on) list += (list.empty() ? "" : ",") + std::string(name);
     return list;
@@ -441,7 +447,7 @@ struct Outputs {
     host::Image image;
     std::vector<std::uint16_t> quantized;
     std::vector<float> view_range;
-    LegacyState* legacy = nullptr; // set in legacy modes
+    LegacyState* legacy = nullptr;      // set in legacy modes
     const ShardRecord* shard = nullptr; // a shard of the trajectory: meta.json says which
 };
 
@@ -807,9 +813,12 @@ int run_render(const std::vector<std::string>& argv) {
         options.has_time = timed;
         dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
     } else if (shard) {
-        FolderManifest manifest{*shard, run_identity(config_text, seed, scene_path, backend_name, save_list(save),
-                                                     timed, &*shard),
-                                {}, backend_name, device};
+        FolderManifest manifest{
+            *shard,
+            run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
+            {},
+            backend_name,
+            device};
         for (std::size_t i = first; i < end; ++i)
             manifest.lines.push_back(poses[i].line);
         start_folder_shard(out_dir->path().string(), manifest, done);

@@ -95,7 +95,8 @@ std::optional<ShardRecord> resolve_shard(const std::optional<std::string>& flag,
     std::optional<ShardRecord> shard;
     if (flag) {
         if (count_flag)
-            throw BadInput("--shard-count: only with JOB_COMPLETION_INDEX; --shard " + *flag + " already gives the count");
+            throw BadInput("--shard-count: only with JOB_COMPLETION_INDEX; --shard " + *flag +
+                           " already gives the count");
         const auto [index, count] = parse_shard(*flag, "--shard");
         shard.emplace();
         shard->index = index;
@@ -188,7 +189,8 @@ std::string json_difference(const nlohmann::json& a, const nlohmann::json& b, co
         }
         for (auto it = b.begin(); it != b.end(); ++it)
             if (!a.contains(it.key()))
-                return (path.empty() ? it.key() : path + "." + it.key()) + ": (absent) vs " + shorten(it.value().dump());
+                return (path.empty() ? it.key() : path + "." + it.key()) + ": (absent) vs " +
+                       shorten(it.value().dump());
         return {};
     }
     if (a == b) return {};
@@ -290,7 +292,8 @@ FolderManifest read_manifest(const std::string& dir) {
         m.backend = j.at("backend").get<std::string>();
         m.device = j.at("device").get<std::string>();
         for (auto it = j.at("identity").begin(); it != j.at("identity").end(); ++it)
-            m.identity.emplace_back(it.key(), it.value().is_string() ? it.value().get<std::string>() : it.value().dump());
+            m.identity.emplace_back(it.key(),
+                                    it.value().is_string() ? it.value().get<std::string>() : it.value().dump());
     } catch (const nlohmann::json::exception& e) {
         throw BadInput(path.string() + ": " + e.what());
     }
@@ -308,8 +311,7 @@ void start_folder_shard(const std::string& dir, const FolderManifest& manifest, 
         const FolderManifest old = read_manifest(dir);
         if (old.shard.index != manifest.shard.index || old.shard.count != manifest.shard.count)
             throw BadInput("--out " + dir + " holds shard " + std::to_string(old.shard.index) + "/" +
-                           std::to_string(old.shard.count) + ", not shard " + name +
-                           ": give each shard its own --out");
+                           std::to_string(old.shard.count) + ", not shard " + name + ": give each shard its own --out");
         if (std::string d = identity_difference(old.identity, manifest.identity); !d.empty())
             throw BadInput("--out " + dir + " holds shard " + name + " of another run (" + d +
                            "): remove it or give another --out");
@@ -329,8 +331,8 @@ void start_folder_shard(const std::string& dir, const FolderManifest& manifest, 
 
 std::string shard_summary(const ShardRecord& shard, std::uint64_t first_line, std::uint64_t last_line,
                           std::uint64_t already_done) {
-    std::string text = "shard " + std::to_string(shard.index) + "/" + std::to_string(shard.count) + " (" +
-                       shard.source + "): ";
+    std::string text =
+        "shard " + std::to_string(shard.index) + "/" + std::to_string(shard.count) + " (" + shard.source + "): ";
     if (shard.end == shard.first)
         return text + "no frames (" + std::to_string(shard.total) + " frames in " + std::to_string(shard.count) +
                " shards)";
