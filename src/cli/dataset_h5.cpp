@@ -103,10 +103,6 @@ public:
     Result<void> reopen(const DatasetMeta& meta, const DatasetOptions& options) {
         auto info = read_dataset_info(path_);
         if (!info) return info.error();
-        const Identity expected = dataset_identity(meta, options);
-        if (std::string d = identity_difference(info->identity, expected); !d.empty())
-            return make_error(ErrorCode::invalid_argument,
-                              path_ + " holds another run (" + d + "): remove it or give another --out");
         const ShardRecord& want = *meta.shard;
         if (!info->shard || info->shard->index != want.index || info->shard->count != want.count ||
             info->shard->first != want.first || info->shard->end != want.end)
@@ -117,6 +113,10 @@ public:
                                                : std::string("an unsharded run")) +
                                   ", not shard " + std::to_string(want.index) + "/" + std::to_string(want.count) +
                                   ": give each shard its own --out");
+        const Identity expected = dataset_identity(meta, options);
+        if (std::string d = identity_difference(info->identity, expected); !d.empty())
+            return make_error(ErrorCode::invalid_argument,
+                              path_ + " holds another run (" + d + "): remove it or give another --out");
         if (info->frames_written > want.end - want.first)
             return make_error(ErrorCode::invalid_argument, path_ + ": frames_written is larger than the shard");
         file_ = Hid(H5Fopen(path_.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);

@@ -325,11 +325,13 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
 }
 
 // The dataset file's path: its folder must exist and be writable before anything renders; the file
-// is removed again unless keep() is called (a frame is in it).
+// is removed again unless keep() is called (a frame is in it). A shard's file that is already there
+// (an earlier run of the shard) is never removed: a failed re-run must not lose its frames.
 class DatasetFile {
 public:
-    explicit DatasetFile(const fs::path& path) : path_(path) {
+    DatasetFile(const fs::path& path, bool keep_existing) : path_(path) {
         std::error_code ec;
+        keep_ = keep_existing && fs::exists(path, ec);
         const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
         if (!fs::is_directory(folder, ec)) throw BadInput("--out " + path.string() + ": no folder " + folder.string());
         if (fs::is_directory(path, ec)) throw BadInput("--out " + path.string() + ": is a directory");
@@ -755,7 +757,7 @@ int run_render(const std::vector<std::string>& argv) {
     std::optional<OutputDir> out_dir;
     std::optional<DatasetFile> dataset_file;
     if (dataset)
-        dataset_file.emplace(out_path);
+        dataset_file.emplace(out_path, shard.has_value());
     else
         out_dir.emplace(out_path);
 

@@ -182,6 +182,24 @@ with tempfile.TemporaryDirectory() as tmp:
     refused([p("m4.h5"), p("plain_0.h5"), p("four_1.h5"), p("plain_2.h5")], "different splits")
     refused([p("m5.h5"), p("plain.h5")], "not a shard")
 
+    # ---- a re-run into an .h5 of another shard or run is refused, the file kept --------------------
+    shard_1 = ["render", "--trajectory", poses, "--out", p("plain_1.h5"), "--save", "polar,polar_u16"]
+    with open(p("plain_1.h5"), "rb") as f:
+        before = f.read()
+    run = vksonar(shard_1 + ["--shard", "1/3", "--seed", "8"] + SMALL[:-2], expect=2)
+    check(run.stderr.count("\n") == 1 and "holds another run (seed: 7 vs 8)" in run.stderr, f"seed clash: {run.stderr}")
+    run = vksonar(shard_1 + ["--shard", "2/3"] + SMALL, expect=2)
+    check("holds shard 1/3, not shard 2/3" in run.stderr, f"shard clash: {run.stderr}")
+    # Refused after the output was opened (the seed clash is found reading the file): the file stays.
+    with open(p("plain_1.h5"), "rb") as f:
+        check(f.read() == before, "refused re-runs left the shard file as it was")
+    run = vksonar(shard_1 + ["--shard", "1/3"] + SMALL)
+    check("4 already on disk" in run.stderr and ": 0 frames rendered" in run.stderr, f"complete re-run: {run.stderr}")
+    with h5py.File(p("plain_1.h5"), "r") as f:
+        check(f.attrs["complete"] == 1 and f.attrs["frames_written"] == 4, "a complete shard stays complete")
+    vksonar(["merge", p("again.h5"), p("plain_0.h5"), p("plain_1.h5"), p("plain_2.h5")])
+    same_h5(p("plain.h5"), p("again.h5"), "merged after a no-op re-run")
+
 if failures:
     print(f"{len(failures)} check(s) failed")
     sys.exit(1)
