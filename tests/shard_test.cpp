@@ -181,6 +181,14 @@ TEST_F(Shard, StepArrayAndFlagBeatsEnvironment) {
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_TRUE(fs::exists(dir_ / "flag" / "frame_000002" / "meta.json"));
     EXPECT_FALSE(fs::exists(dir_ / "flag" / "frame_000003"));
+    // An Indexed Job's index with --shard-count: pod 1 of 3 renders frames 2..3 (lines 4..5).
+    r = run(render_args("k8s", {"--save", "polar", "--shard-count", "3"}), {"JOB_COMPLETION_INDEX=1"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find("shard 1/3 (JOB_COMPLETION_INDEX=1 (--shard-count 3))"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "k8s" / "frame_000004" / "meta.json"));
+    EXPECT_TRUE(fs::exists(dir_ / "k8s" / "frame_000005" / "meta.json"));
+    EXPECT_FALSE(fs::exists(dir_ / "k8s" / "frame_000003"));
+    EXPECT_FALSE(fs::exists(dir_ / "k8s" / "frame_000006"));
     // More shards than frames: an empty shard is a success with its shard.json.
     r = run(render_args("empty", {"--save", "polar", "--shard", "0/9"}));
     ASSERT_EQ(r.exit_code, 0) << r.err;
