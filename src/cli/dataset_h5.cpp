@@ -7,10 +7,16 @@
 #include <vector>
 
 #ifdef VKSONAR_HAVE_HDF5
-#include <hdf5.h>
+#include "cli/h5_util.h"
 #endif
 
 namespace vksonar::cli {
+
+Identity dataset_identity(const DatasetMeta& meta, const DatasetOptions& options) {
+    return run_identity(meta.config_json, meta.seed, meta.scene, meta.backend,
+                        options.polar_u16 ? "polar,polar_u16" : "polar", options.has_time,
+                        meta.shard ? &*meta.shard : nullptr);
+}
 
 #ifndef VKSONAR_HAVE_HDF5
 
@@ -24,6 +30,15 @@ Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& 
                       "--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
 
+Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const DatasetMeta&,
+                                                             const DatasetOptions&) {
+    return make_error(ErrorCode::unsupported, path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
+}
+
+Result<DatasetInfo> read_dataset_info(const std::string& path) {
+    return make_error(ErrorCode::unsupported, path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
+}
+
 #else
 
 bool hdf5_available() {
@@ -32,35 +47,7 @@ bool hdf5_available() {
 
 namespace {
 
-// An HDF5 identifier and the function that closes it: owned, closed once, movable.
-class Hid {
-public:
-    Hid() = default;
-    Hid(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-    ~Hid() { reset(); }
-    Hid(Hid&& o) noexcept : id_(std::exchange(o.id_, H5I_INVALID_HID)), close_(o.close_) {}
-    Hid& operator=(Hid&& o) noexcept {
-        if (this != &o) {
-            reset();
-            id_ = std::exchange(o.id_, H5I_INVALID_HID);
-            close_ = o.close_;
-        }
-        return *this;
-    }
-    Hid(const Hid&) = delete;
-    Hid& operator=(const Hid&) = delete;
-    hid_t get() const { return id_; }
-    hid_t release() { return std::exchange(id_, H5I_INVALID_HID); }
-    bool ok() const { return id_ >= 0; }
-    void reset() {
-        if (id_ >= 0 && close_) close_(id_);
-        id_ = H5I_INVALID_HID;
-    }
-
-private:
-    hid_t id_ = H5I_INVALID_HID;
-    herr_t (*close_)(hid_t) = nullptr;
-};
+using h5::Hid;
 
 // A dataset of rows that grows by one row per frame: [frames, row_dims...], one row per chunk.
 struct RowDataset {
@@ -101,10 +88,52 @@ public:
              count("seed", meta.seed) && text("config", meta.config_json) && text("effects", meta.effects_json) &&
              text("validity", meta.validity_json) && text("scene", meta.scene) && text("backend", meta.backend) &&
              text("device", meta.device) && count("frames_written", 0) && count("complete", 0);
+        if (ok && meta.shard) {
+            const ShardRecord& r = *meta.shard;
+            ok = count("shard_index", r.index) && count("shard_count", r.count) && text("shard_source", r.source) &&
+                 count("shard_first", r.first) && count("shard_end", r.end) && count("trajectory_frames", r.total) &&
+                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash);
+        }
         if (!ok) return fail("cannot write the dataset's layout");
         if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0) return fail("cannot flush");
         return {};
     }
+
+    // Opens an existing shard file to go on writing it (DatasetWriter::resume).
+    Result<void> reopen(const DatasetMeta& meta, const DatasetOptions& options) {
+        auto info = read_dataset_info(path_);
+        if (!info) return info.error();
+        const ShardRecord& want = *meta.shard;
+        if (!info->shard || info->shard->index != want.index || info->shard->count != want.count ||
+            info->shard->first != want.first || info->shard->end != want.end)
+            return make_error(ErrorCode::invalid_argument,
+                              path_ + " holds " +
+                                  (info->shard ? "shard " + std::to_string(info->shard->index) + "/" +
+                                                     std::to_string(info->shard->count)
+                                               : std::string("an unsharded run")) +
+                                  ", not shard " + std::to_string(want.index) + "/" + std::to_string(want.count) +
+                                  ": give each shard its own --out");
+        const Identity expected = dataset_identity(meta, options);
+        if (std::string d = identity_difference(info->identity, expected); !d.empty())
+            return make_error(ErrorCode::invalid_argument,
+                              path_ + " holds another run (" + d + "): remove it or give another --out");
+        if (info->frames_written > want.end - want.first)
+            return make_error(ErrorCode::invalid_argument, path_ + ": frames_written is larger than the shard");
+        file_ = Hid(H5Fopen(path_.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
+        if (!file_.ok()) return make_error(ErrorCode::io, "cannot open " + path_ + " to resume it");
+        frames_ = info->frames_written;
+        bool ok = reopen_rows(polar_, "polar", H5T_NATIVE_FLOAT) && reopen_rows(pose_, "pose", H5T_NATIVE_DOUBLE) &&
+                  reopen_rows(frame_index_, "frame_index", H5T_NATIVE_UINT64) &&
+                  reopen_rows(time_, "time", H5T_NATIVE_DOUBLE);
+        if (ok && options.polar_u16) ok = reopen_rows(polar_u16_, "polar_u16", H5T_NATIVE_UINT16);
+        // The frames after frames_written (a frame cut off by the kill) go; the file is not complete
+        // until this run ends.
+        if (!ok || !set_count("complete", 0) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
+            return make_error(ErrorCode::io, "cannot resume " + path_ + ": its arrays do not open as written");
+        return {};
+    }
+
+    std::uint64_t frames_written() const override { return frames_; }
 
     Result<void> append(const Frame& frame, const Pose& pose, double time_s,
                         const std::uint16_t* display_u16) override {
@@ -156,6 +185,21 @@ private:
         out.memory_type = memory_type;
         out.row = std::move(row);
         return out.id.ok();
+    }
+
+    bool reopen_rows(RowDataset& out, const char* name, hid_t memory_type) {
+        out.id = Hid(H5Dopen2(file_.get(), name, H5P_DEFAULT), H5Dclose);
+        if (!out.id.ok()) return false;
+        const Hid space(H5Dget_space(out.id.get()), H5Sclose);
+        const int rank = space.ok() ? H5Sget_simple_extent_ndims(space.get()) : -1;
+        if (rank < 1) return false;
+        std::vector<hsize_t> dims(static_cast<std::size_t>(rank));
+        H5Sget_simple_extent_dims(space.get(), dims.data(), nullptr);
+        if (dims[0] < frames_) return false;
+        out.memory_type = memory_type;
+        out.row.assign(dims.begin() + 1, dims.end());
+        dims[0] = frames_;
+        return H5Dset_extent(out.id.get(), dims.data()) >= 0;
     }
 
     bool append_row(RowDataset& d, const void* data) {
@@ -211,6 +255,57 @@ private:
 };
 
 } // namespace
+
+Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const DatasetMeta& meta,
+                                                             const DatasetOptions& options) {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    auto writer = std::make_unique<H5Writer>(path);
+    if (auto opened = writer->reopen(meta, options); !opened) return opened.error();
+    return std::unique_ptr<DatasetWriter>(std::move(writer));
+}
+
+Result<DatasetInfo> read_dataset_info(const std::string& path) {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); // errors come back as one line, not a stack dump
+    const Hid file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+    if (!file.ok()) return make_error(ErrorCode::io, path + ": cannot open as HDF5 (cut off before its first flush?)");
+    const hid_t f = file.get();
+    const auto format = h5::read_text(f, "format");
+    if (!format || *format != "vksonar-dataset-1")
+        return make_error(ErrorCode::io, path + ": not a vksonar dataset (attribute format is not vksonar-dataset-1)");
+    DatasetInfo info;
+    const auto config = h5::read_text(f, "config"), scene = h5::read_text(f, "scene"),
+               backend = h5::read_text(f, "backend"), time_unit = h5::read_text(f, "time_unit");
+    const auto seed = h5::read_count(f, "seed"), written = h5::read_count(f, "frames_written"),
+               complete = h5::read_count(f, "complete");
+    if (!config || !scene || !backend || !time_unit || !seed || !written || !complete)
+        return make_error(ErrorCode::io, path + ": a vksonar dataset without its attributes (config, seed, ...)");
+    info.backend = *backend;
+    info.device = h5::read_text(f, "device").value_or("");
+    info.frames_written = *written;
+    info.complete = *complete != 0;
+    if (const auto index = h5::read_count(f, "shard_index")) {
+        ShardRecord r;
+        r.index = *index;
+        const auto count = h5::read_count(f, "shard_count"), first = h5::read_count(f, "shard_first"),
+                   end = h5::read_count(f, "shard_end"), total = h5::read_count(f, "trajectory_frames");
+        const auto source = h5::read_text(f, "shard_source"), hash = h5::read_text(f, "trajectory_fnv1a64");
+        if (!count || !first || !end || !total || !source || !hash || *count == 0 || r.index >= *count ||
+            *end < *first || *end > *total)
+            return make_error(ErrorCode::io, path + ": its shard attributes are incomplete or inconsistent");
+        r.count = *count;
+        r.first = *first;
+        r.end = *end;
+        r.total = *total;
+        r.source = *source;
+        r.trajectory = h5::read_text(f, "trajectory").value_or("");
+        r.trajectory_hash = *hash;
+        info.shard = r;
+    }
+    const bool u16 = H5Lexists(f, "polar_u16", H5P_DEFAULT) > 0;
+    info.identity = run_identity(*config, *seed, *scene, *backend, u16 ? "polar,polar_u16" : "polar",
+                                 time_unit->rfind("s ", 0) == 0, info.shard ? &*info.shard : nullptr);
+    return info;
+}
 
 Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& path, const Plan& plan,
                                                              const DatasetMeta& meta, const DatasetOptions& options) {

@@ -7,7 +7,9 @@
 //   /time         float64 [frames]               s, from the trajectory's time column, else the ordinal
 //   /beam_angles_rad [beams], /ranges_m [bins]
 //   attributes of /: format, frames_written, complete, beams, bins, bin_width_m, range_min_m, ...,
-//   config, effects, validity (JSON text), seed, backend, device, scene.
+//   config, effects, validity (JSON text), seed, backend, device, scene; a shard (`--shard`, shard.h)
+//   adds shard_index, shard_count, shard_source, shard_first, shard_end, trajectory_frames,
+//   trajectory and trajectory_fnv1a64.
 // Each frame is one chunk; the file is flushed after every frame and `frames_written` says how many
 // are whole, so a run that is killed leaves a readable file of the frames before it. `complete` turns
 // 1 only when the run ends without an error.
@@ -15,7 +17,10 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
+
+#include "cli/shard.h"
 
 #include "core/plan.h"
 #include "vksonar/frame.h"
@@ -35,7 +40,22 @@ struct DatasetMeta {
     std::string config_json, effects_json, validity_json;
     std::string scene, backend, device;
     std::uint64_t seed = 0;
+    std::optional<ShardRecord> shard; // a shard of a trajectory: written as attributes
 };
+
+// What must be equal between the shards of one run (shard.h's Identity), from what the writer is given.
+Identity dataset_identity(const DatasetMeta& meta, const DatasetOptions& options);
+
+// What a dataset file says about itself, for `vksonar merge` and for resuming a shard.
+struct DatasetInfo {
+    std::optional<ShardRecord> shard; // absent: not written with --shard
+    Identity identity;
+    std::string backend, device;
+    std::uint64_t frames_written = 0;
+    bool complete = false;
+};
+// Fails (ErrorCode::io) with one line naming the file when it cannot be read as a vksonar dataset.
+Result<DatasetInfo> read_dataset_info(const std::string& path);
 
 // True when this build can write HDF5 (Debian's libhdf5-dev was found at configure time).
 bool hdf5_available();
@@ -45,7 +65,13 @@ public:
     // Creates (or truncates) `path`. Fails with one line naming the file.
     static Result<std::unique_ptr<DatasetWriter>> create(const std::string& path, const Plan& plan,
                                                          const DatasetMeta& meta, const DatasetOptions& options);
+    // Reopens `path`, written by an earlier run of the same shard, to go on after its last whole frame
+    // (frames_written()); a partly written frame after it is dropped. ErrorCode::io: the file cannot be
+    // read as a dataset (start over); ErrorCode::invalid_argument: it holds another run or shard.
+    static Result<std::unique_ptr<DatasetWriter>> resume(const std::string& path, const DatasetMeta& meta,
+                                                         const DatasetOptions& options);
     virtual ~DatasetWriter() = default;
+    virtual std::uint64_t frames_written() const = 0;
     // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on.
     virtual Result<void> append(const Frame& frame, const Pose& pose, double time_s,
                                 const std::uint16_t* display_u16) = 0;

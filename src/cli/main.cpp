@@ -21,6 +21,7 @@ constexpr const char* kUsage =
     "  render    render a scene (or a trajectory) to PNG/NPY/PLY/JSON files\n"
     "  presets   list the sonar presets; --show NAME prints one as JSON\n"
     "  info      print the Vulkan device and driver vksonar would use\n"
+    "  merge     merge the shards of a trajectory (render --shard i/N) into one output\n"
     "  compare   compare two .npy scans (max abs, RMSE, max dB difference, PSNR)\n"
     "  bench     benchmarks: speed | effects | accuracy\n"
     "\n"
@@ -47,9 +48,10 @@ int dispatch(const std::vector<std::string>& argv) {
     if (command == "presets") return run_presets(rest);
     if (command == "info") return run_info(rest);
     if (command == "compare") return run_compare(rest);
+    if (command == "merge") return run_merge(rest);
     if (command == "bench") return run_bench(rest);
     throw BadInput("unknown command '" + command + "' (did you mean '" +
-                   closest_word(command, {"render", "presets", "info", "compare", "bench"}) +
+                   closest_word(command, {"render", "presets", "info", "compare", "merge", "bench"}) +
                    "'?); run 'vksonar --help'");
 }
 

@@ -26,6 +26,7 @@
 #include "cli/dataset_h5.h"
 #include "cli/dataset_mcap.h"
 #include "cli/inputs.h"
+#include "cli/shard.h"
 #include "cli/write_behind.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
@@ -44,8 +45,9 @@ constexpr const char* kUsage =
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
     "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
     "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
-    "                      [--compress] [--ros-prefix /TOPIC] [--ros-frame ID] [--rate HZ]\n"
-    "                      [--ros-sonar-dtype float32|uint16] --out DIR|FILE.h5|FILE.mcap\n"
+    "                      [--compress] [--shard INDEX/COUNT] [--shard-count N] [--ros-prefix /TOPIC]\n"
+    "                      [--ros-frame ID] [--rate HZ] [--ros-sonar-dtype float32|uint16]\n"
+    "                      --out DIR|FILE.h5|FILE.mcap\n"
     "\n"
     "  --scene       glTF scene (default: the bundled assets/scenes/default.gltf)\n"
     "  --sonar       preset name (see 'vksonar presets') or a sonar JSON file (default: preset 'default')\n"
@@ -81,7 +83,13 @@ constexpr const char* kUsage =
     "  --ros-prefix  .mcap: topic prefix (default /vksonar: /vksonar/sonar_image, /vksonar/fan, ...)\n"
     "  --ros-frame   .mcap: the sonar's frame id (default sonar; its child sonar_acoustic is Z forward, X up)\n"
     "  --rate        .mcap: frames per second when the trajectory has no time column (default 10)\n"
-    "  --ros-sonar-dtype .mcap: ProjectedSonarImage data as float32 (uPa^2, default) or uint16 (display)\n";
+    "  --ros-sonar-dtype .mcap: ProjectedSonarImage data as float32 (uPa^2, default) or uint16 (display)\n"
+    "  --shard       with --trajectory: render block INDEX (from 0) of COUNT contiguous blocks of the frames,\n"
+    "                each keeping its frame index (and noise), so the blocks together are the whole run;\n"
+    "                without it a Slurm array (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job\n"
+    "                (JOB_COMPLETION_INDEX) picks the block. Re-running a shard skips the frames already\n"
+    "                on disk. Merge the shards with 'vksonar merge' (docs/scale.md)\n"
+    "  --shard-count with JOB_COMPLETION_INDEX: the number of shards (else VKSONAR_SHARD_COUNT)\n";
 
 const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
                                              "normals", "echo", "cloud", "multibeam", "raw_scan"};
@@ -405,11 +413,13 @@ void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const
 }
 
 // The dataset file's path: its folder must exist and be writable before anything renders; the file
-// is removed again unless keep() is called (a frame is in it).
+// is removed again unless keep() is called (a frame is in it). A shard's file that is already there
+// (an earlier run of the shard) is never removed: a failed re-run must not lose its frames.
 class DatasetFile {
 public:
-    explicit DatasetFile(const fs::path& path) : path_(path) {
+    DatasetFile(const fs::path& path, bool keep_existing) : path_(path) {
         std::error_code ec;
+        keep_ = keep_existing && fs::exists(path, ec);
         const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
         if (!fs::is_directory(folder, ec)) throw BadInput("--out " + path.string() + ": no folder " + folder.string());
         if (fs::is_directory(path, ec)) throw BadInput("--out " + path.string() + ": is a directory");
@@ -440,6 +450,46 @@ DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::
     meta.device = device;
     meta.seed = seed;
     return meta;
+}
+
+// The dataset writer: a shard whose file is already there goes on after its last whole frame (marking
+// them in `done`); a file that cannot be read back is started over.
+std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, const Plan& plan, const DatasetMeta& meta,
+                                                   const DatasetOptions& options, DatasetFile& file,
+                                                   std::vector<char>& done) {
+    std::error_code ec;
+    if (meta.shard && fs::is_regular_file(path, ec)) {
+        auto resumed = DatasetWriter::resume(path, meta, options);
+        if (resumed) {
+            file.keep(); // its frames are a result already
+            for (std::uint64_t k = 0; k < resumed.value()->frames_written(); ++k)
+                done[meta.shard->first + k] = 1;
+            return std::move(resumed.value());
+        }
+        if (resumed.error().code == ErrorCode::invalid_argument) throw BadInput("--out " + resumed.error().message);
+        std::fprintf(stderr, "warning: %s: starting the shard over\n", resumed.error().message.c_str());
+    }
+    auto created = DatasetWriter::create(path, plan, meta, options);
+    if (!created) throw Failure(created.error().message);
+    return std::move(created.value());
+}
+
+// The --save set as a canonical list (a shard's identity).
+std::string save_list(const SaveSet& s) {
+    std::string list;
+    const std::pair<bool, const char*> items[] = {{s.fan, "fan"},
+                                                  {s.polar, "polar"},
+                                                  {s.polar_png, "polar_png"},
+                                                  {s.polar_u16, "polar_u16"},
+                                                  {s.depth, "depth"},
+                                                  {s.normals, "normals"},
+                                                  {s.echo, "echo"},
+                                                  {s.cloud, "cloud"},
+                                                  {s.multibeam, "multibeam"},
+                                                  {s.raw_scan, "raw_scan"}};
+    for (const auto& [on, name] : items)
+        if (on) list += (list.empty() ? "" : ",") + std::string(name);
+    return list;
 }
 
 // Writes through `write(temporary path)`, then renames onto `path`.
@@ -487,7 +537,8 @@ struct Outputs {
     host::Image image;
     std::vector<std::uint16_t> quantized;
     std::vector<float> view_range;
-    LegacyState* legacy = nullptr; // set in legacy modes
+    LegacyState* legacy = nullptr;      // set in legacy modes
+    const ShardRecord* shard = nullptr; // a shard of the trajectory: meta.json says which
 };
 
 // `time_s`: the trajectory's time column, or null when it has none.
@@ -504,6 +555,8 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
                      {"yaw_deg", pose.yaw_deg}};
     extra["backend"] = out.backend;
     extra["device"] = out.device;
+    if (out.shard)
+        extra["shard"] = {{"index", out.shard->index}, {"count", out.shard->count}, {"source", out.shard->source}};
     if (out.legacy && out.legacy->mode == SonarMode::uuv_legacy) {
         extra["mode"] = "uuv-legacy";
         extra["legacy"] = {
@@ -643,12 +696,6 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
     });
 }
 
-std::string frame_dir_name(std::uint64_t line) {
-    char name[32];
-    std::snprintf(name, sizeof name, "frame_%06llu", static_cast<unsigned long long>(line));
-    return name;
-}
-
 } // namespace
 
 int run_render(const std::vector<std::string>& argv) {
@@ -670,6 +717,8 @@ int run_render(const std::vector<std::string>& argv) {
                                   {"--ros-frame", true, false},
                                   {"--rate", true, false},
                                   {"--ros-sonar-dtype", true, false},
+                                  {"--shard", true, false},
+                                  {"--shard-count", true, false},
                                   {"--help", false, false}},
                                  "render");
     if (args.has("--help")) {
@@ -726,6 +775,25 @@ int run_render(const std::vector<std::string>& argv) {
         if (default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
         poses.push_back({pose, 0});
     }
+
+    // 3b. The shard: a block of the trajectory's frames (shard.h), from --shard or the engine's environment.
+    std::optional<ShardRecord> shard;
+    if (args.has("--trajectory")) {
+        auto flag = [&](const char* name) { return args.has(name) ? std::optional(args.value(name)) : std::nullopt; };
+        shard = resolve_shard(flag("--shard"), flag("--shard-count"), poses.size(), process_env());
+        if (shard) {
+            shard->trajectory = args.value("--trajectory");
+            shard->trajectory_hash = file_fnv1a64(shard->trajectory);
+        }
+    } else if (args.has("--shard") || args.has("--shard-count")) {
+        throw BadInput(std::string(args.has("--shard") ? "--shard" : "--shard-count") +
+                       ": shards split a trajectory; give --trajectory POSES.csv");
+    }
+    // No merge joins bags yet: N sharded bags would each hold a piece and nothing would make them one.
+    if (shard && bag)
+        throw BadInput("--out " + out_path + ": a ROS 2 bag is not sharded (shard " + shard->source +
+                       "); shard into FILE.h5 or folders and 'vksonar merge' them");
+    const std::size_t first = shard ? shard->first : 0, end = shard ? shard->end : poses.size();
 
     // 4. Config layers: preset < scene effects < --config < --quality < --set. The user's layers are checked
     //    before the (possibly slow) scene load, then applied again above the scene's effects.
@@ -794,7 +862,7 @@ int run_render(const std::vector<std::string>& argv) {
     std::optional<OutputDir> out_dir;
     std::optional<DatasetFile> dataset_file;
     if (dataset || bag)
-        dataset_file.emplace(out_path);
+        dataset_file.emplace(out_path, shard.has_value());
     else
         out_dir.emplace(out_path);
 
@@ -833,23 +901,34 @@ int run_render(const std::vector<std::string>& argv) {
                     {},
                     {},
                     {},
-                    plan.config.mode != SonarMode::physical ? &legacy_state : nullptr};
+                    plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
+                    shard ? &*shard : nullptr};
     // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of
     //    three frames, so rendering goes on while the previous frames are written.
     const bool trajectory = args.has("--trajectory");
     std::vector<Frame> slots;
-    for (std::size_t i = 0; i < std::min<std::size_t>(3, poses.size()); ++i)
+    for (std::size_t i = 0; i < std::min<std::size_t>(3, std::max<std::size_t>(end - first, 1)); ++i)
         slots.push_back(renderer->make_frame());
     std::unique_ptr<DatasetWriter> dataset_writer;
+    std::vector<char> done(poses.size(), 0); // a shard's frames already on disk (re-run: skipped)
     if (dataset) {
         DatasetMeta meta = dataset_meta(plan, scene_path, backend_name, device, seed);
+        meta.shard = shard;
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;
         options.compress = args.has("--compress");
         options.has_time = timed;
-        auto created = DatasetWriter::create(out_path, plan, meta, options);
-        if (!created) throw Failure(created.error().message);
-        dataset_writer = std::move(created.value());
+        dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
+    } else if (shard) {
+        FolderManifest manifest{
+            *shard,
+            run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
+            {},
+            backend_name,
+            device};
+        for (std::size_t i = first; i < end; ++i)
+            manifest.lines.push_back(poses[i].line);
+        start_folder_shard(out_dir->path().string(), manifest, done);
     }
     std::unique_ptr<McapDatasetWriter> bag_writer;
     if (bag) {
@@ -881,10 +960,8 @@ int run_render(const std::vector<std::string>& argv) {
                 host::quantize_display(slot.frame, outputs.quantized);
                 u16 = outputs.quantized.data();
             }
-            const double time = timed ? slot.time_s : static_cast<double>(ordinal);
-            auto appended = dataset_writer->append(slot.frame, slot.pose, time, u16);
+            auto appended = dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16);
             if (!appended) throw Failure(appended.error().message);
-            ++ordinal;
             dataset_file->keep(); // only this thread calls keep(); read after the join
             return;
         }
@@ -895,9 +972,15 @@ int run_render(const std::vector<std::string>& argv) {
             fs::create_directories(dir, ec);
             if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
         }
-        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr);
+        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr); // meta.json last: done
         out_dir->keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
     });
+    const std::size_t todo = static_cast<std::size_t>(std::count(done.begin() + first, done.begin() + end, 0));
+    if (shard)
+        std::fprintf(stderr, "vksonar: %s\n",
+                     shard_summary(*shard, end > first ? poses[first].line : 0, end > first ? poses[end - 1].line : 0,
+                                   end - first - todo)
+                         .c_str());
     const bool progress = trajectory && ::isatty(::fileno(stderr));
     const auto start = std::chrono::steady_clock::now();
     auto last_progress = start;
@@ -905,15 +988,16 @@ int run_render(const std::vector<std::string>& argv) {
         const auto now = std::chrono::steady_clock::now();
         if (!progress || (!final && now - last_progress < std::chrono::milliseconds(250))) return;
         last_progress = now;
-        const std::uint64_t done = writer.written();
+        const std::uint64_t written = writer.written();
         const double seconds = std::chrono::duration<double>(now - start).count();
-        const double rate = seconds > 0 ? static_cast<double>(done) / seconds : 0.0;
-        const double left = rate > 0 ? static_cast<double>(poses.size() - done) / rate : 0.0;
+        const double rate = seconds > 0 ? static_cast<double>(written) / seconds : 0.0;
+        const double left = rate > 0 ? static_cast<double>(todo - written) / rate : 0.0;
         std::fprintf(stderr, "\rvksonar: %llu/%zu frames written, %.1f frames/s, %.0f s left   ",
-                     static_cast<unsigned long long>(done), poses.size(), rate, left);
+                     static_cast<unsigned long long>(written), todo, rate, left);
         std::fflush(stderr);
     };
-    for (std::size_t i = 0; i < poses.size(); ++i) {
+    for (std::size_t i = first; i < end; ++i) {
+        if (done[i]) continue; // a re-run shard: this frame is complete on disk
         const TrajectoryPose& item = poses[i];
         WriteBehind::Slot& slot = writer.acquire(); // rethrows a write error: the run stops there
         auto rendered = renderer->render(item.pose, item.line, slot.frame);
@@ -924,7 +1008,7 @@ int run_render(const std::vector<std::string>& argv) {
         }
         slot.pose = item.pose;
         slot.line = item.line;
-        slot.time_s = item.time_s;
+        slot.time_s = timed ? item.time_s : static_cast<double>(i); // the .h5 time: the global ordinal
         writer.submit();
         show_progress(false);
     }
@@ -935,6 +1019,15 @@ int run_render(const std::vector<std::string>& argv) {
         if (auto closed = bag_writer->close(); !closed) throw Failure(closed.error().message);
     show_progress(true);
     if (progress) std::fputc('\n', stderr);
+    if (shard) {
+        // A shard's output is its result even when its block is empty or was already complete.
+        if (dataset_file) dataset_file->keep();
+        if (out_dir) out_dir->keep();
+        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        std::fprintf(stderr, "vksonar: shard %llu/%llu: %zu frames rendered in %.2f s (%.2f frames/s)\n",
+                     static_cast<unsigned long long>(shard->index), static_cast<unsigned long long>(shard->count), todo,
+                     seconds, seconds > 0 ? static_cast<double>(todo) / seconds : 0.0);
+    }
     return 0;
 }
 

@@ -1,0 +1,310 @@
+// `vksonar render --shard` and `vksonar merge` as a process: bad shards (flag and engine environment)
+// are one line naming the flag or variable, exit 2, nothing written; frame-folder shards merge into
+// the unsharded run's files byte for byte; shard.json and meta.json say which shard a frame came from.
+// (.h5 shards, kill-and-resume: tests/python/check_shards.py.)
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "cli/shard.h"
+#include "cli_support.h"
+
+namespace fs = std::filesystem;
+using vksonar::testing::quote;
+using vksonar::testing::read_text;
+using vksonar::testing::write_text;
+
+namespace {
+
+struct ShardRun {
+    int exit_code = -1;
+    std::string err;
+    std::size_t err_lines() const {
+        std::size_t n = 0;
+        for (char c : err)
+            n += c == '\n';
+        return n;
+    }
+};
+
+class Shard : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() / ("vksonar_shard_test_" + std::to_string(::getpid()) + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+        std::string poses = "x,y,z,roll,pitch,yaw\n";
+        for (int i = 0; i < 7; ++i)
+            poses +=
+                std::to_string(0.3 * i) + ",0," + std::to_string(-0.1 * i) + ",0,10," + std::to_string(4 * i) + "\n";
+        write_text(dir_ / "poses.csv", poses);
+    }
+    void TearDown() override {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+
+    // Runs vksonar with `env` (NAME=value ...) in an environment cleared of the engines' variables.
+    ShardRun run(const std::vector<std::string>& args, const std::vector<std::string>& env = {}) const {
+        std::string command = "env -u SLURM_ARRAY_TASK_ID -u SLURM_ARRAY_TASK_MIN -u SLURM_ARRAY_TASK_MAX "
+                              "-u SLURM_ARRAY_TASK_STEP -u SLURM_ARRAY_TASK_COUNT -u JOB_COMPLETION_INDEX "
+                              "-u VKSONAR_SHARD_COUNT";
+        for (const auto& e : env)
+            command += " " + quote(e);
+        command += " " + quote(VKSONAR_CLI);
+        for (const auto& a : args)
+            command += " " + quote(a);
+        const fs::path err = dir_ / "stderr.txt";
+        command += " > /dev/null 2> " + quote(err.string()) + " < /dev/null";
+        const int status = std::system(command.c_str());
+        ShardRun r;
+        r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        r.err = read_text(err);
+        return r;
+    }
+
+    std::vector<std::string> render_args(const std::string& out, std::vector<std::string> extra = {}) const {
+        std::vector<std::string> args = {"render",
+                                         "--backend",
+                                         "cpu",
+                                         "--set",
+                                         "bins=32",
+                                         "--set",
+                                         "beams=16",
+                                         "--set",
+                                         "range_min=6",
+                                         "--set",
+                                         "display.fan_width=64",
+                                         "--trajectory",
+                                         (dir_ / "poses.csv").string(),
+                                         "--out",
+                                         (dir_ / out).string()};
+        args.insert(args.end(), extra.begin(), extra.end());
+        return args;
+    }
+
+    // Exit 2, one line "error: ..." holding every `expected`, and no output folder.
+    void expect_bad(const std::vector<std::string>& extra, const std::vector<std::string>& env,
+                    const std::vector<std::string>& expected) const {
+        const ShardRun r = run(render_args("never", extra), env);
+        std::string what;
+        for (const auto& e : env)
+            what += e + " ";
+        for (const auto& e : extra)
+            what += e + " ";
+        EXPECT_EQ(r.exit_code, 2) << what << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << what << r.err;
+        EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << what << r.err;
+        for (const auto& text : expected)
+            EXPECT_NE(r.err.find(text), std::string::npos) << what << "\nwanted: " << text << "\ngot: " << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / "never")) << what;
+    }
+
+    fs::path dir_;
+};
+
+TEST(ShardBlocks, ContiguousBalancedAndCovering) {
+    using vksonar::cli::shard_block;
+    for (std::uint64_t total : {0u, 1u, 7u, 10u, 1000u})
+        for (std::uint64_t count : {1u, 2u, 3u, 4u, 11u}) {
+            std::uint64_t next = 0, smallest = ~0ull, largest = 0;
+            for (std::uint64_t i = 0; i < count; ++i) {
+                const auto [first, end] = shard_block(i, count, total);
+                EXPECT_EQ(first, next) << i << "/" << count << " of " << total;
+                next = end;
+                smallest = std::min(smallest, end - first);
+                largest = std::max(largest, end - first);
+            }
+            EXPECT_EQ(next, total);
+            EXPECT_LE(largest - smallest, 1u) << count << " shards of " << total;
+        }
+    EXPECT_EQ(shard_block(1, 3, 10), std::make_pair(std::uint64_t(3), std::uint64_t(6)));
+}
+
+TEST_F(Shard, BadShardFlagIsOneLine) {
+    expect_bad({"--shard", "3/2"}, {}, {"--shard '3/2'", "index 3 is not below the count 2"});
+    expect_bad({"--shard", "2/2"}, {}, {"--shard '2/2'", "numbered 0..1"});
+    expect_bad({"--shard", "0/0"}, {}, {"--shard '0/0'", "at least 1"});
+    expect_bad({"--shard", "abc"}, {}, {"--shard 'abc'", "INDEX/COUNT"});
+    expect_bad({"--shard", "-1/4"}, {}, {"--shard '-1/4'", "INDEX/COUNT"});
+    expect_bad({"--shard", "1/4", "--shard-count", "4"}, {}, {"--shard-count", "only with JOB_COMPLETION_INDEX"});
+    expect_bad({"--shard-count", "4"}, {}, {"--shard-count 4", "no JOB_COMPLETION_INDEX"});
+    // Without a trajectory there is nothing to split.
+    const ShardRun r = run({"render", "--backend", "cpu", "--shard", "0/2", "--out", (dir_ / "never").string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("--shard: shards split a trajectory"), std::string::npos) << r.err;
+}
+
+// No merge joins ROS 2 bags: a sharded .mcap run (flag or array environment) is refused before
+// anything is written, naming where the shard came from.
+TEST_F(Shard, BagsAreNotSharded) {
+    for (const auto& [extra, env, source] :
+         std::vector<std::tuple<std::vector<std::string>, std::vector<std::string>, std::string>>{
+             {{"--shard", "1/2"}, {}, "--shard 1/2"},
+             {{}, {"SLURM_ARRAY_TASK_ID=1", "SLURM_ARRAY_TASK_COUNT=2"}, "SLURM_ARRAY_TASK_ID=1"}}) {
+        const fs::path bag = dir_ / "never.mcap";
+        std::vector<std::string> args = render_args("unused", extra);
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--out") args[i + 1] = bag.string();
+        const ShardRun r = run(args, env);
+        EXPECT_EQ(r.exit_code, 2) << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << r.err;
+        EXPECT_NE(r.err.find("a ROS 2 bag is not sharded"), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find(source), std::string::npos) << r.err;
+        EXPECT_FALSE(fs::exists(bag));
+    }
+}
+
+TEST_F(Shard, NonsenseEnvironmentIsOneLine) {
+    expect_bad({}, {"SLURM_ARRAY_TASK_ID=abc", "SLURM_ARRAY_TASK_COUNT=4"}, {"SLURM_ARRAY_TASK_ID", "'abc'"});
+    expect_bad({}, {"SLURM_ARRAY_TASK_ID=1", "SLURM_ARRAY_TASK_MIN=0", "SLURM_ARRAY_TASK_MAX=x"},
+               {"SLURM_ARRAY_TASK_MAX", "'x'"});
+    expect_bad({}, {"SLURM_ARRAY_TASK_ID=9", "SLURM_ARRAY_TASK_MIN=0", "SLURM_ARRAY_TASK_MAX=3"},
+               {"SLURM_ARRAY_TASK_ID=9", "not in the array's", "0..3"});
+    expect_bad({}, {"SLURM_ARRAY_TASK_ID=1"}, {"SLURM_ARRAY_TASK_ID=1", "--shard INDEX/COUNT"});
+    // An array "0,1,5" is not one range: MIN..MAX says 6 tasks, COUNT 3.
+    expect_bad(
+        {}, {"SLURM_ARRAY_TASK_ID=5", "SLURM_ARRAY_TASK_MIN=0", "SLURM_ARRAY_TASK_MAX=5", "SLURM_ARRAY_TASK_COUNT=3"},
+        {"SLURM_ARRAY_TASK_COUNT=3", "not one range"});
+    expect_bad({}, {"SLURM_ARRAY_TASK_ID=4", "SLURM_ARRAY_TASK_COUNT=4"}, {"SLURM_ARRAY_TASK_ID=4", "COUNT=4"});
+    expect_bad({}, {"JOB_COMPLETION_INDEX=2"}, {"JOB_COMPLETION_INDEX=2", "--shard-count N", "VKSONAR_SHARD_COUNT"});
+    expect_bad({}, {"JOB_COMPLETION_INDEX=2", "VKSONAR_SHARD_COUNT=two"}, {"VKSONAR_SHARD_COUNT", "'two'"});
+    expect_bad({}, {"JOB_COMPLETION_INDEX=5", "VKSONAR_SHARD_COUNT=5"}, {"JOB_COMPLETION_INDEX=5", "count 5"});
+    expect_bad({}, {"JOB_COMPLETION_INDEX=-1", "VKSONAR_SHARD_COUNT=5"}, {"JOB_COMPLETION_INDEX", "'-1'"});
+    expect_bad({"--shard-count", "3"}, {"SLURM_ARRAY_TASK_ID=0", "SLURM_ARRAY_TASK_COUNT=4"},
+               {"--shard-count 3", "does not match", "4 tasks"});
+}
+
+TEST_F(Shard, StepArrayAndFlagBeatsEnvironment) {
+    // --array=10-40:10 (4 tasks): task 30 is shard 2/4, frames 3..4 of 7 (lines 5..6).
+    ShardRun r = run(render_args("step", {"--save", "polar"}),
+                     {"SLURM_ARRAY_TASK_ID=30", "SLURM_ARRAY_TASK_MIN=10", "SLURM_ARRAY_TASK_MAX=40",
+                      "SLURM_ARRAY_TASK_STEP=10", "SLURM_ARRAY_TASK_COUNT=4"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find("shard 2/4 (SLURM_ARRAY_TASK_ID=30"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "step" / "frame_000005" / "polar.npy"));
+    EXPECT_TRUE(fs::exists(dir_ / "step" / "frame_000006" / "polar.npy"));
+    EXPECT_FALSE(fs::exists(dir_ / "step" / "frame_000004"));
+    EXPECT_FALSE(fs::exists(dir_ / "step" / "frame_000007"));
+    // --shard wins over the environment.
+    r = run(render_args("flag", {"--save", "polar", "--shard", "0/7"}),
+            {"SLURM_ARRAY_TASK_ID=30", "SLURM_ARRAY_TASK_MIN=10", "SLURM_ARRAY_TASK_MAX=40"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "flag" / "frame_000002" / "meta.json"));
+    EXPECT_FALSE(fs::exists(dir_ / "flag" / "frame_000003"));
+    // An Indexed Job's index with --shard-count: pod 1 of 3 renders frames 2..3 (lines 4..5).
+    r = run(render_args("k8s", {"--save", "polar", "--shard-count", "3"}), {"JOB_COMPLETION_INDEX=1"});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find("shard 1/3 (JOB_COMPLETION_INDEX=1 (--shard-count 3))"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "k8s" / "frame_000004" / "meta.json"));
+    EXPECT_TRUE(fs::exists(dir_ / "k8s" / "frame_000005" / "meta.json"));
+    EXPECT_FALSE(fs::exists(dir_ / "k8s" / "frame_000003"));
+    EXPECT_FALSE(fs::exists(dir_ / "k8s" / "frame_000006"));
+    // More shards than frames: an empty shard is a success with its shard.json.
+    r = run(render_args("empty", {"--save", "polar", "--shard", "0/9"}));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find("no frames"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "empty" / "shard.json"));
+}
+
+TEST_F(Shard, FolderShardsMergeIntoTheUnshardedRun) {
+    ASSERT_EQ(run(render_args("whole")).exit_code, 0);
+    std::vector<std::string> merge = {"merge", (dir_ / "merged").string()};
+    for (int i = 2; i >= 0; --i) { // any order
+        const std::string name = "part" + std::to_string(i);
+        const ShardRun r = run(render_args(name, {"--shard", std::to_string(i) + "/3"}));
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        merge.push_back((dir_ / name).string());
+    }
+    // shard.json and meta.json say which shard: 7 frames in 3 shards are 0..1, 2..3, 4..6.
+    const auto manifest = nlohmann::json::parse(read_text(dir_ / "part1" / "shard.json"));
+    EXPECT_EQ(manifest["shard"]["index"], 1);
+    EXPECT_EQ(manifest["frames"]["first"], 2);
+    EXPECT_EQ(manifest["frames"]["end"], 4);
+    EXPECT_EQ(manifest["lines"], nlohmann::json::parse("[[4, 5]]"));
+    const auto meta = nlohmann::json::parse(read_text(dir_ / "part1" / "frame_000004" / "meta.json"));
+    EXPECT_EQ(meta["shard"]["index"], 1);
+    EXPECT_EQ(meta["shard"]["count"], 3);
+    const ShardRun merged = run(merge);
+    ASSERT_EQ(merged.exit_code, 0) << merged.err;
+    std::size_t files = 0;
+    for (int line = 2; line <= 8; ++line) {
+        const std::string frame = vksonar::cli::frame_dir_name(line);
+        for (const char* name : {"fan.png", "polar.npy", "polar.png", "polar_u16.npy"}) {
+            const std::string a = read_text(dir_ / "whole" / frame / name),
+                              b = read_text(dir_ / "merged" / frame / name);
+            EXPECT_FALSE(a.empty()) << frame << "/" << name;
+            EXPECT_TRUE(a == b) << frame << "/" << name << " differs from the unsharded run";
+            ++files;
+        }
+        auto whole = nlohmann::json::parse(read_text(dir_ / "whole" / frame / "meta.json"));
+        auto part = nlohmann::json::parse(read_text(dir_ / "merged" / frame / "meta.json"));
+        part.erase("shard");
+        EXPECT_EQ(whole["frame_index"], line);
+        whole.erase("timings_ms"); // measured, so never the same
+        part.erase("timings_ms");
+        EXPECT_TRUE(whole == part) << frame << ": meta.json differs beyond its shard and timings";
+    }
+    EXPECT_EQ(files, 28u);
+    EXPECT_FALSE(fs::exists(dir_ / "merged" / "frame_000009"));
+    const auto record = nlohmann::json::parse(read_text(dir_ / "merged" / "merged.json"));
+    EXPECT_EQ(record["frames"], 7);
+    EXPECT_EQ(record["shards"].size(), 3u);
+}
+
+TEST_F(Shard, MergeRefusesGapsOverlapsAndOtherRuns) {
+    for (int i = 0; i < 3; ++i)
+        ASSERT_EQ(run(render_args("p" + std::to_string(i), {"--save", "polar", "--shard", std::to_string(i) + "/3"}))
+                      .exit_code,
+                  0);
+    ASSERT_EQ(run(render_args("other", {"--save", "polar", "--shard", "1/3", "--set", "beams=24"})).exit_code, 0);
+    ASSERT_EQ(run(render_args("more", {"--save", "polar,polar_png", "--shard", "1/3"})).exit_code, 0);
+    const auto p = [&](const char* name) { return (dir_ / name).string(); };
+    auto refused = [&](const std::vector<std::string>& shards, const std::vector<std::string>& expected) {
+        std::vector<std::string> args = {"merge", p("out")};
+        args.insert(args.end(), shards.begin(), shards.end());
+        const ShardRun r = run(args);
+        EXPECT_EQ(r.exit_code, 2) << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << r.err;
+        for (const auto& text : expected)
+            EXPECT_NE(r.err.find(text), std::string::npos) << "wanted: " << text << "\ngot: " << r.err;
+        EXPECT_FALSE(fs::exists(p("out")));
+    };
+    refused({p("p0"), p("p2")}, {"shard 1/3 is missing", "frames 2..3"});
+    refused({p("p0"), p("p1"), p("p1"), p("p2")}, {"shard 1/3 is given twice"});
+    refused({p("p0"), p("other"), p("p2")}, {"another run", "config.beams: 16 vs 24"});
+    refused({p("p0"), p("more"), p("p2")}, {"another run", "save: polar vs polar,polar_png"});
+    refused({p("p0"), p("poses.csv")}, {"poses.csv", "not a shard's output"});
+    refused({p("p0"), p("nothing")}, {"nothing", "no such file"});
+    // A frame folder without meta.json: the shard is incomplete.
+    fs::remove(dir_ / "p2" / "frame_000007" / "meta.json");
+    refused({p("p0"), p("p1"), p("p2")}, {"p2 (shard 2/3) is incomplete", "2 of 3 frames", "frame_000007"});
+    // ...and re-running the shard renders just that frame.
+    const ShardRun again = run(render_args("p2", {"--save", "polar", "--shard", "2/3"}));
+    ASSERT_EQ(again.exit_code, 0) << again.err;
+    EXPECT_NE(again.err.find("2 already on disk"), std::string::npos) << again.err;
+    EXPECT_NE(again.err.find(": 1 frames rendered"), std::string::npos) << again.err;
+    // A re-run with another config into the same folder is refused, and the folder kept.
+    const ShardRun clash = run(render_args("p2", {"--save", "polar", "--shard", "2/3", "--seed", "9"}));
+    EXPECT_EQ(clash.exit_code, 2) << clash.err;
+    EXPECT_NE(clash.err.find("another run (seed: 1 vs 9)"), std::string::npos) << clash.err;
+    EXPECT_TRUE(fs::exists(dir_ / "p2" / "frame_000007" / "meta.json"));
+    const ShardRun wrong = run(render_args("p2", {"--save", "polar", "--shard", "1/3"}));
+    EXPECT_EQ(wrong.exit_code, 2) << wrong.err;
+    EXPECT_NE(wrong.err.find("holds shard 2/3, not shard 1/3"), std::string::npos) << wrong.err;
+    const ShardRun ok = run({"merge", p("out"), p("p0"), p("p1"), p("p2")});
+    EXPECT_EQ(ok.exit_code, 0) << ok.err;
+    EXPECT_TRUE(fs::exists(dir_ / "out" / "frame_000008" / "polar.npy"));
+}
+
+} // namespace
