@@ -101,10 +101,11 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
             }
         }
     };
+    // A hit has a range > 0 (view z > 0), a miss 0 in the ring.
     auto sample = [&](std::int64_t c, std::int64_t j) -> Sample {
-        if (c < 0 || j < 0 || c >= C || j >= R || !(depth[j * C + c] > 0.0f)) return M::no_sample();
+        if (c < 0 || j < 0 || c >= C || j >= R) return M::no_sample();
         const Real* q = ring + ((j % kRingRows) * C + c) * 4;
-        return Sample{typename M::vec3(q[0], q[1], q[2]), q[3], true};
+        return Sample{typename M::vec3(q[0], q[1], q[2]), q[3], q[3] > Real(0)};
     };
     auto column3 = [&](std::int64_t c, std::int64_t j) {
         return Column3{sample(c, j - 1), sample(c, j), sample(c, j + 1)};
