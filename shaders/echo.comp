@@ -9,22 +9,22 @@
 #include "sonar_kernels.h"
 
 layout(local_size_x = kWorkgroupSize) in;
-layout(constant_id = 0) const uint kEffectFlags = 0u;
-layout(constant_id = 1) const uint kPixelsPerInvocation = 4u; // set by the host
+layout(constant_id = kSpecEffectFlags) const uint kEffectFlags = 0u;
+layout(constant_id = kSpecPerInvocation) const uint kPixelsPerInvocation = 4u; // set by the host
 const bool kIncidence = (kEffectFlags & kEffectIncidence) != 0u;
 const bool kVerticalPattern = (kEffectFlags & kEffectVerticalPattern) != 0u;
 const bool kSpreading = (kEffectFlags & kEffectSpreading) != 0u;
 const bool kAbsorption = (kEffectFlags & kEffectAbsorption) != 0u;
 
-layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = 1) readonly buffer DepthBuffer { float depth[]; };
-layout(std430, binding = 2) readonly buffer MaterialIdBuffer { uint material_id[]; };
-layout(std430, binding = 3) readonly buffer NormalsBuffer { vec4 normals4[]; };
-layout(std430, binding = 4) writeonly buffer EchoBuffer { vec2 echo2[]; };
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingDepth) readonly buffer DepthBuffer { float depth[]; };
+layout(std430, binding = kBindingMaterialId) readonly buffer MaterialIdBuffer { uint material_id[]; };
+layout(std430, binding = kBindingNormals) readonly buffer NormalsBuffer { vec4 normals4[]; };
+layout(std430, binding = kBindingEcho) writeonly buffer EchoBuffer { vec2 echo2[]; };
 // The same buffer with accuracy.intermediates = fp16: (energy * echo_scale, range) as two halves.
-layout(std430, binding = 4) writeonly buffer EchoHalfBuffer { uint echo_half2[]; };
+layout(std430, binding = kBindingEcho) writeonly buffer EchoHalfBuffer { uint echo_half2[]; };
 
-layout(constant_id = 6) const uint kEchoHalf = 0u; // params.echo_half, as a constant (src/vk/pipelines.h)
+layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u; // params.echo_half, as a constant (src/vk/pipelines.h)
 
 void store_echo(uint p, vec2 energy_range) {
     if (kEchoHalf != 0u) {
@@ -33,12 +33,12 @@ void store_echo(uint p, vec2 energy_range) {
         echo2[p] = energy_range;
     }
 }
-layout(std430, binding = 9) readonly buffer MaterialBuffer { MaterialGpu materials[]; };
+layout(std430, binding = kBindingMaterials) readonly buffer MaterialBuffer { MaterialGpu materials[]; };
 // The same table as a uniform block where it fits one (src/vk/pipelines.h): a divergent uniform load
 // is a vector gather on lavapipe, a storage load a loop over the lanes.
-layout(constant_id = 3) const uint kUniformTables = 0u;
-layout(constant_id = 4) const uint kMaterialCount = 1u; // entries of the uniform block
-layout(std140, binding = 13) uniform MaterialBlock { MaterialGpu materials_u[kMaterialCount]; };
+layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
+layout(constant_id = kSpecTableVec4s0) const uint kMaterialCount = 1u; // entries of the uniform block
+layout(std140, binding = kBindingMaterialsUniform) uniform MaterialBlock { MaterialGpu materials_u[kMaterialCount]; };
 
 uint material_count() {
     return kUniformTables != 0u ? kMaterialCount : uint(materials.length());
@@ -47,7 +47,7 @@ uint material_count() {
 // carry the facet term's exponential and the two extra table reads. Bits 1-3: params.vpattern_shape,
 // so that pattern_power() keeps only that shape's code (a uniform branch runs every shape's code on
 // lavapipe: the chebyshev branch made echo ~10 % slower for a sinc pattern).
-layout(constant_id = 2) const uint kVariant = 2u;
+layout(constant_id = kSpecVariant) const uint kVariant = 2u;
 const uint kRoughMaterials = kVariant & 1u;
 const uint kVerticalShape = (kVariant >> 1u) & 7u;
 

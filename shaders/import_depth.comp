@@ -11,10 +11,10 @@
 
 layout(local_size_x = kWorkgroupSize) in;
 
-layout(std140, set = 0, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, set = 0, binding = 1) writeonly buffer DepthBuffer { float depth[]; };
-layout(std430, set = 0, binding = 2) writeonly buffer MaterialBuffer { uint material_id[]; };
-layout(set = 1, binding = 0) uniform texture2D host_depth;
+layout(std140, set = 0, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, set = 0, binding = kBindingDepth) writeonly buffer DepthBuffer { float depth[]; };
+layout(std430, set = 0, binding = kBindingMaterialId) writeonly buffer MaterialBuffer { uint material_id[]; };
+layout(set = 1, binding = kBindingHostDepthImage) uniform texture2D host_depth;
 layout(push_constant) uniform PushBlock { ImportDepthPush push; };
 
 void main() {

@@ -14,18 +14,18 @@
 #include "sonar_kernels.h"
 
 layout(local_size_x = kWorkgroupSize) in;
-layout(constant_id = 1) const uint kRun = 8u; // pixels per invocation, set by the host
+layout(constant_id = kSpecPerInvocation) const uint kRun = 8u; // pixels per invocation, set by the host
 // params.normal_method, set by the host as a specialization constant rather than read from the
 // uniform: a uniform branch left the sobel5 code in the sobel3 pipeline and made it 1.6x slower on
 // llvmpipe (masked execution); a constant compiles the unused path out.
-layout(constant_id = 2) const uint kNormalMethod = kNormalsSobel3;
+layout(constant_id = kSpecVariant) const uint kNormalMethod = kNormalsSobel3;
 
-layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = 1) readonly buffer DepthBuffer { float depth[]; };
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingDepth) readonly buffer DepthBuffer { float depth[]; };
 // Written by every method; read too by geometric, where the depth pass copied its face normals here.
-layout(std430, binding = 3) buffer NormalsBuffer { vec4 normals4[]; };
+layout(std430, binding = kBindingNormals) buffer NormalsBuffer { vec4 normals4[]; };
 // A uniform block: every lane of a row run reads the same slice (one scalar load on lavapipe).
-layout(std140, binding = 8) uniform SliceBlock { SliceInfo slice_info[kMaxSlices]; };
+layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxSlices]; };
 
 // The pixel's Sample (sonar_kernels.h): invalid outside the image or without a hit.
 Sample load(int column, int row) {

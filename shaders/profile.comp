@@ -16,13 +16,13 @@
 
 layout(local_size_x = kWorkgroupSize) in;
 
-layout(constant_id = 2) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
-layout(constant_id = 6) const uint kEchoHalf = 0u;                      // params.echo_half
+layout(constant_id = kSpecVariant) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
+layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
-layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = 4) readonly buffer EchoBuffer { vec2 echo2[]; };
-layout(std430, binding = 4) readonly buffer EchoHalfBuffer { uint echo_half2[]; }; // accuracy.intermediates = fp16
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingEcho) readonly buffer EchoBuffer { vec2 echo2[]; };
+layout(std430, binding = kBindingEcho) readonly buffer EchoHalfBuffer { uint echo_half2[]; }; // accuracy.intermediates = fp16
 
 vec2 load_echo(uint p) {
     if (kEchoHalf != 0u) {
@@ -31,7 +31,7 @@ vec2 load_echo(uint p) {
     }
     return echo2[p];
 }
-layout(std430, binding = 5) buffer ProfileBuffer { float profiles[]; };
+layout(std430, binding = kBindingProfiles) buffer ProfileBuffer { float profiles[]; };
 
 void main() {
     uint column = gl_GlobalInvocationID.x;

@@ -23,27 +23,27 @@
 #include "sonar_math.h"
 
 layout(local_size_x = kWorkgroupSize) in;
-layout(constant_id = 1) const uint kBeamsPerInvocation = 16u; // set by the host
-layout(constant_id = 2) const uint kVariant = 1u;             // set by the host: the two bits below
+layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; // set by the host
+layout(constant_id = kSpecVariant) const uint kVariant = 1u;             // set by the host: the two bits below
 const bool kBeamMajorOut = (kVariant & 1u) != 0u;              // the side-lobe pass follows
 const bool kWalk = (kVariant & 2u) != 0u;                      // walk the run's columns once (see above)
 
-layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = 5) readonly buffer ProfileBuffer { vec4 profiles4[]; };
-layout(std430, binding = 6) writeonly buffer BeamProfileBuffer { float beam_profiles[]; };
-layout(std430, binding = 6) writeonly buffer BeamProfileBuffer4 { vec4 beam_profiles4[]; }; // beam-major out
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingProfiles) readonly buffer ProfileBuffer { vec4 profiles4[]; };
+layout(std430, binding = kBindingBeamProfiles) writeonly buffer BeamProfileBuffer { float beam_profiles[]; };
+layout(std430, binding = kBindingBeamProfiles) writeonly buffer BeamProfileBuffer4 { vec4 beam_profiles4[]; }; // beam-major out
 // Per pixel column (beam, weight bits): the column's tent weight goes to `beam`, 1 - weight to the next.
-layout(std430, binding = 10) readonly buffer ColumnTable { uvec2 column_entry[]; };
+layout(std430, binding = kBindingColumnTable) readonly buffer ColumnTable { uvec2 column_entry[]; };
 // Per beam (first column, end column) of the columns that reach it.
-layout(std430, binding = 11) readonly buffer BeamTable { uvec2 beam_entry[]; };
+layout(std430, binding = kBindingBeamTable) readonly buffer BeamTable { uvec2 beam_entry[]; };
 // The same tables as uniform blocks where both fit (src/vk/pipelines.h), two entries per uvec4. The
 // beam index is the same for every lane of a workgroup: one scalar load on lavapipe, where a storage
 // load is a loop over the lanes.
-layout(constant_id = 3) const uint kUniformTables = 0u;
-layout(constant_id = 4) const uint kColumnVec4s = 1u;
-layout(constant_id = 5) const uint kBeamVec4s = 1u;
-layout(std140, binding = 14) uniform ColumnBlock { uvec4 column_entry4[kColumnVec4s]; };
-layout(std140, binding = 15) uniform BeamBlock { uvec4 beam_entry4[kBeamVec4s]; };
+layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
+layout(constant_id = kSpecTableVec4s0) const uint kColumnVec4s = 1u;
+layout(constant_id = kSpecTableVec4s1) const uint kBeamVec4s = 1u;
+layout(std140, binding = kBindingColumnTableUniform) uniform ColumnBlock { uvec4 column_entry4[kColumnVec4s]; };
+layout(std140, binding = kBindingBeamTableUniform) uniform BeamBlock { uvec4 beam_entry4[kBeamVec4s]; };
 
 uvec2 column_at(uint c) {
     if (kUniformTables != 0u) {

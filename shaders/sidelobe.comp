@@ -13,21 +13,21 @@
 #include "sonar_shared.h"
 
 layout(local_size_x = kWorkgroupSize) in;
-layout(constant_id = 1) const uint kBeamsPerInvocation = 16u; // set by the host, a multiple of 4
+layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; // set by the host, a multiple of 4
 // 1 when beams % 4 == 0: four beams of a range bin go out as one vec4 store (lavapipe loops over the
 // lanes once per store instruction, so 16 vec4 stores cost a quarter of 64 scalar ones).
-layout(constant_id = 2) const uint kVec4Out = 0u;
+layout(constant_id = kSpecVariant) const uint kVec4Out = 0u;
 
-layout(std140, binding = 0) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = 6) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
-layout(std430, binding = 7) writeonly buffer PolarBuffer { float polar[]; };
-layout(std430, binding = 7) writeonly buffer PolarBuffer4 { vec4 polar4[]; };
-layout(std430, binding = 12) readonly buffer SidelobeBuffer { float sidelobe_weight[]; };
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
+layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer { float polar[]; };
+layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer4 { vec4 polar4[]; };
+layout(std430, binding = kBindingSidelobeWeight) readonly buffer SidelobeBuffer { float sidelobe_weight[]; };
 // The same weights as a uniform block where they fit one (src/vk/pipelines.h). Every lane of a
 // workgroup reads the same weight: one scalar load on lavapipe, a loop over the lanes from storage.
-layout(constant_id = 3) const uint kUniformTables = 0u;
-layout(constant_id = 4) const uint kWeightVec4s = 1u;
-layout(std140, binding = 16) uniform SidelobeBlock { vec4 sidelobe_weight4[kWeightVec4s]; };
+layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
+layout(constant_id = kSpecTableVec4s0) const uint kWeightVec4s = 1u;
+layout(std140, binding = kBindingSidelobeWeightUniform) uniform SidelobeBlock { vec4 sidelobe_weight4[kWeightVec4s]; };
 
 float weight(uint i) {
     return kUniformTables != 0u ? sidelobe_weight4[i >> 2u][i & 3u] : sidelobe_weight[i];

@@ -21,6 +21,41 @@ VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per sli
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 VKS_CONST float kPi = 3.14159265358979323846f;
 
+// The compute stages' shader interface, declared once. Descriptor bindings of set 0: every shader
+// names the ones it uses, the host builds the one set layout from the same names (src/vk/pipelines.h).
+// The four small tables have a storage and a uniform binding on the same buffer (pipelines.h says why).
+VKS_CONST uint kBindingParams = 0u; // uniform SonarParams (std140)
+VKS_CONST uint kBindingDepth = 1u;
+VKS_CONST uint kBindingMaterialId = 2u;
+VKS_CONST uint kBindingNormals = 3u;
+VKS_CONST uint kBindingEcho = 4u;
+VKS_CONST uint kBindingProfiles = 5u;
+VKS_CONST uint kBindingBeamProfiles = 6u;
+VKS_CONST uint kBindingPolar = 7u;
+VKS_CONST uint kBindingSliceInfo = 8u; // uniform SliceInfo[kMaxSlices] (std140)
+VKS_CONST uint kBindingMaterials = 9u;
+VKS_CONST uint kBindingColumnTable = 10u; // uvec2 per pixel column: (beam, weight bits), see resample.comp
+VKS_CONST uint kBindingBeamTable = 11u;   // uvec2 per beam: (first column, end column)
+VKS_CONST uint kBindingSidelobeWeight = 12u;
+VKS_CONST uint kBindingMaterialsUniform = 13u;
+VKS_CONST uint kBindingColumnTableUniform = 14u;
+VKS_CONST uint kBindingBeamTableUniform = 15u;
+VKS_CONST uint kBindingSidelobeWeightUniform = 16u;
+VKS_CONST uint kBindingCount = 17u;
+// Set 1 of import_depth.comp: the host engine's depth image.
+VKS_CONST uint kBindingHostDepthImage = 0u;
+
+// Specialization constant ids of the compute shaders: the host's Specialization struct has member i
+// at constant_id i (src/vk/pipelines.h). What "variant" means is each shader's own (said beside it).
+VKS_CONST uint kSpecEffectFlags = 0u;   // kEffect* bits
+VKS_CONST uint kSpecPerInvocation = 1u; // pixels / beams one invocation handles
+VKS_CONST uint kSpecVariant = 2u;       // a per-shader switch
+VKS_CONST uint kSpecUniformTables = 3u; // 1: read the tables through their uniform blocks
+VKS_CONST uint kSpecTableVec4s0 = 4u;   // sizes of those uniform blocks in vec4s
+VKS_CONST uint kSpecTableVec4s1 = 5u;
+VKS_CONST uint kSpecEchoHalf = 6u; // SonarParams::echo_half
+VKS_CONST uint kSpecCount = 7u;
+
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
 VKS_CONST uint kEffectVerticalPattern = 1u << 1;   // b_v(psi)^2

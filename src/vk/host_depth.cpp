@@ -160,7 +160,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     const VkAllocationCallbacks* allocator = context.allocator;
 
     VkDescriptorSetLayoutBinding binding{};
-    binding.binding = 0;
+    binding.binding = shared::kBindingHostDepthImage;
     binding.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
     binding.descriptorCount = 1;
     binding.stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
@@ -236,7 +236,7 @@ void HostDepthPass::bind_image(const HostDepthImage& image) {
     VkWriteDescriptorSet write{};
     write.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
     write.dstSet = objects_->image_set;
-    write.dstBinding = 0;
+    write.dstBinding = shared::kBindingHostDepthImage;
     write.descriptorCount = 1;
     write.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
     write.pImageInfo = &info;

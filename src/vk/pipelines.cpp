@@ -37,9 +37,14 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, cons
 Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                               VkPipelineLayout layout, VkShaderModule module,
                                               const Specialization& constants) {
-    const std::array<std::uint32_t, 7> values{
-        constants.effect_flags,   constants.per_invocation, constants.variant,  constants.uniform_tables,
-        constants.table_vec4s[0], constants.table_vec4s[1], constants.echo_half};
+    std::array<std::uint32_t, shared::kSpecCount> values{};
+    values[shared::kSpecEffectFlags] = constants.effect_flags;
+    values[shared::kSpecPerInvocation] = constants.per_invocation;
+    values[shared::kSpecVariant] = constants.variant;
+    values[shared::kSpecUniformTables] = constants.uniform_tables;
+    values[shared::kSpecTableVec4s0] = constants.table_vec4s[0];
+    values[shared::kSpecTableVec4s1] = constants.table_vec4s[1];
+    values[shared::kSpecEchoHalf] = constants.echo_half;
     std::array<VkSpecializationMapEntry, values.size()> entries{};
     for (std::uint32_t i = 0; i < entries.size(); ++i)
         entries[i] = {i, static_cast<std::uint32_t>(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};

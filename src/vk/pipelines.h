@@ -1,36 +1,37 @@
 // Pipelines of the stages: the depth-pass render pass + graphics pipeline, and the compute pipelines.
-// All compute stages share one descriptor set layout (binding numbers below, mirrored in each shader).
+// All compute stages share one descriptor set layout (binding numbers: sonar_shared.h).
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 
+#include "sonar_shared.h"
 #include "vk/handles.h"
 #include "vksonar/result.h"
 
 namespace vksonar::vk {
 
-// Descriptor bindings of the compute stages (set 0). Each shader declares the ones it uses.
+// Descriptor bindings of the compute stages (set 0): the shaders' names (sonar_shared.h) as host enums.
 enum Binding : std::uint32_t {
-    binding_params = 0, // uniform SonarParams (std140)
-    binding_depth = 1,
-    binding_material_id = 2,
-    binding_normals = 3,
-    binding_echo = 4,
-    binding_profiles = 5,
-    binding_beam_profiles = 6,
-    binding_polar = 7,
-    binding_slice_info = 8, // uniform SliceInfo[kMaxSlices] (std140)
-    binding_materials = 9,
-    binding_column_table = 10, // uvec2 per pixel column: (beam, weight bits), see resample.comp
-    binding_beam_table = 11,   // uvec2 per beam: (first column, end column)
-    binding_sidelobe_weight = 12,
+    binding_params = shared::kBindingParams,
+    binding_depth = shared::kBindingDepth,
+    binding_material_id = shared::kBindingMaterialId,
+    binding_normals = shared::kBindingNormals,
+    binding_echo = shared::kBindingEcho,
+    binding_profiles = shared::kBindingProfiles,
+    binding_beam_profiles = shared::kBindingBeamProfiles,
+    binding_polar = shared::kBindingPolar,
+    binding_slice_info = shared::kBindingSliceInfo,
+    binding_materials = shared::kBindingMaterials,
+    binding_column_table = shared::kBindingColumnTable,
+    binding_beam_table = shared::kBindingBeamTable,
+    binding_sidelobe_weight = shared::kBindingSidelobeWeight,
     // The same four tables as uniform blocks (below): bound to the same buffers.
-    binding_materials_uniform = 13,
-    binding_column_table_uniform = 14,
-    binding_beam_table_uniform = 15,
-    binding_sidelobe_weight_uniform = 16,
-    binding_count = 17,
+    binding_materials_uniform = shared::kBindingMaterialsUniform,
+    binding_column_table_uniform = shared::kBindingColumnTableUniform,
+    binding_beam_table_uniform = shared::kBindingBeamTableUniform,
+    binding_sidelobe_weight_uniform = shared::kBindingSidelobeWeightUniform,
+    binding_count = shared::kBindingCount,
 };
 
 // Small read-only tables live in uniform blocks where they fit the device's maxUniformBufferRange: a
@@ -61,7 +62,8 @@ constexpr VkFormat kFaceNormalFormat = VK_FORMAT_R32G32B32A32_SFLOAT; // colour 
 [[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device,
                                                                          const VkAllocationCallbacks* allocator);
 
-// Specialization constants of the compute shaders (constant_id = the member's position).
+// Specialization constants of the compute shaders: member i is constant_id i (shared::kSpec*, checked
+// in pipelines.cpp).
 struct Specialization {
     std::uint32_t effect_flags = 0;        // 0: shared::kEffect* bits
     std::uint32_t per_invocation = 1;      // 1: pixels / beams one invocation handles, where the shader has it
