@@ -76,14 +76,10 @@ VKS_FN REAL sinc_of(REAL x) {
 // chebyshev_a: A = acosh(R) of the chebyshev pattern (R = main-lobe / side-lobe amplitude), whose
 // amplitude is cosh(sqrt(A^2 - x^2)) / cosh(A) in the main lobe (x < A) and cos(sqrt(x^2 - A^2)) / cosh(A)
 // beyond it: side lobes of exactly 1 / R, the first null at x = sqrt(A^2 + (pi/2)^2).
-VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a, REAL a) {
-    if (shape == kPatternBox) {
-        return abs(a) <= half_width ? REAL(1) : REAL(0);
-    }
-    if (shape == kPatternGaussian) {
-        return exp(-k * a * a);
-    }
-    REAL x = k * sin(a);
+// The aperture patterns (sinc, hann, chebyshev) depend on the angle only through sin(a): their power
+// from sin_a, for callers that have the sine as a ratio (pixel_elevation_sin) and need no arctangent.
+VKS_FN REAL aperture_pattern_power(uint shape, REAL k, REAL chebyshev_a, REAL sin_a) {
+    REAL x = k * sin_a;
     if (shape == kPatternChebyshev) {
         // (A - x)(A + x), not A^2 - x^2: near x = A (the edge of the main lobe, and past it towards the
         // first null) the squares cancel and float would lose most of the difference's digits.
@@ -103,6 +99,21 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a,
         }
     }
     return amp * amp;
+}
+
+VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a, REAL a) {
+    if (shape == kPatternBox) {
+        return abs(a) <= half_width ? REAL(1) : REAL(0);
+    }
+    if (shape == kPatternGaussian) {
+        return exp(-k * a * a);
+    }
+    return aperture_pattern_power(shape, k, chebyshev_a, sin(a));
+}
+
+// sin of pixel_elevation(u, v), as a ratio: -v / |(u, v, 1)|.
+VKS_FN REAL pixel_elevation_sin(REAL u, REAL v) {
+    return -v / sqrt(REAL(1) + u * u + v * v);
 }
 
 // The combined sonar equation per pixel, without the source level (added on the host in dB):
