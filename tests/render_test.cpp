@@ -209,5 +209,43 @@ TEST_P(RenderTest, DrawTransformIsHonoured) {
 
 INSTANTIATE_TEST_SUITE_P(Backends, RenderTest, ::testing::Values(Backend::vulkan, Backend::cpu), backend_name);
 
+// The CPU backend splits normals, echo and beamform between the Renderer's threads (rows, pixel
+// columns, bins). Every value is computed by one thread in the order of the single-threaded loops,
+// so any thread count gives the same bytes, intermediates included; 3 threads split unevenly.
+TEST(CpuThreads, AnyThreadCountGivesTheSameBytes) {
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    for (NormalMethod method : {NormalMethod::sobel3, NormalMethod::sobel5, NormalMethod::geometric}) {
+        SonarConfig config = quiet_config();
+        config.normal_method = method;
+        std::unique_ptr<Rendered> one;
+        for (std::uint32_t threads : {1u, 2u, 3u}) {
+            RendererOptions options;
+            options.backend = Backend::cpu;
+            options.host_threads = threads;
+            options.save_mask = save_depth | save_normals | save_echo | save_profiles;
+            auto r = Renderer::create(cpu_context(), config, scene.value(), options);
+            ASSERT_TRUE(r) << r.error().message;
+            auto rendered = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});
+            rendered->frame = rendered->renderer.make_frame();
+            ASSERT_TRUE(rendered->renderer.render(pose, 0, rendered->frame));
+            if (!one) {
+                EXPECT_GT(sum(rendered->frame.clean), 0.0);
+                one = std::move(rendered);
+                continue;
+            }
+            const Frame& a = one->frame;
+            const Frame& b = rendered->frame;
+            EXPECT_EQ(a.normals, b.normals) << threads << " threads";
+            EXPECT_EQ(a.echo, b.echo) << threads << " threads";
+            EXPECT_EQ(a.profiles, b.profiles) << threads << " threads";
+            EXPECT_EQ(a.beam_profiles, b.beam_profiles) << threads << " threads";
+            EXPECT_EQ(a.clean, b.clean) << threads << " threads";
+        }
+    }
+}
+
 } // namespace
 } // namespace vksonar::testing

@@ -52,7 +52,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
         if (!backend) return backend.error();
         impl->backend = std::move(backend.value());
     } else {
-        impl->backend = cpu::make_backend(impl->plan, scene.data());
+        impl->backend = cpu::make_backend(impl->plan, scene.data(), impl->workers.get());
     }
     Renderer r;
     r.impl_ = std::move(impl);

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "host/workers.h"
 #include "stages/cpu_stages.h"
 #include "stages/stage_table.h"
 
@@ -20,6 +21,25 @@ double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+// Runs part(begin, end) over [0, n) split between the workers' threads (or whole on the caller).
+template <class Part> void split(host::Workers* workers, std::uint32_t n, const Part& part) {
+    if (workers == nullptr || workers->count() == 1 || n < 2 * workers->count()) {
+        part(0u, n, 0u);
+        return;
+    }
+    struct Context {
+        const Part* part;
+        std::uint32_t n;
+    } context{&part, n};
+    workers->run(
+        [](void* c, std::uint32_t index, std::uint32_t parts) {
+            const auto& t = *static_cast<const Context*>(c);
+            (*t.part)(static_cast<std::uint32_t>(std::uint64_t(t.n) * index / parts),
+                      static_cast<std::uint32_t>(std::uint64_t(t.n) * (index + 1) / parts), index);
+        },
+        &context);
+}
+
 // Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
 template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
     dst.assign(src.begin(), src.end());
@@ -27,7 +47,9 @@ template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
 
 template <class Real> class CpuBackend final : public StageBackend {
 public:
-    CpuBackend(const Plan& plan, const SceneData& scene) : plan_(plan), scene_(scene) {
+    CpuBackend(const Plan& plan, const SceneData& scene, host::Workers* workers)
+        : plan_(plan), scene_(scene), workers_(workers) {
+        const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
         const std::size_t pixels = static_cast<std::size_t>(plan_.rows) * plan_.columns;
         depth_.assign(pixels, 0.0f);
         material_.assign(pixels, shared::kNoMaterial);
@@ -39,7 +61,7 @@ public:
         polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
         if (plan_.effects.incidence && !plan_.face_normals)
-            normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1), Real(0));
+            normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1) * parts, Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
         build_depth_clusters(scene_, clusters_);
         clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
@@ -103,24 +125,37 @@ private:
         }
         case StageId::normals:
             if (plan_.face_normals) {
-                cpu::geometric_normals<Real>(plan_, depth_.data(), face_.data(), normals_.data());
-            } else {
-                cpu::normals<Real>(plan_, depth_.data(), normals_.data(), normals_scratch_.data());
+                split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                    cpu::geometric_normals_rows<Real>(plan_, depth_.data(), face_.data(), normals_.data(), begin, end);
+                });
+            } else { // each part slides its own ring of rows: part i's scratch starts at i * per_part
+                const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(plan_), 1);
+                split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
+                    cpu::normals_rows<Real>(plan_, depth_.data(), normals_.data(),
+                                            normals_scratch_.data() + part * per_part, begin, end);
+                });
             }
             break;
         case StageId::echo: // normals only where the normals stage ran (incidence on)
-            cpu::echo<Real>(plan_, depth_.data(), material_.data(), plan_.effects.incidence ? normals_.data() : nullptr,
-                            echo_.data());
+            split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                cpu::echo_rows<Real>(plan_, depth_.data(), material_.data(),
+                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(), begin, end);
+            });
             break;
-        case StageId::beamform:
-            cpu::beamform<Real>(plan_, echo_.data(), profiles_.data(), beam_profiles_.data(), polar_.data(),
-                                scratch_.data());
+        case StageId::beamform: // every column's profile before any beam reads it
+            split(workers_, plan_.columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles_.data(), scratch_.data(), begin, end);
+            });
+            split(workers_, plan_.bins, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                cpu::beamform_beams<Real>(plan_, profiles_.data(), beam_profiles_.data(), polar_.data(), begin, end);
+            });
             break;
         }
     }
 
     Plan plan_;              // copied: the backend may outlive the caller's Plan object
     const SceneData& scene_; // the scene must outlive the renderer (renderer.h)
+    host::Workers* workers_; // the Renderer's threads, borrowed (null: all on the caller)
     std::vector<shared::DepthPush> draws_;
     std::vector<DepthCluster> clusters_;
     std::vector<std::uint8_t> clusters_drawn_; // slices * clusters, 0 = the cluster cannot reach that slice
@@ -133,9 +168,9 @@ private:
 
 } // namespace
 
-std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene) {
-    if (plan.config.cpu_precision == Precision::f64) return std::make_unique<CpuBackend<double>>(plan, scene);
-    return std::make_unique<CpuBackend<float>>(plan, scene);
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers) {
+    if (plan.config.cpu_precision == Precision::f64) return std::make_unique<CpuBackend<double>>(plan, scene, workers);
+    return std::make_unique<CpuBackend<float>>(plan, scene, workers);
 }
 
 } // namespace vksonar::cpu

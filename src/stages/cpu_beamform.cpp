@@ -15,9 +15,10 @@
 namespace vksonar::cpu {
 
 template <class Real>
-void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
+void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
+                       std::uint32_t column_end) {
     using M = Math<Real>;
-    const std::uint32_t C = plan.columns, R = plan.rows, beams = plan.beams, bins = plan.bins;
+    const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     Real range_min, inv_bin_width;
     if constexpr (std::is_same_v<Real, float>) {
         range_min = plan.params.range_min_m;
@@ -34,11 +35,11 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
     // (shaders/sonar_kernels.h, as profile.comp). The loops run row-major for locality; every
     // accumulator (bin k, column c) still receives its additions in increasing row order (and, within
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
-    const std::size_t cells = static_cast<std::size_t>(bins) * C;
-    std::fill(acc, acc + cells, Real(0));
+    for (std::uint32_t k = 0; k < bins; ++k)
+        std::fill(acc + std::size_t(k) * C + column_begin, acc + std::size_t(k) * C + column_end, Real(0));
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
-        for (std::uint32_t c = 0; c < C; ++c) {
+        for (std::uint32_t c = column_begin; c < column_end; ++c) {
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
             // the five-row window of profile.comp (energy, range; 0 = no hit or outside the image)
@@ -55,11 +56,18 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
                 acc[static_cast<std::size_t>(k) * C + c] += M::range_share(spread, k) * e;
         }
     }
-    for (std::size_t i = 0; i < cells; ++i)
-        profiles[i] = static_cast<float>(acc[i]);
+    for (std::uint32_t k = 0; k < bins; ++k)
+        for (std::uint32_t c = column_begin; c < column_end; ++c)
+            profiles[std::size_t(k) * C + c] = static_cast<float>(acc[std::size_t(k) * C + c]);
+}
 
+template <class Real>
+void beamform_beams(const Plan& plan, const float* profiles, float* beam_profiles, float* polar,
+                    std::uint32_t bin_begin, std::uint32_t bin_end) {
+    using M = Math<Real>;
+    const std::uint32_t C = plan.columns, beams = plan.beams;
     // resample: one cell per (beam j, bin k), columns in increasing order.
-    for (std::uint32_t k = 0; k < bins; ++k) {
+    for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* prof = profiles + static_cast<std::size_t>(k) * C;
         for (std::uint32_t j = 0; j < beams; ++j) {
             Real sum = Real(0);
@@ -75,14 +83,15 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
 
     // sidelobe: polar(j) = sum_t weight[j][t] B(j - K + t), or a copy when the pattern is off.
     if (!plan.effects.horizontal_pattern) {
-        std::copy(beam_profiles, beam_profiles + static_cast<std::size_t>(bins) * beams, polar);
+        std::copy(beam_profiles + std::size_t(bin_begin) * beams, beam_profiles + std::size_t(bin_end) * beams,
+                  polar + std::size_t(bin_begin) * beams);
         return;
     }
     const std::uint32_t taps = plan.sidelobe_taps;
     const std::int64_t K = (static_cast<std::int64_t>(taps) - 1) / 2;
     const std::int64_t nb = beams;
     const float* weights = plan.sidelobe_weight.data();
-    for (std::uint32_t k = 0; k < bins; ++k) {
+    for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
         // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
@@ -135,6 +144,12 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
     }
 }
 
+template <class Real>
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
+    beamform_profiles<Real>(plan, echo2, profiles, acc, 0, plan.columns);
+    beamform_beams<Real>(plan, profiles, beam_profiles, polar, 0, plan.bins);
+}
+
 std::size_t beamform_scratch_count(const Plan& plan) {
     return static_cast<std::size_t>(plan.bins) * plan.columns; // one accumulator per profile cell
 }
@@ -145,6 +160,10 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
     beamform<Real>(plan, echo2, profiles, beam_profiles, polar, acc.data());
 }
 
+template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
+template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t);
+template void beamform_beams<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
+template void beamform_beams<double>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
 template void beamform<float>(const Plan&, const float*, float*, float*, float*, float*);
 template void beamform<double>(const Plan&, const float*, float*, float*, float*, double*);
 template void beamform<float>(const Plan&, const float*, float*, float*, float*);

@@ -13,7 +13,8 @@
 namespace vksonar::cpu {
 
 template <class Real>
-void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
+void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
+               std::uint32_t row_begin, std::uint32_t row_end) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
     typename M::EchoConstants k;
@@ -55,7 +56,7 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
                                       plan.effects.absorption};
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
 
-    for (std::uint32_t j = 0; j < R; ++j) {
+    for (std::uint32_t j = row_begin; j < row_end; ++j) {
         const Real v = M::pixel_coord(j, R, k.tan_half_v);
         for (std::uint32_t c = 0; c < C; ++c) {
             const std::size_t p = static_cast<std::size_t>(j) * C + c;
@@ -76,15 +77,24 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
     }
     if (g.echo_half != 0u) {
         // fp16 storage, as echo.comp stores it: energy * echo_scale (a power of 2) and range as halves.
-        const std::size_t pixels = static_cast<std::size_t>(R) * C;
-        for (std::size_t p = 0; p < pixels; ++p) {
+        const std::size_t end = static_cast<std::size_t>(row_end) * C;
+        for (std::size_t p = static_cast<std::size_t>(row_begin) * C; p < end; ++p) {
             echo2[2 * p] = round_to_half(echo2[2 * p] * g.echo_scale) / g.echo_scale;
             echo2[2 * p + 1] = round_to_half(echo2[2 * p + 1]);
         }
     }
 }
 
+template <class Real>
+void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
+    echo_rows<Real>(plan, depth, material, normals4, echo2, 0, plan.rows);
+}
+
 template void echo<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*);
 template void echo<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*);
+template void echo_rows<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*, std::uint32_t,
+                               std::uint32_t);
+template void echo_rows<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*, std::uint32_t,
+                                std::uint32_t);
 
 } // namespace vksonar::cpu

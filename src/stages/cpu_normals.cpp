@@ -60,7 +60,9 @@ std::size_t normals_scratch_count(const Plan& plan) {
 // The loops around the kernels of shaders/sonar_kernels.h (sobel3_normal, sobel5_normal) that
 // normals.comp calls: positions are reconstructed once per pixel into a ring of five rows, and each
 // window column is rebuilt from it as the window slides along the row.
-template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
+template <class Real>
+void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
+                  std::uint32_t row_end) {
     using M = Math<Real>;
     using Sample = typename M::Sample;
     using Column3 = typename M::Column3;
@@ -121,9 +123,11 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
     };
     const bool sobel5 = plan.params.normal_method == shared::kNormalsSobel5;
 
-    for (std::int64_t j = 0; j < std::min<std::int64_t>(R, 2); ++j)
+    // The ring holds rows j-2 .. j+2 of the row being computed: those before the first row's j+2 first.
+    for (std::int64_t j = std::max<std::int64_t>(std::int64_t(row_begin) - 2, 0);
+         j < std::min<std::int64_t>(R, std::int64_t(row_begin) + 2); ++j)
         fill_row(j);
-    for (std::int64_t j = 0; j < R; ++j) {
+    for (std::int64_t j = row_begin; j < std::int64_t(row_end); ++j) {
         if (j + 2 < R) fill_row(j + 2);
         float* out_row = normals4 + 4 * j * C;
         if (sobel5) {
@@ -150,11 +154,12 @@ template <class Real> void normals(const Plan& plan, const float* depth, float* 
 }
 
 template <class Real>
-void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4) {
+void geometric_normals_rows(const Plan& plan, const float* depth, const float* face4, float* normals4,
+                            std::uint32_t row_begin, std::uint32_t row_end) {
     using M = Math<Real>;
     const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
-    for (std::uint32_t j = 0; j < R; ++j) {
+    for (std::uint32_t j = row_begin; j < row_end; ++j) {
         const Real v = M::pixel_coord(j, R, geometry.tan_half_v);
         for (std::uint32_t c = 0; c < C; ++c) {
             const std::size_t i = static_cast<std::size_t>(j) * C + c;
@@ -180,11 +185,26 @@ void geometric_normals(const Plan& plan, const float* depth, const float* face4,
     }
 }
 
+template <class Real> void normals(const Plan& plan, const float* depth, float* normals4, Real* scratch) {
+    normals_rows<Real>(plan, depth, normals4, scratch, 0, plan.rows);
+}
+
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4) {
     std::vector<Real> scratch(std::max<std::size_t>(normals_scratch_count(plan), 1));
     normals<Real>(plan, depth, normals4, scratch.data());
 }
 
+template <class Real>
+void geometric_normals(const Plan& plan, const float* depth, const float* face4, float* normals4) {
+    geometric_normals_rows<Real>(plan, depth, face4, normals4, 0, plan.rows);
+}
+
+template void geometric_normals_rows<float>(const Plan&, const float*, const float*, float*, std::uint32_t,
+                                            std::uint32_t);
+template void geometric_normals_rows<double>(const Plan&, const float*, const float*, float*, std::uint32_t,
+                                             std::uint32_t);
+template void normals_rows<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
+template void normals_rows<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t);
 template void geometric_normals<float>(const Plan&, const float*, const float*, float*);
 template void geometric_normals<double>(const Plan&, const float*, const float*, float*);
 template void normals<float>(const Plan&, const float*, float*);

@@ -13,6 +13,10 @@
 #include "sonar_shared.h"
 #include "stages/stage_backend.h"
 
+namespace vksonar::host {
+class Workers;
+}
+
 namespace vksonar::cpu {
 
 // Stage 1: rasterizes every draw into every slice with Vulkan's rules (top-left fill convention,
@@ -53,6 +57,30 @@ template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* scratch);
 std::size_t beamform_scratch_count(const Plan& plan);
 
-std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene);
+// The same stages over a part of the image, for splitting a stage between threads: rows
+// [row_begin, row_end) of normals and echo (the normals scratch is the part's own), pixel columns
+// [column_begin, column_end) of the range profiles (acc: the scratch of the whole stage, each part
+// touching its columns only), bins [bin_begin, bin_end) of the resample and side-lobe passes (after
+// every column's profile is done). Each output value is computed by one part, in the same order as the
+// whole-image functions above, so the result does not depend on how the image is split.
+template <class Real>
+void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
+                  std::uint32_t row_end);
+template <class Real>
+void geometric_normals_rows(const Plan& plan, const float* depth, const float* face4, float* normals4,
+                            std::uint32_t row_begin, std::uint32_t row_end);
+template <class Real>
+void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
+               std::uint32_t row_begin, std::uint32_t row_end);
+template <class Real>
+void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
+                       std::uint32_t column_end);
+template <class Real>
+void beamform_beams(const Plan& plan, const float* profiles, float* beam_profiles, float* polar,
+                    std::uint32_t bin_begin, std::uint32_t bin_end);
+
+// workers: the Renderer's threads (borrowed; null or one thread: everything on the caller). The
+// normals, echo and beamform stages are split between them; the depth pass runs on the caller.
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers = nullptr);
 
 } // namespace vksonar::cpu
