@@ -43,13 +43,12 @@ layout(std140, binding = kBindingMaterialsUniform) uniform MaterialBlock { Mater
 uint material_count() {
     return kUniformTables != 0u ? kMaterialCount : uint(materials.length());
 }
-// Set by the host. Bit 0: a material of the scene has the rough model; only then does the pipeline
-// carry the facet term's exponential and the two extra table reads. Bits 1-3: params.vpattern_shape,
-// so that pattern_power() keeps only that shape's code (a uniform branch runs every shape's code on
-// lavapipe: the chebyshev branch made echo ~10 % slower for a sinc pattern).
-layout(constant_id = kSpecVariant) const uint kVariant = 2u;
-const uint kRoughMaterials = kVariant & 1u;
-const uint kVerticalShape = (kVariant >> 1u) & 7u;
+// Set by the host: 1 when a material of the scene has the rough model; only then does the pipeline
+// carry the facet term's exponential and the two extra table reads.
+layout(constant_id = kSpecRoughMaterials) const uint kRoughMaterials = 0u;
+// params.vpattern_shape, so that the pattern code keeps only that shape's branch (a uniform branch
+// runs every shape's code on lavapipe: the chebyshev branch made echo ~10 % slower for a sinc pattern).
+layout(constant_id = kSpecVerticalShape) const uint kVerticalShape = kPatternSinc;
 
 // The table entry, member by member: a struct copied whole between the std140 and std430 blocks is
 // an OpStore of mismatched types before SPIR-V 1.4.

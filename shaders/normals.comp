@@ -18,7 +18,7 @@ layout(constant_id = kSpecPerInvocation) const uint kRun = 8u; // pixels per inv
 // params.normal_method, set by the host as a specialization constant rather than read from the
 // uniform: a uniform branch left the sobel5 code in the sobel3 pipeline and made it 1.6x slower on
 // llvmpipe (masked execution); a constant compiles the unused path out.
-layout(constant_id = kSpecVariant) const uint kNormalMethod = kNormalsSobel3;
+layout(constant_id = kSpecNormalMethod) const uint kNormalMethod = kNormalsSobel3;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingDepth) readonly buffer DepthBuffer { float depth[]; };

@@ -16,7 +16,7 @@
 
 layout(local_size_x = kWorkgroupSize) in;
 
-layout(constant_id = kSpecVariant) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
+layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 

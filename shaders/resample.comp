@@ -24,9 +24,10 @@
 
 layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; // set by the host
-layout(constant_id = kSpecVariant) const uint kVariant = 1u;             // set by the host: the two bits below
-const bool kBeamMajorOut = (kVariant & 1u) != 0u;              // the side-lobe pass follows
-const bool kWalk = (kVariant & 2u) != 0u;                      // walk the run's columns once (see above)
+layout(constant_id = kSpecBeamMajorOut) const uint kBeamMajorOutFlag = 1u; // the side-lobe pass follows
+layout(constant_id = kSpecResampleWalk) const uint kWalkFlag = 0u;          // walk the run's columns once (see above)
+const bool kBeamMajorOut = kBeamMajorOutFlag != 0u;
+const bool kWalk = kWalkFlag != 0u;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingProfiles) readonly buffer ProfileBuffer { vec4 profiles4[]; };

@@ -16,7 +16,7 @@ layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; // set by the host, a multiple of 4
 // 1 when beams % 4 == 0: four beams of a range bin go out as one vec4 store (lavapipe loops over the
 // lanes once per store instruction, so 16 vec4 stores cost a quarter of 64 scalar ones).
-layout(constant_id = kSpecVariant) const uint kVec4Out = 0u;
+layout(constant_id = kSpecVec4Out) const uint kVec4Out = 0u;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };

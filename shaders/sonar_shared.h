@@ -45,16 +45,21 @@ VKS_CONST uint kBindingCount = 17u;
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 
-// Specialization constant ids of the compute shaders: the host's Specialization struct has member i
-// at constant_id i (src/vk/pipelines.h). What "variant" means is each shader's own (said beside it).
-VKS_CONST uint kSpecEffectFlags = 0u;   // kEffect* bits
-VKS_CONST uint kSpecPerInvocation = 1u; // pixels / beams one invocation handles
-VKS_CONST uint kSpecVariant = 2u;       // a per-shader switch
-VKS_CONST uint kSpecUniformTables = 3u; // 1: read the tables through their uniform blocks
-VKS_CONST uint kSpecTableVec4s0 = 4u;   // sizes of those uniform blocks in vec4s
-VKS_CONST uint kSpecTableVec4s1 = 5u;
-VKS_CONST uint kSpecEchoHalf = 6u; // SonarParams::echo_half
-VKS_CONST uint kSpecCount = 7u;
+// Specialization constant ids of the compute shaders, one per meaning (a shader declares the ones it
+// has; the host's per-shader structs in src/vk/pipelines.h set them by these names).
+VKS_CONST uint kSpecEffectFlags = 0u;    // echo: the kEffect* bits
+VKS_CONST uint kSpecPerInvocation = 1u;  // normals, echo: pixels per invocation; resample, sidelobe: beams
+VKS_CONST uint kSpecNormalMethod = 2u;   // normals: kNormals*
+VKS_CONST uint kSpecUniformTables = 3u;  // echo, resample, sidelobe: 1 = read the tables' uniform blocks
+VKS_CONST uint kSpecTableVec4s0 = 4u;    // sizes of those blocks in vec4s: materials, columns, weights
+VKS_CONST uint kSpecTableVec4s1 = 5u;    // resample: the beam table
+VKS_CONST uint kSpecEchoHalf = 6u;       // echo, profile: SonarParams::echo_half
+VKS_CONST uint kSpecRoughMaterials = 7u; // echo: 1 = a material has kScatterRough (the facet term)
+VKS_CONST uint kSpecVerticalShape = 8u;  // echo: the vertical pattern's kPattern*
+VKS_CONST uint kSpecRangeKernel = 9u;    // profile: kRangeKernel*
+VKS_CONST uint kSpecBeamMajorOut = 10u;  // resample: 1 = beam-major vec4 output (the side-lobe pass follows)
+VKS_CONST uint kSpecResampleWalk = 11u;  // resample: 1 = walk each run's columns once (src/vk/resample_walk.h)
+VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (beams % 4 == 0)
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass

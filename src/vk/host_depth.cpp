@@ -187,7 +187,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
 
     auto module = create_shader_module(device, allocator, import_depth_comp_spv, sizeof(import_depth_comp_spv));
     if (!module) return module.error();
-    auto pipeline = create_compute_pipeline(device, allocator, layout, module->get(), Specialization{});
+    auto pipeline = create_compute_pipeline(device, allocator, layout, module->get(), nullptr, 0);
     if (!pipeline) return pipeline.error();
     o.import_pipeline = std::move(pipeline.value());
 

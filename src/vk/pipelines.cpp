@@ -36,27 +36,25 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, cons
 
 Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                               VkPipelineLayout layout, VkShaderModule module,
-                                              const Specialization& constants) {
-    std::array<std::uint32_t, shared::kSpecCount> values{};
-    values[shared::kSpecEffectFlags] = constants.effect_flags;
-    values[shared::kSpecPerInvocation] = constants.per_invocation;
-    values[shared::kSpecVariant] = constants.variant;
-    values[shared::kSpecUniformTables] = constants.uniform_tables;
-    values[shared::kSpecTableVec4s0] = constants.table_vec4s[0];
-    values[shared::kSpecTableVec4s1] = constants.table_vec4s[1];
-    values[shared::kSpecEchoHalf] = constants.echo_half;
-    std::array<VkSpecializationMapEntry, values.size()> entries{};
-    for (std::uint32_t i = 0; i < entries.size(); ++i)
-        entries[i] = {i, static_cast<std::uint32_t>(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
-    VkSpecializationInfo specialization{static_cast<std::uint32_t>(entries.size()), entries.data(), sizeof(values),
-                                        values.data()};
+                                              const SpecConstant* constants, std::uint32_t count) {
+    // The values are laid out as the constants come; each map entry points at its own.
+    std::array<VkSpecializationMapEntry, 16> entries{};
+    std::array<std::uint32_t, 16> values{};
+    if (count > entries.size()) {
+        return make_error(ErrorCode::internal, "create_compute_pipeline: more than 16 specialization constants");
+    }
+    for (std::uint32_t i = 0; i < count; ++i) {
+        values[i] = constants[i].value;
+        entries[i] = {constants[i].id, static_cast<std::uint32_t>(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
+    }
+    VkSpecializationInfo specialization{count, entries.data(), count * sizeof(std::uint32_t), values.data()};
     VkComputePipelineCreateInfo info{};
     info.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
     info.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
     info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
     info.stage.module = module;
     info.stage.pName = "main";
-    info.stage.pSpecializationInfo = &specialization;
+    info.stage.pSpecializationInfo = count > 0 ? &specialization : nullptr;
     info.layout = layout;
     VkPipeline pipeline = VK_NULL_HANDLE;
     VKS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &info, allocator, &pipeline));

@@ -2,6 +2,7 @@
 // All compute stages share one descriptor set layout (binding numbers: sonar_shared.h).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 
@@ -38,7 +39,7 @@ enum Binding : std::uint32_t {
 // GPU serves them from its constant cache, and lavapipe (Mesa 22's llvmpipe) turns a uniform-block
 // load at a workgroup-uniform index into one scalar load and a divergent one into a vector gather,
 // where every storage-buffer load is a branchy loop over the lanes. A table that does not fit is read
-// through its storage binding instead; specialization constant 3 tells the shader which (Specialization).
+// through its storage binding instead; specialization constant kSpecUniformTables tells the shader which.
 constexpr VkDescriptorType descriptor_type(std::uint32_t binding) {
     return binding == binding_params || binding == binding_slice_info || binding >= binding_materials_uniform
                ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER
@@ -62,23 +63,87 @@ constexpr VkFormat kFaceNormalFormat = VK_FORMAT_R32G32B32A32_SFLOAT; // colour 
 [[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device,
                                                                          const VkAllocationCallbacks* allocator);
 
-// Specialization constants of the compute shaders: member i is constant_id i (shared::kSpec*, checked
-// in pipelines.cpp).
-struct Specialization {
-    std::uint32_t effect_flags = 0;        // 0: shared::kEffect* bits
-    std::uint32_t per_invocation = 1;      // 1: pixels / beams one invocation handles, where the shader has it
-    std::uint32_t variant = 0;             // 2: a per-shader switch, e.g. resample.comp's output layout
-    std::uint32_t uniform_tables = 0;      // 3: 1 = read the tables through their uniform blocks
-    std::uint32_t table_vec4s[2] = {1, 1}; // 4, 5: sizes of those uniform blocks in vec4s (>= 1)
-    std::uint32_t echo_half = 0;           // 6: SonarParams::echo_half (echo.comp, profile.comp)
+// One specialization constant: its id (shared::kSpec*) and value.
+struct SpecConstant {
+    std::uint32_t id = 0, value = 0;
 };
-// Switches that the shaders could read from the uniform SonarParams are specialization constants
-// instead: lavapipe runs both sides of a branch under a lane mask, loads and stores included, so a
-// uniform branch costs the memory traffic of every path; a constant compiles the others out.
 
+// Each compute shader's specialization constants, one struct per shader, member by member as the
+// shader declares them. Switches that the shaders could read from the uniform SonarParams are
+// specialization constants instead: lavapipe runs both sides of a branch under a lane mask, loads and
+// stores included, so a uniform branch costs the memory traffic of every path; a constant compiles the
+// others out. Where a stage reads a table through a uniform block (uniform_tables), the block's size in
+// vec4s is a constant too (>= 1).
+struct NormalsSpecialization {
+    std::uint32_t pixels_per_invocation = 8;
+    std::uint32_t normal_method = shared::kNormalsSobel3;
+    std::array<SpecConstant, 2> constants() const {
+        return {{{shared::kSpecPerInvocation, pixels_per_invocation}, {shared::kSpecNormalMethod, normal_method}}};
+    }
+};
+struct EchoSpecialization {
+    std::uint32_t effect_flags = 0;
+    std::uint32_t pixels_per_invocation = 4;
+    std::uint32_t rough_materials = 0;
+    std::uint32_t vertical_shape = shared::kPatternSinc;
+    std::uint32_t uniform_tables = 0;
+    std::uint32_t material_vec4s = 1;
+    std::uint32_t echo_half = 0;
+    std::array<SpecConstant, 7> constants() const {
+        return {{{shared::kSpecEffectFlags, effect_flags},
+                 {shared::kSpecPerInvocation, pixels_per_invocation},
+                 {shared::kSpecRoughMaterials, rough_materials},
+                 {shared::kSpecVerticalShape, vertical_shape},
+                 {shared::kSpecUniformTables, uniform_tables},
+                 {shared::kSpecTableVec4s0, material_vec4s},
+                 {shared::kSpecEchoHalf, echo_half}}};
+    }
+};
+struct ProfileSpecialization {
+    std::uint32_t range_kernel = shared::kRangeKernelFootprint;
+    std::uint32_t echo_half = 0;
+    std::array<SpecConstant, 2> constants() const {
+        return {{{shared::kSpecRangeKernel, range_kernel}, {shared::kSpecEchoHalf, echo_half}}};
+    }
+};
+struct ResampleSpecialization {
+    std::uint32_t beams_per_invocation = 16;
+    std::uint32_t beam_major_out = 1; // the side-lobe pass follows
+    std::uint32_t walk = 0;           // src/vk/resample_walk.h
+    std::uint32_t uniform_tables = 0;
+    std::uint32_t column_vec4s = 1, beam_vec4s = 1;
+    std::array<SpecConstant, 6> constants() const {
+        return {{{shared::kSpecPerInvocation, beams_per_invocation},
+                 {shared::kSpecBeamMajorOut, beam_major_out},
+                 {shared::kSpecResampleWalk, walk},
+                 {shared::kSpecUniformTables, uniform_tables},
+                 {shared::kSpecTableVec4s0, column_vec4s},
+                 {shared::kSpecTableVec4s1, beam_vec4s}}};
+    }
+};
+struct SidelobeSpecialization {
+    std::uint32_t beams_per_invocation = 16; // a multiple of 4
+    std::uint32_t vec4_out = 0;
+    std::uint32_t uniform_tables = 0;
+    std::uint32_t weight_vec4s = 1;
+    std::array<SpecConstant, 4> constants() const {
+        return {{{shared::kSpecPerInvocation, beams_per_invocation},
+                 {shared::kSpecVec4Out, vec4_out},
+                 {shared::kSpecUniformTables, uniform_tables},
+                 {shared::kSpecTableVec4s0, weight_vec4s}}};
+    }
+};
+
+// constants: count specialization constants (none: nullptr, 0), e.g. EchoSpecialization::constants().
 [[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
                                                             VkPipelineLayout layout, VkShaderModule module,
-                                                            const Specialization& constants);
+                                                            const SpecConstant* constants, std::uint32_t count);
+template <std::size_t N>
+[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
+                                                            VkPipelineLayout layout, VkShaderModule module,
+                                                            const std::array<SpecConstant, N>& constants) {
+    return create_compute_pipeline(device, allocator, layout, module, constants.data(), static_cast<std::uint32_t>(N));
+}
 
 // Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), and with
 // face_normals 2 = face normal (RGBA32F, colour location 1), all cleared and left in

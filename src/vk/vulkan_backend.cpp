@@ -373,61 +373,57 @@ Result<void> VulkanBackend::create_compute() {
     vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
 
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
-    const std::uint32_t flags = plan_.effects.shader_flags();
     auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
-                    Specialization constants) -> Result<void> {
+                    const auto& constants) -> Result<void> {
         auto module = create_shader_module(device, allocator, code, bytes);
         if (!module) return module.error();
-        constants.effect_flags = flags;
-        constants.echo_half = gpu_params_.echo_half;
         auto created = create_compute_pipeline(device, allocator, compute_layout_.get(), module->get(), constants);
         if (!created) return created.error();
         pipeline = std::move(created.value());
         return {};
     };
     // Where a stage reads two tables, both go through their uniform views or neither does.
-    auto spec = [](std::uint32_t per_invocation, std::uint32_t variant, std::uint32_t a, std::uint32_t b = 1) {
-        Specialization s;
-        s.per_invocation = per_invocation;
-        s.variant = variant;
-        s.uniform_tables = a > 0 && b > 0 ? 1u : 0u;
-        s.table_vec4s[0] = s.uniform_tables ? a : 1u;
-        s.table_vec4s[1] = s.uniform_tables ? b : 1u;
-        return s;
-    };
-    if (incidence_) {
-        // variant: normal_method, so the pipeline holds only its own stencil (shaders/normals.comp).
-        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv),
-                          spec(kNormalsRun, plan_.params.normal_method, 0));
-            !r)
+    auto both_uniform = [](std::uint32_t a, std::uint32_t b = 1) { return a > 0 && b > 0 ? 1u : 0u; };
+    if (incidence_) { // only its own stencil is compiled in (shaders/normals.comp)
+        NormalsSpecialization normals;
+        normals.pixels_per_invocation = kNormalsRun;
+        normals.normal_method = plan_.params.normal_method;
+        if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), normals.constants()); !r)
             return r;
     }
-    // echo.comp's variant: bit 0 when some material has the rough model (its facet term is compiled
-    // in), bits 1-3 the vertical pattern's shape (only its code is compiled in).
-    const std::uint32_t echo_variant = (plan_.rough_materials ? 1u : 0u) | (plan_.params.vpattern_shape << 1);
-    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv),
-                      spec(kEchoPixels, echo_variant, materials_vec4s));
-        !r)
-        return r;
-    if (auto r =
-            make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), spec(1, plan_.params.range_kernel, 0));
-        !r)
-        return r;
-    // resample.comp's variant: bit 0 beam-major output (the side-lobe pass follows), bit 1 walk each
-    // run's columns once where that adds the same terms in the same order as the gather
-    // (src/vk/resample_walk.h). VKSONAR_RESAMPLE=gather keeps the gather (tests compare the two).
+    EchoSpecialization echo;
+    echo.effect_flags = plan_.effects.shader_flags();
+    echo.pixels_per_invocation = kEchoPixels;
+    echo.rough_materials = plan_.rough_materials ? 1u : 0u; // else the facet term is compiled out
+    echo.vertical_shape = plan_.params.vpattern_shape;      // only its code is compiled in
+    echo.uniform_tables = both_uniform(materials_vec4s);
+    echo.material_vec4s = echo.uniform_tables ? materials_vec4s : 1u;
+    echo.echo_half = gpu_params_.echo_half;
+    if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), echo.constants()); !r) return r;
+    ProfileSpecialization profile;
+    profile.range_kernel = plan_.params.range_kernel;
+    profile.echo_half = gpu_params_.echo_half;
+    if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
+    // resample.comp walks each run's columns once where that adds the same terms in the same order as
+    // the gather (src/vk/resample_walk.h). VKSONAR_RESAMPLE=gather keeps the gather (tests compare the two).
     const char* resample_env = std::getenv("VKSONAR_RESAMPLE");
     const bool force_gather = resample_env && std::strcmp(resample_env, "gather") == 0;
-    const std::uint32_t resample_variant =
-        (sidelobes_ ? 1u : 0u) | (!force_gather && resample_can_walk(plan_, kBeamsPerInvocation) ? 2u : 0u);
-    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv),
-                      spec(kBeamsPerInvocation, resample_variant, column_table_vec4s, beam_table_vec4s));
-        !r)
+    ResampleSpecialization resample;
+    resample.beams_per_invocation = kBeamsPerInvocation;
+    resample.beam_major_out = sidelobes_ ? 1u : 0u; // the side-lobe pass's input layout
+    resample.walk = !force_gather && resample_can_walk(plan_, kBeamsPerInvocation) ? 1u : 0u;
+    resample.uniform_tables = both_uniform(column_table_vec4s, beam_table_vec4s);
+    resample.column_vec4s = resample.uniform_tables ? column_table_vec4s : 1u;
+    resample.beam_vec4s = resample.uniform_tables ? beam_table_vec4s : 1u;
+    if (auto r = make(resample_pipeline_, resample_comp_spv, sizeof(resample_comp_spv), resample.constants()); !r)
         return r;
     if (sidelobes_) {
-        if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv),
-                          spec(kBeamsPerInvocation, plan_.beams % 4 == 0 ? 1u : 0u, sidelobe_vec4s));
-            !r)
+        SidelobeSpecialization sidelobe;
+        sidelobe.beams_per_invocation = kBeamsPerInvocation;
+        sidelobe.vec4_out = plan_.beams % 4 == 0 ? 1u : 0u;
+        sidelobe.uniform_tables = both_uniform(sidelobe_vec4s);
+        sidelobe.weight_vec4s = sidelobe.uniform_tables ? sidelobe_vec4s : 1u;
+        if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), sidelobe.constants()); !r)
             return r;
     }
     return {};
