@@ -17,13 +17,16 @@
 
 #include "cli/bench_cmd.h"
 #include "cli/bench_common.h"
+#include "sonar_shared.h"
 
 namespace fs = std::filesystem;
 
 namespace vksonar::cli::bench {
 namespace {
 
-const char* const kReferenceSidelobe = "8";
+// The reference's side-lobe kernel: the whole fan (1000 beamwidths is past any fan; the plan stops the
+// kernel at the last beam), so the reference truncates nothing.
+const char* const kReferenceSidelobe = "1000";
 
 constexpr const char* kUsage =
     "usage: vksonar bench accuracy [--frames N] [--scene FILE] [--sonar PRESET|FILE] [--set key=value ...]\n"
@@ -35,8 +38,10 @@ constexpr const char* kUsage =
     "accuracy.normal_method sobel3,sobel5,geometric; accuracy.intermediates fp32,fp16; and the --quality presets\n"
     "fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
-    "range_kernel footprint, sidelobe_kernel_beamwidths 8, and a second one with each row's own side-lobe\n"
-    "kernel width (isolates the other knobs). Speckle, ambient noise and TVG are off everywhere.\n"
+    "range_kernel footprint, the side-lobe kernel over the whole fan, and a second one with each row's own\n"
+    "side-lobe kernel width (isolates the other knobs). Speckle, ambient noise and TVG are off everywhere.\n"
+    "The reference is shown converged: each of its grid knobs is refined once more (pixels_per_beam 16,\n"
+    "rows_per_vfov 512, the narrowest slices allowed) and the change is printed.\n"
     "Per setting: median ms per frame on Vulkan (N timed frames, default 10, after 2 warm-up frames) and on\n"
     "the CPU backend in float (3 frames), and for each the RMSE and the max |error| in dB over the cells\n"
     "whose reference level is above the noise floor NL - DI (a value below the floor counts as the floor).\n"
@@ -259,6 +264,27 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         throw BadInput("bench accuracy: no cell of the reference frame is above the noise floor (NL - DI = " +
                        fmt(base.noise_level_db - base.directivity_index_db, 1) +
                        " dB): nothing is in view; check --scene, --pose and --sonar");
+    // Converged? Refine each of the reference's grid knobs once more and print how far it moves.
+    {
+        const double narrowest_slice = std::ceil(base.hfov_deg / shared::kMaxSlices * 1000.0) / 1000.0;
+        const std::vector<std::pair<std::string, std::string>> finer = {
+            {"accuracy.pixels_per_beam", "16"},
+            {"accuracy.rows_per_vfov", "512"},
+            {"accuracy.max_slice", fmt(std::max(narrowest_slice, 1.0), 3)}};
+        for (const auto& [key, value] : finer) {
+            std::vector<std::string> sets = ref_sets;
+            sets.push_back("accuracy.sidelobe_kernel_beamwidths=" + std::string(kReferenceSidelobe));
+            sets.push_back(key + "=" + value);
+            Renderer renderer = make_renderer(cpu_context, layered_config(setup, sets), setup.scene, Backend::cpu);
+            Frame frame = renderer.make_frame();
+            const double ms = timed_render(renderer, setup.pose, 0, frame);
+            const Errors moved = compare(frame.clean, reference, source, floor);
+            std::printf("reference convergence: %s = %s (%u x %u pixels, %s ms) moves the reference by %s dB RMSE, "
+                        "%s dB max\n",
+                        key.c_str(), value.c_str(), frame.columns, frame.rows, fmt(ms, 1).c_str(),
+                        fmt(moved.rmse_db, 3).c_str(), fmt(moved.max_db, 2).c_str());
+        }
+    }
     // Side-lobe truncation dominates the error of every row that keeps the default kernel width (cells
     // beyond the kernel's reach are empty instead of -40..-80 dB); a second reference with the row's own
     // width isolates the other knobs.

@@ -54,7 +54,9 @@ constexpr float kEdgeRelativeJump = 0.05f;
 // lavapipe and most GPUs allow 16384-wide framebuffers; more pixel columns than that buys nothing.
 constexpr std::uint32_t kMaxColumns = 16384;
 constexpr std::uint32_t kMaxRows = 4096;
-constexpr std::uint32_t kMaxSidelobeHalfTaps = 256;
+// The side-lobe kernel's reach in beams: enough for a kernel over the whole fan of 2048 beams (the
+// plan stops it at the last beam anyway); weights are beams x (2 K + 1) floats.
+constexpr std::uint32_t kMaxSidelobeHalfTaps = 2047;
 
 std::string fmt(double v) {
     char buf[64];
