@@ -30,7 +30,7 @@ VKS_FN REAL pixel_coord(uint i, uint n, REAL tan_half) {
 // Slice of pixel column c, c / slice_columns, by a multiply with inv_slice_columns = 1 / slice_columns
 // rounded to REAL: a GPU has no vector integer divide (lavapipe runs one scalar divide per lane).
 // Exact for slice_columns < 2^17 and c < 2^23: the quotient's fraction lies in [0.5 / W, 1 - 0.5 / W]
-// and the two roundings move it by < 16 * 2^-23 (tests/stages/cpu_depth_test.cpp checks every column).
+// and the two roundings move it by < 16 * 2^-23 (tests/stages/depth_test.cpp checks every column).
 VKS_FN uint slice_of_column(uint c, REAL inv_slice_columns) {
     return uint((REAL(c) + REAL(0.5)) * inv_slice_columns);
 }

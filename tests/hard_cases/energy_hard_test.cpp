@@ -254,7 +254,7 @@ TEST_P(EnergyCase, DepthDiscontinuityGivesNoSobelSpikes) {
     // A box whose front face (x = 5) faces the sonar, in front of a wall at 20 m turned 25 deg. Every
     // pixel, on either side of the silhouette, must get the incidence of its own surface: the
     // contract's one-sided differences never mix the two surfaces. Bound: |cos - exact| <= 1e-3 (the
-    // plane tolerance of tests/stages/cpu_normals_test.cpp), so no echo spike exceeds its surface by > 0.1%.
+    // plane tolerance of tests/stages/normals_test.cpp), so no echo spike exceeds its surface by > 0.1%.
     SonarConfig config = small_config();
     config.rows_per_vfov = 32;
     Scene scene;

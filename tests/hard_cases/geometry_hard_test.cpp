@@ -140,7 +140,7 @@ TEST_P(HardCase, GrazingSeabedEchoFallsSmoothlyToZeroTowardsTheHorizon) {
             const double omega = du * dv / (len * len * len);
             const double expected = mu * sin_psi * sin_psi * sin_psi / (h * h); // E / Omega
             const double got = f.echo[2 * p] / omega;
-            // Sobel on an exact plane gives cos to 1e-3 absolute (tests/stages/cpu_normals_test.cpp); relative to
+            // Sobel on an exact plane gives cos to 1e-3 absolute (tests/stages/normals_test.cpp); relative to
             // cos = sin(psi) >= 0.5/60 that is up to 12%. Range from float depth: 1e-4 (tolerances.h), 2e-4 in r^2.
             const double rel = std::abs(got - expected) / expected;
             EXPECT_LE(std::abs(got - expected), 1.1e-3 * mu * sin_psi * sin_psi / (h * h) + 3e-4 * expected)

@@ -15,6 +15,9 @@
 #include <vector>
 
 #include "cpu_stage_support.h"
+#include "stages/gpu_cpu_support.h"
+#include "vk/resample_walk.h"
+#include "vk/vulkan_backend_impl.h"
 
 namespace vksonar {
 namespace {
@@ -325,6 +328,110 @@ TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
     RecordProperty("f32_vs_f64_max_pixel", std::to_string(max_rel_pixel));
     std::printf("f32 vs f64: total %.3g, max cell / peak %.3g, max pixel %.3g\n", total32 / total64 - 1.0, max_rel_peak,
                 max_rel_pixel);
+}
+
+// ---- GPU vs CPU (tests/stages/gpu_cpu_support.h; tolerances: tests/tolerances.h) ------------------
+
+using namespace ::vksonar::testing;
+
+class BeamformGpuCpu : public GpuCpuScene {};
+
+TEST_P(BeamformGpuCpu, MatchesOnTheSameInput) {
+    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+
+    // Beamform from the GPU's echo.
+    std::vector<float> profiles(static_cast<std::size_t>(plan.bins) * plan.columns);
+    std::vector<float> beam_profiles(static_cast<std::size_t>(plan.bins) * plan.beams);
+    std::vector<float> polar(beam_profiles.size());
+    cpu::beamform<float>(plan, g.echo.data(), profiles.data(), beam_profiles.data(), polar.data());
+    double peak = 0;
+    for (float v : polar)
+        peak = std::max(peak, static_cast<double>(v));
+    double max_rel_polar = 0;
+    for (std::size_t i = 0; i < polar.size(); ++i) {
+        const double a = g.clean[i], b = polar[i];
+        max_rel_polar = std::max(max_rel_polar, std::abs(a - b) / std::max(std::abs(b), kBeamformRelFloor * peak));
+    }
+    // The same comparison in dB over the cells above the ambient noise floor (clean is relative to SL).
+    const SonarConfig& cfg = plan.config;
+    const double floor = std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db - cfg.source_level_db) / 10.0);
+    double max_db = 0;
+    std::size_t above = 0;
+    for (std::size_t i = 0; i < polar.size(); ++i) {
+        if (!(polar[i] > floor)) continue;
+        ++above;
+        max_db = std::max(max_db, std::abs(10.0 * std::log10(double(g.clean[i]) / double(polar[i]))));
+    }
+    std::printf("[beamform] max rel %.2e, max %.2e dB over %zu cells above the noise floor\n", max_rel_polar, max_db,
+                above);
+    EXPECT_LE(max_rel_polar, kBeamformRelTol);
+    ASSERT_GT(above, 100u);
+    EXPECT_LE(max_db, 10.0 * std::log10(1.0 + kBeamformRelTol)); // 4.3e-5 dB
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledScenes, BeamformGpuCpu, ::testing::ValuesIn(bundled_scenes()), scene_name);
+
+TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    struct Case {
+        const char* name;
+        std::uint32_t beams;
+        bool side_lobes;
+        double pixels_per_beam;
+        BeamSpacing spacing;
+    };
+    const Case cases[] = {{"512 beams, side lobes", 512, true, 2.0, BeamSpacing::equiangular},
+                          {"130 beams, no side lobes", 130, false, 2.0, BeamSpacing::equiangular},
+                          {"1 column per beam", 256, true, 1.0, BeamSpacing::equiangular},
+                          {"equi-sine table", 200, true, 2.0, BeamSpacing::equisine}};
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.name);
+        SonarConfig config = quiet_config();
+        config.beams = k.beams;
+        config.pixels_per_beam = k.pixels_per_beam;
+        config.beam_spacing = k.spacing;
+        config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
+        auto plan = make_plan(config, scene.value().data());
+        ASSERT_TRUE(plan) << plan.error().message;
+        // Else the renders below would compare the gather with itself.
+        EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation));
+        auto walked = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
+        ::setenv("VKSONAR_RESAMPLE", "gather", 1);
+        auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
+        ::unsetenv("VKSONAR_RESAMPLE");
+        ASSERT_TRUE(walked && gathered);
+        EXPECT_EQ(walked->frame.beam_profiles, gathered->frame.beam_profiles);
+        EXPECT_EQ(walked->frame.clean, gathered->frame.clean);
+        const auto lit = std::count_if(walked->frame.beam_profiles.begin(), walked->frame.beam_profiles.end(),
+                                       [](float v) { return v > 0.0f; });
+        EXPECT_GT(lit, 1000); // the scene is in view: equal frames are not two empty ones
+    }
+}
+
+// Where the walk would add different terms, the host keeps the gather: a full circle (beams 0 and
+// beams-1 gather from every column), and a span that holds a column giving its beam nothing.
+TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
+    Scene scene;
+    SonarConfig config = quiet_config();
+    auto fan = make_plan(config, scene.data());
+    ASSERT_TRUE(fan) << fan.error().message;
+    ASSERT_TRUE(vk::resample_can_walk(fan.value(), vk::kBeamsPerInvocation));
+    config.hfov_deg = 360.0;
+    auto circle = make_plan(config, scene.data());
+    ASSERT_TRUE(circle) << circle.error().message;
+    EXPECT_FALSE(vk::resample_can_walk(circle.value(), vk::kBeamsPerInvocation));
+    // Beam 40's span reaches back over beam 38's columns, which give beam 40 nothing.
+    Plan widened = fan.value();
+    widened.beam_column_begin[40] = widened.beam_column_begin[39];
+    EXPECT_FALSE(vk::resample_can_walk(widened, vk::kBeamsPerInvocation));
 }
 
 } // namespace

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cpu_stage_support.h"
+#include "stages/gpu_cpu_support.h"
 
 namespace vksonar {
 namespace {
@@ -340,6 +341,50 @@ TEST(CpuDepth, DegenerateAndInvalidTrianglesProduceNothing) {
         ASSERT_EQ(out.material[p], shared::kNoMaterial);
     }
 }
+
+// ---- GPU vs CPU (tests/stages/gpu_cpu_support.h; tolerances: tests/tolerances.h) ------------------
+
+using namespace ::vksonar::testing;
+
+class DepthGpuCpu : public GpuCpuScene {};
+
+TEST_P(DepthGpuCpu, DepthDiffersOnlyOnTriangleEdges) {
+    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Frame& c = p->cpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    std::size_t hits = 0, mismatched = 0;
+    double max_rel_interior = 0, max_abs_range_m = 0;
+    for (std::uint32_t row = 0; row < g.rows; ++row) {
+        const double v = math_f64::pixel_coord(row, plan.rows, plan.tan_half_v);
+        for (std::uint32_t col = 0; col < g.columns; ++col) {
+            const std::size_t i = static_cast<std::size_t>(row) * g.columns + col;
+            hits += g.depth[i] > 0;
+            const bool same_surface = g.material[i] == c.material[i] && (g.depth[i] > 0) == (c.depth[i] > 0);
+            const double zg = g.depth[i] > 0 ? plan.depth_a / (g.depth[i] - plan.depth_b) : 0;
+            const double zc = c.depth[i] > 0 ? plan.depth_a / (c.depth[i] - plan.depth_b) : 0;
+            const double rel = zg > 0 ? std::abs(zg - zc) / zg : 0;
+            if (!same_surface || rel > kDepthInteriorRelTol) {
+                ++mismatched;
+            } else {
+                max_rel_interior = std::max(max_rel_interior, rel);
+                // The same difference as slant range in metres: r = z |(u, v, 1)|.
+                const double u = math_f64::pixel_coord(col % plan.slice_columns, plan.slice_columns, plan.tan_half_h);
+                max_abs_range_m = std::max(max_abs_range_m, std::abs(zg - zc) * std::sqrt(1 + u * u + v * v));
+            }
+        }
+    }
+    ASSERT_GT(hits, 0u);
+    RecordProperty("depth_mismatched_pixels", static_cast<int>(mismatched));
+    std::printf("[depth] %s: %zu of %zu hit pixels differ (edges), max interior view-z rel diff %.2e, max slant "
+                "range diff %.2e m\n",
+                GetParam().file.c_str(), mismatched, hits, max_rel_interior, max_abs_range_m);
+    EXPECT_LE(static_cast<double>(mismatched), kDepthEdgePixelBudget * hits);
+    EXPECT_LE(max_abs_range_m, kDepthInteriorRelTol * plan.config.range_max_m);
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledScenes, DepthGpuCpu, ::testing::ValuesIn(bundled_scenes()), scene_name);
 
 } // namespace
 } // namespace vksonar

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "cpu_stage_support.h"
+#include "stages/gpu_cpu_support.h"
 
 namespace vksonar {
 namespace {
@@ -251,6 +252,77 @@ TEST(CpuEcho, BadRoughParameterFromTheEngineApiIsRefused) {
     EXPECT_EQ(plan.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(plan.error().message.find("material 0 'm0': rms_slope = 0 (expected 0.01 to 1)"), std::string::npos)
         << plan.error().message;
+}
+
+// ---- GPU vs CPU (tests/stages/gpu_cpu_support.h; tolerances: tests/tolerances.h) ------------------
+
+using namespace ::vksonar::testing;
+
+class EchoGpuCpu : public GpuCpuScene {};
+
+TEST_P(EchoGpuCpu, MatchesOnTheSameInput) {
+    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+    ASSERT_TRUE(p);
+    const Frame& g = p->gpu->frame;
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    const std::size_t pixels = static_cast<std::size_t>(g.rows) * g.columns;
+
+    // Echo from the GPU's depth, materials and normals.
+    std::vector<float> echo(pixels * 2);
+    cpu::echo<float>(plan, g.depth.data(), g.material.data(), g.normals.data(), echo.data());
+    double max_energy = 0;
+    for (std::size_t i = 0; i < pixels; ++i)
+        max_energy = std::max(max_energy, static_cast<double>(g.echo[2 * i]));
+    ASSERT_GT(max_energy, 0.0);
+    // Relative to the value, or near a vertical-pattern null to the pattern's absolute error
+    // (kVerticalPatternAbsTol x E0, written as a floor under the value: tests/tolerances.h).
+    const std::vector<float> flat = echo_without_vertical_pattern(plan, g);
+    double max_rel_echo = 0, max_range_diff = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        const double a = g.echo[2 * i], b = echo[2 * i];
+        const double floor =
+            std::max(kEchoRelFloor * max_energy, kVerticalPatternAbsTol / kEchoRelTol * double(flat[2 * i]));
+        max_rel_echo = std::max(max_rel_echo, std::abs(a - b) / std::max(std::abs(b), floor));
+        max_range_diff = std::max(max_range_diff, static_cast<double>(std::abs(g.echo[2 * i + 1] - echo[2 * i + 1])));
+    }
+    std::printf("[echo] max rel %.2e, max range diff %.2e m\n", max_rel_echo, max_range_diff);
+    EXPECT_LE(max_rel_echo, kEchoRelTol);
+    EXPECT_LE(max_range_diff, kRangeAbsTolM);
+}
+
+INSTANTIATE_TEST_SUITE_P(BundledScenes, EchoGpuCpu, ::testing::ValuesIn(bundled_scenes()), scene_name);
+
+// A hit pixel whose material id lies outside the plan's table reflects with material 0 (the
+// config's default backscatter) on both backends: the shared kernel's material_index(). The two
+// backends once disagreed here (the GPU gave such a pixel no energy, the CPU material 0). The stale id
+// cannot come from the public API (Scene::add_draw refuses it), so the test writes it into the draw.
+TEST(MaterialIds, OutOfRangeIdReflectsWithMaterialZeroOnBothBackends) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    const SonarConfig config = quiet_config();
+    auto make_scene = [](std::uint32_t drawn_material) {
+        Scene scene;
+        // materials: 0 the scene's implicit default, 1 and 2 these quads' (-20 and -5 dB)
+        add_quad(scene, 10.0, 0.0, 0.0, 6.0, 3.0, -20.0);
+        add_quad(scene, 14.0, 3.0, 0.0, 2.0, 2.0, -5.0);
+        auto& draws = const_cast<SceneData&>(scene.data()).draws;
+        draws[0].material = drawn_material;
+        return scene;
+    };
+    const Scene reference = make_scene(0u);
+    for (std::uint32_t stale : {3u, 7u, shared::kNoMaterial}) {
+        const Scene scene = make_scene(stale);
+        for (Backend backend : {Backend::vulkan, Backend::cpu}) {
+            auto expected = render_once(backend, config, reference);
+            auto got = render_once(backend, config, scene);
+            ASSERT_TRUE(expected && got);
+            // the quad at 10 m is there, at material 0's level, bit for bit (same backend, same input)
+            ASSERT_EQ(scene.materials().size(), 3u);
+            EXPECT_GT(sum(got->frame.clean), 0.0);
+            EXPECT_EQ(got->frame.clean, expected->frame.clean)
+                << "material id " << stale << ", backend " << (backend == Backend::vulkan ? "vulkan" : "cpu");
+        }
+    }
 }
 
 } // namespace
