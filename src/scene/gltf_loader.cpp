@@ -409,6 +409,7 @@ private:
         out_.positions.insert(out_.positions.end(), positions.begin(), positions.end());
         out_.indices.insert(out_.indices.end(), indices.begin(), indices.end());
         out_.meshes.push_back(range);
+        order_triangles_spatially(out_, range);
         return PrimitiveOut{static_cast<std::uint32_t>(out_.meshes.size() - 1), prim.material};
     }
 

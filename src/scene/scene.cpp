@@ -7,7 +7,9 @@
 #include <limits>
 #include <string>
 #include <utility>
+#include <vector>
 
+#include "core/plan.h"
 #include "scene/scene_data.h"
 #include "vksonar/scene.h"
 
@@ -62,6 +64,7 @@ Result<std::uint32_t> Scene::add_mesh(const float* positions_xyz, std::uint32_t 
     d.positions.insert(d.positions.end(), positions_xyz, positions_xyz + 3 * std::size_t(vertex_count));
     d.indices.insert(d.indices.end(), indices, indices + index_count);
     d.meshes.push_back(range);
+    order_triangles_spatially(d, range);
     d.stats.meshes = static_cast<std::uint32_t>(d.meshes.size());
     if (d.materials.empty()) d.materials.push_back(AcousticMaterial{"default"});
     return static_cast<std::uint32_t>(d.meshes.size() - 1);
@@ -192,6 +195,96 @@ const std::vector<AcousticMaterial>& Scene::materials() const {
 }
 const std::string& Scene::effects_json() const {
     return data_->effects_json;
+}
+
+namespace {
+
+// The bits of a 10-bit integer spread to every third bit (Morton order in 3-D).
+std::uint32_t spread_bits(std::uint32_t x) {
+    x &= 0x3ffu;
+    x = (x | (x << 16)) & 0x030000ffu;
+    x = (x | (x << 8)) & 0x0300f00fu;
+    x = (x | (x << 4)) & 0x030c30c3u;
+    x = (x | (x << 2)) & 0x09249249u;
+    return x;
+}
+
+} // namespace
+
+void order_triangles_spatially(SceneData& scene, const MeshRange& mesh_range) {
+    const MeshRange mesh = mesh_range; // a copy: the mesh's entry changes below
+    const std::uint32_t triangles = mesh.index_count / 3;
+    if (triangles <= kClusterTriangles || scene.meshes.empty() || scene.meshes.back().first_index != mesh.first_index ||
+        scene.positions.size() != 3 * (std::size_t(mesh.first_vertex) + mesh.vertex_count) || mesh.vertex_count == 0)
+        return;
+    const std::uint32_t* tri = scene.indices.data() + mesh.first_index;
+    const float* pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
+    float lo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+                   std::numeric_limits<float>::max()};
+    float hi[3] = {std::numeric_limits<float>::lowest(), std::numeric_limits<float>::lowest(),
+                   std::numeric_limits<float>::lowest()};
+    for (std::uint32_t v = 0; v < mesh.vertex_count; ++v)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], pos[3 * std::size_t(v) + std::size_t(a)]);
+            hi[a] = std::max(hi[a], pos[3 * std::size_t(v) + std::size_t(a)]);
+        }
+    const double largest =
+        std::max({double(hi[0]) - double(lo[0]), double(hi[1]) - double(lo[1]), double(hi[2]) - double(lo[2])});
+    // (key, triangle) pairs: sorting them is stable by construction (the triangle breaks ties).
+    std::vector<std::uint64_t> keyed(triangles);
+    for (std::uint32_t t = 0; t < triangles; ++t) {
+        std::uint32_t code = 0;
+        for (int a = 0; a < 3; ++a) {
+            double c = 0;
+            for (int k = 0; k < 3; ++k) {
+                const std::uint32_t v = tri[3 * std::size_t(t) + std::size_t(k)];
+                c += v < mesh.vertex_count ? pos[3 * std::size_t(v) + std::size_t(a)] : lo[a];
+            }
+            // one scale for all axes (the largest extent): a flat terrain's height must not reorder it
+            const double unit = largest > 0 ? (c / 3.0 - lo[a]) / largest : 0.0;
+            code |= spread_bits(static_cast<std::uint32_t>(std::clamp(unit, 0.0, 1.0) * 1023.0)) << a;
+        }
+        keyed[t] = (std::uint64_t(code) << 32) | t;
+    }
+    std::sort(keyed.begin(), keyed.end());
+    // Each run of kClusterTriangles gets its own copy of the vertices it uses, numbered in first use:
+    // a GPU (llvmpipe above all) shades every vertex between the smallest and the largest index of a
+    // draw, and a patch of a row-major grid would otherwise span as many rows of vertices as it is tall.
+    // Vertices on a run's border are stored once per run that uses them (a 16 x 16-quad patch: 289
+    // vertices for 256 quads' worth).
+    std::vector<std::uint32_t> sorted(3 * std::size_t(triangles));
+    std::vector<float> run_positions;
+    run_positions.reserve(scene.positions.size() - 3 * std::size_t(mesh.first_vertex));
+    std::vector<std::uint32_t> new_index(mesh.vertex_count, std::numeric_limits<std::uint32_t>::max());
+    std::vector<std::uint32_t> touched;
+    for (std::uint32_t begin = 0; begin < triangles; begin += kClusterTriangles) {
+        for (std::uint32_t v : touched)
+            new_index[v] = std::numeric_limits<std::uint32_t>::max();
+        touched.clear();
+        const std::uint32_t end = std::min(triangles, begin + kClusterTriangles);
+        for (std::uint32_t t = begin; t < end; ++t) {
+            const std::uint32_t from = static_cast<std::uint32_t>(keyed[t] & 0xffffffffu);
+            for (int k = 0; k < 3; ++k) {
+                const std::uint32_t v = tri[3 * std::size_t(from) + std::size_t(k)];
+                std::uint32_t& mapped = new_index[std::min(v, mesh.vertex_count - 1)];
+                if (v >= mesh.vertex_count) { // out of range: kept as it is (the clusters skip such a run)
+                    sorted[3 * std::size_t(t) + std::size_t(k)] = v;
+                    continue;
+                }
+                if (mapped == std::numeric_limits<std::uint32_t>::max()) {
+                    mapped = static_cast<std::uint32_t>(run_positions.size() / 3);
+                    run_positions.insert(run_positions.end(), pos + 3 * std::size_t(v), pos + 3 * std::size_t(v) + 3);
+                    touched.push_back(v);
+                }
+                sorted[3 * std::size_t(t) + std::size_t(k)] = mapped;
+            }
+        }
+    }
+    std::copy(sorted.begin(), sorted.end(), scene.indices.begin() + mesh.first_index);
+    // The mesh is the scene's last (its vertices end the array): they are replaced by the runs' copies.
+    scene.positions.resize(3 * std::size_t(mesh.first_vertex));
+    scene.positions.insert(scene.positions.end(), run_positions.begin(), run_positions.end());
+    scene.meshes.back().vertex_count = static_cast<std::uint32_t>(run_positions.size() / 3);
 }
 
 } // namespace vksonar

@@ -27,4 +27,16 @@ struct SceneData {
     std::string source_path;
 };
 
+// Puts the triangles of a mesh that has more than one depth cluster's worth (kClusterTriangles, plan.h)
+// in the order of their centroids along a Morton (Z-order) curve through the mesh's bounding box,
+// stable for equal keys. The depth pass draws a mesh as runs of consecutive triangles and skips the
+// runs a slice cannot see (cull_depth_clusters): runs of a spatially sorted mesh are compact patches,
+// where runs in an exporter's order are long strips across a whole terrain that every slice sees.
+// Each run of kClusterTriangles then gets its own copy of the vertices it uses (GPUs shade every
+// vertex in an indexed draw's index range), so the mesh's vertex count grows by the runs' shared
+// borders. The triangles, their winding and their positions do not change; between overlapping
+// coplanar triangles of one mesh the depth test's tie goes to the earlier one, as before. Only for the
+// scene's last mesh (its vertices end the array: call it right after adding the mesh).
+void order_triangles_spatially(SceneData& scene, const MeshRange& mesh);
+
 } // namespace vksonar
