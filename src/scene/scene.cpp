@@ -230,23 +230,41 @@ void order_triangles_spatially(SceneData& scene, const MeshRange& mesh_range) {
         }
     const double largest =
         std::max({double(hi[0]) - double(lo[0]), double(hi[1]) - double(lo[1]), double(hi[2]) - double(lo[2])});
-    // (key, triangle) pairs: sorting them is stable by construction (the triangle breaks ties).
-    std::vector<std::uint64_t> keyed(triangles);
+    // Morton code per triangle, then the triangles by code: a stable LSD radix sort (four passes of 8
+    // bits over the 30-bit codes), linear in the triangles where std::sort doubled a million-triangle load.
+    std::vector<std::uint32_t> code(triangles), order(triangles), code_tmp(triangles), order_tmp(triangles);
     for (std::uint32_t t = 0; t < triangles; ++t) {
-        std::uint32_t code = 0;
+        std::uint32_t key = 0;
         for (int a = 0; a < 3; ++a) {
-            double c = 0;
+            float c = 0;
             for (int k = 0; k < 3; ++k) {
                 const std::uint32_t v = tri[3 * std::size_t(t) + std::size_t(k)];
                 c += v < mesh.vertex_count ? pos[3 * std::size_t(v) + std::size_t(a)] : lo[a];
             }
             // one scale for all axes (the largest extent): a flat terrain's height must not reorder it
-            const double unit = largest > 0 ? (c / 3.0 - lo[a]) / largest : 0.0;
-            code |= spread_bits(static_cast<std::uint32_t>(std::clamp(unit, 0.0, 1.0) * 1023.0)) << a;
+            const float unit = largest > 0 ? float((double(c) / 3.0 - lo[a]) / largest) : 0.0f;
+            key |= spread_bits(static_cast<std::uint32_t>(std::clamp(unit, 0.0f, 1.0f) * 1023.0f)) << a;
         }
-        keyed[t] = (std::uint64_t(code) << 32) | t;
+        code[t] = key;
+        order[t] = t;
     }
-    std::sort(keyed.begin(), keyed.end());
+    for (int shift = 0; shift < 32; shift += 8) {
+        std::uint32_t start[257] = {};
+        for (std::uint32_t t = 0; t < triangles; ++t)
+            ++start[((code[t] >> shift) & 0xffu) + 1];
+        for (int b = 0; b < 256; ++b)
+            start[b + 1] += start[b];
+        for (std::uint32_t t = 0; t < triangles; ++t) {
+            const std::uint32_t slot = start[(code[t] >> shift) & 0xffu]++;
+            code_tmp[slot] = code[t];
+            order_tmp[slot] = order[t];
+        }
+        code.swap(code_tmp);
+        order.swap(order_tmp);
+    }
+    code = {};
+    code_tmp = {};
+    order_tmp = {};
     // Each run of kClusterTriangles gets its own copy of the vertices it uses, numbered in first use:
     // a GPU (llvmpipe above all) shades every vertex between the smallest and the largest index of a
     // draw, and a patch of a row-major grid would otherwise span as many rows of vertices as it is tall.
@@ -263,7 +281,7 @@ void order_triangles_spatially(SceneData& scene, const MeshRange& mesh_range) {
         touched.clear();
         const std::uint32_t end = std::min(triangles, begin + kClusterTriangles);
         for (std::uint32_t t = begin; t < end; ++t) {
-            const std::uint32_t from = static_cast<std::uint32_t>(keyed[t] & 0xffffffffu);
+            const std::uint32_t from = order[t];
             for (int k = 0; k < 3; ++k) {
                 const std::uint32_t v = tri[3 * std::size_t(from) + std::size_t(k)];
                 std::uint32_t& mapped = new_index[std::min(v, mesh.vertex_count - 1)];
