@@ -40,6 +40,30 @@ template <class Part> void split(host::Workers* workers, std::uint32_t n, const 
         &context);
 }
 
+// [0, n) in blocks of `block` dealt out in turn (part p takes blocks p, p + parts, ...): the rows of a
+// sonar image are not equally loaded (above the seabed most rows have no hit), nor are its bins (the
+// side-lobe pass skips empty ones), so contiguous halves would leave a thread idle. part(begin, end, p)
+// runs once per block.
+template <class Part>
+void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, const Part& part) {
+    if (workers == nullptr || workers->count() == 1 || n <= block) {
+        part(0u, n, 0u);
+        return;
+    }
+    struct Context {
+        const Part* part;
+        std::uint32_t n, block;
+    } context{&part, n, block};
+    workers->run(
+        [](void* c, std::uint32_t index, std::uint32_t parts) {
+            const auto& t = *static_cast<const Context*>(c);
+            for (std::uint32_t begin = index * t.block; begin < t.n; begin += parts * t.block)
+                (*t.part)(begin, std::min(begin + t.block, t.n), index);
+        },
+        &context);
+}
+constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32;
+
 // Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
 template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
     dst.assign(src.begin(), src.end());
@@ -125,19 +149,22 @@ private:
         }
         case StageId::normals:
             if (plan_.face_normals) {
-                split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                    cpu::geometric_normals_rows<Real>(plan_, depth_.data(), face_.data(), normals_.data(), begin, end);
-                });
+                split_blocks(workers_, plan_.rows, kRowBlock,
+                             [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                                 cpu::geometric_normals_rows<Real>(plan_, depth_.data(), face_.data(), normals_.data(),
+                                                                   begin, end);
+                             });
             } else { // each part slides its own ring of rows: part i's scratch starts at i * per_part
                 const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(plan_), 1);
-                split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
-                    cpu::normals_rows<Real>(plan_, depth_.data(), normals_.data(),
-                                            normals_scratch_.data() + part * per_part, begin, end);
-                });
+                split_blocks(workers_, plan_.rows, kRowBlock,
+                             [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
+                                 cpu::normals_rows<Real>(plan_, depth_.data(), normals_.data(),
+                                                         normals_scratch_.data() + part * per_part, begin, end);
+                             });
             }
             break;
         case StageId::echo: // normals only where the normals stage ran (incidence on)
-            split(workers_, plan_.rows, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            split_blocks(workers_, plan_.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::echo_rows<Real>(plan_, depth_.data(), material_.data(),
                                      plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(), begin, end);
             });
@@ -146,7 +173,7 @@ private:
             split(workers_, plan_.columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles_.data(), scratch_.data(), begin, end);
             });
-            split(workers_, plan_.bins, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::beamform_beams<Real>(plan_, profiles_.data(), beam_profiles_.data(), polar_.data(), begin, end);
             });
             break;
