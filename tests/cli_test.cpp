@@ -20,6 +20,8 @@
 
 #include "cli_support.h"
 #include "config/config_keys.h"
+#include "vk/vulkan_context.h"
+#include "vksonar/context.h"
 
 namespace fs = std::filesystem;
 
@@ -508,6 +510,29 @@ TEST_F(Cli, DefaultSceneAndPose) {
         EXPECT_NE(meta["scene"].get<std::string>().find("default.gltf"), std::string::npos);
         EXPECT_EQ(npy_shape(out / "polar.npy"), (std::vector<std::size_t>{512, 512}));
     }
+}
+
+// --backend auto, the default: Vulkan on a GPU, the CPU backend where the device is a CPU implementation
+// (lavapipe) or where there is none; meta.json says which and why. Explicit choices are reported too.
+TEST_F(Cli, BackendAutoPicksByTheDeviceAndSaysWhy) {
+    std::string expected = "cpu";
+    if (auto context = vksonar::Context::create(vksonar::ContextOptions{});
+        context && context->vulkan() && context->vulkan()->properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU)
+        expected = "vulkan";
+    const fs::path out = dir_ / "auto";
+    const CliRun r = run({"render", "--save", "polar", "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
+    EXPECT_EQ(meta["backend"], expected);
+    const std::string why = meta["backend_reason"].get<std::string>();
+    EXPECT_EQ(why.rfind("auto: ", 0), 0u) << why;
+    EXPECT_NE(why.find(expected == "cpu" ? "CPU" : "GPU"), std::string::npos) << why;
+    const fs::path cpu = dir_ / "explicit";
+    ASSERT_EQ(run({"render", "--backend", "cpu", "--save", "polar", "--out", cpu.string()}).exit_code, 0);
+    EXPECT_EQ(nlohmann::json::parse(read_text(cpu / "meta.json"))["backend_reason"], "--backend cpu");
+    const CliRun bad = run({"render", "--backend", "gpu", "--out", (dir_ / "never").string()});
+    EXPECT_EQ(bad.exit_code, 2);
+    EXPECT_NE(bad.err.find("--backend: 'gpu' is not a backend (auto, vulkan or cpu)"), std::string::npos) << bad.err;
 }
 
 TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {

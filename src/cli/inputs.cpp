@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "vk/vulkan_context.h"
 
 namespace fs = std::filesystem;
 
@@ -64,6 +65,26 @@ Context make_context(Backend backend) {
         throw Failure(e.code == ErrorCode::no_device ? e.message : e.message + " (try --backend cpu)");
     }
     return std::move(created.value());
+}
+
+Context choose_backend(Backend& backend, std::string& why) {
+    auto created = Context::create(ContextOptions{});
+    if (!created) {
+        backend = Backend::cpu;
+        why = "auto: no usable Vulkan device (" + created.error().message + "): the CPU backend";
+        return Context::cpu_only();
+    }
+    Context context = std::move(created.value());
+    const VulkanContext* vk = context.vulkan();
+    if (vk != nullptr && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
+        backend = Backend::cpu;
+        why = "auto: the Vulkan device is a CPU implementation (" + context.device_description() +
+              "), where the CPU backend is as fast or faster (docs/benchmarks.md, 'How cost grows')";
+        return Context::cpu_only();
+    }
+    backend = Backend::vulkan;
+    why = "auto: a GPU (" + context.device_description() + ")";
+    return context;
 }
 
 } // namespace vksonar::cli

@@ -20,5 +20,10 @@ SonarConfig sonar_base_config(const std::string& sonar);
 // A context for `backend` (validation only through VKSONAR_VALIDATION); for vulkan, throws Failure
 // when no device exists, with the hint to use --backend cpu.
 Context make_context(Backend backend);
+// --backend auto: Vulkan on a GPU; the CPU backend where no Vulkan device works or the only one is a
+// CPU implementation (lavapipe/llvmpipe), where the CPU backend renders as fast or faster (measured:
+// docs/benchmarks.md, "How cost grows": faster at 16 of 18 points, at most 5 % slower at the others).
+// Sets backend and why (for meta.json); never fails.
+Context choose_backend(Backend& backend, std::string& why);
 
 } // namespace vksonar::cli

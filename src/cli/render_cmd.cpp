@@ -62,7 +62,9 @@ constexpr const char* kUsage =
     "                t,x,y,z,roll,pitch,yaw adds a time in s before each pose: meta.json time_s, the .h5 time);\n"
     "                frames go to DIR/frame_NNNNNN/ with NNNNNN the line number\n"
     "  --seed        noise seed (default 1)\n"
-    "  --backend     vulkan (default) or cpu\n"
+    "  --backend     auto (default: Vulkan on a GPU, the CPU backend where the only Vulkan device is a CPU\n"
+    "                implementation such as lavapipe, or where there is none), vulkan or cpu; meta.json says\n"
+    "                which and why (backend, backend_reason)\n"
     "  --save        what to write, a comma list (repeatable); meta.json is always written. Without --save:\n"
     "                fan.png, polar.npy, polar.png and polar_u16.npy (the set 'default'). With it, exactly\n"
     "                what is listed: default, fan (fan.png), polar (polar.npy), polar_png (polar.png),\n"
@@ -532,6 +534,7 @@ struct Outputs {
     std::string meta_plan_part;           // host::meta_json_plan_part(plan), made once
     std::string scene_path;
     std::string backend;
+    std::string backend_reason; // why this backend (--backend, or what auto saw)
     std::string device;
     // Scratch reused across frames.
     host::Image image;
@@ -554,6 +557,7 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
                      {"pitch_deg", pose.pitch_deg},
                      {"yaw_deg", pose.yaw_deg}};
     extra["backend"] = out.backend;
+    extra["backend_reason"] = out.backend_reason;
     extra["device"] = out.device;
     if (out.shard)
         extra["shard"] = {{"index", out.shard->index}, {"count", out.shard->count}, {"source", out.shard->source}};
@@ -732,11 +736,11 @@ int run_render(const std::vector<std::string>& argv) {
 
     // 1. Options that need no files.
     Backend backend = Backend::vulkan;
-    const std::string backend_name = args.value("--backend", "vulkan");
+    std::string backend_name = args.value("--backend", "auto");
     if (backend_name == "cpu")
         backend = Backend::cpu;
-    else if (backend_name != "vulkan")
-        throw BadInput("--backend: '" + backend_name + "' is not a backend (vulkan or cpu)");
+    else if (backend_name != "vulkan" && backend_name != "auto")
+        throw BadInput("--backend: '" + backend_name + "' is not a backend (auto, vulkan or cpu)");
     const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
     SaveSet save = parse_save(args.values("--save"));
     const std::string out_path = args.value("--out");
@@ -866,8 +870,10 @@ int run_render(const std::vector<std::string>& argv) {
     else
         out_dir.emplace(out_path);
 
-    // 6. Device and renderer.
-    Context context = make_context(backend);
+    // 6. Device and renderer. --backend auto (the default) picks by the device (choose_backend).
+    std::string backend_reason = "--backend " + backend_name;
+    Context context = backend_name == "auto" ? choose_backend(backend, backend_reason) : make_context(backend);
+    if (backend_name == "auto") backend_name = backend == Backend::cpu ? "cpu" : "vulkan";
     const std::string device = backend == Backend::vulkan ? context.device_description() : "cpu";
     RendererOptions renderer_options;
     renderer_options.backend = backend;
@@ -897,6 +903,7 @@ int run_render(const std::vector<std::string>& argv) {
                     host::meta_json_plan_part(plan),
                     scene_path,
                     backend_name,
+                    backend_reason,
                     device,
                     {},
                     {},
