@@ -187,27 +187,13 @@ public:
     }
 
     Result<void> close() override {
-        // rosbag2's own metadata record (BagMetadata as YAML, version 8: QoS as text), which
-        // `ros2 bag info` reads beside the summary.
-        std::string topics;
-        for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_}) {
-            if (!t->channel) continue;
-            topics += "  - topic_metadata:\n      name: " + t->name + "\n      type: " + t->type +
-                      "\n      serialization_format: cdr\n      offered_qos_profiles: " + yaml_quoted(t->qos + "\n") +
-                      "\n      type_description_hash: \"\"\n    message_count: " + std::to_string(t->sequence) + "\n";
-        }
-        const std::string file = path_.substr(path_.find_last_of('/') + 1);
-        const std::uint64_t duration = last_ns_ - first_ns_;
-        const std::string yaml =
-            "version: 8\nstorage_identifier: mcap\nduration:\n  nanoseconds: " + std::to_string(duration) +
-            "\nstarting_time:\n  nanoseconds_since_epoch: " + std::to_string(first_ns_) +
-            "\nmessage_count: " + std::to_string(writer_.message_count()) + "\ntopics_with_message_count:\n" + topics +
-            "compression_format: \"\"\ncompression_mode: \"\"\nrelative_file_paths:\n  - " + yaml_quoted(file) +
-            "\nfiles:\n  - path: " + yaml_quoted(file) +
-            "\n    starting_time:\n      nanoseconds_since_epoch: " + std::to_string(first_ns_) +
-            "\n    duration:\n      nanoseconds: " + std::to_string(duration) +
-            "\n    message_count: " + std::to_string(writer_.message_count()) + "\ncustom_data: {}\nros_distro: \"\"\n";
-        writer_.add_metadata("rosbag2", {{"serialized_metadata", yaml}});
+        std::vector<BagTopic> topics;
+        for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_})
+            if (t->channel) topics.push_back({t->name, t->type, t->qos, t->sequence});
+        if (!options_.shard.empty()) writer_.add_metadata("vksonar_shard", options_.shard);
+        writer_.add_metadata(
+            "rosbag2", {{"serialized_metadata", rosbag2_metadata_yaml(path_.substr(path_.find_last_of('/') + 1), topics,
+                                                                      first_ns_, last_ns_, writer_.message_count())}});
         return writer_.close();
     }
 
@@ -244,6 +230,25 @@ private:
 };
 
 } // namespace
+
+std::string rosbag2_metadata_yaml(const std::string& file, const std::vector<BagTopic>& bag_topics,
+                                  std::uint64_t first_ns, std::uint64_t last_ns, std::uint64_t messages) {
+    std::string topics;
+    for (const BagTopic& t : bag_topics) {
+        topics += "  - topic_metadata:\n      name: " + t.name + "\n      type: " + t.type +
+                  "\n      serialization_format: cdr\n      offered_qos_profiles: " + yaml_quoted(t.qos + "\n") +
+                  "\n      type_description_hash: \"\"\n    message_count: " + std::to_string(t.messages) + "\n";
+    }
+    const std::uint64_t duration = last_ns - first_ns;
+    return "version: 8\nstorage_identifier: mcap\nduration:\n  nanoseconds: " + std::to_string(duration) +
+           "\nstarting_time:\n  nanoseconds_since_epoch: " + std::to_string(first_ns) +
+           "\nmessage_count: " + std::to_string(messages) + "\ntopics_with_message_count:\n" + topics +
+           "compression_format: \"\"\ncompression_mode: \"\"\nrelative_file_paths:\n  - " + yaml_quoted(file) +
+           "\nfiles:\n  - path: " + yaml_quoted(file) +
+           "\n    starting_time:\n      nanoseconds_since_epoch: " + std::to_string(first_ns) +
+           "\n    duration:\n      nanoseconds: " + std::to_string(duration) +
+           "\n    message_count: " + std::to_string(messages) + "\ncustom_data: {}\nros_distro: \"\"\n";
+}
 
 bool mcap_zstd_available() {
     return mcap::zstd_available();

@@ -13,7 +13,9 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
+#include "cli/mcap_writer.h"
 #include "core/plan.h"
 #include "host/host_stages.h"
 #include "vksonar/frame.h"
@@ -33,7 +35,20 @@ struct McapOptions {
     bool cloud = false;      // PREFIX/points
     bool zstd = false;       // zstd chunk compression
     std::string library;     // the MCAP header's library field
+    // A shard's record and run identity (render --shard): a "vksonar_shard" Metadata record that
+    // `vksonar merge` reads; empty for an unsharded run (then there is no such record).
+    mcap::KeyValues shard;
 };
+
+// One topic of a bag as rosbag2's metadata lists it.
+struct BagTopic {
+    std::string name, type, qos; // qos: the offered_qos_profiles YAML
+    std::uint64_t messages = 0;
+};
+// rosbag2's own metadata record (BagMetadata as YAML, version 8: QoS as text), which `ros2 bag info`
+// reads beside the summary: the bag file's name, its topics, and its first and last time stamps.
+std::string rosbag2_metadata_yaml(const std::string& file, const std::vector<BagTopic>& topics, std::uint64_t first_ns,
+                                  std::uint64_t last_ns, std::uint64_t messages);
 
 bool mcap_zstd_available();
 

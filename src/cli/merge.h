@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/mcap_writer.h"
 #include "cli/shard.h"
 
 namespace vksonar::cli {
@@ -38,5 +39,14 @@ bool h5_merge_accepts(const std::string& path);
 bool h5_merge_output_ok(const std::string& out);
 ShardInput h5_merge_read(const std::string& path);
 void h5_merge(const std::vector<ShardInput>& shards, const std::string& out);
+
+// ROS 2 bags (merge_mcap.cpp): shard bags written by `render --out FILE.mcap --shard i/N`, which
+// carry shard_metadata() as a "vksonar_shard" Metadata record.
+mcap::KeyValues shard_metadata(const ShardRecord& shard, const Identity& identity, const std::string& backend,
+                               const std::string& device);
+bool mcap_merge_accepts(const std::string& path);
+bool mcap_merge_output_ok(const std::string& out);
+ShardInput mcap_merge_read(const std::string& path);
+void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out);
 
 } // namespace vksonar::cli

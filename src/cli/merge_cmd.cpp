@@ -26,9 +26,10 @@ constexpr const char* kUsage =
     "usage: vksonar merge OUT SHARD...\n"
     "\n"
     "Merges the outputs of 'vksonar render --trajectory ... --shard i/N' into the output the unsharded run\n"
-    "writes: frame folders (each shard's --out DIR, with its shard.json) into one folder OUT, or .h5 shard\n"
-    "files into one OUT.h5. Every shard 0..N-1 of one run must be given once and be complete (a shard that\n"
-    "stopped resumes when re-run); the shards must agree on config, seed, scene, backend, saved arrays and\n"
+    "writes: frame folders (each shard's --out DIR, with its shard.json) into one folder OUT, .h5 shard\n"
+    "files into one OUT.h5, or ROS 2 bags (.mcap) into one OUT.mcap. Every shard 0..N-1 of one run must be\n"
+    "given once and be complete (a folder or .h5 shard that stopped resumes when re-run; a bag shard is\n"
+    "written again whole); the shards must agree on config, seed, scene, backend, saved arrays and\n"
     "trajectory. Frame files are hard-linked into OUT where the file system allows, else copied. OUT must\n"
     "not exist. docs/scale.md\n";
 
@@ -40,7 +41,7 @@ bool folder_accepts(const std::string& path) {
 }
 
 bool folder_output_ok(const std::string& out) {
-    return !h5_merge_output_ok(out);
+    return !h5_merge_output_ok(out) && !mcap_merge_output_ok(out);
 }
 
 ShardInput folder_read(const std::string& path) {
@@ -120,7 +121,9 @@ void folder_merge(const std::vector<ShardInput>& shards, const std::string& out)
 // The formats merge knows, tried in order. One more format (e.g. MCAP) is one more entry.
 const MergeFormat kFormats[] = {
     {"HDF5", h5_merge_accepts, h5_merge_output_ok, "a FILE.h5 (or .hdf5)", h5_merge_read, h5_merge},
-    {"frame folders", folder_accepts, folder_output_ok, "a folder (not ending in .h5)", folder_read, folder_merge},
+    {"ROS 2 bags", mcap_merge_accepts, mcap_merge_output_ok, "a FILE.mcap", mcap_merge_read, mcap_merge},
+    {"frame folders", folder_accepts, folder_output_ok, "a folder (not ending in .h5 or .mcap)", folder_read,
+     folder_merge},
 };
 
 std::string shard_name(const ShardRecord& s) {

@@ -26,6 +26,7 @@
 #include "cli/dataset_h5.h"
 #include "cli/dataset_mcap.h"
 #include "cli/inputs.h"
+#include "cli/merge.h"
 #include "cli/shard.h"
 #include "cli/write_behind.h"
 #include "core/plan.h"
@@ -793,10 +794,6 @@ int run_render(const std::vector<std::string>& argv) {
         throw BadInput(std::string(args.has("--shard") ? "--shard" : "--shard-count") +
                        ": shards split a trajectory; give --trajectory POSES.csv");
     }
-    // No merge joins bags yet: N sharded bags would each hold a piece and nothing would make them one.
-    if (shard && bag)
-        throw BadInput("--out " + out_path + ": a ROS 2 bag is not sharded (shard " + shard->source +
-                       "); shard into FILE.h5 or folders and 'vksonar merge' them");
     const std::size_t first = shard ? shard->first : 0, end = shard ? shard->end : poses.size();
 
     // 4. Config layers: preset < scene effects < --config < --quality < --set. The user's layers are checked
@@ -866,7 +863,7 @@ int run_render(const std::vector<std::string>& argv) {
     std::optional<OutputDir> out_dir;
     std::optional<DatasetFile> dataset_file;
     if (dataset || bag)
-        dataset_file.emplace(out_path, shard.has_value());
+        dataset_file.emplace(out_path, shard.has_value() && !bag); // a bag shard is written again whole
     else
         out_dir.emplace(out_path);
 
@@ -926,7 +923,7 @@ int run_render(const std::vector<std::string>& argv) {
         options.compress = args.has("--compress");
         options.has_time = timed;
         dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
-    } else if (shard) {
+    } else if (shard && !bag) {
         FolderManifest manifest{
             *shard,
             run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
@@ -941,12 +938,18 @@ int run_render(const std::vector<std::string>& argv) {
     if (bag) {
         bag_options->zstd = args.has("--compress");
         bag_options->library = "vksonar 0.1.0 (its own MCAP writer)";
+        if (shard) // the shard's record and the run's identity, for `vksonar merge` (merge_mcap.cpp)
+            bag_options->shard = shard_metadata(
+                *shard, run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
+                backend_name, device);
         auto created = McapDatasetWriter::create(out_path, plan, *bag_options);
         if (!created) throw Failure(created.error().message);
         bag_writer = std::move(created.value());
     }
     const double bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
-    std::uint64_t ordinal = 0; // frames written so far (writer thread only)
+    // The frame's ordinal in the whole trajectory (a shard's first frame is `first`): stamps without a
+    // time column are ordinal / rate, the same in a shard's bag as in the unsharded run's.
+    std::uint64_t ordinal = first; // (writer thread only)
     WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
         if (bag_writer) {
             const bool u16 = bag_options->polar || bag_options->sonar_u16;
