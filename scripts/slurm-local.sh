@@ -2,7 +2,7 @@
 # A real Slurm job array on this machine (docs/scale.md): starts munged, slurmctld and slurmd on
 # localhost (Debian 12's slurm-wlm and munge, installed when missing; configuration, state and logs
 # in a temporary folder), submits examples/slurm/render_array.sbatch as a 4-task array over the
-# bundled trajectory twice (frame folders and .h5 shards), waits, merges with 'vksonar merge',
+# bundled trajectory three times (frame folders, .h5 shards, ROS 2 bags), waits, merges with 'vksonar merge',
 # compares the merged output with a single-process run, and stops every daemon it started.
 #
 #   sudo bash scripts/slurm-local.sh [path/to/vksonar]      (default: build/vksonar)
@@ -126,24 +126,25 @@ done
 [ "$state" = "idle" ] || { say "the node did not come up (state '${state:-none}')"; exit 1; }
 sinfo
 
-# ---- the array, twice: frame folders and .h5 shards ----------------------------------------------
-submit() { # OUT -> job id
+# ---- the array, three times: frame folders, .h5 shards, ROS 2 bags -----------------------------
+submit() { # OUT [SAVE] -> job id
   sbatch --parsable --array=0-$((tasks - 1)) --cpus-per-task=1 --mem=512M --chdir="$work/out" \
     --output="$work/out/task-%A_%a.log" --export="ALL,VKSONAR=$vksonar" \
-    "$repo/examples/slurm/render_array.sbatch" "$trajectory" "$1" --save polar,polar_u16
+    "$repo/examples/slurm/render_array.sbatch" "$trajectory" "$1" --save "${2:-polar,polar_u16}"
 }
 start=$(date +%s%N)
 folders_job=$(submit "$work/out/run")
 h5_job=$(submit "$work/out/run.h5")
-say "submitted array jobs $folders_job (frame folders) and $h5_job (.h5), $tasks tasks each"
+bag_job=$(submit "$work/out/run.mcap" polar)
+say "submitted array jobs $folders_job (frame folders), $h5_job (.h5) and $bag_job (ROS 2 bags), $tasks tasks each"
 deadline=$((SECONDS + 600))
-while [ -n "$(squeue -h -j "$folders_job,$h5_job" 2>/dev/null)" ]; do
+while [ -n "$(squeue -h -j "$folders_job,$h5_job,$bag_job" 2>/dev/null)" ]; do
   [ $SECONDS -lt $deadline ] || { say "the arrays did not finish in 600 s"; squeue; exit 1; }
   sleep 1
 done
 array_ms=$((($(date +%s%N) - start) / 1000000))
 failed=0
-for job in "$folders_job" "$h5_job"; do
+for job in "$folders_job" "$h5_job" "$bag_job"; do
   for ((i = 0; i < tasks; i++)); do
     line=$(scontrol -o show job "${job}_$i" 2>/dev/null | grep -o 'JobState=[A-Z_]* .*ExitCode=[0-9:]*' |
       sed 's/ .*ExitCode=/ ExitCode=/' || true)
@@ -155,16 +156,19 @@ for log in "$work"/out/task-*.log; do
   grep -h "frames rendered" "$log" | sed "s|^|  $(basename "$log"): |"
 done
 [ $failed -eq 0 ] || { say "a task did not complete:"; tail -n 5 "$work"/out/task-*.log; exit 1; }
-say "both arrays ($tasks tasks each, $cpus CPUs) finished in $((array_ms / 1000)).$((array_ms % 1000 / 100)) s (submit to last task done)"
+say "the three arrays ($tasks tasks each, $cpus CPUs) finished in $((array_ms / 1000)).$((array_ms % 1000 / 100)) s (submit to last task done)"
 
 # ---- merge and compare with one process -----------------------------------------------------------
 "$vksonar" merge "$work/merged" "$work"/out/run/shard_*
 "$vksonar" merge "$work/merged.h5" "$work"/out/run.shard_*.h5
+mkdir -p "$work/merged_bag" "$work/single_bag"
+"$vksonar" merge "$work/merged_bag/run.mcap" "$work"/out/run.shard_*.mcap
 start=$(date +%s%N)
 "$vksonar" render --trajectory "$trajectory" --out "$work/single" --save polar,polar_u16 2>/dev/null
 "$vksonar" render --trajectory "$trajectory" --out "$work/single.h5" --save polar,polar_u16 2>/dev/null
+"$vksonar" render --trajectory "$trajectory" --out "$work/single_bag/run.mcap" --save polar 2>/dev/null
 single_ms=$((($(date +%s%N) - start) / 1000000))
-say "the same two runs in one process each: $((single_ms / 1000)).$((single_ms % 1000 / 100)) s"
+say "the same three runs in one process each: $((single_ms / 1000)).$((single_ms % 1000 / 100)) s"
 
 frames=0
 differ=0
@@ -196,6 +200,12 @@ elif command -v h5diff >/dev/null; then
   h5diff "$work/single.h5" "$work/merged.h5" && say ".h5: h5diff finds no difference" || differ=1
 else
   say ".h5: not compared (no python3 with h5py, no h5diff)"
+fi
+if cmp -s "$work/single_bag/run.mcap" "$work/merged_bag/run.mcap"; then
+  say "ROS 2 bag: $(stat -c %s "$work/single_bag/run.mcap") bytes, merged byte-identical: yes"
+else
+  say "ROS 2 bag: the merged bag differs from the single-process one"
+  differ=1
 fi
 [ $differ -eq 0 ] || { say "FAILED: the merged output differs from the single-process run"; exit 1; }
 say "OK: the $tasks-task Slurm arrays merged equal the single-process run"
