@@ -13,17 +13,6 @@
 namespace vksonar::cli::mcap {
 namespace {
 
-constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
-enum Op : std::uint8_t {
-    kHeader = 0x01,
-    kFooter = 0x02,
-    kSchema = 0x03,
-    kChannel = 0x04,
-    kMessage = 0x05,
-    kChunk = 0x06,
-    kMetadata = 0x0C,
-    kDataEnd = 0x0F,
-};
 // A record or chunk larger than this is refused rather than allocated (the writer's chunks are ~1 MiB;
 // a frame's messages are bins x beams x 4 bytes and a fan image).
 constexpr std::uint64_t kMaxRecord = std::uint64_t(1) << 32;
@@ -79,7 +68,7 @@ private:
 
 void dispatch(std::uint8_t op, Cursor c, const ReadCallbacks& cb) {
     switch (op) {
-    case kSchema: {
+    case op_schema: {
         ReadSchema s;
         s.id = c.number<std::uint16_t>("schema id");
         s.name = c.text("schema name");
@@ -88,7 +77,7 @@ void dispatch(std::uint8_t op, Cursor c, const ReadCallbacks& cb) {
         if (cb.schema) cb.schema(s);
         break;
     }
-    case kChannel: {
+    case op_channel: {
         ReadChannel ch;
         ch.id = c.number<std::uint16_t>("channel id");
         ch.schema_id = c.number<std::uint16_t>("channel schema id");
@@ -98,7 +87,7 @@ void dispatch(std::uint8_t op, Cursor c, const ReadCallbacks& cb) {
         if (cb.channel) cb.channel(ch);
         break;
     }
-    case kMessage: {
+    case op_message: {
         ReadMessage m;
         m.channel_id = c.number<std::uint16_t>("message channel id");
         m.sequence = c.number<std::uint32_t>("message sequence");
@@ -109,7 +98,7 @@ void dispatch(std::uint8_t op, Cursor c, const ReadCallbacks& cb) {
         if (cb.message) cb.message(m);
         break;
     }
-    case kMetadata: {
+    case op_metadata: {
         const std::string name = c.text("metadata name");
         const KeyValues values = c.map("metadata");
         if (cb.metadata) cb.metadata(name, values);
@@ -158,17 +147,17 @@ Result<ReadSummary> read(const std::string& path, const ReadCallbacks& callbacks
             if (length > 0 && std::fread(record.data(), 1, length, file.get()) != length) break; // cut short
             Cursor c(record.data(), record.size());
             if (first) {
-                if (op != kHeader) throw Bad{"the first record is not a Header"};
+                if (op != op_header) throw Bad{"the first record is not a Header"};
                 summary.profile = c.text("header profile");
                 summary.library = c.text("header library");
                 first = false;
                 continue;
             }
-            if (op == kDataEnd || op == kFooter) {
-                summary.complete = op == kDataEnd;
+            if (op == op_data_end || op == op_footer) {
+                summary.complete = op == op_data_end;
                 break;
             }
-            if (op != kChunk) {
+            if (op != op_chunk) {
                 dispatch(op, c, callbacks);
                 continue;
             }

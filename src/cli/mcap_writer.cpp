@@ -12,24 +12,6 @@
 namespace vksonar::cli::mcap {
 namespace {
 
-constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
-
-enum Op : std::uint8_t {
-    op_header = 0x01,
-    op_footer = 0x02,
-    op_schema = 0x03,
-    op_channel = 0x04,
-    op_message = 0x05,
-    op_chunk = 0x06,
-    op_message_index = 0x07,
-    op_chunk_index = 0x08,
-    op_statistics = 0x0B,
-    op_metadata = 0x0C,
-    op_metadata_index = 0x0D,
-    op_summary_offset = 0x0E,
-    op_data_end = 0x0F,
-};
-
 std::array<std::uint32_t, 256> make_crc_table() {
     std::array<std::uint32_t, 256> table{};
     for (std::uint32_t i = 0; i < 256; ++i) {

@@ -20,6 +20,24 @@
 
 namespace vksonar::cli::mcap {
 
+// The file's magic (start and end) and the record opcodes of the specification that vksonar uses.
+inline constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
+enum Op : std::uint8_t {
+    op_header = 0x01,
+    op_footer = 0x02,
+    op_schema = 0x03,
+    op_channel = 0x04,
+    op_message = 0x05,
+    op_chunk = 0x06,
+    op_message_index = 0x07,
+    op_chunk_index = 0x08,
+    op_statistics = 0x0B,
+    op_metadata = 0x0C,
+    op_metadata_index = 0x0D,
+    op_summary_offset = 0x0E,
+    op_data_end = 0x0F,
+};
+
 // CRC-32 (IEEE 802.3, reflected, init and final xor 0xFFFFFFFF) of `size` bytes, continuing `crc`
 // (0 to start): crc32(b, crc32(a)) == crc32(a followed by b).
 std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc = 0);
