@@ -145,10 +145,11 @@ TEST_F(Shard, BadShardFlagIsOneLine) {
     EXPECT_NE(r.err.find("--shard: shards split a trajectory"), std::string::npos) << r.err;
 }
 
-// ROS 2 bags: each shard (flag or array environment) writes its block of frames as a bag with its
-// shard record; `vksonar merge` joins them into the unsharded run's bag byte for byte (same file name:
-// rosbag2's metadata names the file), zstd chunks too. Refused in one line each, OUT not written: a
-// gap, a shard of another run, a bag cut short (a killed shard: no record), an unsharded bag.
+// ROS 2 bags: each shard (flag, Slurm array or Kubernetes Indexed Job environment) writes its block of
+// frames as a bag with its shard record; `vksonar merge` joins them into the unsharded run's bag byte
+// for byte (same file name: rosbag2's metadata names the file), zstd chunks too. Refused in one line
+// each, OUT not written: a gap, an overlap, a shard of another run (seed, --rate), a bag cut short (a
+// killed shard), an unsharded bag.
 TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
     auto bag_args = [&](const fs::path& bag, std::vector<std::string> extra) {
         std::vector<std::string> args = render_args("unused", std::move(extra));
@@ -167,8 +168,10 @@ TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
         for (int i = 0; i < 3; ++i) {
             std::vector<std::string> extra = compress;
             std::vector<std::string> env;
-            if (i == 1) { // the middle one from a Slurm array's environment
+            if (i == 1) { // the middle one from a Slurm array's environment, the last from a K8s Job's
                 env = {"SLURM_ARRAY_TASK_ID=1", "SLURM_ARRAY_TASK_COUNT=3"};
+            } else if (i == 2) {
+                env = {"JOB_COMPLETION_INDEX=2", "VKSONAR_SHARD_COUNT=3"};
             } else {
                 extra.insert(extra.end(), {"--shard", std::to_string(i) + "/3"});
             }
@@ -197,12 +200,70 @@ TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
         EXPECT_FALSE(fs::exists(dir_ / "never.mcap"));
     };
     refused({"part0.mcap", "part2.mcap"}, "shard 1/3 is missing");
+    refused({"part0.mcap", "part1.mcap", "part1.mcap", "part2.mcap"}, "given twice");
     ASSERT_EQ(run(bag_args(dir / "seed7.mcap", {"--shard", "1/3", "--seed", "7"})).exit_code, 0);
     refused({"part0.mcap", "seed7.mcap", "part2.mcap"}, "seed: 1 vs 7");
+    // The stamps are ordinal / --rate: a shard at another rate is another run.
+    ASSERT_EQ(run(bag_args(dir / "rate5.mcap", {"--shard", "1/3", "--rate", "5"})).exit_code, 0);
+    refused({"part0.mcap", "rate5.mcap", "part2.mcap"}, "rate: 10 vs 5");
     const std::string part1 = read_text(dir / "part1.mcap");
     write_text(dir / "cut.mcap", part1.substr(0, part1.size() / 2));
-    refused({"part0.mcap", "cut.mcap", "part2.mcap"}, "incomplete");
+    refused({"part0.mcap", "cut.mcap", "part2.mcap"}, "is incomplete: 0 of 2 frames");
     refused({"whole/run.mcap"}, "not a shard");
+}
+
+// A bag shard run again: a complete one is left as it is (nothing rendered); one of another shard or
+// run is refused in one line and kept; one cut short (its frames not closed into a chunk) is written
+// again and then merges into the unsharded bag. (A killed shard whose bag has whole chunks keeps their
+// frames: tests/python/check_shards.py kills one.)
+TEST_F(Shard, BagShardReRuns) {
+    auto bag_args = [&](const fs::path& bag, std::vector<std::string> extra) {
+        std::vector<std::string> args = render_args("unused", std::move(extra));
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--out") args[i + 1] = bag.string();
+        return args;
+    };
+    fs::create_directories(dir_ / "whole");
+    fs::create_directories(dir_ / "merged");
+    ASSERT_EQ(run(bag_args(dir_ / "whole" / "run.mcap", {})).exit_code, 0);
+    for (int i = 0; i < 3; ++i)
+        ASSERT_EQ(run(bag_args(dir_ / ("part" + std::to_string(i) + ".mcap"), {"--shard", std::to_string(i) + "/3"}))
+                      .exit_code,
+                  0);
+    const fs::path part1 = dir_ / "part1.mcap";
+    const std::string complete = read_text(part1);
+
+    ShardRun r = run(bag_args(part1, {"--shard", "1/3"}));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find("2 already on disk"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(": 0 frames rendered"), std::string::npos) << r.err;
+    EXPECT_TRUE(read_text(part1) == complete) << "a complete bag shard was rewritten";
+
+    r = run(bag_args(part1, {"--shard", "1/3", "--seed", "7"}));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("holds another run (seed: 1 vs 7)"), std::string::npos) << r.err;
+    r = run(bag_args(part1, {"--shard", "1/3", "--rate", "20"}));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("holds another run (rate: 10 vs 20)"), std::string::npos) << r.err;
+    r = run(bag_args(part1, {"--shard", "2/3"}));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("holds shard 1/3, not shard 2/3"), std::string::npos) << r.err;
+    r = run(bag_args(part1, {}));
+    EXPECT_EQ(r.exit_code, 0) << r.err; // unsharded: a new bag over it, as any unsharded run
+    write_text(part1, complete);
+    EXPECT_TRUE(read_text(part1) == complete);
+
+    // Cut inside its only chunk: the record is there, no frame is whole; the re-run writes it whole.
+    write_text(part1, complete.substr(0, complete.size() / 2));
+    r = run(bag_args(part1, {"--shard", "1/3"}));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find(": 2 frames rendered"), std::string::npos) << r.err;
+    r = run({"merge", (dir_ / "merged" / "run.mcap").string(), (dir_ / "part0.mcap").string(), part1.string(),
+             (dir_ / "part2.mcap").string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_TRUE(read_text(dir_ / "whole" / "run.mcap") == read_text(dir_ / "merged" / "run.mcap"));
 }
 
 TEST_F(Shard, NonsenseEnvironmentIsOneLine) {

@@ -61,12 +61,12 @@ public:
     McapWriterImpl(std::string path, const Plan& plan, McapOptions options)
         : path_(std::move(path)), plan_(plan), options_(std::move(options)) {}
 
-    Result<void> open() {
+    Result<void> open(const std::string& file) {
         mcap::WriterOptions writer_options;
         writer_options.profile = "ros2";
         writer_options.library = options_.library;
         writer_options.zstd = options_.zstd;
-        if (auto opened = writer_.open(path_, writer_options); !opened) return opened;
+        if (auto opened = writer_.open(file, writer_options); !opened) return opened;
         const std::string& p = options_.prefix;
         if (options_.sonar_image)
             add(sonar_image_, p + "/sonar_image", "marine_acoustic_msgs/msg/ProjectedSonarImage", qos_yaml(10, false));
@@ -75,6 +75,10 @@ public:
         if (options_.cloud) add(cloud_, p + "/points", "sensor_msgs/msg/PointCloud2", qos_yaml(10, false));
         add(tf_, "/tf", "tf2_msgs/msg/TFMessage", qos_yaml(100, false));
         add(tf_static_, "/tf_static", "tf2_msgs/msg/TFMessage", qos_yaml(1, true));
+        // A shard's record goes first, before any frame: a killed shard's bag still says which shard
+        // of which run it holds, and its re-run can go on after its last whole chunk.
+        if (!options_.shard.empty())
+            if (auto written = writer_.write_metadata(kShardRecordName, options_.shard); !written) return written;
 
         // Constant parts of the sonar image: beam directions in the message's own frame (Z forward,
         // X up, so Y starboard: azimuth a, positive to port, is (0, -sin a, cos a)), bin ranges,
@@ -190,12 +194,33 @@ public:
         std::vector<BagTopic> topics;
         for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_})
             if (t->channel) topics.push_back({t->name, t->type, t->qos, t->sequence});
-        if (!options_.shard.empty()) writer_.add_metadata("vksonar_shard", options_.shard);
         writer_.add_metadata(
             "rosbag2", {{"serialized_metadata", rosbag2_metadata_yaml(path_.substr(path_.find_last_of('/') + 1), topics,
                                                                       first_ns_, last_ns_, writer_.message_count())}});
         return writer_.close();
     }
+
+    Result<void> replay(const std::string& topic, std::uint64_t log_time, std::uint64_t publish_time,
+                        const std::uint8_t* data, std::size_t size) override {
+        Topic* t = nullptr;
+        for (Topic* known : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_})
+            if (known->channel && known->name == topic) t = known;
+        if (!t) return make_error(ErrorCode::invalid_argument, "topic " + topic + " is not one this run writes");
+        if (t == &tf_) { // a frame begins: the one before is whole
+            if (frames_ > 0)
+                if (auto ended = writer_.end_batch(); !ended) return ended;
+            if (frames_ == 0 && !tf_static_.sequence) first_ns_ = log_time;
+            last_ns_ = log_time;
+            ++frames_;
+        } else if (t == &tf_static_) {
+            first_ns_ = log_time;
+        }
+        return writer_.write(t->channel, t->sequence++, log_time, publish_time, data, size);
+    }
+
+    Result<void> flush() override { return writer_.flush(); }
+
+    std::uint64_t frames() const override { return frames_; }
 
 private:
     void add(Topic& topic, const std::string& name, const std::string& type, const std::string& qos) {
@@ -255,9 +280,10 @@ bool mcap_zstd_available() {
 }
 
 Result<std::unique_ptr<McapDatasetWriter>> McapDatasetWriter::create(const std::string& path, const Plan& plan,
-                                                                     const McapOptions& options) {
+                                                                     const McapOptions& options,
+                                                                     const std::string& write_to) {
     auto writer = std::make_unique<McapWriterImpl>(path, plan, options);
-    if (auto opened = writer->open(); !opened) return opened.error();
+    if (auto opened = writer->open(write_to.empty() ? path : write_to); !opened) return opened.error();
     return std::unique_ptr<McapDatasetWriter>(std::move(writer));
 }
 

@@ -35,10 +35,14 @@ struct McapOptions {
     bool cloud = false;      // PREFIX/points
     bool zstd = false;       // zstd chunk compression
     std::string library;     // the MCAP header's library field
-    // A shard's record and run identity (render --shard): a "vksonar_shard" Metadata record that
-    // `vksonar merge` reads; empty for an unsharded run (then there is no such record).
+    // A shard's record and run identity (render --shard): a "vksonar_shard" Metadata record, written
+    // right after the Header, that `vksonar merge` and a re-run of the shard read; empty for an
+    // unsharded run (then there is no such record).
     mcap::KeyValues shard;
 };
+
+// The name of a shard bag's Metadata record (McapOptions::shard), written before its first frame.
+inline constexpr const char* kShardRecordName = "vksonar_shard";
 
 // One topic of a bag as rosbag2's metadata lists it.
 struct BagTopic {
@@ -55,8 +59,11 @@ bool mcap_zstd_available();
 class McapDatasetWriter {
 public:
     // Creates (or truncates) `path` and registers the topics. Fails with one line naming the file.
+    // `write_to`, when given, is the file written instead, to be renamed to `path` by the caller
+    // (rosbag2's metadata names `path`'s file).
     static Result<std::unique_ptr<McapDatasetWriter>> create(const std::string& path, const Plan& plan,
-                                                             const McapOptions& options);
+                                                             const McapOptions& options,
+                                                             const std::string& write_to = std::string());
     virtual ~McapDatasetWriter() = default;
     // Appends one frame at `stamp_ns`: `fan` when options.fan, `display_u16` (bins * beams) when
     // options.polar or sonar_u16. Whole frames end a batch: a killed run leaves the chunks before it.
@@ -64,6 +71,16 @@ public:
                                 const std::uint16_t* display_u16) = 0;
     // Writes the summary and closes the file.
     virtual Result<void> close() = 0;
+
+    // Resuming a shard (bag_shard_resume, merge.h): appends one message of a whole frame read back
+    // from the bag a killed run left, with the next sequence number of its topic; a /tf message
+    // begins a frame (as append writes them: /tf_static before the first frame's /tf).
+    virtual Result<void> replay(const std::string& topic, std::uint64_t log_time, std::uint64_t publish_time,
+                                const std::uint8_t* data, std::size_t size) = 0;
+    // Closes the open chunk and hands the file to the operating system.
+    virtual Result<void> flush() = 0;
+    // Frames written (appended or replayed).
+    virtual std::uint64_t frames() const = 0;
 };
 
 } // namespace vksonar::cli

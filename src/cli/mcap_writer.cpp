@@ -268,12 +268,33 @@ void Writer::add_metadata(const std::string& name, const KeyValues& values) {
     metadata_.emplace_back(name, values);
 }
 
+Result<void> Writer::write_metadata(const std::string& name, const KeyValues& values) {
+    if (!file_) return fail("the file is not open");
+    if (auto flushed = flush_chunk(); !flushed) return flushed;
+    scratch_.clear();
+    Bytes out{scratch_};
+    const std::size_t r = out.begin_record(op_metadata);
+    out.str(name);
+    out.map(values);
+    out.end_record(r);
+    metadata_indexes_.push_back({position_, scratch_.size(), name});
+    if (auto written = put(scratch_, true); !written) return written;
+    if (std::fflush(file_) != 0) return fail(std::strerror(errno ? errno : EIO));
+    return {};
+}
+
+Result<void> Writer::flush() {
+    if (auto flushed = flush_chunk(); !flushed) return flushed;
+    if (std::fflush(file_) != 0) return fail(std::strerror(errno ? errno : EIO));
+    return {};
+}
+
 Result<void> Writer::close() {
     if (!file_) return fail("the file is not open");
     if (auto flushed = flush_chunk(); !flushed) return flushed;
 
     // Metadata records, then Data End with the CRC of everything before it.
-    std::vector<MetadataIndex> metadata_indexes;
+    std::vector<MetadataIndex>& metadata_indexes = metadata_indexes_; // those written already, then these
     scratch_.clear();
     Bytes out{scratch_};
     for (const auto& [name, values] : metadata_) {
@@ -321,7 +342,7 @@ Result<void> Writer::close() {
         s.u16(static_cast<std::uint16_t>(schemas_.size()));
         s.u32(static_cast<std::uint32_t>(channels_.size()));
         s.u32(0); // attachments
-        s.u32(static_cast<std::uint32_t>(metadata_.size()));
+        s.u32(static_cast<std::uint32_t>(metadata_indexes.size()));
         s.u32(static_cast<std::uint32_t>(chunk_indexes_.size()));
         s.u64(message_count_ ? start_time_ : 0);
         s.u64(message_count_ ? end_time_ : 0);

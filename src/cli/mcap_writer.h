@@ -77,6 +77,11 @@ public:
     Result<void> end_batch();
     // A Metadata record (written in the data section at close(), indexed in the summary).
     void add_metadata(const std::string& name, const KeyValues& values);
+    // A Metadata record written now, after the open chunk (closed first), and flushed: a file cut
+    // short keeps it (a shard bag's record, written before its first frame).
+    Result<void> write_metadata(const std::string& name, const KeyValues& values);
+    // Closes the open chunk, whatever its size, and hands the file to the operating system.
+    Result<void> flush();
     // Writes the last chunk, the metadata, Data End, the summary and the Footer; closes the file.
     Result<void> close();
 
@@ -115,6 +120,7 @@ private:
     std::vector<Schema> schemas_; // id = index + 1
     std::vector<Channel> channels_;
     std::vector<std::pair<std::string, KeyValues>> metadata_;
+    std::vector<MetadataIndex> metadata_indexes_; // of those written so far
     // The open chunk.
     std::vector<std::uint8_t> chunk_;
     std::vector<bool> schema_in_chunk_, channel_in_chunk_;

@@ -5,9 +5,11 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "cli/dataset_mcap.h"
 #include "cli/mcap_writer.h"
 #include "cli/shard.h"
 
@@ -42,11 +44,26 @@ void h5_merge(const std::vector<ShardInput>& shards, const std::string& out);
 
 // ROS 2 bags (merge_mcap.cpp): shard bags written by `render --out FILE.mcap --shard i/N`, which
 // carry shard_metadata() as a "vksonar_shard" Metadata record.
+// `zstd`: the shard's chunks are compressed (--compress), and so will the merged bag's be.
 mcap::KeyValues shard_metadata(const ShardRecord& shard, const Identity& identity, const std::string& backend,
-                               const std::string& device);
+                               const std::string& device, bool zstd);
 bool mcap_merge_accepts(const std::string& path);
 bool mcap_merge_output_ok(const std::string& out);
 ShardInput mcap_merge_read(const std::string& path);
 void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out);
+
+// A re-run of a bag shard whose --out bag `path` is there already. Its shard record must name this
+// shard of this run (else BadInput, one line, the bag left as it is). A closed bag holding the whole
+// block is complete: nothing to render (`complete`, no writer). A bag a killed run left has its whole
+// chunks' frames (`frames`, the first frames of the block): they are written again into a new bag
+// that replaces it and `writer` goes on after them. A bag that does not read back is started over
+// (a warning; no writer, frames 0): then the caller creates the bag as a first run does.
+struct BagResume {
+    std::unique_ptr<McapDatasetWriter> writer;
+    std::uint64_t frames = 0; // whole frames kept, the first of the block
+    bool complete = false;
+};
+BagResume bag_shard_resume(const std::string& path, const Plan& plan, const McapOptions& options,
+                           const ShardRecord& shard, const Identity& identity);
 
 } // namespace vksonar::cli

@@ -28,9 +28,9 @@ constexpr const char* kUsage =
     "Merges the outputs of 'vksonar render --trajectory ... --shard i/N' into the output the unsharded run\n"
     "writes: frame folders (each shard's --out DIR, with its shard.json) into one folder OUT, .h5 shard\n"
     "files into one OUT.h5, or ROS 2 bags (.mcap) into one OUT.mcap. Every shard 0..N-1 of one run must be\n"
-    "given once and be complete (a folder or .h5 shard that stopped resumes when re-run; a bag shard is\n"
-    "written again whole); the shards must agree on config, seed, scene, backend, saved arrays and\n"
-    "trajectory. Frame files are hard-linked into OUT where the file system allows, else copied. OUT must\n"
+    "given once and be complete (a shard that stopped resumes when re-run); the shards must agree on\n"
+    "config, seed, scene, backend, saved arrays and trajectory (bags: topics, frame id and rate too).\n"
+    "Frame files are hard-linked into OUT where the file system allows, else copied. OUT must\n"
     "not exist. docs/scale.md\n";
 
 // ---- per-frame folders ---------------------------------------------------------------------------
@@ -204,7 +204,7 @@ int run_merge(const std::vector<std::string>& argv) {
         for (const MergeFormat& f : kFormats)
             if (!found && f.accepts(path)) found = &f;
         if (!found)
-            throw BadInput("merge: " + path + ": not a shard's output (a folder with shard.json or a .h5 file)");
+            throw BadInput("merge: " + path + ": not a shard's output (a folder with shard.json, a .h5 or a .mcap file)");
         if (format && found != format)
             throw BadInput("merge: " + path + " is " + found->name + " but " + format_path + " is " + format->name +
                            ": merge shards of one format");

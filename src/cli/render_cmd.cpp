@@ -863,7 +863,7 @@ int run_render(const std::vector<std::string>& argv) {
     std::optional<OutputDir> out_dir;
     std::optional<DatasetFile> dataset_file;
     if (dataset || bag)
-        dataset_file.emplace(out_path, shard.has_value() && !bag); // a bag shard is written again whole
+        dataset_file.emplace(out_path, shard.has_value()); // a shard's file is resumed (or refused), not removed
     else
         out_dir.emplace(out_path);
 
@@ -935,32 +935,48 @@ int run_render(const std::vector<std::string>& argv) {
         start_folder_shard(out_dir->path().string(), manifest, done);
     }
     std::unique_ptr<McapDatasetWriter> bag_writer;
+    bool bag_complete = false; // a re-run shard whose bag holds its whole block already
+    const double bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
     if (bag) {
         bag_options->zstd = args.has("--compress");
         bag_options->library = "vksonar 0.1.0 (its own MCAP writer)";
-        if (shard) // the shard's record and the run's identity, for `vksonar merge` (merge_mcap.cpp)
-            bag_options->shard = shard_metadata(
-                *shard, run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
-                backend_name, device);
-        auto created = McapDatasetWriter::create(out_path, plan, *bag_options);
-        if (!created) throw Failure(created.error().message);
-        bag_writer = std::move(created.value());
+        if (shard) {
+            // The shard's record and the run's identity, for `vksonar merge` and a re-run
+            // (merge_mcap.cpp); the identity also names what the bag's messages depend on.
+            Identity identity =
+                run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard);
+            char rate[32];
+            std::snprintf(rate, sizeof rate, "%.17g", bag_rate);
+            identity.insert(identity.end(), {{"ros_prefix", bag_options->prefix},
+                                             {"ros_frame", bag_options->frame},
+                                             {"ros_sonar_dtype", bag_options->sonar_u16 ? "uint16" : "float32"},
+                                             {"rate", timed ? std::string("time column") : std::string(rate)}});
+            bag_options->shard = shard_metadata(*shard, identity, backend_name, device, bag_options->zstd);
+            BagResume resumed = bag_shard_resume(out_path, plan, *bag_options, *shard, identity);
+            for (std::uint64_t k = 0; k < resumed.frames; ++k)
+                done[first + k] = 1;
+            bag_writer = std::move(resumed.writer);
+            bag_complete = resumed.complete;
+        }
+        if (!bag_writer && !bag_complete) {
+            auto created = McapDatasetWriter::create(out_path, plan, *bag_options);
+            if (!created) throw Failure(created.error().message);
+            bag_writer = std::move(created.value());
+        }
     }
-    const double bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
-    // The frame's ordinal in the whole trajectory (a shard's first frame is `first`): stamps without a
-    // time column are ordinal / rate, the same in a shard's bag as in the unsharded run's.
-    std::uint64_t ordinal = first; // (writer thread only)
     WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
-        if (bag_writer) {
+        if (bag) { // (a complete bag shard has no writer, and no frame comes here)
             const bool u16 = bag_options->polar || bag_options->sonar_u16;
             if (u16) host::quantize_display(slot.frame, outputs.quantized);
             if (bag_options->fan) outputs.fan.render(slot.frame, outputs.image);
-            const double seconds = timed ? slot.time_s : static_cast<double>(ordinal) / bag_rate;
+            // Without a time column, time_s is the frame's ordinal in the whole trajectory (a shard's
+            // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
+            // unsharded run's.
+            const double seconds = timed ? slot.time_s : slot.time_s / bag_rate;
             const auto stamp_ns = static_cast<std::uint64_t>(std::llround(seconds * 1e9));
             auto appended = bag_writer->append(slot.frame, slot.pose, stamp_ns, &outputs.image,
                                                u16 ? outputs.quantized.data() : nullptr);
             if (!appended) throw Failure(appended.error().message);
-            ++ordinal;
             dataset_file->keep();
             return;
         }

@@ -6,8 +6,8 @@ Checks, each of which can fail:
   - 3 shards of a trajectory (.h5, compressed and not, and frame folders) merged equal the unsharded
     run: every array bit for bit, frame_index, pose and time in order;
   - the shard is read from a Slurm array's and a Kubernetes Indexed Job's environment;
-  - a shard killed half way and run again renders only the frames it lacks (.h5 and folders), and
-    the result still merges into the unsharded run;
+  - a shard killed half way and run again renders only the frames it lacks (.h5, folders and a ROS 2
+    bag), and the result still merges into the unsharded run (the bag byte for byte);
   - merge refuses a gap, an overlap, a shard of another run and an incomplete shard with one line.
 """
 import glob
@@ -164,6 +164,33 @@ with tempfile.TemporaryDirectory() as tmp:
     vksonar(["merge", p("long_f_merged"), p("first_f"), folder])
     same_folders(p("long_f"), p("long_f_merged"), "killed and resumed folders merged")
     print(f"killed folder shard: {before} frames on disk before the re-run")
+
+    # A ROS 2 bag shard killed half way keeps the frames of its whole chunks (~1 MiB each); the re-run
+    # writes them into a new bag and renders only the rest, and the bags merge into the unsharded one.
+    bag = p("killed.mcap")
+    bag_args = ["render", "--trajectory", long_poses, "--save", "polar", "--shard", "1/2"] + SMALL
+    process = subprocess.Popen([CLI] + bag_args + ["--out", bag], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    kill_when(process, lambda: os.path.exists(bag) and os.path.getsize(bag) > (3 << 20), "bag shard")
+    killed_size = os.path.getsize(bag)
+    vksonar(["render", "--trajectory", long_poses, "--save", "polar", "--shard", "0/2", "--out", p("first.mcap")]
+            + SMALL)
+    run = vksonar(["merge", p("early.mcap"), p("first.mcap"), bag], expect=2)
+    check("is incomplete" in run.stderr and "not closed" in run.stderr and run.stderr.count("\n") == 1,
+          f"merge of a killed bag shard: {run.stderr}")
+    run = vksonar(bag_args + ["--out", bag])
+    before = int(run.stderr.split(" already on disk")[0].split(",")[-1]) if "already on disk" in run.stderr else 0
+    rendered = int(run.stderr.split("frames rendered")[0].split(":")[-1])
+    check(0 < before < 750 and rendered == 750 - before,
+          f"the bag re-run kept {before} frames of a {killed_size}-byte bag and rendered {rendered}: {run.stderr}")
+    os.makedirs(p("bag_whole"))
+    os.makedirs(p("bag_merged"))
+    vksonar(["render", "--trajectory", long_poses, "--save", "polar", "--out", p("bag_whole/long.mcap")] + SMALL)
+    vksonar(["merge", p("bag_merged/long.mcap"), p("first.mcap"), bag])
+    with open(p("bag_whole/long.mcap"), "rb") as f, open(p("bag_merged/long.mcap"), "rb") as g:
+        check(f.read() == g.read(), "killed and resumed bag shard merged differs from the unsharded bag")
+    print(f"killed bag shard: {before} frames in whole chunks of a {killed_size}-byte bag, {rendered} rendered by "
+          "the re-run")
 
     # ---- merge refuses, one line each -------------------------------------------------------------
     def refused(args, *expected):
