@@ -204,7 +204,8 @@ int run_merge(const std::vector<std::string>& argv) {
         for (const MergeFormat& f : kFormats)
             if (!found && f.accepts(path)) found = &f;
         if (!found)
-            throw BadInput("merge: " + path + ": not a shard's output (a folder with shard.json, a .h5 or a .mcap file)");
+            throw BadInput("merge: " + path +
+                           ": not a shard's output (a folder with shard.json, a .h5 or a .mcap file)");
         if (format && found != format)
             throw BadInput("merge: " + path + " is " + found->name + " but " + format_path + " is " + format->name +
                            ": merge shards of one format");

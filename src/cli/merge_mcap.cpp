@@ -200,8 +200,8 @@ BagResume bag_shard_resume(const std::string& path, const Plan& plan, const Mcap
     // into a temporary file that replaces the bag once they are on disk: the bag is a readable shard
     // bag at every moment.
     const fs::path target(path);
-    const fs::path temporary = (target.has_parent_path() ? target.parent_path() : fs::path(".")) /
-                               (".~" + target.filename().string());
+    const fs::path temporary =
+        (target.has_parent_path() ? target.parent_path() : fs::path(".")) / (".~" + target.filename().string());
     auto created = McapDatasetWriter::create(path, plan, options, temporary.string());
     if (!created) throw Failure(created.error().message);
     std::unique_ptr<McapDatasetWriter> writer = std::move(created.value());
@@ -217,9 +217,10 @@ BagResume bag_shard_resume(const std::string& path, const Plan& plan, const Mcap
     if (!read || !replayed || writer->frames() != old.frames) {
         writer.reset();
         fs::remove(temporary, ec);
-        std::fprintf(stderr, "warning: %s: its frames do not read back (%s): starting the shard over\n",
-                     path.c_str(),
-                     !read ? read.error().message.c_str() : !replayed ? replayed.error().message.c_str() : "a count");
+        std::fprintf(stderr, "warning: %s: its frames do not read back (%s): starting the shard over\n", path.c_str(),
+                     !read       ? read.error().message.c_str()
+                     : !replayed ? replayed.error().message.c_str()
+                                 : "a count");
         out.frames = 0;
         return out;
     }
