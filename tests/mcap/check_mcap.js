@@ -13,6 +13,9 @@
 //   - --compress (zstd chunks) decodes to the same messages; --ros-sonar-dtype uint16 = polar_u16.npy;
 //   - a run killed half way, and a file cut in the middle of a chunk, read record by record up to the
 //     last whole chunk, equal to the same frames of a whole run;
+//   - 3 shard bags (--shard i/3): each its block with the unsharded run's stamps and a vksonar_shard
+//     Metadata record; `vksonar merge` of them equals the unsharded bag, message for message and byte
+//     for byte;
 //   - bad input (an unwritable path, a bad time column, ...) gets one line and exit 2, and no file.
 "use strict";
 const fs = require("fs");
@@ -242,6 +245,42 @@ async function main() {
   check(headSonar.length === frames && killedSonar.every((m, k) => bytesEqual(m.data, headSonar[k].data)),
     `killed run: the ${frames} frames equal a whole run's`);
   console.log(`killed run: ${frames} whole frames in ${killed.chunks} chunks (${killed.error ? "ends in a partial record" : "ends at a record boundary"})`);
+
+  // Sharded bags, read by @mcap/core (summary and chunk CRCs): each of 3 shards holds its block with
+  // the unsharded run's stamps (no time column: global ordinal / --rate) and a vksonar_shard Metadata
+  // record; `vksonar merge` gives the unsharded bag, message for message and byte for byte.
+  fs.writeFileSync(file("untimed.csv"), "x,y,z,roll,pitch,yaw\n" +
+    poses.concat(poses).map((p) => p.join(",")).join("\n") + "\n"); // 10 frames: 0..2, 3..5, 6..9
+  fs.mkdirSync(file("sharded"), { recursive: true });
+  fs.mkdirSync(file("merged"), { recursive: true });
+  render(["--trajectory", file("untimed.csv"), "--out", file("sharded", "run.mcap"), "--rate", "4", ...SMALL]);
+  const whole = await readIndexed(file("sharded", "run.mcap"));
+  const parts = [];
+  for (let i = 0; i < 3; i++) {
+    parts.push(file("sharded", `part${i}.mcap`));
+    render(["--trajectory", file("untimed.csv"), "--out", parts[i], "--rate", "4", "--shard", `${i}/3`, ...SMALL]);
+    const part = await readIndexed(parts[i]);
+    const records = [];
+    for await (const m of part.reader.readMetadata({ name: "vksonar_shard" })) records.push(m.metadata);
+    const [first, end] = [[0, 3], [3, 6], [6, 10]][i];
+    check(records.length === 1 && records[0].get("index") === `${i}` && records[0].get("count") === "3" &&
+      records[0].get("first") === `${first}` && records[0].get("end") === `${end}` && records[0].get("identity.rate") === "4",
+      `shard ${i}/3: vksonar_shard record ${records.length ? [...records[0].entries()].join(" ") : "missing"}`);
+    const stamps = part.messages.filter((m) => m.topic === "/tf").map((m) => m.logTime);
+    const want = whole.messages.filter((m) => m.topic === "/tf").slice(first, end).map((m) => m.logTime);
+    check(stamps.length === end - first && stamps.every((t, k) => t === want[k] && t === BigInt(first + k) * 250000000n),
+      `shard ${i}/3: /tf stamps ${stamps} vs ${want}`);
+  }
+  const merge = spawnSync(CLI, ["merge", file("merged", "run.mcap"), ...parts], { encoding: "utf8" });
+  check(merge.status === 0, `merge of 3 bag shards: ${merge.stderr}`);
+  const merged = await readIndexed(file("merged", "run.mcap"));
+  const key = (m) => `${m.topic} ${m.sequence} ${m.logTime} ${m.publishTime}`;
+  check(merged.messages.length === whole.messages.length &&
+    merged.messages.every((m, k) => key(m) === key(whole.messages[k]) && bytesEqual(m.data, whole.messages[k].data)),
+    "merged shards: the unsharded bag's messages (topic, sequence, stamps, data)");
+  check(bytesEqual(merged.bytes, whole.bytes), "merged shards: the unsharded bag byte for byte");
+  console.log(`shards: 3 bags merged into ${merged.messages.length} messages, ${merged.bytes.length} bytes, ` +
+    `identical to the unsharded bag: ${bytesEqual(merged.bytes, whole.bytes)}`);
 
   // Bad input: one line, exit 2, no file.
   const bad = (args, expect, what) => {
