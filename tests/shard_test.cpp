@@ -212,6 +212,34 @@ TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
     refused({"whole/run.mcap"}, "not a shard");
 }
 
+// More shards than frames: a shard whose block is empty writes a bag with its record and no chunk
+// (so no Schema or Channel record; /tf_static comes with a first frame). Merged, the bags are still
+// the unsharded bag byte for byte (shard 0 here is empty: topics and /tf_static come from shard 1).
+TEST_F(Shard, BagShardsWithEmptyBlocksMerge) {
+    auto bag_args = [&](const fs::path& bag, std::vector<std::string> extra) {
+        std::vector<std::string> args = render_args("unused", std::move(extra));
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--out") args[i + 1] = bag.string();
+        return args;
+    };
+    fs::create_directories(dir_ / "whole");
+    fs::create_directories(dir_ / "merged");
+    ASSERT_EQ(run(bag_args(dir_ / "whole" / "run.mcap", {})).exit_code, 0);
+    std::vector<std::string> merge = {"merge", (dir_ / "merged" / "run.mcap").string()};
+    for (int i = 0; i < 9; ++i) { // 7 frames in 9 shards: blocks 0 and 4 are empty
+        const fs::path part = dir_ / ("part" + std::to_string(i) + ".mcap");
+        const ShardRun r = run(bag_args(part, {"--shard", std::to_string(i) + "/9"}));
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        if (i == 0) {
+            EXPECT_NE(r.err.find("no frames"), std::string::npos) << r.err;
+        }
+        merge.push_back(part.string());
+    }
+    const ShardRun merged = run(merge);
+    ASSERT_EQ(merged.exit_code, 0) << merged.err;
+    EXPECT_TRUE(read_text(dir_ / "whole" / "run.mcap") == read_text(dir_ / "merged" / "run.mcap"));
+}
+
 // A bag shard run again: a complete one is left as it is (nothing rendered); one of another shard or
 // run is refused in one line and kept; one cut short (its frames not closed into a chunk) is written
 // again and then merges into the unsharded bag. (A killed shard whose bag has whole chunks keeps their

@@ -5,7 +5,7 @@
 // check calls it incomplete. A re-run of such a shard goes on after those frames (bag_shard_resume).
 // The merge writes the shards' messages, in shard order, through the same MCAP writer the unsharded
 // run uses, with a chunk boundary after every frame as that run has, per-topic sequence numbers
-// counted across the shards, /tf_static once (from the first shard, stamped with the run's first
+// counted across the shards, /tf_static once (from the first shard with frames, stamped with the run's first
 // frame), and rosbag2's metadata for the whole run: the merged bag is the unsharded run's bag, byte
 // for byte, when OUT has the unsharded bag's file name (rosbag2's metadata names the file).
 #include <algorithm>
@@ -235,15 +235,21 @@ BagResume bag_shard_resume(const std::string& path, const Plan& plan, const Mcap
 }
 
 void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out) {
-    // Pass 1, first shard: its schemas and channels, registered in id order as the writer did.
+    // Pass 1, the first shard with frames (a bag's Schema and Channel records are in the chunks that
+    // use them, and a shard whose block is empty has none): its schemas and channels, registered in
+    // id order as the writer did.
+    std::size_t h = 0;
+    while (h + 1 < shards.size() && shards[h].frames == 0)
+        ++h;
+    const std::string& head_path = shards[h].path;
     std::map<std::uint16_t, mcap::ReadSchema> schemas;
     std::map<std::uint16_t, mcap::ReadChannel> channels;
     mcap::ReadCallbacks first;
     first.schema = [&](const mcap::ReadSchema& s) { schemas.emplace(s.id, s); };
     first.channel = [&](const mcap::ReadChannel& c) { channels.emplace(c.id, c); };
-    auto head = mcap::read(shards[0].path, first);
+    auto head = mcap::read(head_path, first);
     if (!head) throw BadInput("merge: " + head.error().message);
-    auto record = scan_bag(shards[0].path);
+    auto record = scan_bag(shards[0].path); // compressed as shard 0 was (--compress)
     if (!record) throw BadInput("merge: " + record.error().message);
 
     const fs::path target(out);
@@ -255,19 +261,19 @@ void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out) {
         mcap::WriterOptions options;
         options.profile = head->profile;
         options.library = head->library;
-        options.zstd = record->compression == "zstd"; // as the shards were written (--compress)
+        options.zstd = record->compression == "zstd";
         if (auto opened = writer.open(temporary.string(), options); !opened) throw Failure(opened.error().message);
         std::map<std::uint16_t, std::uint16_t> schema_of; // shard id -> merged id (the same, checked)
         for (const auto& [id, s] : schemas) {
             schema_of[id] = writer.add_schema(s.name, s.encoding, s.data);
-            if (schema_of[id] != id) throw Failure("merge: " + shards[0].path + ": schema ids are not 1, 2, ...");
+            if (schema_of[id] != id) throw Failure("merge: " + head_path + ": schema ids are not 1, 2, ...");
         }
         std::map<std::uint16_t, BagTopic> bag_topics;
         for (const auto& [id, c] : channels) {
             if (!schema_of.count(c.schema_id))
-                throw BadInput("merge: " + shards[0].path + ": channel " + c.topic + " has no schema");
+                throw BadInput("merge: " + head_path + ": channel " + c.topic + " has no schema");
             if (writer.add_channel(schema_of[c.schema_id], c.topic, c.encoding, c.metadata) != id)
-                throw Failure("merge: " + shards[0].path + ": channel ids are not 1, 2, ...");
+                throw Failure("merge: " + head_path + ": channel ids are not 1, 2, ...");
             std::string qos;
             for (const auto& [key, value] : c.metadata)
                 if (key == "offered_qos_profiles") qos = value.substr(0, value.size() - (value.empty() ? 0 : 1));
@@ -276,7 +282,7 @@ void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out) {
 
         // Pass 2: every shard's messages in order.
         std::map<std::uint16_t, std::uint32_t> sequence;
-        bool any_frame = false;
+        bool any_frame = false, tf_static = false;
         std::uint64_t first_ns = 0, last_ns = 0;
         Result<void> failed;
         for (std::size_t k = 0; k < shards.size(); ++k) {
@@ -286,14 +292,15 @@ void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out) {
                 topic_of[c.id] = c.topic;
                 const auto mine = channels.find(c.id);
                 if (mine == channels.end() || mine->second.topic != c.topic || mine->second.schema_id != c.schema_id)
-                    throw BadInput("merge: " + shards[k].path + ": its topics differ from " + shards[0].path +
+                    throw BadInput("merge: " + shards[k].path + ": its topics differ from " + head_path +
                                    "'s (channel " + std::to_string(c.id) + " " + c.topic + ")");
             };
             cb.message = [&](const mcap::ReadMessage& m) {
                 if (!failed) return;
                 const std::string& topic = topic_of[m.channel_id];
-                if (topic == "/tf_static" && k > 0) return; // once, from the run's first frame
-                if (topic == "/tf") {                       // a frame begins: the one before is whole
+                if (topic == "/tf_static" && tf_static) return; // once, from the run's first frame
+                if (topic == "/tf_static") tf_static = true;
+                if (topic == "/tf") { // a frame begins: the one before is whole
                     if (any_frame) failed = writer.end_batch();
                     if (!any_frame) first_ns = m.log_time;
                     any_frame = true;
