@@ -210,6 +210,16 @@ TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
     write_text(dir / "cut.mcap", part1.substr(0, part1.size() / 2));
     refused({"part0.mcap", "cut.mcap", "part2.mcap"}, "is incomplete: 0 of 2 frames");
     refused({"whole/run.mcap"}, "not a shard");
+    const ShardRun nowhere =
+        run({"merge", (dir_ / "no_such_folder" / "run.mcap").string(), (dir / "part0.mcap").string(),
+             (dir / "part1.mcap").string(), (dir / "part2.mcap").string()});
+    EXPECT_EQ(nowhere.exit_code, 2) << nowhere.err;
+    EXPECT_EQ(nowhere.err_lines(), 1u) << nowhere.err;
+    EXPECT_NE(nowhere.err.find("no folder"), std::string::npos) << nowhere.err;
+    std::string flipped = read_text(dir / "part1.mcap");
+    flipped[flipped.size() / 2] = static_cast<char>(flipped[flipped.size() / 2] ^ 0x5a); // inside its chunk
+    write_text(dir / "flipped.mcap", flipped);
+    refused({"part0.mcap", "flipped.mcap", "part2.mcap"}, "flipped.mcap: a chunk's CRC does not match");
 }
 
 // More shards than frames: a shard whose block is empty writes a bag with its record and no chunk
