@@ -42,6 +42,27 @@ TEST(Mcap, Crc32IsTheZlibCrc) {
     EXPECT_EQ(mcap::crc32(text, 9), 0xCBF43926u); // the standard check value
     EXPECT_EQ(mcap::crc32(text + 4, 5, mcap::crc32(text, 4)), 0xCBF43926u);
     EXPECT_EQ(mcap::crc32(text, 0), 0u);
+    // Against a bit-at-a-time CRC written here, for every length 0..300 and split points that cut
+    // the 8-byte steps anywhere.
+    std::vector<std::uint8_t> bytes(300);
+    std::uint32_t state = 12345;
+    for (auto& b : bytes)
+        b = static_cast<std::uint8_t>((state = state * 1103515245u + 12345u) >> 24);
+    auto bitwise = [&](std::size_t n) {
+        std::uint32_t c = 0xFFFFFFFFu;
+        for (std::size_t i = 0; i < n; ++i) {
+            c ^= bytes[i];
+            for (int k = 0; k < 8; ++k)
+                c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+        }
+        return c ^ 0xFFFFFFFFu;
+    };
+    for (std::size_t n = 0; n <= bytes.size(); ++n) {
+        const std::uint32_t want = bitwise(n);
+        ASSERT_EQ(mcap::crc32(bytes.data(), n), want) << n;
+        const std::size_t cut = (n * 7) / 13;
+        ASSERT_EQ(mcap::crc32(bytes.data() + cut, n - cut, mcap::crc32(bytes.data(), cut)), want) << n;
+    }
 }
 
 TEST(Cdr, ImageBytesByHand) {
