@@ -4,6 +4,7 @@
 // extensions, which would otherwise fail later with a less useful message.
 #define TINYGLTF_IMPLEMENTATION
 #include "scene/gltf_file.h"
+#include "scene/gltf_draco.h"
 #include "scene/gltf_meshopt.h"
 
 #include <algorithm>
@@ -125,8 +126,9 @@ enum class ExtensionUse { decoded, appearance, refused, unknown };
 
 ExtensionUse extension_use(const std::string& name) {
     static const char* const decoded[] = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"};
-    static const char* const refused[] = {"KHR_draco_mesh_compression", "KHR_meshopt_compression"};
+    static const char* const refused[] = {"KHR_meshopt_compression"};
     if (name == "EXT_meshopt_compression") return meshopt_available() ? ExtensionUse::decoded : ExtensionUse::refused;
+    if (name == "KHR_draco_mesh_compression") return draco_available() ? ExtensionUse::decoded : ExtensionUse::refused;
     static const char* const appearance_prefixes[] = {"KHR_materials_", "KHR_texture_", "EXT_texture_",
                                                       "MSFT_texture_",  "KHR_lights_",  "EXT_lights_"};
     static const char* const appearance[] = {"KHR_xmp",
