@@ -47,6 +47,42 @@ bool draco_available() {
 #endif
 }
 
+std::vector<DracoIndices> prepare_draco(nlohmann::json& doc) {
+    std::vector<DracoIndices> taken;
+    const auto meshes = doc.find("meshes");
+    if (meshes == doc.end() || !meshes->is_array()) return taken;
+    for (std::size_t m = 0; m < meshes->size(); ++m) {
+        nlohmann::json& mesh = (*meshes)[m];
+        if (!mesh.is_object()) continue;
+        const auto prims = mesh.find("primitives");
+        if (prims == mesh.end() || !prims->is_array()) continue;
+        for (std::size_t p = 0; p < prims->size(); ++p) {
+            nlohmann::json& prim = (*prims)[p];
+            if (!prim.is_object()) continue;
+            const auto ext = prim.find("extensions");
+            if (ext == prim.end() || !ext->is_object() || !ext->contains("KHR_draco_mesh_compression")) continue;
+            const auto indices = prim.find("indices");
+            if (indices == prim.end()) continue;
+            if (!indices->is_number_unsigned() ||
+                indices->get<std::size_t>() > std::size_t(std::numeric_limits<int>::max()))
+                fail(ErrorCode::parse, "mesh " + std::to_string(m) + " primitive " + std::to_string(p) +
+                                           ": indices = " + indices->dump() + " is not an accessor index");
+            taken.push_back({m, p, int(indices->get<std::size_t>())});
+            prim.erase(indices);
+        }
+    }
+    return taken;
+}
+
+void restore_draco(const std::vector<DracoIndices>& taken, tinygltf::Model& model) {
+    for (const DracoIndices& t : taken) { // tinygltf keeps every mesh and primitive, in order
+        if (t.mesh >= model.meshes.size() || t.primitive >= model.meshes[t.mesh].primitives.size())
+            fail(ErrorCode::parse,
+                 "mesh " + std::to_string(t.mesh) + " primitive " + std::to_string(t.primitive) + " was not read");
+        model.meshes[t.mesh].primitives[t.primitive].indices = t.accessor;
+    }
+}
+
 DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primitive& prim,
                            const tinygltf::Value& extension, const std::string& where) {
     const std::string ext_where = where + ": KHR_draco_mesh_compression";
@@ -138,8 +174,8 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
                                    idx_where + " declares " + std::to_string(index_count));
     const draco::PointAttribute* att = mesh->GetAttributeByUniqueId(std::uint32_t(position_id));
     if (!att)
-        fail(ErrorCode::parse, ext_where + ": the stream has no attribute " + std::to_string(position_id) +
-                                   " (attributes.POSITION)");
+        fail(ErrorCode::parse,
+             ext_where + ": the stream has no attribute " + std::to_string(position_id) + " (attributes.POSITION)");
     if (att->num_components() != 3)
         fail(ErrorCode::parse, ext_where + ": attribute " + std::to_string(position_id) + " has " +
                                    std::to_string(int(att->num_components())) + " components, not 3");

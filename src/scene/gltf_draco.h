@@ -5,9 +5,12 @@
 // as it decodes. Internal to src/scene.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "scene/gltf_file.h"
 
@@ -20,6 +23,16 @@ struct DracoGeometry {
     std::vector<float> positions;       // 3 per vertex, in the POSITION accessor's space
     std::vector<std::uint32_t> indices; // 3 per triangle
 };
+
+// tinygltf 2.7 refuses an indices accessor without a bufferView, which is how a Draco primitive's
+// indices are written: the indices of every primitive with the extension are taken out of `doc`
+// before tinygltf runs (prepare) and put back after it ran (restore).
+struct DracoIndices {
+    std::size_t mesh = 0, primitive = 0;
+    int accessor = -1;
+};
+std::vector<DracoIndices> prepare_draco(nlohmann::json& doc);
+void restore_draco(const std::vector<DracoIndices>& taken, tinygltf::Model& model);
 
 // Decodes the KHR_draco_mesh_compression stream of `prim` (`extension` is its value). Before the
 // decoder runs: the stream lies inside its buffer, the POSITION (and indices) accessors declare no

@@ -486,10 +486,12 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
     ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
-    const MeshoptPlan meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
-    if (!meshopt.empty()) bytes = with_json(bytes, binary, doc.dump());
+    const MeshoptPlan meshopt = prepare_meshopt(doc);           // edits doc only where the file uses the extension
+    const std::vector<DracoIndices> draco = prepare_draco(doc); // likewise
+    if (!meshopt.empty() || !draco.empty()) bytes = with_json(bytes, binary, doc.dump());
     tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, files, warnings);
     decode_meshopt(meshopt, model);
+    restore_draco(draco, model);
     return model;
 }
 

@@ -383,7 +383,8 @@ private:
         std::optional<gltf::DracoGeometry> draco;
         if (const auto ext = prim.extensions.find("KHR_draco_mesh_compression"); ext != prim.extensions.end())
             draco = gltf::decode_draco(model_, prim, ext->second, where);
-        std::vector<float> positions = draco ? std::move(draco->positions) : read_positions(position->second, pos_where);
+        std::vector<float> positions =
+            draco ? std::move(draco->positions) : read_positions(position->second, pos_where);
         if (positions.empty()) {
             skip(where, "no vertices");
             return std::nullopt;
