@@ -258,5 +258,21 @@ TEST_F(SceneDraco, CorruptStreamsAndDisagreeingAccessorsAreOneLineErrors) {
     expect_one_line_error(write("huge.gltf", huge.dump()), "more than Draco expands to");
 }
 
+// The committed seed of the glTF fuzzer (tests/data/scenes/plane_10m_draco.glb: write_draco_gltf of
+// plane_10m.gltf at 14 bits) loads to its source's plate within half the quantization step of its 4 m
+// extent (1.2e-4 m).
+TEST_F(SceneDraco, CommittedDracoPlateEqualsItsSource) {
+    const auto plain = Scene::load_gltf(VKSONAR_TEST_DIR "/data/scenes/plane_10m.gltf");
+    const auto packed = Scene::load_gltf(VKSONAR_TEST_DIR "/data/scenes/plane_10m_draco.glb");
+    ASSERT_TRUE(plain.ok()) << plain.error().message;
+    ASSERT_TRUE(packed.ok()) << packed.error().message;
+    const SceneBounds a = plain->bounds(), b = packed->bounds();
+    for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(b.min_m[k], a.min_m[k], 1.3e-4) << k;
+        EXPECT_NEAR(b.max_m[k], a.max_m[k], 1.3e-4) << k;
+    }
+    EXPECT_EQ(packed->stats().triangles, plain->stats().triangles);
+}
+
 } // namespace
 } // namespace vksonar
