@@ -580,6 +580,10 @@ def bad_corpus():
     g, doc = base()
     doc["extensionsUsed"] = ["KHR_draco_mesh_compression"]
     doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    # The primitive's "stream" is its float positions: refused as unsupported without libdraco, as not
+    # a Draco mesh with it.
+    doc["meshes"][0]["primitives"][0]["extensions"] = {
+        "KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}}
     put("draco_required.gltf", doc)
 
     # EXT_meshopt_compression whose compressed stream is not one: the positions' view is decoded from

@@ -20,7 +20,7 @@ int run_bench(const std::vector<std::string>& argv) {
             "  speed     per-stage and full-frame times, frames/s, full/depth ratio, RSS growth\n"
             "  effects   cost of each effect, on vs off, interleaved\n"
             "  accuracy  error vs time over the accuracy knobs against a CPU double reference (CSV + SVG)\n"
-            "  load      load time and memory of a million-triangle scene as plain, quantized and meshopt glTF\n"
+            "  load      load time and memory of a million-triangle scene as plain, quantized, meshopt and Draco glTF\n"
             "Run 'vksonar bench MODE --help' for the options of a mode.\n");
         return argv.empty() ? 2 : 0;
     }

@@ -4,6 +4,7 @@
 // extensions, which would otherwise fail later with a less useful message.
 #define TINYGLTF_IMPLEMENTATION
 #include "scene/gltf_file.h"
+#include "scene/gltf_draco.h"
 #include "scene/gltf_meshopt.h"
 
 #include <algorithm>
@@ -125,8 +126,9 @@ enum class ExtensionUse { decoded, appearance, refused, unknown };
 
 ExtensionUse extension_use(const std::string& name) {
     static const char* const decoded[] = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"};
-    static const char* const refused[] = {"KHR_draco_mesh_compression", "KHR_meshopt_compression"};
+    static const char* const refused[] = {"KHR_meshopt_compression"};
     if (name == "EXT_meshopt_compression") return meshopt_available() ? ExtensionUse::decoded : ExtensionUse::refused;
+    if (name == "KHR_draco_mesh_compression") return draco_available() ? ExtensionUse::decoded : ExtensionUse::refused;
     static const char* const appearance_prefixes[] = {"KHR_materials_", "KHR_texture_", "EXT_texture_",
                                                       "MSFT_texture_",  "KHR_lights_",  "EXT_lights_"};
     static const char* const appearance[] = {"KHR_xmp",
@@ -484,10 +486,12 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
     ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
-    const MeshoptPlan meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
-    if (!meshopt.empty()) bytes = with_json(bytes, binary, doc.dump());
+    const MeshoptPlan meshopt = prepare_meshopt(doc);           // edits doc only where the file uses the extension
+    const std::vector<DracoIndices> draco = prepare_draco(doc); // likewise
+    if (!meshopt.empty() || !draco.empty()) bytes = with_json(bytes, binary, doc.dump());
     tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, files, warnings);
     decode_meshopt(meshopt, model);
+    restore_draco(draco, model);
     return model;
 }
 

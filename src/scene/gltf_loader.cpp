@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "scene/gltf_accessors.h"
+#include "scene/gltf_draco.h"
 #include "scene/gltf_file.h"
 #include "scene/scene_data.h"
 #include "vksonar/scene.h"
@@ -377,7 +378,13 @@ private:
         const auto position = prim.attributes.find("POSITION");
         if (position == prim.attributes.end()) fail(ErrorCode::parse, where + ": missing POSITION attribute");
         const std::string pos_where = where + ": POSITION accessor " + std::to_string(position->second);
-        std::vector<float> positions = read_positions(position->second, pos_where);
+        // KHR_draco_mesh_compression: positions and triangles from the stream (gltf_draco.h), in
+        // place of the accessors' data (absent, or an uncompressed fallback).
+        std::optional<gltf::DracoGeometry> draco;
+        if (const auto ext = prim.extensions.find("KHR_draco_mesh_compression"); ext != prim.extensions.end())
+            draco = gltf::decode_draco(model_, prim, ext->second, where);
+        std::vector<float> positions =
+            draco ? std::move(draco->positions) : read_positions(position->second, pos_where);
         if (positions.empty()) {
             skip(where, "no vertices");
             return std::nullopt;
@@ -387,7 +394,8 @@ private:
         const auto vertex_count = static_cast<std::uint32_t>(positions.size() / 3);
         apply_morph_targets(prim, positions, where);
 
-        std::vector<std::uint32_t> indices = read_indices(prim, vertex_count, where);
+        std::vector<std::uint32_t> indices =
+            draco ? std::move(draco->indices) : read_indices(prim, vertex_count, where);
         indices = to_triangle_list(std::move(indices), prim.mode, where);
         if (indices.empty()) {
             skip(where, "no triangles");
