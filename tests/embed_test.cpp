@@ -108,7 +108,7 @@ TEST_P(EmbedMatchTest, ProcessMatchesStandaloneRender) {
     ASSERT_TRUE(context.ok()) << context.error().message;
     const SonarConfig config = host::demo_config();
     RendererOptions renderer_options;
-    renderer_options.save_mask = save_depth;
+    renderer_options.save_mask = SaveFlags::depth;
     auto sonar = Renderer::create_for_depth(*context, config, host::depth_desc(options), renderer_options);
     ASSERT_TRUE(sonar.ok()) << sonar.error().message;
     Frame embedded = sonar->make_frame();

@@ -313,21 +313,21 @@ TEST(SceneMaterials, ScatteringModelsAndFacetParameters) {
 TEST(SceneMaterials, ValidateNamesTheRoughModelsBadParameter) {
     AcousticMaterial m;
     m.model = AcousticMaterial::Model::rough;
-    EXPECT_EQ(m.validate(), "");
+    EXPECT_TRUE(m.validate().ok());
     for (double slope : {0.0, 0.0099, 1.01, -0.1, std::nan(""), std::numeric_limits<double>::infinity()}) {
         m.rms_slope = slope;
-        EXPECT_NE(m.validate().find("rms_slope = "), std::string::npos) << slope;
+        EXPECT_NE(m.validate().error().message.find("rms_slope = "), std::string::npos) << slope;
     }
     m.rms_slope = 0.01;
-    EXPECT_EQ(m.validate(), "") << "the lower bound is allowed";
+    EXPECT_TRUE(m.validate().ok()) << "the lower bound is allowed";
     m.rms_slope = 1.0;
-    EXPECT_EQ(m.validate(), "") << "the upper bound is allowed";
+    EXPECT_TRUE(m.validate().ok()) << "the upper bound is allowed";
     for (double db : {0.5, std::nan(""), -std::numeric_limits<double>::infinity()}) {
         m.reflection_db = db;
-        EXPECT_NE(m.validate().find("reflection_db = "), std::string::npos) << db;
+        EXPECT_NE(m.validate().error().message.find("reflection_db = "), std::string::npos) << db;
     }
     m.model = AcousticMaterial::Model::lambert;
-    EXPECT_EQ(m.validate(), "") << "lambert does not use the facet parameters";
+    EXPECT_TRUE(m.validate().ok()) << "lambert does not use the facet parameters";
 }
 
 TEST(ScenePrimitives, IndexTypesStripsFansAndSkipping) {

@@ -23,7 +23,7 @@
 namespace vksonar::testing {
 namespace {
 
-constexpr std::uint32_t kSaveAll = save_depth | save_normals | save_echo | save_profiles;
+constexpr SaveFlags kSaveAll = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
 
 // A square plate of side `size_m`, in the plane x = distance_m (world), facing the sonar at the origin.
 SceneData facing_plate(double distance_m, double size_m, double backscatter_db = -20.0) {
@@ -70,12 +70,12 @@ struct Harness {
     std::unique_ptr<StageBackend> backend;
     Frame frame;
 
-    Result<void> render(const Pose& pose = {}, std::uint32_t save_mask = kSaveAll) {
+    Result<void> render(const Pose& pose = {}, SaveFlags save_mask = kSaveAll) {
         return backend->render(pose, save_mask, frame);
     }
 };
 
-std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene) {
+std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene, const RendererOptions& options = {}) {
     auto harness = std::make_unique<Harness>();
     harness->scene = std::make_unique<SceneData>(std::move(scene));
     auto plan = make_plan(config, *harness->scene);
@@ -84,7 +84,7 @@ std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene
         return nullptr;
     }
     harness->plan = std::move(plan.value());
-    auto backend = vk::make_backend(*vulkan_context()->vulkan(), harness->plan, *harness->scene);
+    auto backend = vk::make_backend(*vulkan_context()->vulkan(), harness->plan, *harness->scene, options);
     if (!backend) {
         ADD_FAILURE() << "make_backend: " << backend.error().message;
         return nullptr;
@@ -350,11 +350,11 @@ TEST(VkBackend, HostTimedAndTimestampedPathsGiveTheSameFrame) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard guard;
     // One submission for the whole frame (timestamps) or one per stage (host timing): same result.
-    ::setenv("VKSONAR_STAGE_TIMING", "timestamps", 1);
-    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0));
-    ::setenv("VKSONAR_STAGE_TIMING", "host", 1);
-    auto host_timed = make_harness(small_config(), facing_plate(9.0, 20.0));
-    ::unsetenv("VKSONAR_STAGE_TIMING");
+    RendererOptions timestamps, host;
+    timestamps.stage_timing = StageTiming::timestamps;
+    host.stage_timing = StageTiming::host;
+    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0), timestamps);
+    auto host_timed = make_harness(small_config(), facing_plate(9.0, 20.0), host);
     ASSERT_TRUE(timestamped && host_timed);
     ASSERT_TRUE(timestamped->render().ok());
     ASSERT_TRUE(host_timed->render().ok());

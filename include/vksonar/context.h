@@ -21,8 +21,8 @@ namespace vksonar {
 
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ContextOptions {
-    bool enable_validation = false; // VK_LAYER_KHRONOS_validation; also VKSONAR_VALIDATION=1
-    int device_index = -1;          // -1: VKSONAR_DEVICE env var, else the first device with compute+graphics
+    bool enable_validation = false; // VK_LAYER_KHRONOS_validation (skipped if the layer is not installed)
+    int device_index = -1;          // -1: the first device with compute+graphics
     bool vulkan = true;             // false: a CPU-only context (no Vulkan at all)
     // Optional: the allocation callbacks for the instance, device and every object vksonar makes on
     // them (null: the implementation's). Borrowed: they must outlive the Context.
@@ -54,6 +54,12 @@ struct HostVulkan {
     // from any thread that uses them.
     const VkAllocationCallbacks* allocator = nullptr;
 };
+
+// The options `base` with what the environment asks for, for tools and tests; vksonar itself never
+// reads the environment. VKSONAR_VALIDATION=1|true|on sets enable_validation; VKSONAR_DEVICE=N sets
+// device_index when base.device_index is -1. Fails with ErrorCode::invalid_argument if VKSONAR_DEVICE
+// is not a device index. Thread-safety: reads the environment (std::getenv).
+[[nodiscard]] Result<ContextOptions> context_options_from_env(ContextOptions base = {});
 
 struct VulkanContext; // internal
 

@@ -23,15 +23,39 @@ namespace vksonar {
 
 enum class Backend : std::uint8_t { vulkan, cpu };
 
+// How the Vulkan backend reads its small tables (materials, column and beam tables, side-lobe
+// weights). automatic: through uniform blocks where they fit maxUniformBufferRange, else through
+// their storage bindings; storage: always through storage bindings. Frames are bit-identical either
+// way (tests compare the two); automatic is the fast path.
+enum class TableAccess : std::uint8_t { automatic, storage };
+// How resample.comp sums each beam's columns. automatic: walk each run of columns once where that
+// adds the same terms in the same order as the gather, else gather; gather: always gather. Frames
+// are bit-identical either way; automatic is the fast path.
+enum class ResampleMethod : std::uint8_t { automatic, gather };
+// How the Vulkan backend measures Frame::times. automatic: timestamp queries where the queue has
+// them, except on CPU devices (lavapipe), else host clocks around one submission per stage; host:
+// always host clocks; timestamps: timestamp queries where the queue has them, else host clocks.
+enum class StageTiming : std::uint8_t { automatic, host, timestamps };
+
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct RendererOptions {
     Backend backend = Backend::vulkan;
     std::uint64_t seed = 1;
-    std::uint32_t save_mask = 0; // SaveFlags
+    SaveFlags save_mask = SaveFlags::none; // the intermediates make_frame sizes and render fills
     // Threads for the host stages (noise, gain): 0 = one per hardware thread (at most 8), 1 = the
     // calling thread only. Created once with the Renderer. Output does not depend on it.
     std::uint32_t host_threads = 0;
+    // Vulkan backend paths (ignored by the CPU backend); the defaults are the fast paths.
+    TableAccess tables = TableAccess::automatic;
+    ResampleMethod resample = ResampleMethod::automatic;
+    StageTiming stage_timing = StageTiming::automatic;
 };
+
+// The options `base` with what the environment asks for, for tools and tests; vksonar itself never
+// reads the environment. VKSONAR_HOST_THREADS=N sets host_threads (when base.host_threads is 0),
+// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather and VKSONAR_STAGE_TIMING=host|timestamps set the
+// paths above; other values are ignored. Thread-safety: reads the environment (std::getenv).
+[[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});
 
 class RendererImpl; // internal
 struct Plan;        // internal

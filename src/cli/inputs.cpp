@@ -56,9 +56,18 @@ SonarConfig sonar_base_config(const std::string& sonar) {
     return preset.value();
 }
 
+namespace {
+// A Vulkan context with what the environment asks for (VKSONAR_VALIDATION, VKSONAR_DEVICE).
+Result<Context> create_context_from_env() {
+    auto options = context_options_from_env();
+    if (!options) return options.error();
+    return Context::create(options.value());
+}
+} // namespace
+
 Context make_context(Backend backend) {
     if (backend == Backend::cpu) return Context::cpu_only();
-    auto created = Context::create(ContextOptions{});
+    auto created = create_context_from_env();
     if (!created) {
         // no_device errors already say to use --backend cpu; other failures get the hint here.
         const Error& e = created.error();
@@ -68,7 +77,7 @@ Context make_context(Backend backend) {
 }
 
 Context choose_backend(Backend& backend, std::string& why) {
-    auto created = Context::create(ContextOptions{});
+    auto created = create_context_from_env();
     if (!created) {
         backend = Backend::cpu;
         why = "auto: no usable Vulkan device (" + created.error().message + "): the CPU backend";

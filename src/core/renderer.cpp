@@ -1,8 +1,11 @@
 // Renderer: plan + one StageBackend (CPU or Vulkan) + the shared host stages.
 #include "vksonar/renderer.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <string>
 
 #include "core/host_plan.h"
@@ -48,7 +51,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
                               "Renderer::create: the adopted queue family has no graphics for the depth pass; "
                               "use create_for_depth with the host's depth image, or adopt a graphics queue");
         }
-        auto backend = vk::make_backend(*context.vulkan(), impl->plan, scene.data());
+        auto backend = vk::make_backend(*context.vulkan(), impl->plan, scene.data(), options);
         if (!backend) return backend.error();
         impl->backend = std::move(backend.value());
     } else {
@@ -69,7 +72,7 @@ std::uint64_t Renderer::seed() const {
 
 Frame Renderer::make_frame() const {
     const Plan& p = impl_->plan;
-    const std::uint32_t mask = impl_->options.save_mask;
+    const SaveFlags mask = impl_->options.save_mask;
     const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
     const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
     Frame f;
@@ -83,13 +86,13 @@ Frame Renderer::make_frame() const {
     f.clean.assign(cells, 0.0f);
     f.intensity.assign(cells, 0.0f);
     f.display.assign(cells, 0.0f);
-    if (mask & save_depth) {
+    if (any(mask & SaveFlags::depth)) {
         f.depth.assign(pixels, 0.0f);
         f.material.assign(pixels, shared::kNoMaterial);
     }
-    if (mask & save_normals) f.normals.assign(pixels * 4, 0.0f);
-    if (mask & save_echo) f.echo.assign(pixels * 2, 0.0f);
-    if (mask & save_profiles) {
+    if (any(mask & SaveFlags::normals)) f.normals.assign(pixels * 4, 0.0f);
+    if (any(mask & SaveFlags::echo)) f.echo.assign(pixels * 2, 0.0f);
+    if (any(mask & SaveFlags::profiles)) {
         f.profiles.assign(static_cast<std::size_t>(p.bins) * p.columns, 0.0f);
         f.beam_profiles.assign(cells, 0.0f);
     }
@@ -138,7 +141,7 @@ Result<Renderer> Renderer::create_for_depth(Context& context, const SonarConfig&
     r.impl_->plan = std::move(plan.value());
     r.impl_->options = options;
     r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
-    auto pass = vk::HostDepthPass::create(*context.vulkan(), r.impl_->plan, desc);
+    auto pass = vk::HostDepthPass::create(*context.vulkan(), r.impl_->plan, desc, options);
     if (!pass) return pass.error();
     r.impl_->backend = std::move(pass.value());
     return r;
@@ -186,6 +189,23 @@ const SonarConfig& Renderer::config() const {
 
 const std::vector<ModelValidity>& Renderer::validity() const {
     return impl_->plan.validity;
+}
+
+RendererOptions renderer_options_from_env(RendererOptions base) {
+    auto is = [](const char* name, const char* value) {
+        const char* set = std::getenv(name);
+        return set && std::strcmp(set, value) == 0;
+    };
+    if (base.host_threads == 0) {
+        const char* threads = std::getenv("VKSONAR_HOST_THREADS");
+        const long requested = threads ? std::strtol(threads, nullptr, 10) : 0;
+        if (requested > 0) base.host_threads = static_cast<std::uint32_t>(std::min<long>(requested, 1 << 16));
+    }
+    if (is("VKSONAR_TABLES", "storage")) base.tables = TableAccess::storage;
+    if (is("VKSONAR_RESAMPLE", "gather")) base.resample = ResampleMethod::gather;
+    if (is("VKSONAR_STAGE_TIMING", "host")) base.stage_timing = StageTiming::host;
+    if (is("VKSONAR_STAGE_TIMING", "timestamps")) base.stage_timing = StageTiming::timestamps;
+    return base;
 }
 
 const Plan& renderer_plan(const Renderer& renderer) {
