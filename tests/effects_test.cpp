@@ -642,7 +642,7 @@ INSTANTIATE_TEST_SUITE_P(Effects, EffectsTest, ::testing::Values(Backend::vulkan
 // ---- auto resolution (the plan alone) ---------------------------------------------------------------
 
 Plan plan_of(const SonarConfig& config, const Scene& scene) {
-    auto plan = make_plan(config, scene.data());
+    auto plan = make_plan(config, scene_data(scene));
     EXPECT_TRUE(plan.ok()) << (plan.ok() ? "" : plan.error().message);
     return plan.ok() ? plan.value() : Plan{};
 }

@@ -84,7 +84,7 @@ std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene
         return nullptr;
     }
     harness->plan = std::move(plan.value());
-    auto backend = vk::make_backend(*vulkan_context()->vulkan(), harness->plan, *harness->scene, options);
+    auto backend = vk::make_backend(*context_vulkan(*vulkan_context()), harness->plan, *harness->scene, options);
     if (!backend) {
         ADD_FAILURE() << "make_backend: " << backend.error().message;
         return nullptr;
@@ -111,11 +111,11 @@ TEST(VkContext, CreatesDeviceWithDescription) {
     VKSONAR_REQUIRE_VULKAN();
     Context* context = vulkan_context();
     EXPECT_TRUE(context->has_vulkan());
-    ASSERT_NE(context->vulkan(), nullptr);
-    EXPECT_NE(context->vulkan()->device, VK_NULL_HANDLE);
-    EXPECT_NE(context->vulkan()->queue, VK_NULL_HANDLE);
-    EXPECT_TRUE(context->vulkan()->owns_device);
-    EXPECT_TRUE(context->vulkan()->owns_instance);
+    ASSERT_NE(context_vulkan(*context), nullptr);
+    EXPECT_NE(context_vulkan(*context)->device, VK_NULL_HANDLE);
+    EXPECT_NE(context_vulkan(*context)->queue, VK_NULL_HANDLE);
+    EXPECT_TRUE(context_vulkan(*context)->owns_device);
+    EXPECT_TRUE(context_vulkan(*context)->owns_instance);
     EXPECT_FALSE(context->device_description().empty());
     EXPECT_NE(context->device_description().find("Vulkan 1."), std::string::npos) << context->device_description();
     EXPECT_EQ(context->validation_messages(), 0u);
@@ -124,7 +124,7 @@ TEST(VkContext, CreatesDeviceWithDescription) {
 TEST(VkContext, CpuOnlyHasNoVulkan) {
     Context context = Context::cpu_only();
     EXPECT_FALSE(context.has_vulkan());
-    EXPECT_EQ(context.vulkan(), nullptr);
+    EXPECT_EQ(context_vulkan(context), nullptr);
     EXPECT_EQ(context.validation_messages(), 0u);
     Context moved = std::move(context);
     EXPECT_FALSE(moved.has_vulkan());
@@ -378,7 +378,7 @@ TEST(VkBackend, RejectsDrawOfMissingMesh) {
         plan = std::move(made.value());
     }
     scene.draws[0].mesh = 7;
-    auto backend = vk::make_backend(*vulkan_context()->vulkan(), plan, scene);
+    auto backend = vk::make_backend(*context_vulkan(*vulkan_context()), plan, scene);
     ASSERT_FALSE(backend.ok());
     EXPECT_EQ(backend.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(backend.error().message.find("mesh 7"), std::string::npos) << backend.error().message;
@@ -397,7 +397,7 @@ TEST(VkContext, CountsValidationMessages) {
     options.enable_validation = true;
     auto created = Context::create(options);
     ASSERT_TRUE(created.ok()) << created.error().message;
-    const VulkanContext& vk = *created->vulkan();
+    const VulkanContext& vk = *context_vulkan(*created);
     if (!vk.validation) {
         // CI installs the layer: without it every test would pass unvalidated.
         if (vulkan_required()) FAIL() << "VK_LAYER_KHRONOS_validation is not installed";

@@ -66,6 +66,9 @@ struct SceneStats {
 };
 
 struct SceneData; // internal
+namespace detail {
+struct Access; // internal: src/core/access.h
+}
 
 // How Scene::load_gltf treats the files a scene names (external buffers), for scenes nobody here wrote.
 // A buffer's uri is relative to the scene file's folder; it is resolved (symlinks and ".." followed)
@@ -115,9 +118,8 @@ public:
     // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
     const std::string& effects_json() const;
 
-    const SceneData& data() const { return *data_; }
-
 private:
+    friend struct detail::Access; // src/core/access.h
     std::unique_ptr<SceneData> data_;
 };
 

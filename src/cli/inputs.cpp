@@ -84,7 +84,7 @@ Context choose_backend(Backend& backend, std::string& why) {
         return Context::cpu_only();
     }
     Context context = std::move(created.value());
-    const VulkanContext* vk = context.vulkan();
+    const VulkanContext* vk = context_vulkan(context);
     if (vk != nullptr && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
         backend = Backend::cpu;
         why = "auto: the Vulkan device is a CPU implementation (" + context.device_description() +

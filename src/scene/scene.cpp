@@ -15,6 +15,10 @@
 
 namespace vksonar {
 
+const SceneData& detail::Access::scene(const Scene& scene) {
+    return *scene.data_;
+}
+
 Scene::Scene() : data_(std::make_unique<SceneData>()) {}
 Scene::~Scene() = default;
 

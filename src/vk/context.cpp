@@ -336,6 +336,10 @@ Result<ContextOptions> context_options_from_env(ContextOptions base) {
     return base;
 }
 
+VulkanContext* detail::Access::vulkan(const Context& context) {
+    return context.vk_.get();
+}
+
 Context Context::cpu_only() {
     return Context();
 }

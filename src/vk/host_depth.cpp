@@ -414,7 +414,7 @@ Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the 
         break;
     }
     return make_error(ErrorCode::invalid_argument,
-                      "render: this renderer was made by create_for_depth; use process() or record()");
+                      "render: the host-depth pass runs only through HostDepthRenderer::process or read_back");
 }
 
 GpuBufferView HostDepthPass::polar_buffer() const {

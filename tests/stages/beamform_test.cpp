@@ -399,7 +399,7 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
         config.pixels_per_beam = k.pixels_per_beam;
         config.beam_spacing = k.spacing;
         config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
-        auto plan = make_plan(config, scene.value().data());
+        auto plan = make_plan(config, scene_data(scene.value()));
         ASSERT_TRUE(plan) << plan.error().message;
         // Else the renders below would compare the gather with itself.
         EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation));
@@ -421,11 +421,11 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
 TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
     Scene scene;
     SonarConfig config = quiet_config();
-    auto fan = make_plan(config, scene.data());
+    auto fan = make_plan(config, scene_data(scene));
     ASSERT_TRUE(fan) << fan.error().message;
     ASSERT_TRUE(vk::resample_can_walk(fan.value(), vk::kBeamsPerInvocation));
     config.hfov_deg = 360.0;
-    auto circle = make_plan(config, scene.data());
+    auto circle = make_plan(config, scene_data(scene));
     ASSERT_TRUE(circle) << circle.error().message;
     EXPECT_FALSE(vk::resample_can_walk(circle.value(), vk::kBeamsPerInvocation));
     // Beam 40's span reaches back over beam 38's columns, which give beam 40 nothing.
