@@ -54,7 +54,7 @@ int main() {
     // --- What an engine writes (docs/embedding.md) ---
     auto context = vksonar::Context::adopt(host::host_vulkan(engine));
     if (!context) return fail(context.error().message);
-    auto sonar = vksonar::Renderer::create_for_depth(*context, config, host::depth_desc(engine_options));
+    auto sonar = vksonar::HostDepthRenderer::create(*context, config, host::depth_desc(engine_options));
     if (!sonar) return fail(sonar.error().message);
     vksonar::Frame frame = sonar->make_frame();
     if (auto r = sonar->process(host::depth_image(engine), 0, frame); !r) return fail(r.error().message);

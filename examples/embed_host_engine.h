@@ -51,7 +51,7 @@ public:
     std::string upload(const std::vector<Mesh>& meshes);
     // Renders the meshes' depth from `camera` into the depth image, leaving it in
     // DEPTH_STENCIL_READ_ONLY_OPTIMAL. `after_depth` (optional) records more work into the same
-    // command buffer after the render pass (e.g. vksonar's Renderer::record). Submits and waits.
+    // command buffer after the render pass (e.g. vksonar's HostDepthRenderer::record). Submits and waits.
     template <class AfterDepth> std::string render_depth(const CameraPose& camera, AfterDepth&& after_depth) {
         std::string error = begin_frame(camera);
         if (!error.empty()) return error;

@@ -42,8 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
     const auto parsed = vksonar::apply_config_json(base, text, "fuzz.json");
     if (parsed.ok()) {
-        const std::string problem = parsed.value().validate();
-        if (problem.empty()) {
+        if (parsed.value().validate().ok()) {
             check_valid(parsed.value());
             const std::string json = vksonar::config_to_json(parsed.value());
             const auto again = vksonar::apply_config_json(base, json, "roundtrip.json");
@@ -60,7 +59,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         const auto next = vksonar::apply_config_override(config, line);
         if (next.ok()) {
             config = next.value();
-            if (config.validate().empty()) check_valid(config);
+            if (config.validate().ok()) check_valid(config);
         } else if (!one_printable_line(next.error().message)) {
             std::abort();
         }

@@ -50,7 +50,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const vksonar::Result<vksonar::Scene> scene = vksonar::Scene::load_gltf(path);
     if (scene.ok()) {
         // A loaded scene is consistent: every index inside its mesh, every position finite.
-        const vksonar::SceneData& d = scene.value().data();
+        const vksonar::SceneData& d = scene_data(scene.value());
         for (const auto& mesh : d.meshes) {
             if (std::size_t(mesh.first_index) + mesh.index_count > d.indices.size()) std::abort();
             for (std::uint32_t i = 0; i < mesh.index_count; ++i)

@@ -517,7 +517,8 @@ TEST_F(Cli, DefaultSceneAndPose) {
 TEST_F(Cli, BackendAutoPicksByTheDeviceAndSaysWhy) {
     std::string expected = "cpu";
     if (auto context = vksonar::Context::create(vksonar::ContextOptions{});
-        context && context->vulkan() && context->vulkan()->properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU)
+        context && context_vulkan(*context) &&
+        context_vulkan(*context)->properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU)
         expected = "vulkan";
     const fs::path out = dir_ / "auto";
     const CliRun r = run({"render", "--save", "polar", "--out", out.string()});

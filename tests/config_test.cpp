@@ -34,7 +34,7 @@ std::string override_error(const std::string& text) {
 }
 
 TEST(Config, DefaultsAreValid) {
-    EXPECT_EQ(SonarConfig{}.validate(), "");
+    EXPECT_TRUE(SonarConfig{}.validate().ok());
 }
 
 TEST(Config, TableKeysAreUniqueAndRoundTrip) {
@@ -82,7 +82,7 @@ TEST(Config, FlatAndNestedKeys) {
     EXPECT_EQ(config.effects.absorption, EffectMode::off);
     EXPECT_EQ(config.effects.incidence, EffectMode::automatic);
     EXPECT_EQ(config.name, "x");
-    EXPECT_EQ(config.validate(), "");
+    EXPECT_TRUE(config.validate().ok());
 
     // Dotted keys are accepted in files too.
     EXPECT_EQ(apply_json(SonarConfig{}, R"({"display.db_min": 42})").db_min, 42);
@@ -144,7 +144,10 @@ TEST(Config, Overrides) {
     EXPECT_NE(override_error("hfov").find("key=value"), std::string::npos);
     auto nan = apply_config_override(SonarConfig{}, "hfov=nan");
     ASSERT_TRUE(nan.ok()); // parses; validate() rejects it
-    EXPECT_NE(nan->validate().find("hfov"), std::string::npos);
+    const auto refused = nan->validate();
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(refused.error().message.find("hfov"), std::string::npos);
 }
 
 TEST(Config, PrecedenceIsOrderOfApplication) {
@@ -185,7 +188,7 @@ TEST(Presets, AllLoadValidateAndCiteASource) {
     for (const auto& name : names) {
         auto preset = load_preset(name);
         ASSERT_TRUE(preset.ok()) << preset.error().message;
-        EXPECT_EQ(preset->validate(), "") << name;
+        EXPECT_TRUE(preset->validate().ok()) << name;
         EXPECT_EQ(preset->name, name);
         EXPECT_FALSE(preset->description.empty()) << name;
         EXPECT_FALSE(preset->source.empty()) << name;
@@ -215,9 +218,9 @@ std::string invalid(const std::string& override_text) {
     auto result = apply_config_override(SonarConfig{}, override_text);
     EXPECT_TRUE(result.ok()) << override_text;
     if (!result.ok()) return {};
-    std::string problem = result->validate();
-    EXPECT_FALSE(problem.empty()) << override_text;
-    return problem;
+    const auto valid = result->validate();
+    EXPECT_FALSE(valid.ok()) << override_text;
+    return valid ? std::string() : valid.error().message;
 }
 
 TEST(Validate, NamesFieldAndValue) {
@@ -247,19 +250,19 @@ TEST(Validate, NamesFieldAndValue) {
     SonarConfig wide;
     wide.hfov_deg = 360;
     wide.beams = 4096;
-    EXPECT_EQ(wide.validate(), "");
+    EXPECT_TRUE(wide.validate().ok());
     SonarConfig narrow;
     narrow.hfov_deg = 1;
     narrow.beams = 1;
     narrow.range_min_m = 0.01;
     narrow.range_max_m = 100; // ratio 1e4
-    EXPECT_EQ(narrow.validate(), "");
+    EXPECT_TRUE(narrow.validate().ok());
 
     // A table contradicted by a later `beams` is reported.
     auto table = apply_json(SonarConfig{}, R"({"beam_angles": [10, 0, -10]})");
-    EXPECT_EQ(table.validate(), "");
+    EXPECT_TRUE(table.validate().ok());
     table.beams = 4;
-    EXPECT_NE(table.validate().find("does not match beam_angles"), std::string::npos);
+    EXPECT_NE(table.validate().error().message.find("does not match beam_angles"), std::string::npos);
 }
 
 // docs/pipeline.md, "Frames and grids": bins derived from the bandwidth, delta r = c / 2B (0.2-60 m at 30 kHz: 2.5 cm,
@@ -272,7 +275,7 @@ TEST(Validate, BandwidthDerivesTheRangeBins) {
     c.bins = 1024;
     EXPECT_EQ(c.range_bins(), 1024u) << "bandwidth 0: bins as given";
     c.bandwidth_hz = 30e3;
-    EXPECT_EQ(c.validate(), "");
+    EXPECT_TRUE(c.validate().ok());
     EXPECT_EQ(c.range_bins(), 2392u); // 59.8 m / 0.025 m
     c.bandwidth_hz = 1.0;             // c / 2B = 750 m, far wider than the window: one bin
     EXPECT_EQ(c.range_bins(), 1u);

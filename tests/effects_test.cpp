@@ -136,7 +136,7 @@ bool ran(const Frame& f, const std::string& stage) {
     return ::testing::AssertionSuccess();
 }
 
-constexpr std::uint32_t kEchoAndDepth = save_echo | save_depth;
+constexpr SaveFlags kEchoAndDepth = SaveFlags::echo | SaveFlags::depth;
 
 // ---- incidence -------------------------------------------------------------------------------------
 
@@ -148,8 +148,8 @@ TEST_P(EffectsTest, IncidenceIsLambertCosineOnAndFlatOff) {
     SonarConfig on = clean_config(), off = clean_config();
     on.effects.incidence = EffectMode::on;
     off.effects.incidence = EffectMode::off;
-    auto a = render_once(GetParam(), on, scene, {}, kEchoAndDepth | save_normals);
-    auto b = render_once(GetParam(), off, scene, {}, kEchoAndDepth | save_normals);
+    auto a = render_once(GetParam(), on, scene, {}, kEchoAndDepth | SaveFlags::normals);
+    auto b = render_once(GetParam(), off, scene, {}, kEchoAndDepth | SaveFlags::normals);
     ASSERT_TRUE(a && b);
     EXPECT_TRUE(ran(a->frame, "normals"));
     EXPECT_FALSE(ran(b->frame, "normals")); // off: the normals pass is not built at all
@@ -309,8 +309,8 @@ TEST_P(EffectsTest, VerticalPatternOffIsAnAllOnePattern) {
     // (1 - 1 / rows, 65 rows). With 60-degree slices (1.076) the top and bottom rows' centre columns see
     // past +-vfov/2, where the box is 0.
     off.max_slice_deg = box.max_slice_deg = 15.0;
-    auto a = render_once(GetParam(), off, scene, {}, save_echo);
-    auto b = render_once(GetParam(), box, scene, {}, save_echo);
+    auto a = render_once(GetParam(), off, scene, {}, SaveFlags::echo);
+    auto b = render_once(GetParam(), box, scene, {}, SaveFlags::echo);
     ASSERT_TRUE(a && b);
     const Plan& plan = renderer_plan(b->renderer);
     const double top_v = plan.tan_half_v * (1.0 - 1.0 / plan.rows);
@@ -334,8 +334,8 @@ TEST_P(EffectsTest, HorizontalPatternConvolvesBeamsWithTheArraysSidelobes) {
 
     Scene scene;
     add_facing_quad(scene, 10.0, azimuth, 0.0, 0.05, 1.0);
-    auto a = render_once(GetParam(), on, scene, {}, save_profiles);
-    auto b = render_once(GetParam(), off, scene, {}, save_profiles);
+    auto a = render_once(GetParam(), on, scene, {}, SaveFlags::profiles);
+    auto b = render_once(GetParam(), off, scene, {}, SaveFlags::profiles);
     ASSERT_TRUE(a && b);
     const Plan& plan = renderer_plan(a->renderer);
     const Frame& fa = a->frame;
@@ -479,8 +479,8 @@ TEST_P(EffectsTest, AbsorptionOffIsAlphaZero) {
     off.effects.absorption = EffectMode::off;
     zero.effects.absorption = EffectMode::on;
     zero.absorption_db_per_m = 0.0;
-    auto a = render_once(GetParam(), off, scene, {}, save_echo);
-    auto b = render_once(GetParam(), zero, scene, {}, save_echo);
+    auto a = render_once(GetParam(), off, scene, {}, SaveFlags::echo);
+    auto b = render_once(GetParam(), zero, scene, {}, SaveFlags::echo);
     ASSERT_TRUE(a && b);
     EXPECT_GT(sum(a->frame.clean), 0.0);
     EXPECT_TRUE(same_bits(a->frame.echo, b->frame.echo));
@@ -502,8 +502,8 @@ TEST_P(EffectsTest, SpeckleIsExponentialWithTheMeanPreserved) {
     on.effects.speckle = EffectMode::on;
     ASSERT_EQ(on.speckle, SpeckleModel::rayleigh);
     off.effects.speckle = EffectMode::off;
-    auto a = render_once(GetParam(), on, scene, {}, 0, 7);
-    auto b = render_once(GetParam(), off, scene, {}, 0, 7);
+    auto a = render_once(GetParam(), on, scene, {}, SaveFlags::none, 7);
+    auto b = render_once(GetParam(), off, scene, {}, SaveFlags::none, 7);
     ASSERT_TRUE(a && b);
     EXPECT_TRUE(same_bits(a->frame.clean, b->frame.clean)); // speckle is a host stage after the scan
     const double source = std::pow(10.0, on.source_level_db / 10.0);
@@ -554,8 +554,8 @@ TEST_P(EffectsTest, AmbientNoiseRaisesEmptyBinsToTheNoiseLevel) {
     SonarConfig on = clean_config(), off = clean_config();
     on.effects.ambient_noise = EffectMode::on;
     off.effects.ambient_noise = EffectMode::off;
-    auto a = render_once(GetParam(), on, scene, {}, 0, 3);
-    auto b = render_once(GetParam(), off, scene, {}, 0, 3);
+    auto a = render_once(GetParam(), on, scene, {}, SaveFlags::none, 3);
+    auto b = render_once(GetParam(), off, scene, {}, SaveFlags::none, 3);
     ASSERT_TRUE(a && b);
     EXPECT_TRUE(same_bits(a->frame.clean, b->frame.clean));
     const double noise = std::pow(10.0, (on.noise_level_db - on.directivity_index_db) / 10.0);
@@ -642,7 +642,7 @@ INSTANTIATE_TEST_SUITE_P(Effects, EffectsTest, ::testing::Values(Backend::vulkan
 // ---- auto resolution (the plan alone) ---------------------------------------------------------------
 
 Plan plan_of(const SonarConfig& config, const Scene& scene) {
-    auto plan = make_plan(config, scene.data());
+    auto plan = make_plan(config, scene_data(scene));
     EXPECT_TRUE(plan.ok()) << (plan.ok() ? "" : plan.error().message);
     return plan.ok() ? plan.value() : Plan{};
 }

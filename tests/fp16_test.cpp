@@ -40,7 +40,8 @@ TEST(Fp16Echo, GpuMatchesCpuReferenceWithinOneHalfUlp) {
     ASSERT_TRUE(scene) << scene.error().message;
     Pose pose;
     pose.pitch_deg = 15.0;
-    auto g = render_once(Backend::vulkan, config, scene.value(), pose, save_depth | save_normals | save_echo);
+    auto g = render_once(Backend::vulkan, config, scene.value(), pose,
+                         SaveFlags::depth | SaveFlags::normals | SaveFlags::echo);
     ASSERT_TRUE(g);
     const Plan& plan = renderer_plan(g->renderer);
     ASSERT_EQ(plan.params.echo_half, 1u);
@@ -85,9 +86,9 @@ TEST(Fp16Echo, QuantizationIsHalfAnUlpOfBinary16) {
     ASSERT_TRUE(scene) << scene.error().message;
     Pose pose;
     pose.pitch_deg = 15.0;
-    auto full = render_once(Backend::cpu, config, scene.value(), pose, save_echo);
+    auto full = render_once(Backend::cpu, config, scene.value(), pose, SaveFlags::echo);
     config.intermediates = IntermediatePrecision::fp16;
-    auto half = render_once(Backend::cpu, config, scene.value(), pose, save_echo);
+    auto half = render_once(Backend::cpu, config, scene.value(), pose, SaveFlags::echo);
     ASSERT_TRUE(full && half);
     const auto& a = full->frame.echo;
     const auto& b = half->frame.echo;

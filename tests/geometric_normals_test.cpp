@@ -97,7 +97,7 @@ PlaneErrors plane_errors(const Plan& plan, const Frame& f) {
 void expect_plane_exact(Backend backend) {
     Scene scene;
     add_tilted_plane(scene, 0.0, 6.0, 3.0);
-    auto r = render_once(backend, geometric_config(), scene, {}, save_depth | save_normals);
+    auto r = render_once(backend, geometric_config(), scene, {}, SaveFlags::depth | SaveFlags::normals);
     ASSERT_TRUE(r);
     const Plan& plan = renderer_plan(r->renderer);
     ASSERT_TRUE(plan.face_normals);
@@ -138,8 +138,9 @@ void expect_strip_beats_sobel(Backend backend) {
 
     Scene strip;
     add_tilted_plane(strip, -10.0 * v, 3.0, half_t);
-    auto geo = render_once(backend, geometric_config(), strip, {}, save_depth | save_normals);
-    auto sobel = render_once(backend, geometric_config(NormalMethod::sobel3), strip, {}, save_depth | save_normals);
+    auto geo = render_once(backend, geometric_config(), strip, {}, SaveFlags::depth | SaveFlags::normals);
+    auto sobel =
+        render_once(backend, geometric_config(NormalMethod::sobel3), strip, {}, SaveFlags::depth | SaveFlags::normals);
     ASSERT_TRUE(geo && sobel);
     const PlaneErrors g = plane_errors(renderer_plan(geo->renderer), geo->frame);
     const PlaneErrors s = plane_errors(renderer_plan(sobel->renderer), sobel->frame);

@@ -26,7 +26,7 @@ TEST_P(FrameTest, WholeFrameAgrees) {
     SonarConfig config = quiet_config();
     config.effects.speckle = EffectMode::on; // seeded noise must be identical on both backends
     config.effects.ambient_noise = EffectMode::on;
-    auto p = render_pair(GetParam().file, config, GetParam().pose, 0);
+    auto p = render_pair(GetParam().file, config, GetParam().pose, SaveFlags::none);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;
@@ -72,7 +72,7 @@ TEST_P(PresetFrameTest, WholeFrameAgrees) {
         pose.z_m = -2.0;
         pose.pitch_deg = 40.0;
     }
-    auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose, 0);
+    auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose, SaveFlags::none);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;
@@ -112,7 +112,8 @@ TEST(PatternFrame, ChebyshevPatternsAgree) {
     config.horizontal_sidelobe_db = -25.0;
     Pose pose;
     pose.pitch_deg = 15.0;
-    auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose, save_echo | save_depth | save_normals);
+    auto p = render_pair(VKSONAR_ASSET_DIR "/scenes/default.gltf", config, pose,
+                         SaveFlags::echo | SaveFlags::depth | SaveFlags::normals);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;
@@ -177,11 +178,12 @@ TEST(TableViews, UniformAndStorageTablesGiveTheSameFrame) {
         SonarConfig config = quiet_config();
         config.beams = beams;
         config.effects.horizontal_pattern = EffectMode::on;
-        auto uniform = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
-        ::setenv("VKSONAR_TABLES", "storage", 1);
-        auto storage = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
-        ::unsetenv("VKSONAR_TABLES");
-        auto cpu = render_once(Backend::cpu, config, scene.value(), pose, save_profiles);
+        auto uniform = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles);
+        RendererOptions storage_tables;
+        storage_tables.tables = TableAccess::storage;
+        auto storage =
+            render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, storage_tables);
+        auto cpu = render_once(Backend::cpu, config, scene.value(), pose, SaveFlags::profiles);
         ASSERT_TRUE(uniform && storage && cpu);
         EXPECT_EQ(uniform->frame.beam_profiles, storage->frame.beam_profiles);
         EXPECT_EQ(uniform->frame.clean, storage->frame.clean);
@@ -207,8 +209,8 @@ TEST(NoiseAcrossBackends, SameSeedSameNoiseMultipliers) {
     config.effects.ambient_noise = EffectMode::on;
     Scene scene;
     add_quad(scene, 10.0, 0.0, 0.0, 2.0, 2.0);
-    auto g = render_once(Backend::vulkan, config, scene, {}, 0, 7);
-    auto c = render_once(Backend::cpu, config, scene, {}, 0, 7);
+    auto g = render_once(Backend::vulkan, config, scene, {}, SaveFlags::none, 7);
+    auto c = render_once(Backend::cpu, config, scene, {}, SaveFlags::none, 7);
     ASSERT_TRUE(g && c);
     std::size_t compared = 0;
     for (std::size_t i = 0; i < g->frame.clean.size(); ++i) {

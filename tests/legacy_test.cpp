@@ -139,7 +139,7 @@ TEST(LegacyUuv, PlaneAtKnownDepthThroughTheDepthPass) {
     for (Backend backend : {Backend::cpu, Backend::vulkan}) {
         if (backend == Backend::vulkan && vksonar::testing::vulkan_context() == nullptr) continue;
         vksonar::testing::ValidationGuard guard;
-        auto rendered = vksonar::testing::render_once(backend, *preset, scene, {}, save_depth);
+        auto rendered = vksonar::testing::render_once(backend, *preset, scene, {}, SaveFlags::depth);
         ASSERT_NE(rendered, nullptr);
         const Plan& plan = renderer_plan(rendered->renderer);
         ASSERT_EQ(plan.slices, 1u);

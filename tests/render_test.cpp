@@ -172,9 +172,9 @@ TEST_P(RenderTest, SameSeedSameBytesDifferentSeedDifferent) {
     config.effects.ambient_noise = EffectMode::on;
     Scene scene;
     add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0);
-    auto a = render_once(GetParam(), config, scene, {}, 0, 42);
-    auto b = render_once(GetParam(), config, scene, {}, 0, 42);
-    auto c = render_once(GetParam(), config, scene, {}, 0, 43);
+    auto a = render_once(GetParam(), config, scene, {}, SaveFlags::none, 42);
+    auto b = render_once(GetParam(), config, scene, {}, SaveFlags::none, 42);
+    auto c = render_once(GetParam(), config, scene, {}, SaveFlags::none, 43);
     ASSERT_TRUE(a && b && c);
     EXPECT_EQ(a->frame.intensity, b->frame.intensity);
     EXPECT_NE(a->frame.intensity, c->frame.intensity);
@@ -225,7 +225,7 @@ TEST(CpuThreads, AnyThreadCountGivesTheSameBytes) {
             RendererOptions options;
             options.backend = Backend::cpu;
             options.host_threads = threads;
-            options.save_mask = save_depth | save_normals | save_echo | save_profiles;
+            options.save_mask = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
             auto r = Renderer::create(cpu_context(), config, scene.value(), options);
             ASSERT_TRUE(r) << r.error().message;
             auto rendered = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});

@@ -122,7 +122,7 @@ protected:
     // on both backends (the loader's output is what differs between twins; the renderers are tested
     // elsewhere).
     static void expect_twins(const Scene& a, const Scene& b) {
-        const SceneData &da = a.data(), &db = b.data();
+        const SceneData &da = scene_data(a), &db = scene_data(b);
         ASSERT_EQ(da.draws.size(), db.draws.size());
         for (std::size_t i = 0; i < da.draws.size(); ++i) {
             for (int k = 0; k < 16; ++k)
@@ -192,7 +192,7 @@ TEST_F(SceneExtensions, SparsePositionsAndIndicesEqualTheirDenseTwin) {
     const auto b = load("sparse.gltf", sparse.text());
     ASSERT_TRUE(a.ok()) << a.error().message;
     ASSERT_TRUE(b.ok()) << b.error().message;
-    EXPECT_EQ(a->data().indices, b->data().indices);
+    EXPECT_EQ(scene_data(*a).indices, scene_data(*b).indices);
     expect_twins(a.value(), b.value());
 
     // A sparse index past the accessor is named.
@@ -232,7 +232,7 @@ TEST_F(SceneExtensions, InstancesEqualTheSameObjectsAsSeparateNodes) {
     ASSERT_TRUE(a.ok()) << a.error().message;
     ASSERT_TRUE(b.ok()) << b.error().message;
     EXPECT_EQ(b->stats().instances, 3u);
-    EXPECT_EQ(b->data().meshes.size(), 1u); // stored once, drawn three times
+    EXPECT_EQ(scene_data(*b).meshes.size(), 1u); // stored once, drawn three times
     expect_twins(a.value(), b.value());
 }
 
@@ -255,7 +255,7 @@ TEST_F(SceneExtensions, QuantizedPositionsEqualTheirFloatTwinThroughTheNodeTrans
     const auto b = load("quantized.gltf", quantized.text());
     ASSERT_TRUE(b.ok()) << b.error().message;
     // The world corners: 12 m ahead, +-1 m across and up, exactly up to the float rounding of the step.
-    const SceneData& d = b->data();
+    const SceneData& d = scene_data(*b);
     const auto& m = d.draws[0].world_from_local; // column-major
     for (int row = 0; row < 3; ++row) {
         double lo = 1e9, hi = -1e9;
@@ -306,7 +306,7 @@ TEST_F(SceneExtensions, MorphTargetsAtTheirDefaultWeights) {
     const auto a = load("morphed.gltf", morphed.text());
     ASSERT_TRUE(a.ok()) << a.error().message;
     for (std::size_t v = 0; v < 4; ++v)
-        EXPECT_EQ(a->data().positions[3 * v], 3.0f);
+        EXPECT_EQ(scene_data(*a).positions[3 * v], 3.0f);
 }
 
 TEST_F(SceneExtensions, AppearanceIsAWarningAndGeometryWeCannotReadIsRefusedByEveryName) {
@@ -429,7 +429,7 @@ TEST_F(SceneExtensions, CommittedMeshoptPlateEqualsItsSource) {
 // Every drawn triangle as its three world-space corners (double, from float positions), rotated to
 // start at its smallest corner (the winding kept), sorted: the scene's geometry whatever its order.
 std::vector<std::array<double, 9>> triangle_set(const Scene& scene) {
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     std::vector<std::array<double, 9>> out;
     for (const SceneDraw& draw : d.draws) {
         const MeshRange& mesh = d.meshes[draw.mesh];

@@ -123,7 +123,7 @@ class BundledScene : public ::testing::TestWithParam<BundledCase> {};
 TEST_P(BundledScene, LoadsWithExpectedContents) {
     const BundledCase& c = GetParam();
     const Scene scene = load_ok(asset_file(c.file));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     EXPECT_EQ(d.draws.size(), c.draws);
     EXPECT_EQ(d.meshes.size(), c.meshes);
     EXPECT_EQ(d.materials.size(), c.materials);
@@ -157,7 +157,7 @@ INSTANTIATE_TEST_SUITE_P(
 
 TEST(BundledScene, DefaultObjectsSitAheadOfTheSonarOnTheSeabed) {
     const Scene scene = load_ok(asset_file("default.gltf"));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     ASSERT_FALSE(d.draws.empty());
     ASSERT_EQ(d.materials[0].name, "seabed_sand");
     EXPECT_DOUBLE_EQ(d.materials[0].backscatter_db, -30.0);
@@ -183,7 +183,7 @@ TEST(BundledScene, DefaultObjectsSitAheadOfTheSonarOnTheSeabed) {
 
 TEST(BundledScene, TiltedSeafloorRisesAwayFromTheSonar) {
     const Scene scene = load_ok(asset_file("tilted_seafloor.gltf"));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     ASSERT_FALSE(d.draws.empty());
     const double slope = std::tan(10.0 * pi / 180.0);
     const auto plane_z = [&](double x) { return -8.0 + slope * (x - 25.0); };
@@ -201,7 +201,7 @@ TEST(BundledScene, TiltedSeafloorRisesAwayFromTheSonar) {
 
 TEST(SceneFrame, GltfYUpMapsToWorldZUp) {
     const Scene scene = load_ok(test_file("scenes/plane_10m.gltf"));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     ASSERT_EQ(d.draws.size(), 1u);
     const auto& m = d.draws[0].world_from_local;
     const Vec3 up = transform_point(m, {0, 1, 0});
@@ -231,7 +231,7 @@ TEST(SceneFrame, GltfYUpMapsToWorldZUp) {
 
 TEST(SceneFrame, NodeHierarchyIsHonoured) {
     const Scene scene = load_ok(test_file("scenes/node_transform.gltf"));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     ASSERT_EQ(d.draws.size(), 2u);
     EXPECT_EQ(d.meshes.size(), 1u) << "a mesh used by two nodes is stored once";
     EXPECT_EQ(d.draws[0].mesh, d.draws[1].mesh);
@@ -275,7 +275,7 @@ TEST(SceneMaterials, ExtrasParsedAndDefaultsApplied) {
     EXPECT_DOUBLE_EQ(mats[4].backscatter_db, -30.0);
     EXPECT_EQ(mats[4].model, AcousticMaterial::Model::lambert);
 
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     ASSERT_EQ(d.draws.size(), 5u);
     const std::vector<std::uint32_t> draw_materials{0, 1, 2, 4, 3};
     for (std::size_t i = 0; i < d.draws.size(); ++i)
@@ -314,26 +314,26 @@ TEST(SceneMaterials, ScatteringModelsAndFacetParameters) {
 TEST(SceneMaterials, ValidateNamesTheRoughModelsBadParameter) {
     AcousticMaterial m;
     m.model = AcousticMaterial::Model::rough;
-    EXPECT_EQ(m.validate(), "");
+    EXPECT_TRUE(m.validate().ok());
     for (double slope : {0.0, 0.0099, 1.01, -0.1, std::nan(""), std::numeric_limits<double>::infinity()}) {
         m.rms_slope = slope;
-        EXPECT_NE(m.validate().find("rms_slope = "), std::string::npos) << slope;
+        EXPECT_NE(m.validate().error().message.find("rms_slope = "), std::string::npos) << slope;
     }
     m.rms_slope = 0.01;
-    EXPECT_EQ(m.validate(), "") << "the lower bound is allowed";
+    EXPECT_TRUE(m.validate().ok()) << "the lower bound is allowed";
     m.rms_slope = 1.0;
-    EXPECT_EQ(m.validate(), "") << "the upper bound is allowed";
+    EXPECT_TRUE(m.validate().ok()) << "the upper bound is allowed";
     for (double db : {0.5, std::nan(""), -std::numeric_limits<double>::infinity()}) {
         m.reflection_db = db;
-        EXPECT_NE(m.validate().find("reflection_db = "), std::string::npos) << db;
+        EXPECT_NE(m.validate().error().message.find("reflection_db = "), std::string::npos) << db;
     }
     m.model = AcousticMaterial::Model::lambert;
-    EXPECT_EQ(m.validate(), "") << "lambert does not use the facet parameters";
+    EXPECT_TRUE(m.validate().ok()) << "lambert does not use the facet parameters";
 }
 
 TEST(ScenePrimitives, IndexTypesStripsFansAndSkipping) {
     const Scene scene = load_ok(test_file("scenes/primitives.gltf"));
-    const SceneData& d = scene.data();
+    const SceneData& d = scene_data(scene);
     expect_consistent(d);
     // u8 quad (2), u32 triangle (1), non-indexed (1), strip of 4 (2), fan of 5 (3).
     ASSERT_EQ(d.meshes.size(), 5u);
@@ -422,7 +422,7 @@ TEST(SceneWarnings, ControlCharactersFromTheFileAreEscaped) {
     const std::string path = temp_path("control_chars_in_names.gltf");
     std::ofstream(path) << doc.dump();
     const Scene scene = load_ok(path);
-    EXPECT_EQ(scene.data().materials.at(0).name, "quay\nwall"); // the name itself is kept as written
+    EXPECT_EQ(scene_data(scene).materials.at(0).name, "quay\nwall"); // the name itself is kept as written
     const std::vector<std::string>& w = scene.stats().warnings;
     ASSERT_EQ(w.size(), 1u);
     EXPECT_NE(w[0].find("material 0 'quay\\nwall': unknown key extras.vksonar.rough\\tness ignored"), std::string::npos)
@@ -436,10 +436,10 @@ TEST(SceneGlb, RoundTripMatchesTheGltf) {
     const Scene gltf = load_ok(test_file("scenes/plane_10m.gltf"));
     const Scene generated = load_ok(test_file("scenes/plane_10m.glb"));
     for (const Scene* s : {&glb, &generated}) {
-        EXPECT_EQ(s->data().positions, gltf.data().positions);
-        EXPECT_EQ(s->data().indices, gltf.data().indices);
-        ASSERT_EQ(s->data().draws.size(), 1u);
-        EXPECT_EQ(s->data().draws[0].world_from_local, gltf.data().draws[0].world_from_local);
+        EXPECT_EQ(scene_data(*s).positions, scene_data(gltf).positions);
+        EXPECT_EQ(scene_data(*s).indices, scene_data(gltf).indices);
+        ASSERT_EQ(scene_data(*s).draws.size(), 1u);
+        EXPECT_EQ(scene_data(*s).draws[0].world_from_local, scene_data(gltf).draws[0].world_from_local);
     }
 }
 
@@ -463,7 +463,7 @@ TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {
     const std::string text = doc.dump();
     write_bytes(path, std::vector<char>(text.begin(), text.end()));
     const Scene scene = load_ok(path);
-    EXPECT_EQ(scene.data().draws.size(), 5u);
+    EXPECT_EQ(scene_data(scene).draws.size(), 5u);
     EXPECT_TRUE(scene.effects_json().empty());
     const auto& w = scene.stats().warnings;
     EXPECT_TRUE(std::any_of(w.begin(), w.end(), [](const std::string& s) { return s.find("no scenes") != s.npos; }));
@@ -485,7 +485,7 @@ TEST(SceneCorruption, RandomMutationsNeverCrash) {
         write_bytes(path, bytes);
         const Result<Scene> r = Scene::load_gltf(path);
         if (r.ok()) {
-            expect_consistent(r->data());
+            expect_consistent(scene_data(*r));
             continue;
         }
         ++failures;
@@ -618,8 +618,8 @@ TEST(SceneBuilder, AddMeshValidatesItsArrays) {
     expect_invalid(scene.add_mesh(tri, 3, idx, 2), "multiple of 3");
     expect_invalid(scene.add_mesh(tri, 3, bad_idx, 3), "out of range");
     expect_invalid(scene.add_mesh(nan_tri, 3, idx, 3), "vertex 1");
-    EXPECT_TRUE(scene.data().meshes.empty()) << "a rejected mesh leaves no trace";
-    EXPECT_TRUE(scene.data().positions.empty());
+    EXPECT_TRUE(scene_data(scene).meshes.empty()) << "a rejected mesh leaves no trace";
+    EXPECT_TRUE(scene_data(scene).positions.empty());
 
     const Result<std::uint32_t> mesh = scene.add_mesh(tri, 3, idx, 3);
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
@@ -657,22 +657,22 @@ TEST(SceneBuilder, AddMeshValidatesItsArrays) {
     // Second mesh: indices stay mesh-local, first_vertex offsets them.
     const Result<std::uint32_t> second = scene.add_mesh(tri, 3, idx, 3);
     ASSERT_TRUE(second.ok());
-    EXPECT_EQ(scene.data().meshes[1].first_vertex, 3u);
-    EXPECT_EQ(scene.data().meshes[1].first_index, 3u);
-    EXPECT_EQ(scene.data().indices[3], 0u);
+    EXPECT_EQ(scene_data(scene).meshes[1].first_vertex, 3u);
+    EXPECT_EQ(scene_data(scene).meshes[1].first_index, 3u);
+    EXPECT_EQ(scene_data(scene).indices[3], 0u);
 }
 
 TEST(SceneBuilder, MovedFromSceneIsEmptyAndUsable) {
     Scene a = load_ok(test_file("scenes/plane_10m.gltf"));
-    ASSERT_EQ(a.data().draws.size(), 1u);
+    ASSERT_EQ(scene_data(a).draws.size(), 1u);
     Scene b(std::move(a));
-    EXPECT_EQ(b.data().draws.size(), 1u);
-    EXPECT_TRUE(a.data().draws.empty()); // NOLINT(bugprone-use-after-move): moved-from state is specified
+    EXPECT_EQ(scene_data(b).draws.size(), 1u);
+    EXPECT_TRUE(scene_data(a).draws.empty()); // NOLINT(bugprone-use-after-move): moved-from state is specified
     EXPECT_EQ(a.stats().draws, 0u);
     Scene c;
     c = std::move(b);
-    EXPECT_EQ(c.data().draws.size(), 1u);
-    EXPECT_EQ(c.data().source_path, test_file("scenes/plane_10m.gltf"));
+    EXPECT_EQ(scene_data(c).draws.size(), 1u);
+    EXPECT_EQ(scene_data(c).source_path, test_file("scenes/plane_10m.gltf"));
 }
 
 } // namespace

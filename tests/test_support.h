@@ -106,14 +106,14 @@ struct Rendered {
 };
 
 inline std::unique_ptr<Rendered> render_once(Backend backend, const SonarConfig& config, const Scene& scene,
-                                             const Pose& pose = {}, std::uint32_t save_mask = 0,
-                                             std::uint64_t seed = 1) {
+                                             const Pose& pose = {}, SaveFlags save_mask = SaveFlags::none,
+                                             std::uint64_t seed = 1, const RendererOptions& paths = {}) {
     Context* context = backend == Backend::vulkan ? vulkan_context() : &cpu_context();
     if (context == nullptr) {
         ADD_FAILURE() << "no context";
         return nullptr;
     }
-    RendererOptions options;
+    RendererOptions options = paths; // the Vulkan paths (tables, resample, stage_timing)
     options.backend = backend;
     options.save_mask = save_mask;
     options.seed = seed;

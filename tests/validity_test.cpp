@@ -29,7 +29,8 @@ std::string number_text(double x, bool count) {
 std::string problem_of(const std::string& name, const std::string& value) {
     auto set = apply_config_override(SonarConfig{}, name + "=" + value);
     if (!set) return set.error().message;
-    return set->validate();
+    const auto valid = set->validate();
+    return valid ? std::string() : valid.error().message;
 }
 
 // For every bounded key: a value just outside each finite bound is refused with the key's name and
@@ -88,7 +89,7 @@ TEST(KeyRanges, ADepthPassPastTheBufferLimitIsRefusedWithItsSize) {
     SonarConfig c;
     c.bins = 65536;
     c.pixels_per_beam = 32; // 32 x 512 = 16384 columns: 65536 x 16384 floats = 4.3 GB
-    ASSERT_EQ(c.validate(), "");
+    ASSERT_TRUE(c.validate().ok());
     SceneData scene;
     auto plan = make_plan(c, scene);
     ASSERT_FALSE(plan.ok());

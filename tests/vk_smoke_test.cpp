@@ -23,7 +23,7 @@
 namespace vksonar::testing {
 namespace {
 
-constexpr std::uint32_t kSaveAll = save_depth | save_normals | save_echo | save_profiles;
+constexpr SaveFlags kSaveAll = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
 
 // A square plate of side `size_m`, in the plane x = distance_m (world), facing the sonar at the origin.
 SceneData facing_plate(double distance_m, double size_m, double backscatter_db = -20.0) {
@@ -70,12 +70,12 @@ struct Harness {
     std::unique_ptr<StageBackend> backend;
     Frame frame;
 
-    Result<void> render(const Pose& pose = {}, std::uint32_t save_mask = kSaveAll) {
+    Result<void> render(const Pose& pose = {}, SaveFlags save_mask = kSaveAll) {
         return backend->render(pose, save_mask, frame);
     }
 };
 
-std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene) {
+std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene, const RendererOptions& options = {}) {
     auto harness = std::make_unique<Harness>();
     harness->scene = std::make_unique<SceneData>(std::move(scene));
     auto plan = make_plan(config, *harness->scene);
@@ -84,7 +84,7 @@ std::unique_ptr<Harness> make_harness(const SonarConfig& config, SceneData scene
         return nullptr;
     }
     harness->plan = std::move(plan.value());
-    auto backend = vk::make_backend(*vulkan_context()->vulkan(), harness->plan, *harness->scene);
+    auto backend = vk::make_backend(*context_vulkan(*vulkan_context()), harness->plan, *harness->scene, options);
     if (!backend) {
         ADD_FAILURE() << "make_backend: " << backend.error().message;
         return nullptr;
@@ -111,11 +111,11 @@ TEST(VkContext, CreatesDeviceWithDescription) {
     VKSONAR_REQUIRE_VULKAN();
     Context* context = vulkan_context();
     EXPECT_TRUE(context->has_vulkan());
-    ASSERT_NE(context->vulkan(), nullptr);
-    EXPECT_NE(context->vulkan()->device, VK_NULL_HANDLE);
-    EXPECT_NE(context->vulkan()->queue, VK_NULL_HANDLE);
-    EXPECT_TRUE(context->vulkan()->owns_device);
-    EXPECT_TRUE(context->vulkan()->owns_instance);
+    ASSERT_NE(context_vulkan(*context), nullptr);
+    EXPECT_NE(context_vulkan(*context)->device, VK_NULL_HANDLE);
+    EXPECT_NE(context_vulkan(*context)->queue, VK_NULL_HANDLE);
+    EXPECT_TRUE(context_vulkan(*context)->owns_device);
+    EXPECT_TRUE(context_vulkan(*context)->owns_instance);
     EXPECT_FALSE(context->device_description().empty());
     EXPECT_NE(context->device_description().find("Vulkan 1."), std::string::npos) << context->device_description();
     EXPECT_EQ(context->validation_messages(), 0u);
@@ -124,7 +124,7 @@ TEST(VkContext, CreatesDeviceWithDescription) {
 TEST(VkContext, CpuOnlyHasNoVulkan) {
     Context context = Context::cpu_only();
     EXPECT_FALSE(context.has_vulkan());
-    EXPECT_EQ(context.vulkan(), nullptr);
+    EXPECT_EQ(context_vulkan(context), nullptr);
     EXPECT_EQ(context.validation_messages(), 0u);
     Context moved = std::move(context);
     EXPECT_FALSE(moved.has_vulkan());
@@ -350,11 +350,11 @@ TEST(VkBackend, HostTimedAndTimestampedPathsGiveTheSameFrame) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard guard;
     // One submission for the whole frame (timestamps) or one per stage (host timing): same result.
-    ::setenv("VKSONAR_STAGE_TIMING", "timestamps", 1);
-    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0));
-    ::setenv("VKSONAR_STAGE_TIMING", "host", 1);
-    auto host_timed = make_harness(small_config(), facing_plate(9.0, 20.0));
-    ::unsetenv("VKSONAR_STAGE_TIMING");
+    RendererOptions timestamps, host;
+    timestamps.stage_timing = StageTiming::timestamps;
+    host.stage_timing = StageTiming::host;
+    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0), timestamps);
+    auto host_timed = make_harness(small_config(), facing_plate(9.0, 20.0), host);
     ASSERT_TRUE(timestamped && host_timed);
     ASSERT_TRUE(timestamped->render().ok());
     ASSERT_TRUE(host_timed->render().ok());
@@ -378,7 +378,7 @@ TEST(VkBackend, RejectsDrawOfMissingMesh) {
         plan = std::move(made.value());
     }
     scene.draws[0].mesh = 7;
-    auto backend = vk::make_backend(*vulkan_context()->vulkan(), plan, scene);
+    auto backend = vk::make_backend(*context_vulkan(*vulkan_context()), plan, scene);
     ASSERT_FALSE(backend.ok());
     EXPECT_EQ(backend.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(backend.error().message.find("mesh 7"), std::string::npos) << backend.error().message;
@@ -397,7 +397,7 @@ TEST(VkContext, CountsValidationMessages) {
     options.enable_validation = true;
     auto created = Context::create(options);
     ASSERT_TRUE(created.ok()) << created.error().message;
-    const VulkanContext& vk = *created->vulkan();
+    const VulkanContext& vk = *context_vulkan(*created);
     if (!vk.validation) {
         // CI installs the layer: without it every test would pass unvalidated.
         if (vulkan_required()) FAIL() << "VK_LAYER_KHRONOS_validation is not installed";

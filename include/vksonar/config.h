@@ -110,8 +110,10 @@ struct SonarConfig {
     std::string scene_asset_root;
     double scene_scale = 1.0;
 
-    // Returns the first problem in words (field and value), or an empty string if the config is usable.
-    std::string validate() const;
+    // Checks every key against its physical range and the rules that tie keys together. Returns
+    // success, or ErrorCode::invalid_argument whose message names the first problem (key and value,
+    // e.g. "hfov = 400: must be in [0.1, 360] degrees"). Pure: no allocation beyond the message.
+    [[nodiscard]] Result<void> validate() const;
 
     // Number of range bins: `bins`, or with bandwidth_hz > 0 the window (range_max - range_min) over the
     // range resolution c / 2B, rounded to the nearest integer and at least 1 (the bins then tile the

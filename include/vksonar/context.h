@@ -21,12 +21,28 @@ namespace vksonar {
 
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ContextOptions {
-    bool enable_validation = false; // VK_LAYER_KHRONOS_validation; also VKSONAR_VALIDATION=1
-    int device_index = -1;          // -1: VKSONAR_DEVICE env var, else the first device with compute+graphics
+    bool enable_validation = false; // VK_LAYER_KHRONOS_validation (skipped if the layer is not installed)
+    int device_index = -1;          // -1: the first device with compute+graphics
     bool vulkan = true;             // false: a CPU-only context (no Vulkan at all)
     // Optional: the allocation callbacks for the instance, device and every object vksonar makes on
     // them (null: the implementation's). Borrowed: they must outlive the Context.
     const VkAllocationCallbacks* allocator = nullptr;
+};
+
+// The host's Vulkan entry points, optional in HostVulkan (as VMA's VmaVulkanFunctions). vksonar links
+// the Vulkan loader (CMake's Vulkan::Vulkan) and calls the loader's exported functions; it does not
+// route its calls through these pointers. Given, Context::adopt checks with them, before any other
+// Vulkan call, that vksonar's calls will reach the host's device: (1) both pointers are set
+// (else ErrorCode::invalid_argument naming the null one); (2) they come from the loader vksonar
+// links: vkGetInstanceProcAddr(NULL, "vkCreateInstance") gives the same function through both
+// (else ErrorCode::unsupported: a second or statically linked loader, or an ICD called without the
+// loader, which would crash vksonar's calls); (3) the host's vkGetDeviceProcAddr resolves every
+// device function vksonar calls on HostVulkan::device (else ErrorCode::unsupported naming it).
+// Left null, adopt assumes (1)-(3), as before.
+// Thread-safety: a plain value, read only during adopt.
+struct VulkanFunctions {
+    PFN_vkGetInstanceProcAddr vkGetInstanceProcAddr = nullptr; // required
+    PFN_vkGetDeviceProcAddr vkGetDeviceProcAddr = nullptr;     // required
 };
 
 // A host engine's Vulkan objects, borrowed by Context::adopt. vksonar never destroys any of them; they
@@ -53,37 +69,79 @@ struct HostVulkan {
     // (and their pUserData) must outlive the Context and every Renderer made from it, and be callable
     // from any thread that uses them.
     const VkAllocationCallbacks* allocator = nullptr;
+    // Optional: the host's entry points, checked by adopt (VulkanFunctions says what is and is not
+    // done with them). Borrowed: read only during adopt.
+    const VulkanFunctions* functions = nullptr;
 };
 
-struct VulkanContext; // internal
+// The options `base` with what the environment asks for, for tools and tests; vksonar itself never
+// reads the environment. VKSONAR_VALIDATION=1|true|on sets enable_validation; VKSONAR_DEVICE=N sets
+// device_index when base.device_index is -1. Fails with ErrorCode::invalid_argument if VKSONAR_DEVICE
+// is not a device index. Thread-safety: reads the environment (std::getenv).
+[[nodiscard]] Result<ContextOptions> context_options_from_env(ContextOptions base = {});
 
+struct VulkanContext; // internal
+namespace detail {
+struct Access; // internal: src/core/access.h
+}
+class AdoptedContext;
+
+// The device vksonar runs on, as Renderer and HostDepthRenderer take it. Ownership is in the type:
+// a Context made by create() owns its instance and device and destroys them with it; adopt() returns
+// an AdoptedContext, which borrows the host's and destroys nothing of them. (An AdoptedContext is a
+// Context for the renderers, but cannot be moved into a plain Context, which would hide that.)
 // Thread-safety: shared by any number of threads (its calls are const); one Renderer per thread.
 class Context {
 public:
+    // An empty context: no Vulkan, as cpu_only().
     Context();
+    // Destroys the device and instance if create() made them (after vkDeviceWaitIdle); every Renderer
+    // and HostDepthRenderer made from it must be destroyed first.
     ~Context();
     Context(Context&&) noexcept;
     Context& operator=(Context&&) noexcept;
+    Context(AdoptedContext&&) = delete; // would drop the type that says the device is borrowed
+    Context& operator=(AdoptedContext&&) = delete;
 
-    // Creates (and owns) an instance and device. Fails with ErrorCode::no_device if none is usable.
+    // Creates and owns an instance and device (Vulkan 1.1, a graphics+compute queue). Returns the
+    // context, or ErrorCode::no_device if no device is usable (the message suggests the CPU backend),
+    // ErrorCode::invalid_argument for a device_index that does not exist, ErrorCode::vulkan if a
+    // Vulkan call fails. options.vulkan == false gives cpu_only(). Reads no environment variable
+    // (context_options_from_env does, for tools). Thread-safety: may be called from any thread.
     [[nodiscard]] static Result<Context> create(const ContextOptions& options = {});
-    // Wraps (borrows) the host's instance, device and queue. Checks the requirements above and fails
-    // with ErrorCode::unsupported naming the first one missing, or invalid_argument for null handles.
-    [[nodiscard]] static Result<Context> adopt(const HostVulkan& host);
-    // A context without Vulkan, for the CPU backend.
+    // Wraps (borrows) the host's instance, device and queue: see AdoptedContext. Checks the
+    // requirements above and fails with ErrorCode::unsupported naming the first one missing, or
+    // ErrorCode::invalid_argument for null handles, a half-given queue lock or function table, or a
+    // queue family the device does not have. Thread-safety: may be called from any thread; makes no
+    // Vulkan object and submits nothing.
+    [[nodiscard]] static Result<AdoptedContext> adopt(const HostVulkan& host);
+    // A context without Vulkan, for the CPU backend. Never fails, allocates nothing.
     static Context cpu_only();
 
+    // True unless the context is CPU-only.
     bool has_vulkan() const;
-    // True if vksonar created the device (create), false if it is the host's (adopt) or there is none.
-    bool owns_device() const;
-    std::string device_description() const; // device name, driver, API version
-    // Number of validation-layer messages of severity warning or error seen so far.
+    // The device name, driver and API version in one line ("CPU (no Vulkan)" for a CPU-only context).
+    std::string device_description() const;
+    // Number of validation-layer messages of severity warning or error seen so far (0 without
+    // ContextOptions::enable_validation, and always 0 for an adopted context).
     std::uint32_t validation_messages() const;
 
-    VulkanContext* vulkan() const { return vk_.get(); }
-
 private:
+    friend struct detail::Access; // src/core/access.h
+    friend class AdoptedContext;
     std::unique_ptr<VulkanContext> vk_;
+};
+
+// A Context on the host engine's own instance and device (Context::adopt). Borrowed: destroying it
+// destroys no handle of the host's (only what vksonar made on the device, which the renderers own);
+// the host's instance, device and queue must outlive it and every renderer made from it.
+// Thread-safety: as Context.
+class AdoptedContext final : public Context {
+public:
+    // An empty adopted context (no Vulkan): use Context::adopt.
+    AdoptedContext() = default;
+    AdoptedContext(AdoptedContext&&) noexcept = default;
+    AdoptedContext& operator=(AdoptedContext&&) noexcept = default;
 };
 
 } // namespace vksonar

@@ -8,13 +8,35 @@
 
 namespace vksonar {
 
-// Which intermediates a render keeps (bit mask).
-enum SaveFlags : std::uint32_t {
-    save_depth = 1u << 0,    // reversed-Z depth per pixel, and view range
-    save_normals = 1u << 1,  // sonar-frame normal + cos(incidence) per pixel
-    save_echo = 1u << 2,     // per-pixel echo energy and slant range
-    save_profiles = 1u << 3, // per-column range profiles and beam profiles before side lobes
+// Which intermediates a render keeps (RendererOptions::save_mask): flags combined with | and tested
+// with any(mask & SaveFlags::depth).
+enum class SaveFlags : std::uint32_t {
+    none = 0,
+    depth = 1u << 0,    // reversed-Z depth per pixel, and view range
+    normals = 1u << 1,  // sonar-frame normal + cos(incidence) per pixel
+    echo = 1u << 2,     // per-pixel echo energy and slant range
+    profiles = 1u << 3, // per-column range profiles and beam profiles before side lobes
 };
+
+constexpr SaveFlags operator|(SaveFlags a, SaveFlags b) {
+    return static_cast<SaveFlags>(static_cast<std::uint32_t>(a) | static_cast<std::uint32_t>(b));
+}
+constexpr SaveFlags operator&(SaveFlags a, SaveFlags b) {
+    return static_cast<SaveFlags>(static_cast<std::uint32_t>(a) & static_cast<std::uint32_t>(b));
+}
+constexpr SaveFlags operator~(SaveFlags a) {
+    return static_cast<SaveFlags>(~static_cast<std::uint32_t>(a) & 0xfu);
+}
+constexpr SaveFlags& operator|=(SaveFlags& a, SaveFlags b) {
+    return a = a | b;
+}
+constexpr SaveFlags& operator&=(SaveFlags& a, SaveFlags b) {
+    return a = a & b;
+}
+// True if any flag is set: any(mask & SaveFlags::echo).
+constexpr bool any(SaveFlags flags) {
+    return flags != SaveFlags::none;
+}
 
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct StageTime {

@@ -1,11 +1,21 @@
-// A host engine's own depth image as the input of a Renderer (Renderer::create_for_depth, process,
-// record). vksonar then runs only its compute and host stages: the depth image replaces the depth pass.
-// Every Vulkan handle here is borrowed: vksonar never creates, transitions for good, or destroys it.
+// HostDepthRenderer: a host engine's own depth image as the input of the sonar (docs/embedding.md).
+// vksonar then runs only its compute and host stages: the depth image replaces the depth pass.
+// Every Vulkan handle the host passes here is borrowed: vksonar never creates, transitions for good,
+// or destroys it.
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <vector>
 
 #include <vulkan/vulkan_core.h>
+
+#include "vksonar/config.h"
+#include "vksonar/context.h"
+#include "vksonar/frame.h"
+#include "vksonar/renderer.h"
+#include "vksonar/result.h"
+#include "vksonar/validity.h"
 
 namespace vksonar {
 
@@ -52,13 +62,75 @@ struct HostDepthImage {
 };
 
 // A buffer vksonar owns and the host may read (e.g. to draw the sonar image in the engine). Borrowed
-// by the host: valid until the Renderer is destroyed; never destroy it.
+// by the host: valid until the HostDepthRenderer is destroyed; never destroy it.
 // Thread-safety: a plain value; the buffer's contents change with each recorded ping of its Renderer,
 // so the host reads it only between that ping's completion and the next record() or process().
 struct GpuBufferView {
     VkBuffer buffer = VK_NULL_HANDLE;
     VkDeviceSize offset = 0, size = 0;
     std::uint32_t beams = 0, bins = 0; // float32[bins][beams], range-major, linear, relative to the source level
+};
+
+// One simulated sonar on a host engine's depth images (Vulkan backend only): the host renders the
+// depth, vksonar turns it into a sonar frame. Its own type, apart from Renderer (which renders a
+// Scene), so that a scene render on it, or a host-depth call on a Renderer, does not compile.
+// The renderer's pixel grid is the host image's (HostDepthDesc); the camera is the sonar. A depth image
+// carries no material ids: every hit pixel scatters with config.default_backscatter_db and Lambert.
+// Thread-safety: not thread-safe: one thread at a time; renderers sharing a Context are independent.
+class HostDepthRenderer {
+public:
+    // An empty renderer (no call but destruction and assignment is valid): use create().
+    HostDepthRenderer();
+    // Waits for nothing: the host must have seen its last recorded ping finish (see record()).
+    ~HostDepthRenderer();
+    HostDepthRenderer(HostDepthRenderer&&) noexcept;
+    HostDepthRenderer& operator=(HostDepthRenderer&&) noexcept;
+
+    // Validates the config, builds the plan on the host image's grid, and creates the compute stages,
+    // their buffers and the import pass on `context`'s device. Needs a Vulkan context (created or
+    // adopted; a compute queue is enough) and options.backend == Backend::vulkan. Fails with
+    // ErrorCode::invalid_argument for a CPU context, the CPU backend or a bad config or desc, and with
+    // ErrorCode::unsupported if the image does not cover the sonar or the format cannot be sampled.
+    // `context` must outlive the renderer; `config`, `desc` and `options` are copied.
+    [[nodiscard]] static Result<HostDepthRenderer>
+    create(Context& context, const SonarConfig& config, const HostDepthDesc& desc, const RendererOptions& options = {});
+
+    // A frame sized for this renderer (the only allocation; reuse it for every ping).
+    Frame make_frame() const;
+
+    // The noise seed (RendererOptions::seed): (seed, frame_index) key the noise of every frame.
+    void set_seed(std::uint64_t seed);
+    std::uint64_t seed() const;
+
+    // Converts the host's image (in depth.layout, after depth.wait_semaphore) into vksonar's depth
+    // buffer, runs normals/echo/beamform on the context's queue, waits for them, then the host
+    // stages: fills `frame` (made by make_frame) as Renderer::render does. The host must not write the
+    // image until process() returns. Fails with ErrorCode::invalid_argument for a frame not made by
+    // this renderer, ErrorCode::vulkan if a Vulkan call fails.
+    [[nodiscard]] Result<void> process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame);
+    // Records the same GPU work into the host's command buffer (primary, recording, outside a render
+    // pass, from a pool of the context's queue family) with the barriers it needs, and returns without
+    // submitting: the host submits it with its own semaphores and fence, and the sonar runs inside the
+    // host's frame without a CPU wait. One ping in flight: the host must have seen the previous
+    // recorded ping finish before calling record() again, and before destroying the renderer.
+    [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
+    // After the command buffer given to record() has finished executing (the host waited for its
+    // fence): copies the result to host memory and runs the host stages (noise, gain) into `frame`.
+    // Fails with ErrorCode::invalid_argument, without touching `frame`, if nothing was recorded or
+    // the GPU work has not finished.
+    [[nodiscard]] Result<void> read_back(std::uint64_t frame_index, Frame& frame);
+    // The clean polar scan on the GPU after a recorded ping (before speckle, noise and gain, which are
+    // host stages), for drawing it in the engine. Owned by the renderer: the host borrows it.
+    GpuBufferView polar_buffer() const;
+
+    // The config as validated (copied at create).
+    const SonarConfig& config() const;
+    // Each model this renderer's frames use, checked against its validity domain (validity.h).
+    const std::vector<ModelValidity>& validity() const;
+
+private:
+    friend struct detail::Access; // src/core/access.h
+    std::unique_ptr<RendererImpl> impl_;
 };
 
 } // namespace vksonar

@@ -1,6 +1,5 @@
-// Renderer: one simulated sonar. Create once per (config, scene); render() many poses. Or, embedded in
-// an engine, create once per (config, host depth image description) and process()/record() the
-// engine's own depth images (docs/embedding.md).
+// Renderer: one simulated sonar. Create once per (config, scene); render() many poses. (Embedded in an
+// engine, on the engine's own depth images: HostDepthRenderer, vksonar/host_depth.h.)
 // Thread-safety: a Renderer is not thread-safe (one thread at a time uses it: one Renderer per thread);
 // several Renderers, on as many threads, may share one Context. Frame, Scene and SonarConfig are plain
 // values: safe to read from many threads, to write from one. A Scene must not change while a Renderer
@@ -14,7 +13,6 @@
 #include "vksonar/config.h"
 #include "vksonar/context.h"
 #include "vksonar/frame.h"
-#include "vksonar/host_depth.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"
 #include "vksonar/validity.h"
@@ -23,18 +21,44 @@ namespace vksonar {
 
 enum class Backend : std::uint8_t { vulkan, cpu };
 
+// How the Vulkan backend reads its small tables (materials, column and beam tables, side-lobe
+// weights). automatic: through uniform blocks where they fit maxUniformBufferRange, else through
+// their storage bindings; storage: always through storage bindings. Frames are bit-identical either
+// way (tests compare the two); automatic is the fast path.
+enum class TableAccess : std::uint8_t { automatic, storage };
+// How resample.comp sums each beam's columns. automatic: walk each run of columns once where that
+// adds the same terms in the same order as the gather, else gather; gather: always gather. Frames
+// are bit-identical either way; automatic is the fast path.
+enum class ResampleMethod : std::uint8_t { automatic, gather };
+// How the Vulkan backend measures Frame::times. automatic: timestamp queries where the queue has
+// them, except on CPU devices (lavapipe), else host clocks around one submission per stage; host:
+// always host clocks; timestamps: timestamp queries where the queue has them, else host clocks.
+enum class StageTiming : std::uint8_t { automatic, host, timestamps };
+
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct RendererOptions {
     Backend backend = Backend::vulkan;
     std::uint64_t seed = 1;
-    std::uint32_t save_mask = 0; // SaveFlags
+    SaveFlags save_mask = SaveFlags::none; // the intermediates make_frame sizes and render fills
     // Threads for the host stages (noise, gain): 0 = one per hardware thread (at most 8), 1 = the
     // calling thread only. Created once with the Renderer. Output does not depend on it.
     std::uint32_t host_threads = 0;
+    // Vulkan backend paths (ignored by the CPU backend); the defaults are the fast paths.
+    TableAccess tables = TableAccess::automatic;
+    ResampleMethod resample = ResampleMethod::automatic;
+    StageTiming stage_timing = StageTiming::automatic;
 };
 
+// The options `base` with what the environment asks for, for tools and tests; vksonar itself never
+// reads the environment. VKSONAR_HOST_THREADS=N sets host_threads (when base.host_threads is 0),
+// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather and VKSONAR_STAGE_TIMING=host|timestamps set the
+// paths above; other values are ignored. Thread-safety: reads the environment (std::getenv).
+[[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});
+
 class RendererImpl; // internal
-struct Plan;        // internal
+namespace detail {
+struct Access; // internal: src/core/access.h
+}
 
 // Thread-safety: not thread-safe: one thread at a time; Renderers sharing a Context are independent.
 class Renderer {
@@ -60,38 +84,13 @@ public:
     // Renders the scene from `pose` into `frame`. frame_index keys the noise RNG with the seed.
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
 
-    // --- Embedding: the host engine's depth image instead of a scene (Vulkan backend only). ---
-    // The renderer's pixel grid is the host image's (desc); the camera is the sonar (HostDepthDesc).
-    // A depth image carries no material ids: every hit pixel scatters with config.default_backscatter_db
-    // and the Lambert model. Fails with ErrorCode::unsupported if the image does not cover the sonar.
-    [[nodiscard]] static Result<Renderer> create_for_depth(Context& context, const SonarConfig& config,
-                                                           const HostDepthDesc& desc,
-                                                           const RendererOptions& options = {});
-    // Converts the host's image (in depth.layout, after depth.wait_semaphore) into vksonar's depth
-    // buffer, runs normals/echo/beamform on vksonar's queue, waits for them, then the host stages:
-    // fills `frame` as render() does. The host must not write the image until process() returns.
-    [[nodiscard]] Result<void> process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame);
-    // Records the same GPU work into the host's command buffer (primary, recording, outside a render
-    // pass, from a pool of the context's queue family) with the barriers it needs, and returns without
-    // submitting: the host submits it with its own semaphores and fence, and the sonar runs inside the
-    // host's frame without a CPU wait. One ping in flight: the host must have seen the previous
-    // recorded ping finish before calling record() again, and before destroying the Renderer.
-    [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
-    // After the command buffer given to record() has finished executing (the host waited for its
-    // fence): copies the result to host memory and runs the host stages (noise, gain). Fails with
-    // ErrorCode::invalid_argument, without touching `frame`, if the GPU work has not finished.
-    [[nodiscard]] Result<void> read_back(std::uint64_t frame_index, Frame& frame);
-    // The clean polar scan on the GPU after a recorded ping (before speckle, noise and gain, which are
-    // host stages), for drawing it in the engine. Owned by the Renderer: the host borrows it.
-    [[nodiscard]] Result<GpuBufferView> polar_buffer() const;
-
     const SonarConfig& config() const;
     // Each model this renderer's frames use, checked against its validity domain (validity.h): the
     // entries with ok == false are what the CLI prints as warnings and meta.json lists under "validity".
     const std::vector<ModelValidity>& validity() const;
 
 private:
-    friend const Plan& renderer_plan(const Renderer&);
+    friend struct detail::Access; // src/core/access.h
     std::unique_ptr<RendererImpl> impl_;
 };
 

@@ -33,8 +33,9 @@ struct AcousticMaterial {
     double rms_slope = 0.1;      // rough only: m, rms slope of the interface along one axis (0.01 to 1)
     double reflection_db = -8.0; // rough only: 10 log10 R^2 (<= 0; -8 dB is medium sand, -1 dB steel)
 
-    // The first problem in words ("rms_slope = 0 (expected 0.01 to 1)"), or empty.
-    std::string validate() const;
+    // Checks the parameters the model uses. Returns success, or ErrorCode::invalid_argument whose
+    // message names the first problem ("rms_slope = 0 (expected 0.01 to 1)").
+    [[nodiscard]] Result<void> validate() const;
 };
 
 // The acoustic material a glTF material's name suggests, for scenes exported without extras.vksonar:
@@ -65,6 +66,9 @@ struct SceneStats {
 };
 
 struct SceneData; // internal
+namespace detail {
+struct Access; // internal: src/core/access.h
+}
 
 // How Scene::load_gltf treats the files a scene names (external buffers), for scenes nobody here wrote.
 // A buffer's uri is relative to the scene file's folder; it is resolved (symlinks and ".." followed)
@@ -114,9 +118,8 @@ public:
     // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
     const std::string& effects_json() const;
 
-    const SceneData& data() const { return *data_; }
-
 private:
+    friend struct detail::Access; // src/core/access.h
     std::unique_ptr<SceneData> data_;
 };
 

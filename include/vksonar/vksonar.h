@@ -4,6 +4,7 @@
 #include "vksonar/config.h"
 #include "vksonar/context.h"
 #include "vksonar/frame.h"
+#include "vksonar/host_depth.h"
 #include "vksonar/renderer.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"

@@ -120,7 +120,7 @@ SonarConfig layered_config(const Setup& setup, const std::vector<std::string>& o
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
     }
-    if (std::string problem = config.validate(); !problem.empty()) throw BadInput("invalid config: " + problem);
+    if (auto valid = config.validate(); !valid) throw BadInput("invalid config: " + valid.error().message);
     return config;
 }
 
@@ -136,7 +136,7 @@ const char* backend_name(Backend backend) {
 
 Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
                        std::uint64_t seed) {
-    RendererOptions options;
+    RendererOptions options = renderer_options_from_env();
     options.backend = backend;
     options.seed = seed;
     auto renderer = Renderer::create(context, config, scene, options);

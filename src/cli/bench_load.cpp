@@ -158,7 +158,8 @@ int run_bench_load(const std::vector<std::string>& argv) {
             ms.push_back(std::chrono::duration<double, std::milli>(end - start).count());
             rss_delta = std::max(rss_delta, resident_mib() - before);
             triangles = scene->stats().triangles;
-            arrays = (scene->data().positions.size() * 4.0 + scene->data().indices.size() * 4.0) / (1024.0 * 1024.0);
+            arrays = (scene_data(*scene).positions.size() * 4.0 + scene_data(*scene).indices.size() * 4.0) /
+                     (1024.0 * 1024.0);
         }
         std::sort(ms.begin(), ms.end());
         std::printf("| %s | %.1f | %.0f | %.1f | %.1f | %.1f |\n", form.name, double(fs::file_size(file)) / 1e6, ms[1],

@@ -62,7 +62,9 @@ int run_info(const std::vector<std::string>& argv) {
     std::printf("vksonar 0.1.0\n");
     ContextOptions options;
     options.enable_validation = args.has("--validation");
-    auto context = Context::create(options);
+    auto from_env = context_options_from_env(options);
+    if (!from_env) throw BadInput(from_env.error().message);
+    auto context = Context::create(from_env.value());
     if (!context) {
         std::printf("Vulkan: none usable (%s)\nThe CPU backend still works: vksonar render --backend cpu ...\n",
                     context.error().message.c_str());

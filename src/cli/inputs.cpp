@@ -56,9 +56,18 @@ SonarConfig sonar_base_config(const std::string& sonar) {
     return preset.value();
 }
 
+namespace {
+// A Vulkan context with what the environment asks for (VKSONAR_VALIDATION, VKSONAR_DEVICE).
+Result<Context> create_context_from_env() {
+    auto options = context_options_from_env();
+    if (!options) return options.error();
+    return Context::create(options.value());
+}
+} // namespace
+
 Context make_context(Backend backend) {
     if (backend == Backend::cpu) return Context::cpu_only();
-    auto created = Context::create(ContextOptions{});
+    auto created = create_context_from_env();
     if (!created) {
         // no_device errors already say to use --backend cpu; other failures get the hint here.
         const Error& e = created.error();
@@ -68,14 +77,14 @@ Context make_context(Backend backend) {
 }
 
 Context choose_backend(Backend& backend, std::string& why) {
-    auto created = Context::create(ContextOptions{});
+    auto created = create_context_from_env();
     if (!created) {
         backend = Backend::cpu;
         why = "auto: no usable Vulkan device (" + created.error().message + "): the CPU backend";
         return Context::cpu_only();
     }
     Context context = std::move(created.value());
-    const VulkanContext* vk = context.vulkan();
+    const VulkanContext* vk = context_vulkan(context);
     if (vk != nullptr && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
         backend = Backend::cpu;
         why = "auto: the Vulkan device is a CPU implementation (" + context.device_description() +

@@ -103,8 +103,9 @@ struct SaveSet {
     bool fan = true, polar = true, polar_png = true, polar_u16 = true; // the default set
     bool depth = false, normals = false, echo = false, cloud = false;
     bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
-    std::uint32_t mask() const {
-        return (depth ? save_depth : 0u) | (normals ? save_normals : 0u) | (echo ? save_echo : 0u);
+    SaveFlags mask() const {
+        return (depth ? SaveFlags::depth : SaveFlags::none) | (normals ? SaveFlags::normals : SaveFlags::none) |
+               (echo ? SaveFlags::echo : SaveFlags::none);
     }
 };
 
@@ -309,6 +310,12 @@ Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::stri
 }
 
 // ---- one dataset file ---------------------------------------------------------------------------
+
+// The first problem SonarConfig::validate names, or empty for a usable config.
+std::string config_problem(const SonarConfig& config) {
+    const auto valid = config.validate();
+    return valid ? std::string() : valid.error().message;
+}
 
 std::string lower_extension(const std::string& path) {
     std::string ext = fs::path(path).extension().string();
@@ -806,11 +813,11 @@ int run_render(const std::vector<std::string>& argv) {
             std::error_code ec;
             const std::string path = args.value("--config");
             if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
-            const std::string before = config.validate();
+            const std::string before = config_problem(config);
             auto layered = apply_config_file(config, path);
             if (!layered) throw BadInput(layered.error().message);
             config = layered.value();
-            if (std::string after = config.validate(); after != before) {
+            if (std::string after = config_problem(config); after != before) {
                 file_problem = std::move(after);
                 file_path = path;
             }
@@ -825,7 +832,7 @@ int run_render(const std::vector<std::string>& argv) {
             if (!layered) throw BadInput(layered.error().message);
             config = layered.value();
         }
-        if (std::string problem = config.validate(); !problem.empty()) {
+        if (std::string problem = config_problem(config); !problem.empty()) {
             const bool from_file = !file_problem.empty() && problem == file_problem;
             throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
         }
@@ -872,11 +879,12 @@ int run_render(const std::vector<std::string>& argv) {
     Context context = backend_name == "auto" ? choose_backend(backend, backend_reason) : make_context(backend);
     if (backend_name == "auto") backend_name = backend == Backend::cpu ? "cpu" : "vulkan";
     const std::string device = backend == Backend::vulkan ? context.device_description() : "cpu";
-    RendererOptions renderer_options;
+    RendererOptions renderer_options = renderer_options_from_env();
     renderer_options.backend = backend;
     renderer_options.seed = seed;
     // Legacy modes start from the depth pass (and its material ids, for the GTRI retro).
-    renderer_options.save_mask = save.mask() | (config.mode != SonarMode::physical ? save_depth : 0u);
+    renderer_options.save_mask =
+        save.mask() | (config.mode != SonarMode::physical ? SaveFlags::depth : SaveFlags::none);
     auto renderer = Renderer::create(context, config, scene.value(), renderer_options);
     if (!renderer) {
         const Error& e = renderer.error();

@@ -152,69 +152,75 @@ std::uint32_t SonarConfig::range_bins() const {
     return static_cast<std::uint32_t>(std::clamp(bins_from_bandwidth(*this), 1.0, 65536.0));
 }
 
-std::string SonarConfig::validate() const {
-    Checker c;
+Result<void> SonarConfig::validate() const {
+    // The first problem in words, or empty.
+    const std::string first_problem = [this]() -> std::string {
+        Checker c;
 
-    // Every number in the table must be finite (NaN/Inf arrive through --set or a hand-written file).
-    for (const auto& key : config_keys::all()) {
-        const Json value = key.get(*this);
-        if (value.is_number_float() && !std::isfinite(value.get<double>()))
-            return std::string(key.name) + " = " + format_number(value.get<double>()) + ": must be a finite number";
-    }
-    for (std::size_t i = 0; i < beam_angles_deg.size(); ++i)
-        if (!std::isfinite(beam_angles_deg[i]))
-            return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
-                   ": must be a finite number";
-
-    // Every numeric key within its physical range (the table in config_keys.cpp: one place per key,
-    // with its reason), then the rules that tie keys together.
-    if (std::string problem = config_keys::check_ranges(*this); !problem.empty()) return problem;
-
-    c.check(horizontal_beamwidth_deg <= hfov_deg, "horizontal_beamwidth", horizontal_beamwidth_deg,
-            "must be at most hfov (" + format_number(hfov_deg) + " degrees): a beam wider than the whole fan");
-    c.check(range_max_m > range_min_m, "range_max", range_max_m,
-            "must be greater than range_min (" + format_number(range_min_m) + " m)");
-    if (c.problem.empty())
-        c.check(range_max_m / range_min_m <= 1e6, "range_max", range_max_m,
-                "range_max / range_min must be at most 1e6 (range_min = " + format_number(range_min_m) +
-                    " m); raise range_min");
-    // A real pulse's band f +- B/2 cannot reach below 0 Hz.
-    c.check(bandwidth_hz <= 2.0 * frequency_hz, "bandwidth", bandwidth_hz,
-            "must be at most twice the frequency (" + format_number(2.0 * frequency_hz) +
-                " Hz): the band f +- B/2 would reach below 0 Hz");
-    c.check(db_max > db_min, "display.db_max", db_max,
-            "must be greater than display.db_min (" + format_number(db_min) + " dB)");
-    if (c.problem.empty() && bandwidth_hz > 0) {
-        const double resolution_m = sound_speed_mps / (2.0 * bandwidth_hz);
-        const double derived = bins_from_bandwidth(*this);
-        c.check(derived <= 65536, "bandwidth", bandwidth_hz,
-                "gives " + format_number(derived) + " range bins of c / 2B = " + format_number(resolution_m) +
-                    " m over the range window; at most 65536");
-    }
-    if (!c.problem.empty()) return c.problem;
-
-    if (!beam_angles_deg.empty()) {
-        if (beam_angles_deg.size() != beams)
-            return "beams = " + std::to_string(beams) + ": does not match beam_angles (" +
-                   std::to_string(beam_angles_deg.size()) + " entries); set one or clear beam_angles";
-        const double half = hfov_deg / 2 + 1e-9;
-        for (std::size_t i = 0; i < beam_angles_deg.size(); ++i) {
-            if (std::abs(beam_angles_deg[i]) > half)
-                return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
-                       ": outside +-hfov/2 (" + format_number(hfov_deg / 2) + " degrees)";
-            if (i > 0 && !(beam_angles_deg[i] < beam_angles_deg[i - 1]))
-                return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
-                       ": the table must be strictly decreasing (port first), but beam_angles[" +
-                       std::to_string(i - 1) + "] = " + format_number(beam_angles_deg[i - 1]);
+        // Every number in the table must be finite (NaN/Inf arrive through --set or a hand-written file).
+        for (const auto& key : config_keys::all()) {
+            const Json value = key.get(*this);
+            if (value.is_number_float() && !std::isfinite(value.get<double>()))
+                return std::string(key.name) + " = " + format_number(value.get<double>()) + ": must be a finite number";
         }
-    }
+        for (std::size_t i = 0; i < beam_angles_deg.size(); ++i)
+            if (!std::isfinite(beam_angles_deg[i]))
+                return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                       ": must be a finite number";
 
-    // The uuv plugin projects one pinhole depth image; a sliced depth pass has no single focal length.
-    if (c.problem.empty() && mode == SonarMode::uuv_legacy)
-        c.check(hfov_deg <= max_slice_deg && hfov_deg < 180, "hfov", hfov_deg,
+        // Every numeric key within its physical range (the table in config_keys.cpp: one place per key,
+        // with its reason), then the rules that tie keys together.
+        if (std::string problem = config_keys::check_ranges(*this); !problem.empty()) return problem;
+
+        c.check(horizontal_beamwidth_deg <= hfov_deg, "horizontal_beamwidth", horizontal_beamwidth_deg,
+                "must be at most hfov (" + format_number(hfov_deg) + " degrees): a beam wider than the whole fan");
+        c.check(range_max_m > range_min_m, "range_max", range_max_m,
+                "must be greater than range_min (" + format_number(range_min_m) + " m)");
+        if (c.problem.empty())
+            c.check(range_max_m / range_min_m <= 1e6, "range_max", range_max_m,
+                    "range_max / range_min must be at most 1e6 (range_min = " + format_number(range_min_m) +
+                        " m); raise range_min");
+        // A real pulse's band f +- B/2 cannot reach below 0 Hz.
+        c.check(bandwidth_hz <= 2.0 * frequency_hz, "bandwidth", bandwidth_hz,
+                "must be at most twice the frequency (" + format_number(2.0 * frequency_hz) +
+                    " Hz): the band f +- B/2 would reach below 0 Hz");
+        c.check(db_max > db_min, "display.db_max", db_max,
+                "must be greater than display.db_min (" + format_number(db_min) + " dB)");
+        if (c.problem.empty() && bandwidth_hz > 0) {
+            const double resolution_m = sound_speed_mps / (2.0 * bandwidth_hz);
+            const double derived = bins_from_bandwidth(*this);
+            c.check(derived <= 65536, "bandwidth", bandwidth_hz,
+                    "gives " + format_number(derived) + " range bins of c / 2B = " + format_number(resolution_m) +
+                        " m over the range window; at most 65536");
+        }
+        if (!c.problem.empty()) return c.problem;
+
+        if (!beam_angles_deg.empty()) {
+            if (beam_angles_deg.size() != beams)
+                return "beams = " + std::to_string(beams) + ": does not match beam_angles (" +
+                       std::to_string(beam_angles_deg.size()) + " entries); set one or clear beam_angles";
+            const double half = hfov_deg / 2 + 1e-9;
+            for (std::size_t i = 0; i < beam_angles_deg.size(); ++i) {
+                if (std::abs(beam_angles_deg[i]) > half)
+                    return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                           ": outside +-hfov/2 (" + format_number(hfov_deg / 2) + " degrees)";
+                if (i > 0 && !(beam_angles_deg[i] < beam_angles_deg[i - 1]))
+                    return "beam_angles[" + std::to_string(i) + "] = " + format_number(beam_angles_deg[i]) +
+                           ": the table must be strictly decreasing (port first), but beam_angles[" +
+                           std::to_string(i - 1) + "] = " + format_number(beam_angles_deg[i - 1]);
+            }
+        }
+
+        // The uuv plugin projects one pinhole depth image; a sliced depth pass has no single focal length.
+        if (c.problem.empty() && mode == SonarMode::uuv_legacy)
+            c.check(
+                hfov_deg <= max_slice_deg && hfov_deg < 180, "hfov", hfov_deg,
                 "mode uuv-legacy needs one perspective depth image: hfov must be < 180 and <= accuracy.max_slice (" +
                     format_number(max_slice_deg) + " degrees)");
-    return c.problem;
+        return c.problem;
+    }();
+    if (first_problem.empty()) return {};
+    return make_error(ErrorCode::invalid_argument, first_problem);
 }
 
 } // namespace vksonar

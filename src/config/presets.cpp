@@ -25,8 +25,8 @@ Result<SonarConfig> load_preset(const std::string& name) {
         auto config = apply_config_json(SonarConfig{}, std::string(text), origin);
         if (!config) return config;
         if (config->name.empty() || config->name == SonarConfig{}.name) config->name = name;
-        if (std::string problem = config->validate(); !problem.empty())
-            return make_error(ErrorCode::internal, origin + " is invalid: " + problem);
+        if (auto valid = config->validate(); !valid)
+            return make_error(ErrorCode::internal, origin + " is invalid: " + valid.error().message);
         return config;
     }
     std::string valid;

@@ -1,4 +1,4 @@
-// The plan of a renderer that consumes a host engine's depth image (Renderer::create_for_depth):
+// The plan of a renderer that consumes a host engine's depth image (HostDepthRenderer::create):
 // the sonar's beams, bins, patterns and effects as make_plan derives them, on the host image's pixel
 // grid (one slice, the host camera's pinhole projection) instead of vksonar's own sliced grid.
 #pragma once

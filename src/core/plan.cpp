@@ -450,9 +450,9 @@ Result<void> plan_materials(Plan& p, const SceneData& scene, bool& any_angle_dep
     for (std::size_t i = 0; i < scene.materials.size(); ++i) {
         const AcousticMaterial& m = scene.materials[i];
         // Engines fill materials by hand (Scene::add_material); the glTF loader has checked its own.
-        if (const std::string problem = m.validate(); !problem.empty())
+        if (const auto valid = m.validate(); !valid)
             return make_error(ErrorCode::invalid_argument,
-                              "material " + std::to_string(i) + " '" + m.name + "': " + problem);
+                              "material " + std::to_string(i) + " '" + m.name + "': " + valid.error().message);
         const double db = std::isfinite(m.backscatter_db) ? m.backscatter_db : c.default_backscatter_db;
         const double backscatter_linear = std::pow(10.0, db / 10.0);
         shared::MaterialGpu gpu{static_cast<float>(backscatter_linear), shader_id(m.model), 0.0f, 0.0f};
@@ -628,8 +628,8 @@ void plan_gpu_params(Plan& p) {
 } // namespace
 
 Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const HostPixelGrid* host_grid) {
-    if (std::string problem = config.validate(); !problem.empty()) {
-        return make_error(ErrorCode::invalid_argument, "config: " + problem);
+    if (auto valid = config.validate(); !valid) {
+        return make_error(ErrorCode::invalid_argument, "config: " + valid.error().message);
     }
     Plan p;
     p.config = config;

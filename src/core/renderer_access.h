@@ -1,8 +1,9 @@
-// Internal access to a Renderer's plan (for the CLI's images and meta.json, and for tests).
+// Internal access to a renderer's plan (for the CLI's images and meta.json, and for tests).
 #pragma once
 
+#include "core/access.h"
+
 namespace vksonar {
-struct Plan;
-class Renderer;
 const Plan& renderer_plan(const Renderer& renderer);
+const Plan& renderer_plan(const HostDepthRenderer& renderer);
 } // namespace vksonar

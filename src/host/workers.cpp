@@ -6,13 +6,7 @@
 namespace vksonar::host {
 
 Workers::Workers(std::uint32_t threads) {
-    if (threads == 0) {
-        // VKSONAR_HOST_THREADS overrides the automatic count (benchmarks, pinning on shared machines).
-        const char* env = std::getenv("VKSONAR_HOST_THREADS");
-        const long requested = env ? std::strtol(env, nullptr, 10) : 0;
-        threads = requested > 0 ? static_cast<std::uint32_t>(std::min<long>(requested, kMaxThreads))
-                                : std::max(1u, std::thread::hardware_concurrency());
-    }
+    if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
     threads = std::min(threads, kMaxThreads);
     helpers_.reserve(threads - 1);
     for (std::uint32_t part = 1; part < threads; ++part)

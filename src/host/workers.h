@@ -16,7 +16,7 @@ class Workers {
 public:
     using Task = void (*)(void* context, std::uint32_t part, std::uint32_t parts);
 
-    // threads = 0: VKSONAR_HOST_THREADS if set, else one per hardware thread; at most kMaxThreads.
+    // threads = 0: one per hardware thread; at most kMaxThreads.
     // 1: everything on the caller.
     explicit Workers(std::uint32_t threads = 0);
     ~Workers();

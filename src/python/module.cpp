@@ -77,8 +77,8 @@ struct ConfigObject {
     }
     void quality(const std::string& name) { config = take(apply_quality(config, name)); }
     void validate() const {
-        if (std::string problem = config.validate(); !problem.empty())
-            throw py::value_error("invalid config: " + problem);
+        if (const auto valid = config.validate(); !valid)
+            throw py::value_error("invalid config: " + valid.error().message);
     }
     py::dict to_dict() const {
         return py::module_::import("json").attr("loads")(config_to_json(config)).cast<py::dict>();
@@ -121,8 +121,8 @@ struct SceneObject {
         AcousticMaterial material;
         material.name = "from_arrays";
         material.backscatter_db = backscatter_db;
-        if (std::string problem = material.validate(); !problem.empty())
-            throw py::value_error("backscatter_db: " + problem);
+        if (const auto valid = material.validate(); !valid)
+            throw py::value_error("backscatter_db: " + valid.error().message);
         SceneDraw draw;
         draw.mesh = mesh;
         draw.material = scene.add_material(material);
@@ -297,7 +297,7 @@ PYBIND11_MODULE(vksonar, m) {
                          std::uint64_t seed, const std::vector<std::string>& outputs) {
                  if (!scene) throw py::value_error("scene: None");
                  config.validate();
-                 RendererOptions options;
+                 RendererOptions options = renderer_options_from_env();
                  if (backend == "cpu")
                      options.backend = Backend::cpu;
                  else if (backend != "vulkan")
@@ -305,19 +305,20 @@ PYBIND11_MODULE(vksonar, m) {
                  options.seed = seed;
                  for (const std::string& o : outputs) {
                      if (o == "depth")
-                         options.save_mask |= save_depth;
+                         options.save_mask |= SaveFlags::depth;
                      else if (o == "normals")
-                         options.save_mask |= save_normals;
+                         options.save_mask |= SaveFlags::normals;
                      else if (o == "echo")
-                         options.save_mask |= save_echo;
+                         options.save_mask |= SaveFlags::echo;
                      else
                          throw py::value_error("outputs: unknown '" + o + "' (depth, normals, echo)");
                  }
                  auto r = std::make_shared<RendererObject>();
                  r->scene = std::move(scene);
                  r->backend = backend;
-                 r->context = std::make_shared<Context>(
-                     options.backend == Backend::cpu ? Context::cpu_only() : take(Context::create(ContextOptions{})));
+                 r->context = std::make_shared<Context>(options.backend == Backend::cpu
+                                                            ? Context::cpu_only()
+                                                            : take(Context::create(take(context_options_from_env()))));
                  r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;

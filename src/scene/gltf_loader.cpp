@@ -100,8 +100,8 @@ private:
             } else {
                 unmapped += (unmapped.empty() ? "" : ", ") + ("'" + m.name + "'");
             }
-            if (const std::string problem = m.validate(); !problem.empty())
-                fail(ErrorCode::parse, where + ": extras.vksonar." + problem);
+            if (const auto valid = m.validate(); !valid)
+                fail(ErrorCode::parse, where + ": extras.vksonar." + valid.error().message);
             out_.materials.push_back(m);
         }
         if (!unmapped.empty())

@@ -15,6 +15,10 @@
 
 namespace vksonar {
 
+const SceneData& detail::Access::scene(const Scene& scene) {
+    return *scene.data_;
+}
+
 Scene::Scene() : data_(std::make_unique<SceneData>()) {}
 Scene::~Scene() = default;
 
@@ -104,20 +108,25 @@ std::string number(double v) {
 }
 } // namespace
 
-std::string AcousticMaterial::validate() const {
-    // The same physical range as the config's default_backscatter (src/config/config_keys.cpp): 0 dB
-    // (1 m^2 per m^2 per sr) is past a perfect Lambertian reflector (-5 dB); below -100 dB no echo
-    // reaches a display. A non-finite value stands for "the config's default" (plan.cpp).
-    if (std::isfinite(backscatter_db) && !(backscatter_db >= -100.0 && backscatter_db <= 0.0))
-        return "backscatter_db = " + number(backscatter_db) + " (expected -100 to 0 dB)";
-    if (model != Model::rough) return {}; // the facet parameters mean nothing to the other models
-    // m < 0.01 (0.6 deg) makes a mirror whose lobe no pixel grid resolves; m > 1 (45 deg) is past
-    // where the Kirchhoff approximation holds (and would make the facet term's peak unbounded).
-    if (!(rms_slope >= 0.01 && rms_slope <= 1.0)) return "rms_slope = " + number(rms_slope) + " (expected 0.01 to 1)";
-    // R^2 <= 1 (no interface reflects more than arrives); -100 dB is far below any seabed or target.
-    if (!(reflection_db <= 0.0 && reflection_db >= -100.0))
-        return "reflection_db = " + number(reflection_db) + " (expected -100 to 0 dB: R^2 <= 1)";
-    return {};
+Result<void> AcousticMaterial::validate() const {
+    const std::string first_problem = [this]() -> std::string {
+        // The same physical range as the config's default_backscatter (src/config/config_keys.cpp): 0 dB
+        // (1 m^2 per m^2 per sr) is past a perfect Lambertian reflector (-5 dB); below -100 dB no echo
+        // reaches a display. A non-finite value stands for "the config's default" (plan.cpp).
+        if (std::isfinite(backscatter_db) && !(backscatter_db >= -100.0 && backscatter_db <= 0.0))
+            return "backscatter_db = " + number(backscatter_db) + " (expected -100 to 0 dB)";
+        if (model != Model::rough) return {}; // the facet parameters mean nothing to the other models
+        // m < 0.01 (0.6 deg) makes a mirror whose lobe no pixel grid resolves; m > 1 (45 deg) is past
+        // where the Kirchhoff approximation holds (and would make the facet term's peak unbounded).
+        if (!(rms_slope >= 0.01 && rms_slope <= 1.0))
+            return "rms_slope = " + number(rms_slope) + " (expected 0.01 to 1)";
+        // R^2 <= 1 (no interface reflects more than arrives); -100 dB is far below any seabed or target.
+        if (!(reflection_db <= 0.0 && reflection_db >= -100.0))
+            return "reflection_db = " + number(reflection_db) + " (expected -100 to 0 dB: R^2 <= 1)";
+        return {};
+    }();
+    if (first_problem.empty()) return {};
+    return make_error(ErrorCode::invalid_argument, first_problem);
 }
 
 double SceneBounds::diagonal_m() const {

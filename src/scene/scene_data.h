@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "core/access.h"
 #include "vksonar/scene.h"
 
 namespace vksonar {

@@ -91,7 +91,7 @@ public:
         clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
     }
 
-    Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override {
+    Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override {
         const double pose_values[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
         const char* pose_names[6] = {"x", "y", "z", "roll", "pitch", "yaw"};
         for (int i = 0; i < 6; ++i) {
@@ -114,19 +114,19 @@ public:
         }
 
         store(frame.clean, polar_);
-        if (save_mask & save_depth) {
+        if (any(save_mask & SaveFlags::depth)) {
             store(frame.depth, depth_);
             store(frame.material, material_);
         }
-        if (save_mask & save_normals) {
+        if (any(save_mask & SaveFlags::normals)) {
             if (plan_.effects.incidence) {
                 store(frame.normals, normals_);
             } else {
                 frame.normals.clear(); // the normals stage did not run (incidence off)
             }
         }
-        if (save_mask & save_echo) store(frame.echo, echo_);
-        if (save_mask & save_profiles) {
+        if (any(save_mask & SaveFlags::echo)) store(frame.echo, echo_);
+        if (any(save_mask & SaveFlags::profiles)) {
             store(frame.profiles, profiles_);
             store(frame.beam_profiles, beam_profiles_);
         }

@@ -19,7 +19,7 @@ public:
     // Fills frame.clean (bins * beams, linear, relative to SL), the intermediates selected by
     // save_mask, frame.times (one entry per GPU/CPU stage run) and frame.stages_run.
     // Must not allocate once the frame is sized (Renderer::make_frame).
-    [[nodiscard]] virtual Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) = 0;
+    [[nodiscard]] virtual Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) = 0;
     virtual const char* name() const = 0;
 };
 

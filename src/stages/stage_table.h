@@ -26,7 +26,7 @@ enum class StageId : std::uint8_t { depth, normals, echo, beamform };
 struct StageInfo {
     StageId id;
     const char* name;            // Frame::stages_run, Frame::times, `vksonar bench` columns
-    const char* host_depth_name; // the name with a host engine's depth image (create_for_depth)
+    const char* host_depth_name; // the name with a host engine's depth image (HostDepthRenderer)
     bool (*runs)(const Plan&);   // whether the plan needs it (effects on demand)
 };
 

@@ -18,9 +18,104 @@ Error unsupported(const std::string& what) {
     return make_error(ErrorCode::unsupported, "Context::adopt: " + what);
 }
 
+// Every device-level function vksonar calls (src/vk), resolved through the host's vkGetDeviceProcAddr.
+constexpr const char* kDeviceFunctions[] = {
+    "vkAllocateCommandBuffers",
+    "vkAllocateDescriptorSets",
+    "vkAllocateMemory",
+    "vkBeginCommandBuffer",
+    "vkBindBufferMemory",
+    "vkBindImageMemory",
+    "vkCmdBeginRenderPass",
+    "vkCmdBindDescriptorSets",
+    "vkCmdBindIndexBuffer",
+    "vkCmdBindPipeline",
+    "vkCmdBindVertexBuffers",
+    "vkCmdCopyBuffer",
+    "vkCmdCopyImageToBuffer",
+    "vkCmdDispatch",
+    "vkCmdDrawIndexed",
+    "vkCmdEndRenderPass",
+    "vkCmdFillBuffer",
+    "vkCmdPipelineBarrier",
+    "vkCmdPushConstants",
+    "vkCmdResetQueryPool",
+    "vkCmdSetEvent",
+    "vkCmdSetScissor",
+    "vkCmdSetViewport",
+    "vkCmdWriteTimestamp",
+    "vkCreateBuffer",
+    "vkCreateCommandPool",
+    "vkCreateComputePipelines",
+    "vkCreateDescriptorPool",
+    "vkCreateDescriptorSetLayout",
+    "vkCreateEvent",
+    "vkCreateFence",
+    "vkCreateFramebuffer",
+    "vkCreateGraphicsPipelines",
+    "vkCreateImage",
+    "vkCreateImageView",
+    "vkCreatePipelineLayout",
+    "vkCreateQueryPool",
+    "vkCreateRenderPass",
+    "vkCreateShaderModule",
+    "vkDestroyBuffer",
+    "vkDestroyCommandPool",
+    "vkDestroyDescriptorPool",
+    "vkDestroyDescriptorSetLayout",
+    "vkDestroyEvent",
+    "vkDestroyFence",
+    "vkDestroyFramebuffer",
+    "vkDestroyImage",
+    "vkDestroyImageView",
+    "vkDestroyPipeline",
+    "vkDestroyPipelineLayout",
+    "vkDestroyQueryPool",
+    "vkDestroyRenderPass",
+    "vkDestroyShaderModule",
+    "vkEndCommandBuffer",
+    "vkFreeMemory",
+    "vkGetBufferMemoryRequirements",
+    "vkGetEventStatus",
+    "vkGetImageMemoryRequirements",
+    "vkGetQueryPoolResults",
+    "vkMapMemory",
+    "vkQueueSubmit",
+    "vkResetCommandPool",
+    "vkResetEvent",
+    "vkResetFences",
+    "vkUpdateDescriptorSets",
+    "vkWaitForFences",
+};
+
+// VulkanFunctions' checks (context.h): set, from the loader vksonar links, resolving what vksonar calls.
+Result<void> check_functions(const VulkanFunctions& functions, VkDevice device) {
+    if (functions.vkGetInstanceProcAddr == nullptr || functions.vkGetDeviceProcAddr == nullptr) {
+        return make_error(
+            ErrorCode::invalid_argument,
+            std::string("Context::adopt: HostVulkan.functions->") +
+                (functions.vkGetInstanceProcAddr == nullptr ? "vkGetInstanceProcAddr" : "vkGetDeviceProcAddr") +
+                " is null (both are required when functions is given)");
+    }
+    // A global command: no dispatchable handle, so asking both loaders is safe whichever the host has.
+    if (functions.vkGetInstanceProcAddr(VK_NULL_HANDLE, "vkCreateInstance") !=
+        vkGetInstanceProcAddr(VK_NULL_HANDLE, "vkCreateInstance")) {
+        return unsupported("HostVulkan.functions do not come from the Vulkan loader vksonar links (libvulkan): "
+                           "vksonar calls the loader's exported functions, so the host must load Vulkan through "
+                           "the same loader");
+    }
+    for (const char* name : kDeviceFunctions) {
+        if (functions.vkGetDeviceProcAddr(device, name) == nullptr) {
+            return unsupported(std::string("the host's vkGetDeviceProcAddr does not resolve ") + name +
+                               " on HostVulkan.device");
+        }
+    }
+    return {};
+}
+
 } // namespace
 
-Result<Context> Context::adopt(const HostVulkan& host) {
+Result<AdoptedContext> Context::adopt(const HostVulkan& host) {
     if (host.instance == VK_NULL_HANDLE || host.physical_device == VK_NULL_HANDLE || host.device == VK_NULL_HANDLE ||
         host.queue == VK_NULL_HANDLE) {
         return make_error(ErrorCode::invalid_argument,
@@ -29,6 +124,9 @@ Result<Context> Context::adopt(const HostVulkan& host) {
     if ((host.lock_queue == nullptr) != (host.unlock_queue == nullptr)) {
         return make_error(ErrorCode::invalid_argument,
                           "Context::adopt: HostVulkan.lock_queue and unlock_queue must be given together");
+    }
+    if (host.functions != nullptr) {
+        if (auto checked = check_functions(*host.functions, host.device); !checked) return checked.error();
     }
     // The shaders are SPIR-V 1.3 (--target-env vulkan1.1), which a 1.0 instance or device may not accept.
     if (host.instance_api_version != 0 && host.instance_api_version < VK_API_VERSION_1_1) {
@@ -75,13 +173,9 @@ Result<Context> Context::adopt(const HostVulkan& host) {
     context.description = std::string(context.properties.deviceName) + " (Vulkan " +
                           version_text(context.properties.apiVersion) + ", driver 0x" + driver + ", adopted)";
 
-    Context adopted;
+    AdoptedContext adopted;
     adopted.vk_ = std::move(vulkan);
     return adopted;
-}
-
-bool Context::owns_device() const {
-    return vk_ != nullptr && vk_->owns_device;
 }
 
 } // namespace vksonar

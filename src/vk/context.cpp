@@ -224,18 +224,6 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     if (count == 0) {
         return no_device("no Vulkan device found");
     }
-    if (device_index < 0) {
-        if (const char* env = std::getenv("VKSONAR_DEVICE"); env && *env) {
-            char* end = nullptr;
-            long index = std::strtol(env, &end, 10);
-            if (*end != '\0' || index < 0) {
-                return make_error(ErrorCode::invalid_argument,
-                                  std::string("VKSONAR_DEVICE: '") + env + "' is not a device index (0, 1, ...)");
-            }
-            device_index = static_cast<int>(index);
-        }
-    }
-
     int family = -1;
     std::uint32_t timestamp_bits = 0;
     if (device_index >= 0) {
@@ -321,8 +309,7 @@ Result<Context> Context::create(const ContextOptions& options) {
     // The messenger keeps a pointer to the VulkanContext: it lives on the heap and never moves.
     auto vulkan = std::make_unique<VulkanContext>();
     vulkan->allocator = options.allocator;
-    bool want_validation = options.enable_validation || env_flag("VKSONAR_VALIDATION");
-    if (auto created = create_instance(*vulkan, want_validation); !created) {
+    if (auto created = create_instance(*vulkan, options.enable_validation); !created) {
         return created.error();
     }
     if (auto created = create_device(*vulkan, options.device_index); !created) {
@@ -331,6 +318,26 @@ Result<Context> Context::create(const ContextOptions& options) {
     Context context;
     context.vk_ = std::move(vulkan);
     return context;
+}
+
+Result<ContextOptions> context_options_from_env(ContextOptions base) {
+    if (env_flag("VKSONAR_VALIDATION")) base.enable_validation = true;
+    if (base.device_index < 0) {
+        if (const char* env = std::getenv("VKSONAR_DEVICE"); env && *env) {
+            char* end = nullptr;
+            const long index = std::strtol(env, &end, 10);
+            if (*end != '\0' || index < 0 || index > 1 << 16) {
+                return make_error(ErrorCode::invalid_argument,
+                                  std::string("VKSONAR_DEVICE: '") + env + "' is not a device index (0, 1, ...)");
+            }
+            base.device_index = static_cast<int>(index);
+        }
+    }
+    return base;
+}
+
+VulkanContext* detail::Access::vulkan(const Context& context) {
+    return context.vk_.get();
 }
 
 Context Context::cpu_only() {

@@ -41,7 +41,7 @@ struct HostDepthPass::Objects {
     VkDescriptorSet image_set = VK_NULL_HANDLE; // freed with image_pool
     OwnedEvent done;                            // set by the last command record() records
     bool recorded = false;
-    std::uint32_t recorded_mask = 0;
+    SaveFlags recorded_mask = SaveFlags::none;
     enum class Armed { none, process, read_back } armed = Armed::none;
     HostDepthImage armed_image;
 };
@@ -89,13 +89,15 @@ HostDepthPass::~HostDepthPass() {
 }
 
 Result<std::unique_ptr<HostDepthPass>> HostDepthPass::create(VulkanContext& context, const Plan& plan,
-                                                             const HostDepthDesc& desc) {
+                                                             const HostDepthDesc& desc,
+                                                             const RendererOptions& options) {
     std::unique_ptr<HostDepthPass> pass(new HostDepthPass());
-    if (auto r = pass->init(context, plan, desc); !r) return r.error();
+    if (auto r = pass->init(context, plan, desc, options); !r) return r.error();
     return pass;
 }
 
-Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc) {
+Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc,
+                                 const RendererOptions& options) {
     Objects& o = *objects_;
     o.desc = desc;
     const bool depth_format = is_depth_format(desc.format);
@@ -142,7 +144,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     }
 
     // The backend without its depth pass: compute stages, tables, readback and command buffers only.
-    o.backend = std::make_unique<VulkanBackend>(context, plan, o.no_scene);
+    o.backend = std::make_unique<VulkanBackend>(context, plan, o.no_scene, options);
     VulkanBackend& b = *o.backend;
     b.incidence_ = plan.effects.incidence;
     b.sidelobes_ = plan.effects.horizontal_pattern;
@@ -284,7 +286,7 @@ void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage
     pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 2, written.data());
 }
 
-Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t save_mask, Frame& frame) {
+Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_mask, Frame& frame) {
     if (auto r = check_image(image); !r) return r;
     Objects& o = *objects_;
     VulkanBackend& b = *o.backend;
@@ -343,7 +345,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, std::uint32_t s
     return {};
 }
 
-Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImage& image, std::uint32_t save_mask) {
+Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImage& image, SaveFlags save_mask) {
     if (commands == VK_NULL_HANDLE) {
         return make_error(ErrorCode::invalid_argument, "Renderer::record: command buffer is null");
     }
@@ -373,7 +375,7 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     return {};
 }
 
-Result<void> HostDepthPass::read_back(std::uint32_t save_mask, Frame& frame) {
+Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
     Objects& o = *objects_;
     if (!o.recorded) {
         return make_error(ErrorCode::invalid_argument, "Renderer::read_back: nothing was recorded (call record first)");
@@ -400,7 +402,7 @@ void HostDepthPass::arm_read_back() {
     objects_->armed = Objects::Armed::read_back;
 }
 
-Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the sonar*/, std::uint32_t save_mask,
+Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the sonar*/, SaveFlags save_mask,
                                    Frame& frame) {
     const Objects::Armed armed = std::exchange(objects_->armed, Objects::Armed::none);
     switch (armed) {
@@ -412,7 +414,7 @@ Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the 
         break;
     }
     return make_error(ErrorCode::invalid_argument,
-                      "render: this renderer was made by create_for_depth; use process() or record()");
+                      "render: the host-depth pass runs only through HostDepthRenderer::process or read_back");
 }
 
 GpuBufferView HostDepthPass::polar_buffer() const {
@@ -423,7 +425,7 @@ GpuBufferView HostDepthPass::polar_buffer() const {
 }
 
 // The backend's own copy-out: same regions, same layout conversions.
-void HostDepthPass::copy_frame_out(std::uint32_t save_mask, Frame& frame) const {
+void HostDepthPass::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
     objects_->backend->copy_frame_out(save_mask, frame);
 }
 

@@ -10,6 +10,7 @@
 #include "stages/stage_backend.h"
 #include "vksonar/frame.h"
 #include "vksonar/host_depth.h"
+#include "vksonar/renderer.h"
 #include "vksonar/result.h"
 
 namespace vksonar {
@@ -24,37 +25,38 @@ class HostDepthPass final : public StageBackend {
 public:
     // Checks the host image's format against the device (SAMPLED_IMAGE support, encoding) and creates
     // the backend's compute stages for `plan` plus the import pass.
-    [[nodiscard]] static Result<std::unique_ptr<HostDepthPass>> create(VulkanContext& context, const Plan& plan,
-                                                                       const HostDepthDesc& desc);
+    [[nodiscard]] static Result<std::unique_ptr<HostDepthPass>>
+    create(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc, const RendererOptions& options);
     ~HostDepthPass() override;
     HostDepthPass(const HostDepthPass&) = delete;
     HostDepthPass& operator=(const HostDepthPass&) = delete;
 
     // Records, submits (after the image's wait semaphore), waits and copies out: frame.clean, the
     // intermediates in save_mask, frame.times.
-    [[nodiscard]] Result<void> process(const HostDepthImage& image, std::uint32_t save_mask, Frame& frame);
+    [[nodiscard]] Result<void> process(const HostDepthImage& image, SaveFlags save_mask, Frame& frame);
     // Records import .. beamform and the readback copies into the host's command buffer; no submit.
-    [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& image, std::uint32_t save_mask);
+    [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& image, SaveFlags save_mask);
     // After the command buffer given to record() has finished: copies the readback out (as process).
-    [[nodiscard]] Result<void> read_back(std::uint32_t save_mask, Frame& frame);
+    [[nodiscard]] Result<void> read_back(SaveFlags save_mask, Frame& frame);
     GpuBufferView polar_buffer() const;
 
     // The next render() runs process(image) / read_back(); render() without either fails.
     void arm_process(const HostDepthImage& image);
     void arm_read_back();
-    [[nodiscard]] Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override;
+    [[nodiscard]] Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
     const char* name() const override { return "vulkan (host depth)"; }
 
     struct Objects; // internal
 
 private:
     HostDepthPass();
-    Result<void> init(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc);
+    Result<void> init(VulkanContext& context, const Plan& plan, const HostDepthDesc& desc,
+                      const RendererOptions& options);
     Result<void> check_image(const HostDepthImage& image) const;
     void bind_image(const HostDepthImage& image);
     // The import pass, preceded by the barrier that makes the host's writes to the image visible.
     void record_import(VkCommandBuffer commands, const HostDepthImage& image);
-    void copy_frame_out(std::uint32_t save_mask, Frame& frame) const;
+    void copy_frame_out(SaveFlags save_mask, Frame& frame) const;
 
     std::unique_ptr<Objects> objects_;
 };

@@ -260,9 +260,8 @@ Result<void> VulkanBackend::create_compute() {
         beam_table[2 * j + 1] = plan_.beam_column_end[j];
     }
     // A table's uniform view: its size in vec4s, or 0 where it exceeds the device's uniform range.
-    // VKSONAR_TABLES=storage reads every table through its storage binding (tests compare the paths).
-    const char* tables_env = std::getenv("VKSONAR_TABLES");
-    const bool storage_only = tables_env && std::strcmp(tables_env, "storage") == 0;
+    // TableAccess::storage reads every table through its storage binding (tests compare the paths).
+    const bool storage_only = options_.tables == TableAccess::storage;
     auto uniform_vec4s = [&](std::size_t bytes) -> std::uint32_t {
         const std::size_t vec4s = (bytes + 15) / 16;
         return storage_only || vec4s * 16 > context_.properties.limits.maxUniformBufferRange
@@ -405,9 +404,8 @@ Result<void> VulkanBackend::create_compute() {
     profile.echo_half = gpu_params_.echo_half;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
-    // the gather (src/vk/resample_walk.h). VKSONAR_RESAMPLE=gather keeps the gather (tests compare the two).
-    const char* resample_env = std::getenv("VKSONAR_RESAMPLE");
-    const bool force_gather = resample_env && std::strcmp(resample_env, "gather") == 0;
+    // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).
+    const bool force_gather = options_.resample == ResampleMethod::gather;
     ResampleSpecialization resample;
     resample.beams_per_invocation = kBeamsPerInvocation;
     resample.beam_major_out = sidelobes_ ? 1u : 0u; // the side-lobe pass's input layout
@@ -456,12 +454,11 @@ Result<void> VulkanBackend::create_commands() {
     // Stage times: timestamp queries where the queue has them, except on CPU devices. lavapipe's
     // timestamps do not bracket compute dispatches (a dispatch's time shows up in a neighbouring
     // interval), and there one submission per stage costs ~10 us against stages of milliseconds.
-    // VKSONAR_STAGE_TIMING=host|timestamps overrides the choice.
-    const char* timing = std::getenv("VKSONAR_STAGE_TIMING");
+    // RendererOptions::stage_timing = host | timestamps overrides the choice.
     const bool can_timestamp = context_.timestamp_valid_bits > 0 && context_.properties.limits.timestampPeriod > 0.0f;
     timestamps_ = can_timestamp && context_.properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU;
-    if (timing && std::strcmp(timing, "host") == 0) timestamps_ = false;
-    if (timing && std::strcmp(timing, "timestamps") == 0) timestamps_ = can_timestamp;
+    if (options_.stage_timing == StageTiming::host) timestamps_ = false;
+    if (options_.stage_timing == StageTiming::timestamps) timestamps_ = can_timestamp;
     if (timestamps_) {
         VkQueryPoolCreateInfo query_info{};
         query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
@@ -474,8 +471,9 @@ Result<void> VulkanBackend::create_commands() {
     return {};
 }
 
-Result<std::unique_ptr<StageBackend>> make_backend(VulkanContext& context, const Plan& plan, const SceneData& scene) {
-    auto backend = std::make_unique<VulkanBackend>(context, plan, scene);
+Result<std::unique_ptr<StageBackend>> make_backend(VulkanContext& context, const Plan& plan, const SceneData& scene,
+                                                   const RendererOptions& options) {
+    auto backend = std::make_unique<VulkanBackend>(context, plan, scene, options);
     if (auto r = backend->init(); !r) {
         return r.error();
     }

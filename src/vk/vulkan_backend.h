@@ -6,6 +6,7 @@
 #include "core/plan.h"
 #include "scene/scene_data.h"
 #include "stages/stage_backend.h"
+#include "vksonar/renderer.h"
 
 namespace vksonar {
 
@@ -13,7 +14,8 @@ struct VulkanContext;
 
 namespace vk {
 // Creates every pipeline, buffer and image for the plan once, and uploads the scene.
-[[nodiscard]] Result<std::unique_ptr<StageBackend>> make_backend(VulkanContext& context, const Plan& plan,
-                                                                 const SceneData& scene);
+// `options`: the Vulkan paths (tables, resample, stage_timing); the rest is not read here.
+[[nodiscard]] Result<std::unique_ptr<StageBackend>>
+make_backend(VulkanContext& context, const Plan& plan, const SceneData& scene, const RendererOptions& options = {});
 } // namespace vk
 } // namespace vksonar

@@ -13,6 +13,7 @@
 #include "stages/stage_table.h"
 #include "vk/handles.h"
 #include "vk/resources.h"
+#include "vksonar/renderer.h"
 
 namespace vksonar {
 struct VulkanContext;
@@ -60,12 +61,12 @@ class VulkanBackend final : public StageBackend {
     friend class HostDepthPass; // reuses the compute stages, buffers and readback without the depth pass
 
 public:
-    VulkanBackend(VulkanContext& context, const Plan& plan, const SceneData& scene)
-        : context_(context), plan_(plan), scene_(scene) {}
+    VulkanBackend(VulkanContext& context, const Plan& plan, const SceneData& scene, const RendererOptions& options)
+        : context_(context), plan_(plan), scene_(scene), options_(options) {}
     ~VulkanBackend() override;
 
     Result<void> init();
-    Result<void> render(const Pose& pose, std::uint32_t save_mask, Frame& frame) override;
+    Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
     const char* name() const override { return "vulkan"; }
 
 private:
@@ -81,13 +82,13 @@ private:
     void record_normals(VkCommandBuffer commands);
     void record_echo(VkCommandBuffer commands);
     void record_beamform(VkCommandBuffer commands);
-    void record_readback(VkCommandBuffer commands, std::uint32_t save_mask);
+    void record_readback(VkCommandBuffer commands, SaveFlags save_mask);
     void bind_compute(VkCommandBuffer commands, VkPipeline pipeline);
     void compute_barrier(VkCommandBuffer commands, const Buffer& written);
 
     Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
     void copy_out(const Region& region, void* destination) const;
-    void copy_frame_out(std::uint32_t save_mask, Frame& frame) const;
+    void copy_frame_out(SaveFlags save_mask, Frame& frame) const;
     // Copies an outer x inner float array (rows `stride` apart) out of the readback buffer as inner x outer.
     void transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, std::uint32_t stride,
                        float* destination) const;
@@ -95,6 +96,7 @@ private:
     VulkanContext& context_;
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
     const SceneData& scene_;
+    RendererOptions options_; // the Vulkan paths (tables, resample, stage_timing)
     bool incidence_ = false, sidelobes_ = false;
     bool face_normals_ = false; // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;

@@ -9,6 +9,8 @@
 
 #include <vulkan/vulkan_core.h>
 
+#include "core/access.h"
+
 namespace vksonar {
 
 struct VulkanContext {

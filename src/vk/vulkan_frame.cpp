@@ -142,7 +142,7 @@ void VulkanBackend::record_stage(VkCommandBuffer commands, StageId stage) {
     }
 }
 
-void VulkanBackend::record_readback(VkCommandBuffer commands, std::uint32_t save_mask) {
+void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mask) {
     VkBuffer target = readback_.get();
     auto copy = [&](const Buffer& source, const Region& region) {
         if (region.bytes == 0) return;
@@ -150,13 +150,13 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, std::uint32_t save
         vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
     };
     copy(sidelobes_ ? polar_ : beam_profiles_, polar_region_);
-    if (save_mask & save_depth) {
+    if (any(save_mask & SaveFlags::depth)) {
         copy(depth_, depth_region_);
         copy(material_id_, material_region_);
     }
-    if ((save_mask & save_normals) && incidence_) copy(normals_, normals_region_);
-    if (save_mask & save_echo) copy(echo_, echo_region_);
-    if (save_mask & save_profiles) {
+    if (any(save_mask & SaveFlags::normals) && incidence_) copy(normals_, normals_region_);
+    if (any(save_mask & SaveFlags::echo)) copy(echo_, echo_region_);
+    if (any(save_mask & SaveFlags::profiles)) {
         copy(profiles_, profiles_region_);
         copy(beam_profiles_, beam_profiles_region_);
     }
@@ -199,7 +199,7 @@ template <class T> T* sized(std::vector<T>& v, std::size_t n) {
 
 } // namespace
 
-Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Frame& frame) {
+Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame& frame) {
     frame.times.clear();
     frame.stages_run.clear();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
@@ -272,7 +272,7 @@ Result<void> VulkanBackend::render(const Pose& pose, std::uint32_t save_mask, Fr
 
 // Copies what this frame saved out of the (coherent) readback buffer into `frame`, converting the GPU
 // layouts to the public ones. Also used by the host-depth pass (host_depth.cpp).
-void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const {
+void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     frame.beams = plan_.beams;
@@ -280,11 +280,11 @@ void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const 
     frame.columns = plan_.columns;
     frame.rows = plan_.rows;
     copy_out(polar_region_, sized(frame.clean, cells));
-    if (save_mask & save_depth) {
+    if (any(save_mask & SaveFlags::depth)) {
         copy_out(depth_region_, sized(frame.depth, pixels));
         copy_out(material_region_, sized(frame.material, pixels));
     }
-    if (save_mask & save_normals) {
+    if (any(save_mask & SaveFlags::normals)) {
         float* normals = sized(frame.normals, pixels * 4);
         if (incidence_) {
             copy_out(normals_region_, normals);
@@ -292,7 +292,7 @@ void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const 
             std::memset(normals, 0, pixels * 4 * sizeof(float)); // the normals pass did not run
         }
     }
-    if (save_mask & save_echo) {
+    if (any(save_mask & SaveFlags::echo)) {
         float* echo = sized(frame.echo, pixels * 2);
         if (plan_.params.echo_half != 0u) { // two halves per pixel: (energy * echo_scale, range)
             const auto* halves = reinterpret_cast<const std::uint16_t*>(static_cast<const char*>(readback_.mapped) +
@@ -305,7 +305,7 @@ void VulkanBackend::copy_frame_out(std::uint32_t save_mask, Frame& frame) const 
             copy_out(echo_region_, echo);
         }
     }
-    if (save_mask & save_profiles) {
+    if (any(save_mask & SaveFlags::profiles)) {
         // The GPU keeps profiles column-major (contiguous loads in resample.comp); the Frame holds the
         // public range-major layout.
         const std::uint32_t padded = gpu_params_.bins_padded;

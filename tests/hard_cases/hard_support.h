@@ -23,7 +23,7 @@ namespace vksonar::testing::hard {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
-constexpr std::uint32_t kSaveAll = save_depth | save_normals | save_echo | save_profiles;
+constexpr SaveFlags kSaveAll = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
 
 // Every hard case runs on both backends (one body, TEST_P over Backend).
 class HardCase : public ::testing::TestWithParam<Backend> {

@@ -83,7 +83,7 @@ TEST_F(SceneFiles, ABufferBesideOrBelowTheSceneLoads) {
     for (const std::string uri : {"triangle.bin", "sub/triangle.bin", "sub/../triangle.bin", "sub%2Ftriangle.bin"}) {
         const Result<Scene> r = load(uri);
         ASSERT_TRUE(r.ok()) << uri << ": " << r.error().message;
-        EXPECT_EQ(r->data().positions.size(), 9u) << uri;
+        EXPECT_EQ(scene_data(r.value()).positions.size(), 9u) << uri;
     }
 }
 
@@ -126,7 +126,7 @@ TEST_F(SceneFiles, TheAssetRootWidensToAParentFolder) {
     for (const std::string uri : {"../elsewhere/triangle.bin"}) {
         const Result<Scene> r = load(uri, parent);
         ASSERT_TRUE(r.ok()) << uri << ": " << r.error().message;
-        EXPECT_EQ(r->data().positions.size(), 9u);
+        EXPECT_EQ(scene_data(r.value()).positions.size(), 9u);
     }
     fs::create_symlink(root_ / "elsewhere" / "triangle.bin", root_ / "scenes" / "link.bin");
     EXPECT_TRUE(load("link.bin", parent).ok());

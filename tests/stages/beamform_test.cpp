@@ -223,7 +223,7 @@ TEST(CpuBackend, RunsTheContractsStagesAndFillsRequestedIntermediates) {
         Frame frame = sized_frame(plan);
         Pose pose;
         pose.yaw_deg = 5.0;
-        const std::uint32_t mask = save_depth | save_normals | save_echo | save_profiles;
+        const SaveFlags mask = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
         auto r = backend->render(pose, mask, frame);
         ASSERT_TRUE(r.ok()) << r.error().message;
         const std::vector<std::string> expected = incidence
@@ -270,7 +270,7 @@ TEST(CpuBackend, NonFinitePoseIsAnErrorNamingTheField) {
     Frame frame = sized_frame(plan);
     Pose pose;
     pose.pitch_deg = std::numeric_limits<double>::quiet_NaN();
-    auto r = backend->render(pose, 0, frame);
+    auto r = backend->render(pose, SaveFlags::none, frame);
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message.find("pitch"), std::string::npos) << r.error().message;
 }
@@ -285,8 +285,8 @@ TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
     Frame f32 = sized_frame(p32), f64 = sized_frame(p64);
     Pose pose;
     pose.yaw_deg = -3.0;
-    ASSERT_TRUE(cpu::make_backend(p32, scene)->render(pose, save_echo, f32).ok());
-    ASSERT_TRUE(cpu::make_backend(p64, scene)->render(pose, save_echo, f64).ok());
+    ASSERT_TRUE(cpu::make_backend(p32, scene)->render(pose, SaveFlags::echo, f32).ok());
+    ASSERT_TRUE(cpu::make_backend(p64, scene)->render(pose, SaveFlags::echo, f64).ok());
     double total32 = 0, total64 = 0, peak = 0;
     for (std::size_t i = 0; i < f64.clean.size(); ++i) {
         total32 += f32.clean[i];
@@ -315,7 +315,7 @@ TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
     Plan flat64 = p64;
     flat64.effects.vertical_pattern = false;
     Frame e0 = sized_frame(flat64);
-    ASSERT_TRUE(cpu::make_backend(flat64, scene)->render(pose, save_echo, e0).ok());
+    ASSERT_TRUE(cpu::make_backend(flat64, scene)->render(pose, SaveFlags::echo, e0).ok());
     double max_rel_pixel = 0;
     for (std::size_t p = 0; p < f64.echo.size(); p += 2) {
         if (!(f64.echo[p] > 0)) continue;
@@ -399,14 +399,14 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
         config.pixels_per_beam = k.pixels_per_beam;
         config.beam_spacing = k.spacing;
         config.effects.horizontal_pattern = k.side_lobes ? EffectMode::on : EffectMode::off;
-        auto plan = make_plan(config, scene.value().data());
+        auto plan = make_plan(config, scene_data(scene.value()));
         ASSERT_TRUE(plan) << plan.error().message;
         // Else the renders below would compare the gather with itself.
         EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation));
-        auto walked = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
-        ::setenv("VKSONAR_RESAMPLE", "gather", 1);
-        auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, save_profiles);
-        ::unsetenv("VKSONAR_RESAMPLE");
+        auto walked = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles);
+        RendererOptions gather;
+        gather.resample = ResampleMethod::gather;
+        auto gathered = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, gather);
         ASSERT_TRUE(walked && gathered);
         EXPECT_EQ(walked->frame.beam_profiles, gathered->frame.beam_profiles);
         EXPECT_EQ(walked->frame.clean, gathered->frame.clean);
@@ -421,11 +421,11 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
 TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
     Scene scene;
     SonarConfig config = quiet_config();
-    auto fan = make_plan(config, scene.data());
+    auto fan = make_plan(config, scene_data(scene));
     ASSERT_TRUE(fan) << fan.error().message;
     ASSERT_TRUE(vk::resample_can_walk(fan.value(), vk::kBeamsPerInvocation));
     config.hfov_deg = 360.0;
-    auto circle = make_plan(config, scene.data());
+    auto circle = make_plan(config, scene_data(scene));
     ASSERT_TRUE(circle) << circle.error().message;
     EXPECT_FALSE(vk::resample_can_walk(circle.value(), vk::kBeamsPerInvocation));
     // Beam 40's span reaches back over beam 38's columns, which give beam 40 nothing.

@@ -276,7 +276,7 @@ TEST(DepthClusters, BundledScenesFromRandomPosesAreTheSameCulled) {
         for (const double hfov : {130.0, 360.0}) {
             SonarConfig config;
             config.hfov_deg = hfov;
-            const Plan plan = plan_for(config, scene.value().data());
+            const Plan plan = plan_for(config, scene_data(scene.value()));
             for (int i = 0; i < 8; ++i) {
                 Pose pose;
                 pose.x_m = x(rng);
@@ -288,7 +288,7 @@ TEST(DepthClusters, BundledScenesFromRandomPosesAreTheSameCulled) {
                 std::vector<DepthCluster> clusters;
                 std::size_t hits = 0;
                 const std::vector<std::uint8_t> drawn =
-                    culled_and_checked(plan, scene.value().data(), pose, clusters, &hits);
+                    culled_and_checked(plan, scene_data(scene.value()), pose, clusters, &hits);
                 poses_with_hits += hits > 0;
                 skipped += std::size_t(std::count(drawn.begin(), drawn.end(), std::uint8_t(0)));
                 pairs += drawn.size();

@@ -305,7 +305,7 @@ TEST(MaterialIds, OutOfRangeIdReflectsWithMaterialZeroOnBothBackends) {
         // materials: 0 the scene's implicit default, 1 and 2 these quads' (-20 and -5 dB)
         add_quad(scene, 10.0, 0.0, 0.0, 6.0, 3.0, -20.0);
         add_quad(scene, 14.0, 3.0, 0.0, 2.0, 2.0, -5.0);
-        auto& draws = const_cast<SceneData&>(scene.data()).draws;
+        auto& draws = const_cast<SceneData&>(scene_data(scene)).draws;
         draws[0].material = drawn_material;
         return scene;
     };

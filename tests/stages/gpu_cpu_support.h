@@ -18,7 +18,7 @@
 
 namespace vksonar::testing {
 
-constexpr std::uint32_t kSaveAll = save_depth | save_normals | save_echo | save_profiles;
+constexpr SaveFlags kSaveAll = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
 
 struct SceneCase {
     std::string file;
@@ -43,7 +43,7 @@ struct Pair {
 };
 
 inline std::unique_ptr<Pair> render_pair(const std::string& file, const SonarConfig& config, const Pose& pose,
-                                         std::uint32_t save_mask) {
+                                         SaveFlags save_mask) {
     auto pair = std::make_unique<Pair>();
     auto scene = Scene::load_gltf(file);
     if (!scene) {

@@ -386,7 +386,7 @@ TEST_P(NormalsGpuCpu, Sobel5MatchesOnTheSameInput) {
 TEST_P(NormalsGpuCpu, GeometricNormalsDifferOnlyOnTriangleEdges) {
     SonarConfig config = quiet_config();
     config.normal_method = NormalMethod::geometric;
-    auto p = render_pair(GetParam().file, config, GetParam().pose, save_depth | save_normals);
+    auto p = render_pair(GetParam().file, config, GetParam().pose, SaveFlags::depth | SaveFlags::normals);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;

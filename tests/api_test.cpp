@@ -1,0 +1,135 @@
+// The public API's compile-time contracts (the host-depth renderer and the scene renderer are separate
+// types, an adopted context says it is borrowed, SaveFlags is a scoped flag type) and the checks of
+// HostVulkan::functions that need no device.
+#include <type_traits>
+#include <utility>
+
+#include <gtest/gtest.h>
+
+#include "vksonar/vksonar.h"
+
+namespace vksonar::testing {
+namespace {
+
+template <class T, class = void> struct HasRender : std::false_type {};
+template <class T>
+struct HasRender<T, std::void_t<decltype(std::declval<T&>().render(Pose{}, 0, std::declval<Frame&>()))>>
+    : std::true_type {};
+template <class T, class = void> struct HasProcess : std::false_type {};
+template <class T>
+struct HasProcess<T, std::void_t<decltype(std::declval<T&>().process(HostDepthImage{}, 0, std::declval<Frame&>()))>>
+    : std::true_type {};
+template <class T, class = void> struct HasRecord : std::false_type {};
+template <class T>
+struct HasRecord<T, std::void_t<decltype(std::declval<T&>().record(VkCommandBuffer{}, HostDepthImage{}))>>
+    : std::true_type {};
+template <class T, class = void> struct HasReadBack : std::false_type {};
+template <class T>
+struct HasReadBack<T, std::void_t<decltype(std::declval<T&>().read_back(0, std::declval<Frame&>()))>> : std::true_type {
+};
+
+// A wrong call is a compile error, not a run-time one.
+static_assert(HasRender<Renderer>::value && !HasRender<HostDepthRenderer>::value);
+static_assert(HasProcess<HostDepthRenderer>::value && !HasProcess<Renderer>::value);
+static_assert(HasRecord<HostDepthRenderer>::value && !HasRecord<Renderer>::value);
+static_assert(HasReadBack<HostDepthRenderer>::value && !HasReadBack<Renderer>::value);
+static_assert(!std::is_convertible_v<HostDepthRenderer&, Renderer&>);
+
+// Owned vs borrowed in the type: create gives a Context, adopt an AdoptedContext, which the renderers
+// take as a Context but which cannot be moved into a plain Context (that would hide the borrowing).
+static_assert(std::is_same_v<decltype(Context::create()), Result<Context>>);
+static_assert(std::is_same_v<decltype(Context::adopt(HostVulkan{})), Result<AdoptedContext>>);
+static_assert(std::is_convertible_v<AdoptedContext&, Context&>);
+static_assert(!std::is_constructible_v<Context, AdoptedContext&&>);
+static_assert(!std::is_assignable_v<Context&, AdoptedContext&&>);
+
+// SaveFlags: scoped, no implicit conversion from or to an integer.
+static_assert(!std::is_convertible_v<SaveFlags, std::uint32_t>);
+static_assert(!std::is_convertible_v<std::uint32_t, SaveFlags>);
+static_assert(any(SaveFlags::depth | SaveFlags::echo));
+static_assert(!any((SaveFlags::depth | SaveFlags::echo) & SaveFlags::normals));
+
+TEST(Api, SaveFlagsCombine) {
+    SaveFlags mask = SaveFlags::none;
+    mask |= SaveFlags::normals;
+    mask |= SaveFlags::profiles;
+    EXPECT_TRUE(any(mask & SaveFlags::normals));
+    EXPECT_FALSE(any(mask & SaveFlags::depth));
+    mask &= ~SaveFlags::normals;
+    EXPECT_EQ(mask, SaveFlags::profiles);
+}
+
+TEST(Api, ValidateReturnsResult) {
+    EXPECT_TRUE(SonarConfig{}.validate().ok());
+    SonarConfig config;
+    config.range_max_m = config.range_min_m;
+    const Result<void> refused = config.validate();
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(refused.error().message.find("range_max"), std::string::npos) << refused.error().message;
+
+    AcousticMaterial material;
+    material.model = AcousticMaterial::Model::rough;
+    material.rms_slope = 0.0;
+    const Result<void> bad = material.validate();
+    ASSERT_FALSE(bad.ok());
+    EXPECT_EQ(bad.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(bad.error().message.find("rms_slope"), std::string::npos) << bad.error().message;
+}
+
+// Handles that are never dereferenced: adopt checks HostVulkan::functions before any other Vulkan call.
+HostVulkan fake_host() {
+    HostVulkan host;
+    host.instance = reinterpret_cast<VkInstance>(std::uintptr_t{0x1000});
+    host.physical_device = reinterpret_cast<VkPhysicalDevice>(std::uintptr_t{0x2000});
+    host.device = reinterpret_cast<VkDevice>(std::uintptr_t{0x3000});
+    host.queue = reinterpret_cast<VkQueue>(std::uintptr_t{0x4000});
+    return host;
+}
+
+TEST(Api, AdoptRefusesAFunctionTableWithANullEntry) {
+    VulkanFunctions functions;
+    functions.vkGetInstanceProcAddr = vkGetInstanceProcAddr;
+    HostVulkan host = fake_host();
+    host.functions = &functions;
+    auto adopted = Context::adopt(host);
+    ASSERT_FALSE(adopted.ok());
+    EXPECT_EQ(adopted.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(adopted.error().message.find("functions->vkGetDeviceProcAddr is null"), std::string::npos)
+        << adopted.error().message;
+
+    functions = VulkanFunctions{};
+    functions.vkGetDeviceProcAddr = vkGetDeviceProcAddr;
+    adopted = Context::adopt(host);
+    ASSERT_FALSE(adopted.ok());
+    EXPECT_NE(adopted.error().message.find("functions->vkGetInstanceProcAddr is null"), std::string::npos)
+        << adopted.error().message;
+}
+
+// A host whose entry points come from another loader (here: a stand-in that resolves nothing the
+// linked loader does) is refused before vksonar calls anything on its handles.
+PFN_vkVoidFunction VKAPI_CALL other_loader_get_instance_proc_addr(VkInstance, const char*) {
+    return nullptr;
+}
+
+TEST(Api, AdoptRefusesFunctionsOfAnotherLoader) {
+    VulkanFunctions functions;
+    functions.vkGetInstanceProcAddr = other_loader_get_instance_proc_addr;
+    functions.vkGetDeviceProcAddr = vkGetDeviceProcAddr;
+    HostVulkan host = fake_host();
+    host.functions = &functions;
+    auto adopted = Context::adopt(host);
+    ASSERT_FALSE(adopted.ok());
+    EXPECT_EQ(adopted.error().code, ErrorCode::unsupported);
+    EXPECT_NE(adopted.error().message.find("same loader"), std::string::npos) << adopted.error().message;
+}
+
+TEST(Api, HostDepthRendererNeedsAVulkanContext) {
+    Context cpu = Context::cpu_only();
+    auto refused = HostDepthRenderer::create(cpu, SonarConfig{}, HostDepthDesc{});
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::invalid_argument);
+}
+
+} // namespace
+} // namespace vksonar::testing
