@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/access.h"
 #include "scene/draco_pack.h"
 #include "scene/gltf_draco.h"
 #include "scene/scene_data.h"
@@ -78,7 +79,7 @@ TEST_F(SceneDraco, HarbourDecodesToThePlainTrianglesWithinTheQuantizationStep) {
     EXPECT_EQ(draco->stats().triangles, plain->stats().triangles);
     EXPECT_EQ(draco->stats().extensions, std::vector<std::string>{"KHR_draco_mesh_compression"});
     EXPECT_TRUE(draco->stats().warnings.empty());
-    const SceneData &a = plain->data(), &b = draco->data();
+    const SceneData &a = scene_data(*plain), &b = scene_data(*draco);
     ASSERT_EQ(a.draws.size(), b.draws.size());
     for (std::size_t i = 0; i < a.draws.size(); ++i) {
         // The node transforms are kept exactly; the vertices move within half a step on each axis,
@@ -124,7 +125,7 @@ TEST_F(SceneDraco, HarbourRendersLikeThePlainSceneWithinTheQuantizationBound) {
     const auto plain = Scene::load_gltf(kHarbour);
     const auto draco = Scene::load_gltf(pack("harbour_draco.glb"));
     ASSERT_TRUE(plain.ok() && draco.ok());
-    const SceneData& a = plain->data();
+    const SceneData& a = scene_data(*plain);
     double h = 0, area = 0, area_change = 0, tilt = 0;
     for (const SceneDraw& draw : a.draws) {
         const MeshRange& m = a.meshes[draw.mesh];
@@ -195,7 +196,7 @@ TEST_F(SceneDraco, GpuAndCpuAgreeOnTheDracoHarbour) {
     SonarConfig config = testing::quiet_config();
     Pose look_down;
     look_down.pitch_deg = 15.0;
-    auto p = testing::render_pair(file, config, look_down, 0);
+    auto p = testing::render_pair(file, config, look_down, SaveFlags::none);
     ASSERT_TRUE(p);
     const testing::CleanAgreement a = testing::compare_clean(config, p->gpu->frame, p->cpu->frame);
     std::printf("[draco] gpu vs cpu: %zu cells above noise floor, %zu over %.1f dB, max %.2f dB\n", a.above, a.over,
