@@ -165,18 +165,8 @@ TEST_F(SceneDraco, HarbourRendersLikeThePlainSceneWithinTheQuantizationBound) {
         const auto ra = testing::render_once(backend, config, plain.value(), pose);
         const auto rb = testing::render_once(backend, config, draco.value(), pose);
         ASSERT_TRUE(ra && rb);
-        auto moments = [](const Frame& f) {
-            double energy = 0, weighted = 0;
-            for (std::uint32_t k = 0; k < f.bins; ++k)
-                for (std::uint32_t j = 0; j < f.beams; ++j) {
-                    const double e = f.clean[std::size_t(k) * f.beams + j];
-                    energy += e;
-                    weighted += e * f.bin_ranges_m[k];
-                }
-            return std::pair<double, double>{energy, weighted / energy};
-        };
-        const auto [ea, ma] = moments(ra->frame);
-        const auto [eb, mb] = moments(rb->frame);
+        const auto [ea, ma] = testing::energy_and_mean_range(ra->frame);
+        const auto [eb, mb] = testing::energy_and_mean_range(rb->frame);
         const double bin = ra->frame.bin_ranges_m[1] - ra->frame.bin_ranges_m[0];
         std::printf("[draco] %s: energy ratio %.6f, mean range %.4f vs %.4f m (bin %.4f m)\n",
                     backend == Backend::cpu ? "cpu" : "vulkan", eb / ea, mb, ma, bin);

@@ -361,18 +361,8 @@ TEST_F(SceneExtensions, GltfpackQuantizedHarbourRendersLikeTheOriginal) {
         const auto ra = testing::render_once(backend, config, a.value(), pose);
         const auto rb = testing::render_once(backend, config, b.value(), pose);
         ASSERT_TRUE(ra && rb);
-        auto moments = [](const Frame& f) {
-            double energy = 0, weighted = 0;
-            for (std::uint32_t k = 0; k < f.bins; ++k)
-                for (std::uint32_t j = 0; j < f.beams; ++j) {
-                    const double e = f.clean[std::size_t(k) * f.beams + j];
-                    energy += e;
-                    weighted += e * f.bin_ranges_m[k];
-                }
-            return std::pair<double, double>{energy, weighted / energy};
-        };
-        const auto [ea, ra_m] = moments(ra->frame);
-        const auto [eb, rb_m] = moments(rb->frame);
+        const auto [ea, ra_m] = testing::energy_and_mean_range(ra->frame);
+        const auto [eb, rb_m] = testing::energy_and_mean_range(rb->frame);
         EXPECT_NEAR(eb / ea, 1.0, 0.01);
         EXPECT_NEAR(rb_m, ra_m, ra->frame.bin_ranges_m[1] - ra->frame.bin_ranges_m[0]);
     }

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/plan.h"
@@ -130,6 +131,19 @@ inline std::unique_ptr<Rendered> render_once(Backend backend, const SonarConfig&
         return nullptr;
     }
     return out;
+}
+
+// The clean scan's total energy and its energy-weighted mean range (m): two scans of the same scene
+// written two ways (compressed, quantized, instanced) are compared by these.
+inline std::pair<double, double> energy_and_mean_range(const Frame& f) {
+    double energy = 0, weighted = 0;
+    for (std::uint32_t k = 0; k < f.bins; ++k)
+        for (std::uint32_t j = 0; j < f.beams; ++j) {
+            const double e = f.clean[std::size_t(k) * f.beams + j];
+            energy += e;
+            weighted += e * f.bin_ranges_m[k];
+        }
+    return {energy, weighted / energy};
 }
 
 inline double sum(const std::vector<float>& v) {
