@@ -18,6 +18,7 @@ layout(local_size_x = kWorkgroupSize) in;
 
 layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
+layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                    // params.line_array
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
@@ -33,7 +34,81 @@ vec2 load_echo(uint p) {
 }
 layout(std430, binding = kBindingProfiles) buffer ProfileBuffer { float profiles[]; };
 
+// Adds pixel (row, column)'s echo er, times `weight`, to the profile at base: range_spread over the
+// five-row window of its column. `precise`: the bin coordinates and shares round exactly as the CPU's.
+void add_pixel(uint base, uint row, uint column, vec2 er, float weight) {
+    uint columns = params.columns;
+    vec2 up2 = row >= 2u ? load_echo((row - 2u) * columns + column) : vec2(0.0);
+    vec2 up = row >= 1u ? load_echo((row - 1u) * columns + column) : vec2(0.0);
+    vec2 down = row + 1u < params.rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
+    vec2 down2 = row + 2u < params.rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
+    RangeSpread spread = range_spread(kRangeKernel, up2, up, er, down, down2, params.range_min_m,
+                                      params.inv_bin_width_m, params.edge_relative_jump, params.bins);
+    precise float weighted = weight * er.x;
+    for (int k = spread.k_first; k <= spread.k_last; ++k) {
+        precise float share = range_share(spread, k) * weighted;
+        profiles[base + uint(k)] += share;
+    }
+}
+
+// Each pixel's cone coordinate (sonar_kernels.h cone_coord), computed once by the plan: the CPU
+// backend reads the same table, so both put a pixel into the same cone columns with the same shares
+// (GLSL's asin may be off by thousands of ulps, Vulkan's precision for it; a thousandth of a column).
+layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { float cone_coords[]; };
+
+// line_array: one invocation owns cone column `cone` and gathers, row by row (top to bottom) and
+// within a row by increasing pixel column, every pixel whose cone coordinate lies within one column of
+// it: the order in which the CPU backend's scatter adds them (src/stages/cpu_beamform.cpp). Along a
+// row the cone coordinate increases with the pixel column, so the first such pixel is found by a
+// binary search on the first row and then moves by a few columns from row to row.
+void gather_cone_column(uint cone) {
+    uint columns = params.columns;
+    uint rows = params.rows;
+    uint base = cone * params.bins_padded;
+    float lo = float(cone) - 1.0;
+    float hi = float(cone) + 1.0;
+    int count = int(params.profile_columns);
+    // first pixel column of row 0 with a cone coordinate above lo
+    uint first = 0u;
+    uint last = columns;
+    while (first < last) {
+        uint mid = (first + last) / 2u;
+        if (cone_coords[mid] > lo) {
+            last = mid;
+        } else {
+            first = mid + 1u;
+        }
+    }
+    for (uint row = 0u; row < rows; ++row) {
+        uint row_start = row * columns;
+        while (first > 0u && cone_coords[row_start + first - 1u] > lo) {
+            --first;
+        }
+        while (first < columns && !(cone_coords[row_start + first] > lo)) {
+            ++first;
+        }
+        for (uint c = first; c < columns; ++c) {
+            float x = cone_coords[row_start + c];
+            if (!(x < hi)) {
+                break;
+            }
+            float weight = cone_share(x, int(cone), count);
+            vec2 er = load_echo(row_start + c);
+            if (weight > 0.0 && er.x > 0.0) {
+                add_pixel(base, row, c, er, weight);
+            }
+        }
+    }
+}
+
 void main() {
+    if (kLineArray != 0u) {
+        uint cone = gl_GlobalInvocationID.x;
+        if (cone < params.profile_columns) {
+            gather_cone_column(cone);
+        }
+        return;
+    }
     uint column = gl_GlobalInvocationID.x;
     uint columns = params.columns;
     if (column >= columns) {

@@ -81,7 +81,7 @@ float gather_weight(uvec2 entry, uint j) {
 }
 
 void gather(uint q, uint first_beam, uint last_beam) {
-    uint columns = params.columns;
+    uint columns = params.profile_columns;
     uint quads = params.bins_padded / 4u;
     for (uint j = first_beam; j < last_beam; ++j) {
         vec4 sum = vec4(0.0);
@@ -98,7 +98,7 @@ void gather(uint q, uint first_beam, uint last_beam) {
 // later ones were walked already, their 1 - weight shares are in `carry`) and then its own, up to
 // its end. So each beam adds the same terms in the same order as gather().
 void walk(uint q, uint first_beam, uint last_beam) {
-    uint columns = params.columns;
+    uint columns = params.profile_columns;
     uint quads = params.bins_padded / 4u;
     uint c = beam_at(first_beam).x;
     vec4 carry = vec4(0.0);

@@ -367,6 +367,39 @@ VKS_FN REAL range_share(RangeSpread s, int k) {
     return REAL(1);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Beam geometry (stage 4a, line_array): which cone columns a pixel's energy enters.
+//
+// A horizontal line array along the sonar y axis hears a direction by its cosine along the axis: the
+// beam steered to theta receives the cone sin(theta) = cos(elevation) sin(azimuth). The range profiles
+// are then kept per cone column (uniform in theta) instead of per pixel column, and each pixel goes to
+// the two cone columns nearest its own theta, so a column of pixels (one azimuth) bends towards
+// broadside as its elevation grows (docs/pipeline.md, "Beam geometry").
+
+// The cosine along the array axis of pixel (u, v)'s direction in the slice at (cs, sn) (pixel_ray):
+// sin(theta) = cos(elevation) sin(azimuth), without an angle.
+VKS_FN REAL array_axis_cosine(REAL u, REAL v, REAL cs, REAL sn) {
+    return (sn - u * cs) / sqrt(REAL(1) + u * u + v * v);
+}
+
+// A pixel's coordinate on the cone columns from its axis cosine: column c is centred at c, the fan's
+// port edge (theta = half_fov_rad) at -0.5. Increases with the pixel column along a row (towards
+// starboard) while the pixel grid stays within +-90 degrees of azimuth.
+VKS_FN REAL cone_coord(REAL axis_cosine, REAL half_fov_rad, REAL inv_cone_step) {
+    return (half_fov_rad - asin(min(max(axis_cosine, REAL(-1)), REAL(1)))) * inv_cone_step - REAL(0.5);
+}
+
+// The share of a pixel at cone coordinate x that cone column c (of `count`) receives: the tent between
+// the two nearest column centres, the edge columns keeping what lies between their centre and the fan's
+// edge (as the edge beams do, plan.cpp); 0 outside the fan. The shares of a pixel inside sum to 1.
+VKS_FN REAL cone_share(REAL x, int c, int count) {
+    if (!(x >= REAL(-0.5) && x < REAL(count) - REAL(0.5))) {
+        return REAL(0);
+    }
+    REAL xc = min(max(x, REAL(0)), REAL(count - 1));
+    return max(REAL(1) - abs(xc - REAL(c)), REAL(0));
+}
+
 #undef VKS_FN
 #undef VKS_OUT
 #undef VKS_PRECISE

@@ -37,11 +37,12 @@ VKS_CONST uint kBindingMaterials = 9u;
 VKS_CONST uint kBindingColumnTable = 10u; // uvec2 per pixel column: (beam, weight bits), see resample.comp
 VKS_CONST uint kBindingBeamTable = 11u;   // uvec2 per beam: (first column, end column)
 VKS_CONST uint kBindingSidelobeWeight = 12u;
-VKS_CONST uint kBindingMaterialsUniform = 13u;
-VKS_CONST uint kBindingColumnTableUniform = 14u;
-VKS_CONST uint kBindingBeamTableUniform = 15u;
-VKS_CONST uint kBindingSidelobeWeightUniform = 16u;
-VKS_CONST uint kBindingCount = 17u;
+VKS_CONST uint kBindingConeCoord = 13u; // float per pixel: its cone coordinate (line_array; profile.comp)
+VKS_CONST uint kBindingMaterialsUniform = 14u;
+VKS_CONST uint kBindingColumnTableUniform = 15u;
+VKS_CONST uint kBindingBeamTableUniform = 16u;
+VKS_CONST uint kBindingSidelobeWeightUniform = 17u;
+VKS_CONST uint kBindingCount = 18u;
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 
@@ -60,6 +61,7 @@ VKS_CONST uint kSpecRangeKernel = 9u;    // profile: kRangeKernel*
 VKS_CONST uint kSpecBeamMajorOut = 10u;  // resample: 1 = beam-major vec4 output (the side-lobe pass follows)
 VKS_CONST uint kSpecResampleWalk = 11u;  // resample: 1 = walk each run's columns once (src/vk/resample_walk.h)
 VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (beams % 4 == 0)
+VKS_CONST uint kSpecLineArray = 13u;     // profile: 1 = gather pixels onto cone columns (SonarParams::line_array)
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
@@ -149,11 +151,20 @@ struct SonarParams {
     // footprint that lies inside into the edge bins (and the part outside is dropped, not folded in).
     float gate_min_m;
     float gate_max_m;
+    // The columns of the range profiles that the resample stage maps onto beams: the pixel columns
+    // (planar beam geometry), or with line_array = 1 the cone columns, uniform in the beam steering angle
+    // theta over the fan: column c centred at cone_half_fov_rad - (c + 0.5) / inv_cone_step
+    // (sonar_kernels.h, cone_coord).
+    uint profile_columns;
+    uint line_array;
+
+    float cone_half_fov_rad;
+    float inv_cone_step;
     uint pad0;
     uint pad1;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SonarParams) == 32 * 4, "SonarParams must match the GLSL std140 block");
+static_assert(sizeof(SonarParams) == 36 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
 // Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.

@@ -30,6 +30,13 @@ struct EffectsConfig {
 
 enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian, chebyshev };
 enum class BeamSpacing : std::uint8_t { equiangular, equisine };
+// How the beams divide the directions (docs/pipeline.md, "Beam geometry"). line_array: a horizontal
+// line array (Oculus, Gemini, BlueView) hears a direction by its cosine along the array axis, so a
+// beam steered to theta is the cone sin(theta) = cos(elevation) sin(azimuth) and its pattern is a
+// function of sin(theta') - sin(theta), widening as 1 / cos(theta). planar: a beam is the half-plane
+// of one azimuth and its pattern a function of the azimuth difference, as an acoustic lens (ARIS) forms
+// it and as the legacy plugins do. A fan of 180 degrees or more has no single array axis: planar.
+enum class BeamGeometry : std::uint8_t { line_array, planar };
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
 enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
 // geometric: the face normal of the triangle that won each pixel, recorded by the depth pass.
@@ -56,6 +63,7 @@ struct SonarConfig {
     double horizontal_beamwidth_deg = 1.0; // two-way -3 dB receive beamwidth of one beam
     std::uint32_t beams = 512;
     BeamSpacing beam_spacing = BeamSpacing::equiangular;
+    BeamGeometry beam_geometry = BeamGeometry::line_array; // the default sonar (an Oculus) is a line array
     std::vector<double> beam_angles_deg; // explicit table (port first); overrides beams/spacing if non-empty
     std::uint32_t bins = 512;
     double range_min_m = 0.5;

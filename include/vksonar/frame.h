@@ -56,6 +56,9 @@ struct EffectState {
 struct Frame {
     std::uint32_t beams = 0, bins = 0;
     std::uint32_t columns = 0, rows = 0; // pixel grid of the depth pass (all slices side by side)
+    // Columns of `profiles`: the pixel columns, or with the line_array beam geometry the cone columns,
+    // uniform in the beam steering angle over the fan (docs/pipeline.md, "Beam geometry").
+    std::uint32_t profile_columns = 0;
     std::uint64_t frame_index = 0;
     std::uint64_t seed = 0;
 
@@ -74,7 +77,7 @@ struct Frame {
     std::vector<std::uint32_t> material; // rows * columns material id, 0xffffffff = no hit
     std::vector<float> normals;          // rows * columns * 4: nx ny nz (sonar frame) cos_incidence
     std::vector<float> echo;             // rows * columns * 2: energy, slant range m
-    std::vector<float> profiles;         // bins * columns
+    std::vector<float> profiles;         // bins * profile_columns
     std::vector<float> beam_profiles;    // bins * beams, before the side-lobe convolution
 
     std::vector<StageTime> times;

@@ -31,6 +31,9 @@ template <> struct EnumNames<BeamPattern> {
 template <> struct EnumNames<BeamSpacing> {
     static constexpr std::array<const char*, 2> names{"equiangular", "equisine"};
 };
+template <> struct EnumNames<BeamGeometry> {
+    static constexpr std::array<const char*, 2> names{"line_array", "planar"};
+};
 template <> struct EnumNames<SpeckleModel> {
     static constexpr std::array<const char*, 3> names{"rayleigh", "gamma", "gaussian"};
 };
@@ -222,6 +225,10 @@ std::vector<ConfigKey> make_table() {
                   closed(1, 16384, "one beam to one per column of the widest depth pass (16384 columns)")),
         VKS_ENUM("beam_spacing", BeamSpacing, beam_spacing, "equiangular|equisine",
                  "Beam centres uniform in angle, or uniform in sine of the angle"),
+        VKS_ENUM("beam_geometry", BeamGeometry, beam_geometry, "line_array|planar",
+                 "Beams as a horizontal line array forms them (cones around the array axis, patterns in sine "
+                 "space), or as half-planes of one azimuth (an acoustic lens; the legacy modes); a fan of 180 "
+                 "deg or more is planar"),
         ConfigKey{"beam_angles", KeyType::number_list, "deg", "",
                   "Explicit beam-centre table, port first (strictly decreasing, within +-hfov/2); overrides "
                   "beams and beam_spacing when non-empty",

@@ -115,17 +115,18 @@ std::string gigabytes(double bytes) {
 Result<void> check_memory(const Plan& p) {
     const double pixels = double(p.columns) * p.rows;
     const double padded_bins = double((p.bins + 3u) & ~3u);
-    const double profiles = padded_bins * p.columns * 4.0;
-    // Per pixel: depth, material id, normals + cos, echo (energy, range), face normals: 48 bytes.
-    // Per polar cell: beam profiles, polar, clean, intensity, display and the staging copy: 24 bytes.
-    const double total = pixels * 48.0 + profiles + padded_bins * p.beams * 24.0;
+    const double profiles = padded_bins * p.profile_columns * 4.0;
+    // Per pixel: depth, material id, normals + cos, echo (energy, range), face normals, and with
+    // line_array the cone coordinate: 52 bytes. Per polar cell: beam profiles, polar, clean, intensity,
+    // display and the staging copy: 24 bytes.
+    const double total = pixels * 52.0 + profiles + padded_bins * p.beams * 24.0;
     const std::string grid = std::to_string(p.columns) + " x " + std::to_string(p.rows) + " pixels, " +
                              std::to_string(p.bins) + " bins x " + std::to_string(p.beams) + " beams";
     if (profiles > 4294967295.0)
         return make_error(ErrorCode::invalid_argument,
                           "config: the range-profile buffer would hold " + gigabytes(profiles) + " (" +
-                              std::to_string(p.bins) + " bins x " + std::to_string(p.columns) +
-                              " pixel columns), past the 4 GiB a Vulkan device can bind; lower bins (or bandwidth) "
+                              std::to_string(p.bins) + " bins x " + std::to_string(p.profile_columns) +
+                              " profile columns), past the 4 GiB a Vulkan device can bind; lower bins (or bandwidth) "
                               "or accuracy.pixels_per_beam");
     const long pages = ::sysconf(_SC_PHYS_PAGES), page_size = ::sysconf(_SC_PAGE_SIZE);
     if (pages > 0 && page_size > 0) {
@@ -245,9 +246,10 @@ double scatter_factor_peak(const shared::MaterialGpu& m) {
 
 void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
     const std::vector<double>& b = p.beam_angle_rad;
-    p.column_beam.resize(p.columns);
-    p.column_weight.resize(p.columns);
-    for (std::uint32_t col = 0; col < p.columns; ++col) {
+    const std::uint32_t columns = static_cast<std::uint32_t>(p.column_azimuth_rad.size()); // profile columns
+    p.column_beam.resize(columns);
+    p.column_weight.resize(columns);
+    for (std::uint32_t col = 0; col < columns; ++col) {
         const double a = p.column_azimuth_rad[col];
         if (std::abs(a) > exclude_beyond_rad) {
             p.column_beam[col] = p.beams; // no beam: the resample tables skip it
@@ -273,9 +275,9 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
             p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
         }
     }
-    p.beam_column_begin.assign(p.beams, p.columns);
+    p.beam_column_begin.assign(p.beams, columns);
     p.beam_column_end.assign(p.beams, 0);
-    for (std::uint32_t col = 0; col < p.columns; ++col) {
+    for (std::uint32_t col = 0; col < columns; ++col) {
         for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
             if (j >= p.beams) continue;
             p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
@@ -285,7 +287,7 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
     if (p.circular) { // the edge beams gather seam columns at both ends of the pixel grid
         for (std::uint32_t j : {0u, p.beams - 1}) {
             p.beam_column_begin[j] = 0;
-            p.beam_column_end[j] = p.columns;
+            p.beam_column_end[j] = columns;
         }
     }
     for (std::uint32_t j = 0; j < p.beams; ++j) {
@@ -296,37 +298,38 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
 // make_plan, as named steps (each reads the config from p.config and what the steps before it set).
 namespace {
 
+// Step, first: the beam geometry the config asks for, where it can hold.
+void plan_beam_geometry(Plan& p) {
+    const SonarConfig& c = p.config;
+    p.line_array = false;
+    if (c.beam_geometry == BeamGeometry::planar) {
+        p.beam_geometry_why = "planar in config";
+    } else if (c.mode != SonarMode::physical) {
+        p.beam_geometry_why = "planar: the legacy modes reproduce their plugins' planar beams";
+    } else if (c.hfov_deg >= 180.0) {
+        p.beam_geometry_why = "planar: a fan of " + fmt(c.hfov_deg) + " deg has no single array axis (hfov < 180 for "
+                              "line_array)";
+    } else {
+        p.line_array = true;
+        p.beam_geometry_why = "line_array in config";
+    }
+}
+
+// The pixel columns that resolve an angle `width_rad` at pixels_per_beam per resolved angle (the finer
+// of the beam spacing and the beamwidth).
+double columns_for(const Plan& p, double width_rad) {
+    const SonarConfig& c = p.config;
+    const double hfov = c.hfov_deg * kDegToRad;
+    const double spacing = p.beams > 1 ? hfov / p.beams : hfov;
+    const double resolved_angle = std::min(spacing, c.horizontal_beamwidth_deg * kDegToRad);
+    return std::ceil(c.pixels_per_beam * width_rad / resolved_angle);
+}
+
 // Step: vksonar's own pixel grid and the vertical pattern's constants (its coverage reaches the
 // pattern's first null).
 Result<void> plan_pixel_grid(Plan& p) {
     const SonarConfig& c = p.config;
-    // Pixel grid: enough columns that pixels_per_beam of them fall in the finer of the beam spacing and
-    // the beamwidth, split into slices no wider than max_slice_deg.
     const double hfov = c.hfov_deg * kDegToRad;
-    const double hbw = c.horizontal_beamwidth_deg * kDegToRad;
-    const double spacing = p.beams > 1 ? hfov / p.beams : hfov;
-    const double resolved_angle = std::min(spacing, hbw);
-    const double wanted_columns = std::ceil(c.pixels_per_beam * hfov / resolved_angle);
-    p.slices = static_cast<std::uint32_t>(std::ceil(c.hfov_deg / c.max_slice_deg - 1e-9));
-    p.slices = std::max(1u, p.slices);
-    if (p.slices > shared::kMaxSlices) {
-        return make_error(ErrorCode::invalid_argument, "config: accuracy.max_slice = " + fmt(c.max_slice_deg) +
-                                                           " needs " + std::to_string(p.slices) + " slices for hfov " +
-                                                           fmt(c.hfov_deg) + "; at most " +
-                                                           std::to_string(shared::kMaxSlices));
-    }
-    if (wanted_columns > kMaxColumns) {
-        return make_error(ErrorCode::invalid_argument,
-                          "config: " + fmt(wanted_columns) +
-                              " pixel columns needed (accuracy.pixels_per_beam = " + fmt(c.pixels_per_beam) +
-                              ", beams = " + std::to_string(p.beams) + ") exceeds " + std::to_string(kMaxColumns));
-    }
-    const std::uint32_t min_columns = 8; // a 1-beam sonar still needs a few columns for its pattern
-    const std::uint32_t total = std::max(min_columns, static_cast<std::uint32_t>(wanted_columns));
-    p.slice_columns = (total + p.slices - 1) / p.slices;
-    p.columns = p.slice_columns * p.slices;
-    p.slice_width_rad = hfov / p.slices;
-    p.tan_half_h = std::tan(0.5 * p.slice_width_rad);
 
     // Vertical coverage (physical mode): at least vertical_coverage beamwidths and, with the vertical
     // pattern on, its main lobe out to the first null, where the pattern's power reaches 0 (cut at
@@ -342,7 +345,6 @@ Result<void> plan_pixel_grid(Plan& p) {
     p.vpattern_k = pattern_constant(c.vertical_pattern, vfov, p.vpattern_chebyshev_a);
     p.vpattern_halfwidth_rad = 0.5 * vfov;
     double half_coverage = 0.5 * std::min(c.vfov_deg * c.vertical_coverage, 170.0) * kDegToRad;
-    double tan_half_v = std::tan(half_coverage);
     if (c.mode == SonarMode::physical) {
         if (c.effects.vertical_pattern != EffectMode::off) {
             const HorizontalLobes lobes = horizontal_lobes(shader_id(c.vertical_pattern), p.vpattern_k,
@@ -350,8 +352,47 @@ Result<void> plan_pixel_grid(Plan& p) {
             half_coverage = std::max(half_coverage, lobes.first_null_rad);
         }
         half_coverage = std::min(half_coverage, 85.0 * kDegToRad);
-        tan_half_v = std::tan(half_coverage) * std::sqrt(1.0 + p.tan_half_h * p.tan_half_h);
     }
+
+    // The azimuths the pixel grid covers: the fan (planar), or with line_array the fan's edge cones as
+    // far as the covered elevations take them: the cone sin(theta) = cos(elevation) sin(azimuth) of the
+    // edge beam reaches azimuth asin(sin(hfov / 2) / cos(half_coverage)). Up to 89 degrees: each slice
+    // must stay short of 90 (the cone coordinate then increases along a row), and what lies beyond is
+    // a sliver at the largest elevations of a fan close to 180 degrees.
+    double covered = hfov;
+    if (p.line_array) {
+        const double reach = std::sin(0.5 * hfov) / std::cos(half_coverage);
+        covered = 2.0 * std::min(reach < 1.0 ? std::asin(reach) : 0.5 * kPi, 89.0 * kDegToRad);
+        covered = std::max(covered, hfov);
+    }
+
+    // Pixel grid: enough columns that pixels_per_beam of them fall in the finer of the beam spacing and
+    // the beamwidth, split into slices no wider than max_slice_deg.
+    const double covered_deg = p.line_array ? covered / kDegToRad : c.hfov_deg;
+    const double wanted_columns = columns_for(p, covered);
+    p.slices = static_cast<std::uint32_t>(std::ceil(covered_deg / c.max_slice_deg - 1e-9));
+    p.slices = std::max(1u, p.slices);
+    if (p.slices > shared::kMaxSlices) {
+        return make_error(ErrorCode::invalid_argument, "config: accuracy.max_slice = " + fmt(c.max_slice_deg) +
+                                                           " needs " + std::to_string(p.slices) + " slices for hfov " +
+                                                           fmt(covered_deg) + "; at most " +
+                                                           std::to_string(shared::kMaxSlices));
+    }
+    if (wanted_columns > kMaxColumns) {
+        return make_error(ErrorCode::invalid_argument,
+                          "config: " + fmt(wanted_columns) +
+                              " pixel columns needed (accuracy.pixels_per_beam = " + fmt(c.pixels_per_beam) +
+                              ", beams = " + std::to_string(p.beams) + ") exceeds " + std::to_string(kMaxColumns));
+    }
+    const std::uint32_t min_columns = 8; // a 1-beam sonar still needs a few columns for its pattern
+    const std::uint32_t total = std::max(min_columns, static_cast<std::uint32_t>(wanted_columns));
+    p.slice_columns = (total + p.slices - 1) / p.slices;
+    p.columns = p.slice_columns * p.slices;
+    p.slice_width_rad = covered / p.slices;
+    p.tan_half_h = std::tan(0.5 * p.slice_width_rad);
+
+    double tan_half_v = std::tan(half_coverage);
+    if (c.mode == SonarMode::physical) tan_half_v *= std::sqrt(1.0 + p.tan_half_h * p.tan_half_h);
     p.tan_half_v = tan_half_v;
     p.vertical_coverage_rad = 2.0 * std::atan(p.tan_half_v); // at the slice's centre column
     const double rows = std::ceil(c.rows_per_vfov * p.vertical_coverage_rad / (c.vfov_deg * kDegToRad));
@@ -364,7 +405,7 @@ Result<void> plan_pixel_grid(Plan& p) {
 
     p.slice_info.resize(p.slices);
     for (std::uint32_t s = 0; s < p.slices; ++s) {
-        const double centre = 0.5 * hfov - (s + 0.5) * p.slice_width_rad;
+        const double centre = 0.5 * covered - (s + 0.5) * p.slice_width_rad;
         p.slice_info[s] = {static_cast<float>(centre), static_cast<float>(std::cos(centre)),
                            static_cast<float>(std::sin(centre)), 0.0f};
     }
@@ -389,6 +430,39 @@ void use_host_grid(Plan& p, const HostPixelGrid& grid) {
     p.slice_width_rad = 2.0 * std::atan(grid.tan_half_h);
     p.vertical_coverage_rad = 2.0 * std::atan(grid.tan_half_v);
     p.slice_info.assign(1, shared::SliceInfo{0.0f, 1.0f, 0.0f, 0.0f});
+}
+
+// Step (after the pixel grid): the columns of the range profiles. line_array: the cone columns over the
+// fan, as many as the planar grid would have pixel columns there.
+void plan_profile_columns(Plan& p) {
+    if (!p.line_array) {
+        p.profile_columns = p.columns;
+        p.cone_step_rad = 0.0;
+        p.pixel_cone_coord.clear();
+        return;
+    }
+    const double hfov = p.config.hfov_deg * kDegToRad;
+    p.profile_columns = std::max(8u, static_cast<std::uint32_t>(columns_for(p, hfov)));
+    p.cone_step_rad = hfov / p.profile_columns;
+}
+
+// Step (after the memory check): line_array, every pixel's cone coordinate.
+void plan_cone_table(Plan& p) {
+    if (!p.line_array) return;
+    const double hfov = p.config.hfov_deg * kDegToRad;
+    const float half_fov = static_cast<float>(0.5 * hfov);
+    const float inv_step = static_cast<float>(1.0 / p.cone_step_rad);
+    const float tan_half_h = static_cast<float>(p.tan_half_h), tan_half_v = static_cast<float>(p.tan_half_v);
+    p.pixel_cone_coord.resize(static_cast<std::size_t>(p.rows) * p.columns);
+    for (std::uint32_t row = 0; row < p.rows; ++row) {
+        const float v = math_f32::pixel_coord(row, p.rows, tan_half_v);
+        for (std::uint32_t col = 0; col < p.columns; ++col) {
+            const shared::SliceInfo& slice = p.slice_info[col / p.slice_columns];
+            const float u = math_f32::pixel_coord(col % p.slice_columns, p.slice_columns, tan_half_h);
+            const float axis = math_f32::array_axis_cosine(u, v, slice.cos_center, slice.sin_center);
+            p.pixel_cone_coord[std::size_t(row) * p.columns + col] = math_f32::cone_coord(axis, half_fov, inv_step);
+        }
+    }
 }
 
 // Step: the range window: bin width, the echo stage's gate, bin centres.
@@ -470,6 +544,13 @@ Result<void> plan_materials(Plan& p, const SceneData& scene, bool& any_angle_dep
     return {};
 }
 
+// The side-lobe kernel's reach `reach` (an angle from the beam's axis) in the unit the beams are
+// separated in: the angle (planar), or its sine (line_array: the pattern is a function of
+// sin(theta') - sin(theta)).
+double sidelobe_reach(const Plan& p, double reach) {
+    return p.line_array ? std::sin(std::min(reach, 0.5 * kPi)) : reach;
+}
+
 // Step: the effects on demand, and the side-lobe kernel's half width in beams (0: none).
 std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_dependent, double& reach) {
     const SonarConfig& c = p.config;
@@ -481,10 +562,13 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
                                                           c.water_depth_m, c.ph, c.sound_speed_mps);
     const double absorption_window_db = 2.0 * alpha * c.range_max_m;
 
-    // Side-lobe kernel reach in beams (from the finest spacing, so a non-uniform table is covered).
+    // Side-lobe kernel reach in beams (from the finest spacing, so a non-uniform table is covered): in
+    // angle (planar), or in sine with line_array, where the beams near the fan's edges are closer in
+    // sine and their pattern reaches over more of them (the beam widens as 1 / cos(theta)).
     double min_spacing = std::numeric_limits<double>::infinity();
     for (std::uint32_t j = 1; j < p.beams; ++j) {
-        min_spacing = std::min(min_spacing, p.beam_angle_rad[j - 1] - p.beam_angle_rad[j]);
+        const double a = p.beam_angle_rad[j - 1], b = p.beam_angle_rad[j];
+        min_spacing = std::min(min_spacing, p.line_array ? std::sin(a) - std::sin(b) : a - b);
     }
     reach = c.sidelobe_kernel_beamwidths * hbw;
     // Side lobes that stay below the display floor even for a target at the top of the display window
@@ -504,7 +588,7 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
     std::uint32_t half_taps = 0;
     p.circular = c.hfov_deg >= 360.0 && p.beams > 1;
     if (p.beams > 1) {
-        const double k = std::floor(reach / min_spacing);
+        const double k = std::floor(sidelobe_reach(p, reach) / min_spacing);
         // On a circle a kernel wider than the fan would count a source beam twice.
         const double widest = p.circular ? std::floor((p.beams - 1) / 2.0) : p.beams - 1.0;
         half_taps = static_cast<std::uint32_t>(std::min<double>({k, widest, double(kMaxSidelobeHalfTaps)}));
@@ -539,7 +623,14 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
 // Step: which beams each pixel column feeds (tent on the beam table). Columns at |azimuth| beyond
 // exclude_beyond_rad feed none.
 void plan_column_tables(Plan& p, double exclude_beyond_rad) {
-    p.column_azimuth_rad.resize(p.columns);
+    p.column_azimuth_rad.resize(p.profile_columns);
+    if (p.line_array) { // the cone columns' steering angles
+        const double half_fov = 0.5 * p.config.hfov_deg * kDegToRad;
+        for (std::uint32_t col = 0; col < p.profile_columns; ++col)
+            p.column_azimuth_rad[col] = half_fov - (col + 0.5) * p.cone_step_rad;
+        assign_columns_to_beams(p, exclude_beyond_rad);
+        return;
+    }
     for (std::uint32_t col = 0; col < p.columns; ++col) {
         const std::uint32_t s = col / p.slice_columns;
         const double u = math_f64::pixel_coord(col % p.slice_columns, p.slice_columns, p.tan_half_h);
@@ -553,6 +644,7 @@ void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach) {
     const SonarConfig& c = p.config;
     // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their angular separation.
     p.sidelobe_taps = 2 * half_taps + 1;
+    const double reach_units = sidelobe_reach(p, reach);
     p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
     const std::uint32_t hshape = shader_id(c.horizontal_pattern);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
@@ -560,13 +652,18 @@ void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach) {
             std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
             if (p.circular) src = (src + p.beams) % p.beams; // half_taps < beams / 2: one wrap at most
             if (src < 0 || src >= p.beams) continue;
-            double sep = p.beam_angle_rad[src] - p.beam_angle_rad[j];
+            // The separation in the pattern's own variable: the angle, or with line_array its sine, taken
+            // back to the angle whose sine it is (pattern_power reads the aperture patterns as a
+            // function of sin(angle), so they see sin(theta') - sin(theta) exactly).
+            double sep = p.line_array ? std::sin(p.beam_angle_rad[src]) - std::sin(p.beam_angle_rad[j])
+                                      : p.beam_angle_rad[src] - p.beam_angle_rad[j];
             if (p.circular) sep = std::remainder(sep, 2.0 * 3.14159265358979323846); // into [-pi, pi]
+            const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
             float w = 1.0f;
             if (half_taps > 0) {
-                w = std::abs(sep) <= reach + 1e-12
+                w = std::abs(sep) <= reach_units + 1e-12
                         ? static_cast<float>(math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad,
-                                                                     p.hpattern_chebyshev_a, sep))
+                                                                     p.hpattern_chebyshev_a, angle))
                         : 0.0f;
             }
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
@@ -623,6 +720,11 @@ void plan_gpu_params(Plan& p) {
     }
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
     g.vpattern_chebyshev_a = static_cast<float>(p.vpattern_chebyshev_a);
+    g.profile_columns = p.profile_columns;
+    g.line_array = p.line_array ? 1u : 0u;
+    // the same floats plan_profile_columns computed the CPU's cone coordinates from
+    g.cone_half_fov_rad = p.line_array ? static_cast<float>(0.5 * c.hfov_deg * kDegToRad) : 0.0f;
+    g.inv_cone_step = p.line_array ? static_cast<float>(1.0 / p.cone_step_rad) : 0.0f;
 }
 
 } // namespace
@@ -640,12 +742,15 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     p.beams = static_cast<std::uint32_t>(p.beam_angle_rad.size());
     p.bins = config.range_bins();
 
+    plan_beam_geometry(p);
     if (host_grid != nullptr) {
         use_host_grid(p, *host_grid);
     } else if (auto grid = plan_pixel_grid(p); !grid) {
         return grid.error();
     }
+    plan_profile_columns(p);
     if (auto fits = check_memory(p); !fits) return fits.error();
+    plan_cone_table(p);
     plan_range_window(p);
     plan_clip_planes(p);
     plan_horizontal_pattern(p);

@@ -42,6 +42,20 @@ struct Plan {
     double depth_a = 0, depth_b = 0; // view z = depth_a / (d - depth_b); d = 1 at near, 0 at far
     std::vector<shared::SliceInfo> slice_info; // slices
 
+    // Beam geometry (docs/pipeline.md, "Beam geometry"): line_array as resolved from the config (planar
+    // for the legacy modes and for fans of 180 degrees or more, which have no single array axis), and why.
+    bool line_array = false;
+    std::string beam_geometry_why;
+    // The columns of the range profiles, which the beamform tables map onto beams: the pixel columns
+    // (planar), or the cone columns (line_array), uniform in the steering angle over the fan,
+    // cone_step_rad apart. With line_array the pixel grid reaches past the fan's azimuths: a cone at
+    // the fan's edge leans out to larger azimuths as its elevation grows.
+    std::uint32_t profile_columns = 0;
+    double cone_step_rad = 0;
+    // line_array: each pixel's cone coordinate (rows * columns; sonar_kernels.h cone_coord, in float
+    // from the same float inputs as the GPU's), for the CPU backend's scatter onto cone columns.
+    std::vector<float> pixel_cone_coord;
+
     // Beams and range bins.
     std::uint32_t beams = 0, bins = 0;
     std::vector<double> beam_angle_rad; // beams, strictly decreasing (port first)
@@ -57,15 +71,17 @@ struct Plan {
     double hpattern_k = 0, hpattern_halfwidth_rad = 0, hpattern_chebyshev_a = 0;
     double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
 
-    // Beamform tables. Column c (azimuth column_azimuth_rad[c]) gives weight column_weight[c] to beam
-    // column_beam[c] and 1 - column_weight[c] to column_beam[c] + 1 (tent on the beam table; columns
-    // outside the beam fan give their energy only to the nearest edge beam... see plan.cpp).
-    std::vector<double> column_azimuth_rad; // columns
-    std::vector<std::uint32_t> column_beam; // columns
-    std::vector<float> column_weight;       // columns
+    // Beamform tables over the profile columns. Column c (azimuth, or steering angle with line_array,
+    // column_azimuth_rad[c]) gives weight column_weight[c] to beam column_beam[c] and
+    // 1 - column_weight[c] to column_beam[c] + 1 (tent on the beam table; columns outside the beam fan
+    // give their energy only to the nearest edge beam... see plan.cpp).
+    std::vector<double> column_azimuth_rad; // profile_columns
+    std::vector<std::uint32_t> column_beam; // profile_columns
+    std::vector<float> column_weight;       // profile_columns
     // Beam j gathers from columns [beam_column_begin[j], beam_column_end[j]).
     std::vector<std::uint32_t> beam_column_begin, beam_column_end;
-    // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t).
+    // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t),
+    // the horizontal pattern at the two beams' separation in angle (planar) or in sine (line_array).
     std::uint32_t sidelobe_taps = 1;    // 2K + 1
     std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the

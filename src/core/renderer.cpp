@@ -107,6 +107,7 @@ Frame make_frame_for(const RendererImpl& impl) {
     f.beams = p.beams;
     f.bins = p.bins;
     f.columns = p.columns;
+    f.profile_columns = p.profile_columns;
     f.rows = p.rows;
     f.seed = impl.options.seed;
     f.beam_angles_rad = p.beam_angle_rad;
@@ -121,7 +122,7 @@ Frame make_frame_for(const RendererImpl& impl) {
     if (any(mask & SaveFlags::normals)) f.normals.assign(pixels * 4, 0.0f);
     if (any(mask & SaveFlags::echo)) f.echo.assign(pixels * 2, 0.0f);
     if (any(mask & SaveFlags::profiles)) {
-        f.profiles.assign(static_cast<std::size_t>(p.bins) * p.columns, 0.0f);
+        f.profiles.assign(static_cast<std::size_t>(p.bins) * p.profile_columns, 0.0f);
         f.beam_profiles.assign(cells, 0.0f);
     }
     f.times.reserve(8);

@@ -21,7 +21,7 @@ namespace vksonar {
 namespace math_f32 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
+using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
     std::sin, std::sqrt;
 using vec2 = glm::vec2;
 using vec3 = glm::vec3;
@@ -36,7 +36,7 @@ using vec4 = glm::vec4;
 namespace math_f64 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
+using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
     std::sin, std::sqrt;
 using vec2 = glm::dvec2;
 using vec3 = glm::dvec3;
@@ -69,7 +69,8 @@ using vec4 = glm::dvec4;
     VKS_FORWARD(ns, sample_at) VKS_FORWARD(ns, facing_normal) VKS_FORWARD(ns, oriented_normal)                       \
     VKS_FORWARD(ns, sobel3_normal) VKS_FORWARD(ns, sobel5_normal) VKS_FORWARD(ns, geometric_normal)                  \
     VKS_FORWARD(ns, material_index) VKS_FORWARD(ns, echo_of_pixel) VKS_FORWARD(ns, range_spread)       \
-    VKS_FORWARD(ns, range_share)
+    VKS_FORWARD(ns, range_share) VKS_FORWARD(ns, array_axis_cosine) VKS_FORWARD(ns, cone_coord)                   \
+    VKS_FORWARD(ns, cone_share)
 #define VKS_FORWARD(ns, fn) template <class... A> static decltype(auto) fn(A&&... a) { return ns::fn(static_cast<A&&>(a)...); }
 template <class Real> struct Math;
 template <> struct Math<float> { VKS_MATH_TABLE(math_f32) };

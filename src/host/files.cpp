@@ -175,6 +175,9 @@ std::string meta_json_plan_part(const Plan& plan) {
         "X up, Y starboard (right), so azimuth a maps to (x = 0, y = -sin a, z = cos a).";
     m["beams"] = plan.beams;
     m["bins"] = plan.bins;
+    // How a beam divides the directions: cones around the array axis (line_array: beam_angles_rad are
+    // steering angles, sin(theta) = cos(elevation) sin(azimuth)) or half-planes of one azimuth (planar).
+    m["beam_geometry"] = {{"used", plan.line_array ? "line_array" : "planar"}, {"why", plan.beam_geometry_why}};
     json angles = json::array(), directions = json::array(), tx = json::array(), rx = json::array();
     for (std::size_t j = 0; j < plan.beams && j < plan.beam_angle_rad.size(); ++j) {
         const double a = plan.beam_angle_rad[j];

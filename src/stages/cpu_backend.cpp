@@ -80,7 +80,7 @@ public:
         if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
         if (plan_.face_normals) face_.assign(pixels * 4, 0.0f);
         echo_.assign(pixels * 2, 0.0f);
-        profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.columns, 0.0f);
+        profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
@@ -170,7 +170,7 @@ private:
             });
             break;
         case StageId::beamform: // every column's profile before any beam reads it
-            split(workers_, plan_.columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            split(workers_, plan_.profile_columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles_.data(), scratch_.data(), begin, end);
             });
             split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {

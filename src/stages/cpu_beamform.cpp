@@ -14,11 +14,60 @@
 
 namespace vksonar::cpu {
 
+namespace {
+
+// line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x profile_columns). Each
+// pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
+// cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
+// first, then by increasing pixel column, then bin: the order of profile.comp's gather.
+template <class Real>
+void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_t cone_begin, std::uint32_t cone_end,
+                   Real range_min, Real inv_bin_width) {
+    using M = Math<Real>;
+    using vec2 = typename M::vec2;
+    const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins, PC = plan.profile_columns;
+    const std::uint32_t kernel = plan.params.range_kernel;
+    const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
+    const int count = static_cast<int>(PC);
+    for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
+        const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
+        // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
+        const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
+        std::uint32_t c = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
+        for (; c < C && cone_x[c] < hi; ++c) {
+            const float* e2 = echo2 + 2 * (static_cast<std::size_t>(j) * C + c);
+            const Real e = static_cast<Real>(e2[0]);
+            if (!(e > Real(0))) continue;
+            const Real x = static_cast<Real>(cone_x[c]);
+            const auto row_echo = [&](std::int64_t row) {
+                if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
+                const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
+                return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
+            };
+            const std::int64_t jj = j;
+            const typename M::RangeSpread spread =
+                M::range_spread(kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, static_cast<Real>(e2[1])),
+                                row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width, jump_rel, bins);
+            const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
+            const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+            for (int cone = first_cone; cone <= last_cone; ++cone) {
+                const Real weight = M::cone_share(x, cone, count);
+                if (!(weight > Real(0))) continue;
+                const Real weighted = weight * e;
+                for (int k = spread.k_first; k <= spread.k_last; ++k)
+                    acc[static_cast<std::size_t>(k) * PC + cone] += M::range_share(spread, k) * weighted;
+            }
+        }
+    }
+}
+
+} // namespace
+
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end) {
     using M = Math<Real>;
-    const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
+    const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
     Real range_min, inv_bin_width;
     if constexpr (std::is_same_v<Real, float>) {
         range_min = plan.params.range_min_m;
@@ -37,7 +86,10 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
     for (std::uint32_t k = 0; k < bins; ++k)
         std::fill(acc + std::size_t(k) * C + column_begin, acc + std::size_t(k) * C + column_end, Real(0));
-    for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
+    if (plan.line_array) {
+        cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
+    }
+    for (std::uint32_t j = 0; j < R && bins > 0 && !plan.line_array; ++j) {
         const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
         for (std::uint32_t c = column_begin; c < column_end; ++c) {
             const Real e = static_cast<Real>(e2[2 * c]);
@@ -65,7 +117,7 @@ template <class Real>
 void beamform_beams(const Plan& plan, const float* profiles, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
     using M = Math<Real>;
-    const std::uint32_t C = plan.columns, beams = plan.beams;
+    const std::uint32_t C = plan.profile_columns, beams = plan.beams;
     // resample: one cell per (beam j, bin k), columns in increasing order.
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* prof = profiles + static_cast<std::size_t>(k) * C;
@@ -146,12 +198,12 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
 
 template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
-    beamform_profiles<Real>(plan, echo2, profiles, acc, 0, plan.columns);
+    beamform_profiles<Real>(plan, echo2, profiles, acc, 0, plan.profile_columns);
     beamform_beams<Real>(plan, profiles, beam_profiles, polar, 0, plan.bins);
 }
 
 std::size_t beamform_scratch_count(const Plan& plan) {
-    return static_cast<std::size_t>(plan.bins) * plan.columns; // one accumulator per profile cell
+    return static_cast<std::size_t>(plan.bins) * plan.profile_columns; // one accumulator per profile cell
 }
 
 template <class Real>

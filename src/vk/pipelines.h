@@ -27,6 +27,7 @@ enum Binding : std::uint32_t {
     binding_column_table = shared::kBindingColumnTable,
     binding_beam_table = shared::kBindingBeamTable,
     binding_sidelobe_weight = shared::kBindingSidelobeWeight,
+    binding_cone_coord = shared::kBindingConeCoord,
     // The same four tables as uniform blocks (below): bound to the same buffers.
     binding_materials_uniform = shared::kBindingMaterialsUniform,
     binding_column_table_uniform = shared::kBindingColumnTableUniform,
@@ -102,8 +103,11 @@ struct EchoSpecialization {
 struct ProfileSpecialization {
     std::uint32_t range_kernel = shared::kRangeKernelFootprint;
     std::uint32_t echo_half = 0;
-    std::array<SpecConstant, 2> constants() const {
-        return {{{shared::kSpecRangeKernel, range_kernel}, {shared::kSpecEchoHalf, echo_half}}};
+    std::uint32_t line_array = 0;
+    std::array<SpecConstant, 3> constants() const {
+        return {{{shared::kSpecRangeKernel, range_kernel},
+                 {shared::kSpecEchoHalf, echo_half},
+                 {shared::kSpecLineArray, line_array}}};
     }
 };
 struct ResampleSpecialization {

@@ -27,7 +27,7 @@ Share gathered_share(const Plan& plan, std::uint32_t column, std::uint32_t beam)
 
 bool resample_can_walk(const Plan& plan, std::uint32_t beams_per_run) {
     if (beams_per_run == 0 || plan.beam_column_begin.size() != plan.beams ||
-        plan.beam_column_end.size() != plan.beams || plan.column_beam.size() != plan.columns)
+        plan.beam_column_end.size() != plan.beams || plan.column_beam.size() != plan.profile_columns)
         return false;
     std::vector<Term> gathered, walked, carry;
     for (std::uint32_t first = 0; first < plan.beams; first += beams_per_run) {
@@ -36,7 +36,7 @@ bool resample_can_walk(const Plan& plan, std::uint32_t beams_per_run) {
         std::uint32_t c = plan.beam_column_begin[first];
         carry.clear();
         for (std::uint32_t j = first; j < last; ++j) {
-            const std::uint32_t end = std::min(plan.beam_column_end[j], plan.columns);
+            const std::uint32_t end = std::min(plan.beam_column_end[j], plan.profile_columns);
             walked = carry;
             carry.clear();
             for (; c < end; ++c) {

@@ -70,12 +70,12 @@ Result<void> VulkanBackend::init() {
     // The largest polar-side storage buffers (bins padded to 4, as create_compute makes them): the
     // range profiles, one per pixel column, and the beam profiles. Refused before any allocation.
     const std::uint64_t bins_padded = (std::uint64_t(plan_.bins) + 3u) & ~std::uint64_t(3);
-    const std::uint64_t profile_bytes = bins_padded * std::max(plan_.columns, plan_.beams) * sizeof(float);
+    const std::uint64_t profile_bytes = bins_padded * std::max(plan_.profile_columns, plan_.beams) * sizeof(float);
     if (profile_bytes > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported,
                           "vulkan backend: the range-profile buffer would hold " + std::to_string(profile_bytes) +
                               " bytes (" + std::to_string(plan_.bins) + " bins x " +
-                              std::to_string(std::max(plan_.columns, plan_.beams)) +
+                              std::to_string(std::max(plan_.profile_columns, plan_.beams)) +
                               " columns), past the device's limit of " + std::to_string(limits.maxStorageBufferRange) +
                               " bytes (lower bins or accuracy.pixels_per_beam, or use --backend cpu)");
     }
@@ -211,7 +211,7 @@ Result<void> VulkanBackend::create_compute() {
     gpu_params_ = plan_.params;
     gpu_params_.bins_padded = (plan_.bins + 3u) & ~3u;
     const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
-    const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.columns;
+    const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.profile_columns;
     const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     const VkBufferUsageFlags in = storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     const VkBufferUsageFlags out = storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
@@ -249,8 +249,8 @@ Result<void> VulkanBackend::create_compute() {
     // The slice table is a uniform block of kMaxSlices entries (normals.comp); the plan has <= that many.
     std::vector<shared::SliceInfo> slice_info = plan_.slice_info;
     slice_info.resize(shared::kMaxSlices, shared::SliceInfo{});
-    std::vector<std::uint32_t> column_table(2 * std::size_t(plan_.columns));
-    for (std::size_t c = 0; c < plan_.columns; ++c) {
+    std::vector<std::uint32_t> column_table(2 * std::size_t(plan_.profile_columns));
+    for (std::size_t c = 0; c < plan_.profile_columns; ++c) {
         column_table[2 * c] = plan_.column_beam[c];
         std::memcpy(&column_table[2 * c + 1], &plan_.column_weight[c], sizeof(float));
     }
@@ -280,13 +280,17 @@ Result<void> VulkanBackend::create_compute() {
         VkBufferUsageFlags usage;
     };
     const VkBufferUsageFlags uniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
-    const std::array<Table, 6> tables{{
+    const float no_cone_coord[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    const bool cones = !plan_.pixel_cone_coord.empty();
+    const std::array<Table, 7> tables{{
         {&params_, &gpu_params_, sizeof(gpu_params_), uniform},
         {&slice_info_, slice_info.data(), bytes_of(slice_info), uniform},
         {&materials_, materials.data(), bytes_of(materials), storage | uniform},
         {&column_table_, column_table.data(), bytes_of(column_table), storage | uniform},
         {&beam_table_, beam_table.data(), bytes_of(beam_table), storage | uniform},
         {&sidelobe_weight_, plan_.sidelobe_weight.data(), bytes_of(plan_.sidelobe_weight), storage | uniform},
+        {&cone_coord_, cones ? plan_.pixel_cone_coord.data() : no_cone_coord,
+         cones ? bytes_of(plan_.pixel_cone_coord) : sizeof no_cone_coord, storage},
     }};
     for (const Table& t : tables) {
         // Rounded up to whole vec4s: a uniform view covers whole std140 array elements.
@@ -349,7 +353,7 @@ Result<void> VulkanBackend::create_compute() {
     const std::array<const Buffer*, binding_count> bound{
         &params_,          &depth_,     &material_id_,  &normals_,    &echo_,           &profiles_,
         &beam_profiles_,   &polar_,     &slice_info_,   &materials_,  &column_table_,   &beam_table_,
-        &sidelobe_weight_, &materials_, &column_table_, &beam_table_, &sidelobe_weight_};
+        &sidelobe_weight_, &cone_coord_, &materials_, &column_table_, &beam_table_, &sidelobe_weight_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
@@ -402,6 +406,7 @@ Result<void> VulkanBackend::create_compute() {
     ProfileSpecialization profile;
     profile.range_kernel = plan_.params.range_kernel;
     profile.echo_half = gpu_params_.echo_half;
+    profile.line_array = plan_.line_array ? 1u : 0u;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).

@@ -115,6 +115,7 @@ private:
 
     Buffer params_, depth_, material_id_, normals_, echo_, profiles_, beam_profiles_, polar_;
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
+    Buffer cone_coord_; // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
     Buffer readback_;
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;

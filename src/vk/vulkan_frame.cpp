@@ -109,7 +109,7 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
     pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1, &zeroed);
     bind_compute(commands, profile_pipeline_.get());
-    vkCmdDispatch(commands, group_count(plan_.columns), 1, 1);
+    vkCmdDispatch(commands, group_count(plan_.profile_columns), 1, 1); // one invocation per profile column
     compute_barrier(commands, profiles_);
 
     // resample and sidelobe: x = groups of 4-bin quads, y = runs of beams.
@@ -278,6 +278,7 @@ void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
     frame.beams = plan_.beams;
     frame.bins = plan_.bins;
     frame.columns = plan_.columns;
+    frame.profile_columns = plan_.profile_columns;
     frame.rows = plan_.rows;
     copy_out(polar_region_, sized(frame.clean, cells));
     if (any(save_mask & SaveFlags::depth)) {
@@ -309,8 +310,8 @@ void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
         // The GPU keeps profiles column-major (contiguous loads in resample.comp); the Frame holds the
         // public range-major layout.
         const std::uint32_t padded = gpu_params_.bins_padded;
-        transpose_out(profiles_region_, plan_.columns, plan_.bins, padded,
-                      sized(frame.profiles, std::size_t(plan_.bins) * plan_.columns));
+        transpose_out(profiles_region_, plan_.profile_columns, plan_.bins, padded,
+                      sized(frame.profiles, std::size_t(plan_.bins) * plan_.profile_columns));
         if (sidelobes_) { // beam-major, padded: the side-lobe pass's input layout
             transpose_out(beam_profiles_region_, plan_.beams, plan_.bins, padded, sized(frame.beam_profiles, cells));
         } else {
