@@ -13,8 +13,9 @@
 
 namespace host {
 
-// A one-slice sonar (hfov <= max_slice), so that the standalone render's pixel grid is a single
-// pinhole image the host engine can reproduce exactly. Noise off: the clean, deterministic model.
+// A one-slice sonar (the pixel grid's azimuths <= max_slice), so that the standalone render's pixel
+// grid is a single pinhole image the host engine can reproduce exactly. Noise off: the clean,
+// deterministic model. A line array (the default beam geometry), whose grid reaches past the fan.
 inline vksonar::SonarConfig demo_config() {
     vksonar::SonarConfig config;
     config.name = "embed-demo";
@@ -29,24 +30,32 @@ inline vksonar::SonarConfig demo_config() {
     // +-25 deg: past the sinc pattern's first null (23.1 deg for a 20-degree beam), so this, not the
     // null, sets the depth pass's vertical coverage and engine_options_for can state it in closed form.
     config.vertical_coverage = 2.5;
+    config.max_slice_deg = 90.0; // the line array's grid spans 67 deg (engine_options_for): one slice
     config.effects.speckle = vksonar::EffectMode::off;
     config.effects.ambient_noise = vksonar::EffectMode::off;
     config.effects.tvg = vksonar::EffectMode::off;
     return config;
 }
 
-// The engine camera that sees exactly the standalone render's pixel grid (one slice). The vertical
-// coverage rule of docs/pipeline.md for a config whose vertical_coverage x vfov / 2 lies past the vertical
-// pattern's first null (demo_config): tan(vertical_coverage x vfov / 2), times sqrt(1 + tan_half_h^2) so
-// that the slice's edge columns reach that elevation too.
+// The engine camera that sees exactly the standalone render's pixel grid (one slice). The coverage
+// rules of docs/pipeline.md for a config whose vertical_coverage x vfov / 2 lies past the vertical
+// pattern's first null (demo_config): vertically tan(vertical_coverage x vfov / 2), times
+// sqrt(1 + tan_half_h^2) so that the slice's edge columns reach that elevation too; horizontally the
+// fan, or for a line array as far as the edge beam's cone leans out at that elevation,
+// asin(sin(hfov / 2) / cos(elevation)), up to 89 degrees.
 inline EngineOptions engine_options_for(const vksonar::SonarConfig& config, const vksonar::Frame& standalone) {
     const double d = 3.14159265358979323846 / 180.0;
+    const double half_coverage = 0.5 * std::min(config.vfov_deg * config.vertical_coverage, 170.0) * d;
+    double half_h = 0.5 * config.hfov_deg * d;
+    if (config.beam_geometry == vksonar::BeamGeometry::line_array) {
+        const double reach = std::sin(half_h) / std::cos(half_coverage);
+        half_h = std::min(reach < 1.0 ? std::asin(reach) : 90.0 * d, 89.0 * d);
+    }
     EngineOptions options;
     options.width = standalone.columns;
     options.height = standalone.rows;
-    options.tan_half_h = std::tan(0.5 * config.hfov_deg * d);
-    options.tan_half_v = std::tan(0.5 * std::min(config.vfov_deg * config.vertical_coverage, 170.0) * d) *
-                         std::sqrt(1.0 + options.tan_half_h * options.tan_half_h);
+    options.tan_half_h = std::tan(half_h);
+    options.tan_half_v = std::tan(half_coverage) * std::sqrt(1.0 + options.tan_half_h * options.tan_half_h);
     return options;
 }
 

@@ -157,8 +157,11 @@ TEST_F(Cli, ValuesOutsidePhysicsAreRefused) {
     write_text(dir_ / "hot.json", R"({"temperature": 95})");
     expect_bad_render({"--config", (dir_ / "hot.json").string()}, {"hot.json", "temperature = 95", "[-2.5, 40]"});
     // A depth pass no device can hold is refused with its size before anything is allocated.
-    expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32"},
+    // (planar: the pixel grid is the fan's; line_array's reaches past it and hits the column limit first)
+    expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32", "--set", "beam_geometry=planar"},
                       {"range-profile buffer would hold 4.29549 GB"});
+    expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32"},
+                      {"pixel columns needed (accuracy.pixels_per_beam = 32", "exceeds 16384"});
 }
 
 TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {

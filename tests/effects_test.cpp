@@ -62,10 +62,12 @@ struct PixelRay {
 
 // Pixel (column c, row j) per the grid contract: slices of equal width side by side, port first.
 PixelRay pixel_ray(const Plan& plan, std::uint32_t c, std::uint32_t j) {
-    const double hfov = plan.config.hfov_deg * kDeg;
+    // The grid's azimuths: the fan, or with line_array the wider span its edge cones reach
+    // (docs/pipeline.md, "Beam geometry"): the pixel grid as laid out, not a physics reference.
+    const double covered = plan.slice_width_rad * plan.slices;
     const std::uint32_t W = plan.slice_columns, s = c / W;
-    const double centre = 0.5 * hfov - (s + 0.5) * hfov / plan.slices;
-    const double tan_half_h = std::tan(0.5 * hfov / plan.slices);
+    const double centre = 0.5 * covered - (s + 0.5) * covered / plan.slices;
+    const double tan_half_h = std::tan(0.5 * covered / plan.slices);
     const double tan_half_v = std::tan(0.5 * plan.vertical_coverage_rad);
     PixelRay ray;
     ray.u = (2.0 * ((c % W) + 0.5) / W - 1.0) * tan_half_h;
@@ -348,29 +350,34 @@ TEST_P(EffectsTest, HorizontalPatternConvolvesBeamsWithTheArraysSidelobes) {
     EXPECT_TRUE(same_bits(fb.clean, fb.beam_profiles));
     EXPECT_FALSE(ran(fb, "sidelobe")); // no stage of that name either way: it is part of beamform
 
-    // On: polar(j) = sum over beams i within the kernel reach of b_h^2(angle_i - angle_j) B(i), with
-    // b_h^2 the sinc^2 of a uniform line array whose two-way -3 dB width is the horizontal beamwidth.
+    // On: polar(j) = sum over beams i within the kernel reach of b_h^2 B(i), b_h^2 the sinc^2 of a
+    // uniform line array whose two-way -3 dB width is the horizontal beamwidth, at the beams' separation
+    // in angle (planar), or in sine with line_array: b_h^2(asin(sin a_i - sin a_j)) = sinc^2(k (sin a_i -
+    // sin a_j)), within sin(reach) (docs/pipeline.md, "Beam geometry").
     const double hbw = plan.config.horizontal_beamwidth_deg * kDeg;
     const double reach = plan.config.sidelobe_kernel_beamwidths * hbw;
     double peak = 0;
     for (float x : fa.clean)
         peak = std::max(peak, double(x));
-    // Kernel weights by beam offset: the table is equi-angular, so the separation depends on i - j only.
-    const double spacing = plan.beam_angle_rad[0] - plan.beam_angle_rad[1];
-    const int reach_beams = static_cast<int>(std::floor(reach / spacing + 1e-9));
-    ASSERT_GE(reach_beams, 4); // 3 beamwidths of 1 deg over 0.254 deg beams: 11
-    std::vector<double> weight(2 * reach_beams + 1);
-    for (int d = -reach_beams; d <= reach_beams; ++d)
-        weight[d + reach_beams] = sinc_pattern(hbw, d * spacing);
+    const bool line_array = plan.line_array;
+    auto separation = [&](std::size_t i, std::size_t j) {
+        const double a = plan.beam_angle_rad[i], b = plan.beam_angle_rad[j];
+        return line_array ? std::sin(a) - std::sin(b) : a - b;
+    };
+    const double reach_units = line_array ? std::sin(reach) : reach;
+    const int window = 64; // beams either side: past the reach (3 beamwidths: ~12-29 beams) everywhere
     for (std::uint32_t k = 0; k < fa.bins; ++k) {
         for (std::uint32_t j = 0; j < fa.beams; ++j) {
             double expected = 0;
-            for (int d = -reach_beams; d <= reach_beams; ++d) {
+            for (int d = -window; d <= window; ++d) {
                 const std::int64_t i = std::int64_t(j) + d;
                 if (i < 0 || i >= std::int64_t(fa.beams)) continue;
-                expected += weight[d + reach_beams] * fb.beam_profiles[std::size_t(k) * fa.beams + std::size_t(i)];
+                const double sep = separation(std::size_t(i), j);
+                if (std::abs(sep) > reach_units + 1e-12) continue;
+                const double w = sinc_pattern(hbw, line_array ? std::asin(sep) : sep);
+                expected += w * fb.beam_profiles[std::size_t(k) * fa.beams + std::size_t(i)];
             }
-            // Float weights (rel 6e-8) and a float sum of <= 23 terms: 1e-5 relative, with a floor at
+            // Float weights (rel 6e-8) and a float sum of <= 59 terms: 1e-5 relative, with a floor at
             // 1e-6 of the frame's peak for cells near the pattern's nulls (small differences of floats).
             ASSERT_NEAR(fa.clean[std::size_t(k) * fa.beams + j], expected, 1e-5 * expected + 1e-6 * peak)
                 << "bin " << k << " beam " << j;

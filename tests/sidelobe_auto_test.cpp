@@ -35,35 +35,44 @@ const EffectState* state(const Plan& plan, const std::string& name) {
 TEST(SidelobeAuto, NarrowDisplayWindowKeepsOnlyTheMainLobe) {
     Scene scene;
     add_quad(scene, 10.0, 0.0, 0.0, 1.0, 1.0);
-    SonarConfig wide = quiet_config(); // 80 dB window: sinc^2 side lobes (-13.3 dB) are visible
-    SonarConfig narrow = wide;
-    narrow.db_min = 120.0;
-    narrow.db_max = 130.0; // 10 dB: the -13.3 dB side lobes of the brightest target fall below the floor
-    auto a = render_once(Backend::cpu, wide, scene);
-    auto b = render_once(Backend::cpu, narrow, scene);
-    ASSERT_TRUE(a && b);
-    const Plan& pa = renderer_plan(a->renderer);
-    const Plan& pb = renderer_plan(b->renderer);
-    const double spacing = pa.beam_angle_rad[0] - pa.beam_angle_rad[1];
-    const double bw = wide.horizontal_beamwidth_deg * kPi / 180.0;
-    // Wide window: the configured reach (3 beamwidths).
-    EXPECT_EQ(pa.sidelobe_taps, 2 * static_cast<std::uint32_t>(std::floor(3.0 * bw / spacing)) + 1);
-    // Narrow window: out to the first null only (the plan samples the pattern in 1/2000 of the reach,
-    // so allow the null to land one beam either side of the closed form when it sits on a boundary).
-    const double null_beams = sinc_first_null_rad(bw) / spacing;
-    const auto expected = 2 * static_cast<std::uint32_t>(std::floor(null_beams)) + 1;
-    EXPECT_NEAR(double(pb.sidelobe_taps), double(expected), 2.0) << "null at " << null_beams << " beams";
-    EXPECT_LT(pb.sidelobe_taps, pa.sidelobe_taps);
-    const EffectState* why = state(pb, "horizontal_pattern");
-    ASSERT_NE(why, nullptr);
-    EXPECT_TRUE(why->on);
-    EXPECT_NE(why->why.find("main lobe only"), std::string::npos) << why->why;
-    EXPECT_EQ(state(pa, "horizontal_pattern")->why.find("main lobe only"), std::string::npos);
-    // Set explicitly, the effect keeps the configured kernel whatever the window.
-    narrow.effects.horizontal_pattern = EffectMode::on;
-    auto c = render_once(Backend::cpu, narrow, scene);
-    ASSERT_TRUE(c);
-    EXPECT_EQ(renderer_plan(c->renderer).sidelobe_taps, pa.sidelobe_taps);
+    for (BeamGeometry geometry : {BeamGeometry::planar, BeamGeometry::line_array}) {
+        const bool line_array = geometry == BeamGeometry::line_array;
+        SCOPED_TRACE(line_array ? "line_array" : "planar");
+        SonarConfig wide = quiet_config(); // 80 dB window: sinc^2 side lobes (-13.3 dB) are visible
+        wide.beam_geometry = geometry;
+        SonarConfig narrow = wide;
+        narrow.db_min = 120.0;
+        narrow.db_max = 130.0; // 10 dB: the -13.3 dB side lobes of the brightest target fall below the floor
+        auto a = render_once(Backend::cpu, wide, scene);
+        auto b = render_once(Backend::cpu, narrow, scene);
+        ASSERT_TRUE(a && b);
+        const Plan& pa = renderer_plan(a->renderer);
+        const Plan& pb = renderer_plan(b->renderer);
+        // Equiangular beams: in angle the spacing is the same everywhere; with line_array the kernel is
+        // in sine, where the edge beams are closest (sin(a0) - sin(a1), a0 the port-most centre).
+        const double a0 = pa.beam_angle_rad[0], a1 = pa.beam_angle_rad[1];
+        const double spacing = line_array ? std::sin(a0) - std::sin(a1) : a0 - a1;
+        const double bw = wide.horizontal_beamwidth_deg * kPi / 180.0;
+        auto in_units = [&](double angle) { return line_array ? std::sin(angle) : angle; };
+        // Wide window: the configured reach (3 beamwidths).
+        EXPECT_EQ(pa.sidelobe_taps, 2 * static_cast<std::uint32_t>(std::floor(in_units(3.0 * bw) / spacing)) + 1);
+        // Narrow window: out to the first null only (the plan samples the pattern in 1/2000 of the reach,
+        // so allow the null to land one beam either side of the closed form when it sits on a boundary).
+        const double null_beams = in_units(sinc_first_null_rad(bw)) / spacing;
+        const auto expected = 2 * static_cast<std::uint32_t>(std::floor(null_beams)) + 1;
+        EXPECT_NEAR(double(pb.sidelobe_taps), double(expected), 2.0) << "null at " << null_beams << " beams";
+        EXPECT_LT(pb.sidelobe_taps, pa.sidelobe_taps);
+        const EffectState* why = state(pb, "horizontal_pattern");
+        ASSERT_NE(why, nullptr);
+        EXPECT_TRUE(why->on);
+        EXPECT_NE(why->why.find("main lobe only"), std::string::npos) << why->why;
+        EXPECT_EQ(state(pa, "horizontal_pattern")->why.find("main lobe only"), std::string::npos);
+        // Set explicitly, the effect keeps the configured kernel whatever the window.
+        narrow.effects.horizontal_pattern = EffectMode::on;
+        auto c = render_once(Backend::cpu, narrow, scene);
+        ASSERT_TRUE(c);
+        EXPECT_EQ(renderer_plan(c->renderer).sidelobe_taps, pa.sidelobe_taps);
+    }
 }
 
 TEST(SidelobeAuto, PatternsWithoutSideLobesKeepTheirKernel) {

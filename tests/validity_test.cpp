@@ -87,6 +87,7 @@ TEST(KeyRanges, TheIssueExamplesAndTheCrossKeyRules) {
 // anything is allocated, with its size.
 TEST(KeyRanges, ADepthPassPastTheBufferLimitIsRefusedWithItsSize) {
     SonarConfig c;
+    c.beam_geometry = BeamGeometry::planar; // profile columns = pixel columns, which fit the column limit
     c.bins = 65536;
     c.pixels_per_beam = 32; // 32 x 512 = 16384 columns: 65536 x 16384 floats = 4.3 GB
     ASSERT_TRUE(c.validate().ok());
@@ -94,7 +95,7 @@ TEST(KeyRanges, ADepthPassPastTheBufferLimitIsRefusedWithItsSize) {
     auto plan = make_plan(c, scene);
     ASSERT_FALSE(plan.ok());
     EXPECT_NE(
-        plan.error().message.find("range-profile buffer would hold 4.29549 GB (65536 bins x 16386 pixel columns)"),
+        plan.error().message.find("range-profile buffer would hold 4.29549 GB (65536 bins x 16386 profile columns)"),
         std::string::npos)
         << plan.error().message;
     c.bins = 4096; // 268 MB: fine

@@ -50,6 +50,9 @@ SceneData facing_plate(double distance_m, double size_m, double backscatter_db =
 SonarConfig small_config() {
     SonarConfig config;
     config.hfov_deg = 60.0;
+    // The stage contracts these tests check are written on the planar beam geometry, where the
+    // profile columns are the pixel columns; line_array's own: tests/beam_geometry_test.cpp.
+    config.beam_geometry = BeamGeometry::planar;
     config.vfov_deg = 20.0;
     config.beams = 48;
     config.bins = 160;

@@ -307,7 +307,8 @@ void plan_beam_geometry(Plan& p) {
     } else if (c.mode != SonarMode::physical) {
         p.beam_geometry_why = "planar: the legacy modes reproduce their plugins' planar beams";
     } else if (c.hfov_deg >= 180.0) {
-        p.beam_geometry_why = "planar: a fan of " + fmt(c.hfov_deg) + " deg has no single array axis (hfov < 180 for "
+        p.beam_geometry_why = "planar: a fan of " + fmt(c.hfov_deg) +
+                              " deg has no single array axis (hfov < 180 for "
                               "line_array)";
     } else {
         p.line_array = true;

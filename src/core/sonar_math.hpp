@@ -21,8 +21,8 @@ namespace vksonar {
 namespace math_f32 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
-    std::sin, std::sqrt;
+using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max,
+    std::min, std::sin, std::sqrt;
 using vec2 = glm::vec2;
 using vec3 = glm::vec3;
 using vec4 = glm::vec4;
@@ -36,8 +36,8 @@ using vec4 = glm::vec4;
 namespace math_f64 {
 using namespace shared;
 using glm::cross, glm::dot, glm::length;
-using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max, std::min,
-    std::sin, std::sqrt;
+using std::abs, std::asin, std::atan, std::cos, std::cosh, std::exp, std::floor, std::isnan, std::log, std::max,
+    std::min, std::sin, std::sqrt;
 using vec2 = glm::dvec2;
 using vec3 = glm::dvec3;
 using vec4 = glm::dvec4;

@@ -351,9 +351,9 @@ Result<void> VulkanBackend::create_compute() {
     VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
 
     const std::array<const Buffer*, binding_count> bound{
-        &params_,          &depth_,     &material_id_,  &normals_,    &echo_,           &profiles_,
-        &beam_profiles_,   &polar_,     &slice_info_,   &materials_,  &column_table_,   &beam_table_,
-        &sidelobe_weight_, &cone_coord_, &materials_, &column_table_, &beam_table_, &sidelobe_weight_};
+        &params_,          &depth_,      &material_id_, &normals_,      &echo_,         &profiles_,
+        &beam_profiles_,   &polar_,      &slice_info_,  &materials_,    &column_table_, &beam_table_,
+        &sidelobe_weight_, &cone_coord_, &materials_,   &column_table_, &beam_table_,   &sidelobe_weight_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{

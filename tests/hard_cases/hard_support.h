@@ -42,6 +42,9 @@ inline std::string backend_name(const ::testing::TestParamInfo<Backend>& info) {
 // 32 x 64 rows; every deterministic effect on so that every stage runs.
 inline SonarConfig small_config() {
     SonarConfig c = quiet_config();
+    // The grid-level closed forms of these cases (frustum solid angles, beams by azimuth) are the
+    // planar geometry's; line_array's hard cases: tests/beam_geometry_test.cpp.
+    c.beam_geometry = BeamGeometry::planar;
     c.hfov_deg = 60.0;
     c.vfov_deg = 20.0;
     c.horizontal_beamwidth_deg = 2.0;

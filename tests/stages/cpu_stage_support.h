@@ -86,6 +86,9 @@ inline Mat4 yaw_translate(double yaw_deg, double tx, double ty, double tz) {
 inline SonarConfig small_config() {
     SonarConfig c;
     c.hfov_deg = 40.0;
+    // The stage contracts these tests check are written on the planar beam geometry, where the
+    // profile columns are the pixel columns; line_array's own: tests/beam_geometry_test.cpp.
+    c.beam_geometry = BeamGeometry::planar;
     c.vfov_deg = 10.0;
     c.horizontal_beamwidth_deg = 2.0;
     c.beams = 32;
