@@ -176,38 +176,6 @@ INSTANTIATE_TEST_SUITE_P(Backends, PlaneCase, ::testing::Values(Backend::cpu, Ba
                              return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");
                          });
 
-// UV sphere (radius rs, centre c), `segments` around and segments / 2 from pole to pole.
-void add_sphere(Scene& scene, double cx, double rs, int segments, double mu_db) {
-    std::vector<float> positions;
-    std::vector<std::uint32_t> indices;
-    const int rings = segments / 2;
-    for (int i = 0; i <= rings; ++i) {
-        const double theta = kPi * i / rings;
-        for (int j = 0; j <= segments; ++j) {
-            const double phi = 2 * kPi * j / segments;
-            positions.push_back(static_cast<float>(rs * std::sin(theta) * std::cos(phi)));
-            positions.push_back(static_cast<float>(rs * std::sin(theta) * std::sin(phi)));
-            positions.push_back(static_cast<float>(rs * std::cos(theta)));
-        }
-    }
-    for (int i = 0; i < rings; ++i) {
-        for (int j = 0; j < segments; ++j) {
-            const std::uint32_t a = i * (segments + 1) + j, b = a + segments + 1;
-            for (std::uint32_t v : {a, b, a + 1, a + 1, b, b + 1})
-                indices.push_back(v);
-        }
-    }
-    auto mesh = scene.add_mesh(positions.data(), positions.size() / 3, indices.data(), indices.size());
-    ASSERT_TRUE(mesh.ok()) << mesh.error().message;
-    AcousticMaterial material;
-    material.backscatter_db = mu_db;
-    SceneDraw draw;
-    draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
-    draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, cx, 0, 0, 1};
-    ASSERT_TRUE(scene.add_draw(draw).ok());
-}
-
 // The same integral over the visible cap of a sphere (centre at distance d, radius rs), in spherical
 // coordinates about the centre: dA = rs^2 sin(t) dt dp.
 double sphere_echo(double mu, double rs, double d, int n = 1000) {
@@ -231,7 +199,7 @@ TEST(SphereCase, FirstReturnAndTotalEchoMatchTheClosedForm) {
     const SonarConfig config = analytic_config();
     const double d = 12.0, rs = 1.0, mu_db = -20.0;
     Scene scene;
-    add_sphere(scene, d, rs, 96, mu_db);
+    add_sphere(scene, d, 0, 0, rs, 96, mu_db);
     auto r = render_once(Backend::cpu, config, scene);
     ASSERT_TRUE(r);
     const double expected = sphere_echo(std::pow(10.0, mu_db / 10.0), rs, d);
@@ -355,7 +323,7 @@ TEST(Oversampling, ErrorShrinksWithEveryDoubling) {
     // rows: only the horizontal sampling differs, so the error must fall at every doubling.
     SonarConfig config = analytic_config();
     Scene scene;
-    add_sphere(scene, 12.0, 1.0, 96, -20.0);
+    add_sphere(scene, 12.0, 0, 0, 1.0, 96, -20.0);
     auto per_beam = [&](double ppb, Precision precision) {
         SonarConfig c = config;
         c.pixels_per_beam = ppb;

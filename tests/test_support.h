@@ -90,6 +90,40 @@ inline void add_quad(Scene& scene, double cx, double cy, double cz, double width
     add_quad(scene, cx, cy, cz, width_m, height_m, material, yaw_deg);
 }
 
+// A Lambert UV sphere of radius rs centred at (cx, cy, cz), `segments` around and segments / 2 from
+// pole to pole, backscatter mu_db.
+inline void add_sphere(Scene& scene, double cx, double cy, double cz, double rs, int segments, double mu_db) {
+    const double pi = 3.14159265358979323846;
+    std::vector<float> positions;
+    std::vector<std::uint32_t> indices;
+    const int rings = segments / 2;
+    for (int i = 0; i <= rings; ++i) {
+        const double theta = pi * i / rings;
+        for (int j = 0; j <= segments; ++j) {
+            const double phi = 2 * pi * j / segments;
+            positions.push_back(static_cast<float>(rs * std::sin(theta) * std::cos(phi)));
+            positions.push_back(static_cast<float>(rs * std::sin(theta) * std::sin(phi)));
+            positions.push_back(static_cast<float>(rs * std::cos(theta)));
+        }
+    }
+    for (int i = 0; i < rings; ++i) {
+        for (int j = 0; j < segments; ++j) {
+            const std::uint32_t a = i * (segments + 1) + j, b = a + segments + 1;
+            for (std::uint32_t v : {a, b, a + 1, a + 1, b, b + 1})
+                indices.push_back(v);
+        }
+    }
+    auto mesh = scene.add_mesh(positions.data(), positions.size() / 3, indices.data(), indices.size());
+    ASSERT_TRUE(mesh.ok()) << mesh.error().message;
+    AcousticMaterial material;
+    material.backscatter_db = mu_db;
+    SceneDraw draw;
+    draw.mesh = mesh.value();
+    draw.material = scene.add_material(material);
+    draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, cx, cy, cz, 1};
+    ASSERT_TRUE(scene.add_draw(draw).ok());
+}
+
 // The default preset with every noise source off: the clean, deterministic model.
 inline SonarConfig quiet_config() {
     auto c = load_preset("default");
