@@ -670,6 +670,18 @@ void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach) {
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
         }
     }
+    p.sidelobe_tap_begin.assign(p.beams, 0);
+    p.sidelobe_tap_end.assign(p.beams, 0);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        const float* w = p.sidelobe_weight.data() + std::size_t(j) * p.sidelobe_taps;
+        std::uint32_t begin = 0, end = p.sidelobe_taps;
+        while (begin < end && w[begin] == 0.0f)
+            ++begin;
+        while (end > begin && w[end - 1] == 0.0f)
+            --end;
+        p.sidelobe_tap_begin[j] = begin;
+        p.sidelobe_tap_end[j] = end;
+    }
 }
 
 // Step, last: the compute stages' uniform block, from the finished plan.

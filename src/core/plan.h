@@ -84,6 +84,10 @@ struct Plan {
     // the horizontal pattern at the two beams' separation in angle (planar) or in sine (line_array).
     std::uint32_t sidelobe_taps = 1;    // 2K + 1
     std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
+    // Per beam, the taps [begin, end) outside which its weights are 0 (beyond the kernel's reach, which
+    // spans fewer beams near broadside than at a line array's edges): the CPU skips the zero terms,
+    // which add exactly +0 to a sum of non-negative energies.
+    std::vector<std::uint32_t> sidelobe_tap_begin, sidelobe_tap_end;
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
     // +-180 deg seam. Then column_beam[c] + 1 and the side-lobe source j - K + t wrap modulo beams,
     // and seam columns split their energy between beam beams-1 and beam 0 (docs/pipeline.md §4).

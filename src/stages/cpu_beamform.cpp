@@ -50,12 +50,19 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                                 row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width, jump_rel, bins);
             const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
             const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+            // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
+            constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
+            Real shares[kMaxSpreadBins];
+            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+            for (int i = 0; i < spread_bins; ++i)
+                shares[i] = M::range_share(spread, spread.k_first + i);
             for (int cone = first_cone; cone <= last_cone; ++cone) {
                 const Real weight = M::cone_share(x, cone, count);
                 if (!(weight > Real(0))) continue;
                 const Real weighted = weight * e;
-                for (int k = spread.k_first; k <= spread.k_last; ++k)
-                    acc[static_cast<std::size_t>(k) * PC + cone] += M::range_share(spread, k) * weighted;
+                Real* column = acc + static_cast<std::size_t>(spread.k_first) * PC + cone;
+                for (int i = 0; i < spread_bins; ++i)
+                    column[static_cast<std::size_t>(i) * PC] += shares[i] * weighted;
             }
         }
     }
@@ -143,6 +150,8 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
     const std::int64_t K = (static_cast<std::int64_t>(taps) - 1) / 2;
     const std::int64_t nb = beams;
     const float* weights = plan.sidelobe_weight.data();
+    const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
+    const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
@@ -154,14 +163,19 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
         std::int64_t j = 0;
         while (j < nb) {
             if (j >= K && j + 3 + K < nb) {
-                // Four interior beams at once: independent sums, each still in increasing t.
+                // Four interior beams at once: independent sums, each still in increasing t, over the
+                // taps where any of the four has a weight (a zero weight adds exactly +0).
                 const float* w0 = weights + static_cast<std::size_t>(j) * taps;
                 const float* w1 = w0 + taps;
                 const float* w2 = w1 + taps;
                 const float* w3 = w2 + taps;
                 const float* src = B + (j - K);
+                const std::uint32_t t_begin =
+                    std::min(std::min(tap_begin[j], tap_begin[j + 1]), std::min(tap_begin[j + 2], tap_begin[j + 3]));
+                const std::uint32_t t_end =
+                    std::max(std::max(tap_end[j], tap_end[j + 1]), std::max(tap_end[j + 2], tap_end[j + 3]));
                 Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
-                for (std::uint32_t t = 0; t < taps; ++t) {
+                for (std::uint32_t t = t_begin; t < t_end; ++t) {
                     s0 += static_cast<Real>(w0[t]) * static_cast<Real>(src[t]);
                     s1 += static_cast<Real>(w1[t]) * static_cast<Real>(src[t + 1]);
                     s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
@@ -183,9 +197,9 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
                 ++j;
                 continue;
             }
-            // Taps whose source beam j - K + t lies in [0, beams), in increasing t.
-            const std::int64_t first = std::max<std::int64_t>(0, K - j);
-            const std::int64_t end = std::min<std::int64_t>(taps, nb + K - j);
+            // Taps whose source beam j - K + t lies in [0, beams) and whose weight is not 0, in increasing t.
+            const std::int64_t first = std::max<std::int64_t>(std::max<std::int64_t>(0, K - j), tap_begin[j]);
+            const std::int64_t end = std::min<std::int64_t>(std::min<std::int64_t>(taps, nb + K - j), tap_end[j]);
             const float* src = B + (j - K);
             Real sum = Real(0);
             for (std::int64_t t = first; t < end; ++t)
