@@ -19,6 +19,7 @@ layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
 layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                    // params.line_array
+layout(constant_id = kSpecPerInvocation) const uint kConesPerInvocation = 4u;       // line_array (see below)
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
@@ -34,21 +35,16 @@ vec2 load_echo(uint p) {
 }
 layout(std430, binding = kBindingProfiles) buffer ProfileBuffer { float profiles[]; };
 
-// Adds pixel (row, column)'s echo er, times `weight`, to the profile at base: range_spread over the
-// five-row window of its column. `precise`: the bin coordinates and shares round exactly as the CPU's.
-void add_pixel(uint base, uint row, uint column, vec2 er, float weight) {
+// The range spread of pixel (row, column) with echo er, over the five-row window of its column.
+// `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
+RangeSpread pixel_spread(uint row, uint column, vec2 er) {
     uint columns = params.columns;
     vec2 up2 = row >= 2u ? load_echo((row - 2u) * columns + column) : vec2(0.0);
     vec2 up = row >= 1u ? load_echo((row - 1u) * columns + column) : vec2(0.0);
     vec2 down = row + 1u < params.rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
     vec2 down2 = row + 2u < params.rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
-    RangeSpread spread = range_spread(kRangeKernel, up2, up, er, down, down2, params.range_min_m,
-                                      params.inv_bin_width_m, params.edge_relative_jump, params.bins);
-    precise float weighted = weight * er.x;
-    for (int k = spread.k_first; k <= spread.k_last; ++k) {
-        precise float share = range_share(spread, k) * weighted;
-        profiles[base + uint(k)] += share;
-    }
+    return range_spread(kRangeKernel, up2, up, er, down, down2, params.range_min_m, params.inv_bin_width_m,
+                        params.edge_relative_jump, params.bins);
 }
 
 // Each pixel's cone coordinate (sonar_kernels.h cone_coord), computed once by the plan: the CPU
@@ -56,17 +52,19 @@ void add_pixel(uint base, uint row, uint column, vec2 er, float weight) {
 // (GLSL's asin may be off by thousands of ulps, Vulkan's precision for it; a thousandth of a column).
 layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { float cone_coords[]; };
 
-// line_array: one invocation owns cone column `cone` and gathers, row by row (top to bottom) and
-// within a row by increasing pixel column, every pixel whose cone coordinate lies within one column of
-// it: the order in which the CPU backend's scatter adds them (src/stages/cpu_beamform.cpp). Along a
-// row the cone coordinate increases with the pixel column, so the first such pixel is found by a
-// binary search on the first row and then moves by a few columns from row to row.
-void gather_cone_column(uint cone) {
+// line_array: one invocation owns the cone columns [first_cone, end_cone) (kConesPerInvocation of
+// them) and gathers, row by row (top to bottom) and within a row by increasing pixel column, every
+// pixel whose cone coordinate lies within one column of them; each such pixel's window is loaded and
+// its range spread computed once, then added to the (at most two) of its cone columns this invocation
+// owns. So every profile cell receives its additions in the order of the CPU backend's scatter
+// (src/stages/cpu_beamform.cpp): rows, then pixel columns, then bins. Along a row the cone coordinate
+// increases with the pixel column, so the first such pixel is found by a binary search on the first
+// row and then moves by a few columns from row to row.
+void gather_cone_columns(uint first_cone, uint end_cone) {
     uint columns = params.columns;
     uint rows = params.rows;
-    uint base = cone * params.bins_padded;
-    float lo = float(cone) - 1.0;
-    float hi = float(cone) + 1.0;
+    float lo = float(first_cone) - 1.0;
+    float hi = float(end_cone);
     int count = int(params.profile_columns);
     // first pixel column of row 0 with a cone coordinate above lo
     uint first = 0u;
@@ -92,10 +90,31 @@ void gather_cone_column(uint cone) {
             if (!(x < hi)) {
                 break;
             }
-            float weight = cone_share(x, int(cone), count);
+            // its cone columns floor(x) and floor(x) + 1, those of them this invocation owns
+            int below = int(floor(x));
+            int cone_a = max(below, int(first_cone));
+            int cone_b = min(below + 1, int(end_cone) - 1);
+            float weight_a = cone_a <= cone_b ? cone_share(x, cone_a, count) : 0.0;
+            float weight_b = cone_b > cone_a ? cone_share(x, cone_b, count) : 0.0;
             vec2 er = load_echo(row_start + c);
-            if (weight > 0.0 && er.x > 0.0) {
-                add_pixel(base, row, c, er, weight);
+            if (!(er.x > 0.0) || !(weight_a > 0.0 || weight_b > 0.0)) {
+                continue;
+            }
+            RangeSpread spread = pixel_spread(row, c, er);
+            precise float weighted_a = weight_a * er.x;
+            precise float weighted_b = weight_b * er.x;
+            uint base_a = uint(cone_a) * params.bins_padded;
+            uint base_b = uint(cone_b) * params.bins_padded;
+            for (int k = spread.k_first; k <= spread.k_last; ++k) {
+                float share = range_share(spread, k);
+                if (weight_a > 0.0) {
+                    precise float add = share * weighted_a;
+                    profiles[base_a + uint(k)] += add;
+                }
+                if (weight_b > 0.0) {
+                    precise float add = share * weighted_b;
+                    profiles[base_b + uint(k)] += add;
+                }
             }
         }
     }
@@ -103,9 +122,9 @@ void gather_cone_column(uint cone) {
 
 void main() {
     if (kLineArray != 0u) {
-        uint cone = gl_GlobalInvocationID.x;
-        if (cone < params.profile_columns) {
-            gather_cone_column(cone);
+        uint first_cone = gl_GlobalInvocationID.x * kConesPerInvocation;
+        if (first_cone < params.profile_columns) {
+            gather_cone_columns(first_cone, min(first_cone + kConesPerInvocation, params.profile_columns));
         }
         return;
     }

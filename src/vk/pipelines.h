@@ -104,10 +104,12 @@ struct ProfileSpecialization {
     std::uint32_t range_kernel = shared::kRangeKernelFootprint;
     std::uint32_t echo_half = 0;
     std::uint32_t line_array = 0;
-    std::array<SpecConstant, 3> constants() const {
+    std::uint32_t cones_per_invocation = 4; // line_array
+    std::array<SpecConstant, 4> constants() const {
         return {{{shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
-                 {shared::kSpecLineArray, line_array}}};
+                 {shared::kSpecLineArray, line_array},
+                 {shared::kSpecPerInvocation, cones_per_invocation}}};
     }
 };
 struct ResampleSpecialization {

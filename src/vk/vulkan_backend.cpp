@@ -407,6 +407,7 @@ Result<void> VulkanBackend::create_compute() {
     profile.range_kernel = plan_.params.range_kernel;
     profile.echo_half = gpu_params_.echo_half;
     profile.line_array = plan_.line_array ? 1u : 0u;
+    profile.cones_per_invocation = kConesPerInvocation;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).

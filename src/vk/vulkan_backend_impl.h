@@ -27,6 +27,9 @@ constexpr std::uint32_t kNormalsRun = 8; // pixels of one row per normals invoca
 constexpr std::uint32_t kEchoPixels = 4; // consecutive pixels per echo invocation
 // Beams per resample/sidelobe workgroup (each invocation one bin of them); sidelobe.comp holds at most 32.
 constexpr std::uint32_t kBeamsPerInvocation = 16;
+// line_array: cone columns per profile invocation; a pixel between two of them is loaded once, not
+// twice (a quarter of the pixels a gather touches at 4, against all of them at 1).
+constexpr std::uint32_t kConesPerInvocation = 4;
 
 // The timed stages, in order. Each is recorded into its own command buffer so that, without
 // timestamp queries, they can be submitted and timed one by one.
