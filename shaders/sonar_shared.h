@@ -48,8 +48,9 @@ VKS_CONST uint kBindingHostDepthImage = 0u;
 
 // Specialization constant ids of the compute shaders, one per meaning (a shader declares the ones it
 // has; the host's per-shader structs in src/vk/pipelines.h set them by these names).
-VKS_CONST uint kSpecEffectFlags = 0u;    // echo: the kEffect* bits
-VKS_CONST uint kSpecPerInvocation = 1u;  // normals, echo: pixels per invocation; resample, sidelobe: beams; profile: cone columns
+VKS_CONST uint kSpecEffectFlags = 0u; // echo: the kEffect* bits
+VKS_CONST uint kSpecPerInvocation =
+    1u; // normals, echo: pixels per invocation; resample, sidelobe: beams; profile: cone columns
 VKS_CONST uint kSpecNormalMethod = 2u;   // normals: kNormals*
 VKS_CONST uint kSpecUniformTables = 3u;  // echo, resample, sidelobe: 1 = read the tables' uniform blocks
 VKS_CONST uint kSpecTableVec4s0 = 4u;    // sizes of those blocks in vec4s: materials, columns, weights

@@ -110,10 +110,10 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1, &zeroed);
     bind_compute(commands, profile_pipeline_.get());
     // one invocation per pixel column (planar) or per kConesPerInvocation cone columns (line_array)
-    vkCmdDispatch(commands,
-                  group_count(plan_.line_array ? ceil_div(plan_.profile_columns, kConesPerInvocation)
-                                               : plan_.profile_columns),
-                  1, 1);
+    vkCmdDispatch(
+        commands,
+        group_count(plan_.line_array ? ceil_div(plan_.profile_columns, kConesPerInvocation) : plan_.profile_columns), 1,
+        1);
     compute_barrier(commands, profiles_);
 
     // resample and sidelobe: x = groups of 4-bin quads, y = runs of beams.
