@@ -17,6 +17,9 @@
 
 #include "cli/bench_cmd.h"
 #include "cli/bench_common.h"
+#include "core/access.h"
+#include "core/angles.h"
+#include "core/plan.h"
 #include "sonar_shared.h"
 
 namespace fs = std::filesystem;
@@ -266,7 +269,16 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
                        " dB): nothing is in view; check --scene, --pose and --sonar");
     // Converged? Refine each of the reference's grid knobs once more and print how far it moves.
     {
-        const double narrowest_slice = std::ceil(base.hfov_deg / shared::kMaxSlices * 1000.0) / 1000.0;
+        // As many slices as the pixel grid may have over the azimuths it covers: the fan, or with the
+        // line-array geometry the wider span of its edge cones (docs/pipeline.md, "Beam geometry").
+        double covered_deg = base.hfov_deg;
+        {
+            std::vector<std::string> sets = ref_sets;
+            sets.push_back("accuracy.sidelobe_kernel_beamwidths=" + std::string(kReferenceSidelobe));
+            if (auto plan = make_plan(layered_config(setup, sets), scene_data(setup.scene)))
+                covered_deg = plan->slice_width_rad * plan->slices * kRadToDeg;
+        }
+        const double narrowest_slice = std::ceil(covered_deg / shared::kMaxSlices * 1000.0) / 1000.0;
         const std::vector<std::pair<std::string, std::string>> finer = {
             {"accuracy.pixels_per_beam", "16"},
             {"accuracy.rows_per_vfov", "512"},
