@@ -4,9 +4,14 @@
 // for a generated terrain of about a million triangles (--grid N: N x N vertices). The plain .glb is
 // written here, and the Draco one when this build has libdraco; the quantized and meshopt ones are made
 // with Debian's gltfpack when it is installed (else skipped, saying so). After one untimed load, each form is loaded
-// three times (median); memory is the largest resident-set growth over a load, beside the bytes of the arrays the scene
-// keeps (what the allocator had already mapped from an earlier load does not show).
+// three times (median). Memory is the peak resident-set growth during a load (the largest of the three), beside the
+// bytes of the arrays the scene keeps: before each load the allocator returns its free memory to the system
+// (malloc_trim) and the kernel's high-water mark is reset (/proc/self/clear_refs), so what an earlier load left
+// mapped does not hide a temporary.
 #include <unistd.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +26,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "cli/bench_common.h"
 #include "cli/commands.h"
 #include "scene/draco_pack.h"
 #include "scene/gltf_draco.h"
@@ -32,12 +38,26 @@ namespace {
 
 namespace fs = std::filesystem;
 
-double resident_mib() {
+// A field of /proc/self/status in MiB ("VmRSS:" now, "VmHWM:" the peak since the last reset), -1 if absent.
+double status_mib(const char* field) {
     std::ifstream status("/proc/self/status");
     std::string line;
+    const std::size_t length = std::strlen(field);
     while (std::getline(status, line))
-        if (line.rfind("VmRSS:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
-    return 0.0;
+        if (line.compare(0, length, field) == 0) return std::atof(line.c_str() + length) / 1024.0;
+    return -1.0;
+}
+
+// Gives the allocator's free memory back to the system and sets the resident-set high-water mark
+// (VmHWM) to the current resident set. False where the kernel does not allow the reset.
+bool reset_peak_resident() {
+#if defined(__GLIBC__)
+    ::malloc_trim(0);
+#endif
+    std::ofstream clear("/proc/self/clear_refs");
+    clear << "5";
+    clear.flush();
+    return bool(clear) && status_mib("VmHWM:") >= 0.0;
 }
 
 // An N x N grid of a rolling seabed, 1 m spacing, as one indexed mesh in a .glb.
@@ -94,9 +114,9 @@ int run_bench_load(const std::vector<std::string>& argv) {
     const Args args = parse_args(argv, {{"--grid", true, false}, {"--help", false, false}}, "bench load");
     if (args.has("--help")) {
         std::printf("usage: vksonar bench load [--grid N]\n"
-                    "  load time and memory of a generated N x N terrain (default 709: 1,002,528 triangles) as\n"
-                    "  plain, quantized, meshopt- and Draco-compressed glTF (quantized and meshopt made with\n"
-                    "  gltfpack if installed, Draco with libdraco if this build has it)\n");
+                    "  load time, peak resident-set growth and scene arrays of a generated N x N terrain (default\n"
+                    "  709: 1,002,528 triangles) as plain, quantized, meshopt- and Draco-compressed glTF (quantized\n"
+                    "  and meshopt made with gltfpack if installed, Draco with libdraco if this build has it)\n");
         return 0;
     }
     const auto n = static_cast<std::uint32_t>(parse_u64(args.value("--grid", "709"), "--grid"));
@@ -124,14 +144,16 @@ int run_bench_load(const std::vector<std::string>& argv) {
     const bool have_gltfpack = std::system("command -v gltfpack >/dev/null 2>&1") == 0;
     if (!Scene::load_gltf((dir / "plain.glb").string())) throw Failure("bench load: the generated scene does not load");
     // (one untimed load first: the file cache and the allocator are warm for every form alike)
-    std::printf(
-        "| form | file MB | load ms (median of 3) | Mtriangles/s | scene arrays MiB | RSS after - before MiB |\n"
-        "|---|---:|---:|---:|---:|---:|\n");
+    std::printf("| form | file MB | load ms (median of 3) | Mtriangles/s | scene arrays MiB | peak RSS growth MiB | "
+                "peak / arrays "
+                "|\n"
+                "|---|---:|---:|---:|---:|---:|---:|\n");
+    bool peak_known = true;
     for (const Form& form : forms) {
         const fs::path file = dir / form.file;
         if (std::string(form.file) == "draco.glb") {
             if (!gltf::draco_available()) {
-                std::printf("| %s | skipped: this build has no libdraco | | | | |\n", form.name);
+                std::printf("| %s | skipped: this build has no libdraco | | | | | |\n", form.name);
                 continue;
             }
             const std::string error = gltf::write_draco_gltf((dir / "plain.glb").string(), file.string(), 14);
@@ -139,7 +161,7 @@ int run_bench_load(const std::vector<std::string>& argv) {
         }
         if (form.gltfpack_flags) {
             if (!have_gltfpack) {
-                std::printf("| %s | skipped: gltfpack is not installed | | | | |\n", form.name);
+                std::printf("| %s | skipped: gltfpack is not installed | | | | | |\n", form.name);
                 continue;
             }
             const std::string command = std::string("gltfpack ") + form.gltfpack_flags + " -i '" +
@@ -147,25 +169,29 @@ int run_bench_load(const std::vector<std::string>& argv) {
             if (std::system(command.c_str()) != 0) throw Failure("bench load: " + command + " failed");
         }
         std::vector<double> ms;
-        double rss_delta = 0, arrays = 0;
+        double peak = 0, arrays = 0;
         std::uint64_t triangles = 0;
         for (int run = 0; run < 3; ++run) {
-            const double before = resident_mib();
+            peak_known = reset_peak_resident() && peak_known;
+            const double before = status_mib("VmRSS:");
             const auto start = std::chrono::steady_clock::now();
             auto scene = Scene::load_gltf(file.string());
             const auto end = std::chrono::steady_clock::now();
+            const double high = status_mib("VmHWM:");
             if (!scene) throw Failure("bench load: " + scene.error().message);
             ms.push_back(std::chrono::duration<double, std::milli>(end - start).count());
-            rss_delta = std::max(rss_delta, resident_mib() - before);
+            peak = std::max(peak, high - before);
             triangles = scene->stats().triangles;
             arrays = (scene_data(*scene).positions.size() * 4.0 + scene_data(*scene).indices.size() * 4.0) /
                      (1024.0 * 1024.0);
         }
         std::sort(ms.begin(), ms.end());
-        std::printf("| %s | %.1f | %.0f | %.1f | %.1f | %.1f |\n", form.name, double(fs::file_size(file)) / 1e6, ms[1],
-                    double(triangles) / ms[1] / 1e3, arrays, rss_delta);
+        std::printf("| %s | %.1f | %.0f | %.1f | %.1f | %s | %s |\n", form.name, double(fs::file_size(file)) / 1e6,
+                    ms[1], double(triangles) / ms[1] / 1e3, arrays, peak_known ? bench::fmt(peak, 1).c_str() : "n/a",
+                    peak_known && arrays > 0 ? bench::fmt(peak / arrays, 2).c_str() : "n/a");
     }
-    std::printf("(%u x %u grid; one run: compare rows, not machines.)\n", n, n);
+    std::printf("(%u x %u grid; one run: compare rows, not machines.%s)\n", n, n,
+                peak_known ? "" : " Peak RSS n/a: this kernel does not let /proc/self/clear_refs reset the peak.");
     return 0;
 }
 
