@@ -418,8 +418,7 @@ private:
         range.index_count = static_cast<std::uint32_t>(index_count);
         range.first_vertex = static_cast<std::uint32_t>(first_position / 3);
         range.vertex_count = vertex_count;
-        out_.meshes.push_back(range);
-        order_triangles_spatially(out_, range);
+        out_.meshes.push_back(range); // put in spatial order once every mesh is read (load_gltf)
         return PrimitiveOut{static_cast<std::uint32_t>(out_.meshes.size() - 1), prim.material};
     }
 
@@ -552,9 +551,14 @@ Result<Scene> Scene::load_gltf(const std::string& path, const SceneLoadOptions& 
         if (!(options.scale > 0.0) || !std::isfinite(options.scale))
             return make_error(ErrorCode::invalid_argument,
                               path + ": scale " + std::to_string(options.scale) + " is not a positive finite number");
-        const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
-        Converter(model, data, options.scale).run();
-        data.stats.extensions = model.extensionsUsed;
+        {
+            const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
+            Converter(model, data, options.scale).run();
+            data.stats.extensions = model.extensionsUsed;
+        } // the file's buffers are freed before the spatial order allocates its scratch
+        order_triangles_spatially(data);
+        data.positions.shrink_to_fit(); // no-ops when the arrays grew by exactly one primitive
+        data.indices.shrink_to_fit();
         for (std::string& w : data.stats.warnings) // one line each, like errors (names may hold newlines)
             w = detail::escape_control_chars(path + ": " + w);
         return Result<Scene>(std::move(scene));
