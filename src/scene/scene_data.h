@@ -44,7 +44,7 @@ void order_triangles_spatially(SceneData& scene, const MeshRange& mesh);
 // fill the array (as the glTF loader writes them), with the same result as calling the function above
 // after adding each mesh: the loader reads every mesh first and orders them once the file's buffers
 // are freed, so that the sort's scratch never coexists with them. Positions end exactly as large as
-// the copies need; the indices are reordered in place. Leaves any other layout as it is.
+// the copies need, and so do the indices. Leaves any other layout as it is.
 void order_triangles_spatially(SceneData& scene);
 
 } // namespace vksonar
