@@ -694,6 +694,7 @@ TEST_F(Cli, BenchLoadTimesEachForm) {
     EXPECT_NE(r.out.find("| plain (float) |"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("| quantized (KHR_mesh_quantization) |"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("| meshopt (EXT_meshopt_compression) |"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("| peak RSS growth MiB | peak / arrays |"), std::string::npos) << r.out;
     EXPECT_EQ(run({"bench", "load", "--grid", "1"}).exit_code, 2);
 }
 

@@ -148,7 +148,8 @@ std::size_t total_buffer_bytes(const tinygltf::Model& model) {
 
 } // namespace
 
-std::vector<double> read_accessor(const tinygltf::Model& model, int index, const std::string& where) {
+template <class T>
+void append_accessor(const tinygltf::Model& model, int index, const std::string& where, std::vector<T>& out) {
     if (index < 0 || std::size_t(index) >= model.accessors.size())
         fail(ErrorCode::parse, where + " does not exist (" + std::to_string(model.accessors.size()) + " accessors)");
     const tinygltf::Accessor& acc = model.accessors[std::size_t(index)];
@@ -156,14 +157,15 @@ std::vector<double> read_accessor(const tinygltf::Model& model, int index, const
     const int n = type_components(acc.type);
     if (bytes == 0 || n == 0) fail(ErrorCode::parse, where + ": unknown component type or type");
     const std::size_t element_bytes = bytes * std::size_t(n);
-    std::vector<double> values;
+    const std::size_t base = out.size();
     if (acc.bufferView >= 0 || !acc.sparse.isSparse) {
         const AccessorView view = view_accessor(model, index, element_bytes, where); // bounds the count
-        values.resize(view.count * std::size_t(n));
+        out.resize(base + view.count * std::size_t(n));
+        T* values = out.data() + base;
         for (std::size_t i = 0; i < view.count; ++i)
             for (int c = 0; c < n; ++c)
-                values[i * std::size_t(n) + std::size_t(c)] =
-                    component(view.data + view.stride * i + bytes * std::size_t(c), acc.componentType, acc.normalized);
+                values[i * std::size_t(n) + std::size_t(c)] = static_cast<T>(
+                    component(view.data + view.stride * i + bytes * std::size_t(c), acc.componentType, acc.normalized));
     } else {
         // Zeros with sparse substitutions: nothing in the file bounds the count, so the file's own size
         // does (a zero-filled accessor longer than every byte of data the file holds is refused).
@@ -172,9 +174,10 @@ std::vector<double> read_accessor(const tinygltf::Model& model, int index, const
             fail(ErrorCode::parse, where + ": " + std::to_string(acc.count) +
                                        " elements without a bufferView, more than " + std::to_string(limit) +
                                        " (the file's buffer bytes)");
-        values.assign(acc.count * std::size_t(n), 0.0);
+        out.resize(base + acc.count * std::size_t(n), static_cast<T>(0.0));
     }
-    if (!acc.sparse.isSparse) return values;
+    if (!acc.sparse.isSparse) return;
+    T* values = out.data() + base;
 
     const std::string sparse_where = where + ": sparse";
     const std::size_t count = std::size_t(std::max(acc.sparse.count, 0));
@@ -198,9 +201,18 @@ std::vector<double> read_accessor(const tinygltf::Model& model, int index, const
             fail(ErrorCode::parse, sparse_where + " index " + std::to_string(target) + " is out of range (" +
                                        std::to_string(acc.count) + " elements)");
         for (int c = 0; c < n; ++c)
-            values[target * std::size_t(n) + std::size_t(c)] =
-                component(substitutes + s * element_bytes + bytes * std::size_t(c), acc.componentType, acc.normalized);
+            values[target * std::size_t(n) + std::size_t(c)] = static_cast<T>(
+                component(substitutes + s * element_bytes + bytes * std::size_t(c), acc.componentType, acc.normalized));
     }
+}
+
+template void append_accessor(const tinygltf::Model&, int, const std::string&, std::vector<double>&);
+template void append_accessor(const tinygltf::Model&, int, const std::string&, std::vector<float>&);
+template void append_accessor(const tinygltf::Model&, int, const std::string&, std::vector<std::uint32_t>&);
+
+std::vector<double> read_accessor(const tinygltf::Model& model, int index, const std::string& where) {
+    std::vector<double> values;
+    append_accessor(model, index, where, values);
     return values;
 }
 

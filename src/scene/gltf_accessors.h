@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -36,5 +37,11 @@ AccessorView view_accessor(const tinygltf::Model& model, int index, std::size_t 
 // substitutions are applied (indices bounds-checked). Counts are checked against the bytes present
 // before anything of that size is allocated.
 std::vector<double> read_accessor(const tinygltf::Model& model, int index, const std::string& where);
+
+// The same values appended to `out`, each as static_cast<T> of the double read_accessor returns (T is
+// double, float or std::uint32_t), with no array of doubles in between: `out` grows by exactly count x
+// components. On failure `out` may have grown; the load fails as a whole.
+template <class T>
+void append_accessor(const tinygltf::Model& model, int index, const std::string& where, std::vector<T>& out);
 
 } // namespace vksonar::gltf

@@ -83,13 +83,15 @@ void restore_draco(const std::vector<DracoIndices>& taken, tinygltf::Model& mode
     }
 }
 
-DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primitive& prim,
-                           const tinygltf::Value& extension, const std::string& where) {
+void decode_draco(const tinygltf::Model& model, const tinygltf::Primitive& prim, const tinygltf::Value& extension,
+                  const std::string& where, std::vector<float>& positions, std::vector<std::uint32_t>& indices) {
     const std::string ext_where = where + ": KHR_draco_mesh_compression";
 #ifndef VKSONAR_HAVE_DRACO
     (void)model;
     (void)prim;
     (void)extension;
+    (void)positions;
+    (void)indices;
     fail(ErrorCode::unsupported, ext_where + ": this build has no libdraco");
 #else
     if (!extension.IsObject()) fail(ErrorCode::parse, ext_where + " is not an object");
@@ -184,8 +186,9 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
         fail(ErrorCode::parse, ext_where + ": attribute " + std::to_string(position_id) + " is " +
                                    (float_stream ? "float" : "integer") + ", " + pos_where + " is not");
 
-    DracoGeometry out;
-    out.positions.resize(points * 3);
+    const std::size_t first_position = positions.size();
+    positions.resize(first_position + points * 3);
+    float* const out_positions = positions.data() + first_position;
     for (std::size_t p = 0; p < points; ++p) {
         const draco::AttributeValueIndex value = att->mapped_index(draco::PointIndex(std::uint32_t(p)));
         double v[3];
@@ -200,7 +203,7 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
                                                                   : x / 65535.0;
             if (!std::isfinite(x) || std::fabs(x) > double(std::numeric_limits<float>::max()))
                 fail(ErrorCode::parse, ext_where + ": vertex " + std::to_string(p) + " has a NaN or Inf position");
-            out.positions[3 * p + std::size_t(k)] = static_cast<float>(x);
+            out_positions[3 * p + std::size_t(k)] = static_cast<float>(x);
         }
     }
     // The decoded positions against the accessor's box (glTF requires it for POSITION).
@@ -212,7 +215,7 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
             const double lo = pos.minValues[std::size_t(k)], hi = pos.maxValues[std::size_t(k)];
             const double slack = kBoundsSlack * extent + 1e-6 * std::max(std::fabs(lo), std::fabs(hi)) + 1e-30;
             for (std::size_t p = 0; p < points; ++p) {
-                const double x = out.positions[3 * p + std::size_t(k)];
+                const double x = out_positions[3 * p + std::size_t(k)];
                 if (x < lo - slack || x > hi + slack)
                     fail(ErrorCode::parse, ext_where + ": vertex " + std::to_string(p) + " decodes to " +
                                                std::to_string(x) + " on axis " + std::to_string(k) + ", outside " +
@@ -221,7 +224,9 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
             }
         }
     }
-    out.indices.resize(faces * 3);
+    const std::size_t first_index = indices.size();
+    indices.resize(first_index + faces * 3);
+    std::uint32_t* const out_indices = indices.data() + first_index;
     for (std::size_t f = 0; f < faces; ++f) {
         const draco::Mesh::Face& face = mesh->face(draco::FaceIndex(std::uint32_t(f)));
         for (int k = 0; k < 3; ++k) {
@@ -229,10 +234,9 @@ DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primiti
             if (i >= points)
                 fail(ErrorCode::parse, ext_where + ": triangle " + std::to_string(f) + " names vertex " +
                                            std::to_string(i) + " of " + std::to_string(points));
-            out.indices[3 * f + std::size_t(k)] = i;
+            out_indices[3 * f + std::size_t(k)] = i;
         }
     }
-    return out;
 #endif
 }
 

@@ -19,11 +19,6 @@ namespace vksonar::gltf {
 // True when this build decodes KHR_draco_mesh_compression (libdraco-dev was found).
 bool draco_available();
 
-struct DracoGeometry {
-    std::vector<float> positions;       // 3 per vertex, in the POSITION accessor's space
-    std::vector<std::uint32_t> indices; // 3 per triangle
-};
-
 // tinygltf 2.7 refuses an indices accessor without a bufferView, which is how a Draco primitive's
 // indices are written: the indices of every primitive with the extension are taken out of `doc`
 // before tinygltf runs (prepare) and put back after it ran (restore).
@@ -34,12 +29,15 @@ struct DracoIndices {
 std::vector<DracoIndices> prepare_draco(nlohmann::json& doc);
 void restore_draco(const std::vector<DracoIndices>& taken, tinygltf::Model& model);
 
-// Decodes the KHR_draco_mesh_compression stream of `prim` (`extension` is its value). Before the
-// decoder runs: the stream lies inside its buffer, the POSITION (and indices) accessors declare no
-// more than Draco could expand that stream to. After it: the decoded vertex and triangle counts equal
-// the accessors' counts and the positions lie within the accessor's min/max, or the file is refused
-// with one line naming `where` (the mesh and primitive). Throws LoadFailure.
-DracoGeometry decode_draco(const tinygltf::Model& model, const tinygltf::Primitive& prim,
-                           const tinygltf::Value& extension, const std::string& where);
+// Decodes the KHR_draco_mesh_compression stream of `prim` (`extension` is its value) and appends its
+// positions (3 floats per vertex, in the POSITION accessor's space) to `positions` and its triangles
+// (3 vertex numbers each, from 0 for the primitive's first vertex) to `indices`, each grown by exactly
+// what the stream holds. Before the decoder runs: the stream lies inside its buffer, the POSITION (and
+// indices) accessors declare no more than Draco could expand that stream to. After it: the decoded
+// vertex and triangle counts equal the accessors' counts and the positions lie within the accessor's
+// min/max, or the file is refused with one line naming `where` (the mesh and primitive). Throws
+// LoadFailure (the arrays may have grown; the load fails as a whole).
+void decode_draco(const tinygltf::Model& model, const tinygltf::Primitive& prim, const tinygltf::Value& extension,
+                  const std::string& where, std::vector<float>& positions, std::vector<std::uint32_t>& indices);
 
 } // namespace vksonar::gltf

@@ -38,6 +38,18 @@ std::vector<unsigned char> read_file(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in) fail(ErrorCode::io, std::string("cannot open: ") + std::strerror(errno));
     std::vector<unsigned char> bytes;
+    // A regular file is read into an array of its size at once (growing one chunk at a time would hold
+    // a file-sized array and its double while the array grows); whatever follows, if the file grew in
+    // between, and anything that is not a regular file, a chunk at a time.
+    if (std::filesystem::is_regular_file(st)) {
+        const std::uintmax_t size = std::filesystem::file_size(path, ec);
+        if (!ec && size > max_file_bytes) fail(ErrorCode::unsupported, "file is larger than 2 GiB");
+        if (!ec && size > 0) {
+            bytes.resize(static_cast<std::size_t>(size));
+            in.read(reinterpret_cast<char*>(bytes.data()), static_cast<std::streamsize>(size));
+            bytes.resize(static_cast<std::size_t>(in.gcount()));
+        }
+    }
     char chunk[1 << 16];
     while (in) {
         in.read(chunk, sizeof chunk);
@@ -53,8 +65,9 @@ std::uint32_t read_u32_le(const unsigned char* p) {
     return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
 }
 
-// Validates the GLB container; returns the JSON chunk and shrinks `bytes` to the declared length.
-std::string glb_json_chunk(std::vector<unsigned char>& bytes) {
+// Validates the GLB container; returns the JSON chunk's length (it starts at byte 20) and shrinks
+// `bytes` to the declared length.
+std::size_t glb_json_chunk(std::vector<unsigned char>& bytes) {
     if (bytes.size() < 20)
         fail(ErrorCode::parse, "GLB is " + std::to_string(bytes.size()) + " bytes, shorter than its header");
     if (std::memcmp(bytes.data(), "glTF", 4) != 0)
@@ -77,14 +90,15 @@ std::string glb_json_chunk(std::vector<unsigned char>& bytes) {
             fail(ErrorCode::parse, "GLB BIN chunk length " + std::to_string(bin_length) + " exceeds the file");
     }
     bytes.resize(static_cast<std::size_t>(length));
-    return std::string(reinterpret_cast<const char*>(&bytes[20]), static_cast<std::size_t>(json_length));
+    return static_cast<std::size_t>(json_length);
 }
 
 // nlohmann parses iteratively, but tinygltf converts extras recursively: cap the nesting first.
-void check_json_depth(const std::string& text) {
+void check_json_depth(const char* text, std::size_t size) {
     int depth = 0;
     bool in_string = false, escaped = false;
-    for (char c : text) {
+    for (const char* p = text; p != text + size; ++p) {
+        const char c = *p;
         if (in_string) {
             if (escaped)
                 escaped = false;
@@ -103,10 +117,12 @@ void check_json_depth(const std::string& text) {
     }
 }
 
-json parse_json(const std::string& text) {
-    check_json_depth(text);
+// The JSON text in place (the file's bytes), without a copy.
+json parse_json(const unsigned char* bytes, std::size_t size) {
+    const char* text = reinterpret_cast<const char*>(bytes);
+    check_json_depth(text, size);
     try {
-        json doc = json::parse(text);
+        json doc = json::parse(text, text + size);
         if (!doc.is_object()) fail(ErrorCode::parse, "top level JSON value is not an object");
         return doc;
     } catch (const json::parse_error& e) {
@@ -481,15 +497,22 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
     if (has_extension(path, ".glb") && !binary)
         fail(ErrorCode::parse, "not a binary glTF (bad magic; expected 'glTF')");
-    json doc = parse_json(binary ? glb_json_chunk(bytes) : std::string(bytes.begin(), bytes.end()));
-    check_extensions(doc, warnings);
     std::string base_dir = std::filesystem::path(path).parent_path().string();
     if (base_dir.empty()) base_dir = ".";
-    ExternalFiles files = check_external_buffers(doc, base_dir, asset_root);
-    const MeshoptPlan meshopt = prepare_meshopt(doc);           // edits doc only where the file uses the extension
-    const std::vector<DracoIndices> draco = prepare_draco(doc); // likewise
-    if (!meshopt.empty() || !draco.empty()) bytes = with_json(bytes, binary, doc.dump());
+    ExternalFiles files;
+    MeshoptPlan meshopt;
+    std::vector<DracoIndices> draco;
+    { // the parsed JSON is freed before tinygltf parses the text again
+        const std::size_t json_length = binary ? glb_json_chunk(bytes) : bytes.size();
+        json doc = parse_json(bytes.data() + (binary ? 20 : 0), json_length);
+        check_extensions(doc, warnings);
+        files = check_external_buffers(doc, base_dir, asset_root);
+        meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
+        draco = prepare_draco(doc);     // likewise
+        if (!meshopt.empty() || !draco.empty()) bytes = with_json(bytes, binary, doc.dump());
+    }
     tinygltf::Model model = run_tinygltf(bytes, binary, base_dir, files, warnings);
+    std::vector<unsigned char>().swap(bytes); // tinygltf has copied the buffers it needs
     decode_meshopt(meshopt, model);
     restore_draco(draco, model);
     return model;

@@ -378,57 +378,79 @@ private:
         const auto position = prim.attributes.find("POSITION");
         if (position == prim.attributes.end()) fail(ErrorCode::parse, where + ": missing POSITION attribute");
         const std::string pos_where = where + ": POSITION accessor " + std::to_string(position->second);
+        // The primitive's vertices and triangles are appended to the scene's arrays as they are read,
+        // with no copy in between, and taken back if the primitive is skipped.
+        const std::size_t first_position = out_.positions.size(), first_index = out_.indices.size();
+        const auto skip_primitive = [&](const std::string& why) {
+            out_.positions.resize(first_position);
+            out_.indices.resize(first_index);
+            skip(where, why);
+            return std::nullopt;
+        };
         // KHR_draco_mesh_compression: positions and triangles from the stream (gltf_draco.h), in
         // place of the accessors' data (absent, or an uncompressed fallback).
-        std::optional<gltf::DracoGeometry> draco;
-        if (const auto ext = prim.extensions.find("KHR_draco_mesh_compression"); ext != prim.extensions.end())
-            draco = gltf::decode_draco(model_, prim, ext->second, where);
-        std::vector<float> positions =
-            draco ? std::move(draco->positions) : read_positions(position->second, pos_where);
-        if (positions.empty()) {
-            skip(where, "no vertices");
-            return std::nullopt;
-        }
-        if (positions.size() / 3 > std::numeric_limits<std::uint32_t>::max())
+        const auto draco = prim.extensions.find("KHR_draco_mesh_compression");
+        if (draco != prim.extensions.end())
+            gltf::decode_draco(model_, prim, draco->second, where, out_.positions, out_.indices);
+        else
+            append_positions(position->second, pos_where, out_.positions);
+        const std::size_t position_values = out_.positions.size() - first_position;
+        if (position_values == 0) return skip_primitive("no vertices");
+        if (position_values / 3 > std::numeric_limits<std::uint32_t>::max())
             fail(ErrorCode::unsupported, pos_where + ": more than 2^32 vertices");
-        const auto vertex_count = static_cast<std::uint32_t>(positions.size() / 3);
-        apply_morph_targets(prim, positions, where);
+        const auto vertex_count = static_cast<std::uint32_t>(position_values / 3);
+        apply_morph_targets(prim, out_.positions.data() + first_position, position_values, where);
 
-        std::vector<std::uint32_t> indices =
-            draco ? std::move(draco->indices) : read_indices(prim, vertex_count, where);
-        indices = to_triangle_list(std::move(indices), prim.mode, where);
-        if (indices.empty()) {
-            skip(where, "no triangles");
-            return std::nullopt;
-        }
-        if (all_degenerate(positions, indices)) {
-            skip(where, "all " + std::to_string(indices.size() / 3) + " triangles are degenerate");
-            return std::nullopt;
-        }
+        if (draco == prim.extensions.end()) append_triangles(prim, vertex_count, where);
+        const std::size_t index_count = out_.indices.size() - first_index;
+        if (index_count % 3 != 0) // a Draco stream's faces are whole triangles
+            fail(ErrorCode::parse,
+                 where + ": " + std::to_string(index_count) + " triangle indices is not a multiple of 3");
+        if (index_count == 0) return skip_primitive("no triangles");
+        if (all_degenerate(out_.positions.data() + first_position, out_.indices.data() + first_index, index_count))
+            return skip_primitive("all " + std::to_string(index_count / 3) + " triangles are degenerate");
 
         constexpr std::uint64_t max_u32 = std::numeric_limits<std::uint32_t>::max();
-        if (out_.positions.size() / 3 + vertex_count > max_u32 || out_.indices.size() + indices.size() > max_u32)
+        if (first_position / 3 + vertex_count > max_u32 || first_index + index_count > max_u32)
             fail(ErrorCode::unsupported, where + ": scene exceeds 2^32 vertices or indices");
         MeshRange range;
-        range.first_index = static_cast<std::uint32_t>(out_.indices.size());
-        range.index_count = static_cast<std::uint32_t>(indices.size());
-        range.first_vertex = static_cast<std::uint32_t>(out_.positions.size() / 3);
+        range.first_index = static_cast<std::uint32_t>(first_index);
+        range.index_count = static_cast<std::uint32_t>(index_count);
+        range.first_vertex = static_cast<std::uint32_t>(first_position / 3);
         range.vertex_count = vertex_count;
-        out_.positions.insert(out_.positions.end(), positions.begin(), positions.end());
-        out_.indices.insert(out_.indices.end(), indices.begin(), indices.end());
-        out_.meshes.push_back(range);
-        order_triangles_spatially(out_, range);
+        out_.meshes.push_back(range); // put in spatial order once every mesh is read (load_gltf)
         return PrimitiveOut{static_cast<std::uint32_t>(out_.meshes.size() - 1), prim.material};
     }
 
-    std::vector<std::uint32_t> read_indices(const tinygltf::Primitive& prim, std::uint32_t vertex_count,
-                                            const std::string& where) {
-        std::vector<std::uint32_t> indices;
+    // The primitive's triangles as a list appended to out_.indices: its indices accessor (or 0 ..
+    // vertex_count - 1 without one), a strip or fan unrolled. The caller checks the count.
+    void append_triangles(const tinygltf::Primitive& prim, std::uint32_t vertex_count, const std::string& where) {
+        if (prim.mode == TINYGLTF_MODE_TRIANGLES) {
+            append_indices(prim, vertex_count, where, out_.indices);
+            return;
+        }
+        std::vector<std::uint32_t> in;
+        append_indices(prim, vertex_count, where, in);
+        if (in.size() < 3) return;
+        out_.indices.reserve(out_.indices.size() + (in.size() - 2) * 3);
+        for (std::size_t i = 0; i + 2 < in.size(); ++i) {
+            if (prim.mode == TINYGLTF_MODE_TRIANGLE_FAN)
+                out_.indices.insert(out_.indices.end(), {in[0], in[i + 1], in[i + 2]});
+            else if (i % 2 == 0)
+                out_.indices.insert(out_.indices.end(), {in[i], in[i + 1], in[i + 2]}); // strip keeps winding
+            else
+                out_.indices.insert(out_.indices.end(), {in[i + 1], in[i], in[i + 2]});
+        }
+    }
+
+    void append_indices(const tinygltf::Primitive& prim, std::uint32_t vertex_count, const std::string& where,
+                        std::vector<std::uint32_t>& out) {
+        const std::size_t first = out.size();
         if (prim.indices == -1) {
-            indices.resize(vertex_count);
+            out.resize(first + vertex_count);
             for (std::uint32_t i = 0; i < vertex_count; ++i)
-                indices[i] = i;
-            return indices;
+                out[first + i] = i;
+            return;
         }
         const std::string idx_where = where + ": indices accessor " + std::to_string(prim.indices);
         if (prim.indices < 0 || std::size_t(prim.indices) >= model_.accessors.size())
@@ -439,22 +461,21 @@ private:
                                                  acc.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
                                                  acc.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
             fail(ErrorCode::parse, idx_where + " is not an unsigned byte/short/int SCALAR");
-        const std::vector<double> values = gltf::read_accessor(model_, prim.indices, idx_where);
-        indices.resize(values.size());
-        for (std::size_t i = 0; i < values.size(); ++i) {
-            if (values[i] >= vertex_count)
-                fail(ErrorCode::parse, idx_where + ": index " + std::to_string(i) + " = " +
-                                           std::to_string(static_cast<std::uint64_t>(values[i])) +
-                                           " is out of range (" + std::to_string(vertex_count) + " vertices)");
-            indices[i] = static_cast<std::uint32_t>(values[i]);
+        // Whole numbers below 2^32 (or, normalized, in [0, 1]): as uint32 they compare with vertex_count
+        // as their values do.
+        gltf::append_accessor(model_, prim.indices, idx_where, out);
+        for (std::size_t i = first; i < out.size(); ++i) {
+            if (out[i] >= vertex_count)
+                fail(ErrorCode::parse, idx_where + ": index " + std::to_string(i - first) + " = " +
+                                           std::to_string(out[i]) + " is out of range (" +
+                                           std::to_string(vertex_count) + " vertices)");
         }
-        return indices;
     }
 
     // POSITION (or a morph target's displacement): float VEC3, or an integer type of
     // KHR_mesh_quantization (byte, short, unsigned or not, normalized or not; the node transform
     // gltfpack writes dequantizes them). Sparse accessors and accessors without data are read too.
-    std::vector<float> read_positions(int accessor, const std::string& where) {
+    void append_positions(int accessor, const std::string& where, std::vector<float>& out) {
         if (accessor < 0 || std::size_t(accessor) >= model_.accessors.size())
             fail(ErrorCode::parse,
                  where + " does not exist (" + std::to_string(model_.accessors.size()) + " accessors)");
@@ -467,20 +488,21 @@ private:
             acc.componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT || (quantized && !declared))
             fail(ErrorCode::unsupported, where + " is not float VEC3 (byte and short positions need "
                                                  "KHR_mesh_quantization in extensionsUsed)");
-        const std::vector<double> values = gltf::read_accessor(model_, accessor, where);
-        std::vector<float> positions(values.size());
-        for (std::size_t i = 0; i < values.size(); ++i) {
-            if (!std::isfinite(values[i]))
-                fail(ErrorCode::parse,
-                     where + " has " + (std::isnan(values[i]) ? "NaN" : "Inf") + " at vertex " + std::to_string(i / 3));
-            positions[i] = static_cast<float>(values[i]);
+        // A float component converts to float and back exactly, an integer one is finite: the float is
+        // finite exactly when the value read is.
+        const std::size_t first = out.size();
+        gltf::append_accessor(model_, accessor, where, out);
+        for (std::size_t i = first; i < out.size(); ++i) {
+            if (!std::isfinite(out[i]))
+                fail(ErrorCode::parse, where + " has " + (std::isnan(out[i]) ? "NaN" : "Inf") + " at vertex " +
+                                           std::to_string((i - first) / 3));
         }
-        return positions;
     }
 
     // Morph targets at the mesh's default weights (glTF: mesh.weights, 0 when absent): each target's
     // POSITION displacement times its weight. Animation is not read: the default pose is drawn.
-    void apply_morph_targets(const tinygltf::Primitive& prim, std::vector<float>& positions, const std::string& where) {
+    void apply_morph_targets(const tinygltf::Primitive& prim, float* positions, std::size_t values,
+                             const std::string& where) {
         if (prim.targets.empty()) return;
         const std::vector<double>& weights = current_mesh_weights_;
         for (std::size_t t = 0; t < prim.targets.size(); ++t) {
@@ -488,39 +510,18 @@ private:
             const auto it = prim.targets[t].find("POSITION");
             if (it == prim.targets[t].end() || weight == 0.0) continue;
             const std::string target_where = where + ": morph target " + std::to_string(t) + " POSITION";
-            const std::vector<float> delta = read_positions(it->second, target_where);
-            if (delta.size() != positions.size())
+            std::vector<float> delta;
+            append_positions(it->second, target_where, delta);
+            if (delta.size() != values)
                 fail(ErrorCode::parse, target_where + " has " + std::to_string(delta.size() / 3) +
-                                           " vertices, POSITION " + std::to_string(positions.size() / 3));
-            for (std::size_t i = 0; i < positions.size(); ++i)
+                                           " vertices, POSITION " + std::to_string(values / 3));
+            for (std::size_t i = 0; i < values; ++i)
                 positions[i] = static_cast<float>(positions[i] + weight * delta[i]);
         }
     }
 
-    static std::vector<std::uint32_t> to_triangle_list(std::vector<std::uint32_t> in, int mode,
-                                                       const std::string& where) {
-        if (mode == TINYGLTF_MODE_TRIANGLES) {
-            if (in.size() % 3 != 0)
-                fail(ErrorCode::parse,
-                     where + ": " + std::to_string(in.size()) + " triangle indices is not a multiple of 3");
-            return in;
-        }
-        std::vector<std::uint32_t> out;
-        if (in.size() < 3) return out;
-        out.reserve((in.size() - 2) * 3);
-        for (std::size_t i = 0; i + 2 < in.size(); ++i) {
-            if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
-                out.insert(out.end(), {in[0], in[i + 1], in[i + 2]});
-            else if (i % 2 == 0)
-                out.insert(out.end(), {in[i], in[i + 1], in[i + 2]}); // strip keeps winding
-            else
-                out.insert(out.end(), {in[i + 1], in[i], in[i + 2]});
-        }
-        return out;
-    }
-
-    static bool all_degenerate(const std::vector<float>& pos, const std::vector<std::uint32_t>& idx) {
-        for (std::size_t t = 0; t < idx.size(); t += 3) {
+    static bool all_degenerate(const float* pos, const std::uint32_t* idx, std::size_t index_count) {
+        for (std::size_t t = 0; t < index_count; t += 3) {
             const float* a = &pos[std::size_t(idx[t]) * 3];
             const float* b = &pos[std::size_t(idx[t + 1]) * 3];
             const float* c = &pos[std::size_t(idx[t + 2]) * 3];
@@ -550,9 +551,14 @@ Result<Scene> Scene::load_gltf(const std::string& path, const SceneLoadOptions& 
         if (!(options.scale > 0.0) || !std::isfinite(options.scale))
             return make_error(ErrorCode::invalid_argument,
                               path + ": scale " + std::to_string(options.scale) + " is not a positive finite number");
-        const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
-        Converter(model, data, options.scale).run();
-        data.stats.extensions = model.extensionsUsed;
+        {
+            const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
+            Converter(model, data, options.scale).run();
+            data.stats.extensions = model.extensionsUsed;
+        } // the file's buffers are freed before the spatial order allocates its scratch
+        order_triangles_spatially(data);
+        data.positions.shrink_to_fit(); // no-ops when the arrays grew by exactly one primitive
+        data.indices.shrink_to_fit();
         for (std::string& w : data.stats.warnings) // one line each, like errors (names may hold newlines)
             w = detail::escape_control_chars(path + ": " + w);
         return Result<Scene>(std::move(scene));

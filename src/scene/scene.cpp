@@ -218,100 +218,174 @@ std::uint32_t spread_bits(std::uint32_t x) {
     return x;
 }
 
-} // namespace
+constexpr std::uint32_t kUnset = std::numeric_limits<std::uint32_t>::max();
 
-void order_triangles_spatially(SceneData& scene, const MeshRange& mesh_range) {
-    const MeshRange mesh = mesh_range; // a copy: the mesh's entry changes below
-    const std::uint32_t triangles = mesh.index_count / 3;
-    if (triangles <= kClusterTriangles || scene.meshes.empty() || scene.meshes.back().first_index != mesh.first_index ||
-        scene.positions.size() != 3 * (std::size_t(mesh.first_vertex) + mesh.vertex_count) || mesh.vertex_count == 0)
-        return;
-    const std::uint32_t* tri = scene.indices.data() + mesh.first_index;
-    const float* pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
+bool orders_spatially(const MeshRange& mesh) {
+    return mesh.index_count / 3 > kClusterTriangles && mesh.vertex_count > 0;
+}
+
+// Puts the triangles of `mesh` (in scene.indices, 3 vertex numbers each into its vertices) in the order
+// of their centroids along a Morton curve, stable for equal codes.
+void sort_triangles(SceneData& scene, const MeshRange& mesh) {
+    const std::uint32_t triangles = mesh.index_count / 3, vertex_count = mesh.vertex_count;
+    std::uint32_t* const tri = scene.indices.data() + mesh.first_index;
+    const float* const pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
     float lo[3] = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
                    std::numeric_limits<float>::max()};
     float hi[3] = {std::numeric_limits<float>::lowest(), std::numeric_limits<float>::lowest(),
                    std::numeric_limits<float>::lowest()};
-    for (std::uint32_t v = 0; v < mesh.vertex_count; ++v)
+    for (std::uint32_t v = 0; v < vertex_count; ++v)
         for (int a = 0; a < 3; ++a) {
             lo[a] = std::min(lo[a], pos[3 * std::size_t(v) + std::size_t(a)]);
             hi[a] = std::max(hi[a], pos[3 * std::size_t(v) + std::size_t(a)]);
         }
     const double largest =
         std::max({double(hi[0]) - double(lo[0]), double(hi[1]) - double(lo[1]), double(hi[2]) - double(lo[2])});
-    // Morton code per triangle, then the triangles by code: a stable LSD radix sort (four passes of 8
+    // Morton code per triangle, then the triangles by code: a stable LSD radix sort (three passes of 10
     // bits over the 30-bit codes), linear in the triangles where std::sort doubled a million-triangle load.
-    std::vector<std::uint32_t> code(triangles), order(triangles), code_tmp(triangles), order_tmp(triangles);
+    // The codes and orders of the passes take turns in four arrays of one number per triangle, three of
+    // them one block, which then takes the sorted triangles: 16 bytes per triangle in all.
+    std::vector<std::uint32_t> block(3 * std::size_t(triangles)), sorted_order(triangles);
+    std::uint32_t* const code_a = block.data();
+    std::uint32_t* const code_b = code_a + triangles;
+    std::uint32_t* const order_a = code_b + triangles;
     for (std::uint32_t t = 0; t < triangles; ++t) {
         std::uint32_t key = 0;
         for (int a = 0; a < 3; ++a) {
             float c = 0;
             for (int k = 0; k < 3; ++k) {
                 const std::uint32_t v = tri[3 * std::size_t(t) + std::size_t(k)];
-                c += v < mesh.vertex_count ? pos[3 * std::size_t(v) + std::size_t(a)] : lo[a];
+                c += v < vertex_count ? pos[3 * std::size_t(v) + std::size_t(a)] : lo[a];
             }
             // one scale for all axes (the largest extent): a flat terrain's height must not reorder it
             const float unit = largest > 0 ? float((double(c) / 3.0 - lo[a]) / largest) : 0.0f;
             key |= spread_bits(static_cast<std::uint32_t>(std::clamp(unit, 0.0f, 1.0f) * 1023.0f)) << a;
         }
-        code[t] = key;
-        order[t] = t;
+        code_a[t] = key;
+        order_a[t] = t;
     }
-    for (int shift = 0; shift < 32; shift += 8) {
-        std::uint32_t start[257] = {};
+    const auto pass = [triangles](int shift, const std::uint32_t* code, const std::uint32_t* order,
+                                  std::uint32_t* code_out, std::uint32_t* order_out) {
+        std::uint32_t start[1025] = {};
         for (std::uint32_t t = 0; t < triangles; ++t)
-            ++start[((code[t] >> shift) & 0xffu) + 1];
-        for (int b = 0; b < 256; ++b)
+            ++start[((code[t] >> shift) & 0x3ffu) + 1];
+        for (int b = 0; b < 1024; ++b)
             start[b + 1] += start[b];
         for (std::uint32_t t = 0; t < triangles; ++t) {
-            const std::uint32_t slot = start[(code[t] >> shift) & 0xffu]++;
-            code_tmp[slot] = code[t];
-            order_tmp[slot] = order[t];
+            const std::uint32_t slot = start[(code[t] >> shift) & 0x3ffu]++;
+            if (code_out) code_out[slot] = code[t];
+            order_out[slot] = order[t];
         }
-        code.swap(code_tmp);
-        order.swap(order_tmp);
+    };
+    pass(0, code_a, order_a, code_b, sorted_order.data());
+    pass(10, code_b, sorted_order.data(), code_a, order_a);
+    pass(20, code_a, order_a, nullptr, sorted_order.data());
+    // Triangle t of the sorted mesh is triangle sorted_order[t]: gathered into the block (independent
+    // loads, where following the permutation's cycles in place is one long chain of cache misses).
+    for (std::uint32_t t = 0; t < triangles; ++t) {
+        const std::uint32_t* from = tri + 3 * std::size_t(sorted_order[t]);
+        std::copy(from, from + 3, block.data() + 3 * std::size_t(t));
     }
-    code = {};
-    code_tmp = {};
-    order_tmp = {};
-    // Each run of kClusterTriangles gets its own copy of the vertices it uses, numbered in first use:
-    // a GPU (llvmpipe above all) shades every vertex between the smallest and the largest index of a
-    // draw, and a patch of a row-major grid would otherwise span as many rows of vertices as it is tall.
-    // Vertices on a run's border are stored once per run that uses them (a 16 x 16-quad patch: 289
-    // vertices for 256 quads' worth).
-    std::vector<std::uint32_t> sorted(3 * std::size_t(triangles));
-    std::vector<float> run_positions;
-    run_positions.reserve(scene.positions.size() - 3 * std::size_t(mesh.first_vertex));
-    std::vector<std::uint32_t> new_index(mesh.vertex_count, std::numeric_limits<std::uint32_t>::max());
-    std::vector<std::uint32_t> touched;
+    if (mesh.first_index == 0 && block.size() == scene.indices.size())
+        scene.indices.swap(block); // the whole array: no copy
+    else
+        std::copy(block.begin(), block.end(), tri);
+}
+
+// Each run of kClusterTriangles triangles of `tri` (in their final order) gets its own copy of the
+// vertices it uses, numbered in order of first use from 0 for the mesh's first run on; returns how many
+// copies there are. With `out` null it only counts; otherwise it renumbers `tri` in place and writes the
+// copies' positions (from `pos`) to `out`. Out-of-range vertex numbers are kept as they are (the
+// clusters skip such a run). `new_index` holds vertex_count kUnset values and is left that way.
+std::size_t copy_runs(std::uint32_t* tri, std::uint32_t triangles, const float* pos, std::uint32_t vertex_count,
+                      float* out, std::vector<std::uint32_t>& new_index, std::vector<std::uint32_t>& touched) {
+    std::size_t copies = 0;
     for (std::uint32_t begin = 0; begin < triangles; begin += kClusterTriangles) {
         for (std::uint32_t v : touched)
-            new_index[v] = std::numeric_limits<std::uint32_t>::max();
+            new_index[v] = kUnset;
         touched.clear();
         const std::uint32_t end = std::min(triangles, begin + kClusterTriangles);
-        for (std::uint32_t t = begin; t < end; ++t) {
-            const std::uint32_t from = order[t];
-            for (int k = 0; k < 3; ++k) {
-                const std::uint32_t v = tri[3 * std::size_t(from) + std::size_t(k)];
-                std::uint32_t& mapped = new_index[std::min(v, mesh.vertex_count - 1)];
-                if (v >= mesh.vertex_count) { // out of range: kept as it is (the clusters skip such a run)
-                    sorted[3 * std::size_t(t) + std::size_t(k)] = v;
-                    continue;
-                }
-                if (mapped == std::numeric_limits<std::uint32_t>::max()) {
-                    mapped = static_cast<std::uint32_t>(run_positions.size() / 3);
-                    run_positions.insert(run_positions.end(), pos + 3 * std::size_t(v), pos + 3 * std::size_t(v) + 3);
-                    touched.push_back(v);
-                }
-                sorted[3 * std::size_t(t) + std::size_t(k)] = mapped;
+        for (std::size_t i = 3 * std::size_t(begin); i < 3 * std::size_t(end); ++i) {
+            const std::uint32_t v = tri[i];
+            if (v >= vertex_count) continue;
+            std::uint32_t& mapped = new_index[v];
+            if (mapped == kUnset) {
+                mapped = static_cast<std::uint32_t>(copies++);
+                touched.push_back(v);
+                if (out)
+                    std::copy(pos + 3 * std::size_t(v), pos + 3 * std::size_t(v) + 3, out + 3 * std::size_t(mapped));
             }
+            if (out) tri[i] = mapped;
         }
     }
-    std::copy(sorted.begin(), sorted.end(), scene.indices.begin() + mesh.first_index);
+    for (std::uint32_t v : touched)
+        new_index[v] = kUnset;
+    touched.clear();
+    return copies;
+}
+
+} // namespace
+
+void order_triangles_spatially(SceneData& scene, const MeshRange& mesh_range) {
+    const MeshRange mesh = mesh_range; // a copy: the mesh's entry changes below
+    if (!orders_spatially(mesh) || scene.meshes.empty() || scene.meshes.back().first_index != mesh.first_index ||
+        scene.positions.size() != 3 * (std::size_t(mesh.first_vertex) + mesh.vertex_count))
+        return;
+    sort_triangles(scene, mesh);
+    std::uint32_t* tri = scene.indices.data() + mesh.first_index;
+    const std::uint32_t triangles = mesh.index_count / 3;
+    const float* pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
+    std::vector<std::uint32_t> new_index(mesh.vertex_count, kUnset), touched;
+    std::vector<float> copies(3 * copy_runs(tri, triangles, pos, mesh.vertex_count, nullptr, new_index, touched));
+    copy_runs(tri, triangles, pos, mesh.vertex_count, copies.data(), new_index, touched);
     // The mesh is the scene's last (its vertices end the array): they are replaced by the runs' copies.
     scene.positions.resize(3 * std::size_t(mesh.first_vertex));
-    scene.positions.insert(scene.positions.end(), run_positions.begin(), run_positions.end());
-    scene.meshes.back().vertex_count = static_cast<std::uint32_t>(run_positions.size() / 3);
+    scene.positions.insert(scene.positions.end(), copies.begin(), copies.end());
+    scene.meshes.back().vertex_count = static_cast<std::uint32_t>(copies.size() / 3);
+}
+
+void order_triangles_spatially(SceneData& scene) {
+    std::size_t vertices = 0;
+    std::uint32_t widest = 0; // the most vertices of a mesh that is put in order
+    for (const MeshRange& mesh : scene.meshes) {
+        if (mesh.first_vertex != vertices || std::size_t(mesh.first_index) + mesh.index_count > scene.indices.size())
+            return; // not one after another: not what the loader writes
+        vertices += mesh.vertex_count;
+        if (orders_spatially(mesh)) widest = std::max(widest, mesh.vertex_count);
+    }
+    if (widest == 0 || 3 * vertices != scene.positions.size()) return;
+    // Each mesh in order, then the number of its vertices with the runs' copies; then one array of
+    // exactly that many, filled mesh after mesh.
+    std::vector<std::uint32_t> new_index(widest, kUnset), touched;
+    std::vector<std::size_t> counts(scene.meshes.size());
+    std::size_t total = 0;
+    for (std::size_t m = 0; m < scene.meshes.size(); ++m) {
+        const MeshRange& mesh = scene.meshes[m];
+        counts[m] = mesh.vertex_count;
+        if (orders_spatially(mesh)) {
+            sort_triangles(scene, mesh);
+            std::uint32_t* tri = scene.indices.data() + mesh.first_index;
+            const float* pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
+            counts[m] = copy_runs(tri, mesh.index_count / 3, pos, mesh.vertex_count, nullptr, new_index, touched);
+        }
+        total += counts[m];
+    }
+    std::vector<float> positions(3 * total);
+    std::size_t next = 0;
+    for (std::size_t m = 0; m < scene.meshes.size(); ++m) {
+        MeshRange& mesh = scene.meshes[m];
+        const float* pos = scene.positions.data() + 3 * std::size_t(mesh.first_vertex);
+        float* out = positions.data() + 3 * next;
+        if (orders_spatially(mesh))
+            copy_runs(scene.indices.data() + mesh.first_index, mesh.index_count / 3, pos, mesh.vertex_count, out,
+                      new_index, touched);
+        else
+            std::copy(pos, pos + 3 * std::size_t(mesh.vertex_count), out);
+        mesh.first_vertex = static_cast<std::uint32_t>(next);
+        mesh.vertex_count = static_cast<std::uint32_t>(counts[m]);
+        next += counts[m];
+    }
+    scene.positions.swap(positions);
 }
 
 } // namespace vksonar

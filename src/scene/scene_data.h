@@ -40,4 +40,12 @@ struct SceneData {
 // scene's last mesh (its vertices end the array: call it right after adding the mesh).
 void order_triangles_spatially(SceneData& scene, const MeshRange& mesh);
 
+// The same for every mesh of a scene whose meshes' vertices lie one after another in mesh order and
+// fill the array (as the glTF loader writes them), with the same result as calling the function above
+// after adding each mesh: the loader reads every mesh first and orders them once the file's buffers
+// are freed, so that the sort's scratch never coexists with them. The positions end in a new array
+// exactly as large as the copies need; the indices keep their array (one mesh that fills it takes the
+// sort's scratch block of exactly its size instead). Leaves any other layout as it is.
+void order_triangles_spatially(SceneData& scene);
+
 } // namespace vksonar
