@@ -23,12 +23,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
-class BeamGeometryTest : public ::testing::TestWithParam<Backend> {
-protected:
-    void SetUp() override {
-        if (GetParam() == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
-    }
-};
+class BeamGeometryTest : public BackendTest {};
 
 // The per-beam energy of the clean scan (summed over bins).
 std::vector<double> per_beam(const Frame& f) {

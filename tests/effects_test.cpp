@@ -21,13 +21,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kDeg = kPi / 180.0;
 
-class EffectsTest : public ::testing::TestWithParam<Backend> {
-protected:
-    void SetUp() override {
-        if (GetParam() == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
-    }
-    ValidationGuard validation_;
-};
+class EffectsTest : public BackendTest {};
 
 std::string backend_param_name(const ::testing::TestParamInfo<Backend>& info) {
     return info.param == Backend::vulkan ? "vulkan" : "cpu";

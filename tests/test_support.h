@@ -61,6 +61,16 @@ private:
     std::uint32_t before_;
 };
 
+// A test run on each backend (TEST_P over ::testing::Values(Backend::vulkan, Backend::cpu)): the
+// Vulkan run skips without a device and fails on any validation message.
+class BackendTest : public ::testing::TestWithParam<Backend> {
+protected:
+    void SetUp() override {
+        if (GetParam() == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
+    }
+    ValidationGuard validation_;
+};
+
 // A rectangle of width x height metres, centred at `centre` (world), facing the -x direction
 // (towards a sonar at the origin looking along +x), optionally rotated by yaw_deg about z.
 inline void add_quad(Scene& scene, double cx, double cy, double cz, double width_m, double height_m,

@@ -16,6 +16,26 @@ namespace vksonar::cpu {
 
 namespace {
 
+// The range spread of pixel (row j, column c) of energy e, from the five-row window of its column (as
+// profile.comp's pixel_spread; range 0 = no hit or outside the image). Inlined into both profile loops.
+template <class Real>
+[[gnu::always_inline]] inline typename Math<Real>::RangeSpread pixel_spread(const Plan& plan, const float* echo2,
+                                                                            std::uint32_t j, std::uint32_t c, Real e,
+                                                                            Real range_min, Real inv_bin_width) {
+    using vec2 = typename Math<Real>::vec2;
+    const std::uint32_t C = plan.columns, R = plan.rows;
+    const auto row_echo = [&](std::int64_t row) {
+        if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
+        const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
+        return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
+    };
+    const std::int64_t jj = j;
+    const Real range = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + c) + 1]);
+    return Math<Real>::range_spread(plan.params.range_kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, range),
+                                    row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width,
+                                    static_cast<Real>(plan.params.edge_relative_jump), plan.bins);
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x profile_columns). Each
 // pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
@@ -24,10 +44,7 @@ template <class Real>
 void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_t cone_begin, std::uint32_t cone_end,
                    Real range_min, Real inv_bin_width) {
     using M = Math<Real>;
-    using vec2 = typename M::vec2;
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins, PC = plan.profile_columns;
-    const std::uint32_t kernel = plan.params.range_kernel;
-    const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
     const int count = static_cast<int>(PC);
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
@@ -39,15 +56,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const Real e = static_cast<Real>(e2[0]);
             if (!(e > Real(0))) continue;
             const Real x = static_cast<Real>(cone_x[c]);
-            const auto row_echo = [&](std::int64_t row) {
-                if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
-                const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
-                return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
-            };
-            const std::int64_t jj = j;
-            const typename M::RangeSpread spread =
-                M::range_spread(kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, static_cast<Real>(e2[1])),
-                                row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width, jump_rel, bins);
+            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
             const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
             const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
             // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
@@ -83,9 +92,6 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
         range_min = plan.config.range_min_m;
         inv_bin_width = Real(1) / plan.bin_width_m;
     }
-    const std::uint32_t kernel = plan.params.range_kernel;
-    const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
-    using vec2 = typename M::vec2;
 
     // profile: per column, rows in increasing order, each pixel spread by range_spread / range_share
     // (shaders/sonar_kernels.h, as profile.comp). The loops run row-major for locality; every
@@ -101,16 +107,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
         for (std::uint32_t c = column_begin; c < column_end; ++c) {
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
-            // the five-row window of profile.comp (energy, range; 0 = no hit or outside the image)
-            const auto row_echo = [&](std::int64_t row) {
-                if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
-                const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
-                return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
-            };
-            const std::int64_t jj = j;
-            const typename M::RangeSpread spread =
-                M::range_spread(kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, static_cast<Real>(e2[2 * c + 1])),
-                                row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width, jump_rel, bins);
+            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
             for (int k = spread.k_first; k <= spread.k_last; ++k)
                 acc[static_cast<std::size_t>(k) * C + c] += M::range_share(spread, k) * e;
         }
