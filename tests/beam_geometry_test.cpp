@@ -102,7 +102,9 @@ TEST_P(BeamGeometryTest, PointTargetPeaksOnTheBeamOfItsCone) {
                 EXPECT_NEAR(got, expected, 0.5)
                     << (line_array ? "line_array" : "planar") << " az " << azimuth << " el " << elevation;
                 // Where the geometries disagree by more than a beam, the peak tells them apart.
-                if (std::abs(expected - other) > 1.5) EXPECT_GT(std::abs(got - other), 1.0);
+                if (std::abs(expected - other) > 1.5) {
+                    EXPECT_GT(std::abs(got - other), 1.0);
+                }
             }
         }
     }
@@ -297,8 +299,8 @@ TEST(BeamGeometry, ResolvedGeometryAndItsReason) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, BeamGeometryTest, ::testing::Values(Backend::vulkan, Backend::cpu),
-                         [](const ::testing::TestParamInfo<Backend>& info) {
-                             return info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");
+                         [](const ::testing::TestParamInfo<Backend>& param_info) {
+                             return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");
                          });
 
 } // namespace

@@ -355,8 +355,8 @@ TEST_P(EffectsTest, HorizontalPatternConvolvesBeamsWithTheArraysSidelobes) {
         peak = std::max(peak, double(x));
     const bool line_array = plan.line_array;
     auto separation = [&](std::size_t i, std::size_t j) {
-        const double a = plan.beam_angle_rad[i], b = plan.beam_angle_rad[j];
-        return line_array ? std::sin(a) - std::sin(b) : a - b;
+        const double from = plan.beam_angle_rad[i], to = plan.beam_angle_rad[j];
+        return line_array ? std::sin(from) - std::sin(to) : from - to;
     };
     const double reach_units = line_array ? std::sin(reach) : reach;
     const int window = 64; // beams either side: past the reach (3 beamwidths: ~12-29 beams) everywhere
