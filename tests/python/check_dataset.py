@@ -72,6 +72,9 @@ with tempfile.TemporaryDirectory() as tmp:
         check(f["polar"].chunks == (1, 64, 32), f"one chunk per frame: {f['polar'].chunks}")
         config = json.loads(f.attrs["config"])
         check(config["bins"] == 64 and config["range_min"] == 6, "config attribute")
+        meta = json.load(open(os.path.join(folder, "frame_000002", "meta.json")))
+        check(f.attrs["beam_geometry"] == meta["beam_geometry"]["used"] == "line_array"
+              and f.attrs["beam_geometry_why"] == meta["beam_geometry"]["why"], "beam_geometry as meta.json")
 
     # A time column (header t / time / time_s) fills /time and each folder's meta.json time_s.
     timed = os.path.join(tmp, "timed.csv")
