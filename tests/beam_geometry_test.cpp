@@ -274,6 +274,13 @@ TEST(BeamGeometry, ResolvedGeometryAndItsReason) {
     ASSERT_TRUE(plan) << plan.error().message;
     EXPECT_TRUE(plan->line_array); // the default sonar (an Oculus) is a line array
     EXPECT_GT(plan->columns, plan->profile_columns) << "the pixel grid reaches past the fan's azimuths";
+    // The wider grid can need more slices than the fan would: the error says why.
+    SonarConfig narrow_slices = config;
+    narrow_slices.max_slice_deg = 5.0;
+    auto refused = make_plan(narrow_slices, scene);
+    ASSERT_FALSE(refused);
+    EXPECT_NE(refused.error().message.find("span a line array's pixel grid covers (hfov 130)"), std::string::npos)
+        << refused.error().message;
     config.hfov_deg = 360.0; // no single array axis
     plan = make_plan(config, scene);
     ASSERT_TRUE(plan) << plan.error().message;

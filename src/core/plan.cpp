@@ -374,10 +374,13 @@ Result<void> plan_pixel_grid(Plan& p) {
     p.slices = static_cast<std::uint32_t>(std::ceil(covered_deg / c.max_slice_deg - 1e-9));
     p.slices = std::max(1u, p.slices);
     if (p.slices > shared::kMaxSlices) {
+        const std::string span = p.line_array ? "the " + fmt(covered_deg) +
+                                                    "-degree span a line array's pixel grid covers (hfov " +
+                                                    fmt(c.hfov_deg) + ")"
+                                              : "hfov " + fmt(c.hfov_deg);
         return make_error(ErrorCode::invalid_argument, "config: accuracy.max_slice = " + fmt(c.max_slice_deg) +
-                                                           " needs " + std::to_string(p.slices) + " slices for hfov " +
-                                                           fmt(covered_deg) + "; at most " +
-                                                           std::to_string(shared::kMaxSlices));
+                                                           " needs " + std::to_string(p.slices) + " slices for " +
+                                                           span + "; at most " + std::to_string(shared::kMaxSlices));
     }
     if (wanted_columns > kMaxColumns) {
         return make_error(ErrorCode::invalid_argument,
