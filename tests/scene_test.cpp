@@ -429,6 +429,66 @@ TEST(SceneWarnings, ControlCharactersFromTheFileAreEscaped) {
         << w[0];
 }
 
+// Objects for ground-truth labels (SceneInstance): the node index + 1, the class from the node's
+// extras, else its mesh's, else the mesh's name; every draw of a node carries its id.
+TEST(SceneObjects, IdsAreNodeIndicesAndClassesComeFromExtrasOrTheMeshName) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    // node 0 'child' (mesh 0, under node 1 'parent'), node 2 'by_matrix' (mesh 0)
+    doc["nodes"][2]["extras"]["vksonar"]["class"] = "special";
+    const std::string named = temp_path("objects_named.gltf");
+    std::ofstream(named) << doc.dump();
+    Scene scene = load_ok(named);
+    ASSERT_EQ(scene.instances().size(), 2u);
+    // The node tree is walked from the scene's roots: parent (no mesh), its child, then by_matrix.
+    const SceneInstance& child = scene.instances()[0];
+    const SceneInstance& by_matrix = scene.instances()[1];
+    EXPECT_EQ(child.id, 1u);
+    EXPECT_EQ(child.node, "child");
+    EXPECT_EQ(child.mesh, "tri");
+    EXPECT_EQ(child.class_name, "tri"); // no extras: the mesh's name
+    EXPECT_EQ(by_matrix.id, 3u);
+    EXPECT_EQ(by_matrix.class_name, "special");
+    EXPECT_EQ(scene.classes(), (std::vector<std::string>{"tri", "special"}));
+    EXPECT_EQ(child.class_id, 1u);
+    EXPECT_EQ(by_matrix.class_id, 2u);
+    const SceneData& d = scene_data(scene);
+    ASSERT_EQ(d.draws.size(), 2u);
+    EXPECT_EQ(d.draws[0].instance, 1u);
+    EXPECT_EQ(d.draws[1].instance, 3u);
+
+    // A mesh's class applies to every node of it without one of its own.
+    doc["meshes"][0]["extras"]["vksonar"]["class"] = "triangle";
+    const std::string meshed = temp_path("objects_mesh_class.gltf");
+    std::ofstream(meshed) << doc.dump();
+    scene = load_ok(meshed);
+    EXPECT_EQ(scene.instances()[0].class_name, "triangle");
+    EXPECT_EQ(scene.instances()[1].class_name, "special");
+
+    // A class that is not a name is an error naming the node, the key and the value.
+    doc["nodes"][2]["extras"]["vksonar"]["class"] = 5;
+    const std::string bad = temp_path("objects_bad_class.gltf");
+    std::ofstream(bad) << doc.dump();
+    auto refused = Scene::load_gltf(bad);
+    ASSERT_FALSE(refused);
+    EXPECT_NE(refused.error().message.find("node 2: extras.vksonar.class = 5 is not a name"), std::string::npos)
+        << refused.error().message;
+}
+
+TEST(SceneObjects, BundledScenesNameTheirClasses) {
+    const Scene harbour = load_ok(asset_file("harbour.gltf"));
+    EXPECT_EQ(harbour.classes(), (std::vector<std::string>{"seabed", "wall", "pier", "piling", "crate"}));
+    const auto pilings = std::count_if(harbour.instances().begin(), harbour.instances().end(),
+                                       [](const SceneInstance& i) { return i.class_name == "piling"; });
+    EXPECT_EQ(pilings, 8); // 4 x 2 piles under the pier
+    const Scene tilted = load_ok(asset_file("tilted_seafloor.gltf"));
+    EXPECT_EQ(tilted.classes(), (std::vector<std::string>{"seabed", "rock", "block"}));
+    const Scene standard = load_ok(asset_file("default.gltf"));
+    EXPECT_EQ(standard.classes(), (std::vector<std::string>{"seabed", "piling", "pipe", "crate", "sphere"}));
+    for (const SceneDraw& draw : scene_data(standard).draws)
+        EXPECT_GT(draw.instance, 0u) << "every draw of a loaded scene belongs to an object";
+}
+
 TEST(SceneGlb, RoundTripMatchesTheGltf) {
     const std::string path = temp_path("plane_roundtrip.glb");
     write_bytes(path, make_plane_glb());

@@ -238,8 +238,10 @@ class Gltf:
         self.meshes.append({"name": name, "primitives": [self.primitive(verts, tris, material)]})
         return len(self.meshes) - 1
 
-    def node(self, name, mesh=None, children=None, t=None, r=None, s=None, matrix=None):
+    def node(self, name, mesh=None, children=None, t=None, r=None, s=None, matrix=None, object_class=None):
         n = {"name": name}
+        if object_class is not None:  # the label class of this object (README "Scene objects")
+            n["extras"] = {"vksonar": {"class": object_class}}
         if mesh is not None:
             n["mesh"] = mesh
         if children:
@@ -368,14 +370,14 @@ def harbour_scene():
     pile = g.mesh("pier_pile", closed(cylinder(0.3, 10.0, 24)), timber)
     crate = g.mesh("sunken_crate", closed(box(1.5, 1.0, 1.0, y0=0.0)), steel)
 
-    nodes = [g.node("seabed", seabed, t=w2g(20, 0, -8)), g.node("quay_wall", wall, t=w2g(19, 0, -8))]
+    nodes = [g.node("seabed", seabed, t=w2g(20, 0, -8)), g.node("quay_wall", wall, t=w2g(19, 0, -8), object_class="wall")]
     # Pier from the wall back to x = 6 m at y = +10 m; deck at z = +1.5, piles down to the seabed.
-    children = [g.node("deck", deck, t=w2g(0, 0, 1.5))]
+    children = [g.node("deck", deck, t=w2g(0, 0, 1.5), object_class="pier")]
     for i, x in enumerate([-5.0, -1.5, 2.0, 5.0]):
         for j, y in enumerate([-1.5, 1.5]):
-            children.append(g.node("pile_%d_%d" % (i, j), pile, t=w2g(x, y, -8)))
+            children.append(g.node("pile_%d_%d" % (i, j), pile, t=w2g(x, y, -8), object_class="piling"))
     nodes.append(g.node("pier", children=children, t=w2g(12, 10, 0)))
-    nodes.append(g.node("sunken_crate", crate, t=w2g(10, -5, -8), r=quat_world((0, 0, 1), -35)))
+    nodes.append(g.node("sunken_crate", crate, t=w2g(10, -5, -8), r=quat_world((0, 0, 1), -35), object_class="crate"))
     path = os.path.join(ROOT, "assets/scenes/harbour.gltf")
     g.write_gltf(path, nodes)
     report(path, g, nodes)
@@ -397,7 +399,8 @@ def tilted_seafloor_scene():
     kids = []
     for i, ((x, y), r) in enumerate(zip([(-12, -3), (-6, 5), (-2, -6), (6, 2)], radii)):
         # Partly buried: the centre sits at 0.4 of the (flattened) radius above the slope.
-        kids.append(g.node("rock_%d" % i, rocks[i], t=w2g(x, y, 0.4 * 0.6 * r), r=quat_world((0, 0, 1), 40 * i)))
+        kids.append(g.node("rock_%d" % i, rocks[i], t=w2g(x, y, 0.4 * 0.6 * r), r=quat_world((0, 0, 1), 40 * i),
+                          object_class="rock"))
     kids.append(g.node("block", block, t=w2g(-9, 7, 0), r=quat_world((0, 0, 1), 15)))
     # Rotating by -10 deg about world y lifts +x: z = -8 + tan(10 deg) * (x - 25).
     nodes = [g.node("seabed", seabed, children=kids, t=w2g(25, 0, -8), r=quat_world((0, 1, 0), -10))]

@@ -51,6 +51,7 @@ struct AcousticMaterial {
 struct SceneDraw {
     std::uint32_t mesh = 0;     // index into SceneMeshView list
     std::uint32_t material = 0; // index into materials
+    std::uint32_t instance = 0; // SceneInstance::id of the object drawn (0: none given)
     std::array<double, 16> world_from_local{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; // column-major
 };
 
@@ -63,6 +64,20 @@ struct SceneStats {
     std::vector<std::string> extensions;  // glTF extensions the file uses
     std::uint32_t skipped_primitives = 0; // points/lines and degenerate-only primitives, skipped with a warning
     std::vector<std::string> warnings;
+};
+
+// An object of the scene, as ground-truth labels name it: a glTF node with a mesh. Its id is the
+// node's index + 1, stable across frames and runs of the same file (0 means no object); every draw of
+// the node (its primitives, its EXT_mesh_gpu_instancing copies) carries it. Its class is the node's
+// extras.vksonar.class, else its mesh's, else the mesh's name (else "mesh N"); classes are numbered
+// from 1 in the order the file first names them (Scene::classes()[class_id - 1]).
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
+struct SceneInstance {
+    std::uint32_t id = 0;
+    std::string node;       // the node's name ("" if it has none)
+    std::string mesh;       // its mesh's name ("" if it has none)
+    std::string class_name; // as above
+    std::uint32_t class_id = 0;
 };
 
 struct SceneData; // internal
@@ -115,6 +130,11 @@ public:
     // Every drawn vertex through its draw's transform (linear in vertices x draws).
     SceneBounds bounds() const;
     const std::vector<AcousticMaterial>& materials() const;
+    // The objects of a loaded glTF scene, in the order its node tree is walked, and their class names
+    // (SceneInstance); empty
+    // for a scene built with add_mesh / add_draw.
+    const std::vector<SceneInstance>& instances() const;
+    const std::vector<std::string>& classes() const;
     // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
     const std::string& effects_json() const;
 

@@ -87,9 +87,9 @@ public:
              number("frequency_hz", c.frequency_hz) && number("sound_speed_mps", c.sound_speed_mps) &&
              count("seed", meta.seed) && text("config", meta.config_json) && text("effects", meta.effects_json) &&
              text("validity", meta.validity_json) && text("beam_geometry", plan.line_array ? "line_array" : "planar") &&
-             text("beam_geometry_why", plan.beam_geometry_why) && text("scene", meta.scene) &&
-             text("backend", meta.backend) && text("device", meta.device) && count("frames_written", 0) &&
-             count("complete", 0);
+             text("beam_geometry_why", plan.beam_geometry_why) && text("objects", meta.objects_json) &&
+             text("scene", meta.scene) && text("backend", meta.backend) && text("device", meta.device) &&
+             count("frames_written", 0) && count("complete", 0);
         if (ok && meta.shard) {
             const ShardRecord& r = *meta.shard;
             ok = count("shard_index", r.index) && count("shard_count", r.count) && text("shard_source", r.source) &&

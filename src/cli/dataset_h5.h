@@ -38,6 +38,7 @@ struct DatasetOptions {
 // Everything meta.json holds that does not change between frames, as JSON text per attribute.
 struct DatasetMeta {
     std::string config_json, effects_json, validity_json;
+    std::string objects_json; // the scene's objects and classes (meta.json "objects")
     std::string scene, backend, device;
     std::uint64_t seed = 0;
     std::optional<ShardRecord> shard; // a shard of a trajectory: written as attributes

@@ -550,6 +550,7 @@ struct Outputs {
     std::vector<float> view_range;
     LegacyState* legacy = nullptr;      // set in legacy modes
     const ShardRecord* shard = nullptr; // a shard of the trajectory: meta.json says which
+    nlohmann::ordered_json objects;     // host::objects_json(scene), made once
 };
 
 // `time_s`: the trajectory's time column, or null when it has none.
@@ -564,6 +565,7 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
                      {"roll_deg", pose.roll_deg},
                      {"pitch_deg", pose.pitch_deg},
                      {"yaw_deg", pose.yaw_deg}};
+    extra["objects"] = out.objects;
     extra["backend"] = out.backend;
     extra["backend_reason"] = out.backend_reason;
     extra["device"] = out.device;
@@ -914,7 +916,9 @@ int run_render(const std::vector<std::string>& argv) {
                     {},
                     {},
                     plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
-                    shard ? &*shard : nullptr};
+                    shard ? &*shard : nullptr,
+                    {}};
+    outputs.objects = host::objects_json(scene.value());
     // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of
     //    three frames, so rendering goes on while the previous frames are written.
     const bool trajectory = args.has("--trajectory");
@@ -925,6 +929,7 @@ int run_render(const std::vector<std::string>& argv) {
     std::vector<char> done(poses.size(), 0); // a shard's frames already on disk (re-run: skipped)
     if (dataset) {
         DatasetMeta meta = dataset_meta(plan, scene_path, backend_name, device, seed);
+        meta.objects_json = outputs.objects.dump();
         meta.shard = shard;
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vksonar/frame.h"
+#include "vksonar/scene.h"
 #include "vksonar/validity.h"
 
 namespace vksonar::host {
@@ -30,6 +31,18 @@ inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& mo
                             {"domain", v.domain},
                             {"action", v.action}});
     return validity;
+}
+
+// The scene's objects and classes (SceneInstance): {"instances": [{"id", "node", "mesh", "class",
+// "class_id"}, ...], "classes": [{"id", "name"}, ...]}; id 0 is no object and no class.
+inline nlohmann::ordered_json objects_json(const Scene& scene) {
+    nlohmann::ordered_json instances = nlohmann::ordered_json::array(), classes = nlohmann::ordered_json::array();
+    for (const SceneInstance& i : scene.instances())
+        instances.push_back(
+            {{"id", i.id}, {"node", i.node}, {"mesh", i.mesh}, {"class", i.class_name}, {"class_id", i.class_id}});
+    for (std::size_t c = 0; c < scene.classes().size(); ++c)
+        classes.push_back({{"id", c + 1}, {"name", scene.classes()[c]}});
+    return {{"instances", std::move(instances)}, {"classes", std::move(classes)}};
 }
 
 } // namespace vksonar::host

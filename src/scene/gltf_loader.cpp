@@ -270,10 +270,11 @@ private:
             if (node.mesh >= 0 && !node.weights.empty())
                 warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
             if (node.mesh >= 0) {
+                const std::uint32_t id = add_instance(item.node, where);
                 const std::vector<Mat4> instances = instance_matrices(node, where);
-                if (instances.empty()) add_draws(node.mesh, world, where);
+                if (instances.empty()) add_draws(node.mesh, world, id, where);
                 for (const Mat4& instance : instances)
-                    add_draws(node.mesh, multiply(world, instance), where);
+                    add_draws(node.mesh, multiply(world, instance), id, where);
             } else if (node.mesh < -1)
                 fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
@@ -330,7 +331,43 @@ private:
         return matrices;
     }
 
-    void add_draws(int mesh_index, const Mat4& world, const std::string& where) {
+    // extras.vksonar.class of a node or mesh ("" if not given); anything but a string is an error.
+    std::string class_of(const std::string& extras_json, const std::string& where) {
+        if (extras_json.empty()) return {};
+        const json extras = json::parse(extras_json, nullptr, /*allow_exceptions=*/false);
+        if (!extras.is_object() || !extras.contains("vksonar") || !extras["vksonar"].is_object()) return {};
+        const json& vk = extras["vksonar"];
+        if (!vk.contains("class")) return {};
+        if (!vk["class"].is_string() || vk["class"].get<std::string>().empty())
+            fail(ErrorCode::parse, where + ": extras.vksonar.class = " + vk["class"].dump() + " is not a name");
+        return vk["class"].get<std::string>();
+    }
+
+    // The object a node with a mesh is (SceneInstance): its id, name and class.
+    std::uint32_t add_instance(int node_index, const std::string& where) {
+        const tinygltf::Node& node = model_.nodes[std::size_t(node_index)];
+        SceneInstance instance;
+        instance.id = static_cast<std::uint32_t>(node_index) + 1;
+        instance.node = node.name;
+        std::string mesh_class;
+        if (std::size_t(node.mesh) < model_.meshes.size()) {
+            const tinygltf::Mesh& mesh = model_.meshes[std::size_t(node.mesh)];
+            instance.mesh = mesh.name;
+            mesh_class = class_of(mesh.extras_json_string, "mesh " + std::to_string(node.mesh));
+        }
+        instance.class_name = class_of(node.extras_json_string, where);
+        if (instance.class_name.empty()) instance.class_name = mesh_class;
+        if (instance.class_name.empty()) instance.class_name = instance.mesh;
+        if (instance.class_name.empty()) instance.class_name = "mesh " + std::to_string(node.mesh);
+        std::vector<std::string>& classes = out_.classes;
+        const auto known = std::find(classes.begin(), classes.end(), instance.class_name);
+        instance.class_id = static_cast<std::uint32_t>(known - classes.begin()) + 1;
+        if (known == classes.end()) classes.push_back(instance.class_name);
+        out_.instances.push_back(instance);
+        return instance.id;
+    }
+
+    void add_draws(int mesh_index, const Mat4& world, std::uint32_t instance, const std::string& where) {
         if (std::size_t(mesh_index) >= model_.meshes.size())
             fail(ErrorCode::parse, where + ": mesh " + std::to_string(mesh_index) + " does not exist (" +
                                        std::to_string(model_.meshes.size()) + " meshes)");
@@ -341,6 +378,7 @@ private:
             SceneDraw draw;
             draw.mesh = p.mesh;
             draw.material = material_index(p.gltf_material);
+            draw.instance = instance;
             draw.world_from_local = world;
             out_.draws.push_back(draw);
             out_.stats.triangles += out_.meshes[p.mesh].index_count / 3;

@@ -202,6 +202,12 @@ const SceneStats& Scene::stats() const {
 const std::vector<AcousticMaterial>& Scene::materials() const {
     return data_->materials;
 }
+const std::vector<SceneInstance>& Scene::instances() const {
+    return data_->instances;
+}
+const std::vector<std::string>& Scene::classes() const {
+    return data_->classes;
+}
 const std::string& Scene::effects_json() const {
     return data_->effects_json;
 }

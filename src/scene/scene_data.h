@@ -23,6 +23,8 @@ struct SceneData {
     std::vector<MeshRange> meshes;
     std::vector<SceneDraw> draws;            // world_from_local already includes the glTF y-up -> z-up rotation
     std::vector<AcousticMaterial> materials; // at least one (the default material) once a mesh exists
+    std::vector<SceneInstance> instances;    // glTF nodes with a mesh, in the order the node tree is walked
+    std::vector<std::string> classes;        // class names, class_id - 1
     SceneStats stats;
     std::string effects_json; // scene-level effect requests, "" if none
     std::string source_path;

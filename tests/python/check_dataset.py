@@ -75,6 +75,9 @@ with tempfile.TemporaryDirectory() as tmp:
         meta = json.load(open(os.path.join(folder, "frame_000002", "meta.json")))
         check(f.attrs["beam_geometry"] == meta["beam_geometry"]["used"] == "line_array"
               and f.attrs["beam_geometry_why"] == meta["beam_geometry"]["why"], "beam_geometry as meta.json")
+        objects = json.loads(f.attrs["objects"])
+        check(objects == meta["objects"] and [c["name"] for c in objects["classes"]][:2] == ["seabed", "piling"],
+              "objects as meta.json")
 
     # A time column (header t / time / time_s) fills /time and each folder's meta.json time_s.
     timed = os.path.join(tmp, "timed.csv")
