@@ -59,6 +59,16 @@ TEST(Api, SaveFlagsCombine) {
     EXPECT_EQ(mask, SaveFlags::profiles);
 }
 
+TEST(Api, AnEmptyRendererRefusesToRenderInsteadOfCrashing) {
+    Renderer empty;
+    Frame frame = empty.make_frame();
+    EXPECT_TRUE(frame.clean.empty());
+    auto r = empty.render(Pose{}, 0, frame);
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(r.error().message.find("Renderer::create"), std::string::npos) << r.error().message;
+}
+
 TEST(Api, ValidateReturnsResult) {
     EXPECT_TRUE(SonarConfig{}.validate().ok());
     SonarConfig config;

@@ -63,6 +63,10 @@ struct Access; // internal: src/core/access.h
 // Thread-safety: not thread-safe: one thread at a time; Renderers sharing a Context are independent.
 class Renderer {
 public:
+    // An empty renderer, to move one from create() into: render() on it fails with
+    // ErrorCode::invalid_argument and make_frame() gives an empty Frame; seed(), config() and validity()
+    // need a renderer from create(). Move-only; destroying it frees every buffer and Vulkan object it
+    // made (after its submissions finished), none of the Context's or Scene's.
     Renderer();
     ~Renderer();
     Renderer(Renderer&&) noexcept;
@@ -84,6 +88,7 @@ public:
     // Renders the scene from `pose` into `frame`. frame_index keys the noise RNG with the seed.
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
 
+    // The validated config this renderer was made with (valid as long as the renderer).
     const SonarConfig& config() const;
     // Each model this renderer's frames use, checked against its validity domain (validity.h): the
     // entries with ok == false are what the CLI prints as warnings and meta.json lists under "validity".

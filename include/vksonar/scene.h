@@ -111,6 +111,8 @@ struct SceneBounds {
 // Renderer made from it exists.
 class Scene {
 public:
+    // An empty scene (no mesh, no material, no draw), to build with add_mesh / add_material / add_draw.
+    // Move-only; the scene owns its arrays and frees them on destruction.
     Scene();
     ~Scene();
     Scene(Scene&&) noexcept;
@@ -123,16 +125,23 @@ public:
     // Adds one mesh and returns its index; then place it with add_draw.
     [[nodiscard]] Result<std::uint32_t> add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
                                                  const std::uint32_t* indices, std::uint32_t index_count);
+    // Adds a material (copied; not validated until a Renderer is made from the scene, which then names
+    // it in its error) and returns its index for SceneDraw::material. Never fails.
     std::uint32_t add_material(const AcousticMaterial& material);
+    // Adds a draw of a mesh added before with a material added before. Fails with
+    // ErrorCode::invalid_argument naming the field for an unknown mesh or material index or a non-finite
+    // transform entry; the scene is then unchanged.
     [[nodiscard]] Result<void> add_draw(const SceneDraw& draw);
 
+    // What the scene holds (counts, the file's extensions, the loader's warnings); the reference is
+    // valid as long as the scene.
     const SceneStats& stats() const;
     // Every drawn vertex through its draw's transform (linear in vertices x draws).
     SceneBounds bounds() const;
+    // The acoustic materials, indexed by SceneDraw::material; valid as long as the scene.
     const std::vector<AcousticMaterial>& materials() const;
     // The objects of a loaded glTF scene, in the order its node tree is walked, and their class names
-    // (SceneInstance); empty
-    // for a scene built with add_mesh / add_draw.
+    // (SceneInstance); empty for a scene built with add_mesh / add_draw. Valid as long as the scene.
     const std::vector<SceneInstance>& instances() const;
     const std::vector<std::string>& classes() const;
     // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.

@@ -89,10 +89,14 @@ std::uint64_t Renderer::seed() const {
 }
 
 Frame Renderer::make_frame() const {
-    return make_frame_for(*impl_);
+    return impl_ ? make_frame_for(*impl_) : Frame{};
 }
 
 Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame& frame) {
+    if (!impl_)
+        return make_error(ErrorCode::invalid_argument,
+                          "Renderer::render: an empty renderer (default-constructed or moved from; make one with "
+                          "Renderer::create)");
     return run_frame(*impl_, pose, frame_index, frame);
 }
 
