@@ -1,7 +1,9 @@
 // Stage 4a, per-column range profiles (docs/pipeline.md §4). One invocation owns one pixel column and
 // walks its rows top to bottom, so every profile cell has exactly one writer and a fixed summation
-// order: no atomics, bit-identical run to run. The host zeroes `profiles` (vkCmdFillBuffer) first:
-// a memset is far cheaper than per-invocation strided stores.
+// order: no atomics, bit-identical run to run. With the line-array beam geometry the profiles are per
+// cone column instead, each invocation gathering the pixels of its cone columns (gather_cone_columns).
+// The host zeroes `profiles` (vkCmdFillBuffer) first: a memset is far cheaper than per-invocation
+// strided stores.
 //
 // GPU layout: profiles[column * bins_padded + bin] (bins fastest, padded to a multiple of 4), so that
 // resample.comp loads four bins of a column as one vec4. The host transposes to the public
@@ -49,7 +51,7 @@ RangeSpread pixel_spread(uint row, uint column, vec2 er) {
 
 // Each pixel's cone coordinate (sonar_kernels.h cone_coord), computed once by the plan: the CPU
 // backend reads the same table, so both put a pixel into the same cone columns with the same shares
-// (GLSL's asin may be off by thousands of ulps, Vulkan's precision for it; a thousandth of a column).
+// (Vulkan allows GLSL's asin an error of 4096 ulps, 5e-4 rad near 1: a fifth of the default's cone column).
 layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { float cone_coords[]; };
 
 // line_array: one invocation owns the cone columns [first_cone, end_cone) (kConesPerInvocation of
