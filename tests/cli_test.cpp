@@ -644,6 +644,10 @@ TEST_F(Cli, InfoScaleAndFramingForAStrangersScene) {
     EXPECT_NE(info.out.find("triangles: 2 drawn"), std::string::npos) << info.out;
     EXPECT_NE(info.out.find("extensions: none"), std::string::npos) << info.out;
     EXPECT_EQ(run({"info", (dir_ / "none.gltf").string()}).exit_code, 2);
+    const CliRun harbour = run({"info", VKSONAR_ASSET_DIR "/scenes/harbour.gltf"});
+    EXPECT_NE(harbour.out.find("objects: 12 in 5 classes: seabed (1), wall (1), pier (1), piling (8), crate (1)"),
+              std::string::npos)
+        << harbour.out;
 
     // The quad as if modelled in millimetres (x 1000: 11.7 km across): one warning naming the fix.
     const std::vector<std::string> common = {"render",    "--scene",     (dir_ / "quad.gltf").string(),

@@ -37,6 +37,16 @@ int scene_info(const std::string& path, const std::string& asset_root) {
     for (const AcousticMaterial& m : scene->materials())
         std::printf("  %s: %s, backscatter %.1f dB\n", m.name.c_str(), models[static_cast<int>(m.model)],
                     m.backscatter_db);
+    // The objects ground-truth labels name (SceneInstance), counted per class.
+    std::string classes;
+    for (std::size_t c = 0; c < scene->classes().size(); ++c) {
+        std::size_t objects = 0;
+        for (const SceneInstance& i : scene->instances())
+            objects += i.class_id == c + 1;
+        classes += (classes.empty() ? "" : ", ") + scene->classes()[c] + " (" + std::to_string(objects) + ")";
+    }
+    std::printf("objects: %zu in %zu classes%s%s\n", scene->instances().size(), scene->classes().size(),
+                classes.empty() ? "" : ": ", classes.c_str());
     std::string extensions;
     for (const std::string& e : s.extensions)
         extensions += (extensions.empty() ? "" : ", ") + e;
