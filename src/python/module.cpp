@@ -211,7 +211,20 @@ PYBIND11_MODULE(vksonar, m) {
         .def("add", &SceneObject::add, py::arg("vertices"), py::arg("indices"), py::arg("backscatter_db") = -30.0,
              py::arg("transform") = py::none(), "Adds one more mesh, material and draw; returns the mesh index.")
         .def_property_readonly("triangles", [](const SceneObject& s) { return s.scene.stats().triangles; })
-        .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene.stats().warnings; });
+        .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene.stats().warnings; })
+        .def_property_readonly(
+            "objects",
+            [](const SceneObject& s) {
+                py::list out;
+                for (const SceneInstance& i : s.scene.instances())
+                    out.append(py::dict(py::arg("id") = i.id, py::arg("node") = i.node, py::arg("mesh") = i.mesh,
+                                        py::arg("class") = i.class_name, py::arg("class_id") = i.class_id));
+                return out;
+            },
+            "The glTF nodes with a mesh (meta.json 'objects'): id = node index + 1, class and class_id.")
+        .def_property_readonly(
+            "classes", [](const SceneObject& s) { return s.scene.classes(); },
+            "Class names; class_id k is classes[k - 1] (0: no class).");
 
     py::class_<FrameObject, std::shared_ptr<FrameObject>>(m, "Frame", "One rendered ping. Arrays are views, no copy.")
         .def_property_readonly(
@@ -359,6 +372,12 @@ PYBIND11_MODULE(vksonar, m) {
         .def_property_readonly("beams", [](const RendererObject& r) { return renderer_plan(r.renderer).beams; })
         .def_property_readonly("seed", [](const RendererObject& r) { return r.renderer.seed(); })
         .def_property_readonly("backend", [](const RendererObject& r) { return r.backend; })
+        .def_property_readonly(
+            "beam_geometry",
+            [](const RendererObject& r) {
+                return std::string(renderer_plan(r.renderer).line_array ? "line_array" : "planar");
+            },
+            "The beam geometry as resolved (meta.json beam_geometry.used): 'line_array' or 'planar'.")
         .def("validity", [](const RendererObject& r) {
             py::list out;
             for (const ModelValidity& v : r.renderer.validity())

@@ -157,3 +157,14 @@ def test_render_releases_the_gil():
     margin = 0.1 * (end - start)
     inside = [t for t in stamps if start + margin < t < end - margin]
     assert inside, f"no stamp during a {end - start:.4f} s render ({len(stamps)} stamps in all)"
+
+
+def test_scene_objects_and_beam_geometry_as_meta_json(tmp_path, renderer):
+    run = cli(tmp_path)
+    assert run.returncode == 0, run.stderr
+    meta = json.load(open(tmp_path / "meta.json"))
+    scene = vksonar.Scene.load(SCENE)
+    assert scene.objects == meta["objects"]["instances"]
+    assert scene.classes == [c["name"] for c in meta["objects"]["classes"]]
+    assert scene.classes[:2] == ["seabed", "piling"]
+    assert renderer.beam_geometry == meta["beam_geometry"]["used"] == "line_array"
