@@ -54,8 +54,11 @@ void main() {
     int first_source = first_beam - half_taps;
     int last_source = first_beam + int(kBeamsPerInvocation) - 1 + half_taps;
     if (!circular) {
-        first_source = max(first_source, 0);
-        last_source = min(last_source, beams - 1);
+        // Only the sources some weight of this run reaches (the host put them after the weights: the
+        // first and last source of each run, as exact floats); a zero weight would add exactly +0.
+        uint run_entry = uint(beams * taps) + 2u * gl_WorkGroupID.y;
+        first_source = max(max(first_source, 0), int(weight(run_entry)));
+        last_source = min(min(last_source, beams - 1), int(weight(run_entry + 1u)));
     }
     for (int source = first_source; source <= last_source; ++source) {
         int wrapped = source < 0 ? source + beams : (source >= beams ? source - beams : source);

@@ -271,7 +271,27 @@ Result<void> VulkanBackend::create_compute() {
     const std::uint32_t materials_vec4s = uniform_vec4s(bytes_of(materials));
     const std::uint32_t column_table_vec4s = uniform_vec4s(bytes_of(column_table));
     const std::uint32_t beam_table_vec4s = uniform_vec4s(bytes_of(beam_table));
-    const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(plan_.sidelobe_weight));
+    // The side-lobe table: the weights, then per run of kBeamsPerInvocation beams the first and last
+    // source beam any of its weights reaches (as floats, exact below 2^24, within [0, beams)):
+    // sidelobe.comp loops over those sources only. A line array's kernel spans the most beams at the fan's edges; near broadside most of its
+    // taps are 0, and a zero weight adds exactly +0, so skipping them changes no bit.
+    std::vector<float> sidelobe_table = plan_.sidelobe_weight;
+    for (std::uint32_t first = 0; first < plan_.beams; first += kBeamsPerInvocation) {
+        const std::uint32_t end = std::min(first + kBeamsPerInvocation, plan_.beams);
+        const std::int64_t half_taps = (std::int64_t(plan_.sidelobe_taps) - 1) / 2;
+        std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
+        for (std::uint32_t j = first; j < end; ++j) {
+            if (plan_.sidelobe_tap_begin[j] >= plan_.sidelobe_tap_end[j]) continue;
+            lo = std::min(lo, std::int64_t(j) - half_taps + plan_.sidelobe_tap_begin[j]);
+            hi = std::max(hi, std::int64_t(j) - half_taps + plan_.sidelobe_tap_end[j] - 1);
+        }
+        if (lo > hi) lo = hi = first; // no weight at all (cannot happen: the centre tap is 1)
+        lo = std::clamp<std::int64_t>(lo, 0, plan_.beams - 1);
+        hi = std::clamp<std::int64_t>(hi, 0, plan_.beams - 1);
+        sidelobe_table.push_back(static_cast<float>(lo));
+        sidelobe_table.push_back(static_cast<float>(hi));
+    }
+    const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(sidelobe_table));
 
     struct Table {
         Buffer* buffer;
@@ -288,7 +308,7 @@ Result<void> VulkanBackend::create_compute() {
         {&materials_, materials.data(), bytes_of(materials), storage | uniform},
         {&column_table_, column_table.data(), bytes_of(column_table), storage | uniform},
         {&beam_table_, beam_table.data(), bytes_of(beam_table), storage | uniform},
-        {&sidelobe_weight_, plan_.sidelobe_weight.data(), bytes_of(plan_.sidelobe_weight), storage | uniform},
+        {&sidelobe_weight_, sidelobe_table.data(), bytes_of(sidelobe_table), storage | uniform},
         {&cone_coord_, cones ? plan_.pixel_cone_coord.data() : no_cone_coord,
          cones ? bytes_of(plan_.pixel_cone_coord) : sizeof no_cone_coord, storage},
     }};
