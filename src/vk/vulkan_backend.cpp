@@ -273,8 +273,8 @@ Result<void> VulkanBackend::create_compute() {
     const std::uint32_t beam_table_vec4s = uniform_vec4s(bytes_of(beam_table));
     // The side-lobe table: the weights, then per run of kBeamsPerInvocation beams the first and last
     // source beam any of its weights reaches (as floats, exact below 2^24, within [0, beams)):
-    // sidelobe.comp loops over those sources only. A line array's kernel spans the most beams at the fan's edges; near broadside most of its
-    // taps are 0, and a zero weight adds exactly +0, so skipping them changes no bit.
+    // sidelobe.comp loops over those sources only. A line array's kernel spans the most beams at the fan's edges; near
+    // broadside most of its taps are 0, and a zero weight adds exactly +0, so skipping them changes no bit.
     std::vector<float> sidelobe_table = plan_.sidelobe_weight;
     for (std::uint32_t first = 0; first < plan_.beams; first += kBeamsPerInvocation) {
         const std::uint32_t end = std::min(first + kBeamsPerInvocation, plan_.beams);
