@@ -231,7 +231,8 @@ struct EchoTerms {
 // The material a hit pixel reflects with: its id, or material 0 (the config's default backscatter)
 // where the id is outside the table (a host depth image, or kNoMaterial under a hit).
 VKS_FN uint material_index(uint material_id, uint material_count) {
-    return material_id < material_count ? material_id : 0u;
+    uint m = material_id & kMaterialIdMask; // the instance id above it, when labels are on
+    return m < material_count ? m : 0u;
 }
 
 // (energy relative to SL, slant range) of the pixel (u, v) at reversed-Z depth d > 0 with material

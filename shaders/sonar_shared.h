@@ -19,6 +19,10 @@ using uint = std::uint32_t;
 VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
 VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
+// The material attachment holds material_id | instance << kInstanceShift (the instance only when
+// labels are asked for, else 0): the material is the low 16 bits.
+VKS_CONST uint kMaterialIdMask = 0xffffu;
+VKS_CONST uint kInstanceShift = 16u;
 VKS_CONST float kPi = 3.14159265358979323846f;
 
 // The compute stages' shader interface, declared once. Descriptor bindings of set 0: every shader

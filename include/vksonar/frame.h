@@ -16,6 +16,9 @@ enum class SaveFlags : std::uint32_t {
     normals = 1u << 1,  // sonar-frame normal + cos(incidence) per pixel
     echo = 1u << 2,     // per-pixel echo energy and slant range
     profiles = 1u << 3, // per-column range profiles and beam profiles before side lobes
+    // Ground-truth labels per polar cell (Frame::instance ... point). They are computed from the depth
+    // pass's material/instance image and the echo, so a labels frame also keeps depth, material and echo.
+    labels = 1u << 4,
 };
 
 constexpr SaveFlags operator|(SaveFlags a, SaveFlags b) {
@@ -25,7 +28,7 @@ constexpr SaveFlags operator&(SaveFlags a, SaveFlags b) {
     return static_cast<SaveFlags>(static_cast<std::uint32_t>(a) & static_cast<std::uint32_t>(b));
 }
 constexpr SaveFlags operator~(SaveFlags a) {
-    return static_cast<SaveFlags>(~static_cast<std::uint32_t>(a) & 0xfu);
+    return static_cast<SaveFlags>(~static_cast<std::uint32_t>(a) & 0x1fu);
 }
 constexpr SaveFlags& operator|=(SaveFlags& a, SaveFlags b) {
     return a = a | b;
@@ -79,6 +82,16 @@ struct Frame {
     std::vector<float> echo;             // rows * columns * 2: energy, slant range m
     std::vector<float> profiles;         // bins * profile_columns
     std::vector<float> beam_profiles;    // bins * beams, before the side-lobe convolution
+
+    // Ground-truth labels (SaveFlags::labels, else empty), bins * beams like `clean` (docs/labels.md).
+    // They follow each pixel's energy along the main lobe: the pixel's range shares, its columns and
+    // their beams, exactly as the beamform stage spreads it, before side lobes, speckle and noise.
+    std::vector<std::uint16_t> instance;     // SceneInstance::id with the most energy in the cell (0: none)
+    std::vector<float> instance_fraction;    // that instance's share of the cell's energy (0: no energy)
+    std::vector<std::uint16_t> object_class; // SceneInstance::class_id of `instance` (0: none)
+    std::vector<float> elevation;            // energy-weighted mean elevation, rad, up positive (NaN: no energy)
+    std::vector<float> elevation_spread;     // its energy-weighted standard deviation, rad (NaN: no energy)
+    std::vector<float> point; // bins * beams * 3: the instance's energy-weighted mean point, sonar frame, m (NaN)
 
     std::vector<StageTime> times;
     std::vector<EffectState> effects;

@@ -70,7 +70,10 @@ constexpr const char* kUsage =
     "                fan.png, polar.npy, polar.png and polar_u16.npy (the set 'default'). With it, exactly\n"
     "                what is listed: default, fan (fan.png), polar (polar.npy), polar_png (polar.png),\n"
     "                polar_u16 (polar_u16.npy), depth (depth.npy, view range m), normals (normals.npy),\n"
-    "                echo (echo.npy), cloud (cloud.ply); e.g. --save polar for a dataset, --save default,depth.\n"
+    "                echo (echo.npy), cloud (cloud.ply), labels (ground truth per cell: instance.npy, class.npy,\n"
+    "                instance_fraction.npy, elevation.npy, elevation_spread.npy, point.npy; on the fan image:\n"
+    "                instance_fan.npy, class_fan.npy, instance_fan.png; docs/labels.md); e.g. --save polar for a\n"
+    "                dataset, --save default,depth.\n"
     "                Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the legacy\n"
     "                image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
@@ -95,7 +98,7 @@ constexpr const char* kUsage =
     "  --shard-count with JOB_COMPLETION_INDEX: the number of shards (else VKSONAR_SHARD_COUNT)\n";
 
 const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
-                                             "normals", "echo", "cloud", "multibeam", "raw_scan"};
+                                             "normals", "echo", "cloud", "multibeam", "raw_scan",  "labels"};
 
 // What a render writes. meta.json always (it says what the arrays are); the rest as --save lists it,
 // or, without --save, the default set.
@@ -103,9 +106,10 @@ struct SaveSet {
     bool fan = true, polar = true, polar_png = true, polar_u16 = true; // the default set
     bool depth = false, normals = false, echo = false, cloud = false;
     bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
+    bool labels = false;                      // ground truth per cell and on the fan (docs/labels.md)
     SaveFlags mask() const {
         return (depth ? SaveFlags::depth : SaveFlags::none) | (normals ? SaveFlags::normals : SaveFlags::none) |
-               (echo ? SaveFlags::echo : SaveFlags::none);
+               (echo ? SaveFlags::echo : SaveFlags::none) | (labels ? SaveFlags::labels : SaveFlags::none);
     }
 };
 
@@ -155,11 +159,13 @@ SaveSet parse_save(const std::vector<std::string>& values) {
                 save.multibeam = true;
             else if (item == "raw_scan")
                 save.raw_scan = true;
+            else if (item == "labels")
+                save.labels = true;
             else
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
                                closest_word(item, kSaveItems) +
                                "'? valid: default,fan,polar,polar_png,polar_u16,depth,normals,echo,cloud,multibeam,"
-                               "raw_scan)");
+                               "raw_scan,labels)");
         }
     }
     return save;
@@ -338,6 +344,7 @@ McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path)
                         : save.echo      ? "echo"
                         : save.multibeam ? "multibeam"
                         : save.raw_scan  ? "raw_scan"
+                        : save.labels    ? "labels"
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a ROS 2 bag (" + path +
@@ -551,6 +558,7 @@ struct Outputs {
     LegacyState* legacy = nullptr;      // set in legacy modes
     const ShardRecord* shard = nullptr; // a shard of the trajectory: meta.json says which
     nlohmann::ordered_json objects;     // host::objects_json(scene), made once
+    std::vector<std::uint16_t> fan_ids; // --save labels: instance or class ids on the fan image
 };
 
 // `time_s`: the trajectory's time column, or null when it has none.
@@ -665,6 +673,34 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     }
 }
 
+// --save labels: the per-cell label arrays (as polar.npy's [bins, beams]) and the fan-image versions of
+// instance and class, nearest cell (docs/labels.md).
+void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
+    const std::uint32_t bins = frame.bins, beams = frame.beams;
+    const auto u16 = [&](const char* name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
+                         std::uint32_t cols) {
+        write_atomically(dir / name,
+                         [&](const std::string& p) { return host::write_npy_u16(p, v.data(), rows, cols); });
+    };
+    const auto f32 = [&](const char* name, const std::vector<float>& v, std::uint32_t channels) {
+        write_atomically(dir / name,
+                         [&](const std::string& p) { return host::write_npy_f32(p, v.data(), bins, beams, channels); });
+    };
+    u16("instance.npy", frame.instance, bins, beams);
+    f32("instance_fraction.npy", frame.instance_fraction, 1);
+    u16("class.npy", frame.object_class, bins, beams);
+    f32("elevation.npy", frame.elevation, 1);
+    f32("elevation_spread.npy", frame.elevation_spread, 1);
+    f32("point.npy", frame.point, 3);
+    const std::uint32_t width = out.fan.width(), height = out.fan.height();
+    out.fan.nearest_cell(frame.object_class, out.fan_ids);
+    u16("class_fan.npy", out.fan_ids, height, width);
+    out.fan.nearest_cell(frame.instance, out.fan_ids);
+    u16("instance_fan.npy", out.fan_ids, height, width);
+    host::label_image(out.fan_ids, width, height, out.image);
+    write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+}
+
 void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s) {
     const Plan& plan = out.plan;
     if (out.legacy) {
@@ -701,6 +737,7 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
         write_atomically(dir / "echo.npy", [&](const std::string& p) {
             return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
         });
+    if (out.save.labels) write_labels(out, dir, frame);
     if (out.save.cloud && !out.legacy)
         write_atomically(dir / "cloud.ply",
                          [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
@@ -917,6 +954,7 @@ int run_render(const std::vector<std::string>& argv) {
                     {},
                     plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
                     shard ? &*shard : nullptr,
+                    {},
                     {}};
     outputs.objects = host::objects_json(scene.value());
     // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of

@@ -85,7 +85,8 @@ void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& p
             shared::DepthPush& push = out[s * draws + i];
             for (int k = 0; k < 16; ++k)
                 push.clip_from_local[k] = static_cast<float>(clip_local[k]);
-            push.material_id = d.material;
+            // With labels the instance rides above the material (Renderer::create has checked both fit).
+            push.material_id = plan.labels ? d.material | d.instance << shared::kInstanceShift : d.material;
             push.pad0 = push.pad1 = push.pad2 = 0;
         }
     }

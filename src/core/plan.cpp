@@ -522,6 +522,12 @@ Result<void> plan_materials(Plan& p, const SceneData& scene, bool& any_angle_dep
     }
     // Only materials that something is drawn with count for the incidence rule: a scene always carries
     // the implicit Lambert "default" material, used or not.
+    // The depth pass's id image holds the material in its low 16 bits (the instance in the high ones
+    // when labels are asked for; kNoMaterial's low half, 0xffff, means no hit).
+    if (scene.materials.size() >= shared::kMaterialIdMask)
+        return make_error(ErrorCode::invalid_argument, "scene: " + std::to_string(scene.materials.size()) +
+                                                           " materials; at most " +
+                                                           std::to_string(shared::kMaterialIdMask - 1));
     std::vector<bool> drawn(scene.materials.size(), false);
     for (const SceneDraw& d : scene.draws)
         if (d.material < drawn.size()) drawn[d.material] = true;

@@ -103,6 +103,9 @@ struct Plan {
     // The depth pass records each pixel's face normal (normal_method = geometric with the incidence
     // effect on); otherwise no attachment is created, recorded or copied.
     bool face_normals = false;
+    // Ground-truth labels were asked for (SaveFlags::labels): the depth pass writes each draw's instance
+    // id into the high 16 bits of the material image (compose_depth_draws), for the labels stage.
+    bool labels = false;
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
 

@@ -17,6 +17,7 @@
 #include "host/workers.h"
 #include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
+#include "stages/labels.h"
 #include "vk/host_depth.h"
 #include "vk/vulkan_backend.h"
 #include "vk/vulkan_context.h"
@@ -28,14 +29,42 @@ public:
     Plan plan;
     RendererOptions options;
     std::unique_ptr<StageBackend> backend;
-    std::unique_ptr<host::Workers> workers;  // host-stage threads, made once here
-    vk::HostDepthPass* host_depth = nullptr; // HostDepthRenderer: `backend`, typed
+    std::unique_ptr<host::Workers> workers;   // host-stage threads, made once here
+    vk::HostDepthPass* host_depth = nullptr;  // HostDepthRenderer: `backend`, typed
+    std::unique_ptr<cpu::LabelsStage> labels; // only with SaveFlags::labels
 };
 
 namespace {
 
 Frame make_frame_for(const RendererImpl& impl);
 Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame);
+
+// What the backend must fill: what was asked for, and with labels the material image and the echo
+// they are computed from.
+SaveFlags backend_save_mask(const RendererOptions& options) {
+    return any(options.save_mask & SaveFlags::labels) ? options.save_mask | SaveFlags::depth | SaveFlags::echo
+                                                      : options.save_mask;
+}
+
+// Labels: the plan's flag, and the stage with each instance's class. Instance ids ride in 16 bits of
+// the depth pass's id image.
+Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
+    if (!any(impl.options.save_mask & SaveFlags::labels)) return {};
+    impl.plan.labels = true;
+    std::vector<std::uint16_t> class_of_instance(1, 0);
+    if (scene != nullptr) {
+        for (const SceneInstance& instance : scene->instances) {
+            if (instance.id > 0xffffu || instance.class_id > 0xffffu)
+                return make_error(ErrorCode::invalid_argument, "labels: node '" + instance.node + "' has instance id " +
+                                                                   std::to_string(instance.id) +
+                                                                   "; labels hold ids up to 65535");
+            if (class_of_instance.size() <= instance.id) class_of_instance.resize(instance.id + 1, 0);
+            class_of_instance[instance.id] = static_cast<std::uint16_t>(instance.class_id);
+        }
+    }
+    impl.labels = std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get());
+    return {};
+}
 
 } // namespace
 
@@ -60,6 +89,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
     impl->plan = std::move(plan.value());
     impl->options = options;
     impl->workers = std::make_unique<host::Workers>(options.host_threads);
+    if (auto labels = set_up_labels(*impl, &scene_data(scene)); !labels) return labels.error();
     if (options.backend == Backend::vulkan) {
         if (!context.has_vulkan()) {
             return make_error(ErrorCode::no_device, "no Vulkan device in this context; use --backend cpu");
@@ -104,7 +134,7 @@ namespace {
 
 Frame make_frame_for(const RendererImpl& impl) {
     const Plan& p = impl.plan;
-    const SaveFlags mask = impl.options.save_mask;
+    const SaveFlags mask = backend_save_mask(impl.options);
     const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
     const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
     Frame f;
@@ -129,6 +159,14 @@ Frame make_frame_for(const RendererImpl& impl) {
         f.profiles.assign(static_cast<std::size_t>(p.bins) * p.profile_columns, 0.0f);
         f.beam_profiles.assign(cells, 0.0f);
     }
+    if (any(mask & SaveFlags::labels)) {
+        f.instance.assign(cells, 0);
+        f.instance_fraction.assign(cells, 0.0f);
+        f.object_class.assign(cells, 0);
+        f.elevation.assign(cells, 0.0f);
+        f.elevation_spread.assign(cells, 0.0f);
+        f.point.assign(cells * 3, 0.0f);
+    }
     f.times.reserve(8);
     f.stages_run.reserve(8);
     f.effects = p.effects.states;
@@ -147,8 +185,15 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     // the capacity reserved by make_frame; no allocation).
     frame.times.clear();
     frame.stages_run.clear();
-    auto r = impl.backend->render(pose, impl.options.save_mask, frame);
+    auto r = impl.backend->render(pose, backend_save_mask(impl.options), frame);
     if (!r) return r;
+    if (impl.labels) {
+        const auto start = std::chrono::steady_clock::now();
+        impl.labels->run(frame);
+        frame.times.push_back(
+            {"labels", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()});
+        frame.stages_run.push_back("labels");
+    }
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
@@ -182,6 +227,7 @@ Result<HostDepthRenderer> HostDepthRenderer::create(Context& context, const Sona
     r.impl_->plan = std::move(plan.value());
     r.impl_->options = options;
     r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
+    if (auto labels = set_up_labels(*r.impl_, nullptr); !labels) return labels.error();
     auto pass = vk::HostDepthPass::create(*context_vulkan(context), r.impl_->plan, desc, options);
     if (!pass) return pass.error();
     r.impl_->host_depth = pass.value().get();
@@ -207,7 +253,7 @@ Result<void> HostDepthRenderer::process(const HostDepthImage& depth, std::uint64
 }
 
 Result<void> HostDepthRenderer::record(VkCommandBuffer commands, const HostDepthImage& depth) {
-    return impl_->host_depth->record(commands, depth, impl_->options.save_mask);
+    return impl_->host_depth->record(commands, depth, backend_save_mask(impl_->options));
 }
 
 Result<void> HostDepthRenderer::read_back(std::uint64_t frame_index, Frame& frame) {

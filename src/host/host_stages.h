@@ -49,6 +49,9 @@ class FanRenderer {
 public:
     explicit FanRenderer(const Plan& plan); // precomputes the pixel -> (beam, bin) lookup once
     void render(const Frame& frame, Image& out) const;
+    // A per-cell id array (bins * beams, e.g. Frame::instance) on the fan image's pixels, by the
+    // nearest cell (never interpolated: ids stay ids); 0 outside the fan. out: width * height.
+    void nearest_cell(const std::vector<std::uint16_t>& cells, std::vector<std::uint16_t>& out) const;
     std::uint32_t width() const;
     std::uint32_t height() const;
 
@@ -61,6 +64,10 @@ private:
     std::uint32_t beams_ = 0, bins_ = 0;
     Colormap colormap_ = Colormap::sonar;
 };
+
+// Ids (width * height, 0 = none) as colours for looking at: 0 black, every other id a fixed colour
+// of its own (a hash of the id, bright enough to see), the same in every frame and run.
+void label_image(const std::vector<std::uint16_t>& ids, std::uint32_t width, std::uint32_t height, Image& out);
 
 // Files. Errors name the path.
 [[nodiscard]] Result<void> write_png(const std::string& path, const Image& image);

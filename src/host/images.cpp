@@ -252,4 +252,39 @@ void FanRenderer::render(const Frame& frame, Image& out) const {
     }
 }
 
+void FanRenderer::nearest_cell(const std::vector<std::uint16_t>& cells, std::vector<std::uint16_t>& out) const {
+    const std::size_t npix = static_cast<std::size_t>(width_) * height_;
+    out.assign(npix, 0);
+    if (cells.size() < static_cast<std::size_t>(beams_) * bins_) return;
+    for (std::size_t p = 0; p < npix; ++p) {
+        const std::int32_t j0 = beam0_[p];
+        if (j0 < 0) continue;
+        // The nearer of the two beams and of the two bins that render() blends.
+        std::size_t j = static_cast<std::size_t>(j0);
+        if (beam_t_[p] >= 0.5f) j = j + 1 < beams_ ? j + 1 : 0;
+        std::size_t k = static_cast<std::size_t>(bin0_[p]);
+        if (bin_t_[p] >= 0.5f && k + 1 < bins_) ++k;
+        out[p] = cells[k * beams_ + j];
+    }
+}
+
+void label_image(const std::vector<std::uint16_t>& ids, std::uint32_t width, std::uint32_t height, Image& out) {
+    ensure_size(out, width, height);
+    const std::size_t npix = static_cast<std::size_t>(width) * height;
+    for (std::size_t p = 0; p < npix && p < ids.size(); ++p) {
+        Rgb8 c{0, 0, 0};
+        if (ids[p] != 0) {
+            // splitmix-style bit mixing of the id, each channel lifted into [64, 255]
+            std::uint32_t h = ids[p] * 0x9e3779b9u;
+            h ^= h >> 16;
+            h *= 0x85ebca6bu;
+            h ^= h >> 13;
+            c = {static_cast<std::uint8_t>(64 + (h & 0xff) * 191 / 255),
+                 static_cast<std::uint8_t>(64 + ((h >> 8) & 0xff) * 191 / 255),
+                 static_cast<std::uint8_t>(64 + ((h >> 16) & 0xff) * 191 / 255)};
+        }
+        put(out, p, c);
+    }
+}
+
 } // namespace vksonar::host

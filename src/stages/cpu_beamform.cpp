@@ -11,30 +11,11 @@
 
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
+#include "stages/pixel_spread.h"
 
 namespace vksonar::cpu {
 
 namespace {
-
-// The range spread of pixel (row j, column c) of energy e, from the five-row window of its column (as
-// profile.comp's pixel_spread; range 0 = no hit or outside the image). Inlined into both profile loops.
-template <class Real>
-[[gnu::always_inline]] inline typename Math<Real>::RangeSpread pixel_spread(const Plan& plan, const float* echo2,
-                                                                            std::uint32_t j, std::uint32_t c, Real e,
-                                                                            Real range_min, Real inv_bin_width) {
-    using vec2 = typename Math<Real>::vec2;
-    const std::uint32_t C = plan.columns, R = plan.rows;
-    const auto row_echo = [&](std::int64_t row) {
-        if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
-        const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
-        return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
-    };
-    const std::int64_t jj = j;
-    const Real range = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + c) + 1]);
-    return Math<Real>::range_spread(plan.params.range_kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, range),
-                                    row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width,
-                                    static_cast<Real>(plan.params.edge_relative_jump), plan.bins);
-}
 
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x profile_columns). Each
 // pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by

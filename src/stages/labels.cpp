@@ -1,0 +1,243 @@
+// The labels stage (labels.h): one beam at a time, every pixel that feeds the beam, each of its range
+// shares into the cell it lands in, with the pixel's instance, elevation and 3-D point.
+#include "stages/labels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <utility>
+
+#include "core/sonar_math.hpp"
+#include "host/workers.h"
+#include "stages/pixel_spread.h"
+
+namespace vksonar::cpu {
+
+namespace {
+using M = Math<double>;
+
+struct Slot {
+    double energy;
+    double x, y, z; // energy-weighted sums of the contributions' points
+    std::uint32_t id;
+};
+
+struct Cell {
+    Slot slots[kLabelSlots];
+    std::uint32_t used;
+    double energy;      // every contribution, told apart or not
+    double psi, psi_sq; // energy-weighted sums of the elevation and its square
+};
+
+} // namespace
+
+// What the beams need of a pixel, worked out once per frame (a pixel feeds up to four beams).
+struct PixelLabel {
+    M::RangeSpread spread; // k_last < k_first: no energy in the window
+    float dir[3];          // unit direction, sonar frame (x forward, y port, z up)
+    float elevation;       // rad, up positive
+    float range;           // slant range, m
+    std::uint32_t instance;
+};
+
+struct LabelsStage::Scratch {
+    std::vector<Cell> cells; // bins of the beam being labelled
+};
+
+struct LabelsStage::Pixels {
+    std::vector<PixelLabel> pixels; // rows * columns
+};
+
+LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers)
+    : plan_(plan), class_of_instance_(std::move(class_of_instance)), workers_(workers) {
+    const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
+    for (std::uint32_t i = 0; i < parts; ++i) {
+        scratch_.push_back(std::make_unique<Scratch>());
+        scratch_.back()->cells.resize(plan_.bins);
+    }
+    pixels_ = std::make_unique<Pixels>();
+    pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
+}
+
+LabelsStage::~LabelsStage() = default;
+
+namespace {
+
+struct Job {
+    const Plan* plan;
+    const std::vector<std::uint16_t>* class_of_instance;
+    std::vector<std::unique_ptr<LabelsStage::Scratch>>* scratch;
+    std::vector<PixelLabel>* pixels;
+    Frame* frame;
+};
+
+// Adds w (energy) of a pixel of `instance` at elevation psi and point p to the cell.
+inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const double p[3]) {
+    cell.energy += w;
+    cell.psi += w * psi;
+    cell.psi_sq += w * psi * psi;
+    for (std::uint32_t s = 0; s < cell.used; ++s) {
+        Slot& slot = cell.slots[s];
+        if (slot.id != instance) continue;
+        slot.energy += w;
+        slot.x += w * p[0];
+        slot.y += w * p[1];
+        slot.z += w * p[2];
+        return;
+    }
+    if (cell.used == kLabelSlots) return; // counted in the total only (labels.h)
+    cell.slots[cell.used++] = {w, w * p[0], w * p[1], w * p[2], instance};
+}
+
+// Rows [row_begin, row_end) of the pixel cache: each pixel's range spread (as the beamform stage's),
+// direction, elevation and instance.
+void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& pixels, std::uint32_t row_begin,
+                std::uint32_t row_end) {
+    const std::uint32_t W = plan.slice_columns;
+    const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
+    for (std::uint32_t row = row_begin; row < row_end; ++row) {
+        const double v = M::pixel_coord(row, plan.rows, plan.tan_half_v);
+        for (std::uint32_t column = 0; column < plan.columns; ++column) {
+            const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
+            PixelLabel& out = pixels[p];
+            out.spread.k_first = 0;
+            out.spread.k_last = -1;
+            const double e = frame.echo[2 * p];
+            if (!(e > 0.0)) continue;
+            out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
+            const double u = M::pixel_coord(column % W, W, plan.tan_half_h);
+            const shared::SliceInfo& slice = plan.slice_info[column / W];
+            const M::vec3 ray = M::pixel_ray(u, v, slice.cos_center, slice.sin_center);
+            const double inv_length = 1.0 / std::sqrt(1.0 + u * u + v * v);
+            for (int i = 0; i < 3; ++i)
+                out.dir[i] = static_cast<float>(ray[i] * inv_length);
+            out.elevation = static_cast<float>(M::pixel_elevation(u, v));
+            out.range = frame.echo[2 * p + 1];
+            out.instance = frame.material[p] == shared::kNoMaterial ? 0u : frame.material[p] >> shared::kInstanceShift;
+        }
+    }
+}
+
+// One pixel's energy into the beam's cells along its range shares. Its point in a cell lies along its
+// direction at the range of the part of its footprint inside the cell's bin (the footprint kernel
+// spreads one pixel over many bins at grazing incidence; the tent and nearest kernels keep its range).
+void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, std::size_t p, std::vector<Cell>& cells,
+               double weight, int& k_low, int& k_high) {
+    const M::RangeSpread& spread = pixel.spread;
+    if (spread.k_last < spread.k_first) return;
+    const double e = frame.echo[2 * p] * weight;
+    const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
+    for (int k = spread.k_first; k <= spread.k_last; ++k) {
+        const double w = M::range_share(spread, k) * e;
+        if (!(w > 0.0)) continue;
+        double range = pixel.range;
+        if (footprint) {
+            const double x = 0.5 * (std::max(spread.lo, double(k)) + std::min(spread.hi, double(k + 1)));
+            range = plan.config.range_min_m + x * plan.bin_width_m;
+        }
+        const double point[3] = {pixel.dir[0] * range, pixel.dir[1] * range, pixel.dir[2] * range};
+        add(cells[static_cast<std::size_t>(k)], pixel.instance, w, pixel.elevation, point);
+        k_low = std::min(k_low, k);
+        k_high = std::max(k_high, k);
+    }
+}
+
+// Labels beam j into the frame's label arrays.
+void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
+                const std::vector<PixelLabel>& pixels, std::vector<Cell>& cells, Frame& frame, std::uint32_t j) {
+    const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
+    int k_low = static_cast<int>(plan.bins), k_high = -1;
+    for (std::uint32_t q = plan.beam_column_begin[j]; q < plan.beam_column_end[j]; ++q) {
+        const std::uint32_t share = M::resample_share(plan.column_beam[q], j, beams, plan.circular);
+        const double cw = plan.column_weight[q];
+        const double beam_weight = share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
+        if (!(beam_weight > 0.0)) continue;
+        for (std::uint32_t row = 0; row < plan.rows; ++row) {
+            if (!plan.line_array) {
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
+                add_pixel(plan, frame, pixels[p], p, cells, beam_weight, k_low, k_high);
+                continue;
+            }
+            // The pixels of this row whose cone coordinate x lies within one column of q: x in [q - 1, q + 1).
+            const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
+            const float lo = static_cast<float>(q) - 1.0f, hi = static_cast<float>(q) + 1.0f;
+            std::uint32_t c = static_cast<std::uint32_t>(std::lower_bound(cone_x, cone_x + plan.columns, lo) - cone_x);
+            for (; c < plan.columns && cone_x[c] < hi; ++c) {
+                const double cone_weight = M::cone_share(cone_x[c], static_cast<int>(q), static_cast<int>(PC));
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+                if (cone_weight > 0.0)
+                    add_pixel(plan, frame, pixels[p], p, cells, cone_weight * beam_weight, k_low, k_high);
+            }
+        }
+    }
+
+    // (cells without energy keep the values run() filled in)
+    for (int k = k_low; k <= k_high; ++k) {
+        Cell& cell = cells[static_cast<std::size_t>(k)];
+        if (cell.energy > 0.0 && cell.used > 0) {
+            // The most energy wins; an exact tie goes to the lower id.
+            const Slot* best = &cell.slots[0];
+            for (std::uint32_t s = 1; s < cell.used; ++s) {
+                const Slot& slot = cell.slots[s];
+                if (slot.energy > best->energy || (slot.energy == best->energy && slot.id < best->id)) best = &slot;
+            }
+            const std::size_t out = static_cast<std::size_t>(k) * beams + j;
+            frame.instance[out] = static_cast<std::uint16_t>(best->id);
+            frame.instance_fraction[out] = static_cast<float>(best->energy / cell.energy);
+            frame.object_class[out] = best->id < class_of_instance.size() ? class_of_instance[best->id] : 0;
+            const double mean = cell.psi / cell.energy;
+            frame.elevation[out] = static_cast<float>(mean);
+            frame.elevation_spread[out] =
+                static_cast<float>(std::sqrt(std::max(0.0, cell.psi_sq / cell.energy - mean * mean)));
+            frame.point[3 * out] = static_cast<float>(best->x / best->energy);
+            frame.point[3 * out + 1] = static_cast<float>(best->y / best->energy);
+            frame.point[3 * out + 2] = static_cast<float>(best->z / best->energy);
+        }
+        cell = Cell{};
+    }
+}
+
+} // namespace
+
+void LabelsStage::run(Frame& frame) {
+    Job job{&plan_, &class_of_instance_, &scratch_, &pixels_->pixels, &frame};
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
+    std::fill(frame.instance_fraction.begin(), frame.instance_fraction.end(), 0.0f);
+    std::fill(frame.object_class.begin(), frame.object_class.end(), std::uint16_t(0));
+    std::fill(frame.elevation.begin(), frame.elevation.end(), nan);
+    std::fill(frame.elevation_spread.begin(), frame.elevation_spread.end(), nan);
+    std::fill(frame.point.begin(), frame.point.end(), nan);
+    for (auto& s : scratch_)
+        std::fill(s->cells.begin(), s->cells.end(), Cell{});
+    // Beams dealt out in blocks of 8 in turn: a line array's edge beams gather from more columns.
+    constexpr std::uint32_t kBeamBlock = 8;
+    const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
+        const Job& t = *static_cast<const Job*>(context);
+        const std::uint32_t rows = t.plan->rows;
+        cache_rows(*t.plan, *t.frame, *t.pixels, static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
+                   static_cast<std::uint32_t>(std::uint64_t(rows) * (part + 1) / parts));
+    };
+    const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
+        const Job& t = *static_cast<const Job*>(context);
+        std::vector<Cell>& cells = (*t.scratch)[part]->cells;
+        const std::uint32_t beams = t.plan->beams;
+        for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
+            for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
+                label_beam(*t.plan, *t.class_of_instance, *t.pixels, cells, *t.frame, j);
+    };
+    if (workers_ != nullptr && workers_->count() > 1) {
+        workers_->run(cache, &job);
+        workers_->run(task, &job);
+    } else {
+        cache(&job, 0, 1);
+        task(&job, 0, 1);
+    }
+    // The material image as without labels: the material id alone.
+    for (std::uint32_t& m : frame.material)
+        if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;
+}
+
+} // namespace vksonar::cpu

@@ -1,0 +1,54 @@
+// The labels stage (SaveFlags::labels, docs/labels.md): per polar cell, the object that put the most
+// energy into it, its share, its class, the energy-weighted elevation and its spread, and the object's
+// mean 3-D point. It runs on the host after either backend, on that backend's material/instance image
+// and echo, and follows each pixel's energy along the main lobe exactly as the beamform stage spreads it
+// (pixel_spread's range shares, the cone or pixel columns, the beam table), in double. Side lobes,
+// speckle and noise are left out: a label says what the beam looks at, not what leaks into it.
+//
+// Made only when labels are asked for (effects on demand): its scratch is allocated here, once.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/plan.h"
+#include "vksonar/frame.h"
+
+namespace vksonar::host {
+class Workers;
+}
+
+namespace vksonar::cpu {
+
+// Contributions of more than kLabelSlots distinct instances to one cell: the first kLabelSlots (in the
+// order the beam's pixels are visited) are told apart, the rest count only in the cell's total energy
+// (so a cell that mixed that many objects has a small instance_fraction, as it should).
+inline constexpr std::uint32_t kLabelSlots = 4;
+
+class LabelsStage {
+public:
+    // class_of_instance[id] = the class id of instance id (0 for 0 and any id past the table).
+    // workers: the Renderer's threads, borrowed (null: all on the caller).
+    LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers);
+    ~LabelsStage();
+    LabelsStage(const LabelsStage&) = delete;
+    LabelsStage& operator=(const LabelsStage&) = delete;
+
+    // Reads frame.material (material | instance << 16, as the depth pass wrote it with plan.labels) and
+    // frame.echo, fills frame.instance ... frame.point, then leaves frame.material as material ids
+    // (kNoMaterial where nothing was hit), as without labels. The result does not depend on the threads.
+    void run(Frame& frame);
+
+    struct Scratch; // per thread: one beam's bins
+    struct Pixels;  // per pixel: what the beams read of it
+
+private:
+    const Plan& plan_; // the Renderer's, which owns this stage
+    std::vector<std::uint16_t> class_of_instance_;
+    host::Workers* workers_;
+    std::vector<std::unique_ptr<Scratch>> scratch_; // one per worker thread
+    std::unique_ptr<Pixels> pixels_;
+};
+
+} // namespace vksonar::cpu

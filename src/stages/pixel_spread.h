@@ -1,0 +1,34 @@
+// The range spread of one pixel, shared by the beamform stage's profiles (cpu_beamform.cpp) and the
+// labels stage (labels.cpp), which must spread each pixel's energy over the same bins with the same
+// shares.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "core/plan.h"
+#include "core/sonar_math.hpp"
+
+namespace vksonar::cpu {
+
+// The range spread of pixel (row j, column c) of energy e, from the five-row window of its column (as
+// profile.comp's pixel_spread; range 0 = no hit or outside the image). Inlined into both profile loops.
+template <class Real>
+[[gnu::always_inline]] inline typename Math<Real>::RangeSpread pixel_spread(const Plan& plan, const float* echo2,
+                                                                            std::uint32_t j, std::uint32_t c, Real e,
+                                                                            Real range_min, Real inv_bin_width) {
+    using vec2 = typename Math<Real>::vec2;
+    const std::uint32_t C = plan.columns, R = plan.rows;
+    const auto row_echo = [&](std::int64_t row) {
+        if (row < 0 || row >= static_cast<std::int64_t>(R)) return vec2(Real(0));
+        const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c);
+        return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
+    };
+    const std::int64_t jj = j;
+    const Real range = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + c) + 1]);
+    return Math<Real>::range_spread(plan.params.range_kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, range),
+                                    row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width,
+                                    static_cast<Real>(plan.params.edge_relative_jump), plan.bins);
+}
+
+} // namespace vksonar::cpu
