@@ -74,7 +74,7 @@ protected:
 // A rectangle of width x height metres, centred at `centre` (world), facing the -x direction
 // (towards a sonar at the origin looking along +x), optionally rotated by yaw_deg about z.
 inline void add_quad(Scene& scene, double cx, double cy, double cz, double width_m, double height_m,
-                     const AcousticMaterial& material, double yaw_deg = 0.0) {
+                     const AcousticMaterial& material, double yaw_deg = 0.0, std::uint32_t instance = 0) {
     const float hw = static_cast<float>(width_m / 2), hh = static_cast<float>(height_m / 2);
     const float positions[] = {0, -hw, -hh, 0, hw, -hh, 0, hw, hh, 0, -hw, hh};
     const std::uint32_t indices[] = {0, 1, 2, 0, 2, 3};
@@ -86,6 +86,7 @@ inline void add_quad(Scene& scene, double cx, double cy, double cz, double width
     const double a = yaw_deg * 3.14159265358979323846 / 180.0;
     draw.world_from_local = {std::cos(a), std::sin(a), 0, 0, -std::sin(a), std::cos(a), 0,  0,
                              0,           0,           1, 0, cx,           cy,          cz, 1};
+    draw.instance = instance;
     auto added = scene.add_draw(draw);
     ASSERT_TRUE(added.ok()) << added.error().message;
 }
@@ -101,8 +102,9 @@ inline void add_quad(Scene& scene, double cx, double cy, double cz, double width
 }
 
 // A Lambert UV sphere of radius rs centred at (cx, cy, cz), `segments` around and segments / 2 from
-// pole to pole, backscatter mu_db.
-inline void add_sphere(Scene& scene, double cx, double cy, double cz, double rs, int segments, double mu_db) {
+// pole to pole, backscatter mu_db; its draw carries `instance` (SceneDraw::instance, for labels).
+inline void add_sphere(Scene& scene, double cx, double cy, double cz, double rs, int segments, double mu_db,
+                       std::uint32_t instance = 0) {
     const double pi = 3.14159265358979323846;
     std::vector<float> positions;
     std::vector<std::uint32_t> indices;
@@ -131,6 +133,7 @@ inline void add_sphere(Scene& scene, double cx, double cy, double cz, double rs,
     draw.mesh = mesh.value();
     draw.material = scene.add_material(material);
     draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, cx, cy, cz, 1};
+    draw.instance = instance;
     ASSERT_TRUE(scene.add_draw(draw).ok());
 }
 

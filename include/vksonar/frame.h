@@ -91,7 +91,9 @@ struct Frame {
     std::vector<std::uint16_t> object_class; // SceneInstance::class_id of `instance` (0: none)
     std::vector<float> elevation;            // energy-weighted mean elevation, rad, up positive (NaN: no energy)
     std::vector<float> elevation_spread;     // its energy-weighted standard deviation, rad (NaN: no energy)
-    std::vector<float> point; // bins * beams * 3: the instance's energy-weighted mean point, sonar frame, m (NaN)
+    // bins * beams * 3: the point of the instance's strongest return in the cell (the pixel that put the
+    // most energy there, at the range of the part of its footprint inside the bin), sonar frame, m (NaN)
+    std::vector<float> point;
 
     std::vector<StageTime> times;
     std::vector<EffectState> effects;

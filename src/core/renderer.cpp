@@ -61,6 +61,11 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
             if (class_of_instance.size() <= instance.id) class_of_instance.resize(instance.id + 1, 0);
             class_of_instance[instance.id] = static_cast<std::uint16_t>(instance.class_id);
         }
+        for (std::size_t i = 0; i < scene->draws.size(); ++i) // an engine's own ids (Scene::add_draw)
+            if (scene->draws[i].instance > 0xffffu)
+                return make_error(ErrorCode::invalid_argument,
+                                  "labels: draw " + std::to_string(i) + " has instance id " +
+                                      std::to_string(scene->draws[i].instance) + "; labels hold ids up to 65535");
     }
     impl.labels = std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get());
     return {};

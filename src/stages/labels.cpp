@@ -20,7 +20,8 @@ using M = Math<double>;
 
 struct Slot {
     double energy;
-    double x, y, z; // energy-weighted sums of the contributions' points
+    double peak; // the strongest single contribution (one pixel's share) and its point
+    float x, y, z;
     std::uint32_t id;
 };
 
@@ -82,13 +83,17 @@ inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const 
         Slot& slot = cell.slots[s];
         if (slot.id != instance) continue;
         slot.energy += w;
-        slot.x += w * p[0];
-        slot.y += w * p[1];
-        slot.z += w * p[2];
+        if (w > slot.peak) { // the first of equal contributions stays (visit order is fixed)
+            slot.peak = w;
+            slot.x = static_cast<float>(p[0]);
+            slot.y = static_cast<float>(p[1]);
+            slot.z = static_cast<float>(p[2]);
+        }
         return;
     }
     if (cell.used == kLabelSlots) return; // counted in the total only (labels.h)
-    cell.slots[cell.used++] = {w, w * p[0], w * p[1], w * p[2], instance};
+    cell.slots[cell.used++] = {w,       w, static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2]),
+                               instance};
 }
 
 // Rows [row_begin, row_end) of the pixel cache: each pixel's range spread (as the beamform stage's),
@@ -191,9 +196,9 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
             frame.elevation[out] = static_cast<float>(mean);
             frame.elevation_spread[out] =
                 static_cast<float>(std::sqrt(std::max(0.0, cell.psi_sq / cell.energy - mean * mean)));
-            frame.point[3 * out] = static_cast<float>(best->x / best->energy);
-            frame.point[3 * out + 1] = static_cast<float>(best->y / best->energy);
-            frame.point[3 * out + 2] = static_cast<float>(best->z / best->energy);
+            frame.point[3 * out] = best->x;
+            frame.point[3 * out + 1] = best->y;
+            frame.point[3 * out + 2] = best->z;
         }
         cell = Cell{};
     }

@@ -1,0 +1,296 @@
+// Ground-truth labels (SaveFlags::labels, docs/labels.md) against geometry computed here: where an
+// object's cells must lie (its visible surface's range and beam extent under each beam geometry), the
+// elevation and 3-D point of a sphere, occlusion, the class table of a glTF scene, labels off vs on,
+// and the two backends against each other. Nothing below reads the plan's beam or bin tables: beams
+// come from the config's equi-angular table (beam centre j at (1 - (2 j + 1) / N) hfov / 2) and bins
+// from the window (bin k covers [range_min + k w, range_min + (k + 1) w)).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+#include "core/plan.h"
+#include "core/renderer_access.h"
+#include "test_support.h"
+
+namespace vksonar::testing {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+constexpr std::uint32_t kSphereId = 7, kQuadId = 9;
+
+struct Point3 {
+    double x, y, z;
+};
+
+// The extent, in fractional bin and beam coordinates, of a set of surface points seen by the config.
+struct Extent {
+    double bin_lo = 1e30, bin_hi = -1e30, beam_lo = 1e30, beam_hi = -1e30;
+};
+
+double beam_angle_of(BeamGeometry geometry, const Point3& p) {
+    const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
+    // line array along y: the direction cosine along the axis is the sine of the steering angle
+    return geometry == BeamGeometry::line_array ? std::asin(p.y / r) : std::atan2(p.y, p.x);
+}
+
+Extent extent_of(const SonarConfig& c, const std::vector<Point3>& points) {
+    const double bin_width = (c.range_max_m - c.range_min_m) / c.bins;
+    const double half = 0.5 * c.hfov_deg * kDeg, spacing = c.hfov_deg * kDeg / c.beams;
+    Extent e;
+    for (const Point3& p : points) {
+        const double r = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z);
+        const double bin = (r - c.range_min_m) / bin_width;
+        const double beam = (half - beam_angle_of(c.beam_geometry, p)) / spacing - 0.5;
+        e.bin_lo = std::min(e.bin_lo, bin);
+        e.bin_hi = std::max(e.bin_hi, bin);
+        e.beam_lo = std::min(e.beam_lo, beam);
+        e.beam_hi = std::max(e.beam_hi, beam);
+    }
+    return e;
+}
+
+// Points on the half of a sphere (centre c, radius a) that faces a sonar at the origin.
+std::vector<Point3> sphere_front(const Point3& c, double a) {
+    std::vector<Point3> out;
+    for (int i = 0; i <= 90; ++i) {
+        const double theta = kPi * i / 90;
+        for (int j = 0; j < 180; ++j) {
+            const double phi = 2 * kPi * j / 180;
+            const Point3 n{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
+            const Point3 p{c.x + a * n.x, c.y + a * n.y, c.z + a * n.z};
+            if (n.x * p.x + n.y * p.y + n.z * p.z < 0) out.push_back(p); // faces the origin
+        }
+    }
+    return out;
+}
+
+// Points of a width x height rectangle centred at c, facing the origin (normal along -c, vertical sides).
+std::vector<Point3> quad_points(const Point3& c, double width, double height) {
+    const double yaw = std::atan2(c.y, c.x);
+    std::vector<Point3> out;
+    for (int i = 0; i <= 60; ++i)
+        for (int j = 0; j <= 20; ++j) {
+            const double s = width * (double(i) / 60 - 0.5), t = height * (double(j) / 20 - 0.5);
+            out.push_back({c.x - s * std::sin(yaw), c.y + s * std::cos(yaw), c.z + t});
+        }
+    return out;
+}
+
+Point3 at(double range, double azimuth_deg, double elevation_deg) {
+    const double a = azimuth_deg * kDeg, e = elevation_deg * kDeg;
+    return {range * std::cos(e) * std::cos(a), range * std::cos(e) * std::sin(a), range * std::sin(e)};
+}
+
+SonarConfig labels_config(BeamGeometry geometry) {
+    SonarConfig c = quiet_config(); // the default sonar: 130 x 20 deg, 512 beams x 512 bins, 40 m
+    c.beam_geometry = geometry;
+    return c;
+}
+
+struct TwoObjects {
+    Point3 sphere = at(15.0, 20.0, -4.0);
+    double radius = 0.4;
+    Point3 quad = at(10.0, -25.0, 0.0);
+    double quad_width = 3.0, quad_height = 1.0;
+    Scene scene;
+    TwoObjects() {
+        add_sphere(scene, sphere.x, sphere.y, sphere.z, radius, 64, -10.0, kSphereId);
+        AcousticMaterial m;
+        m.backscatter_db = -15.0;
+        add_quad(scene, quad.x, quad.y, quad.z, quad_width, quad_height, m, std::atan2(quad.y, quad.x) / kDeg, kQuadId);
+    }
+};
+
+struct LabelTest : public ::testing::TestWithParam<std::tuple<Backend, BeamGeometry>> {
+    void SetUp() override {
+        if (std::get<0>(GetParam()) == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
+    }
+    ValidationGuard validation_;
+};
+
+// Every cell of an object lies within one bin and one beam of the extent of its visible surface, and
+// every beam strictly inside that extent has a cell of it; the rest of the image has no label.
+TEST_P(LabelTest, ObjectsSitWhereTheGeometryPutsThem) {
+    const auto [backend, geometry] = GetParam();
+    const SonarConfig config = labels_config(geometry);
+    TwoObjects objects;
+    auto r = render_once(backend, config, objects.scene, {}, SaveFlags::labels);
+    ASSERT_TRUE(r);
+    const Frame& f = r->frame;
+    ASSERT_EQ(f.instance.size(), std::size_t(f.bins) * f.beams);
+    ASSERT_EQ(f.point.size(), std::size_t(f.bins) * f.beams * 3);
+
+    const Extent sphere = extent_of(config, sphere_front(objects.sphere, objects.radius));
+    const Extent quad = extent_of(config, quad_points(objects.quad, objects.quad_width, objects.quad_height));
+    for (const auto& [id, e, name] : {std::tuple{kSphereId, sphere, "sphere"}, std::tuple{kQuadId, quad, "quad"}}) {
+        std::size_t cells = 0, outside = 0;
+        std::vector<bool> beam_has(f.beams, false);
+        for (std::uint32_t k = 0; k < f.bins; ++k)
+            for (std::uint32_t j = 0; j < f.beams; ++j) {
+                if (f.instance[std::size_t(k) * f.beams + j] != id) continue;
+                ++cells;
+                beam_has[j] = true;
+                const bool in_bins = k + 1 >= std::floor(e.bin_lo) && k <= std::floor(e.bin_hi) + 1;
+                const bool in_beams = j + 1 >= std::floor(e.beam_lo) && j <= std::ceil(e.beam_hi) + 1;
+                if (!in_bins || !in_beams) {
+                    if (outside < 5)
+                        ADD_FAILURE() << name << " cell bin " << k << " beam " << j << " outside bins [" << e.bin_lo
+                                      << ", " << e.bin_hi << "] beams [" << e.beam_lo << ", " << e.beam_hi << "]";
+                    ++outside;
+                }
+            }
+        std::size_t missing = 0;
+        for (int j = static_cast<int>(std::ceil(e.beam_lo)) + 1; j < static_cast<int>(std::floor(e.beam_hi)); ++j)
+            missing += !beam_has[j];
+        std::printf("[labels] %s: %zu cells, beams %.1f-%.1f, bins %.1f-%.1f\n", name, cells, e.beam_lo, e.beam_hi,
+                    e.bin_lo, e.bin_hi);
+        EXPECT_GT(cells, 0u) << name;
+        EXPECT_EQ(outside, 0u) << name;
+        EXPECT_EQ(missing, 0u) << name << ": beams inside its extent without a cell of it";
+    }
+    // Nothing else in the scene: every cell with energy belongs to one of the two, and they do not meet,
+    // so each labelled cell is one object's alone.
+    for (std::size_t i = 0; i < f.instance.size(); ++i) {
+        if (f.instance[i] == 0) {
+            ASSERT_EQ(f.instance_fraction[i], 0.0f);
+            ASSERT_TRUE(std::isnan(f.elevation[i]) && std::isnan(f.point[3 * i]));
+            continue;
+        }
+        ASSERT_TRUE(f.instance[i] == kSphereId || f.instance[i] == kQuadId) << f.instance[i];
+        ASSERT_NEAR(f.instance_fraction[i], 1.0f, 1e-6f);
+        ASSERT_EQ(f.object_class[i], 0u); // a hand-built scene has no class table
+    }
+}
+
+// The sphere's strongest cell looks at its centre's elevation (within one vertical pixel), and the
+// points of its cells lie on its surface (within a bin width).
+TEST_P(LabelTest, SphereElevationAndPoints) {
+    const auto [backend, geometry] = GetParam();
+    const SonarConfig config = labels_config(geometry);
+    TwoObjects objects;
+    auto r = render_once(backend, config, objects.scene, {}, SaveFlags::labels);
+    ASSERT_TRUE(r);
+    const Frame& f = r->frame;
+    const Plan& plan = renderer_plan(r->renderer);
+    const double pixel_rad = plan.vertical_coverage_rad / plan.rows; // a tolerance only
+    const double true_elevation = std::asin(objects.sphere.z / 15.0);
+    std::size_t best = 0;
+    for (std::size_t i = 0; i < f.clean.size(); ++i)
+        if (f.instance[i] == kSphereId && (f.instance[best] != kSphereId || f.clean[i] > f.clean[best])) best = i;
+    ASSERT_EQ(f.instance[best], kSphereId);
+    std::printf("[labels] sphere elevation %.3f deg, true %.3f, pixel %.3f deg, spread %.3f deg\n",
+                f.elevation[best] / kDeg, true_elevation / kDeg, pixel_rad / kDeg, f.elevation_spread[best] / kDeg);
+    EXPECT_NEAR(f.elevation[best], true_elevation, pixel_rad);
+    // All of the sphere lies within its angular radius of its centre's direction.
+    EXPECT_LT(f.elevation_spread[best], std::asin(objects.radius / 15.0));
+
+    const double bin_width = (config.range_max_m - config.range_min_m) / config.bins;
+    // On its pixel's ray, at the range of that pixel's footprint inside the bin: off the surface by at
+    // most the part of a bin the footprint's range does not follow.
+    const double tolerance = bin_width;
+    std::size_t cells = 0, off = 0;
+    double worst = 0;
+    for (std::size_t i = 0; i < f.instance.size(); ++i) {
+        if (f.instance[i] != kSphereId) continue;
+        ++cells;
+        const double dx = f.point[3 * i] - objects.sphere.x, dy = f.point[3 * i + 1] - objects.sphere.y,
+                     dz = f.point[3 * i + 2] - objects.sphere.z;
+        const double miss = std::abs(std::sqrt(dx * dx + dy * dy + dz * dz) - objects.radius);
+
+        worst = std::max(worst, miss);
+        off += miss > tolerance;
+    }
+    std::printf("[labels] sphere points: %zu cells, worst %.3f m off the surface (tolerance %.3f)\n", cells, worst,
+                tolerance);
+    EXPECT_EQ(off, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Labels, LabelTest,
+                         ::testing::Combine(::testing::Values(Backend::vulkan, Backend::cpu),
+                                            ::testing::Values(BeamGeometry::line_array, BeamGeometry::planar)));
+
+class LabelBackendTest : public BackendTest {};
+
+// A wall in front of the sphere hides it: no cell is the sphere's (and without the wall some are).
+TEST_P(LabelBackendTest, OccludedObjectGetsNoCells) {
+    const SonarConfig config = labels_config(BeamGeometry::line_array);
+    for (const bool wall : {false, true}) {
+        Scene scene;
+        add_sphere(scene, 14.0, 0.0, 0.0, 0.4, 48, -10.0, kSphereId);
+        if (wall) { // 8 m away, 4 x 4 m: +-14 deg in azimuth and elevation, the sphere subtends +-1.6 deg
+            AcousticMaterial m;
+            m.backscatter_db = -20.0;
+            add_quad(scene, 8.0, 0.0, 0.0, 4.0, 4.0, m, 0.0, kQuadId);
+        }
+        auto r = render_once(GetParam(), config, scene, {}, SaveFlags::labels);
+        ASSERT_TRUE(r);
+        const auto sphere_cells = std::count(r->frame.instance.begin(), r->frame.instance.end(), kSphereId);
+        const auto wall_cells = std::count(r->frame.instance.begin(), r->frame.instance.end(), kQuadId);
+        if (wall) {
+            EXPECT_EQ(sphere_cells, 0);
+            EXPECT_GT(wall_cells, 0);
+        } else {
+            EXPECT_GT(sphere_cells, 0);
+        }
+    }
+}
+
+// The bundled scene: labels off and on give bit-identical intensities and material image; every
+// labelled cell names an object of the scene's table with that object's class.
+TEST_P(LabelBackendTest, BundledSceneTableAndNoChangeToIntensities) {
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    SonarConfig config = quiet_config();
+    config.effects.speckle = EffectMode::on;
+    config.effects.ambient_noise = EffectMode::on;
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    auto off = render_once(GetParam(), config, scene.value(), pose, SaveFlags::depth);
+    auto on = render_once(GetParam(), config, scene.value(), pose, SaveFlags::depth | SaveFlags::labels);
+    ASSERT_TRUE(off && on);
+    const Frame &a = off->frame, &b = on->frame;
+    ASSERT_EQ(a.intensity.size(), b.intensity.size());
+    EXPECT_EQ(std::memcmp(a.clean.data(), b.clean.data(), a.clean.size() * sizeof(float)), 0);
+    EXPECT_EQ(std::memcmp(a.intensity.data(), b.intensity.data(), a.intensity.size() * sizeof(float)), 0);
+    EXPECT_EQ(a.material, b.material);
+    EXPECT_TRUE(a.instance.empty()) << "labels not asked for, yet filled";
+
+    std::vector<std::uint32_t> class_of(65536, 0);
+    std::vector<bool> known(65536, false);
+    for (const SceneInstance& o : scene.value().instances()) {
+        class_of[o.id] = o.class_id;
+        known[o.id] = true;
+    }
+    std::size_t labelled = 0;
+    std::vector<std::size_t> per_id(65536, 0);
+    for (std::size_t i = 0; i < b.instance.size(); ++i) {
+        const std::uint16_t id = b.instance[i];
+        if (id == 0) continue;
+        ++labelled;
+        ++per_id[id];
+        ASSERT_TRUE(known[id]) << "instance " << id << " is not in the scene's table";
+        ASSERT_EQ(b.object_class[i], class_of[id]);
+        ASSERT_GT(b.instance_fraction[i], 0.0f);
+        ASSERT_LE(b.instance_fraction[i], 1.0f + 1e-6f);
+        ASSERT_TRUE(std::isfinite(b.elevation[i]) && std::isfinite(b.point[3 * i]));
+    }
+    std::size_t objects_seen = 0;
+    for (std::size_t n : per_id)
+        objects_seen += n > 0;
+    std::printf("[labels] default scene: %zu labelled cells, %zu objects\n", labelled, objects_seen);
+    EXPECT_GT(labelled, b.instance.size() / 10);
+    EXPECT_GE(objects_seen, 5u); // seabed, pilings, pipe, crate, sphere in the default view
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, LabelBackendTest, ::testing::Values(Backend::vulkan, Backend::cpu),
+                         [](const ::testing::TestParamInfo<Backend>& param_info) {
+                             return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");
+                         });
+
+} // namespace
+} // namespace vksonar::testing
