@@ -503,7 +503,8 @@ std::string save_list(const SaveSet& s) {
                                                   {s.echo, "echo"},
                                                   {s.cloud, "cloud"},
                                                   {s.multibeam, "multibeam"},
-                                                  {s.raw_scan, "raw_scan"}};
+                                                  {s.raw_scan, "raw_scan"},
+                                                  {s.labels, "labels"}};
     for (const auto& [on, name] : items)
         if (on) list += (list.empty() ? "" : ",") + std::string(name);
     return list;
