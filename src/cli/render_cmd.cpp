@@ -374,9 +374,9 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
-                       ") holds polar and polar_u16 only; write per-frame folders (--out DIR) for the rest");
+                       ") holds polar, polar_u16 and labels only; write per-frame folders (--out DIR) for the rest");
     if (!save.polar && !save.polar_u16)
-        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16)");
+        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16; labels go beside them)");
     if (!hdf5_available())
         throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
@@ -972,6 +972,7 @@ int run_render(const std::vector<std::string>& argv) {
         meta.shard = shard;
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;
+        options.labels = save.labels;
         options.compress = args.has("--compress");
         options.has_time = timed;
         dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
