@@ -1,19 +1,27 @@
 // The CLI's MCAP writer and ROS 2 CDR serializers (src/cli/mcap_writer.h, ros_msgs.h) against bytes
 // worked out by hand from the MCAP specification and the CDR rules; tests/mcap/check_mcap.js reads
-// whole bags with independent readers.
+// whole bags with independent readers. A bag the CLI writes is read back with its own reader
+// (mcap_reader.h) where a topic's pixels must equal a per-frame file.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "cli/cdr.h"
+#include "cli/mcap_reader.h"
 #include "cli/mcap_writer.h"
+#include "cli/npy_read.h"
 #include "cli/ros_msgs.h"
+#include "cli_support.h"
 
 namespace {
 
@@ -243,6 +251,125 @@ TEST(Mcap, RecordLayoutAndCrcs) {
     }
     EXPECT_EQ(expected_start, summary_offsets);
     EXPECT_EQ(groups, (std::vector<int>{0x03, 0x04, 0x0B, 0x08, 0x0D}));
+}
+
+// sensor_msgs/msg/Image read back from CDR (the layout Cdr.ImageBytesByHand spells out).
+struct DecodedImage {
+    std::uint64_t stamp_ns = 0;
+    std::string frame_id, encoding;
+    std::uint32_t height = 0, width = 0, step = 0;
+    Bytes data;
+};
+
+DecodedImage decode_image(const std::uint8_t* bytes, std::size_t size) {
+    std::size_t at = 4; // after the encapsulation; alignment counts from here
+    auto align = [&](std::size_t n) { at = 4 + ((at - 4 + n - 1) / n) * n; };
+    auto u32 = [&] {
+        align(4);
+        std::uint32_t v = 0;
+        EXPECT_LE(at + 4, size);
+        std::memcpy(&v, bytes + at, 4);
+        at += 4;
+        return v;
+    };
+    auto text = [&] {
+        const std::uint32_t n = u32(); // with the NUL
+        std::string t(reinterpret_cast<const char*>(bytes + at), n ? n - 1 : 0);
+        at += n;
+        return t;
+    };
+    DecodedImage m;
+    const std::uint32_t sec = u32(), nsec = u32();
+    m.stamp_ns = std::uint64_t(sec) * 1000000000ull + nsec;
+    m.frame_id = text();
+    m.height = u32();
+    m.width = u32();
+    m.encoding = text();
+    EXPECT_EQ(bytes[at], 0) << "is_bigendian";
+    ++at;
+    m.step = u32();
+    const std::uint32_t n = u32();
+    EXPECT_EQ(at + n, size);
+    m.data.assign(bytes + at, bytes + at + n);
+    return m;
+}
+
+// --save labels in a bag: PREFIX/instance is instance.npy of the same frame, rows flipped exactly as
+// PREFIX/polar flips polar_u16.npy, with the polar image's stamp and frame id, one message a frame.
+TEST(McapBag, InstanceTopicOverlaysThePolarImage) {
+    namespace fs = std::filesystem;
+    using vksonar::testing::quote;
+    const fs::path dir = fs::temp_directory_path() / ("vksonar_mcap_labels_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    vksonar::testing::write_text(dir / "poses.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.5,0.2,-0.1,0,12,6\n");
+    auto render = [&](const std::string& out, const std::string& save) {
+        std::string command = quote(VKSONAR_CLI) +
+                              " render --backend cpu --set bins=40 --set beams=24 --set "
+                              "range_min=6 --seed 3 --trajectory " +
+                              quote((dir / "poses.csv").string()) + " --save " + save + " --out " +
+                              quote((dir / out).string()) + " 2> " + quote((dir / "stderr.txt").string());
+        const int status = std::system(command.c_str());
+        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    };
+    ASSERT_EQ(render("frames", "polar_u16,labels"), 0) << vksonar::testing::read_text(dir / "stderr.txt");
+    ASSERT_EQ(render("run.mcap", "polar_u16,labels"), 0) << vksonar::testing::read_text(dir / "stderr.txt");
+
+    std::map<std::uint16_t, std::string> topics;
+    std::map<std::string, std::vector<DecodedImage>> images;
+    std::size_t tf_messages = 0;
+    mcap::ReadCallbacks cb;
+    cb.channel = [&](const mcap::ReadChannel& c) { topics[c.id] = c.topic; };
+    cb.message = [&](const mcap::ReadMessage& m) {
+        const std::string& topic = topics[m.channel_id];
+        if (topic == "/tf") ++tf_messages;
+        if (topic == "/vksonar/instance" || topic == "/vksonar/polar") {
+            images[topic].push_back(decode_image(m.data, m.size));
+            EXPECT_EQ(images[topic].back().stamp_ns, m.log_time) << topic;
+        }
+    };
+    auto read = mcap::read((dir / "run.mcap").string(), cb);
+    ASSERT_TRUE(read) << read.error().message;
+    EXPECT_TRUE(read->complete);
+    const auto& instance = images["/vksonar/instance"];
+    const auto& polar = images["/vksonar/polar"];
+    ASSERT_EQ(tf_messages, 2u);
+    ASSERT_EQ(instance.size(), 2u);
+    ASSERT_EQ(polar.size(), 2u);
+    std::size_t labelled = 0;
+    for (std::size_t f = 0; f < 2; ++f) {
+        const fs::path frame = dir / "frames" / ("frame_00000" + std::to_string(f + 2));
+        const NpyArray ids = read_npy((frame / "instance.npy").string());
+        const NpyArray display = read_npy((frame / "polar_u16.npy").string());
+        ASSERT_EQ(ids.dtype, "<u2");
+        ASSERT_EQ(ids.shape, (std::vector<std::size_t>{40, 24}));
+        const DecodedImage& image = instance[f];
+        EXPECT_EQ(image.encoding, "mono16");
+        EXPECT_EQ(image.frame_id, polar[f].frame_id);
+        EXPECT_EQ(image.frame_id, "sonar");
+        EXPECT_EQ(image.stamp_ns, polar[f].stamp_ns);
+        EXPECT_EQ(image.stamp_ns, f * 100000000ull); // ordinal / --rate 10
+        EXPECT_EQ(image.height, polar[f].height);
+        EXPECT_EQ(image.width, polar[f].width);
+        EXPECT_EQ(image.step, polar[f].step);
+        EXPECT_EQ(image.height, 40u);
+        EXPECT_EQ(image.width, 24u);
+        ASSERT_EQ(image.data.size(), 40u * 24u * 2u);
+        // Row r of both images is bin (bins - 1 - r): pixel (r, j) of the polar image is polar_u16.npy
+        // (bins - 1 - r, j), and the instance image's same pixel is instance.npy's same cell.
+        for (std::size_t r = 0; r < 40; ++r)
+            for (std::size_t j = 0; j < 24; ++j) {
+                const std::size_t pixel = 2 * (r * 24 + j), cell = (39 - r) * 24 + j;
+                const unsigned id = image.data[pixel] | unsigned(image.data[pixel + 1]) << 8;
+                const unsigned shown = polar[f].data[pixel] | unsigned(polar[f].data[pixel + 1]) << 8;
+                ASSERT_EQ(id, ids.values[cell]) << "frame " << f << " row " << r << " beam " << j;
+                ASSERT_EQ(shown, display.values[cell]) << "frame " << f << " row " << r << " beam " << j;
+                labelled += id != 0;
+            }
+    }
+    EXPECT_GT(labelled, 100u); // the bundled scene labels many cells: the comparison is not of zeros
+    std::error_code ec;
+    fs::remove_all(dir, ec);
 }
 
 } // namespace

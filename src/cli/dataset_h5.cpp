@@ -12,9 +12,16 @@
 
 namespace vksonar::cli {
 
+namespace {
+// The arrays a file holds, as the --save list of its identity: shards merge only with the same arrays.
+std::string saved_arrays(bool polar_u16, bool labels) {
+    return std::string(polar_u16 ? "polar,polar_u16" : "polar") + (labels ? ",labels" : "");
+}
+} // namespace
+
 Identity dataset_identity(const DatasetMeta& meta, const DatasetOptions& options) {
     return run_identity(meta.config_json, meta.seed, meta.scene, meta.backend,
-                        options.polar_u16 ? "polar,polar_u16" : "polar", options.has_time,
+                        saved_arrays(options.polar_u16, options.labels), options.has_time,
                         meta.shard ? &*meta.shard : nullptr);
 }
 
@@ -56,6 +63,11 @@ struct RowDataset {
     std::vector<hsize_t> row; // the dimensions after the frame axis
 };
 
+// The label arrays (--save labels): all of them or none, as the run asked.
+struct LabelRows {
+    RowDataset instance, instance_fraction, object_class, elevation, elevation_spread, point;
+};
+
 class H5Writer final : public DatasetWriter {
 public:
     explicit H5Writer(std::string path) : path_(std::move(path)) {}
@@ -71,6 +83,16 @@ public:
                   rows(time_, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {}, false);
         if (ok && options.polar_u16)
             ok = rows(polar_u16_, "polar_u16", H5T_STD_U16LE, H5T_NATIVE_UINT16, {bins, beams}, options.compress);
+        if (ok && options.labels) {
+            const bool z = options.compress;
+            LabelRows& l = labels_;
+            ok = rows(l.instance, "instance", H5T_STD_U16LE, H5T_NATIVE_UINT16, {bins, beams}, z) &&
+                 rows(l.instance_fraction, "instance_fraction", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
+                 rows(l.object_class, "class", H5T_STD_U16LE, H5T_NATIVE_UINT16, {bins, beams}, z) &&
+                 rows(l.elevation, "elevation", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
+                 rows(l.elevation_spread, "elevation_spread", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
+                 rows(l.point, "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 3}, z);
+        }
         std::vector<double> angles(plan.beam_angle_rad.begin(), plan.beam_angle_rad.begin() + plan.beams);
         std::vector<double> ranges(plan.bin_range_m.begin(), plan.bin_range_m.begin() + plan.bins);
         ok = ok && vector(file_.get(), "beam_angles_rad", angles) && vector(file_.get(), "ranges_m", ranges);
@@ -128,6 +150,15 @@ public:
                   reopen_rows(frame_index_, "frame_index", H5T_NATIVE_UINT64) &&
                   reopen_rows(time_, "time", H5T_NATIVE_DOUBLE);
         if (ok && options.polar_u16) ok = reopen_rows(polar_u16_, "polar_u16", H5T_NATIVE_UINT16);
+        if (ok && options.labels) {
+            LabelRows& l = labels_;
+            ok = reopen_rows(l.instance, "instance", H5T_NATIVE_UINT16) &&
+                 reopen_rows(l.instance_fraction, "instance_fraction", H5T_NATIVE_FLOAT) &&
+                 reopen_rows(l.object_class, "class", H5T_NATIVE_UINT16) &&
+                 reopen_rows(l.elevation, "elevation", H5T_NATIVE_FLOAT) &&
+                 reopen_rows(l.elevation_spread, "elevation_spread", H5T_NATIVE_FLOAT) &&
+                 reopen_rows(l.point, "point", H5T_NATIVE_FLOAT);
+        }
         // The frames after frames_written (a frame cut off by the kill) go; the file is not complete
         // until this run ends.
         if (!ok || !set_count("complete", 0) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
@@ -144,6 +175,19 @@ public:
         bool ok = append_row(polar_, frame.intensity.data()) && append_row(pose_, pose_row) &&
                   append_row(frame_index_, &index) && append_row(time_, &time_s);
         if (ok && polar_u16_.id.ok()) ok = append_row(polar_u16_, display_u16);
+        if (ok && labels_.instance.id.ok()) {
+            // A Renderer made without SaveFlags::labels leaves these empty: refuse rather than read past them.
+            const std::size_t cells = std::size_t(frame.bins) * frame.beams;
+            if (frame.instance.size() != cells || frame.point.size() != 3 * cells)
+                return fail("frame " + std::to_string(frames_) + " has no labels (render with SaveFlags::labels)");
+            LabelRows& l = labels_;
+            ok = append_row(l.instance, frame.instance.data()) &&
+                 append_row(l.instance_fraction, frame.instance_fraction.data()) &&
+                 append_row(l.object_class, frame.object_class.data()) &&
+                 append_row(l.elevation, frame.elevation.data()) &&
+                 append_row(l.elevation_spread, frame.elevation_spread.data()) &&
+                 append_row(l.point, frame.point.data());
+        }
         if (!ok) return fail("cannot write frame " + std::to_string(frames_));
         ++frames_;
         // The frame counts only once all its rows are written; flushed so a killed run leaves it readable.
@@ -156,6 +200,7 @@ public:
         if (!set_count("complete", 1)) return fail("cannot mark the file complete");
         polar_ = {};
         polar_u16_ = {};
+        labels_ = {};
         pose_ = {};
         frame_index_ = {};
         time_ = {};
@@ -253,6 +298,7 @@ private:
     std::string path_;
     Hid file_;
     RowDataset polar_, polar_u16_, pose_, frame_index_, time_;
+    LabelRows labels_;
     hsize_t frames_ = 0;
 };
 
@@ -304,7 +350,8 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
         info.shard = r;
     }
     const bool u16 = H5Lexists(f, "polar_u16", H5P_DEFAULT) > 0;
-    info.identity = run_identity(*config, *seed, *scene, *backend, u16 ? "polar,polar_u16" : "polar",
+    const bool labels = H5Lexists(f, "instance", H5P_DEFAULT) > 0;
+    info.identity = run_identity(*config, *seed, *scene, *backend, saved_arrays(u16, labels),
                                  time_unit->rfind("s ", 0) == 0, info.shard ? &*info.shard : nullptr);
     return info;
 }

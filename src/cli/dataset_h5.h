@@ -2,6 +2,10 @@
 // reads with h5py, the constant metadata once. Layout (docs/datasets.md), names as in meta.json:
 //   /polar        float32 [frames, bins, beams]  received intensity, uPa^2 (polar.npy of each frame)
 //   /polar_u16    uint16  [frames, bins, beams]  display value x 65535 (only with --save polar_u16)
+//   with --save labels (Frame's label arrays, docs/labels.md), all six or none:
+//   /instance, /class                        uint16  [frames, bins, beams]
+//   /instance_fraction, /elevation, /elevation_spread  float32 [frames, bins, beams]
+//   /point                                   float32 [frames, bins, beams, 3]
 //   /pose         float64 [frames, 6]            x_m, y_m, z_m, roll_deg, pitch_deg, yaw_deg
 //   /frame_index  uint64  [frames]               the trajectory line: the noise stream of the frame
 //   /time         float64 [frames]               s, from the trajectory's time column, else the ordinal
@@ -31,6 +35,7 @@ namespace vksonar::cli {
 
 struct DatasetOptions {
     bool polar_u16 = false; // also write /polar_u16
+    bool labels = false;    // also write the label arrays (/instance ... /point)
     bool compress = false;  // shuffle + deflate level 4 on the frame arrays (lossless)
     bool has_time = false;  // /time holds the trajectory's times, else the frame ordinal
 };

@@ -73,6 +73,7 @@ public:
         if (options_.fan) add(fan_, p + "/fan", "sensor_msgs/msg/Image", qos_yaml(10, false));
         if (options_.polar) add(polar_, p + "/polar", "sensor_msgs/msg/Image", qos_yaml(10, false));
         if (options_.cloud) add(cloud_, p + "/points", "sensor_msgs/msg/PointCloud2", qos_yaml(10, false));
+        if (options_.instance) add(instance_, p + "/instance", "sensor_msgs/msg/Image", qos_yaml(10, false));
         add(tf_, "/tf", "tf2_msgs/msg/TFMessage", qos_yaml(100, false));
         add(tf_static_, "/tf_static", "tf2_msgs/msg/TFMessage", qos_yaml(1, true));
         // A shard's record goes first, before any frame: a killed shard's bag still says which shard
@@ -97,6 +98,8 @@ public:
             sonar_.ranges.push_back(static_cast<float>(plan_.bin_range_m[k]));
         sonar_.beam_count = static_cast<std::uint32_t>(beams);
         sonar_.dtype = options_.sonar_u16 ? ros::kDtypeUint16 : ros::kDtypeFloat32;
+        if (options_.polar) flipped_.resize(beams * bins);
+        if (options_.instance) instance_rows_.resize(beams * bins);
         return {};
     }
 
@@ -152,21 +155,16 @@ public:
             if (auto w = put(fan_, stamp_ns); !w) return w;
         }
         if (options_.polar) {
-            // Rows from the far range down, as polar.png shows it: row r is bin (bins - 1 - r).
-            flipped_.resize(n);
-            for (std::size_t k = 0; k < bins; ++k)
-                std::copy(display_u16 + (bins - 1 - k) * beams, display_u16 + (bins - k) * beams,
-                          flipped_.begin() + static_cast<std::ptrdiff_t>(k * beams));
-            ros::Image image;
-            image.header = {stamp_ns, options_.frame};
-            image.height = static_cast<std::uint32_t>(bins);
-            image.width = static_cast<std::uint32_t>(beams);
-            image.step = static_cast<std::uint32_t>(2 * beams);
-            image.encoding = "mono16";
-            image.data = flipped_.data();
-            image.data_bytes = n * sizeof(std::uint16_t);
-            ros::serialize(image, buffer_);
+            ros::serialize(polar_image(display_u16, flipped_, stamp_ns), buffer_);
             if (auto w = put(polar_, stamp_ns); !w) return w;
+        }
+        if (options_.instance) {
+            // The same rows as PREFIX/polar, so an instance id sits on the pixel of the echo it labels.
+            if (frame.instance.size() != n)
+                return make_error(ErrorCode::invalid_argument,
+                                  path_ + ": a frame without labels for " + instance_.name + " (SaveFlags::labels)");
+            ros::serialize(polar_image(frame.instance.data(), instance_rows_, stamp_ns), buffer_);
+            if (auto w = put(instance_, stamp_ns); !w) return w;
         }
         if (options_.cloud) {
             // cloud.ply's points: every cell the display shows, at elevation 0 in the sonar frame.
@@ -192,7 +190,7 @@ public:
 
     Result<void> close() override {
         std::vector<BagTopic> topics;
-        for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_})
+        for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &instance_, &tf_, &tf_static_})
             if (t->channel) topics.push_back({t->name, t->type, t->qos, t->sequence});
         writer_.add_metadata(
             "rosbag2", {{"serialized_metadata", rosbag2_metadata_yaml(path_.substr(path_.find_last_of('/') + 1), topics,
@@ -203,7 +201,7 @@ public:
     Result<void> replay(const std::string& topic, std::uint64_t log_time, std::uint64_t publish_time,
                         const std::uint8_t* data, std::size_t size) override {
         Topic* t = nullptr;
-        for (Topic* known : {&sonar_image_, &fan_, &polar_, &cloud_, &tf_, &tf_static_})
+        for (Topic* known : {&sonar_image_, &fan_, &polar_, &cloud_, &instance_, &tf_, &tf_static_})
             if (known->channel && known->name == topic) t = known;
         if (!t) return make_error(ErrorCode::invalid_argument, "topic " + topic + " is not one this run writes");
         if (t == &tf_) { // a frame begins: the one before is whole
@@ -223,6 +221,24 @@ public:
     std::uint64_t frames() const override { return frames_; }
 
 private:
+    // A bins x beams uint16 grid as a mono16 image with the far range in row 0, as polar.png shows it:
+    // row r is bin (bins - 1 - r), column j beam j (port-most first). `rows` holds the flipped copy.
+    ros::Image polar_image(const std::uint16_t* grid, std::vector<std::uint16_t>& rows, std::uint64_t stamp_ns) const {
+        const std::size_t beams = plan_.beams, bins = plan_.bins;
+        for (std::size_t k = 0; k < bins; ++k)
+            std::copy(grid + (bins - 1 - k) * beams, grid + (bins - k) * beams,
+                      rows.begin() + static_cast<std::ptrdiff_t>(k * beams));
+        ros::Image image;
+        image.header = {stamp_ns, options_.frame};
+        image.height = static_cast<std::uint32_t>(bins);
+        image.width = static_cast<std::uint32_t>(beams);
+        image.step = static_cast<std::uint32_t>(2 * beams);
+        image.encoding = "mono16";
+        image.data = rows.data();
+        image.data_bytes = bins * beams * sizeof(std::uint16_t);
+        return image;
+    }
+
     void add(Topic& topic, const std::string& name, const std::string& type, const std::string& qos) {
         const std::uint16_t schema = schema_for(type);
         topic.name = name;
@@ -246,10 +262,11 @@ private:
     McapOptions options_;
     mcap::Writer writer_;
     std::vector<std::pair<std::string, std::uint16_t>> schemas_;
-    Topic sonar_image_, fan_, polar_, cloud_, tf_, tf_static_;
+    Topic sonar_image_, fan_, polar_, cloud_, instance_, tf_, tf_static_;
     ros::SonarImage sonar_;
     std::vector<std::uint8_t> buffer_;
-    std::vector<std::uint16_t> flipped_;
+    std::vector<std::uint16_t> flipped_;       // PREFIX/polar's rows
+    std::vector<std::uint16_t> instance_rows_; // PREFIX/instance's rows
     std::vector<float> points_;
     std::uint64_t frames_ = 0, first_ns_ = 0, last_ns_ = 0;
 };

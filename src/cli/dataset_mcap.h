@@ -5,6 +5,8 @@
 //   PREFIX/fan          sensor_msgs/msg/Image rgb8 (fan.png)          frame FRAME
 //   PREFIX/polar        sensor_msgs/msg/Image mono16 (polar_u16.npy)  frame FRAME
 //   PREFIX/points       sensor_msgs/msg/PointCloud2 x,y,z,intensity (cloud.ply; with --save cloud)
+//   PREFIX/instance     sensor_msgs/msg/Image mono16 (instance.npy)   frame FRAME (with --save labels),
+//                       rows as PREFIX/polar's, so the two overlay
 //   /tf                 tf2_msgs/msg/TFMessage: world -> FRAME, the pose of each frame
 //   /tf_static          tf2_msgs/msg/TFMessage: FRAME -> FRAME_acoustic (Z forward, X up), once
 // Every message of a frame has the frame's time stamp (header.stamp, log and publish time).
@@ -33,6 +35,7 @@ struct McapOptions {
     bool fan = true;         // PREFIX/fan
     bool polar = true;       // PREFIX/polar
     bool cloud = false;      // PREFIX/points
+    bool instance = false;   // PREFIX/instance (the frames must carry labels: SaveFlags::labels)
     bool zstd = false;       // zstd chunk compression
     std::string library;     // the MCAP header's library field
     // A shard's record and run identity (render --shard): a "vksonar_shard" Metadata record, written

@@ -67,8 +67,11 @@ namespace {
 
 using h5::Hid;
 
-// The per-frame arrays, in the order the writer creates them.
-constexpr const char* kRowSets[] = {"polar", "pose", "frame_index", "time", "polar_u16"};
+// The per-frame arrays, in the order the writer creates them. polar_u16 and the labels (instance ...
+// point) are there only when the run asked for them; the shards' identities agree on which.
+constexpr const char* kRowSets[] = {
+    "polar", "pose",      "frame_index",      "time", "polar_u16", "instance", "instance_fraction",
+    "class", "elevation", "elevation_spread", "point"};
 
 struct Rows {
     Hid set;
@@ -117,7 +120,7 @@ void merge_into(const std::vector<ShardInput>& shards, const std::string& tempor
     std::vector<std::uint64_t> indices;
     std::vector<unsigned char> buffer;
     for (const char* name : kRowSets) {
-        if (H5Lexists(file.get(), name, H5P_DEFAULT) <= 0) continue; // polar_u16 is optional
+        if (H5Lexists(file.get(), name, H5P_DEFAULT) <= 0) continue; // an array this run did not ask for
         Rows out_rows;
         if (!open_rows(file.get(), name, out_rows)) throw fail(std::string("cannot open /") + name);
         // Shard 0's file may hold rows after frames_written (a frame cut off before a resume): drop them.

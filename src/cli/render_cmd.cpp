@@ -81,10 +81,13 @@ constexpr const char* kUsage =
     "                '..' resolved (default: the scene file's folder; config key scene.asset_root)\n"
     "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
-    "                --save polar (default) and polar_u16 only)\n"
+    "                --save polar (default), polar_u16 and labels only: labels adds instance, class,\n"
+    "                instance_fraction, elevation, elevation_spread [frames, bins, beams] and point [..., 3])\n"
     "                or a FILE.mcap: one ROS 2 bag (rosbag2 MCAP: ros2 bag play, Foxglove; docs/ros2.md) of\n"
     "                marine_acoustic_msgs/ProjectedSonarImage, the fan and polar sensor_msgs/Image, /tf and, with\n"
-    "                --save cloud, a PointCloud2 (--save polar, fan, polar_u16, cloud pick the topics)\n"
+    "                --save cloud, a PointCloud2; with --save labels, PREFIX/instance: the instance ids as a\n"
+    "                mono16 image laid out as the polar one (--save polar, fan, polar_u16, cloud, labels pick\n"
+    "                the topics)\n"
     "  --compress    .h5: lossless shuffle + deflate on the frame arrays; .mcap: zstd chunks\n"
     "  --ros-prefix  .mcap: topic prefix (default /vksonar: /vksonar/sonar_image, /vksonar/fan, ...)\n"
     "  --ros-frame   .mcap: the sonar's frame id (default sonar; its child sonar_acoustic is Z forward, X up)\n"
@@ -336,7 +339,8 @@ bool is_mcap_path(const std::string& path) {
     return lower_extension(path) == ".mcap";
 }
 
-// A bag holds the sonar image, the fan, the polar display and the cloud; the rest needs folders.
+// A bag holds the sonar image, the fan, the polar display, the cloud and the instance ids; the rest
+// needs folders.
 McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path) {
     if (!listed) save = SaveSet{true, true, false, true};
     const char* other = save.depth       ? "depth"
@@ -344,23 +348,24 @@ McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path)
                         : save.echo      ? "echo"
                         : save.multibeam ? "multibeam"
                         : save.raw_scan  ? "raw_scan"
-                        : save.labels    ? "labels"
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a ROS 2 bag (" + path +
-                       ") holds polar, fan, polar_u16 (or polar_png) and cloud; write per-frame folders (--out DIR) "
-                       "for the rest");
+                       ") holds polar, fan, polar_u16 (or polar_png), cloud and labels; write per-frame folders "
+                       "(--out DIR) for the rest");
     McapOptions options;
     options.sonar_image = save.polar;
     options.fan = save.fan;
     options.polar = save.polar_u16 || save.polar_png;
     options.cloud = save.cloud;
-    if (!options.sonar_image && !options.fan && !options.polar && !options.cloud)
-        throw BadInput("--save: nothing for the bag " + path + " (polar, fan, polar_u16, cloud)");
+    options.instance = save.labels;
+    if (!options.sonar_image && !options.fan && !options.polar && !options.cloud && !options.instance)
+        throw BadInput("--save: nothing for the bag " + path + " (polar, fan, polar_u16, cloud, labels)");
     return options;
 }
 
-// A dataset holds the polar arrays; images and per-pixel intermediates go to per-frame folders.
+// A dataset holds the polar arrays and the labels beside them; images and per-pixel intermediates go
+// to per-frame folders.
 void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
     if (!listed) save = SaveSet{false, true, false, false};
     const char* other = save.fan         ? "fan"
@@ -374,9 +379,9 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
-                       ") holds polar and polar_u16 only; write per-frame folders (--out DIR) for the rest");
+                       ") holds polar, polar_u16 and labels only; write per-frame folders (--out DIR) for the rest");
     if (!save.polar && !save.polar_u16)
-        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16)");
+        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16; labels go beside them)");
     if (!hdf5_available())
         throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
@@ -503,7 +508,8 @@ std::string save_list(const SaveSet& s) {
                                                   {s.echo, "echo"},
                                                   {s.cloud, "cloud"},
                                                   {s.multibeam, "multibeam"},
-                                                  {s.raw_scan, "raw_scan"}};
+                                                  {s.raw_scan, "raw_scan"},
+                                                  {s.labels, "labels"}};
     for (const auto& [on, name] : items)
         if (on) list += (list.empty() ? "" : ",") + std::string(name);
     return list;
@@ -971,6 +977,7 @@ int run_render(const std::vector<std::string>& argv) {
         meta.shard = shard;
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;
+        options.labels = save.labels;
         options.compress = args.has("--compress");
         options.has_time = timed;
         dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);

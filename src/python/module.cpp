@@ -167,8 +167,10 @@ struct RendererObject {
     std::string config_json;
 };
 
-// A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`.
-template <class T> py::array view(std::vector<T>& data, std::vector<py::ssize_t> shape, const py::object& owner) {
+// A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`; None where the frame has no
+// such array (an output not asked for). A py::object, not a py::array: None cast to an array would be
+// a 0-d object array that is not None.
+template <class T> py::object view(std::vector<T>& data, std::vector<py::ssize_t> shape, const py::object& owner) {
     if (data.empty()) return py::none();
     return py::array_t<T>(shape, data.data(), owner);
 }
@@ -281,6 +283,54 @@ PYBIND11_MODULE(vksonar, m) {
                 return view(f.frame.echo, {f.frame.rows, f.frame.columns, 2}, self);
             },
             "float32 [rows, columns, 2]: energy, slant range (outputs=['echo'])")
+        // Ground truth per polar cell (outputs=['labels'], docs/labels.md), None without it.
+        .def_property_readonly(
+            "instance",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.instance, {f.frame.bins, f.frame.beams}, self);
+            },
+            "uint16 [bins, beams]: the id (Scene.objects' id) of the object with the most energy in the cell, "
+            "0: none (instance.npy; outputs=['labels'])")
+        .def_property_readonly(
+            "instance_fraction",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.instance_fraction, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: that object's share of the cell's energy, 0: no energy (outputs=['labels'])")
+        .def_property_readonly(
+            "object_class",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.object_class, {f.frame.bins, f.frame.beams}, self);
+            },
+            "uint16 [bins, beams]: the class_id of `instance` (Scene.classes[class_id - 1]), 0: none "
+            "(class.npy; outputs=['labels'])")
+        .def_property_readonly(
+            "elevation",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.elevation, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: energy-weighted mean elevation, rad, up positive; NaN: no energy "
+            "(outputs=['labels'])")
+        .def_property_readonly(
+            "elevation_spread",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.elevation_spread, {f.frame.bins, f.frame.beams}, self);
+            },
+            "float32 [bins, beams]: the elevation's energy-weighted standard deviation, rad; NaN: no energy "
+            "(outputs=['labels'])")
+        .def_property_readonly(
+            "point",
+            [](py::object self) {
+                auto& f = self.cast<FrameObject&>();
+                return view(f.frame.point, {f.frame.bins, f.frame.beams, 3}, self);
+            },
+            "float32 [bins, beams, 3]: the instance's energy-weighted mean point, sonar frame, m; NaN: none "
+            "(outputs=['labels'])")
         .def_property_readonly(
             "fan",
             [](py::object self) {
@@ -323,8 +373,10 @@ PYBIND11_MODULE(vksonar, m) {
                          options.save_mask |= SaveFlags::normals;
                      else if (o == "echo")
                          options.save_mask |= SaveFlags::echo;
+                     else if (o == "labels")
+                         options.save_mask |= SaveFlags::labels;
                      else
-                         throw py::value_error("outputs: unknown '" + o + "' (depth, normals, echo)");
+                         throw py::value_error("outputs: unknown '" + o + "' (depth, normals, echo, labels)");
                  }
                  auto r = std::make_shared<RendererObject>();
                  r->scene = std::move(scene);

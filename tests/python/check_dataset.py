@@ -6,6 +6,8 @@ Checks, each of which can fail:
   - every frame of the file equals polar.npy / polar_u16.npy of the per-frame folders of the same
     trajectory and seed, bit for bit; compressed equals uncompressed;
   - pose, frame_index, time, the tables and the attributes say what was rendered;
+  - with --save labels, the six label arrays equal the folders' instance.npy ... point.npy, one chunk a
+    frame, compressed with --compress; without it there are none;
   - a run killed half way leaves a readable file: frames_written whole frames, equal to the same
     frames of an uninterrupted run, and complete = 0;
   - what a dataset cannot hold is refused with one line (exit 2) and no file is left.
@@ -79,6 +81,40 @@ with tempfile.TemporaryDirectory() as tmp:
         check(objects == meta["objects"] and [c["name"] for c in objects["classes"]][:2] == ["seabed", "piling"],
               "objects as meta.json")
 
+    # --save labels: the label arrays beside polar, as the per-frame folders' files.
+    LABELS = {"instance": ("instance.npy", np.uint16, ()), "class": ("class.npy", np.uint16, ()),
+              "instance_fraction": ("instance_fraction.npy", np.float32, ()),
+              "elevation": ("elevation.npy", np.float32, ()),
+              "elevation_spread": ("elevation_spread.npy", np.float32, ()), "point": ("point.npy", np.float32, (3,))}
+    labelled = os.path.join(tmp, "labelled")
+    render(["--trajectory", poses, "--out", labelled, "--save", "polar,labels"] + SMALL)
+    for name, compress in (("labels.h5", []), ("labels_packed.h5", ["--compress"])):
+        render(["--trajectory", poses, "--out", os.path.join(tmp, name), "--save", "polar,labels"] + compress + SMALL)
+    with h5py.File(os.path.join(tmp, "labels.h5"), "r") as f, h5py.File(os.path.join(tmp, "labels_packed.h5")) as g:
+        check("polar_u16" not in f, "labels without polar_u16")
+        labelled_cells = 0
+        for name, (npy, dtype, tail) in LABELS.items():
+            d = f[name]
+            check(d.dtype == dtype and d.shape == (6, 64, 32) + tail, f"/{name}: {d.dtype} {d.shape}")
+            check(d.chunks == (1, 64, 32) + tail, f"/{name}: one chunk per frame: {d.chunks}")
+            check(d.compression is None and g[name].compression == "gzip", f"/{name} compression")
+            for i in range(6):
+                expected = np.load(os.path.join(labelled, f"frame_{i + 2:06d}", npy))
+                check(np.array_equal(d[i], expected, equal_nan=True), f"/{name} frame {i} differs from {npy}")
+                check(np.array_equal(g[name][i], expected, equal_nan=True), f"compressed /{name} frame {i}")
+        labelled_cells = int((f["instance"][:] > 0).sum())
+        check(labelled_cells > 100, f"the labels label something: {labelled_cells} cells")
+        ids = {o["id"]: o["class_id"] for o in json.loads(f.attrs["objects"])["instances"]}
+        instance, classes = f["instance"][:], f["class"][:]
+        check(set(np.unique(instance[instance > 0]).tolist()) <= set(ids), "instance ids are the objects' ids")
+        check(all(ids.get(int(i), 0) == c for i, c in zip(instance.ravel(), classes.ravel())),
+              "class is the class of the instance in the objects table")
+        for i in range(6):
+            polar = np.load(os.path.join(labelled, f"frame_{i + 2:06d}", "polar.npy"))
+            check(np.array_equal(f["polar"][i], polar), f"polar {i} with labels")
+    with h5py.File(plain, "r") as f:
+        check(not any(name in f for name in LABELS), f"no label arrays without --save labels: {list(f.keys())}")
+
     # A time column (header t / time / time_s) fills /time and each folder's meta.json time_s.
     timed = os.path.join(tmp, "timed.csv")
     with open(timed, "w") as f:
@@ -133,6 +169,9 @@ with tempfile.TemporaryDirectory() as tmp:
     bad = os.path.join(tmp, "bad.h5")
     run = render(["--out", bad, "--save", "fan"] + SMALL, expect=2)
     check(run.stderr.count("\n") == 1 and "--save fan" in run.stderr, f"one line naming --save fan: {run.stderr}")
+    check(not os.path.exists(bad), "no file left after a refusal")
+    run = render(["--out", bad, "--save", "labels"] + SMALL, expect=2)
+    check(run.stderr.count("\n") == 1 and "nothing for the dataset" in run.stderr, f"labels alone: {run.stderr}")
     check(not os.path.exists(bad), "no file left after a refusal")
     run = render(["--out", os.path.join(tmp, "dir_out"), "--compress"] + SMALL, expect=2)
     check("--compress" in run.stderr, f"--compress without .h5: {run.stderr}")

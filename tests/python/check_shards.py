@@ -98,6 +98,22 @@ with tempfile.TemporaryDirectory() as tmp:
         vksonar(["merge", p(f"{tag}_merged.h5"), p(f"{tag}_2.h5"), p(f"{tag}_0.h5"), p(f"{tag}_1.h5")])
         same_h5(p(f"{tag}.h5"), p(f"{tag}_merged.h5"), f"{tag} merged")
 
+    # ---- --save labels: the label arrays merge with the frames; shards with and without are refused -----
+    vksonar(["render", "--trajectory", poses, "--out", p("labels.h5"), "--save", "polar,labels"] + SMALL)
+    for i in range(3):
+        vksonar(["render", "--trajectory", poses, "--out", p(f"labels_{i}.h5"), "--save", "polar,labels",
+                 "--shard", f"{i}/3"] + SMALL)
+    vksonar(["merge", p("labels_merged.h5"), p("labels_0.h5"), p("labels_1.h5"), p("labels_2.h5")])
+    same_h5(p("labels.h5"), p("labels_merged.h5"), "labels merged")
+    with h5py.File(p("labels_merged.h5"), "r") as f:
+        check(f["instance"].shape == (11, 64, 32) and f["point"].shape == (11, 64, 32, 3), "merged label shapes")
+    vksonar(["render", "--trajectory", poses, "--out", p("nolabels_1.h5"), "--save", "polar", "--shard", "1/3"]
+            + SMALL)
+    run = vksonar(["merge", p("mixed.h5"), p("labels_0.h5"), p("nolabels_1.h5"), p("labels_2.h5")], expect=2)
+    check(run.stderr.count("\n") == 1 and "another run" in run.stderr and "labels" in run.stderr,
+          f"merge of shards with and without labels: {run.stderr}")
+    check(not os.path.exists(p("mixed.h5")), "mixed merge left a file")
+
     # ---- the engines' environment picks the shard ------------------------------------------------
     base = {k: v for k, v in os.environ.items() if not k.startswith(("SLURM_", "JOB_COMPLETION", "VKSONAR_SHARD"))}
     slurm = []

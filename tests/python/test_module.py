@@ -168,3 +168,59 @@ def test_scene_objects_and_beam_geometry_as_meta_json(tmp_path, renderer):
     assert scene.classes == [c["name"] for c in meta["objects"]["classes"]]
     assert scene.classes[:2] == ["seabed", "piling"]
     assert renderer.beam_geometry == meta["beam_geometry"]["used"] == "line_array"
+
+
+@pytest.fixture(scope="module")
+def labelled():
+    scene = vksonar.Scene.load(SCENE)
+    renderer = vksonar.Renderer(scene, small_config(), backend="cpu", seed=9, outputs=["labels"])
+    return scene, renderer.render(POSE, frame=0)
+
+
+def test_labels_layout_and_consistency_with_the_scene_table(labelled):
+    scene, frame = labelled
+    cells = (64, 48)
+    for name, dtype in (("instance", np.uint16), ("object_class", np.uint16), ("instance_fraction", np.float32),
+                        ("elevation", np.float32), ("elevation_spread", np.float32)):
+        array = getattr(frame, name)
+        assert array.dtype == dtype and array.shape == cells, (name, array.dtype, array.shape)
+    assert frame.point.dtype == np.float32 and frame.point.shape == cells + (3,)
+    instance, fraction = frame.instance, frame.instance_fraction
+    hit = instance > 0
+    assert hit.sum() > 100, "the bundled scene fills many cells"
+    class_of = {o["id"]: o["class_id"] for o in scene.objects}
+    assert set(np.unique(instance[hit]).tolist()) <= set(class_of)
+    expected_class = np.vectorize(lambda i: class_of.get(int(i), 0), otypes=[np.uint16])(instance)
+    assert np.array_equal(frame.object_class, expected_class)
+    assert len(np.unique(frame.object_class[hit])) >= 2  # more than one class in view (seabed and another)
+    assert np.all((fraction[hit] > 0) & (fraction[hit] <= 1))
+    assert np.all(fraction[~hit] == 0)
+    energy = fraction > 0
+    assert np.array_equal(np.isfinite(frame.elevation), energy)
+    assert np.array_equal(np.isfinite(frame.elevation_spread), energy)
+    assert np.all(frame.elevation_spread[energy] >= 0)
+    assert np.all(np.isfinite(frame.point[hit]))
+    # A labelled cell's point lies in it: its range within about a bin of the cell's range.
+    bins, beams = np.nonzero(hit)
+    ranges = np.linalg.norm(frame.point[bins, beams], axis=1)
+    width = frame.ranges_m[1] - frame.ranges_m[0]
+    assert np.median(np.abs(ranges - frame.ranges_m[bins])) <= width
+
+
+def test_labels_equal_the_cli_files_and_leave_the_intensities_alone(tmp_path, labelled):
+    _, frame = labelled
+    run = cli(tmp_path, "--save", "polar,labels")
+    assert run.returncode == 0, run.stderr
+    assert np.array_equal(frame.instance, np.load(tmp_path / "instance.npy"))
+    assert np.array_equal(frame.object_class, np.load(tmp_path / "class.npy"))
+    for name in ("instance_fraction", "elevation", "elevation_spread", "point"):
+        assert np.array_equal(getattr(frame, name), np.load(tmp_path / f"{name}.npy"), equal_nan=True), name
+    # Labels are read off the render, not a part of it: the same seed gives the same intensities.
+    plain = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9).render(POSE, frame=0)
+    assert np.array_equal(frame.polar, plain.polar) and np.array_equal(frame.clean, plain.clean)
+    assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    for name in ("instance", "instance_fraction", "object_class", "elevation", "elevation_spread", "point",
+                 "depth", "normals", "echo"):
+        assert getattr(plain, name) is None, name  # not asked for
+    with pytest.raises(ValueError, match="labels"):
+        vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", outputs=["label"])
