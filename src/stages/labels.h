@@ -1,7 +1,7 @@
 // The labels stage (SaveFlags::labels, docs/labels.md): per polar cell, the object that put the most
 // energy into it, its share, its class, the energy-weighted elevation and its spread, and the 3-D point
-// of the object's strongest return there. It runs on the host after either backend, on that backend's material/instance image
-// and echo, and follows each pixel's energy along the main lobe exactly as the beamform stage spreads it
+// of the object's strongest return there. It runs on the host after either backend, on that backend's material/instance
+// image and echo, and follows each pixel's energy along the main lobe exactly as the beamform stage spreads it
 // (pixel_spread's range shares, the cone or pixel columns, the beam table), in double. Side lobes,
 // speckle and noise are left out: a label says what the beam looks at, not what leaks into it.
 //
