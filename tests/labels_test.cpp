@@ -287,6 +287,50 @@ TEST_P(LabelBackendTest, BundledSceneTableAndNoChangeToIntensities) {
     EXPECT_GE(objects_seen, 5u); // seabed, pilings, pipe, crate, sphere in the default view
 }
 
+// GPU vs CPU on the bundled scene: the labels are one host stage on each backend's depth and echo,
+// so they differ only where the two backends' echoes do (float order, lavapipe's rasterization is the
+// CPU rasterizer's rule). Integer labels must be identical wherever the winner is clear: a cell whose
+// top instance holds at least 50.1 % of its energy on the CPU cannot lose it to a 1e-5 relative change
+// (the echo's GPU-vs-CPU tolerance, tests/tolerances.h, is far below the 0.2 % margin).
+TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    const SonarConfig config = quiet_config();
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    auto gpu = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::labels);
+    auto cpu = render_once(Backend::cpu, config, scene.value(), pose, SaveFlags::labels);
+    ASSERT_TRUE(gpu && cpu);
+    const Frame &g = gpu->frame, &c = cpu->frame;
+    std::size_t labelled = 0, clear = 0, differ_clear = 0, differ_any = 0;
+    double worst_elevation = 0;
+    std::size_t elevation_off = 0;
+    for (std::size_t i = 0; i < c.instance.size(); ++i) {
+        labelled += c.instance[i] != 0;
+        const bool is_clear = c.instance_fraction[i] >= 0.501f;
+        clear += is_clear;
+        differ_any += g.instance[i] != c.instance[i];
+        if (is_clear && g.instance[i] != c.instance[i]) ++differ_clear;
+        if (is_clear && g.instance[i] == c.instance[i]) {
+            EXPECT_EQ(g.object_class[i], c.object_class[i]);
+            const double d = std::abs(g.elevation[i] - c.elevation[i]);
+            worst_elevation = std::max(worst_elevation, d);
+            elevation_off += d > 1e-3;
+        }
+    }
+    std::printf("[labels] gpu vs cpu: %zu labelled, %zu clear, %zu differ (%zu of them clear), elevation worst "
+                "%.2e rad, %zu cells over 1e-3\n",
+                labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off);
+    EXPECT_GT(clear, labelled / 2);
+    EXPECT_EQ(differ_clear, 0u);
+    // A cell's elevation is a mean over the same pixels with weights 1e-5 apart (< 1e-3 rad), except
+    // where a depth-edge pixel is hit on one backend only (tolerances.h, kFrameCellBudget): there one
+    // pixel more or less moves a cell's mean. At most 1e-4 of the cells may be over.
+    EXPECT_LE(double(elevation_off), 1e-4 * double(clear));
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, LabelBackendTest, ::testing::Values(Backend::vulkan, Backend::cpu),
                          [](const ::testing::TestParamInfo<Backend>& param_info) {
                              return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");
