@@ -135,10 +135,11 @@ const char* backend_name(Backend backend) {
 }
 
 Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
-                       std::uint64_t seed) {
+                       std::uint64_t seed, SaveFlags save_mask) {
     RendererOptions options = renderer_options_from_env();
     options.backend = backend;
     options.seed = seed;
+    options.save_mask = save_mask;
     auto renderer = Renderer::create(context, config, scene, options);
     if (!renderer) throw Failure(std::string(backend_name(backend)) + " renderer: " + renderer.error().message);
     return std::move(renderer.value());

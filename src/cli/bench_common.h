@@ -37,8 +37,9 @@ Backend parse_backend(const std::string& name);
 const char* backend_name(Backend backend);
 
 // Throws Failure with the renderer's message.
+// save_mask: the outputs the renderer fills (SaveFlags::labels for the labels row of bench effects).
 Renderer make_renderer(Context& context, const SonarConfig& config, const Scene& scene, Backend backend,
-                       std::uint64_t seed = 1);
+                       std::uint64_t seed = 1, SaveFlags save_mask = SaveFlags::none);
 
 // Renders one frame and returns the wall-clock milliseconds around Renderer::render. Throws Failure.
 double timed_render(Renderer& renderer, const Pose& pose, std::uint64_t frame_index, Frame& frame);

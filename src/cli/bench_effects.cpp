@@ -24,13 +24,15 @@ constexpr const char* kUsage =
     "\n"
     "For each effect (incidence, vertical_pattern, horizontal_pattern, spreading, absorption, speckle,\n"
     "ambient_noise, tvg) three renderers of the same scene: effects.X=on, effects.X=off and a second,\n"
-    "identical effects.X=off (the noise reference). Their frames are interleaved (the order rotates every\n"
+    "identical effects.X=off (the noise reference); 'labels' is the ground-truth labels stage (--save labels)\n"
+    "on vs off the same way. Their frames are interleaved (the order rotates every\n"
     "round), N rounds per effect (default 60); the table holds medians of full-frame wall-clock times and\n"
     "medians of the per-round ratios. Target: off'/off within 1.02 (a disabled effect costs nothing\n"
     "measurable).\n";
 
-const std::array<const char*, 8> kEffects = {"incidence",  "vertical_pattern", "horizontal_pattern", "spreading",
-                                             "absorption", "speckle",          "ambient_noise",      "tvg"};
+const std::array<const char*, 9> kEffects = {"incidence",  "vertical_pattern", "horizontal_pattern", "spreading",
+                                             "absorption", "speckle",          "ambient_noise",      "tvg",
+                                             "labels"};
 
 struct Variant {
     std::vector<double> full_ms;
@@ -92,13 +94,16 @@ int run_bench_effects(const std::vector<std::string>& argv) {
             [&, e](benchmark::State& state) {
                 EffectResult& result = results[e];
                 try {
+                    // labels is an output, not a config effect: the same config, with and without the stage
+                    const bool labels = effects[e] == "labels";
                     const std::string key = "effects." + effects[e];
                     std::vector<std::string> sets = args.values("--set");
-                    sets.push_back(key + "=on");
+                    if (!labels) sets.push_back(key + "=on");
                     const SonarConfig on = layered_config(setup, sets);
-                    sets.back() = key + "=off";
+                    if (!labels) sets.back() = key + "=off";
                     const SonarConfig off = layered_config(setup, sets);
-                    std::array<Renderer, 3> renderers{make_renderer(context, on, setup.scene, backend),
+                    std::array<Renderer, 3> renderers{make_renderer(context, on, setup.scene, backend, 1,
+                                                                    labels ? SaveFlags::labels : SaveFlags::none),
                                                       make_renderer(context, off, setup.scene, backend),
                                                       make_renderer(context, off, setup.scene, backend)};
                     std::array<Frame, 3> frames{renderers[0].make_frame(), renderers[1].make_frame(),

@@ -35,11 +35,14 @@ struct Cell {
 } // namespace
 
 // What the beams need of a pixel, worked out once per frame (a pixel feeds up to four beams).
+constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider footprints recompute theirs
+
 struct PixelLabel {
-    M::RangeSpread spread; // k_last < k_first: no energy in the window
-    float dir[3];          // unit direction, sonar frame (x forward, y port, z up)
-    float elevation;       // rad, up positive
-    float range;           // slant range, m
+    M::RangeSpread spread;       // k_last < k_first: no energy in the window
+    float shares[kCachedShares]; // range_share(spread, k_first + i), when the spread spans <= kCachedShares bins
+    float dir[3];                // unit direction, sonar frame (x forward, y port, z up)
+    float elevation;             // rad, up positive
+    float range;                 // slant range, m
     std::uint32_t instance;
 };
 
@@ -112,6 +115,9 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
             const double e = frame.echo[2 * p];
             if (!(e > 0.0)) continue;
             out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
+            if (out.spread.k_last - out.spread.k_first < kCachedShares)
+                for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
+                    out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
             const double u = M::pixel_coord(column % W, W, plan.tan_half_h);
             const shared::SliceInfo& slice = plan.slice_info[column / W];
             const M::vec3 ray = M::pixel_ray(u, v, slice.cos_center, slice.sin_center);
@@ -134,8 +140,9 @@ void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, st
     if (spread.k_last < spread.k_first) return;
     const double e = frame.echo[2 * p] * weight;
     const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
+    const bool cached = spread.k_last - spread.k_first < kCachedShares;
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
-        const double w = M::range_share(spread, k) * e;
+        const double w = (cached ? double(pixel.shares[k - spread.k_first]) : M::range_share(spread, k)) * e;
         if (!(w > 0.0)) continue;
         double range = pixel.range;
         if (footprint) {
@@ -154,27 +161,41 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
                 const std::vector<PixelLabel>& pixels, std::vector<Cell>& cells, Frame& frame, std::uint32_t j) {
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
     int k_low = static_cast<int>(plan.bins), k_high = -1;
-    for (std::uint32_t q = plan.beam_column_begin[j]; q < plan.beam_column_end[j]; ++q) {
+    const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
+    // The share of profile column q that beam j takes (the resample's tent on the beam table).
+    const auto beam_weight = [&](std::uint32_t q) {
         const std::uint32_t share = M::resample_share(plan.column_beam[q], j, beams, plan.circular);
         const double cw = plan.column_weight[q];
-        const double beam_weight = share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
-        if (!(beam_weight > 0.0)) continue;
-        for (std::uint32_t row = 0; row < plan.rows; ++row) {
-            if (!plan.line_array) {
+        return share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
+    };
+    if (!plan.line_array) {
+        for (std::uint32_t q = q_begin; q < q_end; ++q) {
+            const double weight = beam_weight(q);
+            if (!(weight > 0.0)) continue;
+            for (std::uint32_t row = 0; row < plan.rows; ++row) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                add_pixel(plan, frame, pixels[p], p, cells, beam_weight, k_low, k_high);
-                continue;
+                if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
             }
-            // The pixels of this row whose cone coordinate x lies within one column of q: x in [q - 1, q + 1).
-            const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
-            const float lo = static_cast<float>(q) - 1.0f, hi = static_cast<float>(q) + 1.0f;
-            std::uint32_t c = static_cast<std::uint32_t>(std::lower_bound(cone_x, cone_x + plan.columns, lo) - cone_x);
-            for (; c < plan.columns && cone_x[c] < hi; ++c) {
-                const double cone_weight = M::cone_share(cone_x[c], static_cast<int>(q), static_cast<int>(PC));
-                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
-                if (cone_weight > 0.0)
-                    add_pixel(plan, frame, pixels[p], p, cells, cone_weight * beam_weight, k_low, k_high);
-            }
+        }
+    }
+    for (std::uint32_t row = 0; row < plan.rows && plan.line_array; ++row) {
+        // The pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1, q_end),
+        // each visited once with the sum of its two cone columns' shares of this beam.
+        const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
+        const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
+        std::uint32_t c = static_cast<std::uint32_t>(std::lower_bound(cone_x, cone_x + plan.columns, lo) - cone_x);
+        for (; c < plan.columns && cone_x[c] < hi; ++c) {
+            const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+            // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
+            if (!(frame.echo[2 * p] > 0.0f)) continue;
+            const double x = cone_x[c];
+            const auto first = static_cast<std::int64_t>(std::floor(x));
+            double weight = 0.0;
+            for (std::int64_t q = first; q <= first + 1; ++q)
+                if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
+                    weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
+                              beam_weight(static_cast<std::uint32_t>(q));
+            if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
         }
     }
 
