@@ -331,6 +331,87 @@ TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     EXPECT_LE(double(elevation_off), 1e-4 * double(clear));
 }
 
+// Flow, sonar moving forward by d = 0.5 m in a static scene: each labelled point P of frame 0 moves to
+// P - (d, 0, 0) in the sonar frame, so its range bin changes by (|P - d x| - |P|) / w and its beam by the
+// change of its steering angle on the equi-angular table, computed here from P alone.
+TEST_P(LabelBackendTest, FlowOfAForwardMove) {
+    const SonarConfig config = labels_config(BeamGeometry::line_array);
+    TwoObjects objects;
+    Pose start, ahead;
+    ahead.x_m = 0.5;
+    auto r = render_once(GetParam(), config, objects.scene, start, SaveFlags::labels);
+    ASSERT_TRUE(r);
+    Frame next = r->renderer.make_frame();
+    ASSERT_TRUE(r->renderer.render(ahead, 1, next));
+    std::vector<float> flow;
+    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, ahead, flow));
+    const Frame& f = r->frame;
+    ASSERT_EQ(flow.size(), std::size_t(f.bins) * f.beams * 2);
+    const double bin_width = (config.range_max_m - config.range_min_m) / config.bins;
+    const double spacing = config.hfov_deg * kDeg / config.beams;
+    std::size_t labelled = 0, finite = 0;
+    double worst_bin = 0, worst_beam = 0;
+    for (std::size_t i = 0; i < f.instance.size(); ++i) {
+        if (f.instance[i] == 0) {
+            ASSERT_TRUE(std::isnan(flow[2 * i]) && std::isnan(flow[2 * i + 1]));
+            continue;
+        }
+        ++labelled;
+        if (std::isnan(flow[2 * i])) continue;
+        ++finite;
+        const Point3 p{f.point[3 * i], f.point[3 * i + 1], f.point[3 * i + 2]};
+        const Point3 q{p.x - ahead.x_m, p.y, p.z};
+        const double r0 = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z),
+                     r1 = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
+        const double d_bin = (r1 - r0) / bin_width;
+        const double d_beam = (std::asin(p.y / r0) - std::asin(q.y / r1)) / spacing; // beams count to starboard
+        worst_bin = std::max(worst_bin, std::abs(flow[2 * i] - d_bin));
+        worst_beam = std::max(worst_beam, std::abs(flow[2 * i + 1] - d_beam));
+    }
+    std::printf("[labels] flow: %zu labelled cells, %zu with flow, worst error %.2e bins, %.2e beams\n", labelled,
+                finite, worst_bin, worst_beam);
+    EXPECT_GT(finite, labelled * 9 / 10); // nothing hides anything here; a few edge points fall off a surface
+    EXPECT_LT(worst_bin, 1e-3);
+    EXPECT_LT(worst_beam, 1e-3);
+}
+
+// Flow, occlusion: from the origin a sphere at (14, 5, 0) is in view beside a wall at x = 8; from
+// (0, -6.67, 0) the wall lies on the line to the sphere and hides it. The sphere's cells get no flow;
+// the wall's, in view from both, do.
+TEST_P(LabelBackendTest, FlowStopsAtAnOccluder) {
+    const SonarConfig config = labels_config(BeamGeometry::line_array);
+    Scene scene;
+    add_sphere(scene, 14.0, 5.0, 0.0, 0.4, 48, -10.0, kSphereId);
+    AcousticMaterial m;
+    m.backscatter_db = -20.0;
+    add_quad(scene, 8.0, 0.0, 0.0, 4.0, 4.0, m, 0.0, kQuadId);
+    Pose start, aside;
+    aside.y_m = -6.67;
+    auto r = render_once(GetParam(), config, scene, start, SaveFlags::labels);
+    ASSERT_TRUE(r);
+    Frame next = r->renderer.make_frame();
+    ASSERT_TRUE(r->renderer.render(aside, 1, next));
+    EXPECT_EQ(std::count(next.instance.begin(), next.instance.end(), kSphereId), 0); // hidden indeed
+    std::vector<float> flow;
+    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, aside, flow));
+    std::size_t sphere = 0, sphere_flow = 0, wall = 0, wall_flow = 0;
+    for (std::size_t i = 0; i < r->frame.instance.size(); ++i) {
+        const bool has = !std::isnan(flow[2 * i]);
+        if (r->frame.instance[i] == kSphereId) {
+            ++sphere;
+            sphere_flow += has;
+        } else if (r->frame.instance[i] == kQuadId) {
+            ++wall;
+            wall_flow += has;
+        }
+    }
+    std::printf("[labels] occluded flow: sphere %zu cells, %zu with flow; wall %zu cells, %zu with flow\n", sphere,
+                sphere_flow, wall, wall_flow);
+    EXPECT_GT(sphere, 0u);
+    EXPECT_EQ(sphere_flow, 0u);
+    EXPECT_GT(wall_flow, wall * 8 / 10);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, LabelBackendTest, ::testing::Values(Backend::vulkan, Backend::cpu),
                          [](const ::testing::TestParamInfo<Backend>& param_info) {
                              return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");

@@ -88,6 +88,14 @@ public:
     // Renders the scene from `pose` into `frame`. frame_index keys the noise RNG with the seed.
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
 
+    // Flow between two frames this renderer made with SaveFlags::labels, in a static scene
+    // (docs/labels.md): for each cell of `from` with a label, where its point lands in the polar grid
+    // seen from to_pose, as flow[2 i] = d_bin, flow[2 i + 1] = d_beam (bins * beams * 2, float; resized
+    // only if its size differs); NaN where the cell has no label, the point leaves the window or
+    // something in `to` hides it. Fails with invalid_argument without labels or on frames not its own.
+    [[nodiscard]] Result<void> label_flow(const Frame& from, const Pose& from_pose, const Frame& to,
+                                          const Pose& to_pose, std::vector<float>& flow) const;
+
     // The validated config this renderer was made with (valid as long as the renderer).
     const SonarConfig& config() const;
     // Each model this renderer's frames use, checked against its validity domain (validity.h): the

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -72,7 +73,9 @@ constexpr const char* kUsage =
     "                polar_u16 (polar_u16.npy), depth (depth.npy, view range m), normals (normals.npy),\n"
     "                echo (echo.npy), cloud (cloud.ply), labels (ground truth per cell: instance.npy, class.npy,\n"
     "                instance_fraction.npy, elevation.npy, elevation_spread.npy, point.npy; on the fan image:\n"
-    "                instance_fan.npy, class_fan.npy, instance_fan.png; docs/labels.md); e.g. --save polar for a\n"
+    "                instance_fan.npy, class_fan.npy, instance_fan.png; docs/labels.md), flow (with --trajectory:\n"
+    "                flow.npy [bins, beams, 2], each labelled cell's d_bin, d_beam to the next frame, NaN where\n"
+    "                it leaves the window or is hidden; implies the labels stage); e.g. --save polar for a\n"
     "                dataset, --save default,depth.\n"
     "                Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the legacy\n"
     "                image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
@@ -100,8 +103,9 @@ constexpr const char* kUsage =
     "                on disk. Merge the shards with 'vksonar merge' (docs/scale.md)\n"
     "  --shard-count with JOB_COMPLETION_INDEX: the number of shards (else VKSONAR_SHARD_COUNT)\n";
 
-const std::vector<std::string> kSaveItems = {"default", "fan",  "polar", "polar_png", "polar_u16", "depth",
-                                             "normals", "echo", "cloud", "multibeam", "raw_scan",  "labels"};
+const std::vector<std::string> kSaveItems = {"default",  "fan",     "polar", "polar_png", "polar_u16",
+                                             "depth",    "normals", "echo",  "cloud",     "multibeam",
+                                             "raw_scan", "labels",  "flow"};
 
 // What a render writes. meta.json always (it says what the arrays are); the rest as --save lists it,
 // or, without --save, the default set.
@@ -110,9 +114,10 @@ struct SaveSet {
     bool depth = false, normals = false, echo = false, cloud = false;
     bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
     bool labels = false;                      // ground truth per cell and on the fan (docs/labels.md)
+    bool flow = false;                        // labels' flow to the next frame of the trajectory
     SaveFlags mask() const {
         return (depth ? SaveFlags::depth : SaveFlags::none) | (normals ? SaveFlags::normals : SaveFlags::none) |
-               (echo ? SaveFlags::echo : SaveFlags::none) | (labels ? SaveFlags::labels : SaveFlags::none);
+               (echo ? SaveFlags::echo : SaveFlags::none) | (labels || flow ? SaveFlags::labels : SaveFlags::none);
     }
 };
 
@@ -164,11 +169,13 @@ SaveSet parse_save(const std::vector<std::string>& values) {
                 save.raw_scan = true;
             else if (item == "labels")
                 save.labels = true;
+            else if (item == "flow")
+                save.flow = true;
             else
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
                                closest_word(item, kSaveItems) +
                                "'? valid: default,fan,polar,polar_png,polar_u16,depth,normals,echo,cloud,multibeam,"
-                               "raw_scan,labels)");
+                               "raw_scan,labels,flow)");
         }
     }
     return save;
@@ -348,6 +355,7 @@ McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path)
                         : save.echo      ? "echo"
                         : save.multibeam ? "multibeam"
                         : save.raw_scan  ? "raw_scan"
+                        : save.flow      ? "flow"
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a ROS 2 bag (" + path +
@@ -376,6 +384,7 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
                         : save.cloud     ? "cloud"
                         : save.multibeam ? "multibeam"
                         : save.raw_scan  ? "raw_scan"
+                        : save.flow      ? "flow"
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
@@ -509,7 +518,8 @@ std::string save_list(const SaveSet& s) {
                                                   {s.cloud, "cloud"},
                                                   {s.multibeam, "multibeam"},
                                                   {s.raw_scan, "raw_scan"},
-                                                  {s.labels, "labels"}};
+                                                  {s.labels, "labels"},
+                                                  {s.flow, "flow"}};
     for (const auto& [on, name] : items)
         if (on) list += (list.empty() ? "" : ",") + std::string(name);
     return list;
@@ -707,7 +717,9 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
 }
 
-void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s) {
+// flow: --save flow's d_bin, d_beam per cell toward the next frame (null without it).
+void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s,
+                 const std::vector<float>* flow) {
     const Plan& plan = out.plan;
     if (out.legacy) {
         write_legacy(*out.legacy, out, dir, frame);
@@ -744,6 +756,10 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
             return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
         });
     if (out.save.labels) write_labels(out, dir, frame);
+    if (flow)
+        write_atomically(dir / "flow.npy", [&](const std::string& p) {
+            return host::write_npy_f32(p, flow->data(), frame.bins, frame.beams, 2);
+        });
     if (out.save.cloud && !out.legacy)
         write_atomically(dir / "cloud.ply",
                          [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
@@ -786,6 +802,8 @@ int run_render(const std::vector<std::string>& argv) {
         throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
     if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
     if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
+    if (!args.has("--trajectory") && parse_save(args.values("--save")).flow)
+        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
 
     // 1. Options that need no files.
     Backend backend = Backend::vulkan;
@@ -967,7 +985,8 @@ int run_render(const std::vector<std::string>& argv) {
     //    three frames, so rendering goes on while the previous frames are written.
     const bool trajectory = args.has("--trajectory");
     std::vector<Frame> slots;
-    for (std::size_t i = 0; i < std::min<std::size_t>(3, std::max<std::size_t>(end - first, 1)); ++i)
+    // (--save flow holds a frame back until the next one is rendered: at least two slots)
+    for (std::size_t i = 0; i < std::min<std::size_t>(3, std::max<std::size_t>(end - first, save.flow ? 2 : 1)); ++i)
         slots.push_back(renderer->make_frame());
     std::unique_ptr<DatasetWriter> dataset_writer;
     std::vector<char> done(poses.size(), 0); // a shard's frames already on disk (re-run: skipped)
@@ -1056,7 +1075,8 @@ int run_render(const std::vector<std::string>& argv) {
             fs::create_directories(dir, ec);
             if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
         }
-        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr); // meta.json last: done
+        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr,
+                    save.flow ? &slot.flow : nullptr); // meta.json last: done
         out_dir->keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
     });
     const std::size_t todo = static_cast<std::size_t>(std::count(done.begin() + first, done.begin() + end, 0));
@@ -1080,10 +1100,8 @@ int run_render(const std::vector<std::string>& argv) {
                      static_cast<unsigned long long>(written), todo, rate, left);
         std::fflush(stderr);
     };
-    for (std::size_t i = first; i < end; ++i) {
-        if (done[i]) continue; // a re-run shard: this frame is complete on disk
+    const auto render_into = [&](std::size_t i, WriteBehind::Slot& slot) {
         const TrajectoryPose& item = poses[i];
-        WriteBehind::Slot& slot = writer.acquire(); // rethrows a write error: the run stops there
         auto rendered = renderer->render(item.pose, item.line, slot.frame);
         if (!rendered) {
             const std::string where =
@@ -1093,8 +1111,44 @@ int run_render(const std::vector<std::string>& argv) {
         slot.pose = item.pose;
         slot.line = item.line;
         slot.time_s = timed ? item.time_s : static_cast<double>(i); // the .h5 time: the global ordinal
+    };
+    // --save flow: frame i is held back until frame i + 1 is rendered, its flow computed, then submitted.
+    // The next frame is rendered for it even where it is not this run's to write (a re-run shard's
+    // frame already on disk, the first frame of the next shard), so every shard's flow is the
+    // unsharded run's; the trajectory's last frame has no next one: its flow is all NaN.
+    WriteBehind::Slot* held = nullptr;
+    const auto submit_held = [&](const WriteBehind::Slot* next) {
+        if (next) {
+            auto flowed = renderer->label_flow(held->frame, held->pose, next->frame, next->pose, held->flow);
+            if (!flowed) throw Failure(flowed.error().message);
+        } else {
+            held->flow.assign(std::size_t(2) * held->frame.bins * held->frame.beams,
+                              std::numeric_limits<float>::quiet_NaN());
+        }
         writer.submit();
+        held = nullptr;
+    };
+    for (std::size_t i = first; i < end; ++i) {
+        if (done[i] && !held) continue;                         // a re-run shard: this frame is complete on disk
+        WriteBehind::Slot& slot = writer.acquire(held ? 1 : 0); // rethrows a write error: the run stops there
+        render_into(i, slot);
+        if (held) submit_held(&slot);
+        if (done[i]) continue; // rendered for the previous frame's flow only; the slot is reused
+        if (save.flow) {
+            held = &slot;
+        } else {
+            writer.submit();
+        }
         show_progress(false);
+    }
+    if (held) {
+        if (end < poses.size()) { // the next shard's first frame
+            WriteBehind::Slot& next = writer.acquire(1);
+            render_into(end, next);
+            submit_held(&next);
+        } else {
+            submit_held(nullptr);
+        }
     }
     writer.finish();
     if (dataset_writer)

@@ -25,11 +25,11 @@ void WriteBehind::rethrow_locked() {
     if (error_) std::rethrow_exception(error_);
 }
 
-WriteBehind::Slot& WriteBehind::acquire() {
+WriteBehind::Slot& WriteBehind::acquire(std::size_t ahead) {
     std::unique_lock<std::mutex> lock(mutex_);
-    slot_free_.wait(lock, [&] { return error_ || submitted_ - written_ < slots_.size(); });
+    slot_free_.wait(lock, [&] { return error_ || submitted_ + ahead - written_ < slots_.size(); });
     rethrow_locked();
-    return slots_[submitted_ % slots_.size()];
+    return slots_[(submitted_ + ahead) % slots_.size()];
 }
 
 void WriteBehind::submit() {

@@ -28,8 +28,9 @@ public:
     struct Slot {
         Frame frame;
         Pose pose;
-        std::uint64_t line = 0; // the trajectory line (the frame index)
-        double time_s = 0.0;    // the trajectory's time column, if any
+        std::uint64_t line = 0;  // the trajectory line (the frame index)
+        double time_s = 0.0;     // the trajectory's time column, if any
+        std::vector<float> flow; // --save flow: label_flow to the next frame (sized on first use)
     };
     using WriteFn = std::function<void(const Slot&)>;
 
@@ -41,7 +42,9 @@ public:
     WriteBehind& operator=(const WriteBehind&) = delete;
 
     // The next slot to render into; waits while all slots are pending. Rethrows the writer's error.
-    Slot& acquire();
+    // ahead = 1: the slot after the next, while the next is held back unsubmitted (--save flow renders
+    // frame t + 1 before frame t is submitted); the ring needs two slots for it.
+    Slot& acquire(std::size_t ahead = 0);
     // Hands the slot from acquire() to the writer.
     void submit();
     // Waits until every submitted slot is written. Rethrows the writer's error.

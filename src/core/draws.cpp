@@ -27,6 +27,8 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
     return r;
 }
 
+} // namespace
+
 // sonar_from_world = inverse of [R | t] with R = Rz(yaw) Ry(pitch) Rx(roll).
 Mat4 sonar_from_world(const Pose& pose) {
     const double cr = std::cos(pose.roll_deg * kDegToRad), sr = std::sin(pose.roll_deg * kDegToRad);
@@ -49,6 +51,8 @@ Mat4 sonar_from_world(const Pose& pose) {
     m[15] = 1.0;
     return m;
 }
+
+namespace {
 
 // clip_from_sonar for one slice: camera axes (right, down, forward) then the reversed-Z projection
 // clip = (x / tan_half_h, y / tan_half_v, A + B z, z) so that z_ndc = A / z + B.

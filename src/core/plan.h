@@ -151,6 +151,10 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad = std::numeric_l
 // The per-draw, per-slice clip_from_local matrices of the depth pass, composed in double relative
 // to the sonar and rounded to float once. out is resized to slices * draws (slice-major);
 // no allocation once it has that size.
+// The sonar frame from the world (column-major 4 x 4, double): the inverse of the pose's
+// [Rz(yaw) Ry(pitch) Rx(roll) | x y z]. Shared by the depth pass and the labels' flow.
+std::array<double, 16> sonar_from_world(const Pose& pose);
+
 void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
                          std::vector<shared::DepthPush>& out);
 // The depth pass draws each draw's triangles as runs ("clusters") of at most kClusterTriangles

@@ -278,6 +278,21 @@ const std::vector<ModelValidity>& HostDepthRenderer::validity() const {
     return impl_->plan.validity;
 }
 
+Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                                  std::vector<float>& flow) const {
+    if (!impl_ || !impl_->labels)
+        return make_error(ErrorCode::invalid_argument,
+                          "label_flow: this renderer was made without SaveFlags::labels (RendererOptions::save_mask)");
+    const Plan& p = impl_->plan;
+    const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
+    const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
+    if (from.instance.size() != cells || from.point.size() != 3 * cells || to.depth.size() != pixels)
+        return make_error(ErrorCode::invalid_argument, "label_flow: the frames were not made by this renderer");
+    if (flow.size() != 2 * cells) flow.resize(2 * cells);
+    cpu::label_flow(p, from, from_pose, to, to_pose, flow.data());
+    return {};
+}
+
 const SonarConfig& Renderer::config() const {
     return impl_->plan.config;
 }

@@ -9,6 +9,7 @@
 #include <limits>
 #include <utility>
 
+#include "core/angles.h"
 #include "core/sonar_math.hpp"
 #include "host/workers.h"
 #include "stages/pixel_spread.h"
@@ -264,6 +265,103 @@ void LabelsStage::run(Frame& frame) {
     // The material image as without labels: the material id alone.
     for (std::uint32_t& m : frame.material)
         if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;
+}
+
+namespace {
+
+// The fractional beam index of steering angle a on the beam table (strictly decreasing, port first):
+// linear between beam centres, extrapolated by the edge spacing up to the fan's edge; NaN outside it.
+double beam_coordinate(const Plan& plan, double a) {
+    const std::vector<double>& t = plan.beam_angle_rad;
+    const std::size_t n = t.size();
+    const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
+    if (n == 0 || !(std::abs(a) <= half)) return std::numeric_limits<double>::quiet_NaN();
+    if (n == 1) return 0.0;
+    if (a >= t[0]) return (t[0] - a) / (t[0] - t[1]);
+    if (a <= t[n - 1]) return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]);
+    // first j with t[j] < a (t decreasing): the point lies between beams j - 1 and j
+    const std::size_t j = static_cast<std::size_t>(
+        std::upper_bound(t.begin(), t.end(), a, [](double x, double angle) { return x > angle; }) - t.begin());
+    return double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]);
+}
+
+// The point p (sonar frame) as (bin, beam) coordinates: bin b covers [b, b + 1) (cell k's centre at
+// k + 0.5); NaN outside the window.
+void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    bin = r >= plan.config.range_min_m && r < plan.config.range_max_m ? (r - plan.config.range_min_m) / plan.bin_width_m
+                                                                      : nan;
+    // The beam a direction is heard on: its cone (line array, the sine along the y axis) or its azimuth.
+    const double angle = plan.line_array ? std::asin(std::clamp(p[1] / r, -1.0, 1.0)) : std::atan2(p[1], p[0]);
+    beam = r > 0.0 ? beam_coordinate(plan, angle) : nan;
+}
+
+// Whether the depth image `to` sees the point p (sonar frame, range r): some pixel of the 3 x 3 around
+// its direction holds a surface at least as far as r - tolerance (a nearer surface in all nine is an
+// occluder; the neighbours absorb the pixel grid's own range steps at grazing incidence). False outside
+// the depth pass's coverage.
+bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) {
+    const double azimuth = std::atan2(p[1], p[0]);
+    const double elevation = std::asin(std::clamp(p[2] / r, -1.0, 1.0));
+    const std::uint32_t W = plan.slice_columns;
+    for (std::uint32_t s = 0; s < plan.slices; ++s) {
+        double off = plan.slice_info[s].center_azimuth_rad - azimuth; // pixel_azimuth = centre - atan(u)
+        off = std::remainder(off, 2.0 * 3.14159265358979323846);
+        if (!(std::abs(off) <= 0.5 * plan.slice_width_rad + 1e-9)) continue;
+        const double u = std::tan(off);
+        const double v = -std::tan(elevation) * std::sqrt(1.0 + u * u); // pixel_elevation inverted
+        const double cx = (u / plan.tan_half_h + 1.0) * 0.5 * W, cy = (v / plan.tan_half_v + 1.0) * 0.5 * plan.rows;
+        if (!(cx >= 0.0 && cx < W && cy >= 0.0 && cy < plan.rows)) return false;
+        const auto column = static_cast<std::int64_t>(cx), row = static_cast<std::int64_t>(cy);
+        const double tolerance = plan.bin_width_m + 1e-3 * r;
+        for (std::int64_t dy = -1; dy <= 1; ++dy)
+            for (std::int64_t dx = -1; dx <= 1; ++dx) {
+                const std::int64_t y = row + dy, x = column + dx;
+                if (y < 0 || y >= plan.rows || x < 0 || x >= W) continue;
+                const std::size_t q = static_cast<std::size_t>(y) * plan.columns + s * W + static_cast<std::size_t>(x);
+                const double d = to.depth[q];
+                if (!(d > 0.0)) continue;
+                const double uu = M::pixel_coord(static_cast<std::uint32_t>(x), W, plan.tan_half_h);
+                const double vv = M::pixel_coord(static_cast<std::uint32_t>(y), plan.rows, plan.tan_half_v);
+                const double range = M::slant_range(M::view_z_from_depth(d, plan.depth_a, plan.depth_b), uu, vv);
+                if (range >= r - tolerance) return true;
+            }
+        return false;
+    }
+    return false;
+}
+
+} // namespace
+
+void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                float* flow) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
+    const auto a = sonar_from_world(from_pose), b = sonar_from_world(to_pose);
+    for (std::size_t i = 0; i < cells; ++i) {
+        flow[2 * i] = flow[2 * i + 1] = nan;
+        if (from.instance.size() != cells || from.instance[i] == 0 || to.depth.empty()) continue;
+        const double p[3] = {from.point[3 * i], from.point[3 * i + 1], from.point[3 * i + 2]};
+        // a = sonar_from_world = [R^T | -R^T t]: the world point is R (p - a's translation column)
+        double world[3];
+        for (int k = 0; k < 3; ++k) {
+            double sum = 0.0;
+            for (int m = 0; m < 3; ++m)
+                sum += a[k * 4 + m] * (p[m] - a[12 + m]);
+            world[k] = sum;
+        }
+        double q[3];
+        for (int m = 0; m < 3; ++m)
+            q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
+        double bin_from, beam_from, bin_to, beam_to;
+        polar_coordinates(plan, p, bin_from, beam_from);
+        polar_coordinates(plan, q, bin_to, beam_to);
+        const double r = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+        if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, to, q, r)) continue;
+        flow[2 * i] = static_cast<float>(bin_to - bin_from);
+        flow[2 * i + 1] = static_cast<float>(beam_to - beam_from);
+    }
 }
 
 } // namespace vksonar::cpu

@@ -51,4 +51,13 @@ private:
     std::unique_ptr<Pixels> pixels_;
 };
 
+// Flow between two labelled frames of one plan (docs/labels.md): for each cell of `from` with a label,
+// where its point moves in the polar grid when the sonar goes from from_pose to to_pose in a static
+// scene: flow[2 i] = d_bin, flow[2 i + 1] = d_beam (fractional; the point's coordinates in `to` minus
+// those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
+// the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
+// (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2.
+void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                float* flow);
+
 } // namespace vksonar::cpu
