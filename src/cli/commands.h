@@ -13,6 +13,7 @@ int run_info(const std::vector<std::string>& args);
 int run_compare(const std::vector<std::string>& args);
 int run_bench(const std::vector<std::string>& args);
 int run_merge(const std::vector<std::string>& args);      // merge_cmd.cpp: shards of a trajectory into one output
+int run_export(const std::vector<std::string>& args);     // export_cmd.cpp: boxes.json of a run -> COCO
 int run_bench_load(const std::vector<std::string>& args); // bench_load.cpp; needs no Google Benchmark
 
 } // namespace vksonar::cli

@@ -23,6 +23,7 @@ constexpr const char* kUsage =
     "  info      print the Vulkan device and driver vksonar would use\n"
     "  merge     merge the shards of a trajectory (render --shard i/N) into one output\n"
     "  compare   compare two .npy scans (max abs, RMSE, max dB difference, PSNR)\n"
+    "  export    export a run's boxes (render --save fan,labels) as COCO: export coco RUN OUT.json\n"
     "  bench     benchmarks: speed | effects | accuracy\n"
     "\n"
     "Run 'vksonar <command> --help' for the options of a command.\n";
@@ -50,8 +51,9 @@ int dispatch(const std::vector<std::string>& argv) {
     if (command == "compare") return run_compare(rest);
     if (command == "merge") return run_merge(rest);
     if (command == "bench") return run_bench(rest);
+    if (command == "export") return run_export(rest);
     throw BadInput("unknown command '" + command + "' (did you mean '" +
-                   closest_word(command, {"render", "presets", "info", "compare", "merge", "bench"}) +
+                   closest_word(command, {"render", "presets", "info", "compare", "merge", "bench", "export"}) +
                    "'?); run 'vksonar --help'");
 }
 

@@ -32,6 +32,7 @@
 #include "cli/write_behind.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "host/boxes.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
 #include "legacy/legacy.h"
@@ -73,10 +74,11 @@ constexpr const char* kUsage =
     "                polar_u16 (polar_u16.npy), depth (depth.npy, view range m), normals (normals.npy),\n"
     "                echo (echo.npy), cloud (cloud.ply), labels (ground truth per cell: instance.npy, class.npy,\n"
     "                instance_fraction.npy, elevation.npy, elevation_spread.npy, point.npy; on the fan image:\n"
-    "                instance_fan.npy, class_fan.npy, instance_fan.png; docs/labels.md), flow (with --trajectory:\n"
-    "                flow.npy [bins, beams, 2], each labelled cell's d_bin, d_beam to the next frame, NaN where\n"
-    "                it leaves the window or is hidden; implies the labels stage); e.g. --save polar for a\n"
-    "                dataset, --save default,depth.\n"
+    "                instance_fan.npy, class_fan.npy, instance_fan.png, and boxes.json: each object's box in the\n"
+    "                polar and fan images, for 'vksonar export coco'; docs/labels.md, docs/datasets.md), flow\n"
+    "                (with --trajectory: flow.npy [bins, beams, 2], each labelled cell's d_bin, d_beam to the\n"
+    "                next frame, NaN where it leaves the window or is hidden; implies the labels stage);\n"
+    "                e.g. --save polar for a dataset, --save default,depth.\n"
     "                Legacy modes (--sonar uuv-legacy|gtri-legacy, docs/legacy.md): fan.png is the legacy\n"
     "                image and polar.* the physical model of the same ping; uuv-legacy adds normals\n"
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
@@ -571,10 +573,13 @@ struct Outputs {
     host::Image image;
     std::vector<std::uint16_t> quantized;
     std::vector<float> view_range;
-    LegacyState* legacy = nullptr;      // set in legacy modes
-    const ShardRecord* shard = nullptr; // a shard of the trajectory: meta.json says which
-    nlohmann::ordered_json objects;     // host::objects_json(scene), made once
-    std::vector<std::uint16_t> fan_ids; // --save labels: instance or class ids on the fan image
+    LegacyState* legacy = nullptr;        // set in legacy modes
+    const ShardRecord* shard = nullptr;   // a shard of the trajectory: meta.json says which
+    nlohmann::ordered_json objects;       // host::objects_json(scene), made once
+    std::vector<std::uint16_t> fan_ids;   // --save labels: instance or class ids on the fan image
+    std::vector<std::string> class_names; // Scene::classes(): boxes.json's class names
+    host::BoxFinder box_finder;           // --save labels: boxes.json, its scratch kept across frames
+    std::vector<host::Box> boxes;
 };
 
 // `time_s`: the trajectory's time column, or null when it has none.
@@ -689,8 +694,8 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     }
 }
 
-// --save labels: the per-cell label arrays (as polar.npy's [bins, beams]) and the fan-image versions of
-// instance and class, nearest cell (docs/labels.md).
+// --save labels: the per-cell label arrays (as polar.npy's [bins, beams]), the fan-image versions of
+// instance and class, nearest cell (docs/labels.md), and each object's box (boxes.json, docs/datasets.md).
 void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     const std::uint32_t bins = frame.bins, beams = frame.beams;
     const auto u16 = [&](const char* name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
@@ -713,6 +718,10 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     u16("class_fan.npy", out.fan_ids, height, width);
     out.fan.nearest_cell(frame.instance, out.fan_ids);
     u16("instance_fan.npy", out.fan_ids, height, width);
+    // The boxes' fan extents are read off instance_fan.npy's ids, so the two files always agree.
+    out.box_finder.find(frame, out.fan_ids, width, height, out.boxes);
+    const std::string boxes = host::boxes_json_text(frame, width, height, out.boxes, out.class_names);
+    write_atomically(dir / "boxes.json", [&](const std::string& p) { return host::write_text_file(p, boxes); });
     host::label_image(out.fan_ids, width, height, out.image);
     write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
 }
@@ -979,8 +988,12 @@ int run_render(const std::vector<std::string>& argv) {
                     plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
                     shard ? &*shard : nullptr,
                     {},
+                    {},
+                    {},
+                    {},
                     {}};
     outputs.objects = host::objects_json(scene.value());
+    outputs.class_names = scene->classes();
     // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of
     //    three frames, so rendering goes on while the previous frames are written.
     const bool trajectory = args.has("--trajectory");

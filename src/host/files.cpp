@@ -233,6 +233,10 @@ std::string meta_json_text(const Plan& plan, const Frame& frame, const std::stri
     return (plan_part ? *plan_part : meta_json_plan_part(plan)) + ",\n" + frame_part.substr(2) + "\n";
 }
 
+Result<void> write_text_file(const std::string& path, const std::string& text) {
+    return write_file(path, nullptr, 0, text.data(), text.size());
+}
+
 Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
                              const std::string& extra_json_fields, const std::string* plan_part) {
     const std::string text = meta_json_text(plan, frame, extra_json_fields, plan_part);

@@ -82,6 +82,8 @@ void label_image(const std::vector<std::uint16_t>& ids, std::uint32_t width, std
 // `comment` (one line) says what the intensity is.
 [[nodiscard]] Result<void> write_points_ply(const std::string& path, const float* xyzi, std::size_t count,
                                             const std::string& comment);
+// Any text (a JSON document) as the file's whole content.
+[[nodiscard]] Result<void> write_text_file(const std::string& path, const std::string& text);
 // meta.json: beam angles, bin ranges, resolved config, effects, stage times, seed, frame convention.
 [[nodiscard]] Result<void> write_meta_json(const std::string& path, const Plan& plan, const Frame& frame,
                                            const std::string& extra_json_fields,

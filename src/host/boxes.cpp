@@ -1,0 +1,107 @@
+// Boxes of the labelled objects from a frame's labels (host/boxes.h).
+#include "host/boxes.h"
+
+#include <algorithm>
+#include <cstddef>
+#include <limits>
+
+#include <nlohmann/json.hpp>
+
+namespace vksonar::host {
+
+void BoxFinder::find(const Frame& frame, const std::vector<std::uint16_t>& fan_ids, std::uint32_t width,
+                     std::uint32_t height, std::vector<Box>& boxes) {
+    boxes.clear();
+    const std::size_t beams = frame.beams, bins = frame.bins, cells = beams * bins;
+    if (frame.instance.size() < cells || frame.object_class.size() < cells || frame.instance_fraction.size() < cells)
+        return; // no labels in this frame
+    // Every uint16 id has a slot: 256 KiB once, instead of a map that would allocate per object.
+    if (slot_.empty()) slot_.assign(std::size_t{std::numeric_limits<std::uint16_t>::max()} + 1, 0);
+    const bool has_clean = frame.clean.size() >= cells;
+
+    for (std::size_t k = 0; k < bins; ++k) {
+        for (std::size_t j = 0; j < beams; ++j) {
+            const std::size_t i = k * beams + j;
+            const std::uint16_t id = frame.instance[i];
+            if (id == 0) continue;
+            std::uint32_t& slot = slot_[id];
+            if (slot == 0) {
+                Box box;
+                box.instance_id = id;
+                box.class_id = frame.object_class[i];
+                box.bin_first = box.bin_last = static_cast<std::uint32_t>(k);
+                box.beam_first = box.beam_last = static_cast<std::uint32_t>(j);
+                boxes.push_back(box);
+                slot = static_cast<std::uint32_t>(boxes.size());
+            }
+            Box& box = boxes[slot - 1];
+            // Cells are visited bin by bin, so bin_first is the first bin seen and bin_last the latest.
+            box.bin_last = static_cast<std::uint32_t>(k);
+            box.beam_first = std::min(box.beam_first, static_cast<std::uint32_t>(j));
+            box.beam_last = std::max(box.beam_last, static_cast<std::uint32_t>(j));
+            ++box.cells;
+            if (has_clean)
+                box.energy += static_cast<double>(frame.clean[i]) * static_cast<double>(frame.instance_fraction[i]);
+        }
+    }
+
+    // Fan pixels carry the ids of cells, so every id found there has a box already; a pixel whose id has
+    // none (fan_ids from another frame) is skipped rather than invented a box.
+    if (fan_ids.size() >= static_cast<std::size_t>(width) * height) {
+        for (std::uint32_t y = 0; y < height; ++y) {
+            const std::uint16_t* row = fan_ids.data() + static_cast<std::size_t>(y) * width;
+            for (std::uint32_t x = 0; x < width; ++x) {
+                const std::uint16_t id = row[x];
+                if (id == 0 || slot_[id] == 0) continue;
+                Box& box = boxes[slot_[id] - 1];
+                if (box.fan_pixels == 0) {
+                    box.x0 = box.x1 = x;
+                    box.y0 = box.y1 = y;
+                }
+                box.x0 = std::min(box.x0, x);
+                box.x1 = std::max(box.x1, x);
+                box.y1 = y; // rows in order: the latest row is the lowest
+                ++box.fan_pixels;
+            }
+        }
+    }
+
+    for (Box& box : boxes) {
+        slot_[box.instance_id] = 0; // the table is all zeros again for the next frame
+        box.at_window_edge =
+            box.bin_first == 0 || box.beam_first == 0 || box.bin_last + 1 == bins || box.beam_last + 1 == beams;
+    }
+    std::sort(boxes.begin(), boxes.end(), [](const Box& a, const Box& b) { return a.instance_id < b.instance_id; });
+}
+
+std::string boxes_json_text(const Frame& frame, std::uint32_t width, std::uint32_t height,
+                            const std::vector<Box>& boxes, const std::vector<std::string>& class_names) {
+    using json = nlohmann::ordered_json;
+    json list = json::array();
+    for (const Box& b : boxes) {
+        json box = {{"instance_id", b.instance_id},
+                    {"class_id", b.class_id},
+                    {"class",
+                     b.class_id >= 1 && b.class_id <= class_names.size() ? class_names[b.class_id - 1] : std::string()},
+                    {"polar",
+                     {{"bin_first", b.bin_first},
+                      {"bin_last", b.bin_last},
+                      {"beam_first", b.beam_first},
+                      {"beam_last", b.beam_last}}},
+                    {"cells", b.cells},
+                    {"energy", b.energy}};
+        if (b.fan_pixels > 0)
+            box["fan"] = {{"x0", b.x0}, {"y0", b.y0}, {"x1", b.x1}, {"y1", b.y1}, {"pixels", b.fan_pixels}};
+        else
+            box["fan"] = nullptr;
+        box["at_window_edge"] = b.at_window_edge;
+        list.push_back(std::move(box));
+    }
+    const json doc = {{"frame_index", frame.frame_index},
+                      {"image_size", {{"width", width}, {"height", height}}},
+                      {"polar_size", {{"bins", frame.bins}, {"beams", frame.beams}}},
+                      {"boxes", std::move(list)}};
+    return doc.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
+} // namespace vksonar::host
