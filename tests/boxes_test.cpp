@@ -6,7 +6,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -400,6 +402,64 @@ TEST_F(BoxesCli, BoxesJsonIsTightOnTheLabelsAndCocoMatchesIt) {
     EXPECT_EQ(read_text(kept), "{\"old\": true}\n");
     for (const auto& entry : fs::directory_iterator(dir_))
         EXPECT_NE(entry.path().filename().string().rfind(".~", 0), 0u) << "temporary left: " << entry.path();
+}
+
+} // namespace
+
+namespace {
+
+// --save flow along a 4-frame trajectory: flow.npy [bins, beams, 2] in every frame; finite exactly on
+// labelled cells that stay in view; the last frame (no next one) all NaN; two shards write the same
+// flow as the whole run (a shard renders the next shard's first frame for its last frame's flow); and
+// flow without a trajectory, or into a dataset file, is refused with one line.
+TEST_F(BoxesCli, FlowAlongATrajectoryAndAcrossShards) {
+    write_text(dir_ / "fwd.csv", "0,0,0,0,10,0\n0.3,0,0,0,10,0\n0.6,0,0,0,10,2\n0.9,0,0,0,10,4\n");
+    const std::vector<std::string> common = {
+        "render", "--backend", "cpu",    "--trajectory", (dir_ / "fwd.csv").string(), "--set", "bins=96",
+        "--set",  "beams=48",  "--save", "labels,flow"};
+    auto render = [&](const fs::path& out, const std::vector<std::string>& extra) {
+        std::vector<std::string> args = common;
+        args.insert(args.end(), extra.begin(), extra.end());
+        args.insert(args.end(), {"--out", out.string()});
+        const CliRun r = run(args);
+        EXPECT_EQ(r.exit_code, 0) << r.err;
+    };
+    render(dir_ / "whole", {});
+    render(dir_ / "shard0", {"--shard", "0/2"});
+    render(dir_ / "shard1", {"--shard", "1/2"});
+    for (int k = 1; k <= 4; ++k) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%06d", k);
+        const auto flow = vksonar::cli::read_npy((dir_ / "whole" / name / "flow.npy").string());
+        const auto instance = vksonar::cli::read_npy((dir_ / "whole" / name / "instance.npy").string());
+        ASSERT_EQ(flow.shape, (std::vector<std::size_t>{96, 48, 2}));
+        std::size_t labelled = 0, finite = 0, finite_unlabelled = 0;
+        for (std::size_t i = 0; i < instance.values.size(); ++i) {
+            const bool has = std::isfinite(flow.values[2 * i]) && std::isfinite(flow.values[2 * i + 1]);
+            labelled += instance.values[i] != 0;
+            finite += has;
+            finite_unlabelled += has && instance.values[i] == 0;
+        }
+        EXPECT_EQ(finite_unlabelled, 0u) << name;
+        if (k < 4)
+            EXPECT_GT(finite, labelled / 2) << name; // forward 0.3 m: nearly everything stays in view
+        else
+            EXPECT_EQ(finite, 0u) << name; // the trajectory's last frame has no next one
+        const fs::path shard = dir_ / (k <= 2 ? "shard0" : "shard1") / name / "flow.npy";
+        const auto sharded = vksonar::cli::read_npy(shard.string());
+        ASSERT_EQ(sharded.values.size(), flow.values.size());
+        for (std::size_t i = 0; i < flow.values.size(); ++i)
+            ASSERT_TRUE(flow.values[i] == sharded.values[i] ||
+                        (std::isnan(flow.values[i]) && std::isnan(sharded.values[i])))
+                << name << " value " << i;
+    }
+    const CliRun single = run({"render", "--backend", "cpu", "--save", "flow", "--out", (dir_ / "one").string()});
+    EXPECT_EQ(single.exit_code, 2);
+    EXPECT_NE(single.err.find("--trajectory"), std::string::npos) << single.err;
+    const CliRun h5 = run({"render", "--backend", "cpu", "--trajectory", (dir_ / "fwd.csv").string(), "--save",
+                           "polar,flow", "--out", (dir_ / "run.h5").string()});
+    EXPECT_EQ(h5.exit_code, 2);
+    EXPECT_NE(h5.err.find("flow"), std::string::npos) << h5.err;
 }
 
 } // namespace
