@@ -420,6 +420,25 @@ PYBIND11_MODULE(vksonar, m) {
             py::arg("pose"), py::arg("frame") = 0, py::arg("seed") = py::none(), py::arg("out") = nullptr,
             "Renders one ping from pose (x, y, z, roll, pitch, yaw); frame keys the noise with the seed. "
             "Returns a new Frame, or fills `out` (a Frame of this renderer) to reuse its memory.")
+        .def(
+            "flow",
+            [](py::object self, std::shared_ptr<FrameObject> from, std::shared_ptr<FrameObject> to) {
+                auto& r = self.cast<RendererObject&>();
+                if (!from || !to) throw py::value_error("flow: frames must not be None");
+                if (from->renderer.ptr() != self.ptr() || to->renderer.ptr() != self.ptr())
+                    throw py::value_error("flow: frames of another Renderer");
+                std::vector<float> flow;
+                check(r.renderer.label_flow(from->frame, from->pose, to->frame, to->pose, flow));
+                const std::size_t bins = from->frame.bins, beams = from->frame.beams;
+                py::array_t<float> out(
+                    {static_cast<py::ssize_t>(bins), static_cast<py::ssize_t>(beams), static_cast<py::ssize_t>(2)});
+                std::copy(flow.begin(), flow.end(), out.mutable_data());
+                return out;
+            },
+            py::arg("frame_from"), py::arg("frame_to"),
+            "Where each labelled cell of frame_from moves by frame_to (both rendered by this Renderer with "
+            "outputs=['labels'], from their own poses; a static scene): float32 [bins, beams, 2] of d_bin, d_beam, "
+            "NaN where the cell has no label, leaves the window or is hidden (docs/labels.md).")
         .def_property_readonly("bins", [](const RendererObject& r) { return renderer_plan(r.renderer).bins; })
         .def_property_readonly("beams", [](const RendererObject& r) { return renderer_plan(r.renderer).beams; })
         .def_property_readonly("seed", [](const RendererObject& r) { return r.renderer.seed(); })

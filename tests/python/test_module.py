@@ -224,3 +224,28 @@ def test_labels_equal_the_cli_files_and_leave_the_intensities_alone(tmp_path, la
         assert getattr(plain, name) is None, name  # not asked for
     with pytest.raises(ValueError, match="labels"):
         vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", outputs=["label"])
+
+
+def test_flow_between_two_frames_matches_the_cli(tmp_path):
+    # Renderer.flow is the CLI's --save flow: the same numbers for the same two poses, finite only on
+    # labelled cells, and a moved sonar moves the cells (the range shrinks going forward).
+    scene = vksonar.Scene.load(SCENE)
+    renderer = vksonar.Renderer(scene, small_config(), backend="cpu", seed=1, outputs=["labels"])
+    poses = [(0, 0, 0, 0, 10, 0), (0.3, 0, 0, 0, 10, 0)]
+    frames = [renderer.render(p, frame=i + 1) for i, p in enumerate(poses)]
+    flow = renderer.flow(frames[0], frames[1])
+    assert flow.shape == frames[0].instance.shape + (2,) and flow.dtype == np.float32
+    finite = np.isfinite(flow[..., 0])
+    assert not finite[frames[0].instance == 0].any()
+    assert finite.sum() > 0.5 * (frames[0].instance > 0).sum()
+    assert np.nanmedian(flow[..., 0]) < 0  # forward: points come nearer
+    with pytest.raises(ValueError):
+        vksonar.Renderer(scene, small_config(), backend="cpu").flow(frames[0], frames[1])
+    (tmp_path / "poses.csv").write_text("".join(",".join(str(v) for v in p) + "\n" for p in poses))
+    args = [CLI, "render", "--scene", SCENE, "--backend", "cpu", "--trajectory", str(tmp_path / "poses.csv"),
+            "--save", "flow", "--out", str(tmp_path / "run")]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    run = subprocess.run(args, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    np.testing.assert_array_equal(np.load(tmp_path / "run" / "frame_000001" / "flow.npy"), flow)
