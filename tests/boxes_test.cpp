@@ -155,10 +155,7 @@ TEST(Boxes, JsonText) {
 
 // ---- the CLI: boxes.json of a render, and export coco ----------------------------------------------
 
-struct CliRun {
-    int exit_code = -1;
-    std::string out, err;
-};
+using vksonar::testing::CliRun;
 
 class BoxesCli : public ::testing::Test {
 protected:
@@ -173,19 +170,7 @@ protected:
         fs::remove_all(dir_, ec);
     }
 
-    CliRun run(const std::vector<std::string>& args) const {
-        std::string command = quote(VKSONAR_CLI);
-        for (const auto& arg : args)
-            command += " " + quote(arg);
-        const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-        command += " > " + quote(out.string()) + " 2> " + quote(err.string()) + " < /dev/null";
-        const int status = std::system(command.c_str());
-        CliRun r;
-        r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-        r.out = read_text(out);
-        r.err = read_text(err);
-        return r;
-    }
+    CliRun run(const std::vector<std::string>& args) const { return vksonar::testing::run_cli(dir_, args); }
 
     // The bundled scene along three poses, small and on the CPU backend.
     fs::path render_run(const std::string& save = "fan,labels") const {

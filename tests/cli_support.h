@@ -1,10 +1,15 @@
 // Helpers for the tests that run the vksonar executable as a process (cli_test.cpp,
-// hard_cases/bad_input_test.cpp): shell quoting and whole-file text I/O.
+// hard_cases/bad_input_test.cpp, boxes_test.cpp): shell quoting, whole-file text I/O and one run of
+// the CLI with its exit code and output.
 #pragma once
+#include <sys/wait.h>
+
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace vksonar::testing {
 
@@ -30,6 +35,35 @@ inline std::string read_text(const std::filesystem::path& path) {
 inline void write_text(const std::filesystem::path& path, const std::string& text) {
     std::ofstream file(path, std::ios::binary);
     file << text;
+}
+
+// One run of the CLI: its exit code (-1 if it did not exit), stdout and stderr.
+struct CliRun {
+    int exit_code = -1;
+    std::string out, err;
+    std::vector<std::string> err_lines() const {
+        std::vector<std::string> lines;
+        std::stringstream stream(err);
+        std::string line;
+        while (std::getline(stream, line))
+            lines.push_back(line);
+        return lines;
+    }
+};
+
+// Runs VKSONAR_CLI with `args` (stdin from /dev/null), its stdout and stderr caught in files in `dir`.
+inline CliRun run_cli(const std::filesystem::path& dir, const std::vector<std::string>& args) {
+    std::string command = quote(VKSONAR_CLI);
+    for (const auto& arg : args)
+        command += " " + quote(arg);
+    const std::filesystem::path out = dir / "stdout.txt", err = dir / "stderr.txt";
+    command += " > " + quote(out.string()) + " 2> " + quote(err.string()) + " < /dev/null";
+    const int status = std::system(command.c_str());
+    CliRun result;
+    result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    result.out = read_text(out);
+    result.err = read_text(err);
+    return result;
 }
 
 } // namespace vksonar::testing

@@ -27,19 +27,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-    int exit_code = -1;
-    std::string out, err;
-    std::vector<std::string> err_lines() const {
-        std::vector<std::string> lines;
-        std::stringstream stream(err);
-        std::string line;
-        while (std::getline(stream, line))
-            lines.push_back(line);
-        return lines;
-    }
-};
-
+using vksonar::testing::CliRun;
 using vksonar::testing::quote;
 using vksonar::testing::read_text;
 using vksonar::testing::write_text;
@@ -58,19 +46,7 @@ protected:
         fs::remove_all(dir_, ec);
     }
 
-    CliRun run(const std::vector<std::string>& args) const {
-        std::string command = quote(VKSONAR_CLI);
-        for (const auto& arg : args)
-            command += " " + quote(arg);
-        const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-        command += " > " + quote(out.string()) + " 2> " + quote(err.string()) + " < /dev/null";
-        const int status = std::system(command.c_str());
-        CliRun result;
-        result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-        result.out = read_text(out);
-        result.err = read_text(err);
-        return result;
-    }
+    CliRun run(const std::vector<std::string>& args) const { return vksonar::testing::run_cli(dir_, args); }
 
     // Runs a render that must fail with exit code 2 and exactly one stderr line `error: ...` that
     // contains every string in `expected`, and must leave no output directory behind.
