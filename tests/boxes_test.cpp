@@ -396,7 +396,7 @@ namespace {
 // --save flow along a 4-frame trajectory: flow.npy [bins, beams, 2] in every frame; finite exactly on
 // labelled cells that stay in view; the last frame (no next one) all NaN; two shards write the same
 // flow as the whole run (a shard renders the next shard's first frame for its last frame's flow); and
-// flow without a trajectory, or into a dataset file, is refused with one line.
+// flow without a trajectory, or into a bag, is refused with one line.
 TEST_F(BoxesCli, FlowAlongATrajectoryAndAcrossShards) {
     write_text(dir_ / "fwd.csv", "0,0,0,0,10,0\n0.3,0,0,0,10,0\n0.6,0,0,0,10,2\n0.9,0,0,0,10,4\n");
     const std::vector<std::string> common = {
@@ -441,10 +441,10 @@ TEST_F(BoxesCli, FlowAlongATrajectoryAndAcrossShards) {
     const CliRun single = run({"render", "--backend", "cpu", "--save", "flow", "--out", (dir_ / "one").string()});
     EXPECT_EQ(single.exit_code, 2);
     EXPECT_NE(single.err.find("--trajectory"), std::string::npos) << single.err;
-    const CliRun h5 = run({"render", "--backend", "cpu", "--trajectory", (dir_ / "fwd.csv").string(), "--save",
-                           "polar,flow", "--out", (dir_ / "run.h5").string()});
-    EXPECT_EQ(h5.exit_code, 2);
-    EXPECT_NE(h5.err.find("flow"), std::string::npos) << h5.err;
+    const CliRun bag = run({"render", "--backend", "cpu", "--trajectory", (dir_ / "fwd.csv").string(), "--save",
+                            "polar,flow", "--out", (dir_ / "run.mcap").string()});
+    EXPECT_EQ(bag.exit_code, 2);
+    EXPECT_NE(bag.err.find("flow"), std::string::npos) << bag.err;
 }
 
 } // namespace

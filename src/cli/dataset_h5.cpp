@@ -14,14 +14,14 @@ namespace vksonar::cli {
 
 namespace {
 // The arrays a file holds, as the --save list of its identity: shards merge only with the same arrays.
-std::string saved_arrays(bool polar_u16, bool labels) {
-    return std::string(polar_u16 ? "polar,polar_u16" : "polar") + (labels ? ",labels" : "");
+std::string saved_arrays(bool polar_u16, bool labels, bool flow) {
+    return std::string(polar_u16 ? "polar,polar_u16" : "polar") + (labels ? ",labels" : "") + (flow ? ",flow" : "");
 }
 } // namespace
 
 Identity dataset_identity(const DatasetMeta& meta, const DatasetOptions& options) {
     return run_identity(meta.config_json, meta.seed, meta.scene, meta.backend,
-                        saved_arrays(options.polar_u16, options.labels), options.has_time,
+                        saved_arrays(options.polar_u16, options.labels, options.flow), options.has_time,
                         meta.shard ? &*meta.shard : nullptr);
 }
 
@@ -93,6 +93,8 @@ public:
                  rows(l.elevation_spread, "elevation_spread", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
                  rows(l.point, "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 3}, z);
         }
+        if (ok && options.flow)
+            ok = rows(flow_, "flow", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 2}, options.compress);
         std::vector<double> angles(plan.beam_angle_rad.begin(), plan.beam_angle_rad.begin() + plan.beams);
         std::vector<double> ranges(plan.bin_range_m.begin(), plan.bin_range_m.begin() + plan.bins);
         ok = ok && vector(file_.get(), "beam_angles_rad", angles) && vector(file_.get(), "ranges_m", ranges);
@@ -159,6 +161,7 @@ public:
                  reopen_rows(l.elevation_spread, "elevation_spread", H5T_NATIVE_FLOAT) &&
                  reopen_rows(l.point, "point", H5T_NATIVE_FLOAT);
         }
+        if (ok && options.flow) ok = reopen_rows(flow_, "flow", H5T_NATIVE_FLOAT);
         // The frames after frames_written (a frame cut off by the kill) go; the file is not complete
         // until this run ends.
         if (!ok || !set_count("complete", 0) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
@@ -168,8 +171,8 @@ public:
 
     std::uint64_t frames_written() const override { return frames_; }
 
-    Result<void> append(const Frame& frame, const Pose& pose, double time_s,
-                        const std::uint16_t* display_u16) override {
+    Result<void> append(const Frame& frame, const Pose& pose, double time_s, const std::uint16_t* display_u16,
+                        const float* flow) override {
         const double pose_row[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
         const std::uint64_t index = frame.frame_index;
         bool ok = append_row(polar_, frame.intensity.data()) && append_row(pose_, pose_row) &&
@@ -188,6 +191,10 @@ public:
                  append_row(l.elevation_spread, frame.elevation_spread.data()) &&
                  append_row(l.point, frame.point.data());
         }
+        if (ok && flow_.id.ok()) {
+            if (flow == nullptr) return fail("frame " + std::to_string(frames_) + " has no flow");
+            ok = append_row(flow_, flow);
+        }
         if (!ok) return fail("cannot write frame " + std::to_string(frames_));
         ++frames_;
         // The frame counts only once all its rows are written; flushed so a killed run leaves it readable.
@@ -201,6 +208,7 @@ public:
         polar_ = {};
         polar_u16_ = {};
         labels_ = {};
+        flow_ = {};
         pose_ = {};
         frame_index_ = {};
         time_ = {};
@@ -299,6 +307,7 @@ private:
     Hid file_;
     RowDataset polar_, polar_u16_, pose_, frame_index_, time_;
     LabelRows labels_;
+    RowDataset flow_;
     hsize_t frames_ = 0;
 };
 
@@ -351,7 +360,8 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
     }
     const bool u16 = H5Lexists(f, "polar_u16", H5P_DEFAULT) > 0;
     const bool labels = H5Lexists(f, "instance", H5P_DEFAULT) > 0;
-    info.identity = run_identity(*config, *seed, *scene, *backend, saved_arrays(u16, labels),
+    const bool flow = H5Lexists(f, "flow", H5P_DEFAULT) > 0;
+    info.identity = run_identity(*config, *seed, *scene, *backend, saved_arrays(u16, labels, flow),
                                  time_unit->rfind("s ", 0) == 0, info.shard ? &*info.shard : nullptr);
     return info;
 }

@@ -36,6 +36,7 @@ namespace vksonar::cli {
 struct DatasetOptions {
     bool polar_u16 = false; // also write /polar_u16
     bool labels = false;    // also write the label arrays (/instance ... /point)
+    bool flow = false;      // also write /flow (--save flow: each labelled cell's d_bin, d_beam to the next frame)
     bool compress = false;  // shuffle + deflate level 4 on the frame arrays (lossless)
     bool has_time = false;  // /time holds the trajectory's times, else the frame ordinal
 };
@@ -78,9 +79,10 @@ public:
                                                          const DatasetOptions& options);
     virtual ~DatasetWriter() = default;
     virtual std::uint64_t frames_written() const = 0;
-    // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on.
-    virtual Result<void> append(const Frame& frame, const Pose& pose, double time_s,
-                                const std::uint16_t* display_u16) = 0;
+    // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on,
+    // `flow` the frame's flow (bins * beams * 2) when flow is on.
+    virtual Result<void> append(const Frame& frame, const Pose& pose, double time_s, const std::uint16_t* display_u16,
+                                const float* flow = nullptr) = 0;
     // Marks the file complete and closes it.
     virtual Result<void> close() = 0;
 };

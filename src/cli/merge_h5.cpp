@@ -67,11 +67,11 @@ namespace {
 
 using h5::Hid;
 
-// The per-frame arrays, in the order the writer creates them. polar_u16 and the labels (instance ...
-// point) are there only when the run asked for them; the shards' identities agree on which.
+// The per-frame arrays, in the order the writer creates them. polar_u16, the labels (instance ...
+// point) and flow are there only when the run asked for them; the shards' identities agree on which.
 constexpr const char* kRowSets[] = {
-    "polar", "pose",      "frame_index",      "time", "polar_u16", "instance", "instance_fraction",
-    "class", "elevation", "elevation_spread", "point"};
+    "polar", "pose",      "frame_index",      "time",  "polar_u16", "instance", "instance_fraction",
+    "class", "elevation", "elevation_spread", "point", "flow"};
 
 struct Rows {
     Hid set;

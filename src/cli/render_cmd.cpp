@@ -386,13 +386,14 @@ void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
                         : save.cloud     ? "cloud"
                         : save.multibeam ? "multibeam"
                         : save.raw_scan  ? "raw_scan"
-                        : save.flow      ? "flow"
                                          : nullptr;
     if (other)
         throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
-                       ") holds polar, polar_u16 and labels only; write per-frame folders (--out DIR) for the rest");
+                       ") holds polar, polar_u16, labels and flow only; write per-frame folders (--out DIR) for the "
+                       "rest");
     if (!save.polar && !save.polar_u16)
-        throw BadInput("--save: nothing for the dataset file " + path + " (polar, polar_u16; labels go beside them)");
+        throw BadInput("--save: nothing for the dataset file " + path +
+                       " (polar, polar_u16; labels and flow go beside them)");
     if (!hdf5_available())
         throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
@@ -1010,6 +1011,7 @@ int run_render(const std::vector<std::string>& argv) {
         DatasetOptions options;
         options.polar_u16 = save.polar_u16;
         options.labels = save.labels;
+        options.flow = save.flow;
         options.compress = args.has("--compress");
         options.has_time = timed;
         dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
@@ -1076,7 +1078,8 @@ int run_render(const std::vector<std::string>& argv) {
                 host::quantize_display(slot.frame, outputs.quantized);
                 u16 = outputs.quantized.data();
             }
-            auto appended = dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16);
+            auto appended =
+                dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16, save.flow ? slot.flow.data() : nullptr);
             if (!appended) throw Failure(appended.error().message);
             dataset_file->keep(); // only this thread calls keep(); read after the join
             return;

@@ -6,7 +6,7 @@ Checks, each of which can fail:
   - every frame of the file equals polar.npy / polar_u16.npy of the per-frame folders of the same
     trajectory and seed, bit for bit; compressed equals uncompressed;
   - pose, frame_index, time, the tables and the attributes say what was rendered;
-  - with --save labels, the six label arrays equal the folders' instance.npy ... point.npy, one chunk a
+  - with --save labels,flow, the six label arrays and /flow equal the folders' instance.npy ... point.npy, one chunk a
     frame, compressed with --compress; without it there are none;
   - a run killed half way leaves a readable file: frames_written whole frames, equal to the same
     frames of an uninterrupted run, and complete = 0;
@@ -85,11 +85,13 @@ with tempfile.TemporaryDirectory() as tmp:
     LABELS = {"instance": ("instance.npy", np.uint16, ()), "class": ("class.npy", np.uint16, ()),
               "instance_fraction": ("instance_fraction.npy", np.float32, ()),
               "elevation": ("elevation.npy", np.float32, ()),
-              "elevation_spread": ("elevation_spread.npy", np.float32, ()), "point": ("point.npy", np.float32, (3,))}
+              "elevation_spread": ("elevation_spread.npy", np.float32, ()), "point": ("point.npy", np.float32, (3,)),
+              "flow": ("flow.npy", np.float32, (2,))}
     labelled = os.path.join(tmp, "labelled")
-    render(["--trajectory", poses, "--out", labelled, "--save", "polar,labels"] + SMALL)
+    render(["--trajectory", poses, "--out", labelled, "--save", "polar,labels,flow"] + SMALL)
     for name, compress in (("labels.h5", []), ("labels_packed.h5", ["--compress"])):
-        render(["--trajectory", poses, "--out", os.path.join(tmp, name), "--save", "polar,labels"] + compress + SMALL)
+        render(["--trajectory", poses, "--out", os.path.join(tmp, name), "--save", "polar,labels,flow"] + compress +
+               SMALL)
     with h5py.File(os.path.join(tmp, "labels.h5"), "r") as f, h5py.File(os.path.join(tmp, "labels_packed.h5")) as g:
         check("polar_u16" not in f, "labels without polar_u16")
         labelled_cells = 0
@@ -103,6 +105,9 @@ with tempfile.TemporaryDirectory() as tmp:
                 check(np.array_equal(d[i], expected, equal_nan=True), f"/{name} frame {i} differs from {npy}")
                 check(np.array_equal(g[name][i], expected, equal_nan=True), f"compressed /{name} frame {i}")
         labelled_cells = int((f["instance"][:] > 0).sum())
+        flow = f["flow"][:]
+        check(np.isfinite(flow[:-1]).any() and not np.isfinite(flow[-1]).any(),
+              "flow: finite before the last frame, all NaN in it (no next frame)")
         check(labelled_cells > 100, f"the labels label something: {labelled_cells} cells")
         ids = {o["id"]: o["class_id"] for o in json.loads(f.attrs["objects"])["instances"]}
         instance, classes = f["instance"][:], f["class"][:]
