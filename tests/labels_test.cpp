@@ -412,6 +412,62 @@ TEST_P(LabelBackendTest, FlowStopsAtAnOccluder) {
     EXPECT_GT(wall_flow, wall * 8 / 10);
 }
 
+// Frame::visibility against geometry: a wall 8 m away covering azimuths below 0 (y in [-4, 0] at
+// x = 8) hides exactly the starboard half of a sphere 14 m ahead (the sonar's view of it is symmetric
+// about azimuth 0); the wall itself is hidden nowhere. Then, alone, the sphere with range_max = 13.5:
+// the part of its visible surface beyond 13.5 m is outside the window. A ray at angle t from the
+// centre direction meets the sphere (distance D, radius a) at r(t) = D cos t - sqrt(a^2 - D^2 sin^2 t),
+// so that part is the cap t < t_out with r(t_out) = 13.5, its share of the disc t < asin(a / D) in
+// solid angle (1 - cos t_out) / (1 - cos t_max). Tolerance: the pixels along the disc's edge and the
+// cut (one pixel wide, about 8 % of a 13-pixel-radius disc; 0.05 on a half).
+TEST_P(LabelBackendTest, VisibilityOfAHalfHiddenAndAPartlyOutsideObject) {
+    const double D = 14.0, a = 1.0;
+    {
+        const SonarConfig config = labels_config(BeamGeometry::line_array);
+        Scene scene;
+        add_sphere(scene, D, 0.0, 0.0, a, 96, -10.0, kSphereId);
+        AcousticMaterial m;
+        m.backscatter_db = -20.0;
+        add_quad(scene, 8.0, -2.0, 0.0, 4.0, 6.0, m, 0.0, kQuadId);
+        auto r = render_once(GetParam(), config, scene, {}, SaveFlags::labels);
+        ASSERT_TRUE(r);
+        const auto& vis = r->frame.visibility;
+        ASSERT_EQ(vis.size(), 2u);
+        EXPECT_EQ(vis[0].instance, kSphereId);
+        EXPECT_EQ(vis[1].instance, kQuadId);
+        const double hidden = double(vis[0].hidden) / vis[0].pixels;
+        std::printf("[labels] sphere behind a half wall: %u pixels, hidden %.3f (expected 0.5); wall hidden %u\n",
+                    vis[0].pixels, hidden, vis[1].hidden);
+        EXPECT_NEAR(hidden, 0.5, 0.05);
+        EXPECT_EQ(vis[0].outside, 0u);
+        EXPECT_EQ(vis[1].hidden, 0u);
+    }
+    {
+        SonarConfig config = labels_config(BeamGeometry::line_array);
+        config.range_max_m = 13.5;
+        Scene scene;
+        add_sphere(scene, D, 0.0, 0.0, a, 96, -10.0, kSphereId);
+        auto r = render_once(GetParam(), config, scene, {}, SaveFlags::labels);
+        ASSERT_TRUE(r);
+        ASSERT_EQ(r->frame.visibility.size(), 1u);
+        const ObjectVisibility& v = r->frame.visibility[0];
+        // r(t) = 13.5 by bisection on t in [0, t_max] (r grows with t)
+        const double t_max = std::asin(a / D);
+        double lo = 0.0, hi = t_max;
+        for (int i = 0; i < 100; ++i) {
+            const double t = 0.5 * (lo + hi);
+            const double range = D * std::cos(t) - std::sqrt(std::max(0.0, a * a - D * D * std::sin(t) * std::sin(t)));
+            (range < 13.5 ? lo : hi) = t;
+        }
+        const double expected = 1.0 - (1.0 - std::cos(lo)) / (1.0 - std::cos(t_max));
+        const double outside = double(v.outside) / v.pixels;
+        std::printf("[labels] sphere across range_max: %u pixels, outside %.3f (expected %.3f)\n", v.pixels, outside,
+                    expected);
+        EXPECT_EQ(v.hidden, 0u);
+        EXPECT_NEAR(outside, expected, 0.05);
+    }
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, LabelBackendTest, ::testing::Values(Backend::vulkan, Backend::cpu),
                          [](const ::testing::TestParamInfo<Backend>& param_info) {
                              return param_info.param == Backend::cpu ? std::string("cpu") : std::string("vulkan");

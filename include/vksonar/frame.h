@@ -41,6 +41,18 @@ constexpr bool any(SaveFlags flags) {
     return flags != SaveFlags::none;
 }
 
+// How much of an object the sonar sees (labels, docs/labels.md): over the depth pass's pixels that the
+// object covers when drawn alone (its projection inside the depth pass's view: the fan, the vertical
+// coverage and the near/far planes), how many a nearer object hides and how many of the rest lie
+// outside the range window.
+// Thread-safety: a plain value: safe to read from many threads at once, to write from one.
+struct ObjectVisibility {
+    std::uint32_t instance = 0; // SceneInstance::id
+    std::uint32_t pixels = 0;   // covered when drawn alone
+    std::uint32_t hidden = 0;   // of those, where the depth pass's nearest surface is another object's
+    std::uint32_t outside = 0;  // of the rest, slant range outside [range_min, range_max)
+};
+
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct StageTime {
     std::string stage; // "depth", "normals", "echo", "beamform", "noise", "image"
@@ -94,6 +106,9 @@ struct Frame {
     // bins * beams * 3: the point of the instance's strongest return in the cell (the pixel that put the
     // most energy there, at the range of the part of its footprint inside the bin), sonar frame, m (NaN)
     std::vector<float> point;
+    // One entry per object with a labelled cell, in increasing id (empty without a scene: a host's depth
+    // image names no objects).
+    std::vector<ObjectVisibility> visibility;
 
     std::vector<StageTime> times;
     std::vector<EffectState> effects;

@@ -32,6 +32,7 @@ public:
     std::unique_ptr<host::Workers> workers;   // host-stage threads, made once here
     vk::HostDepthPass* host_depth = nullptr;  // HostDepthRenderer: `backend`, typed
     std::unique_ptr<cpu::LabelsStage> labels; // only with SaveFlags::labels
+    std::size_t visibility_capacity = 0;      // Frame::visibility's reserve (labels)
 };
 
 namespace {
@@ -67,7 +68,11 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
                                   "labels: draw " + std::to_string(i) + " has instance id " +
                                       std::to_string(scene->draws[i].instance) + "; labels hold ids up to 65535");
     }
-    impl.labels = std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get());
+    // Frame::visibility holds at most one entry per distinct instance id of the draws.
+    impl.visibility_capacity = 1;
+    if (scene != nullptr) impl.visibility_capacity += scene->draws.size();
+    impl.labels =
+        std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get(), scene);
     return {};
 }
 
@@ -171,6 +176,7 @@ Frame make_frame_for(const RendererImpl& impl) {
         f.elevation.assign(cells, 0.0f);
         f.elevation_spread.assign(cells, 0.0f);
         f.point.assign(cells * 3, 0.0f);
+        f.visibility.reserve(impl.visibility_capacity);
     }
     f.times.reserve(8);
     f.stages_run.reserve(8);
@@ -194,7 +200,7 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     if (!r) return r;
     if (impl.labels) {
         const auto start = std::chrono::steady_clock::now();
-        impl.labels->run(frame);
+        impl.labels->run(frame, pose);
         frame.times.push_back(
             {"labels", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()});
         frame.stages_run.push_back("labels");

@@ -70,6 +70,16 @@ void BoxFinder::find(const Frame& frame, const std::vector<std::uint16_t>& fan_i
         slot_[box.instance_id] = 0; // the table is all zeros again for the next frame
         box.at_window_edge =
             box.bin_first == 0 || box.beam_first == 0 || box.bin_last + 1 == bins || box.beam_last + 1 == beams;
+        box.has_visibility = false;
+        const auto seen = std::lower_bound(
+            frame.visibility.begin(), frame.visibility.end(), box.instance_id,
+            [](const ObjectVisibility& v, std::uint32_t id) { return v.instance < id; }); // increasing ids
+        if (seen != frame.visibility.end() && seen->instance == box.instance_id && seen->pixels > 0) {
+            box.has_visibility = true;
+            box.projected_pixels = seen->pixels;
+            box.hidden_fraction = double(seen->hidden) / seen->pixels;
+            box.outside_fraction = double(seen->outside) / seen->pixels;
+        }
     }
     std::sort(boxes.begin(), boxes.end(), [](const Box& a, const Box& b) { return a.instance_id < b.instance_id; });
 }
@@ -95,6 +105,13 @@ std::string boxes_json_text(const Frame& frame, std::uint32_t width, std::uint32
         else
             box["fan"] = nullptr;
         box["at_window_edge"] = b.at_window_edge;
+        if (b.has_visibility)
+            box["visibility"] = {{"projected_pixels", b.projected_pixels},
+                                 {"hidden_fraction", b.hidden_fraction},
+                                 {"outside_fraction", b.outside_fraction},
+                                 {"hidden_or_outside_fraction", b.hidden_fraction + b.outside_fraction}};
+        else
+            box["visibility"] = nullptr;
         list.push_back(std::move(box));
     }
     const json doc = {{"frame_index", frame.frame_index},

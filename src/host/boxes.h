@@ -32,6 +32,12 @@ struct Box {
     // Its polar extent reaches the first or last beam or bin: the object may go on outside the range
     // window or the fan (false does not rule that out in elevation, which the polar image does not show).
     bool at_window_edge = false;
+    // Frame::visibility of the object (absent without a scene: has_visibility false): its pixels in the
+    // depth pass's view drawn alone, and the fractions of them hidden by a nearer object and outside the
+    // range window (of the unhidden ones); hidden + outside is the part of its projection not seen.
+    bool has_visibility = false;
+    std::uint32_t projected_pixels = 0;
+    double hidden_fraction = 0.0, outside_fraction = 0.0;
 };
 
 // Finds the boxes of one frame. Its scratch (an id -> box table) is allocated on first use and kept,

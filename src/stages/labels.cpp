@@ -12,6 +12,8 @@
 #include "core/angles.h"
 #include "core/sonar_math.hpp"
 #include "host/workers.h"
+#include "scene/scene_data.h"
+#include "stages/cpu_stages.h"
 #include "stages/pixel_spread.h"
 
 namespace vksonar::cpu {
@@ -55,7 +57,20 @@ struct LabelsStage::Pixels {
     std::vector<PixelLabel> pixels; // rows * columns
 };
 
-LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers)
+// Frame::visibility: the scene's depth clusters, culled per frame, and a depth image for one object
+// drawn alone (the CPU rasterizer: the same coverage rule as the depth pass on either backend).
+struct LabelsStage::Alone {
+    const SceneData* scene;
+    std::vector<shared::DepthPush> draws;
+    std::vector<DepthCluster> clusters;
+    std::vector<std::uint8_t> drawn, drawn_alone; // slices * clusters
+    std::vector<float> depth;
+    std::vector<std::uint32_t> material;
+    std::vector<std::uint8_t> labelled; // 65536: the ids with a labelled cell this frame
+};
+
+LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
+                         const SceneData* scene)
     : plan_(plan), class_of_instance_(std::move(class_of_instance)), workers_(workers) {
     const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
     for (std::uint32_t i = 0; i < parts; ++i) {
@@ -64,6 +79,17 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
+    if (scene != nullptr) {
+        alone_ = std::make_unique<Alone>();
+        alone_->scene = scene;
+        alone_->draws.resize(static_cast<std::size_t>(plan_.slices) * scene->draws.size());
+        build_depth_clusters(*scene, alone_->clusters);
+        alone_->drawn.resize(static_cast<std::size_t>(plan_.slices) * alone_->clusters.size());
+        alone_->drawn_alone.resize(alone_->drawn.size());
+        alone_->depth.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
+        alone_->material.resize(alone_->depth.size());
+        alone_->labelled.assign(65536, 0);
+    }
 }
 
 LabelsStage::~LabelsStage() = default;
@@ -228,7 +254,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
 
 } // namespace
 
-void LabelsStage::run(Frame& frame) {
+void LabelsStage::run(Frame& frame, const Pose& pose) {
     Job job{&plan_, &class_of_instance_, &scratch_, &pixels_->pixels, &frame};
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
@@ -262,9 +288,58 @@ void LabelsStage::run(Frame& frame) {
         cache(&job, 0, 1);
         task(&job, 0, 1);
     }
+    frame.visibility.clear();
+    if (alone_) visibility(frame, pose);
     // The material image as without labels: the material id alone.
     for (std::uint32_t& m : frame.material)
         if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;
+}
+
+void LabelsStage::visibility(Frame& frame, const Pose& pose) {
+    Alone& a = *alone_;
+    const SceneData& scene = *a.scene;
+    for (std::uint16_t id : frame.instance)
+        a.labelled[id] = 1;
+    a.labelled[0] = 0;
+    compose_depth_draws(plan_, scene, pose, a.draws);
+    cull_depth_clusters(a.clusters, scene.draws.size(), a.draws, a.drawn);
+    const std::uint32_t W = plan_.slice_columns;
+    const std::size_t runs = a.clusters.size();
+    for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
+        if (!a.labelled[id]) continue;
+        a.labelled[id] = 0;
+        ObjectVisibility v;
+        v.instance = id;
+        // Only this object's runs (where the frustum does not rule them out): it alone in the depth image.
+        bool any = false;
+        for (std::size_t i = 0; i < a.drawn.size(); ++i) {
+            const bool mine = scene.draws[a.clusters[i % runs].draw].instance == id;
+            a.drawn_alone[i] = mine ? a.drawn[i] : 0;
+            any = any || a.drawn_alone[i];
+        }
+        if (any) {
+            const DepthClusters only{a.clusters, a.drawn_alone};
+            depth_pass(plan_, scene, a.draws, a.depth.data(), a.material.data(), nullptr, &only);
+            for (std::size_t p = 0; p < a.depth.size(); ++p) {
+                const float d = a.depth[p];
+                if (!(d > 0.0f)) continue;
+                ++v.pixels;
+                const std::uint32_t m = frame.material[p];
+                const std::uint32_t nearest = m == shared::kNoMaterial ? 0u : m >> shared::kInstanceShift;
+                if (nearest != id) {
+                    ++v.hidden;
+                    continue;
+                }
+                const std::uint32_t row = static_cast<std::uint32_t>(p / plan_.columns);
+                const std::uint32_t column = static_cast<std::uint32_t>(p % plan_.columns);
+                const double u = M::pixel_coord(column % W, W, plan_.tan_half_h);
+                const double v_coord = M::pixel_coord(row, plan_.rows, plan_.tan_half_v);
+                const double range = M::slant_range(M::view_z_from_depth(d, plan_.depth_a, plan_.depth_b), u, v_coord);
+                if (range < plan_.config.range_min_m || range >= plan_.config.range_max_m) ++v.outside;
+            }
+        }
+        frame.visibility.push_back(v); // capacity reserved by make_frame (one per instance of the scene)
+    }
 }
 
 namespace {

@@ -14,9 +14,14 @@
 
 #include "core/plan.h"
 #include "vksonar/frame.h"
+#include "vksonar/scene.h"
 
 namespace vksonar::host {
 class Workers;
+}
+
+namespace vksonar {
+struct SceneData;
 }
 
 namespace vksonar::cpu {
@@ -29,8 +34,10 @@ inline constexpr std::uint32_t kLabelSlots = 4;
 class LabelsStage {
 public:
     // class_of_instance[id] = the class id of instance id (0 for 0 and any id past the table).
-    // workers: the Renderer's threads, borrowed (null: all on the caller).
-    LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers);
+    // workers: the Renderer's threads, borrowed (null: all on the caller). scene: borrowed, for
+    // Frame::visibility (null: a host depth image, no visibility).
+    LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
+                const SceneData* scene);
     ~LabelsStage();
     LabelsStage(const LabelsStage&) = delete;
     LabelsStage& operator=(const LabelsStage&) = delete;
@@ -38,17 +45,22 @@ public:
     // Reads frame.material (material | instance << 16, as the depth pass wrote it with plan.labels) and
     // frame.echo, fills frame.instance ... frame.point, then leaves frame.material as material ids
     // (kNoMaterial where nothing was hit), as without labels. The result does not depend on the threads.
-    void run(Frame& frame);
+    // pose: the frame's, for Frame::visibility (each labelled object drawn alone on the CPU rasterizer).
+    void run(Frame& frame, const Pose& pose);
 
     struct Scratch; // per thread: one beam's bins
     struct Pixels;  // per pixel: what the beams read of it
+    struct Alone;   // each labelled object drawn alone (Frame::visibility)
 
 private:
+    void visibility(Frame& frame, const Pose& pose);
+
     const Plan& plan_; // the Renderer's, which owns this stage
     std::vector<std::uint16_t> class_of_instance_;
     host::Workers* workers_;
     std::vector<std::unique_ptr<Scratch>> scratch_; // one per worker thread
     std::unique_ptr<Pixels> pixels_;
+    std::unique_ptr<Alone> alone_; // null without a scene
 };
 
 // Flow between two labelled frames of one plan (docs/labels.md): for each cell of `from` with a label,
