@@ -329,8 +329,21 @@ PYBIND11_MODULE(vksonar, m) {
                 auto& f = self.cast<FrameObject&>();
                 return view(f.frame.point, {f.frame.bins, f.frame.beams, 3}, self);
             },
-            "float32 [bins, beams, 3]: the instance's energy-weighted mean point, sonar frame, m; NaN: none "
-            "(outputs=['labels'])")
+            "float32 [bins, beams, 3]: the point of the instance's strongest return in the cell, sonar frame, m; "
+            "NaN: none (outputs=['labels'])")
+        .def_property_readonly(
+            "visibility",
+            [](const FrameObject& f) -> py::object {
+                if (f.frame.instance.empty()) return py::none();
+                py::list out;
+                for (const ObjectVisibility& v : f.frame.visibility)
+                    out.append(py::dict(py::arg("instance") = v.instance, py::arg("pixels") = v.pixels,
+                                        py::arg("hidden") = v.hidden, py::arg("outside") = v.outside));
+                return out;
+            },
+            "Per object with a labelled cell (increasing id): its pixels in the depth pass's view drawn alone, "
+            "how many a nearer object hides and how many unhidden ones lie outside the range window, as dicts "
+            "(outputs=['labels'], docs/labels.md)")
         .def_property_readonly(
             "fan",
             [](py::object self) {

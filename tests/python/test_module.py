@@ -249,3 +249,12 @@ def test_flow_between_two_frames_matches_the_cli(tmp_path):
     run = subprocess.run(args, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     np.testing.assert_array_equal(np.load(tmp_path / "run" / "frame_000001" / "flow.npy"), flow)
+
+
+def test_visibility_lists_the_labelled_objects(labelled):
+    scene, frame = labelled
+    ids = sorted(set(np.unique(frame.instance).tolist()) - {0})
+    vis = frame.visibility
+    assert [v["instance"] for v in vis] == ids
+    assert all(0 <= v["hidden"] + v["outside"] <= v["pixels"] for v in vis)
+    assert any(v["pixels"] > 0 for v in vis)
