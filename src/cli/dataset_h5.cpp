@@ -63,9 +63,10 @@ struct RowDataset {
     std::vector<hsize_t> row; // the dimensions after the frame axis
 };
 
-// The label arrays (--save labels): all of them or none, as the run asked.
+// The label arrays (--save labels): all of them or none, as the run asked. `boxes` holds one
+// boxes.json text per frame.
 struct LabelRows {
-    RowDataset instance, instance_fraction, object_class, elevation, elevation_spread, point;
+    RowDataset instance, instance_fraction, object_class, elevation, elevation_spread, point, boxes;
 };
 
 class H5Writer final : public DatasetWriter {
@@ -74,6 +75,7 @@ public:
 
     Result<void> open(const Plan& plan, const DatasetMeta& meta, const DatasetOptions& options) {
         H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); // errors come back as one line, not a stack dump
+        if (!make_text_type()) return fail("cannot make the text type");
         file_ = Hid(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
         if (!file_.ok()) return fail("cannot create the file");
         const hsize_t bins = plan.bins, beams = plan.beams;
@@ -91,7 +93,9 @@ public:
                  rows(l.object_class, "class", H5T_STD_U16LE, H5T_NATIVE_UINT16, {bins, beams}, z) &&
                  rows(l.elevation, "elevation", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
                  rows(l.elevation_spread, "elevation_spread", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, z) &&
-                 rows(l.point, "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 3}, z);
+                 rows(l.point, "point", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 3}, z) &&
+                 // Not filtered: deflate would see the heap references, not the text.
+                 rows(l.boxes, "boxes", text_type_.get(), text_type_.get(), {}, false);
         }
         if (ok && options.flow)
             ok = rows(flow_, "flow", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams, 2}, options.compress);
@@ -147,6 +151,7 @@ public:
             return make_error(ErrorCode::invalid_argument, path_ + ": frames_written is larger than the shard");
         file_ = Hid(H5Fopen(path_.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
         if (!file_.ok()) return make_error(ErrorCode::io, "cannot open " + path_ + " to resume it");
+        if (!make_text_type()) return make_error(ErrorCode::io, "cannot resume " + path_ + ": no text type");
         frames_ = info->frames_written;
         bool ok = reopen_rows(polar_, "polar", H5T_NATIVE_FLOAT) && reopen_rows(pose_, "pose", H5T_NATIVE_DOUBLE) &&
                   reopen_rows(frame_index_, "frame_index", H5T_NATIVE_UINT64) &&
@@ -159,7 +164,9 @@ public:
                  reopen_rows(l.object_class, "class", H5T_NATIVE_UINT16) &&
                  reopen_rows(l.elevation, "elevation", H5T_NATIVE_FLOAT) &&
                  reopen_rows(l.elevation_spread, "elevation_spread", H5T_NATIVE_FLOAT) &&
-                 reopen_rows(l.point, "point", H5T_NATIVE_FLOAT);
+                 reopen_rows(l.point, "point", H5T_NATIVE_FLOAT) &&
+                 // (a shard file from before /boxes has none: it does not open, and the shard starts over)
+                 reopen_rows(l.boxes, "boxes", text_type_.get());
         }
         if (ok && options.flow) ok = reopen_rows(flow_, "flow", H5T_NATIVE_FLOAT);
         // The frames after frames_written (a frame cut off by the kill) go; the file is not complete
@@ -172,7 +179,7 @@ public:
     std::uint64_t frames_written() const override { return frames_; }
 
     Result<void> append(const Frame& frame, const Pose& pose, double time_s, const std::uint16_t* display_u16,
-                        const float* flow) override {
+                        const float* flow, const std::string* boxes_json) override {
         const double pose_row[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
         const std::uint64_t index = frame.frame_index;
         bool ok = append_row(polar_, frame.intensity.data()) && append_row(pose_, pose_row) &&
@@ -183,13 +190,16 @@ public:
             const std::size_t cells = std::size_t(frame.bins) * frame.beams;
             if (frame.instance.size() != cells || frame.point.size() != 3 * cells)
                 return fail("frame " + std::to_string(frames_) + " has no labels (render with SaveFlags::labels)");
+            if (boxes_json == nullptr) return fail("frame " + std::to_string(frames_) + " has no boxes");
+            // The variable-length string type takes a pointer to the text; HDF5 copies it out.
+            const char* boxes_text = boxes_json->c_str();
             LabelRows& l = labels_;
             ok = append_row(l.instance, frame.instance.data()) &&
                  append_row(l.instance_fraction, frame.instance_fraction.data()) &&
                  append_row(l.object_class, frame.object_class.data()) &&
                  append_row(l.elevation, frame.elevation.data()) &&
                  append_row(l.elevation_spread, frame.elevation_spread.data()) &&
-                 append_row(l.point, frame.point.data());
+                 append_row(l.point, frame.point.data()) && append_row(l.boxes, &boxes_text);
         }
         if (ok && flow_.id.ok()) {
             if (flow == nullptr) return fail("frame " + std::to_string(frames_) + " has no flow");
@@ -212,6 +222,7 @@ public:
         pose_ = {};
         frame_index_ = {};
         time_ = {};
+        text_type_ = {};
         if (H5Fclose(file_.release()) < 0) return fail("cannot close the file");
         return {};
     }
@@ -219,6 +230,13 @@ public:
 private:
     Error fail(const std::string& what) const {
         return make_error(ErrorCode::io, "cannot write " + path_ + ": " + what);
+    }
+
+    // UTF-8 text of variable length (h5py: .asstr() reads str): /boxes' type in the file and in memory.
+    bool make_text_type() {
+        text_type_ = Hid(H5Tcopy(H5T_C_S1), H5Tclose);
+        return text_type_.ok() && H5Tset_size(text_type_.get(), H5T_VARIABLE) >= 0 &&
+               H5Tset_cset(text_type_.get(), H5T_CSET_UTF8) >= 0;
     }
 
     bool rows(RowDataset& out, const char* name, hid_t file_type, hid_t memory_type, std::vector<hsize_t> row,
@@ -304,6 +322,7 @@ private:
     }
 
     std::string path_;
+    Hid text_type_; // /boxes' type, in the file and in memory (make_text_type)
     Hid file_;
     RowDataset polar_, polar_u16_, pose_, frame_index_, time_;
     LabelRows labels_;

@@ -2,10 +2,11 @@
 // reads with h5py, the constant metadata once. Layout (docs/datasets.md), names as in meta.json:
 //   /polar        float32 [frames, bins, beams]  received intensity, uPa^2 (polar.npy of each frame)
 //   /polar_u16    uint16  [frames, bins, beams]  display value x 65535 (only with --save polar_u16)
-//   with --save labels (Frame's label arrays, docs/labels.md), all six or none:
+//   with --save labels (Frame's label arrays, docs/labels.md, and the boxes), all or none:
 //   /instance, /class                        uint16  [frames, bins, beams]
 //   /instance_fraction, /elevation, /elevation_spread  float32 [frames, bins, beams]
 //   /point                                   float32 [frames, bins, beams, 3]
+//   /boxes         UTF-8 text of variable length [frames]  the frame's boxes.json, character for character
 //   /pose         float64 [frames, 6]            x_m, y_m, z_m, roll_deg, pitch_deg, yaw_deg
 //   /frame_index  uint64  [frames]               the trajectory line: the noise stream of the frame
 //   /time         float64 [frames]               s, from the trajectory's time column, else the ordinal
@@ -80,9 +81,11 @@ public:
     virtual ~DatasetWriter() = default;
     virtual std::uint64_t frames_written() const = 0;
     // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on,
-    // `flow` the frame's flow (bins * beams * 2) when flow is on.
+    // `flow` the frame's flow (bins * beams * 2) when flow is on, `boxes_json` the frame's boxes.json
+    // text (host::boxes_json_text) when labels is on: the caller makes it, as it owns the fan image
+    // the boxes' fan extents are read off.
     virtual Result<void> append(const Frame& frame, const Pose& pose, double time_s, const std::uint16_t* display_u16,
-                                const float* flow = nullptr) = 0;
+                                const float* flow = nullptr, const std::string* boxes_json = nullptr) = 0;
     // Marks the file complete and closes it.
     virtual Result<void> close() = 0;
 };

@@ -68,16 +68,19 @@ namespace {
 using h5::Hid;
 
 // The per-frame arrays, in the order the writer creates them. polar_u16, the labels (instance ...
-// point) and flow are there only when the run asked for them; the shards' identities agree on which.
+// boxes) and flow are there only when the run asked for them; the shards' identities agree on which.
 constexpr const char* kRowSets[] = {
     "polar", "pose",      "frame_index",      "time",  "polar_u16", "instance", "instance_fraction",
-    "class", "elevation", "elevation_spread", "point", "flow"};
+    "class", "elevation", "elevation_spread", "point", "boxes",     "flow"};
 
 struct Rows {
     Hid set;
     Hid native; // memory type
     std::vector<hsize_t> dims;
     std::size_t row_bytes = 0;
+    // Text of variable length (/boxes): a row read is a pointer to text HDF5 allocated, written back
+    // as it is and then freed (free_row).
+    bool variable = false;
 };
 
 bool open_rows(hid_t file, const char* name, Rows& r) {
@@ -91,6 +94,7 @@ bool open_rows(hid_t file, const char* name, Rows& r) {
     r.dims.resize(static_cast<std::size_t>(rank));
     H5Sget_simple_extent_dims(space.get(), r.dims.data(), nullptr);
     r.row_bytes = H5Tget_size(r.native.get());
+    r.variable = H5Tis_variable_str(r.native.get()) > 0;
     for (std::size_t d = 1; d < r.dims.size(); ++d)
         r.row_bytes *= r.dims[d];
     return true;
@@ -108,6 +112,18 @@ bool row_io(const Rows& r, hsize_t row, void* data, bool write) {
         return false;
     return write ? H5Dwrite(r.set.get(), r.native.get(), memory_space.get(), file_space.get(), H5P_DEFAULT, data) >= 0
                  : H5Dread(r.set.get(), r.native.get(), memory_space.get(), file_space.get(), H5P_DEFAULT, data) >= 0;
+}
+
+// Frees what reading one row of variable-length text allocated (a no-op for fixed-size rows).
+void free_row(const Rows& r, void* data) {
+    if (!r.variable) return;
+    const hsize_t one = 1;
+    const Hid space(H5Screate_simple(1, &one, nullptr), H5Sclose);
+#if H5_VERSION_GE(1, 12, 0)
+    H5Treclaim(r.native.get(), space.get(), H5P_DEFAULT, data);
+#else
+    H5Dvlen_reclaim(r.native.get(), space.get(), H5P_DEFAULT, data);
+#endif
 }
 
 void merge_into(const std::vector<ShardInput>& shards, const std::string& temporary, const std::string& out) {
@@ -137,15 +153,19 @@ void merge_into(const std::vector<ShardInput>& shards, const std::string& tempor
                 !std::equal(in_rows.dims.begin() + 1, in_rows.dims.end(), out_rows.dims.begin() + 1))
                 throw BadInput("merge: " + shards[k].path + ": /" + name + " has another shape than in " +
                                shards[0].path);
-            buffer.resize(in_rows.row_bytes);
+            if (in_rows.variable != out_rows.variable)
+                throw BadInput("merge: " + shards[k].path + ": /" + name + " has another type than in " +
+                               shards[0].path);
+            buffer.assign(in_rows.row_bytes, 0);
             for (hsize_t row = 0; row < shards[k].frames; ++row) {
                 out_rows.dims[0] = at + 1;
                 if (!row_io(in_rows, row, buffer.data(), false))
                     throw BadInput("merge: " + shards[k].path + ": cannot read /" + name + " row " +
                                    std::to_string(row));
-                if (H5Dset_extent(out_rows.set.get(), out_rows.dims.data()) < 0 ||
-                    !row_io(out_rows, at, buffer.data(), true))
-                    throw fail("cannot append to /" + std::string(name));
+                const bool written = H5Dset_extent(out_rows.set.get(), out_rows.dims.data()) >= 0 &&
+                                     row_io(out_rows, at, buffer.data(), true);
+                free_row(in_rows, buffer.data());
+                if (!written) throw fail("cannot append to /" + std::string(name));
                 ++at;
             }
         }

@@ -581,6 +581,7 @@ struct Outputs {
     std::vector<std::string> class_names; // Scene::classes(): boxes.json's class names
     host::BoxFinder box_finder;           // --save labels: boxes.json, its scratch kept across frames
     std::vector<host::Box> boxes;
+    std::string boxes_text; // the frame's boxes.json (frame_boxes)
 };
 
 // `time_s`: the trajectory's time column, or null when it has none.
@@ -695,6 +696,17 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     }
 }
 
+// The frame's boxes.json text, for the frame folder and the dataset file alike, so the two never differ.
+// Leaves Frame::instance on the fan image (instance_fan.npy) in out.fan_ids: the boxes' fan extents are
+// read off those ids, so the two files always agree.
+const std::string& frame_boxes(Outputs& out, const Frame& frame) {
+    const std::uint32_t width = out.fan.width(), height = out.fan.height();
+    out.fan.nearest_cell(frame.instance, out.fan_ids);
+    out.box_finder.find(frame, out.fan_ids, width, height, out.boxes);
+    out.boxes_text = host::boxes_json_text(frame, width, height, out.boxes, out.class_names);
+    return out.boxes_text;
+}
+
 // --save labels: the per-cell label arrays (as polar.npy's [bins, beams]), the fan-image versions of
 // instance and class, nearest cell (docs/labels.md), and each object's box (boxes.json, docs/datasets.md).
 void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
@@ -717,11 +729,8 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     const std::uint32_t width = out.fan.width(), height = out.fan.height();
     out.fan.nearest_cell(frame.object_class, out.fan_ids);
     u16("class_fan.npy", out.fan_ids, height, width);
-    out.fan.nearest_cell(frame.instance, out.fan_ids);
+    const std::string& boxes = frame_boxes(out, frame);
     u16("instance_fan.npy", out.fan_ids, height, width);
-    // The boxes' fan extents are read off instance_fan.npy's ids, so the two files always agree.
-    out.box_finder.find(frame, out.fan_ids, width, height, out.boxes);
-    const std::string boxes = host::boxes_json_text(frame, width, height, out.boxes, out.class_names);
     write_atomically(dir / "boxes.json", [&](const std::string& p) { return host::write_text_file(p, boxes); });
     host::label_image(out.fan_ids, width, height, out.image);
     write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
@@ -992,6 +1001,7 @@ int run_render(const std::vector<std::string>& argv) {
                     {},
                     {},
                     {},
+                    {},
                     {}};
     outputs.objects = host::objects_json(scene.value());
     outputs.class_names = scene->classes();
@@ -1079,7 +1089,8 @@ int run_render(const std::vector<std::string>& argv) {
                 u16 = outputs.quantized.data();
             }
             auto appended =
-                dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16, save.flow ? slot.flow.data() : nullptr);
+                dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16, save.flow ? slot.flow.data() : nullptr,
+                                       save.labels ? &frame_boxes(outputs, slot.frame) : nullptr);
             if (!appended) throw Failure(appended.error().message);
             dataset_file->keep(); // only this thread calls keep(); read after the join
             return;

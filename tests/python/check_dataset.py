@@ -8,6 +8,8 @@ Checks, each of which can fail:
   - pose, frame_index, time, the tables and the attributes say what was rendered;
   - with --save labels,flow, the six label arrays and /flow equal the folders' instance.npy ... point.npy, one chunk a
     frame, compressed with --compress; without it there are none;
+  - with --save labels, /boxes holds each frame's boxes.json text, character for character, with and
+    without --compress; without labels there is no /boxes;
   - a run killed half way leaves a readable file: frames_written whole frames, equal to the same
     frames of an uninterrupted run, and complete = 0;
   - what a dataset cannot hold is refused with one line (exit 2) and no file is left.
@@ -117,8 +119,27 @@ with tempfile.TemporaryDirectory() as tmp:
         for i in range(6):
             polar = np.load(os.path.join(labelled, f"frame_{i + 2:06d}", "polar.npy"))
             check(np.array_equal(f["polar"][i], polar), f"polar {i} with labels")
+        # /boxes: one UTF-8 string per frame, the frame folder's boxes.json as it is.
+        for h in (f, g):
+            d = h["boxes"]
+            check(d.shape == (6,) and h5py.check_string_dtype(d.dtype) is not None
+                  and h5py.check_string_dtype(d.dtype).encoding == "utf-8" and h5py.check_string_dtype(d.dtype).length
+                  is None, f"/boxes: {d.dtype} {d.shape}")
+            check(d.chunks is not None and d.maxshape == (None,), f"/boxes grows per frame: {d.chunks} {d.maxshape}")
+            texts = d.asstr()[:]
+            boxed = 0
+            for i in range(6):
+                with open(os.path.join(labelled, f"frame_{i + 2:06d}", "boxes.json"), encoding="utf-8") as src:
+                    expected = src.read()
+                check(texts[i] == expected, f"{h.filename}: /boxes[{i}] is not boxes.json's text")
+                parsed = json.loads(texts[i])
+                check(parsed == json.loads(expected) and parsed["frame_index"] == i + 2,
+                      f"{h.filename}: /boxes[{i}] parses to another object than boxes.json")
+                boxed += len(parsed["boxes"])
+            check(boxed > 0, "/boxes: some frame has a box")
     with h5py.File(plain, "r") as f:
         check(not any(name in f for name in LABELS), f"no label arrays without --save labels: {list(f.keys())}")
+        check("boxes" not in f, "no /boxes without --save labels")
 
     # A time column (header t / time / time_s) fills /time and each folder's meta.json time_s.
     timed = os.path.join(tmp, "timed.csv")
