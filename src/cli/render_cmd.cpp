@@ -821,8 +821,6 @@ int run_render(const std::vector<std::string>& argv) {
         throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
     if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
     if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
-    if (!args.has("--trajectory") && parse_save(args.values("--save")).flow)
-        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
 
     // 1. Options that need no files.
     Backend backend = Backend::vulkan;
@@ -833,6 +831,8 @@ int run_render(const std::vector<std::string>& argv) {
         throw BadInput("--backend: '" + backend_name + "' is not a backend (auto, vulkan or cpu)");
     const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
     SaveSet save = parse_save(args.values("--save"));
+    if (save.flow && !args.has("--trajectory"))
+        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
     const std::string out_path = args.value("--out");
     const bool dataset = is_dataset_path(out_path);
     const bool bag = is_mcap_path(out_path);

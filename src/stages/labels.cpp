@@ -50,7 +50,9 @@ struct PixelLabel {
 };
 
 struct LabelsStage::Scratch {
-    std::vector<Cell> cells; // bins of the beam being labelled
+    // bins of the beam being labelled: value-initialised here, and label_beam resets every cell it
+    // touched, so each beam starts from zeros without a per-frame clear
+    std::vector<Cell> cells;
 };
 
 struct LabelsStage::Pixels {
@@ -104,6 +106,20 @@ struct Job {
     Frame* frame;
 };
 
+// The instance a pixel of the depth pass's id image shows (material | instance << 16; 0 where nothing
+// was hit).
+inline std::uint32_t instance_of(std::uint32_t material_id) {
+    return material_id == shared::kNoMaterial ? 0u : material_id >> shared::kInstanceShift;
+}
+
+// The slant range of pixel (row, column) at reversed-Z depth d > 0 (as the echo stage reconstructs it).
+inline double pixel_slant_range(const Plan& plan, std::uint32_t row, std::uint32_t column, double d) {
+    const std::uint32_t W = plan.slice_columns;
+    const double u = M::pixel_coord(column % W, W, plan.tan_half_h);
+    const double v = M::pixel_coord(row, plan.rows, plan.tan_half_v);
+    return M::slant_range(M::view_z_from_depth(d, plan.depth_a, plan.depth_b), u, v);
+}
+
 // Adds w (energy) of a pixel of `instance` at elevation psi and point p to the cell.
 inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const double p[3]) {
     cell.energy += w;
@@ -153,7 +169,7 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
                 out.dir[i] = static_cast<float>(ray[i] * inv_length);
             out.elevation = static_cast<float>(M::pixel_elevation(u, v));
             out.range = frame.echo[2 * p + 1];
-            out.instance = frame.material[p] == shared::kNoMaterial ? 0u : frame.material[p] >> shared::kInstanceShift;
+            out.instance = instance_of(frame.material[p]);
         }
     }
 }
@@ -263,8 +279,6 @@ void LabelsStage::run(Frame& frame, const Pose& pose) {
     std::fill(frame.elevation.begin(), frame.elevation.end(), nan);
     std::fill(frame.elevation_spread.begin(), frame.elevation_spread.end(), nan);
     std::fill(frame.point.begin(), frame.point.end(), nan);
-    for (auto& s : scratch_)
-        std::fill(s->cells.begin(), s->cells.end(), Cell{});
     // Beams dealt out in blocks of 8 in turn: a line array's edge beams gather from more columns.
     constexpr std::uint32_t kBeamBlock = 8;
     const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
@@ -303,7 +317,6 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose) {
     a.labelled[0] = 0;
     compose_depth_draws(plan_, scene, pose, a.draws);
     cull_depth_clusters(a.clusters, scene.draws.size(), a.draws, a.drawn);
-    const std::uint32_t W = plan_.slice_columns;
     const std::size_t runs = a.clusters.size();
     for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
         if (!a.labelled[id]) continue;
@@ -324,17 +337,12 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose) {
                 const float d = a.depth[p];
                 if (!(d > 0.0f)) continue;
                 ++v.pixels;
-                const std::uint32_t m = frame.material[p];
-                const std::uint32_t nearest = m == shared::kNoMaterial ? 0u : m >> shared::kInstanceShift;
-                if (nearest != id) {
+                if (instance_of(frame.material[p]) != id) {
                     ++v.hidden;
                     continue;
                 }
-                const std::uint32_t row = static_cast<std::uint32_t>(p / plan_.columns);
-                const std::uint32_t column = static_cast<std::uint32_t>(p % plan_.columns);
-                const double u = M::pixel_coord(column % W, W, plan_.tan_half_h);
-                const double v_coord = M::pixel_coord(row, plan_.rows, plan_.tan_half_v);
-                const double range = M::slant_range(M::view_z_from_depth(d, plan_.depth_a, plan_.depth_b), u, v_coord);
+                const double range = pixel_slant_range(plan_, static_cast<std::uint32_t>(p / plan_.columns),
+                                                       static_cast<std::uint32_t>(p % plan_.columns), d);
                 if (range < plan_.config.range_min_m || range >= plan_.config.range_max_m) ++v.outside;
             }
         }
@@ -382,7 +390,7 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
     const std::uint32_t W = plan.slice_columns;
     for (std::uint32_t s = 0; s < plan.slices; ++s) {
         double off = plan.slice_info[s].center_azimuth_rad - azimuth; // pixel_azimuth = centre - atan(u)
-        off = std::remainder(off, 2.0 * 3.14159265358979323846);
+        off = std::remainder(off, 2.0 * kPi);
         if (!(std::abs(off) <= 0.5 * plan.slice_width_rad + 1e-9)) continue;
         const double u = std::tan(off);
         const double v = -std::tan(elevation) * std::sqrt(1.0 + u * u); // pixel_elevation inverted
@@ -397,10 +405,9 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
                 const std::size_t q = static_cast<std::size_t>(y) * plan.columns + s * W + static_cast<std::size_t>(x);
                 const double d = to.depth[q];
                 if (!(d > 0.0)) continue;
-                const double uu = M::pixel_coord(static_cast<std::uint32_t>(x), W, plan.tan_half_h);
-                const double vv = M::pixel_coord(static_cast<std::uint32_t>(y), plan.rows, plan.tan_half_v);
-                const double range = M::slant_range(M::view_z_from_depth(d, plan.depth_a, plan.depth_b), uu, vv);
-                if (range >= r - tolerance) return true;
+                const std::uint32_t column_in_image = s * W + static_cast<std::uint32_t>(x);
+                if (pixel_slant_range(plan, static_cast<std::uint32_t>(y), column_in_image, d) >= r - tolerance)
+                    return true;
             }
         return false;
     }
