@@ -83,7 +83,9 @@ public:
         profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
-        scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
+        scratch_.assign(std::max<std::size_t>(beamform_accumulator_count(plan_), 1), Real(0));
+        resample_w_.assign(std::max<std::size_t>(resample_weight_count(plan_), 1), Real(0));
+        resample_weights<Real>(plan_, resample_w_.data());
         if (plan_.effects.incidence && !plan_.face_normals)
             normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1) * parts, Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
@@ -108,7 +110,7 @@ public:
         for (const StageInfo& stage : kStageTable) {
             if (!stage.runs(plan_)) continue;
             const auto start = Clock::now();
-            run(stage.id, pose);
+            run(stage.id, pose, save_mask);
             frame.times.push_back({stage.name, ms_since(start)});
             frame.stages_run.emplace_back(stage.name);
         }
@@ -137,7 +139,7 @@ public:
 
 private:
     // One stage of kStageTable on this backend's buffers.
-    void run(StageId stage, const Pose& pose) {
+    void run(StageId stage, const Pose& pose, SaveFlags save_mask) {
         switch (stage) {
         case StageId::depth: {
             compose_depth_draws(plan_, scene_, pose, draws_);
@@ -169,14 +171,18 @@ private:
                                      plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(), begin, end);
             });
             break;
-        case StageId::beamform: // every column's profile before any beam reads it
+        case StageId::beamform: { // every column's profile before any beam reads it
+            // the float profiles only when saved: the resample reads the accumulators
+            float* profiles = any(save_mask & SaveFlags::profiles) ? profiles_.data() : nullptr;
             split(workers_, plan_.profile_columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles_.data(), scratch_.data(), begin, end);
+                cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
             });
             split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_beams<Real>(plan_, profiles_.data(), beam_profiles_.data(), polar_.data(), begin, end);
+                cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(),
+                                          polar_.data(), begin, end);
             });
             break;
+        }
         }
     }
 
@@ -190,7 +196,8 @@ private:
     std::vector<std::uint32_t> material_;
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
     std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
-    std::vector<Real> scratch_, normals_scratch_;
+    std::vector<Real> scratch_, normals_scratch_; // scratch_: the profile accumulators (beamform_accumulator_count)
+    std::vector<Real> resample_w_;                // resample_weights, filled once
 };
 
 } // namespace
