@@ -80,6 +80,8 @@ public:
         if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
         if (plan_.face_normals) face_.assign(pixels * 4, 0.0f);
         echo_.assign(pixels * 2, 0.0f);
+        echo_table_.assign(echo_table_count(plan_), Real(0));
+        echo_table<Real>(plan_, echo_table_.data());
         profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
@@ -168,7 +170,8 @@ private:
         case StageId::echo: // normals only where the normals stage ran (incidence on)
             split_blocks(workers_, plan_.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::echo_rows<Real>(plan_, depth_.data(), material_.data(),
-                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(), begin, end);
+                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(),
+                                     echo_table_.data(), begin, end);
             });
             break;
         case StageId::beamform: { // every column's profile before any beam reads it
@@ -197,6 +200,7 @@ private:
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
     std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
     std::vector<Real> scratch_, normals_scratch_; // scratch_: the profile accumulators (beamform_accumulator_count)
+    std::vector<Real> echo_table_;                // echo_table, filled once
     std::vector<Real> resample_w_;                // resample_weights, filled once
 };
 

@@ -77,9 +77,14 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
 template <class Real>
 void geometric_normals_rows(const Plan& plan, const float* depth, const float* face4, float* normals4,
                             std::uint32_t row_begin, std::uint32_t row_end);
+// table: echo_table's, made once per plan.
 template <class Real>
 void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
-               std::uint32_t row_begin, std::uint32_t row_end);
+               const Real* table, std::uint32_t row_begin, std::uint32_t row_end);
+// The echo stage's factors of a pixel's place in the grid: u per slice column, then (solid angle,
+// vertical power) per row and slice column (echo_table_count values).
+std::size_t echo_table_count(const Plan& plan);
+template <class Real> void echo_table(const Plan& plan, Real* table);
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end);
