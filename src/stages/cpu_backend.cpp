@@ -84,7 +84,6 @@ public:
         echo_table<Real>(plan_, echo_table_.data());
         profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
-        polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
         scratch_.assign(std::max<std::size_t>(beamform_accumulator_count(plan_), 1), Real(0));
         resample_w_.assign(std::max<std::size_t>(resample_weight_count(plan_), 1), Real(0));
         resample_weights<Real>(plan_, resample_w_.data());
@@ -109,15 +108,16 @@ public:
         // A frame reused across renders reports this render's stages only (capacity is kept).
         frame.times.clear();
         frame.stages_run.clear();
+        // The side-lobe pass writes the polar scan straight into the frame (make_frame sized it).
+        frame.clean.resize(static_cast<std::size_t>(plan_.bins) * plan_.beams);
         for (const StageInfo& stage : kStageTable) {
             if (!stage.runs(plan_)) continue;
             const auto start = Clock::now();
-            run(stage.id, pose, save_mask);
+            run(stage.id, pose, save_mask, frame.clean.data());
             frame.times.push_back({stage.name, ms_since(start)});
             frame.stages_run.emplace_back(stage.name);
         }
 
-        store(frame.clean, polar_);
         if (any(save_mask & SaveFlags::depth)) {
             store(frame.depth, depth_);
             store(frame.material, material_);
@@ -141,7 +141,7 @@ public:
 
 private:
     // One stage of kStageTable on this backend's buffers.
-    void run(StageId stage, const Pose& pose, SaveFlags save_mask) {
+    void run(StageId stage, const Pose& pose, SaveFlags save_mask, float* polar) {
         switch (stage) {
         case StageId::depth: {
             compose_depth_draws(plan_, scene_, pose, draws_);
@@ -181,8 +181,8 @@ private:
                 cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
             });
             split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(),
-                                          polar_.data(), begin, end);
+                cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(), polar,
+                                          begin, end);
             });
             break;
         }
@@ -198,7 +198,7 @@ private:
     std::vector<float> depth_;
     std::vector<std::uint32_t> material_;
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
-    std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
+    std::vector<float> normals_, echo_, profiles_, beam_profiles_; // the polar scan: in the frame
     std::vector<Real> scratch_, normals_scratch_; // scratch_: the profile accumulators (beamform_accumulator_count)
     std::vector<Real> echo_table_;                // echo_table, filled once
     std::vector<Real> resample_w_;                // resample_weights, filled once
