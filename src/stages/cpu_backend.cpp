@@ -21,29 +21,11 @@ double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// Runs part(begin, end) over [0, n) split between the workers' threads (or whole on the caller).
-template <class Part> void split(host::Workers* workers, std::uint32_t n, const Part& part) {
-    if (workers == nullptr || workers->count() == 1 || n < 2 * workers->count()) {
-        part(0u, n, 0u);
-        return;
-    }
-    struct Context {
-        const Part* part;
-        std::uint32_t n;
-    } context{&part, n};
-    workers->run(
-        [](void* c, std::uint32_t index, std::uint32_t parts) {
-            const auto& t = *static_cast<const Context*>(c);
-            (*t.part)(static_cast<std::uint32_t>(std::uint64_t(t.n) * index / parts),
-                      static_cast<std::uint32_t>(std::uint64_t(t.n) * (index + 1) / parts), index);
-        },
-        &context);
-}
-
-// [0, n) in blocks of `block` dealt out in turn (part p takes blocks p, p + parts, ...): the rows of a
-// sonar image are not equally loaded (above the seabed most rows have no hit), nor are its bins (the
-// side-lobe pass skips empty ones), so contiguous halves would leave a thread idle. part(begin, end, p)
-// runs once per block.
+// [0, n) in blocks of `block`, taken by the workers' threads as they come (Workers::run_blocks): the
+// rows of a sonar image are not equally loaded (above the seabed most rows have no hit), nor are its
+// bins (the side-lobe pass skips empty ones), and a thread that the system runs late (on a busy
+// machine) leaves its share to the others. part(begin, end, thread) runs once per block; thread picks
+// the per-thread scratch. On one thread, part runs once over the whole range.
 template <class Part>
 void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, const Part& part) {
     if (workers == nullptr || workers->count() == 1 || n <= block) {
@@ -54,15 +36,15 @@ void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, 
         const Part* part;
         std::uint32_t n, block;
     } context{&part, n, block};
-    workers->run(
-        [](void* c, std::uint32_t index, std::uint32_t parts) {
+    workers->run_blocks(
+        [](void* c, std::uint32_t index, std::uint32_t thread) {
             const auto& t = *static_cast<const Context*>(c);
-            for (std::uint32_t begin = index * t.block; begin < t.n; begin += parts * t.block)
-                (*t.part)(begin, std::min(begin + t.block, t.n), index);
+            const std::uint32_t begin = index * t.block;
+            (*t.part)(begin, std::min(begin + t.block, t.n), thread);
         },
-        &context);
+        &context, (n + block - 1) / block);
 }
-constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32;
+constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32, kColumnBlock = 64;
 
 // Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
 template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
@@ -177,9 +159,10 @@ private:
         case StageId::beamform: { // every column's profile before any beam reads it
             // the float profiles only when saved: the resample reads the accumulators
             float* profiles = any(save_mask & SaveFlags::profiles) ? profiles_.data() : nullptr;
-            split(workers_, plan_.profile_columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
-            });
+            split_blocks(workers_, plan_.profile_columns, kColumnBlock,
+                         [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                             cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
+                         });
             split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(), polar,
                                           begin, end);
