@@ -405,6 +405,23 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
     return max(REAL(1) - abs(xc - REAL(c)), REAL(0));
 }
 
+// ---------------------------------------------------------------------------------------------
+// Far side lobes (stage 4c, docs/pipeline.md "Side lobes"): the pattern beyond the side-lobe
+// kernel's reach, carried on a coarse grid of cells (Plan::far_cells). A beam puts its energy into
+// its two nearest cells and reads the convolved cells back with the same two shares.
+
+// The share of cell c in beam j's pair, beam_cell = (first cell, second cell, share of the second, 0)
+// (Plan::far_beam_cell[4 j ...]); 0 for any other cell.
+VKS_FN REAL far_cell_share(vec4 beam_cell, uint c) {
+    if (uint(beam_cell.x) == c) {
+        return REAL(1) - beam_cell.z;
+    }
+    if (uint(beam_cell.y) == c) {
+        return beam_cell.z;
+    }
+    return REAL(0);
+}
+
 #undef VKS_FN
 #undef VKS_FN_INLINE
 #undef VKS_OUT

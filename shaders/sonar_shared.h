@@ -18,6 +18,7 @@ using uint = std::uint32_t;
 
 VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
 VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kMaxFarCells = 256u;       // far side lobes' grid (Plan::far_cells): far_sidelobe.comp's shared array
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 // The material attachment holds material_id | instance << kInstanceShift (the instance only when
 // labels are asked for, else 0): the material is the low 16 bits.
@@ -42,11 +43,15 @@ VKS_CONST uint kBindingColumnTable = 10u; // uvec2 per pixel column: (beam, weig
 VKS_CONST uint kBindingBeamTable = 11u;   // uvec2 per beam: (first column, end column)
 VKS_CONST uint kBindingSidelobeWeight = 12u;
 VKS_CONST uint kBindingConeCoord = 13u; // float per pixel: its cone coordinate (line_array; profile.comp)
-VKS_CONST uint kBindingMaterialsUniform = 14u;
-VKS_CONST uint kBindingColumnTableUniform = 15u;
-VKS_CONST uint kBindingBeamTableUniform = 16u;
-VKS_CONST uint kBindingSidelobeWeightUniform = 17u;
-VKS_CONST uint kBindingCount = 18u;
+// Far side lobes (Plan::far_cells): the table (beam cells, cell beam spans, weights; far_sidelobe.comp)
+// and the convolved cells, vec4 over four range bins: far_cells[c * bins_padded / 4 + quad].
+VKS_CONST uint kBindingFarTable = 14u;
+VKS_CONST uint kBindingFarCells = 15u;
+VKS_CONST uint kBindingMaterialsUniform = 16u; // the uniform views: the last four bindings
+VKS_CONST uint kBindingColumnTableUniform = 17u;
+VKS_CONST uint kBindingBeamTableUniform = 18u;
+VKS_CONST uint kBindingSidelobeWeightUniform = 19u;
+VKS_CONST uint kBindingCount = 20u;
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 
@@ -67,6 +72,7 @@ VKS_CONST uint kSpecBeamMajorOut = 10u;  // resample: 1 = beam-major vec4 output
 VKS_CONST uint kSpecResampleWalk = 11u;  // resample: 1 = walk each run's columns once (src/vk/resample_walk.h)
 VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (beams % 4 == 0)
 VKS_CONST uint kSpecLineArray = 13u;     // profile: 1 = gather pixels onto cone columns (SonarParams::line_array)
+VKS_CONST uint kSpecFarSidelobes = 14u;  // sidelobe: 1 = add the far side lobes' cells (far_sidelobe.comp)
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
@@ -165,7 +171,7 @@ struct SonarParams {
 
     float cone_half_fov_rad;
     float inv_cone_step;
-    uint pad0;
+    uint far_cells; // far side lobes: cells of the coarse grid (Plan::far_cells), 0: none
     uint pad1;
 };
 #ifdef __cplusplus

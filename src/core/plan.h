@@ -88,6 +88,17 @@ struct Plan {
     // spans fewer beams near broadside than at a line array's edges): the CPU skips the zero terms,
     // which add exactly +0 to a sum of non-negative energies.
     std::vector<std::uint32_t> sidelobe_tap_begin, sidelobe_tap_end;
+    // Far side lobes (docs/pipeline.md, "Side lobes"): the pattern beyond the kernel's reach R, on a
+    // coarse grid of far_cells cells uniform in the separation variable (0: none). Each beam puts its
+    // energy into its two nearest cells (far_beam_cell: first cell, second cell, share of the second,
+    // 0), the cells are convolved with far_weight, and each beam reads its two cells back with the same
+    // shares. far_weight[far_cells - 1 + a - b] is cell b's weight into cell a: the pattern times a ramp
+    // from 0 at R / 2 to 1 at R, averaged over one cell (a cell spans one or more lobes, so the average
+    // is the lobes' mean level); the kernel's taps carry the pattern times one minus the same ramp.
+    std::uint32_t far_cells = 0;
+    std::vector<float> far_beam_cell;          // beams * 4
+    std::vector<std::uint32_t> far_cell_beams; // far_cells * 2: the beams [first, end) that feed cell c
+    std::vector<float> far_weight;             // 2 * far_cells - 1
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
     // +-180 deg seam. Then column_beam[c] + 1 and the side-lobe source j - K + t wrap modulo beams,
     // and seam columns split their energy between beam beams-1 and beam 0 (docs/pipeline.md §4).

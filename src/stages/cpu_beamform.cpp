@@ -3,6 +3,7 @@
 // Every output cell is computed by one loop iteration with sums in increasing index order, so the
 // result is deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -130,6 +131,23 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
     const float* weights = plan.sidelobe_weight.data();
     const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
     const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
+    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells, the cells
+    // convolved with far_weight, stored in float as far_sidelobe.comp stores them; then each output
+    // adds its two cells' share (sidelobe.comp). Sums in increasing beam and cell order, as the shaders.
+    const std::uint32_t cells = plan.far_cells;
+    std::array<Real, shared::kMaxFarCells> cell_energy{};
+    std::array<float, shared::kMaxFarCells> far_level{};
+    auto beam_cell = [&](std::int64_t j) {
+        const float* b = plan.far_beam_cell.data() + 4 * j;
+        return typename M::vec4(b[0], b[1], b[2], b[3]);
+    };
+    auto far_at = [&](std::int64_t j) -> Real {
+        if (cells == 0) return Real(0);
+        const typename M::vec4 bc = beam_cell(j);
+        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+        return M::far_cell_share(bc, c0) * static_cast<Real>(far_level[c0]) +
+               M::far_cell_share(bc, c1) * static_cast<Real>(far_level[c1]);
+    };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
@@ -137,6 +155,19 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
         if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
             std::fill(out, out + beams, 0.0f);
             continue;
+        }
+        for (std::uint32_t c = 0; c < cells; ++c) {
+            Real sum = Real(0);
+            for (std::uint32_t j = plan.far_cell_beams[2 * c]; j < plan.far_cell_beams[2 * c + 1]; ++j)
+                sum += M::far_cell_share(beam_cell(j), c) * static_cast<Real>(B[j]);
+            cell_energy[c] = static_cast<Real>(static_cast<float>(sum)); // a float in far_sidelobe.comp's shared array
+        }
+        for (std::uint32_t a = 0; a < cells; ++a) {
+            const float* w = plan.far_weight.data() + (cells - 1 + a);
+            Real sum = Real(0);
+            for (std::uint32_t b = 0; b < cells; ++b)
+                sum += static_cast<Real>(*(w - b)) * cell_energy[b];
+            far_level[a] = static_cast<float>(sum);
         }
         std::int64_t j = 0;
         while (j < nb) {
@@ -159,10 +190,10 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
                     s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
                     s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
                 }
-                out[j] = static_cast<float>(s0);
-                out[j + 1] = static_cast<float>(s1);
-                out[j + 2] = static_cast<float>(s2);
-                out[j + 3] = static_cast<float>(s3);
+                out[j] = static_cast<float>(s0 + far_at(j));
+                out[j + 1] = static_cast<float>(s1 + far_at(j + 1));
+                out[j + 2] = static_cast<float>(s2 + far_at(j + 2));
+                out[j + 3] = static_cast<float>(s3 + far_at(j + 3));
                 j += 4;
                 continue;
             }
@@ -171,7 +202,7 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
                 Real sum = Real(0);
                 for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
                     sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
-                out[j] = static_cast<float>(sum);
+                out[j] = static_cast<float>(sum + far_at(j));
                 ++j;
                 continue;
             }
@@ -182,7 +213,7 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
             Real sum = Real(0);
             for (std::int64_t t = first; t < end; ++t)
                 sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
-            out[j] = static_cast<float>(sum);
+            out[j] = static_cast<float>(sum + far_at(j));
             ++j;
         }
     }

@@ -158,8 +158,23 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
     const std::vector<float> echo2 = random_echo(plan, &total);
     const BeamformOut o = run_beamform<Real>(plan, echo2);
     const std::int64_t K = (plan.sidelobe_taps - 1) / 2;
+    // The far side lobes (plan.h far_cells) from their definition: each beam's two cell shares
+    // (first cell 1 - s, second s), the cells convolved with far_weight[cells - 1 + a - b].
+    const std::uint32_t cells = plan.far_cells;
+    ASSERT_GT(cells, 1u) << "a 4-degree beam's 3-beamwidth kernel stops short of the fan";
+    auto share = [&](std::uint32_t j, std::uint32_t c) {
+        const float* bc = plan.far_beam_cell.data() + 4 * std::size_t(j);
+        return std::uint32_t(bc[0]) == c ? 1.0 - bc[2] : std::uint32_t(bc[1]) == c ? double(bc[2]) : 0.0;
+    };
     double max_rel = 0;
     for (std::uint32_t k = 0; k < plan.bins; ++k) {
+        std::vector<double> cell(cells, 0.0), far(cells, 0.0);
+        for (std::uint32_t c = 0; c < cells; ++c)
+            for (std::uint32_t i = 0; i < plan.beams; ++i)
+                cell[c] += share(i, c) * o.beams[std::size_t(k) * plan.beams + i];
+        for (std::uint32_t a = 0; a < cells; ++a)
+            for (std::uint32_t c = 0; c < cells; ++c)
+                far[a] += double(plan.far_weight[cells - 1 + a - c]) * cell[c];
         for (std::uint32_t j = 0; j < plan.beams; ++j) {
             double B = 0; // resample from the definition: every column, weight by the table
             for (std::uint32_t c = 0; c < plan.columns; ++c) {
@@ -175,9 +190,12 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
                 P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) *
                      o.beams[std::size_t(k) * plan.beams + src];
             }
+            for (std::uint32_t c = 0; c < cells; ++c)
+                P += share(j, c) * far[c];
             const double gotB = o.beams[std::size_t(k) * plan.beams + j],
                          gotP = o.polar[std::size_t(k) * plan.beams + j];
-            // Sums of <= ~10 positive float terms: float arithmetic is good to ~1e-6 relative.
+            // Sums of <= ~10 positive float terms (the far cells: a few dozen, each stored once in
+            // float): float arithmetic is good to ~1e-6 relative.
             EXPECT_NEAR(gotB, B, 2e-6 * B + 1e-30);
             EXPECT_NEAR(gotP, P, 2e-6 * P + 1e-30);
             if (P > 0) max_rel = std::max(max_rel, std::abs(gotP - P) / P);
