@@ -39,8 +39,15 @@ layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
 layout(constant_id = kSpecTableVec4s0) const uint kWeightVec4s = 1u;
 layout(std140, binding = kBindingSidelobeWeightUniform) uniform SidelobeBlock { vec4 sidelobe_weight4[kWeightVec4s]; };
 
+layout(constant_id = kSpecTableVec4s1) const uint kFarTableVec4s = 1u;
+layout(std140, binding = kBindingFarTableUniform) uniform FarTableBlock { vec4 far_table4[kFarTableVec4s]; };
+
 float weight(uint i) {
     return kUniformTables != 0u ? sidelobe_weight4[i >> 2u][i & 3u] : sidelobe_weight[i];
+}
+
+float far_entry(uint i) {
+    return kUniformTables != 0u ? far_table4[i >> 2u][i & 3u] : far_table[i];
 }
 
 void main() {
@@ -86,7 +93,7 @@ void main() {
             uint j = uint(first_beam) + r;
             if (j < uint(beams)) {
                 uint i = 4u * j;
-                vec4 cell = vec4(far_table[i], far_table[i + 1u], far_table[i + 2u], far_table[i + 3u]);
+                vec4 cell = vec4(far_entry(i), far_entry(i + 1u), far_entry(i + 2u), far_entry(i + 3u));
                 uint c0 = uint(cell.x), c1 = uint(cell.y);
                 sums[r] += far_cell_share(cell, c0) * far_cells4[c0 * quads + q] +
                            far_cell_share(cell, c1) * far_cells4[c1 * quads + q];

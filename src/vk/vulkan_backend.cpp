@@ -228,7 +228,7 @@ Result<void> VulkanBackend::create_compute() {
         std::size_t bytes;
         VkBufferUsageFlags usage;
     };
-    const std::array<Working, 8> working{{
+    const std::array<Working, 9> working{{
         {&depth_, pixels * sizeof(float), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         {&material_id_, pixels * sizeof(std::uint32_t), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         // geometric: the depth pass copies its face normals in, the normals pass orients them in place
@@ -239,6 +239,8 @@ Result<void> VulkanBackend::create_compute() {
          out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
         {&beam_profiles_, padded_cells * sizeof(float), out},
         {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
+        {&far_energy_, far_sidelobes_ ? std::size_t(gpu_params_.bins_padded) * plan_.far_cells * sizeof(float) : 16,
+         storage},
         {&far_cells_, far_sidelobes_ ? std::size_t(gpu_params_.bins_padded) * plan_.far_cells * sizeof(float) : 16,
          storage},
     }};
@@ -306,6 +308,7 @@ Result<void> VulkanBackend::create_compute() {
         far_table.push_back(static_cast<float>(beam)); // exact: beams < 2^24
     far_table.insert(far_table.end(), plan_.far_weight.begin(), plan_.far_weight.end());
     if (far_table.empty()) far_table.assign(4, 0.0f);
+    const std::uint32_t far_table_vec4s = uniform_vec4s(bytes_of(far_table));
 
     struct Table {
         Buffer* buffer;
@@ -325,7 +328,7 @@ Result<void> VulkanBackend::create_compute() {
         {&sidelobe_weight_, sidelobe_table.data(), bytes_of(sidelobe_table), storage | uniform},
         {&cone_coord_, cones ? plan_.pixel_cone_coord.data() : no_cone_coord,
          cones ? bytes_of(plan_.pixel_cone_coord) : sizeof no_cone_coord, storage},
-        {&far_table_, far_table.data(), bytes_of(far_table), storage},
+        {&far_table_, far_table.data(), bytes_of(far_table), storage | uniform},
     }};
     for (const Table& t : tables) {
         // Rounded up to whole vec4s: a uniform view covers whole std140 array elements.
@@ -386,13 +389,14 @@ Result<void> VulkanBackend::create_compute() {
     VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
 
     const std::array<const Buffer*, binding_count> bound{
-        &params_,    &depth_,      &material_id_, &normals_,      &echo_,       &profiles_,        &beam_profiles_,
-        &polar_,     &slice_info_, &materials_,   &column_table_, &beam_table_, &sidelobe_weight_, &cone_coord_,
-        &far_table_, &far_cells_,  &materials_,   &column_table_, &beam_table_, &sidelobe_weight_};
+        &params_,          &depth_,      &material_id_,     &normals_,    &echo_,         &profiles_,
+        &beam_profiles_,   &polar_,      &slice_info_,      &materials_,  &column_table_, &beam_table_,
+        &sidelobe_weight_, &cone_coord_, &far_table_,       &far_energy_, &far_cells_,    &materials_,
+        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
-        materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s};
+        materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s, far_table_vec4s};
     std::array<VkDescriptorBufferInfo, binding_count> infos{};
     std::array<VkWriteDescriptorSet, binding_count> writes{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
@@ -460,16 +464,22 @@ Result<void> VulkanBackend::create_compute() {
         SidelobeSpecialization sidelobe;
         sidelobe.beams_per_invocation = kBeamsPerInvocation;
         sidelobe.vec4_out = plan_.beams % 4 == 0 ? 1u : 0u;
-        sidelobe.uniform_tables = both_uniform(sidelobe_vec4s);
+        sidelobe.uniform_tables = both_uniform(sidelobe_vec4s, far_table_vec4s);
         sidelobe.weight_vec4s = sidelobe.uniform_tables ? sidelobe_vec4s : 1u;
         sidelobe.far_sidelobes = far_sidelobes_ ? 1u : 0u;
+        sidelobe.far_table_vec4s = sidelobe.uniform_tables ? far_table_vec4s : 1u;
         if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), sidelobe.constants()); !r)
             return r;
     }
     if (far_sidelobes_) {
-        const std::array<SpecConstant, 0> none{};
-        if (auto r = make(far_sidelobe_pipeline_, far_sidelobe_comp_spv, sizeof(far_sidelobe_comp_spv), none); !r)
-            return r;
+        FarSidelobeSpecialization far;
+        far.uniform_tables = both_uniform(far_table_vec4s);
+        far.far_table_vec4s = far.uniform_tables ? far_table_vec4s : 1u;
+        for (OwnedPipeline* pipeline : {&far_deposit_pipeline_, &far_convolve_pipeline_}) {
+            if (auto r = make(*pipeline, far_sidelobe_comp_spv, sizeof(far_sidelobe_comp_spv), far.constants()); !r)
+                return r;
+            far.pass = 1;
+        }
     }
     return {};
 }
