@@ -2,12 +2,14 @@
 // side-lobe kernel's reach, on a coarse grid of cells uniform in the beams' separation variable
 // (Plan::far_cells). Two passes of this shader run before sidelobe.comp, which adds each beam's
 // share of its two cells:
-//   kFarPass 0 (deposit):  far_energy[c] = sum over the beams [first, end) of cell c, in increasing
-//                          order, of far_cell_share(beam j, c) * B(j);
-//   kFarPass 1 (convolve): far_cells[a] = sum over b in increasing order of weight(a - b) * far_energy[b].
+//   kFarPass 0 (deposit):  far_energy[m][c] = sum over the beams [first, end) of cell c, in increasing
+//                          order, of far_deposit_weight(beam j, c, m) * B(j);
+//   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
+// for each channel m < far_channels (sonar_kernels.h, Plan::far_channels).
 // An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
-// that resample.comp writes) and a workgroup one cell (y), so every table load is the same for the
-// whole workgroup: one scalar load from the uniform view on lavapipe (src/vk/pipelines.h says why).
+// that resample.comp writes) and a workgroup one (channel, cell) (y = m * cells + c), so every table
+// load is the same for the whole workgroup: one scalar load from the uniform view on lavapipe
+// (src/vk/pipelines.h says why).
 // The CPU backend (src/stages/cpu_beamform.cpp) makes the same sums in the same order.
 #version 450
 #extension GL_GOOGLE_include_directive : require
@@ -22,7 +24,7 @@ layout(constant_id = kSpecFarPass) const uint kFarPass = 0u;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
-// Plan::far_beam_cell (4 per beam), then Plan::far_cell_beams as floats (2 per cell, exact below
+// Plan::far_beam_cell (8 per beam), then Plan::far_cell_beams as floats (2 per cell, exact below
 // 2^24), then Plan::far_weight (2 cells - 1); and the same as a uniform block where it fits.
 layout(std430, binding = kBindingFarTable) readonly buffer FarTableBuffer { float far_table[]; };
 layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
@@ -39,24 +41,28 @@ void main() {
     uint quads = params.bins_padded / 4u;
     uint q = gl_GlobalInvocationID.x;
     uint cells = params.far_cells;
-    uint c = gl_WorkGroupID.y;
-    if (q >= quads || c >= cells) {
+    uint m = gl_WorkGroupID.y / cells;
+    uint c = gl_WorkGroupID.y - m * cells;
+    if (q >= quads || m >= params.far_channels) {
         return;
     }
-    uint spans = 4u * params.beams;
+    uint spans = 8u * params.beams;
+    uint channel_base = m * cells;
     vec4 sum = vec4(0.0);
     if (kFarPass == 0u) {
         uint end = uint(table(spans + 2u * c + 1u));
         for (uint j = uint(table(spans + 2u * c)); j < end; ++j) {
-            vec4 cell = vec4(table(4u * j), table(4u * j + 1u), table(4u * j + 2u), table(4u * j + 3u));
-            sum += far_cell_share(cell, c) * beam_profiles4[j * quads + q];
+            uint i = 8u * j;
+            vec4 cell = vec4(table(i), table(i + 1u), table(i + 2u), table(i + 3u));
+            vec4 phase = vec4(table(i + 4u), table(i + 5u), table(i + 6u), table(i + 7u));
+            sum += far_deposit_weight(cell, phase, c, m) * beam_profiles4[j * quads + q];
         }
-        far_energy4[c * quads + q] = sum;
+        far_energy4[(channel_base + c) * quads + q] = sum;
         return;
     }
     uint weights = spans + 2u * cells;
     for (uint b = 0u; b < cells; ++b) {
-        sum += table(weights + cells - 1u + c - b) * far_energy4[b * quads + q];
+        sum += table(weights + cells - 1u + c - b) * far_energy4[(channel_base + b) * quads + q];
     }
-    far_cells4[c * quads + q] = sum;
+    far_cells4[(channel_base + c) * quads + q] = sum;
 }

@@ -92,11 +92,19 @@ void main() {
         for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
             uint j = uint(first_beam) + r;
             if (j < uint(beams)) {
-                uint i = 4u * j;
+                uint i = 8u * j;
                 vec4 cell = vec4(far_entry(i), far_entry(i + 1u), far_entry(i + 2u), far_entry(i + 3u));
+                vec4 phase = vec4(far_entry(i + 4u), far_entry(i + 5u), far_entry(i + 6u), far_entry(i + 7u));
                 uint c0 = uint(cell.x), c1 = uint(cell.y);
-                sums[r] += far_cell_share(cell, c0) * far_cells4[c0 * quads + q] +
-                           far_cell_share(cell, c1) * far_cells4[c1 * quads + q];
+                float s0 = far_cell_share(cell, c0), s1 = far_cell_share(cell, c1);
+                uint cells = params.far_cells;
+                vec4 l[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
+                for (uint m = 0u; m < params.far_channels; ++m) {
+                    l[m] = s0 * far_cells4[(m * cells + c0) * quads + q] + s1 * far_cells4[(m * cells + c1) * quads + q];
+                }
+                for (uint b = 0u; b < 4u; ++b) {
+                    sums[r][b] += far_sidelobe_level(phase, l[0][b], l[1][b], l[2][b]);
+                }
             }
         }
     }

@@ -174,8 +174,8 @@ struct SonarParams {
 
     float cone_half_fov_rad;
     float inv_cone_step;
-    uint far_cells; // far side lobes: cells of the coarse grid (Plan::far_cells), 0: none
-    uint pad1;
+    uint far_cells;    // far side lobes: cells of the coarse grid (Plan::far_cells), 0: none
+    uint far_channels; // 3: sinc^2's phase channels, 1: the lobes' mean (Plan::far_channels)
 };
 #ifdef __cplusplus
 static_assert(sizeof(SonarParams) == 36 * 4, "SonarParams must match the GLSL std140 block");

@@ -683,6 +683,7 @@ double beam_position(const Plan& p, std::uint32_t j) {
 // are as narrow as far_sidelobe_cell * reach, and at most kMaxFarCells.
 void plan_far_sidelobes(Plan& p, double reach_units) {
     p.far_cells = 0;
+    p.far_channels = 1;
     p.far_beam_cell.clear();
     p.far_cell_beams.clear();
     p.far_weight.clear();
@@ -702,8 +703,14 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
         step = span / (cells - 1);
     }
     p.far_cells = cells;
+    // A line array's sinc^2 pattern is sin^2(k du) / (k du)^2, and sin^2(k (u_s - u_j)) =
+    // (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2: the crests and nulls factor into a phase of
+    // each beam, and only the smooth 1 / (k du)^2 goes on the grid (three channels: the energy, and the
+    // energy times each beam's cos 2k u and sin 2k u). Other patterns keep the lobes' mean (one channel).
+    const bool phased = p.line_array && shader_id(p.config.horizontal_pattern) == shared::kPatternSinc;
+    p.far_channels = phased ? 3u : 1u;
     // Each beam's two cells and the share of the second: position x = (first beam's position - its own) / step.
-    p.far_beam_cell.assign(std::size_t(p.beams) * 4, 0.0f);
+    p.far_beam_cell.assign(std::size_t(p.beams) * 8, 0.0f);
     std::vector<std::uint32_t> first(cells, p.beams), last(cells, 0);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         double x = (beam_position(p, 0) - beam_position(p, j)) / step;
@@ -715,9 +722,14 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
             c0 = std::min(c0, cells - 2);
         const std::uint32_t c1 = p.circular ? (c0 + 1) % cells : c0 + 1;
         const float share = static_cast<float>(std::clamp(x - std::floor(x) + (std::floor(x) - c0), 0.0, 1.0));
-        p.far_beam_cell[4 * j + 0] = static_cast<float>(c0);
-        p.far_beam_cell[4 * j + 1] = static_cast<float>(c1);
-        p.far_beam_cell[4 * j + 2] = share;
+        p.far_beam_cell[8 * j + 0] = static_cast<float>(c0);
+        p.far_beam_cell[8 * j + 1] = static_cast<float>(c1);
+        p.far_beam_cell[8 * j + 2] = share;
+        if (phased) {
+            const double phase = 2.0 * p.hpattern_k * beam_position(p, j);
+            p.far_beam_cell[8 * j + 4] = static_cast<float>(std::cos(phase));
+            p.far_beam_cell[8 * j + 5] = static_cast<float>(std::sin(phase));
+        }
         for (std::uint32_t c : {c0, c1}) {
             first[c] = std::min(first[c], j);
             last[c] = std::max(last[c], j);
@@ -729,8 +741,8 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
         p.far_cell_beams[2 * c] = first[c];
         p.far_cell_beams[2 * c + 1] = last[c] + 1;
     }
-    // far_weight: cell b into cell a depends on a - b only; the pattern times the ramp, averaged over
-    // one cell by the midpoint rule.
+    // far_weight: cell b into cell a depends on a - b only; the pattern (phased: its smooth part
+    // 1 / (2 (k du)^2)) times the ramp, averaged over one cell by the midpoint rule.
     constexpr int kSamples = 64;
     p.far_weight.assign(2 * std::size_t(cells) - 1, 0.0f);
     for (std::int64_t d = -std::int64_t(cells) + 1; d < std::int64_t(cells); ++d) {
@@ -738,7 +750,10 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
         for (int i = 0; i < kSamples; ++i) {
             const double sep = (double(d) + (i + 0.5) / kSamples - 0.5) * step;
             const double folded = p.circular ? std::remainder(sep, 2.0 * kPi) : sep;
-            sum += pattern_at_separation(p, sep) * far_ramp(std::abs(folded), reach_units);
+            const double ramp = far_ramp(std::abs(folded), reach_units);
+            if (ramp == 0.0) continue; // also keeps 1 / du^2 away from du = 0
+            const double x = p.hpattern_k * sep;
+            sum += (phased ? 0.5 / (x * x) : pattern_at_separation(p, sep)) * ramp;
         }
         p.far_weight[std::size_t(d + cells - 1)] = static_cast<float>(sum / kSamples);
     }
@@ -797,6 +812,7 @@ void plan_gpu_params(Plan& p) {
     g.effect_flags = e.shader_flags();
     g.sidelobe_taps = p.sidelobe_taps;
     g.far_cells = p.far_cells;
+    g.far_channels = p.far_channels;
     g.tan_half_h = static_cast<float>(p.tan_half_h);
     g.tan_half_v = static_cast<float>(p.tan_half_v);
     g.depth_a = static_cast<float>(p.depth_a);

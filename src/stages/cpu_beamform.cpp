@@ -131,22 +131,27 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
     const float* weights = plan.sidelobe_weight.data();
     const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
     const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
-    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells, the cells
-    // convolved with far_weight, stored in float as far_sidelobe.comp stores them; then each output
-    // adds its two cells' share (sidelobe.comp). Sums in increasing beam and cell order, as the shaders.
-    const std::uint32_t cells = plan.far_cells;
-    std::array<Real, shared::kMaxFarCells> cell_energy{};
-    std::array<float, shared::kMaxFarCells> far_level{};
-    auto beam_cell = [&](std::int64_t j) {
-        const float* b = plan.far_beam_cell.data() + 4 * j;
+    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells (per channel),
+    // the cells convolved with far_weight, both stored in float as far_sidelobe.comp's two passes store
+    // them; then each output adds far_sidelobe_level of its two cells (sidelobe.comp). Sums in
+    // increasing beam and cell order, as the shaders.
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
+    std::array<Real, 3 * shared::kMaxFarCells> cell_energy{};
+    std::array<float, 3 * shared::kMaxFarCells> far_level{};
+    auto table_vec4 = [&](std::int64_t j, std::size_t offset) {
+        const float* b = plan.far_beam_cell.data() + 8 * j + offset;
         return typename M::vec4(b[0], b[1], b[2], b[3]);
     };
     auto far_at = [&](std::int64_t j) -> Real {
         if (cells == 0) return Real(0);
-        const typename M::vec4 bc = beam_cell(j);
+        const typename M::vec4 bc = table_vec4(j, 0), phase = table_vec4(j, 4);
         const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-        return M::far_cell_share(bc, c0) * static_cast<Real>(far_level[c0]) +
-               M::far_cell_share(bc, c1) * static_cast<Real>(far_level[c1]);
+        const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        Real l[3] = {Real(0), Real(0), Real(0)};
+        for (std::uint32_t m = 0; m < channels; ++m)
+            l[m] =
+                s0 * static_cast<Real>(far_level[m * cells + c0]) + s1 * static_cast<Real>(far_level[m * cells + c1]);
+        return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
     };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
@@ -156,18 +161,20 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
             std::fill(out, out + beams, 0.0f);
             continue;
         }
-        for (std::uint32_t c = 0; c < cells; ++c) {
-            Real sum = Real(0);
-            for (std::uint32_t j = plan.far_cell_beams[2 * c]; j < plan.far_cell_beams[2 * c + 1]; ++j)
-                sum += M::far_cell_share(beam_cell(j), c) * static_cast<Real>(B[j]);
-            cell_energy[c] = static_cast<Real>(static_cast<float>(sum)); // a float in far_sidelobe.comp's shared array
-        }
-        for (std::uint32_t a = 0; a < cells; ++a) {
-            const float* w = plan.far_weight.data() + (cells - 1 + a);
-            Real sum = Real(0);
-            for (std::uint32_t b = 0; b < cells; ++b)
-                sum += static_cast<Real>(*(w - b)) * cell_energy[b];
-            far_level[a] = static_cast<float>(sum);
+        for (std::uint32_t m = 0; m < channels; ++m) {
+            for (std::uint32_t c = 0; c < cells; ++c) {
+                Real sum = Real(0);
+                for (std::uint32_t j = plan.far_cell_beams[2 * c]; j < plan.far_cell_beams[2 * c + 1]; ++j)
+                    sum += M::far_deposit_weight(table_vec4(j, 0), table_vec4(j, 4), c, m) * static_cast<Real>(B[j]);
+                cell_energy[m * cells + c] = static_cast<Real>(static_cast<float>(sum)); // far_energy: float
+            }
+            for (std::uint32_t a = 0; a < cells; ++a) {
+                const float* w = plan.far_weight.data() + (cells - 1 + a);
+                Real sum = Real(0);
+                for (std::uint32_t b = 0; b < cells; ++b)
+                    sum += static_cast<Real>(*(w - b)) * cell_energy[m * cells + b];
+                far_level[m * cells + a] = static_cast<float>(sum);
+            }
         }
         std::int64_t j = 0;
         while (j < nb) {

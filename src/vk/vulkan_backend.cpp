@@ -218,6 +218,7 @@ Result<void> VulkanBackend::create_compute() {
     gpu_params_.bins_padded = (plan_.bins + 3u) & ~3u;
     const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
     const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.profile_columns;
+    const std::size_t far_floats = std::size_t(gpu_params_.bins_padded) * plan_.far_cells * plan_.far_channels;
     const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     const VkBufferUsageFlags in = storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     const VkBufferUsageFlags out = storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
@@ -239,10 +240,8 @@ Result<void> VulkanBackend::create_compute() {
          out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
         {&beam_profiles_, padded_cells * sizeof(float), out},
         {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
-        {&far_energy_, far_sidelobes_ ? std::size_t(gpu_params_.bins_padded) * plan_.far_cells * sizeof(float) : 16,
-         storage},
-        {&far_cells_, far_sidelobes_ ? std::size_t(gpu_params_.bins_padded) * plan_.far_cells * sizeof(float) : 16,
-         storage},
+        {&far_energy_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
+        {&far_cells_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
     }};
     for (const Working& w : working) {
         auto buffer = create_buffer(context_, w.bytes, w.usage, MemoryUse::device);
