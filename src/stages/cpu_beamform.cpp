@@ -161,19 +161,48 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
             std::fill(out, out + beams, 0.0f);
             continue;
         }
-        for (std::uint32_t m = 0; m < channels; ++m) {
-            for (std::uint32_t c = 0; c < cells; ++c) {
-                Real sum = Real(0);
-                for (std::uint32_t j = plan.far_cell_beams[2 * c]; j < plan.far_cell_beams[2 * c + 1]; ++j)
-                    sum += M::far_deposit_weight(table_vec4(j, 0), table_vec4(j, 4), c, m) * static_cast<Real>(B[j]);
-                cell_energy[m * cells + c] = static_cast<Real>(static_cast<float>(sum)); // far_energy: float
+        if (cells > 0) {
+            // Each cell's sum takes its beams in increasing order whether gathered per cell (the shader)
+            // or scattered per beam (here); a beam of zero energy would add exactly +-0.
+            std::fill(cell_energy.begin(), cell_energy.begin() + std::size_t(channels) * cells, Real(0));
+            for (std::uint32_t i = 0; i < beams; ++i) {
+                if (B[i] == 0.0f) continue;
+                const typename M::vec4 bc = table_vec4(i, 0), phase = table_vec4(i, 4);
+                const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+                const Real energy = static_cast<Real>(B[i]);
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    cell_energy[m * cells + c0] += M::far_deposit_weight(bc, phase, c0, m) * energy;
+                    cell_energy[m * cells + c1] += M::far_deposit_weight(bc, phase, c1, m) * energy;
+                }
             }
-            for (std::uint32_t a = 0; a < cells; ++a) {
-                const float* w = plan.far_weight.data() + (cells - 1 + a);
-                Real sum = Real(0);
-                for (std::uint32_t b = 0; b < cells; ++b)
-                    sum += static_cast<Real>(*(w - b)) * cell_energy[m * cells + b];
-                far_level[m * cells + a] = static_cast<float>(sum);
+            for (std::uint32_t c = 0; c < channels * cells; ++c) // far_energy is stored in float
+                cell_energy[c] = static_cast<Real>(static_cast<float>(cell_energy[c]));
+            // Four cells at once: independent sums, each still over b in increasing order.
+            const float* w = plan.far_weight.data() + (cells - 1);
+            for (std::uint32_t m = 0; m < channels; ++m) {
+                const Real* e = cell_energy.data() + std::size_t(m) * cells;
+                float* level = far_level.data() + std::size_t(m) * cells;
+                std::uint32_t a = 0;
+                for (; a + 4 <= cells; a += 4) {
+                    Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b) {
+                        const float* wb = w + a - b;
+                        s0 += static_cast<Real>(wb[0]) * e[b];
+                        s1 += static_cast<Real>(wb[1]) * e[b];
+                        s2 += static_cast<Real>(wb[2]) * e[b];
+                        s3 += static_cast<Real>(wb[3]) * e[b];
+                    }
+                    level[a] = static_cast<float>(s0);
+                    level[a + 1] = static_cast<float>(s1);
+                    level[a + 2] = static_cast<float>(s2);
+                    level[a + 3] = static_cast<float>(s3);
+                }
+                for (; a < cells; ++a) {
+                    Real sum = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b)
+                        sum += static_cast<Real>(*(w + a - b)) * e[b];
+                    level[a] = static_cast<float>(sum);
+                }
             }
         }
         std::int64_t j = 0;
