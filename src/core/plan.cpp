@@ -767,6 +767,11 @@ void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool f
     // A kernel asked to reach across the fan (bench accuracy's reference) is exact everywhere it reaches.
     const bool stops_short = reach < p.config.hfov_deg * kDegToRad;
     if (half_taps > 0 && far_sidelobes && stops_short) plan_far_sidelobes(p, reach_units);
+    if (p.far_cells > 0) // meta.json and Frame::effects say how the pattern reaches past the kernel
+        for (EffectState& state : p.effects.states)
+            if (state.name == "horizontal_pattern")
+                state.why += "; far side lobes over the fan on " + std::to_string(p.far_cells) + " cells" +
+                             (p.far_channels == 3 ? " (sinc^2 crests and nulls exact)" : " (the lobes' mean level)");
     p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
