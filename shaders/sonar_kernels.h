@@ -426,6 +426,43 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
     return max(REAL(1) - abs(xc - REAL(c)), REAL(0));
 }
 
+// ---------------------------------------------------------------------------------------------
+// Far side lobes (stage 4c, docs/pipeline.md "Side lobes"): the pattern beyond the side-lobe
+// kernel's reach, carried on a coarse grid of cells (Plan::far_cells). A beam puts its energy into
+// its two nearest cells and reads the convolved cells back with the same two shares.
+
+// The share of cell c in beam j's pair, beam_cell = (first cell, second cell, share of the second, 0)
+// (Plan::far_beam_cell[8 j ...]); 0 for any other cell.
+VKS_FN REAL far_cell_share(vec4 beam_cell, uint c) {
+    if (uint(beam_cell.x) == c) {
+        return REAL(1) - beam_cell.z;
+    }
+    if (uint(beam_cell.y) == c) {
+        return beam_cell.z;
+    }
+    return REAL(0);
+}
+
+// Beam j's weight into channel `channel` of cell c: its share, times 1 (channel 0) or its phase's
+// cosine (1) or sine (2), beam_phase = (cos 2k u_j, sin 2k u_j, 0, 0) (Plan::far_beam_cell[8 j + 4 ...]).
+VKS_FN REAL far_deposit_weight(vec4 beam_cell, vec4 beam_phase, uint c, uint channel) {
+    REAL share = far_cell_share(beam_cell, c);
+    if (channel == 1u) {
+        return share * beam_phase.x;
+    }
+    if (channel == 2u) {
+        return share * beam_phase.y;
+    }
+    return share;
+}
+
+// The far side lobes at beam j from its read-back channels l0, l1, l2 (each its two cells' shares
+// times the convolved cells): sin^2 = (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2 (the 1/2
+// is in the weights), so l0 - cos l1 - sin l2, never below 0 (rounding); one channel: l0.
+VKS_FN REAL far_sidelobe_level(vec4 beam_phase, REAL l0, REAL l1, REAL l2) {
+    return max(l0 - beam_phase.x * l1 - beam_phase.y * l2, REAL(0));
+}
+
 #undef VKS_FN
 #undef VKS_FN_INLINE
 #undef VKS_OUT

@@ -3,6 +3,7 @@
 // Every output cell is computed by one loop iteration with sums in increasing index order, so the
 // result is deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -167,6 +168,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
+    using M = Math<Real>;
     const std::uint32_t beams = plan.beams;
     resample_bins<Real>(plan, acc, resample_w, beam_profiles, bin_begin, bin_end);
 
@@ -182,6 +184,28 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     const float* weights = plan.sidelobe_weight.data();
     const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
     const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
+    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells (per channel),
+    // the cells convolved with far_weight, both stored in float as far_sidelobe.comp's two passes store
+    // them; then each output adds far_sidelobe_level of its two cells (sidelobe.comp). Sums in
+    // increasing beam and cell order, as the shaders.
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
+    std::array<Real, 3 * shared::kMaxFarCells> cell_energy{};
+    std::array<float, 3 * shared::kMaxFarCells> far_level{};
+    auto table_vec4 = [&](std::int64_t j, std::size_t offset) {
+        const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+        return typename M::vec4(b[0], b[1], b[2], b[3]);
+    };
+    auto far_at = [&](std::int64_t j) -> Real {
+        if (cells == 0) return Real(0);
+        const typename M::vec4 bc = table_vec4(j, 0), phase = table_vec4(j, 4);
+        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+        const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        Real l[3] = {Real(0), Real(0), Real(0)};
+        for (std::uint32_t m = 0; m < channels; ++m)
+            l[m] =
+                s0 * static_cast<Real>(far_level[m * cells + c0]) + s1 * static_cast<Real>(far_level[m * cells + c1]);
+        return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
+    };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
@@ -189,6 +213,50 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
         if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
             std::fill(out, out + beams, 0.0f);
             continue;
+        }
+        if (cells > 0) {
+            // Each cell's sum takes its beams in increasing order whether gathered per cell (the shader)
+            // or scattered per beam (here); a beam of zero energy would add exactly +-0.
+            std::fill(cell_energy.begin(), cell_energy.begin() + std::size_t(channels) * cells, Real(0));
+            for (std::uint32_t i = 0; i < beams; ++i) {
+                if (B[i] == 0.0f) continue;
+                const typename M::vec4 bc = table_vec4(i, 0), phase = table_vec4(i, 4);
+                const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+                const Real energy = static_cast<Real>(B[i]);
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    cell_energy[m * cells + c0] += M::far_deposit_weight(bc, phase, c0, m) * energy;
+                    cell_energy[m * cells + c1] += M::far_deposit_weight(bc, phase, c1, m) * energy;
+                }
+            }
+            for (std::uint32_t c = 0; c < channels * cells; ++c) // far_energy is stored in float
+                cell_energy[c] = static_cast<Real>(static_cast<float>(cell_energy[c]));
+            // Four cells at once: independent sums, each still over b in increasing order.
+            const float* w = plan.far_weight.data() + (cells - 1);
+            for (std::uint32_t m = 0; m < channels; ++m) {
+                const Real* e = cell_energy.data() + std::size_t(m) * cells;
+                float* level = far_level.data() + std::size_t(m) * cells;
+                std::uint32_t a = 0;
+                for (; a + 4 <= cells; a += 4) {
+                    Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b) {
+                        const float* wb = w + a - b;
+                        s0 += static_cast<Real>(wb[0]) * e[b];
+                        s1 += static_cast<Real>(wb[1]) * e[b];
+                        s2 += static_cast<Real>(wb[2]) * e[b];
+                        s3 += static_cast<Real>(wb[3]) * e[b];
+                    }
+                    level[a] = static_cast<float>(s0);
+                    level[a + 1] = static_cast<float>(s1);
+                    level[a + 2] = static_cast<float>(s2);
+                    level[a + 3] = static_cast<float>(s3);
+                }
+                for (; a < cells; ++a) {
+                    Real sum = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b)
+                        sum += static_cast<Real>(*(w + a - b)) * e[b];
+                    level[a] = static_cast<float>(sum);
+                }
+            }
         }
         std::int64_t j = 0;
         while (j < nb) {
@@ -211,10 +279,10 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
                     s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
                 }
-                out[j] = static_cast<float>(s0);
-                out[j + 1] = static_cast<float>(s1);
-                out[j + 2] = static_cast<float>(s2);
-                out[j + 3] = static_cast<float>(s3);
+                out[j] = static_cast<float>(s0 + far_at(j));
+                out[j + 1] = static_cast<float>(s1 + far_at(j + 1));
+                out[j + 2] = static_cast<float>(s2 + far_at(j + 2));
+                out[j + 3] = static_cast<float>(s3 + far_at(j + 3));
                 j += 4;
                 continue;
             }
@@ -223,7 +291,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                 Real sum = Real(0);
                 for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
                     sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
-                out[j] = static_cast<float>(sum);
+                out[j] = static_cast<float>(sum + far_at(j));
                 ++j;
                 continue;
             }
@@ -234,7 +302,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             Real sum = Real(0);
             for (std::int64_t t = first; t < end; ++t)
                 sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
-            out[j] = static_cast<float>(sum);
+            out[j] = static_cast<float>(sum + far_at(j));
             ++j;
         }
     }
