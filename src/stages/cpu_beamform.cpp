@@ -165,6 +165,63 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
             profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
 }
 
+// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
+// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
+// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
+// increasing order, as the shader's; the bins side by side are independent sums (vectorized).
+constexpr std::uint32_t kFarRows = 8;
+
+template <class Real> struct FarRows {
+    std::array<Real, 3 * shared::kMaxFarCells * kFarRows> energy; // [(m * cells + c) * kFarRows + row]
+    std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
+};
+
+template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
+    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+    return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
+}
+
+template <class Real>
+void far_sidelobe_rows(const Plan& plan, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
+                       FarRows<Real>& far) {
+    using M = Math<Real>;
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
+    const std::size_t used = std::size_t(channels) * cells * kFarRows;
+    std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
+    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
+    // cell); a beam of zero energy would add exactly +-0.
+    for (std::uint32_t r = 0; r < rows; ++r) {
+        const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
+        for (std::uint32_t i = 0; i < beams; ++i) {
+            if (B[i] == 0.0f) continue;
+            const typename M::vec4 bc = far_table_vec4<Real>(plan, i, 0), phase = far_table_vec4<Real>(plan, i, 4);
+            const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+            const Real energy = static_cast<Real>(B[i]);
+            for (std::uint32_t m = 0; m < channels; ++m) {
+                far.energy[(m * cells + c0) * kFarRows + r] += M::far_deposit_weight(bc, phase, c0, m) * energy;
+                far.energy[(m * cells + c1) * kFarRows + r] += M::far_deposit_weight(bc, phase, c1, m) * energy;
+            }
+        }
+    }
+    for (std::size_t i = 0; i < used; ++i)
+        far.energy[i] = static_cast<Real>(static_cast<float>(far.energy[i]));
+    const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
+    for (std::uint32_t m = 0; m < channels; ++m) {
+        for (std::uint32_t a = 0; a < cells; ++a) {
+            Real sum[kFarRows] = {};
+            for (std::uint32_t b = 0; b < cells; ++b) {
+                const Real wb = static_cast<Real>(*(w + a - b));
+                const Real* e = far.energy.data() + (std::size_t(m) * cells + b) * kFarRows;
+                for (std::uint32_t r = 0; r < kFarRows; ++r)
+                    sum[r] += wb * e[r];
+            }
+            float* level = far.level.data() + (std::size_t(m) * cells + a) * kFarRows;
+            for (std::uint32_t r = 0; r < kFarRows; ++r)
+                level[r] = static_cast<float>(sum[r]);
+        }
+    }
+}
+
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
@@ -184,79 +241,34 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     const float* weights = plan.sidelobe_weight.data();
     const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
     const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
-    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells (per channel),
-    // the cells convolved with far_weight, both stored in float as far_sidelobe.comp's two passes store
-    // them; then each output adds far_sidelobe_level of its two cells (sidelobe.comp). Sums in
-    // increasing beam and cell order, as the shaders.
+    // Far side lobes (plan.h far_cells), kFarRows bins at a time (far_sidelobe_rows); each output adds
+    // far_sidelobe_level of its two cells (sidelobe.comp).
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
-    std::array<Real, 3 * shared::kMaxFarCells> cell_energy{};
-    std::array<float, 3 * shared::kMaxFarCells> far_level{};
-    auto table_vec4 = [&](std::int64_t j, std::size_t offset) {
-        const float* b = plan.far_beam_cell.data() + 8 * j + offset;
-        return typename M::vec4(b[0], b[1], b[2], b[3]);
-    };
-    auto far_at = [&](std::int64_t j) -> Real {
+    FarRows<Real> far;
+    std::uint32_t far_first = bin_begin; // the first bin of the batch `far` holds
+    auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
-        const typename M::vec4 bc = table_vec4(j, 0), phase = table_vec4(j, 4);
+        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
         const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
         const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        const std::uint32_t r = k - far_first;
         Real l[3] = {Real(0), Real(0), Real(0)};
         for (std::uint32_t m = 0; m < channels; ++m)
-            l[m] =
-                s0 * static_cast<Real>(far_level[m * cells + c0]) + s1 * static_cast<Real>(far_level[m * cells + c1]);
+            l[m] = s0 * static_cast<Real>(far.level[(m * cells + c0) * kFarRows + r]) +
+                   s1 * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
         return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
     };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
+        if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
+            far_first = k;
+            far_sidelobe_rows<Real>(plan, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
+        }
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
         // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
         if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
             std::fill(out, out + beams, 0.0f);
             continue;
-        }
-        if (cells > 0) {
-            // Each cell's sum takes its beams in increasing order whether gathered per cell (the shader)
-            // or scattered per beam (here); a beam of zero energy would add exactly +-0.
-            std::fill(cell_energy.begin(), cell_energy.begin() + std::size_t(channels) * cells, Real(0));
-            for (std::uint32_t i = 0; i < beams; ++i) {
-                if (B[i] == 0.0f) continue;
-                const typename M::vec4 bc = table_vec4(i, 0), phase = table_vec4(i, 4);
-                const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-                const Real energy = static_cast<Real>(B[i]);
-                for (std::uint32_t m = 0; m < channels; ++m) {
-                    cell_energy[m * cells + c0] += M::far_deposit_weight(bc, phase, c0, m) * energy;
-                    cell_energy[m * cells + c1] += M::far_deposit_weight(bc, phase, c1, m) * energy;
-                }
-            }
-            for (std::uint32_t c = 0; c < channels * cells; ++c) // far_energy is stored in float
-                cell_energy[c] = static_cast<Real>(static_cast<float>(cell_energy[c]));
-            // Four cells at once: independent sums, each still over b in increasing order.
-            const float* w = plan.far_weight.data() + (cells - 1);
-            for (std::uint32_t m = 0; m < channels; ++m) {
-                const Real* e = cell_energy.data() + std::size_t(m) * cells;
-                float* level = far_level.data() + std::size_t(m) * cells;
-                std::uint32_t a = 0;
-                for (; a + 4 <= cells; a += 4) {
-                    Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
-                    for (std::uint32_t b = 0; b < cells; ++b) {
-                        const float* wb = w + a - b;
-                        s0 += static_cast<Real>(wb[0]) * e[b];
-                        s1 += static_cast<Real>(wb[1]) * e[b];
-                        s2 += static_cast<Real>(wb[2]) * e[b];
-                        s3 += static_cast<Real>(wb[3]) * e[b];
-                    }
-                    level[a] = static_cast<float>(s0);
-                    level[a + 1] = static_cast<float>(s1);
-                    level[a + 2] = static_cast<float>(s2);
-                    level[a + 3] = static_cast<float>(s3);
-                }
-                for (; a < cells; ++a) {
-                    Real sum = Real(0);
-                    for (std::uint32_t b = 0; b < cells; ++b)
-                        sum += static_cast<Real>(*(w + a - b)) * e[b];
-                    level[a] = static_cast<float>(sum);
-                }
-            }
         }
         std::int64_t j = 0;
         while (j < nb) {
@@ -279,10 +291,10 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
                     s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
                 }
-                out[j] = static_cast<float>(s0 + far_at(j));
-                out[j + 1] = static_cast<float>(s1 + far_at(j + 1));
-                out[j + 2] = static_cast<float>(s2 + far_at(j + 2));
-                out[j + 3] = static_cast<float>(s3 + far_at(j + 3));
+                out[j] = static_cast<float>(s0 + far_at(j, k));
+                out[j + 1] = static_cast<float>(s1 + far_at(j + 1, k));
+                out[j + 2] = static_cast<float>(s2 + far_at(j + 2, k));
+                out[j + 3] = static_cast<float>(s3 + far_at(j + 3, k));
                 j += 4;
                 continue;
             }
@@ -291,7 +303,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                 Real sum = Real(0);
                 for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
                     sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
-                out[j] = static_cast<float>(sum + far_at(j));
+                out[j] = static_cast<float>(sum + far_at(j, k));
                 ++j;
                 continue;
             }
@@ -302,7 +314,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             Real sum = Real(0);
             for (std::int64_t t = first; t < end; ++t)
                 sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
-            out[j] = static_cast<float>(sum + far_at(j));
+            out[j] = static_cast<float>(sum + far_at(j, k));
             ++j;
         }
     }
