@@ -226,7 +226,7 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
 }
 
 Result<void> create_device(VulkanContext& context, int device_index) {
-    const vk::Functions& fn = context.fn;
+    vk::Functions& fn = context.fn;
     std::uint32_t count = 0;
     VKS_VK_TRY(fn.vkEnumeratePhysicalDevices(context.instance, &count, nullptr));
     std::vector<VkPhysicalDevice> devices(count);
@@ -284,7 +284,7 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     info.ppEnabledExtensionNames = extensions.data();
     VKS_VK_TRY(fn.vkCreateDevice(context.physical_device, &info, context.allocator, &context.device));
     context.owns_device = true;
-    if (auto loaded = vk::load_device_functions(context.fn, context.device, true, kWhose); !loaded) {
+    if (auto loaded = vk::load_device_functions(fn, context.device, true, kWhose); !loaded) {
         return loaded.error();
     }
     fn.vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);

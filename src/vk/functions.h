@@ -137,18 +137,15 @@ struct Functions {
 // (device), which must be set; `own`: also the own-instance / own-device group, loaded first (so that
 // what destroys the instance or device is there even if a later name fails). load_instance_functions
 // also sets fn.vkGetDeviceProcAddr from vkGetInstanceProcAddr where it is still null (a host that
-// gives its own keeps it). Each fails with
-// ErrorCode::unsupported naming the first function the getter returns null for, as one line:
-// "<whose>vkGetDeviceProcAddr returns null for <name>" (`whose`: e.g. "Context::create: the Vulkan
-// loader's ").
+// gives its own keeps it). Each fails with ErrorCode::unsupported naming the first function the getter
+// returns null for, in one line: "<whose>vkGetDeviceProcAddr returns null for <name>" (`whose`: e.g.
+// "Context::create: the Vulkan loader's ").
 [[nodiscard]] Result<void> load_global_functions(Functions& fn, const std::string& whose);
 [[nodiscard]] Result<void> load_instance_functions(Functions& fn, VkInstance instance, bool own,
                                                    const std::string& whose);
 [[nodiscard]] Result<void> load_device_functions(Functions& fn, VkDevice device, bool own, const std::string& whose);
 // The debug-utils group, with fn.vkGetInstanceProcAddr: where the getter returns null the member stays
 // null (the caller then goes without the messenger). Never fails.
-void load_debug_utils_functions(Functions& fn, VkInstance instance);
-// The debug-utils group: loaded where found, never fails (a missing one leaves the messenger off).
 void load_debug_utils_functions(Functions& fn, VkInstance instance);
 
 } // namespace vksonar::vk
