@@ -8,29 +8,46 @@
 // once, in increasing order, and adds each to every output it reaches; each output still sums its
 // taps in increasing t. The run length is a compile-time constant so the loop over the accumulators
 // unrolls and they stay in registers.
+//
+// With the far side lobes (kFarSidelobes), each output then adds its beam's share of its two cells of
+// far_sidelobe.comp's grid, which ran before: near + (share0 * cell0 + share1 * cell1).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
+#define REAL float
+#define VKS_ATAN2 atan
+#include "sonar_math.h"
+#include "sonar_kernels.h"
 
 layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; // set by the host, a multiple of 4
 // 1 when beams % 4 == 0: four beams of a range bin go out as one vec4 store (lavapipe loops over the
 // lanes once per store instruction, so 16 vec4 stores cost a quarter of 64 scalar ones).
 layout(constant_id = kSpecVec4Out) const uint kVec4Out = 0u;
+layout(constant_id = kSpecFarSidelobes) const uint kFarSidelobes = 0u; // 1: add far_sidelobe.comp's cells
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
 layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer { float polar[]; };
 layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer4 { vec4 polar4[]; };
 layout(std430, binding = kBindingSidelobeWeight) readonly buffer SidelobeBuffer { float sidelobe_weight[]; };
+layout(std430, binding = kBindingFarTable) readonly buffer FarTableBuffer { float far_table[]; };
+layout(std430, binding = kBindingFarCells) readonly buffer FarCellsBuffer { vec4 far_cells4[]; };
 // The same weights as a uniform block where they fit one (src/vk/pipelines.h). Every lane of a
 // workgroup reads the same weight: one scalar load on lavapipe, a loop over the lanes from storage.
 layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
 layout(constant_id = kSpecTableVec4s0) const uint kWeightVec4s = 1u;
 layout(std140, binding = kBindingSidelobeWeightUniform) uniform SidelobeBlock { vec4 sidelobe_weight4[kWeightVec4s]; };
 
+layout(constant_id = kSpecTableVec4s1) const uint kFarTableVec4s = 1u;
+layout(std140, binding = kBindingFarTableUniform) uniform FarTableBlock { vec4 far_table4[kFarTableVec4s]; };
+
 float weight(uint i) {
     return kUniformTables != 0u ? sidelobe_weight4[i >> 2u][i & 3u] : sidelobe_weight[i];
+}
+
+float far_entry(uint i) {
+    return kUniformTables != 0u ? far_table4[i >> 2u][i & 3u] : far_table[i];
 }
 
 void main() {
@@ -68,6 +85,26 @@ void main() {
             int t = source - j + half_taps;
             if (t >= 0 && t < taps && j < beams) {
                 sums[r] += weight(uint(j * taps + t)) * b;
+            }
+        }
+    }
+    if (kFarSidelobes != 0u) {
+        for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
+            uint j = uint(first_beam) + r;
+            if (j < uint(beams)) {
+                uint i = 8u * j;
+                vec4 cell = vec4(far_entry(i), far_entry(i + 1u), far_entry(i + 2u), far_entry(i + 3u));
+                vec4 phase = vec4(far_entry(i + 4u), far_entry(i + 5u), far_entry(i + 6u), far_entry(i + 7u));
+                uint c0 = uint(cell.x), c1 = uint(cell.y);
+                float s0 = far_cell_share(cell, c0), s1 = far_cell_share(cell, c1);
+                uint cells = params.far_cells;
+                vec4 l[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
+                for (uint m = 0u; m < params.far_channels; ++m) {
+                    l[m] = s0 * far_cells4[(m * cells + c0) * quads + q] + s1 * far_cells4[(m * cells + c1) * quads + q];
+                }
+                for (uint b = 0u; b < 4u; ++b) {
+                    sums[r][b] += far_sidelobe_level(phase, l[0][b], l[1][b], l[2][b]);
+                }
             }
         }
     }

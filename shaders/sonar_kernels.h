@@ -235,22 +235,9 @@ VKS_FN uint material_index(uint material_id, uint material_count) {
     return m < material_count ? m : 0u;
 }
 
-// (energy relative to SL, slant range) of the pixel (u, v) at reversed-Z depth d > 0 with material
-// `mat`; (0, r) outside the range gate. cos_incidence is read only with terms.incidence.
-VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL v, MaterialGpu mat,
-                          REAL cos_incidence) {
-    REAL z = view_z_from_depth(d, k.depth_a, k.depth_b);
-    REAL r = slant_range(z, u, v);
-    if (r < k.gate_min_m || r >= k.gate_max_m) {
-        return vec2(REAL(0), r);
-    }
-    REAL scatter = REAL(1);
-    if (terms.incidence && terms.rough_materials) {
-        scatter = scatter_factor(mat.model, cos_incidence, REAL(mat.specular_ratio), REAL(mat.inv_two_slope_sq));
-    } else if (terms.incidence && mat.model == kScatterLambert) {
-        scatter = cos_incidence;
-    }
-    REAL omega = pixel_solid_angle(u, v, k.pixel_du, k.pixel_dv);
+// The vertical pattern's power over the pixel (u, v) (1 with the effect off): a function of the pixel's
+// place in the grid alone, which the CPU backend reads from a table made once (cpu_echo.cpp).
+VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v) {
     REAL vertical = REAL(1);
     if (terms.vertical_pattern && terms.vertical_shape == kPatternBox) {
         vertical = pattern_power(kPatternBox, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
@@ -276,9 +263,43 @@ VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL
         }
         vertical = REAL(0.5) * (upper + lower);
     }
+    return vertical;
+}
+
+// The slant range of the pixel (u, v) at reversed-Z depth d > 0.
+VKS_FN REAL depth_slant_range(EchoConstants k, REAL d, REAL u, REAL v) {
+    return slant_range(view_z_from_depth(d, k.depth_a, k.depth_b), u, v);
+}
+
+// (energy relative to SL, r) of a hit at slant range r with material `mat`, given the pixel's solid
+// angle omega (pixel_solid_angle) and vertical power (pixel_vertical_power); (0, r) outside the range
+// gate. cos_incidence is read only with terms.incidence.
+VKS_FN vec2 echo_at_range(EchoConstants k, EchoTerms terms, REAL r, MaterialGpu mat, REAL cos_incidence, REAL omega,
+                          REAL vertical) {
+    if (r < k.gate_min_m || r >= k.gate_max_m) {
+        return vec2(REAL(0), r);
+    }
+    REAL scatter = REAL(1);
+    if (terms.incidence && terms.rough_materials) {
+        scatter = scatter_factor(mat.model, cos_incidence, REAL(mat.specular_ratio), REAL(mat.inv_two_slope_sq));
+    } else if (terms.incidence && mat.model == kScatterLambert) {
+        scatter = cos_incidence;
+    }
     REAL e = echo_energy(REAL(mat.backscatter_linear), scatter, omega, r, k.alpha_db_per_m, vertical, terms.spreading,
                          terms.absorption);
     return vec2(e, r);
+}
+
+// (energy relative to SL, slant range) of the pixel (u, v) at reversed-Z depth d > 0 with material
+// `mat`; (0, r) outside the range gate. cos_incidence is read only with terms.incidence.
+VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL v, MaterialGpu mat,
+                          REAL cos_incidence) {
+    REAL r = depth_slant_range(k, d, u, v);
+    if (r < k.gate_min_m || r >= k.gate_max_m) {
+        return vec2(REAL(0), r);
+    }
+    return echo_at_range(k, terms, r, mat, cos_incidence, pixel_solid_angle(u, v, k.pixel_du, k.pixel_dv),
+                         pixel_vertical_power(k, terms, u, v));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -403,6 +424,43 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
     }
     REAL xc = min(max(x, REAL(0)), REAL(count - 1));
     return max(REAL(1) - abs(xc - REAL(c)), REAL(0));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Far side lobes (stage 4c, docs/pipeline.md "Side lobes"): the pattern beyond the side-lobe
+// kernel's reach, carried on a coarse grid of cells (Plan::far_cells). A beam puts its energy into
+// its two nearest cells and reads the convolved cells back with the same two shares.
+
+// The share of cell c in beam j's pair, beam_cell = (first cell, second cell, share of the second, 0)
+// (Plan::far_beam_cell[8 j ...]); 0 for any other cell.
+VKS_FN REAL far_cell_share(vec4 beam_cell, uint c) {
+    if (uint(beam_cell.x) == c) {
+        return REAL(1) - beam_cell.z;
+    }
+    if (uint(beam_cell.y) == c) {
+        return beam_cell.z;
+    }
+    return REAL(0);
+}
+
+// Beam j's weight into channel `channel` of cell c: its share, times 1 (channel 0) or its phase's
+// cosine (1) or sine (2), beam_phase = (cos 2k u_j, sin 2k u_j, 0, 0) (Plan::far_beam_cell[8 j + 4 ...]).
+VKS_FN REAL far_deposit_weight(vec4 beam_cell, vec4 beam_phase, uint c, uint channel) {
+    REAL share = far_cell_share(beam_cell, c);
+    if (channel == 1u) {
+        return share * beam_phase.x;
+    }
+    if (channel == 2u) {
+        return share * beam_phase.y;
+    }
+    return share;
+}
+
+// The far side lobes at beam j from its read-back channels l0, l1, l2 (each its two cells' shares
+// times the convolved cells): sin^2 = (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2 (the 1/2
+// is in the weights), so l0 - cos l1 - sin l2, never below 0 (rounding); one channel: l0.
+VKS_FN REAL far_sidelobe_level(vec4 beam_phase, REAL l0, REAL l1, REAL l2) {
+    return max(l0 - beam_phase.x * l1 - beam_phase.y * l2, REAL(0));
 }
 
 #undef VKS_FN

@@ -18,6 +18,7 @@ using uint = std::uint32_t;
 
 VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
 VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kMaxFarCells = 256u;       // far side lobes' grid (Plan::far_cells): far_sidelobe.comp's shared array
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 // The material attachment holds material_id | instance << kInstanceShift (the instance only when
 // labels are asked for, else 0): the material is the low 16 bits.
@@ -42,11 +43,17 @@ VKS_CONST uint kBindingColumnTable = 10u; // uvec2 per pixel column: (beam, weig
 VKS_CONST uint kBindingBeamTable = 11u;   // uvec2 per beam: (first column, end column)
 VKS_CONST uint kBindingSidelobeWeight = 12u;
 VKS_CONST uint kBindingConeCoord = 13u; // float per pixel: its cone coordinate (line_array; profile.comp)
-VKS_CONST uint kBindingMaterialsUniform = 14u;
-VKS_CONST uint kBindingColumnTableUniform = 15u;
-VKS_CONST uint kBindingBeamTableUniform = 16u;
-VKS_CONST uint kBindingSidelobeWeightUniform = 17u;
-VKS_CONST uint kBindingCount = 18u;
+// Far side lobes (Plan::far_cells): the table (beam cells, cell beam spans, weights; far_sidelobe.comp),
+// the cells' energies and the convolved cells, vec4 over four range bins: [c * bins_padded / 4 + quad].
+VKS_CONST uint kBindingFarTable = 14u;
+VKS_CONST uint kBindingFarEnergy = 15u;
+VKS_CONST uint kBindingFarCells = 16u;
+VKS_CONST uint kBindingMaterialsUniform = 17u; // the uniform views: the last five bindings
+VKS_CONST uint kBindingColumnTableUniform = 18u;
+VKS_CONST uint kBindingBeamTableUniform = 19u;
+VKS_CONST uint kBindingSidelobeWeightUniform = 20u;
+VKS_CONST uint kBindingFarTableUniform = 21u;
+VKS_CONST uint kBindingCount = 22u;
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 
@@ -58,7 +65,7 @@ VKS_CONST uint kSpecPerInvocation =
 VKS_CONST uint kSpecNormalMethod = 2u;   // normals: kNormals*
 VKS_CONST uint kSpecUniformTables = 3u;  // echo, resample, sidelobe: 1 = read the tables' uniform blocks
 VKS_CONST uint kSpecTableVec4s0 = 4u;    // sizes of those blocks in vec4s: materials, columns, weights
-VKS_CONST uint kSpecTableVec4s1 = 5u;    // resample: the beam table
+VKS_CONST uint kSpecTableVec4s1 = 5u;    // resample: the beam table; sidelobe: the far table
 VKS_CONST uint kSpecEchoHalf = 6u;       // echo, profile: SonarParams::echo_half
 VKS_CONST uint kSpecRoughMaterials = 7u; // echo: 1 = a material has kScatterRough (the facet term)
 VKS_CONST uint kSpecVerticalShape = 8u;  // echo: the vertical pattern's kPattern*
@@ -67,6 +74,8 @@ VKS_CONST uint kSpecBeamMajorOut = 10u;  // resample: 1 = beam-major vec4 output
 VKS_CONST uint kSpecResampleWalk = 11u;  // resample: 1 = walk each run's columns once (src/vk/resample_walk.h)
 VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (beams % 4 == 0)
 VKS_CONST uint kSpecLineArray = 13u;     // profile: 1 = gather pixels onto cone columns (SonarParams::line_array)
+VKS_CONST uint kSpecFarSidelobes = 14u;  // sidelobe: 1 = add the far side lobes' cells (far_sidelobe.comp)
+VKS_CONST uint kSpecFarPass = 15u;       // far_sidelobe: 0 = deposit beams into cells, 1 = convolve the cells
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
@@ -165,8 +174,8 @@ struct SonarParams {
 
     float cone_half_fov_rad;
     float inv_cone_step;
-    uint pad0;
-    uint pad1;
+    uint far_cells;    // far side lobes: cells of the coarse grid (Plan::far_cells), 0: none
+    uint far_channels; // 3: sinc^2's phase channels, 1: the lobes' mean (Plan::far_channels)
 };
 #ifdef __cplusplus
 static_assert(sizeof(SonarParams) == 36 * 4, "SonarParams must match the GLSL std140 block");

@@ -119,6 +119,9 @@ struct SonarConfig {
     NormalMethod normal_method = NormalMethod::sobel3;
     RangeKernel range_kernel = RangeKernel::footprint;
     double sidelobe_kernel_beamwidths = 3.0; // side-lobe kernel reaches +- this many beamwidths
+    // Far side lobes: beyond that reach the pattern is carried on a coarse grid whose cells are this
+    // fraction of the reach wide (0: none, the kernel stops at the reach).
+    double far_sidelobe_cell = 0.5;
     IntermediatePrecision intermediates = IntermediatePrecision::fp32; // echo buffer storage
     Precision cpu_precision = Precision::f32;
 

@@ -558,11 +558,15 @@ Result<void> plan_materials(Plan& p, const SceneData& scene, bool& any_angle_dep
 // separated in: the angle (planar), or its sine (line_array: the pattern is a function of
 // sin(theta') - sin(theta)).
 double sidelobe_reach(const Plan& p, double reach) {
-    return p.line_array ? std::sin(std::min(reach, 0.5 * kPi)) : reach;
+    if (!p.line_array) return reach;
+    // Two beams' sines differ by up to 2 (a fan's two edges): past a quarter turn the reach goes on
+    // growing, continuously, to 2 at half a turn.
+    return reach <= 0.5 * kPi ? std::sin(reach) : 1.0 + std::sin(std::min(reach - 0.5 * kPi, 0.5 * kPi));
 }
 
 // Step: the effects on demand, and the side-lobe kernel's half width in beams (0: none).
-std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_dependent, double& reach) {
+std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_dependent, double& reach,
+                           bool& main_lobe_only) {
     const SonarConfig& c = p.config;
     const double hbw = c.horizontal_beamwidth_deg * kDegToRad;
     // Effects (README "Effects: only what the scene calls for").
@@ -590,6 +594,7 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
                                                        p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, reach);
         const double window_db = c.db_max - c.db_min;
         if (lobes.first_null_rad > 0.0 && lobes.peak_sidelobe_db < -window_db) {
+            main_lobe_only = true;
             reach = std::min(reach, lobes.first_null_rad);
             lobes_why = "; side lobes (" + fmt(lobes.peak_sidelobe_db) + " dB) stay below the " + fmt(window_db) +
                         " dB display window: main lobe only";
@@ -649,32 +654,137 @@ void plan_column_tables(Plan& p, double exclude_beyond_rad) {
     assign_columns_to_beams(p, exclude_beyond_rad);
 }
 
-// Step: the side-lobe kernel along beams.
-void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach) {
-    const SonarConfig& c = p.config;
-    // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their angular separation.
+// The horizontal power pattern at separation `sep` of two beams in the side-lobe kernel's unit: the
+// angle, or with line_array its sine. A line array's aperture patterns are functions of
+// sin(theta') - sin(theta) over its whole range [-2, 2]; the others (box, gaussian) are read at the
+// angle whose sine it is (at most 90 degrees).
+double pattern_at_separation(const Plan& p, double sep) {
+    const std::uint32_t hshape = shader_id(p.config.horizontal_pattern);
+    if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
+    if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)
+        return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
+    const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+    return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle);
+}
+
+// The share of the pattern at |sep| that the far grid carries: 0 up to half the reach, 1 from the
+// reach on, a smoothstep between (smooth, so the coarse grid sees no edge).
+double far_ramp(double abs_sep, double reach_units) {
+    const double x = std::clamp((abs_sep - 0.5 * reach_units) / (0.5 * reach_units), 0.0, 1.0);
+    return x * x * (3.0 - 2.0 * x);
+}
+
+// The separation variable of beam j: its angle, or with line_array its sine.
+double beam_position(const Plan& p, std::uint32_t j) {
+    return p.line_array ? std::sin(p.beam_angle_rad[j]) : p.beam_angle_rad[j];
+}
+
+// Step: the far side lobes' grid (Plan::far_cells), when the kernel stops short of the fan. The cells
+// are as narrow as far_sidelobe_cell * reach, and at most kMaxFarCells.
+void plan_far_sidelobes(Plan& p, double reach_units) {
+    p.far_cells = 0;
+    p.far_channels = 1;
+    p.far_beam_cell.clear();
+    p.far_cell_beams.clear();
+    p.far_weight.clear();
+    const double cell_fraction = p.config.far_sidelobe_cell;
+    if (!(cell_fraction > 0.0) || p.beams < 2 || !(reach_units > 0.0)) return;
+    const double span = p.circular ? 2.0 * kPi : beam_position(p, 0) - beam_position(p, p.beams - 1);
+    if (0.5 * reach_units >= span) return; // every pair of beams is within the kernel's exact part
+    const double wanted = cell_fraction * reach_units;
+    std::uint32_t cells = 0;
+    double step = 0.0;
+    if (p.circular) {
+        cells = static_cast<std::uint32_t>(std::clamp(std::ceil(span / wanted), 3.0, double(shared::kMaxFarCells)));
+        step = span / cells;
+    } else {
+        cells =
+            static_cast<std::uint32_t>(std::clamp(std::ceil(span / wanted) + 1.0, 2.0, double(shared::kMaxFarCells)));
+        step = span / (cells - 1);
+    }
+    p.far_cells = cells;
+    // A line array's sinc^2 pattern is sin^2(k du) / (k du)^2, and sin^2(k (u_s - u_j)) =
+    // (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2: the crests and nulls factor into a phase of
+    // each beam, and only the smooth 1 / (k du)^2 goes on the grid (three channels: the energy, and the
+    // energy times each beam's cos 2k u and sin 2k u). Other patterns keep the lobes' mean (one channel).
+    const bool phased = p.line_array && shader_id(p.config.horizontal_pattern) == shared::kPatternSinc;
+    p.far_channels = phased ? 3u : 1u;
+    // Each beam's two cells and the share of the second: position x = (first beam's position - its own) / step.
+    p.far_beam_cell.assign(std::size_t(p.beams) * 8, 0.0f);
+    std::vector<std::uint32_t> first(cells, p.beams), last(cells, 0);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        double x = (beam_position(p, 0) - beam_position(p, j)) / step;
+        if (p.circular) x = std::fmod(std::fmod(x, double(cells)) + cells, double(cells));
+        auto c0 = static_cast<std::uint32_t>(std::floor(x));
+        if (p.circular)
+            c0 %= cells;
+        else
+            c0 = std::min(c0, cells - 2);
+        const std::uint32_t c1 = p.circular ? (c0 + 1) % cells : c0 + 1;
+        const float share = static_cast<float>(std::clamp(x - std::floor(x) + (std::floor(x) - c0), 0.0, 1.0));
+        p.far_beam_cell[8 * j + 0] = static_cast<float>(c0);
+        p.far_beam_cell[8 * j + 1] = static_cast<float>(c1);
+        p.far_beam_cell[8 * j + 2] = share;
+        if (phased) {
+            const double phase = 2.0 * p.hpattern_k * beam_position(p, j);
+            p.far_beam_cell[8 * j + 4] = static_cast<float>(std::cos(phase));
+            p.far_beam_cell[8 * j + 5] = static_cast<float>(std::sin(phase));
+        }
+        for (std::uint32_t c : {c0, c1}) {
+            first[c] = std::min(first[c], j);
+            last[c] = std::max(last[c], j);
+        }
+    }
+    p.far_cell_beams.assign(std::size_t(cells) * 2, 0);
+    for (std::uint32_t c = 0; c < cells; ++c) {
+        if (first[c] > last[c]) continue; // no beam feeds it
+        p.far_cell_beams[2 * c] = first[c];
+        p.far_cell_beams[2 * c + 1] = last[c] + 1;
+    }
+    // far_weight: cell b into cell a depends on a - b only; the pattern (phased: its smooth part
+    // 1 / (2 (k du)^2)) times the ramp, averaged over one cell by the midpoint rule.
+    constexpr int kSamples = 64;
+    p.far_weight.assign(2 * std::size_t(cells) - 1, 0.0f);
+    for (std::int64_t d = -std::int64_t(cells) + 1; d < std::int64_t(cells); ++d) {
+        double sum = 0.0;
+        for (int i = 0; i < kSamples; ++i) {
+            const double sep = (double(d) + (i + 0.5) / kSamples - 0.5) * step;
+            const double folded = p.circular ? std::remainder(sep, 2.0 * kPi) : sep;
+            const double ramp = far_ramp(std::abs(folded), reach_units);
+            if (ramp == 0.0) continue; // also keeps 1 / du^2 away from du = 0
+            const double x = p.hpattern_k * sep;
+            sum += (phased ? 0.5 / (x * x) : pattern_at_separation(p, sep)) * ramp;
+        }
+        p.far_weight[std::size_t(d + cells - 1)] = static_cast<float>(sum / kSamples);
+    }
+}
+
+// Step: the side-lobe kernel along beams (its taps out to the reach; the far side lobes beyond).
+void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes) {
+    // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their separation.
     p.sidelobe_taps = 2 * half_taps + 1;
     const double reach_units = sidelobe_reach(p, reach);
+    // A kernel asked to reach across the fan (bench accuracy's reference) is exact everywhere it reaches.
+    const bool stops_short = reach < p.config.hfov_deg * kDegToRad;
+    if (half_taps > 0 && far_sidelobes && stops_short) plan_far_sidelobes(p, reach_units);
+    if (p.far_cells > 0) // meta.json and Frame::effects say how the pattern reaches past the kernel
+        for (EffectState& state : p.effects.states)
+            if (state.name == "horizontal_pattern")
+                state.why += "; far side lobes over the fan on " + std::to_string(p.far_cells) + " cells" +
+                             (p.far_channels == 3 ? " (sinc^2 crests and nulls exact)" : " (the lobes' mean level)");
     p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
-    const std::uint32_t hshape = shader_id(c.horizontal_pattern);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
             std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
             if (p.circular) src = (src + p.beams) % p.beams; // half_taps < beams / 2: one wrap at most
             if (src < 0 || src >= p.beams) continue;
-            // The separation in the pattern's own variable: the angle, or with line_array its sine, taken
-            // back to the angle whose sine it is (pattern_power reads the aperture patterns as a
-            // function of sin(angle), so they see sin(theta') - sin(theta) exactly).
-            double sep = p.line_array ? std::sin(p.beam_angle_rad[src]) - std::sin(p.beam_angle_rad[j])
-                                      : p.beam_angle_rad[src] - p.beam_angle_rad[j];
-            if (p.circular) sep = std::remainder(sep, 2.0 * 3.14159265358979323846); // into [-pi, pi]
-            const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+            double sep = beam_position(p, static_cast<std::uint32_t>(src)) - beam_position(p, j);
             float w = 1.0f;
             if (half_taps > 0) {
-                w = std::abs(sep) <= reach_units + 1e-12
-                        ? static_cast<float>(math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad,
-                                                                     p.hpattern_chebyshev_a, angle))
-                        : 0.0f;
+                const double folded = p.circular ? std::abs(std::remainder(sep, 2.0 * kPi)) : std::abs(sep);
+                const double near_share = p.far_cells > 0 ? 1.0 - far_ramp(folded, reach_units) : 1.0;
+                w = folded <= reach_units + 1e-12 ? static_cast<float>(pattern_at_separation(p, sep) * near_share)
+                                                  : 0.0f;
             }
             p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
         }
@@ -706,6 +816,8 @@ void plan_gpu_params(Plan& p) {
     g.bins = p.bins;
     g.effect_flags = e.shader_flags();
     g.sidelobe_taps = p.sidelobe_taps;
+    g.far_cells = p.far_cells;
+    g.far_channels = p.far_channels;
     g.tan_half_h = static_cast<float>(p.tan_half_h);
     g.tan_half_v = static_cast<float>(p.tan_half_v);
     g.depth_a = static_cast<float>(p.depth_a);
@@ -779,12 +891,13 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     bool any_angle_dependent = false;
     if (auto materials = plan_materials(p, scene, any_angle_dependent); !materials) return materials.error();
     double reach = 0.0;
-    const std::uint32_t half_taps = plan_effects(p, scene, any_angle_dependent, reach);
+    bool main_lobe_only = false;
+    const std::uint32_t half_taps = plan_effects(p, scene, any_angle_dependent, reach, main_lobe_only);
     // A host camera may see beyond the sonar's fan: those columns feed no beam (make_plan's own grid
     // folds its few edge columns into the edge beams).
     plan_column_tables(p, host_grid != nullptr ? 0.5 * config.hfov_deg * kDegToRad
                                                : std::numeric_limits<double>::infinity());
-    plan_sidelobe_kernel(p, half_taps, reach);
+    plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only);
     plan_gpu_params(p);
     return p;
 }

@@ -48,15 +48,18 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
         noise_bins(plan, seed, frame_index, frame, 0, plan.bins);
         return;
     }
-    // Every cell is a pure function of its key, so splitting the bins changes nothing in the output.
+    // Every cell is a pure function of its key, so splitting the bins changes nothing in the output:
+    // blocks of kBinBlock bins, taken by the threads as they come.
+    constexpr std::uint32_t kBinBlock = 32;
     NoiseTask task{&plan, seed, frame_index, &frame};
-    workers->run(
-        [](void* context, std::uint32_t part, std::uint32_t parts) {
+    workers->run_blocks(
+        [](void* context, std::uint32_t block, std::uint32_t) {
             const auto& t = *static_cast<NoiseTask*>(context);
-            const std::size_t bins = t.plan->bins;
-            noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, bins * part / parts, bins * (part + 1) / parts);
+            const std::size_t begin = std::size_t(block) * kBinBlock;
+            noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, begin,
+                       std::min<std::size_t>(begin + kBinBlock, t.plan->bins));
         },
-        &task);
+        &task, (plan.bins + kBinBlock - 1) / kBinBlock);
 }
 
 namespace {

@@ -30,6 +30,7 @@ void Workers::run(Task task, void* context) {
         task_ = task;
         context_ = context;
         pending_ = parts - 1;
+        blocks_ = false;
         ++generation_;
     }
     start_.notify_all();
@@ -40,23 +41,75 @@ void Workers::run(Task task, void* context) {
     }
 }
 
+namespace {
+
+struct BlockJob {
+    Workers::BlockTask task;
+    void* context;
+    std::uint32_t blocks;
+    std::atomic<std::uint32_t> next{0};
+};
+
+// Takes blocks until none is left.
+void take_blocks(void* job_pointer, std::uint32_t thread, std::uint32_t) {
+    auto& job = *static_cast<BlockJob*>(job_pointer);
+    for (std::uint32_t block = job.next.fetch_add(1, std::memory_order_relaxed); block < job.blocks;
+         block = job.next.fetch_add(1, std::memory_order_relaxed))
+        job.task(job.context, block, thread);
+}
+
+} // namespace
+
+void Workers::run_blocks(BlockTask task, void* context, std::uint32_t blocks) {
+    if (count() == 1 || blocks < 2) {
+        for (std::uint32_t block = 0; block < blocks; ++block)
+            task(context, block, 0);
+        return;
+    }
+    BlockJob job{task, context, blocks};
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        task_ = take_blocks;
+        context_ = &job;
+        blocks_ = true;
+        open_ = true;
+        active_ = 0;
+        ++generation_;
+    }
+    start_.notify_all();
+    take_blocks(&job, 0, count());
+    // Every block is taken: close the job (a helper that wakes now leaves it alone) and wait for the
+    // helpers still running the blocks they took.
+    std::unique_lock<std::mutex> lock(mutex_);
+    open_ = false;
+    done_.wait(lock, [this] { return active_ == 0; });
+}
+
 void Workers::helper_loop(std::uint32_t part) {
     std::uint64_t seen = 0;
     for (;;) {
         Task task;
         void* context;
+        bool blocks;
         {
             std::unique_lock<std::mutex> lock(mutex_);
             start_.wait(lock, [&] { return stop_ || generation_ != seen; });
             if (stop_) return;
             seen = generation_;
+            blocks = blocks_;
+            if (blocks && !open_) continue; // a run_blocks job already done without this helper
+            if (blocks) ++active_;
             task = task_;
             context = context_;
         }
         task(context, part, count());
         {
             std::lock_guard<std::mutex> lock(mutex_);
-            if (--pending_ == 0) done_.notify_one();
+            if (blocks) {
+                if (--active_ == 0) done_.notify_one();
+            } else if (--pending_ == 0) {
+                done_.notify_one();
+            }
         }
     }
 }

@@ -4,6 +4,7 @@
 // result never depends on the thread count or the scheduling.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <mutex>
@@ -26,6 +27,15 @@ public:
     void run(Task task, void* context);
     std::uint32_t count() const { return static_cast<std::uint32_t>(helpers_.size()) + 1; }
 
+    // Runs task(context, block, thread) once for every block in [0, blocks), on whichever thread comes
+    // first: the caller and the helpers take blocks in turn from a shared counter, so a helper that the
+    // system runs late (another process on its core) leaves its blocks to the others instead of holding
+    // up the stage. thread: the index of the thread running the block (0 = the caller, < count()), for
+    // per-thread scratch. Returns when every block is done. Which thread runs a block must not change
+    // its result: each block a pure function of its index.
+    using BlockTask = void (*)(void* context, std::uint32_t block, std::uint32_t thread);
+    void run_blocks(BlockTask task, void* context, std::uint32_t blocks);
+
     static constexpr std::uint32_t kMaxThreads = 8;
 
 private:
@@ -39,6 +49,10 @@ private:
     std::uint64_t generation_ = 0; // bumped by run(): helpers wait for a new one
     std::uint32_t pending_ = 0;    // helpers still working on the current generation
     bool stop_ = false;
+    // run_blocks: helpers join the generation only while it is open, and the caller waits for the
+    // ones that joined (active_) after closing it.
+    bool blocks_ = false, open_ = false;
+    std::uint32_t active_ = 0;
 };
 
 } // namespace vksonar::host

@@ -21,29 +21,11 @@ double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// Runs part(begin, end) over [0, n) split between the workers' threads (or whole on the caller).
-template <class Part> void split(host::Workers* workers, std::uint32_t n, const Part& part) {
-    if (workers == nullptr || workers->count() == 1 || n < 2 * workers->count()) {
-        part(0u, n, 0u);
-        return;
-    }
-    struct Context {
-        const Part* part;
-        std::uint32_t n;
-    } context{&part, n};
-    workers->run(
-        [](void* c, std::uint32_t index, std::uint32_t parts) {
-            const auto& t = *static_cast<const Context*>(c);
-            (*t.part)(static_cast<std::uint32_t>(std::uint64_t(t.n) * index / parts),
-                      static_cast<std::uint32_t>(std::uint64_t(t.n) * (index + 1) / parts), index);
-        },
-        &context);
-}
-
-// [0, n) in blocks of `block` dealt out in turn (part p takes blocks p, p + parts, ...): the rows of a
-// sonar image are not equally loaded (above the seabed most rows have no hit), nor are its bins (the
-// side-lobe pass skips empty ones), so contiguous halves would leave a thread idle. part(begin, end, p)
-// runs once per block.
+// [0, n) in blocks of `block`, taken by the workers' threads as they come (Workers::run_blocks): the
+// rows of a sonar image are not equally loaded (above the seabed most rows have no hit), nor are its
+// bins (the side-lobe pass skips empty ones), and a thread that the system runs late (on a busy
+// machine) leaves its share to the others. part(begin, end, thread) runs once per block; thread picks
+// the per-thread scratch. On one thread, part runs once over the whole range.
 template <class Part>
 void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, const Part& part) {
     if (workers == nullptr || workers->count() == 1 || n <= block) {
@@ -54,15 +36,15 @@ void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, 
         const Part* part;
         std::uint32_t n, block;
     } context{&part, n, block};
-    workers->run(
-        [](void* c, std::uint32_t index, std::uint32_t parts) {
+    workers->run_blocks(
+        [](void* c, std::uint32_t index, std::uint32_t thread) {
             const auto& t = *static_cast<const Context*>(c);
-            for (std::uint32_t begin = index * t.block; begin < t.n; begin += parts * t.block)
-                (*t.part)(begin, std::min(begin + t.block, t.n), index);
+            const std::uint32_t begin = index * t.block;
+            (*t.part)(begin, std::min(begin + t.block, t.n), thread);
         },
-        &context);
+        &context, (n + block - 1) / block);
 }
-constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32;
+constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32, kColumnBlock = 64;
 
 // Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
 template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
@@ -80,10 +62,13 @@ public:
         if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
         if (plan_.face_normals) face_.assign(pixels * 4, 0.0f);
         echo_.assign(pixels * 2, 0.0f);
+        echo_table_.assign(echo_table_count(plan_), Real(0));
+        echo_table<Real>(plan_, echo_table_.data());
         profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
         beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
-        polar_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
-        scratch_.assign(std::max<std::size_t>(beamform_scratch_count(plan_), 1), Real(0));
+        scratch_.assign(std::max<std::size_t>(beamform_accumulator_count(plan_), 1), Real(0));
+        resample_w_.assign(std::max<std::size_t>(resample_weight_count(plan_), 1), Real(0));
+        resample_weights<Real>(plan_, resample_w_.data());
         if (plan_.effects.incidence && !plan_.face_normals)
             normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1) * parts, Real(0));
         draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
@@ -105,15 +90,16 @@ public:
         // A frame reused across renders reports this render's stages only (capacity is kept).
         frame.times.clear();
         frame.stages_run.clear();
+        // The side-lobe pass writes the polar scan straight into the frame (make_frame sized it).
+        frame.clean.resize(static_cast<std::size_t>(plan_.bins) * plan_.beams);
         for (const StageInfo& stage : kStageTable) {
             if (!stage.runs(plan_)) continue;
             const auto start = Clock::now();
-            run(stage.id, pose);
+            run(stage.id, pose, save_mask, frame.clean.data());
             frame.times.push_back({stage.name, ms_since(start)});
             frame.stages_run.emplace_back(stage.name);
         }
 
-        store(frame.clean, polar_);
         if (any(save_mask & SaveFlags::depth)) {
             store(frame.depth, depth_);
             store(frame.material, material_);
@@ -137,7 +123,7 @@ public:
 
 private:
     // One stage of kStageTable on this backend's buffers.
-    void run(StageId stage, const Pose& pose) {
+    void run(StageId stage, const Pose& pose, SaveFlags save_mask, float* polar) {
         switch (stage) {
         case StageId::depth: {
             compose_depth_draws(plan_, scene_, pose, draws_);
@@ -166,17 +152,23 @@ private:
         case StageId::echo: // normals only where the normals stage ran (incidence on)
             split_blocks(workers_, plan_.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
                 cpu::echo_rows<Real>(plan_, depth_.data(), material_.data(),
-                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(), begin, end);
+                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(),
+                                     echo_table_.data(), begin, end);
             });
             break;
-        case StageId::beamform: // every column's profile before any beam reads it
-            split(workers_, plan_.profile_columns, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles_.data(), scratch_.data(), begin, end);
-            });
+        case StageId::beamform: { // every column's profile before any beam reads it
+            // the float profiles only when saved: the resample reads the accumulators
+            float* profiles = any(save_mask & SaveFlags::profiles) ? profiles_.data() : nullptr;
+            split_blocks(workers_, plan_.profile_columns, kColumnBlock,
+                         [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                             cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
+                         });
             split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_beams<Real>(plan_, profiles_.data(), beam_profiles_.data(), polar_.data(), begin, end);
+                cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(), polar,
+                                          begin, end);
             });
             break;
+        }
         }
     }
 
@@ -189,8 +181,10 @@ private:
     std::vector<float> depth_;
     std::vector<std::uint32_t> material_;
     std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
-    std::vector<float> normals_, echo_, profiles_, beam_profiles_, polar_;
-    std::vector<Real> scratch_, normals_scratch_;
+    std::vector<float> normals_, echo_, profiles_, beam_profiles_; // the polar scan: in the frame
+    std::vector<Real> scratch_, normals_scratch_; // scratch_: the profile accumulators (beamform_accumulator_count)
+    std::vector<Real> echo_table_;                // echo_table, filled once
+    std::vector<Real> resample_w_;                // resample_weights, filled once
 };
 
 } // namespace

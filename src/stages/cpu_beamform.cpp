@@ -3,10 +3,12 @@
 // Every output cell is computed by one loop iteration with sums in increasing index order, so the
 // result is deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "core/sonar_math.hpp"
@@ -17,16 +19,23 @@ namespace vksonar::cpu {
 
 namespace {
 
-// line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x profile_columns). Each
-// pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
+// Accumulators of bin k start at k * accumulator_stride: the profile columns and 64 bytes more, so that
+// the bins of one column do not all fall into the same cache set (1024 columns of floats are 4 KiB).
+std::size_t accumulator_stride(const Plan& plan) {
+    return plan.profile_columns + 16u;
+}
+
+// line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
+// Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
 // first, then by increasing pixel column, then bin: the order of profile.comp's gather.
 template <class Real>
 void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_t cone_begin, std::uint32_t cone_end,
                    Real range_min, Real inv_bin_width) {
     using M = Math<Real>;
-    const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins, PC = plan.profile_columns;
-    const int count = static_cast<int>(PC);
+    const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
+    const std::size_t S = accumulator_stride(plan);
+    const int count = static_cast<int>(plan.profile_columns);
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
@@ -50,21 +59,78 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                 const Real weight = M::cone_share(x, cone, count);
                 if (!(weight > Real(0))) continue;
                 const Real weighted = weight * e;
-                Real* column = acc + static_cast<std::size_t>(spread.k_first) * PC + cone;
+                Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
                 for (int i = 0; i < spread_bins; ++i)
-                    column[static_cast<std::size_t>(i) * PC] += shares[i] * weighted;
+                    column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
             }
         }
     }
 }
 
+// The weight beam j gives column c in the resample (resample_share of shaders/sonar_math.h).
+template <class Real> Real resample_weight(const Plan& plan, std::uint32_t j, std::uint32_t c) {
+    const std::uint32_t share = Math<Real>::resample_share(plan.column_beam[c], j, plan.beams, plan.circular);
+    const Real cw = static_cast<Real>(plan.column_weight[c]);
+    return share == 1 ? cw : (share == 2 ? Real(1) - cw : Real(0));
+}
+
+// resample: one cell per (beam j, bin k), columns in increasing order, from the accumulators (rounded
+// to float first: the values the profiles hold). Beam j's weights are weights[offset_j + c -
+// beam_column_begin[j]], offset_j the sum of the earlier beams' column counts (resample_weights). Eight
+// bins are summed side by side, each its own sum in the same order (eight independent chains).
+template <class Real>
+void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float* beam_profiles,
+                   std::uint32_t bin_begin, std::uint32_t bin_end) {
+    constexpr std::uint32_t kBlock = 8;
+    const std::uint32_t beams = plan.beams;
+    const std::size_t S = accumulator_stride(plan);
+    std::uint32_t k0 = bin_begin;
+    auto block = [&](auto n_constant) {
+        constexpr std::uint32_t n = decltype(n_constant)::value;
+        const Real* w = weights;
+        for (std::uint32_t j = 0; j < beams; ++j) {
+            Real sum[n];
+            for (std::uint32_t l = 0; l < n; ++l)
+                sum[l] = Real(0);
+            const std::uint32_t c_begin = plan.beam_column_begin[j], c_end = plan.beam_column_end[j];
+            for (std::uint32_t c = c_begin; c < c_end; ++c) {
+                const Real wc = w[c - c_begin];
+                const Real* column = acc + static_cast<std::size_t>(k0) * S + c;
+                for (std::uint32_t l = 0; l < n; ++l)
+                    sum[l] += wc * static_cast<Real>(static_cast<float>(column[static_cast<std::size_t>(l) * S]));
+            }
+            w += c_end - c_begin;
+            for (std::uint32_t l = 0; l < n; ++l)
+                beam_profiles[static_cast<std::size_t>(k0 + l) * beams + j] = static_cast<float>(sum[l]);
+        }
+    };
+    for (; k0 + kBlock <= bin_end; k0 += kBlock)
+        block(std::integral_constant<std::uint32_t, kBlock>());
+    for (; k0 < bin_end; ++k0)
+        block(std::integral_constant<std::uint32_t, 1>());
+}
+
 } // namespace
+
+std::size_t resample_weight_count(const Plan& plan) {
+    std::size_t n = 0;
+    for (std::uint32_t j = 0; j < plan.beams; ++j)
+        n += plan.beam_column_end[j] - plan.beam_column_begin[j];
+    return n;
+}
+
+template <class Real> void resample_weights(const Plan& plan, Real* weights) {
+    for (std::uint32_t j = 0; j < plan.beams; ++j)
+        for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c)
+            *weights++ = resample_weight<Real>(plan, j, c);
+}
 
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end) {
     using M = Math<Real>;
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
+    const std::size_t S = accumulator_stride(plan);
     Real range_min, inv_bin_width;
     if constexpr (std::is_same_v<Real, float>) {
         range_min = plan.params.range_min_m;
@@ -78,8 +144,8 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // (shaders/sonar_kernels.h, as profile.comp). The loops run row-major for locality; every
     // accumulator (bin k, column c) still receives its additions in increasing row order (and, within
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
-    for (std::uint32_t k = 0; k < bins; ++k)
-        std::fill(acc + std::size_t(k) * C + column_begin, acc + std::size_t(k) * C + column_end, Real(0));
+    for (std::size_t k = 0; k < bins; ++k)
+        std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
     }
@@ -90,33 +156,21 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
             if (!(e > Real(0))) continue;
             const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
             for (int k = spread.k_first; k <= spread.k_last; ++k)
-                acc[static_cast<std::size_t>(k) * C + c] += M::range_share(spread, k) * e;
+                acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
         }
     }
-    for (std::uint32_t k = 0; k < bins; ++k)
+    if (profiles == nullptr) return;
+    for (std::size_t k = 0; k < bins; ++k)
         for (std::uint32_t c = column_begin; c < column_end; ++c)
-            profiles[std::size_t(k) * C + c] = static_cast<float>(acc[std::size_t(k) * C + c]);
+            profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
 }
 
 template <class Real>
-void beamform_beams(const Plan& plan, const float* profiles, float* beam_profiles, float* polar,
+void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
     using M = Math<Real>;
-    const std::uint32_t C = plan.profile_columns, beams = plan.beams;
-    // resample: one cell per (beam j, bin k), columns in increasing order.
-    for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
-        const float* prof = profiles + static_cast<std::size_t>(k) * C;
-        for (std::uint32_t j = 0; j < beams; ++j) {
-            Real sum = Real(0);
-            for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c) {
-                const std::uint32_t share = M::resample_share(plan.column_beam[c], j, beams, plan.circular);
-                const Real cw = static_cast<Real>(plan.column_weight[c]);
-                const Real w = share == 1 ? cw : (share == 2 ? Real(1) - cw : Real(0));
-                sum += w * static_cast<Real>(prof[c]);
-            }
-            beam_profiles[static_cast<std::size_t>(k) * beams + j] = static_cast<float>(sum);
-        }
-    }
+    const std::uint32_t beams = plan.beams;
+    resample_bins<Real>(plan, acc, resample_w, beam_profiles, bin_begin, bin_end);
 
     // sidelobe: polar(j) = sum_t weight[j][t] B(j - K + t), or a copy when the pattern is off.
     if (!plan.effects.horizontal_pattern) {
@@ -130,6 +184,28 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
     const float* weights = plan.sidelobe_weight.data();
     const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
     const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
+    // Far side lobes (plan.h far_cells): per row, each beam's energy into its two cells (per channel),
+    // the cells convolved with far_weight, both stored in float as far_sidelobe.comp's two passes store
+    // them; then each output adds far_sidelobe_level of its two cells (sidelobe.comp). Sums in
+    // increasing beam and cell order, as the shaders.
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
+    std::array<Real, 3 * shared::kMaxFarCells> cell_energy{};
+    std::array<float, 3 * shared::kMaxFarCells> far_level{};
+    auto table_vec4 = [&](std::int64_t j, std::size_t offset) {
+        const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+        return typename M::vec4(b[0], b[1], b[2], b[3]);
+    };
+    auto far_at = [&](std::int64_t j) -> Real {
+        if (cells == 0) return Real(0);
+        const typename M::vec4 bc = table_vec4(j, 0), phase = table_vec4(j, 4);
+        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+        const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        Real l[3] = {Real(0), Real(0), Real(0)};
+        for (std::uint32_t m = 0; m < channels; ++m)
+            l[m] =
+                s0 * static_cast<Real>(far_level[m * cells + c0]) + s1 * static_cast<Real>(far_level[m * cells + c1]);
+        return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
+    };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
@@ -137,6 +213,50 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
         if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
             std::fill(out, out + beams, 0.0f);
             continue;
+        }
+        if (cells > 0) {
+            // Each cell's sum takes its beams in increasing order whether gathered per cell (the shader)
+            // or scattered per beam (here); a beam of zero energy would add exactly +-0.
+            std::fill(cell_energy.begin(), cell_energy.begin() + std::size_t(channels) * cells, Real(0));
+            for (std::uint32_t i = 0; i < beams; ++i) {
+                if (B[i] == 0.0f) continue;
+                const typename M::vec4 bc = table_vec4(i, 0), phase = table_vec4(i, 4);
+                const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+                const Real energy = static_cast<Real>(B[i]);
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    cell_energy[m * cells + c0] += M::far_deposit_weight(bc, phase, c0, m) * energy;
+                    cell_energy[m * cells + c1] += M::far_deposit_weight(bc, phase, c1, m) * energy;
+                }
+            }
+            for (std::uint32_t c = 0; c < channels * cells; ++c) // far_energy is stored in float
+                cell_energy[c] = static_cast<Real>(static_cast<float>(cell_energy[c]));
+            // Four cells at once: independent sums, each still over b in increasing order.
+            const float* w = plan.far_weight.data() + (cells - 1);
+            for (std::uint32_t m = 0; m < channels; ++m) {
+                const Real* e = cell_energy.data() + std::size_t(m) * cells;
+                float* level = far_level.data() + std::size_t(m) * cells;
+                std::uint32_t a = 0;
+                for (; a + 4 <= cells; a += 4) {
+                    Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b) {
+                        const float* wb = w + a - b;
+                        s0 += static_cast<Real>(wb[0]) * e[b];
+                        s1 += static_cast<Real>(wb[1]) * e[b];
+                        s2 += static_cast<Real>(wb[2]) * e[b];
+                        s3 += static_cast<Real>(wb[3]) * e[b];
+                    }
+                    level[a] = static_cast<float>(s0);
+                    level[a + 1] = static_cast<float>(s1);
+                    level[a + 2] = static_cast<float>(s2);
+                    level[a + 3] = static_cast<float>(s3);
+                }
+                for (; a < cells; ++a) {
+                    Real sum = Real(0);
+                    for (std::uint32_t b = 0; b < cells; ++b)
+                        sum += static_cast<Real>(*(w + a - b)) * e[b];
+                    level[a] = static_cast<float>(sum);
+                }
+            }
         }
         std::int64_t j = 0;
         while (j < nb) {
@@ -159,10 +279,10 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
                     s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
                     s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
                 }
-                out[j] = static_cast<float>(s0);
-                out[j + 1] = static_cast<float>(s1);
-                out[j + 2] = static_cast<float>(s2);
-                out[j + 3] = static_cast<float>(s3);
+                out[j] = static_cast<float>(s0 + far_at(j));
+                out[j + 1] = static_cast<float>(s1 + far_at(j + 1));
+                out[j + 2] = static_cast<float>(s2 + far_at(j + 2));
+                out[j + 3] = static_cast<float>(s3 + far_at(j + 3));
                 j += 4;
                 continue;
             }
@@ -171,7 +291,7 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
                 Real sum = Real(0);
                 for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
                     sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
-                out[j] = static_cast<float>(sum);
+                out[j] = static_cast<float>(sum + far_at(j));
                 ++j;
                 continue;
             }
@@ -182,32 +302,43 @@ void beamform_beams(const Plan& plan, const float* profiles, float* beam_profile
             Real sum = Real(0);
             for (std::int64_t t = first; t < end; ++t)
                 sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
-            out[j] = static_cast<float>(sum);
+            out[j] = static_cast<float>(sum + far_at(j));
             ++j;
         }
     }
 }
 
 template <class Real>
-void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* acc) {
-    beamform_profiles<Real>(plan, echo2, profiles, acc, 0, plan.profile_columns);
-    beamform_beams<Real>(plan, profiles, beam_profiles, polar, 0, plan.bins);
+void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar,
+              Real* scratch) {
+    Real* resample_w = scratch + beamform_accumulator_count(plan);
+    resample_weights<Real>(plan, resample_w);
+    beamform_profiles<Real>(plan, echo2, profiles, scratch, 0, plan.profile_columns);
+    beamform_beams<Real>(plan, scratch, resample_w, beam_profiles, polar, 0, plan.bins);
+}
+
+std::size_t beamform_accumulator_count(const Plan& plan) {
+    return plan.bins * accumulator_stride(plan); // one accumulator per profile cell, and the padding
 }
 
 std::size_t beamform_scratch_count(const Plan& plan) {
-    return static_cast<std::size_t>(plan.bins) * plan.profile_columns; // one accumulator per profile cell
+    return beamform_accumulator_count(plan) + resample_weight_count(plan);
 }
 
 template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar) {
-    std::vector<Real> acc(std::max<std::size_t>(beamform_scratch_count(plan), 1));
-    beamform<Real>(plan, echo2, profiles, beam_profiles, polar, acc.data());
+    std::vector<Real> scratch(std::max<std::size_t>(beamform_scratch_count(plan), 1));
+    beamform<Real>(plan, echo2, profiles, beam_profiles, polar, scratch.data());
 }
 
+template void resample_weights<float>(const Plan&, float*);
+template void resample_weights<double>(const Plan&, double*);
 template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
 template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t);
-template void beamform_beams<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
-template void beamform_beams<double>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
+template void beamform_beams<float>(const Plan&, const float*, const float*, float*, float*, std::uint32_t,
+                                    std::uint32_t);
+template void beamform_beams<double>(const Plan&, const double*, const double*, float*, float*, std::uint32_t,
+                                     std::uint32_t);
 template void beamform<float>(const Plan&, const float*, float*, float*, float*, float*);
 template void beamform<double>(const Plan&, const float*, float*, float*, float*, double*);
 template void beamform<float>(const Plan&, const float*, float*, float*, float*);

@@ -2,9 +2,12 @@
 // vertical pattern, scattering factor and the combined sonar equation of shaders/sonar_math.h.
 //
 // Constants: float reads the shaders' float values (SonarParams); double reads the Plan's doubles.
+// The factors that depend on the pixel's place in the grid alone (its solid angle and the vertical
+// pattern) come from a table made once per plan (echo_table), by the kernels echo_of_pixel calls.
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
+#include <vector>
 
 #include "core/half.h"
 #include "core/sonar_math.hpp"
@@ -12,12 +15,13 @@
 
 namespace vksonar::cpu {
 
-template <class Real>
-void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
-               std::uint32_t row_begin, std::uint32_t row_end) {
-    using M = Math<Real>;
+namespace {
+
+// The echo stage's constants in the working precision: float reads the shaders' float values
+// (SonarParams), double the Plan's doubles.
+template <class Real> typename Math<Real>::EchoConstants echo_constants(const Plan& plan) {
     const shared::SonarParams& g = plan.params;
-    typename M::EchoConstants k;
+    typename Math<Real>::EchoConstants k;
     if constexpr (std::is_same_v<Real, float>) {
         k = {g.tan_half_h,
              g.tan_half_v,
@@ -45,34 +49,84 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
              plan.vpattern_halfwidth_rad,
              plan.vpattern_chebyshev_a};
     }
+    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(plan.slice_columns);
+    k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);
+    return k;
+}
+
+template <class Real> typename Math<Real>::EchoTerms echo_terms(const Plan& plan, const float* normals4) {
+    return {plan.effects.incidence && normals4 != nullptr,
+            plan.rough_materials,
+            plan.effects.vertical_pattern,
+            plan.params.vpattern_shape,
+            plan.effects.spreading,
+            plan.effects.absorption};
+}
+
+} // namespace
+
+std::size_t echo_table_count(const Plan& plan) {
+    return static_cast<std::size_t>(plan.slice_columns) * (1 + 2 * static_cast<std::size_t>(plan.rows));
+}
+
+template <class Real> void echo_table(const Plan& plan, Real* table) {
+    using M = Math<Real>;
+    const typename M::EchoConstants k = echo_constants<Real>(plan);
+    // the terms without incidence: the table does not depend on it
+    const typename M::EchoTerms terms = echo_terms<Real>(plan, nullptr);
+    const std::uint32_t R = plan.rows, W = plan.slice_columns;
+    Real* u = table;
+    Real* pixel = table + W;
+    for (std::uint32_t x = 0; x < W; ++x)
+        u[x] = M::pixel_coord(x, W, k.tan_half_h);
+    for (std::uint32_t j = 0; j < R; ++j) {
+        const Real v = M::pixel_coord(j, R, k.tan_half_v);
+        for (std::uint32_t x = 0; x < W; ++x, pixel += 2) {
+            pixel[0] = M::pixel_solid_angle(u[x], v, k.pixel_du, k.pixel_dv);
+            pixel[1] = M::pixel_vertical_power(k, terms, u[x], v);
+        }
+    }
+}
+
+// echo_of_pixel (shaders/sonar_kernels.h, as echo.comp calls it) with its per-pixel-place factors, the
+// solid angle and the vertical power, read from echo_table: the same functions of the same values.
+template <class Real>
+void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
+               const Real* table, std::uint32_t row_begin, std::uint32_t row_end) {
+    using M = Math<Real>;
+    const shared::SonarParams& g = plan.params;
+    const typename M::EchoConstants k = echo_constants<Real>(plan);
+    const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
-    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(W);
-    k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(R);
-    const typename M::EchoTerms terms{plan.effects.incidence && normals4 != nullptr,
-                                      plan.rough_materials,
-                                      plan.effects.vertical_pattern,
-                                      g.vpattern_shape,
-                                      plan.effects.spreading,
-                                      plan.effects.absorption};
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
+    const Real* u = table;
 
     for (std::uint32_t j = row_begin; j < row_end; ++j) {
         const Real v = M::pixel_coord(j, R, k.tan_half_v);
-        for (std::uint32_t c = 0; c < C; ++c) {
-            const std::size_t p = static_cast<std::size_t>(j) * C + c;
-            float* out = echo2 + 2 * p;
-            const float d = depth[p];
-            if (!(d > 0.0f) || material_count == 0) {
-                out[0] = 0.0f;
-                out[1] = 0.0f;
-                continue;
+        const Real* row_terms = table + W + 2 * static_cast<std::size_t>(j) * W;
+        for (std::uint32_t c0 = 0; c0 < C; c0 += W) {
+            for (std::uint32_t x = 0; x < W; ++x) {
+                const std::size_t p = static_cast<std::size_t>(j) * C + c0 + x;
+                float* out = echo2 + 2 * p;
+                const float d = depth[p];
+                if (!(d > 0.0f) || material_count == 0) {
+                    out[0] = 0.0f;
+                    out[1] = 0.0f;
+                    continue;
+                }
+                const Real r = M::depth_slant_range(k, static_cast<Real>(d), u[x], v);
+                if (r < k.gate_min_m || r >= k.gate_max_m) { // echo_of_pixel's gate
+                    out[0] = 0.0f;
+                    out[1] = static_cast<float>(r);
+                    continue;
+                }
+                const shared::MaterialGpu& mat = plan.materials[M::material_index(material[p], material_count)];
+                const Real cos_incidence = terms.incidence ? static_cast<Real>(normals4[4 * p + 3]) : Real(0);
+                const auto e =
+                    M::echo_at_range(k, terms, r, mat, cos_incidence, row_terms[2 * x], row_terms[2 * x + 1]);
+                out[0] = static_cast<float>(e.x);
+                out[1] = static_cast<float>(e.y);
             }
-            const Real u = M::pixel_coord(c % W, W, k.tan_half_h);
-            const shared::MaterialGpu& mat = plan.materials[M::material_index(material[p], material_count)];
-            const Real cos_incidence = terms.incidence ? static_cast<Real>(normals4[4 * p + 3]) : Real(0);
-            const auto e = M::echo_of_pixel(k, terms, static_cast<Real>(d), u, v, mat, cos_incidence);
-            out[0] = static_cast<float>(e.x);
-            out[1] = static_cast<float>(e.y);
         }
     }
     if (g.echo_half != 0u) {
@@ -87,14 +141,18 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
 
 template <class Real>
 void echo(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2) {
-    echo_rows<Real>(plan, depth, material, normals4, echo2, 0, plan.rows);
+    std::vector<Real> table(echo_table_count(plan));
+    echo_table<Real>(plan, table.data());
+    echo_rows<Real>(plan, depth, material, normals4, echo2, table.data(), 0, plan.rows);
 }
 
 template void echo<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*);
 template void echo<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*);
-template void echo_rows<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*, std::uint32_t,
-                               std::uint32_t);
-template void echo_rows<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*, std::uint32_t,
-                                std::uint32_t);
+template void echo_table<float>(const Plan&, float*);
+template void echo_table<double>(const Plan&, double*);
+template void echo_rows<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*, const float*,
+                               std::uint32_t, std::uint32_t);
+template void echo_rows<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*, const double*,
+                                std::uint32_t, std::uint32_t);
 
 } // namespace vksonar::cpu

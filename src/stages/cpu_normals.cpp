@@ -53,13 +53,15 @@ template <class Real> void slice_rotation(const Plan& plan, std::uint32_t s, Rea
 
 std::size_t normals_scratch_count(const Plan& plan) {
     // per column: the ray (x, y; its z is -v per row); five rows of (Px, Py, Pz, r) (the 5x5 window of
-    // sobel5; sobel3 uses 3)
-    return static_cast<std::size_t>(plan.columns) * (2 + kRingRows * 4);
+    // sobel5; sobel3 uses 3) and a row of zeros (the rows outside the image), each with two columns of
+    // zeros either side (the columns outside the image)
+    return static_cast<std::size_t>(plan.columns) * 2 + (kRingRows + 1) * (plan.columns + 4) * 4;
 }
 
 // The loops around the kernels of shaders/sonar_kernels.h (sobel3_normal, sobel5_normal) that
-// normals.comp calls: positions are reconstructed once per pixel into a ring of five rows, and each
-// window column is rebuilt from it as the window slides along the row.
+// normals.comp calls: positions are reconstructed once per pixel into a ring of five rows, from which
+// each hit pixel's window is read. A miss reads as range 0 in the ring, and so does every position
+// outside the image (the zero row and columns around it): no_sample(), without a bounds test.
 template <class Real>
 void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
                   std::uint32_t row_end) {
@@ -71,11 +73,14 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
     const std::int64_t C = plan.columns, R = plan.rows;
     const std::uint32_t W = plan.slice_columns;
+    const std::int64_t stride = (C + 4) * 4; // a ring row: columns -2 .. C + 1
 
     // pixel_ray per column, without its z (-v, per row): P = z * ray, so per pixel only z changes.
     Real* ray_x = scratch;
     Real* ray_y = scratch + C;
-    Real* ring = scratch + 2 * C; // rows j % kRingRows: (Px, Py, Pz, r) per column
+    Real* ring = scratch + 2 * C; // rows j % kRingRows, then the zero row
+    Real* zero_row = ring + kRingRows * stride;
+    std::fill(zero_row, zero_row + stride, Real(0));
     for (std::int64_t c = 0; c < C; ++c) {
         const std::uint32_t col = static_cast<std::uint32_t>(c), s = col / W;
         Real cs, sn;
@@ -85,7 +90,10 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         ray_y[c] = ray.y;
     }
     auto fill_row = [&](std::int64_t j) {
-        Real* row = ring + (j % kRingRows) * C * 4;
+        Real* row = ring + (j % kRingRows) * stride;
+        std::fill(row, row + 8, Real(0));
+        std::fill(row + stride - 8, row + stride, Real(0));
+        row += 8; // column 0
         const Real v =
             M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), geometry.tan_half_v);
         const float* d = depth + j * C;
@@ -103,17 +111,13 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
             }
         }
     };
-    // A hit has a range > 0 (view z > 0), a miss 0 in the ring.
-    auto sample = [&](std::int64_t c, std::int64_t j) -> Sample {
-        if (c < 0 || j < 0 || c >= C || j >= R) return M::no_sample();
-        const Real* q = ring + ((j % kRingRows) * C + c) * 4;
+    // Column 0 of ring row j (of the zero row outside the image); a hit has a range > 0 (view z > 0).
+    auto row_at = [&](std::int64_t j) -> const Real* {
+        return (j < 0 || j >= R ? zero_row : ring + (j % kRingRows) * stride) + 8;
+    };
+    auto sample = [](const Real* row, std::int64_t c) -> Sample {
+        const Real* q = row + 4 * c;
         return Sample{typename M::vec3(q[0], q[1], q[2]), q[3], q[3] > Real(0)};
-    };
-    auto column3 = [&](std::int64_t c, std::int64_t j) {
-        return Column3{sample(c, j - 1), sample(c, j), sample(c, j + 1)};
-    };
-    auto column5 = [&](std::int64_t c, std::int64_t j) {
-        return Column5{sample(c, j - 2), sample(c, j - 1), sample(c, j), sample(c, j + 1), sample(c, j + 2)};
     };
     auto store = [](float* out, const typename M::vec4& n) {
         out[0] = static_cast<float>(n.x);
@@ -130,24 +134,22 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     for (std::int64_t j = row_begin; j < std::int64_t(row_end); ++j) {
         if (j + 2 < R) fill_row(j + 2);
         float* out_row = normals4 + 4 * j * C;
-        if (sobel5) {
-            Column5 l2 = column5(-2, j), l1 = column5(-1, j), c = column5(0, j), r1 = column5(1, j);
-            for (std::int64_t x = 0; x < C; ++x) {
-                const Column5 r2 = column5(x + 2, j);
-                store(out_row + 4 * x,
-                      c.mid.valid ? M::sobel5_normal(l2, l1, c, r1, r2, jump_rel) : typename M::vec4(Real(0)));
-                l2 = l1;
-                l1 = c;
-                c = r1;
-                r1 = r2;
+        const Real *up2 = row_at(j - 2), *up = row_at(j - 1), *mid = row_at(j), *down = row_at(j + 1),
+                   *down2 = row_at(j + 2);
+        for (std::int64_t x = 0; x < C; ++x) {
+            if (!(mid[4 * x + 3] > Real(0))) { // no hit: no normal
+                store(out_row + 4 * x, typename M::vec4(Real(0)));
+                continue;
             }
-        } else {
-            Column3 l = column3(-1, j), c = column3(0, j);
-            for (std::int64_t x = 0; x < C; ++x) {
-                const Column3 r = column3(x + 1, j);
-                store(out_row + 4 * x, c.mid.valid ? M::sobel3_normal(l, c, r, jump_rel) : typename M::vec4(Real(0)));
-                l = c;
-                c = r;
+            if (sobel5) {
+                auto column5 = [&](std::int64_t c) {
+                    return Column5{sample(up2, c), sample(up, c), sample(mid, c), sample(down, c), sample(down2, c)};
+                };
+                store(out_row + 4 * x, M::sobel5_normal(column5(x - 2), column5(x - 1), column5(x), column5(x + 1),
+                                                        column5(x + 2), jump_rel));
+            } else {
+                auto column3 = [&](std::int64_t c) { return Column3{sample(up, c), sample(mid, c), sample(down, c)}; };
+                store(out_row + 4 * x, M::sobel3_normal(column3(x - 1), column3(x), column3(x + 1), jump_rel));
             }
         }
     }

@@ -52,31 +52,44 @@ void echo(const Plan& plan, const float* depth, const std::uint32_t* material, c
 // scan after the side-lobe convolution (bins * beams).
 template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar);
-// The same with caller-owned scratch of beamform_scratch_count(plan) values (the overload above allocates it).
+// The same with caller-owned scratch of beamform_scratch_count(plan) values (the overload above allocates it):
+// the accumulators (beamform_accumulator_count), then the resample weights (resample_weight_count).
 template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* scratch);
 std::size_t beamform_scratch_count(const Plan& plan);
+std::size_t beamform_accumulator_count(const Plan& plan); // bins x (profile_columns + padding)
+// The resample's weights, beam after beam, each beam's columns in increasing order (a function of the
+// plan alone: filled once).
+std::size_t resample_weight_count(const Plan& plan);
+template <class Real> void resample_weights(const Plan& plan, Real* weights);
 
 // The same stages over a part of the image, for splitting a stage between threads: rows
 // [row_begin, row_end) of normals and echo (the normals scratch is the part's own), pixel columns
-// [column_begin, column_end) of the range profiles (acc: the scratch of the whole stage, each part
-// touching its columns only), bins [bin_begin, bin_end) of the resample and side-lobe passes (after
-// every column's profile is done). Each output value is computed by one part, in the same order as the
-// whole-image functions above, so the result does not depend on how the image is split.
+// [column_begin, column_end) of the range profiles (acc: the beamform_accumulator_count accumulators of
+// the whole stage, each part touching its columns only; profiles: null, or receives them as floats,
+// bins x profile_columns), bins [bin_begin, bin_end) of the resample (from acc, with resample_weights)
+// and side-lobe passes (after every column's profile is done). Each output value is
+// computed by one part, in the same order as the whole-image functions above, so the result does not
+// depend on how the image is split.
 template <class Real>
 void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
                   std::uint32_t row_end);
 template <class Real>
 void geometric_normals_rows(const Plan& plan, const float* depth, const float* face4, float* normals4,
                             std::uint32_t row_begin, std::uint32_t row_end);
+// table: echo_table's, made once per plan.
 template <class Real>
 void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
-               std::uint32_t row_begin, std::uint32_t row_end);
+               const Real* table, std::uint32_t row_begin, std::uint32_t row_end);
+// The echo stage's factors of a pixel's place in the grid: u per slice column, then (solid angle,
+// vertical power) per row and slice column (echo_table_count values).
+std::size_t echo_table_count(const Plan& plan);
+template <class Real> void echo_table(const Plan& plan, Real* table);
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end);
 template <class Real>
-void beamform_beams(const Plan& plan, const float* profiles, float* beam_profiles, float* polar,
+void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end);
 
 // workers: the Renderer's threads (borrowed; null or one thread: everything on the caller). The

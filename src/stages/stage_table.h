@@ -7,7 +7,8 @@
 //   depth     shaders/depth*.vert/.frag (host depth image: import_depth.comp)  src/stages/cpu_depth.cpp
 //   normals   shaders/normals.comp                                              src/stages/cpu_normals.cpp
 //   echo      shaders/echo.comp                                                 src/stages/cpu_echo.cpp
-//   beamform  shaders/profile.comp, resample.comp, sidelobe.comp                src/stages/cpu_beamform.cpp
+//   beamform  shaders/profile.comp, resample.comp, far_sidelobe.comp,           src/stages/cpu_beamform.cpp
+//             sidelobe.comp
 // The per-pixel kernels of normals, echo and the range kernel of beamform are written once, in
 // shaders/sonar_kernels.h, for both backends. The host stages (noise, gain, images) follow in
 // src/host/ and are shared by both backends.

@@ -146,8 +146,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     // The backend without its depth pass: compute stages, tables, readback and command buffers only.
     o.backend = std::make_unique<VulkanBackend>(context, plan, o.no_scene, options);
     VulkanBackend& b = *o.backend;
-    b.incidence_ = plan.effects.incidence;
-    b.sidelobes_ = plan.effects.horizontal_pattern;
+    b.resolve_passes();
     const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
     const VkPhysicalDeviceLimits& limits = context.properties.limits;
     if (group_count(pixels) > limits.maxComputeWorkGroupCount[0] || pixels * 16 > limits.maxStorageBufferRange) {

@@ -28,11 +28,15 @@ enum Binding : std::uint32_t {
     binding_beam_table = shared::kBindingBeamTable,
     binding_sidelobe_weight = shared::kBindingSidelobeWeight,
     binding_cone_coord = shared::kBindingConeCoord,
-    // The same four tables as uniform blocks (below): bound to the same buffers.
+    binding_far_table = shared::kBindingFarTable,
+    binding_far_energy = shared::kBindingFarEnergy,
+    binding_far_cells = shared::kBindingFarCells,
+    // The same five tables as uniform blocks (below): bound to the same buffers.
     binding_materials_uniform = shared::kBindingMaterialsUniform,
     binding_column_table_uniform = shared::kBindingColumnTableUniform,
     binding_beam_table_uniform = shared::kBindingBeamTableUniform,
     binding_sidelobe_weight_uniform = shared::kBindingSidelobeWeightUniform,
+    binding_far_table_uniform = shared::kBindingFarTableUniform,
     binding_count = shared::kBindingCount,
 };
 
@@ -131,11 +135,25 @@ struct SidelobeSpecialization {
     std::uint32_t vec4_out = 0;
     std::uint32_t uniform_tables = 0;
     std::uint32_t weight_vec4s = 1;
-    std::array<SpecConstant, 4> constants() const {
+    std::uint32_t far_sidelobes = 0; // Plan::far_cells > 0
+    std::uint32_t far_table_vec4s = 1;
+    std::array<SpecConstant, 6> constants() const {
         return {{{shared::kSpecPerInvocation, beams_per_invocation},
                  {shared::kSpecVec4Out, vec4_out},
                  {shared::kSpecUniformTables, uniform_tables},
-                 {shared::kSpecTableVec4s0, weight_vec4s}}};
+                 {shared::kSpecTableVec4s0, weight_vec4s},
+                 {shared::kSpecFarSidelobes, far_sidelobes},
+                 {shared::kSpecTableVec4s1, far_table_vec4s}}};
+    }
+};
+struct FarSidelobeSpecialization {
+    std::uint32_t pass = 0; // 0: deposit, 1: convolve
+    std::uint32_t uniform_tables = 0;
+    std::uint32_t far_table_vec4s = 1;
+    std::array<SpecConstant, 3> constants() const {
+        return {{{shared::kSpecFarPass, pass},
+                 {shared::kSpecUniformTables, uniform_tables},
+                 {shared::kSpecTableVec4s0, far_table_vec4s}}};
     }
 };
 

@@ -23,6 +23,7 @@
 #include "depth_geometric.frag.spv.h"
 #include "depth_geometric.vert.spv.h"
 #include "echo.comp.spv.h"
+#include "far_sidelobe.comp.spv.h"
 #include "normals.comp.spv.h"
 #include "profile.comp.spv.h"
 #include "resample.comp.spv.h"
@@ -38,10 +39,15 @@ VulkanBackend::~VulkanBackend() {
     }
 }
 
-Result<void> VulkanBackend::init() {
+void VulkanBackend::resolve_passes() {
     incidence_ = plan_.effects.incidence;
     sidelobes_ = plan_.effects.horizontal_pattern;
+    far_sidelobes_ = sidelobes_ && plan_.far_cells > 0;
     face_normals_ = plan_.face_normals;
+}
+
+Result<void> VulkanBackend::init() {
+    resolve_passes();
     if (plan_.columns == 0 || plan_.rows == 0 || plan_.beams == 0 || plan_.bins == 0) {
         return make_error(ErrorCode::internal, "vulkan backend: plan has an empty pixel grid or polar scan");
     }
@@ -212,6 +218,7 @@ Result<void> VulkanBackend::create_compute() {
     gpu_params_.bins_padded = (plan_.bins + 3u) & ~3u;
     const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
     const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.profile_columns;
+    const std::size_t far_floats = std::size_t(gpu_params_.bins_padded) * plan_.far_cells * plan_.far_channels;
     const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     const VkBufferUsageFlags in = storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     const VkBufferUsageFlags out = storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
@@ -222,7 +229,7 @@ Result<void> VulkanBackend::create_compute() {
         std::size_t bytes;
         VkBufferUsageFlags usage;
     };
-    const std::array<Working, 7> working{{
+    const std::array<Working, 9> working{{
         {&depth_, pixels * sizeof(float), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         {&material_id_, pixels * sizeof(std::uint32_t), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         // geometric: the depth pass copies its face normals in, the normals pass orients them in place
@@ -233,6 +240,8 @@ Result<void> VulkanBackend::create_compute() {
          out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
         {&beam_profiles_, padded_cells * sizeof(float), out},
         {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
+        {&far_energy_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
+        {&far_cells_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
     }};
     for (const Working& w : working) {
         auto buffer = create_buffer(context_, w.bytes, w.usage, MemoryUse::device);
@@ -292,6 +301,13 @@ Result<void> VulkanBackend::create_compute() {
         sidelobe_table.push_back(static_cast<float>(hi));
     }
     const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(sidelobe_table));
+    // The far side lobes' table, as far_sidelobe.comp reads it: beam cells, cell spans, weights.
+    std::vector<float> far_table = plan_.far_beam_cell;
+    for (std::uint32_t beam : plan_.far_cell_beams)
+        far_table.push_back(static_cast<float>(beam)); // exact: beams < 2^24
+    far_table.insert(far_table.end(), plan_.far_weight.begin(), plan_.far_weight.end());
+    if (far_table.empty()) far_table.assign(4, 0.0f);
+    const std::uint32_t far_table_vec4s = uniform_vec4s(bytes_of(far_table));
 
     struct Table {
         Buffer* buffer;
@@ -302,7 +318,7 @@ Result<void> VulkanBackend::create_compute() {
     const VkBufferUsageFlags uniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
     const float no_cone_coord[4] = {0.0f, 0.0f, 0.0f, 0.0f};
     const bool cones = !plan_.pixel_cone_coord.empty();
-    const std::array<Table, 7> tables{{
+    const std::array<Table, 8> tables{{
         {&params_, &gpu_params_, sizeof(gpu_params_), uniform},
         {&slice_info_, slice_info.data(), bytes_of(slice_info), uniform},
         {&materials_, materials.data(), bytes_of(materials), storage | uniform},
@@ -311,6 +327,7 @@ Result<void> VulkanBackend::create_compute() {
         {&sidelobe_weight_, sidelobe_table.data(), bytes_of(sidelobe_table), storage | uniform},
         {&cone_coord_, cones ? plan_.pixel_cone_coord.data() : no_cone_coord,
          cones ? bytes_of(plan_.pixel_cone_coord) : sizeof no_cone_coord, storage},
+        {&far_table_, far_table.data(), bytes_of(far_table), storage | uniform},
     }};
     for (const Table& t : tables) {
         // Rounded up to whole vec4s: a uniform view covers whole std140 array elements.
@@ -371,13 +388,14 @@ Result<void> VulkanBackend::create_compute() {
     VKS_VK_TRY(context_.fn.vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
 
     const std::array<const Buffer*, binding_count> bound{
-        &params_,          &depth_,      &material_id_, &normals_,      &echo_,         &profiles_,
-        &beam_profiles_,   &polar_,      &slice_info_,  &materials_,    &column_table_, &beam_table_,
-        &sidelobe_weight_, &cone_coord_, &materials_,   &column_table_, &beam_table_,   &sidelobe_weight_};
+        &params_,          &depth_,      &material_id_,     &normals_,    &echo_,         &profiles_,
+        &beam_profiles_,   &polar_,      &slice_info_,      &materials_,  &column_table_, &beam_table_,
+        &sidelobe_weight_, &cone_coord_, &far_table_,       &far_energy_, &far_cells_,    &materials_,
+        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
-        materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s};
+        materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s, far_table_vec4s};
     std::array<VkDescriptorBufferInfo, binding_count> infos{};
     std::array<VkWriteDescriptorSet, binding_count> writes{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
@@ -445,10 +463,22 @@ Result<void> VulkanBackend::create_compute() {
         SidelobeSpecialization sidelobe;
         sidelobe.beams_per_invocation = kBeamsPerInvocation;
         sidelobe.vec4_out = plan_.beams % 4 == 0 ? 1u : 0u;
-        sidelobe.uniform_tables = both_uniform(sidelobe_vec4s);
+        sidelobe.uniform_tables = both_uniform(sidelobe_vec4s, far_table_vec4s);
         sidelobe.weight_vec4s = sidelobe.uniform_tables ? sidelobe_vec4s : 1u;
+        sidelobe.far_sidelobes = far_sidelobes_ ? 1u : 0u;
+        sidelobe.far_table_vec4s = sidelobe.uniform_tables ? far_table_vec4s : 1u;
         if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), sidelobe.constants()); !r)
             return r;
+    }
+    if (far_sidelobes_) {
+        FarSidelobeSpecialization far;
+        far.uniform_tables = both_uniform(far_table_vec4s);
+        far.far_table_vec4s = far.uniform_tables ? far_table_vec4s : 1u;
+        for (OwnedPipeline* pipeline : {&far_deposit_pipeline_, &far_convolve_pipeline_}) {
+            if (auto r = make(*pipeline, far_sidelobe_comp_spv, sizeof(far_sidelobe_comp_spv), far.constants()); !r)
+                return r;
+            far.pass = 1;
+        }
     }
     return {};
 }

@@ -100,8 +100,11 @@ private:
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
     const SceneData& scene_;
     RendererOptions options_; // the Vulkan paths (tables, resample, stage_timing)
+    // Which optional passes run, from the plan's effects (init and the host-depth path both call it).
+    void resolve_passes();
     bool incidence_ = false, sidelobes_ = false;
-    bool face_normals_ = false; // plan_.face_normals: the depth pass has the face-normal attachment
+    bool far_sidelobes_ = false; // plan_.far_cells > 0: far_sidelobe.comp runs before sidelobe.comp
+    bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
 
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
@@ -118,7 +121,8 @@ private:
 
     Buffer params_, depth_, material_id_, normals_, echo_, profiles_, beam_profiles_, polar_;
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
-    Buffer cone_coord_; // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
+    Buffer cone_coord_;                         // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
+    Buffer far_table_, far_energy_, far_cells_; // far side lobes (16-byte stand-ins without them)
     Buffer readback_;
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;
@@ -129,6 +133,7 @@ private:
     VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE; // freed with the pool
     shared::SonarParams gpu_params_{};                // plan_.params plus the GPU-only layout fields
     OwnedPipeline normals_pipeline_, echo_pipeline_, profile_pipeline_, resample_pipeline_, sidelobe_pipeline_;
+    OwnedPipeline far_deposit_pipeline_, far_convolve_pipeline_;
 
     OwnedCommandPool command_pool_;
     std::array<VkCommandBuffer, kCommandBufferCount> command_buffers_{}; // freed with the pool

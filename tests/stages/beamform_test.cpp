@@ -158,8 +158,32 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
     const std::vector<float> echo2 = random_echo(plan, &total);
     const BeamformOut o = run_beamform<Real>(plan, echo2);
     const std::int64_t K = (plan.sidelobe_taps - 1) / 2;
+    // The far side lobes (plan.h far_cells) from their definition: each beam's two cell shares
+    // (first cell 1 - s, second s); with the phase channels (a line array's sinc^2) the cells also
+    // take the energy times cos and sin of the beam's phase 2k u; each channel is convolved with
+    // far_weight[cells - 1 + a - b]; a beam reads l0 - cos l1 - sin l2 back (at least 0).
+    const std::uint32_t cells = plan.far_cells;
+    ASSERT_GT(cells, 1u) << "a 4-degree beam's 3-beamwidth kernel stops short of the fan";
+    ASSERT_EQ(plan.far_channels, plan.line_array ? 3u : 1u);
+    auto share = [&](std::uint32_t j, std::uint32_t c) {
+        const float* bc = plan.far_beam_cell.data() + 8 * std::size_t(j);
+        return std::uint32_t(bc[0]) == c ? 1.0 - bc[2] : std::uint32_t(bc[1]) == c ? double(bc[2]) : 0.0;
+    };
+    auto phase = [&](std::uint32_t j, std::uint32_t m) {
+        return m == 0 ? 1.0 : double(plan.far_beam_cell[8 * std::size_t(j) + 3 + m]);
+    };
     double max_rel = 0;
     for (std::uint32_t k = 0; k < plan.bins; ++k) {
+        std::vector<double> far(3 * std::size_t(cells), 0.0);
+        for (std::uint32_t m = 0; m < plan.far_channels; ++m) {
+            std::vector<double> cell(cells, 0.0);
+            for (std::uint32_t c = 0; c < cells; ++c)
+                for (std::uint32_t i = 0; i < plan.beams; ++i)
+                    cell[c] += share(i, c) * phase(i, m) * o.beams[std::size_t(k) * plan.beams + i];
+            for (std::uint32_t a = 0; a < cells; ++a)
+                for (std::uint32_t c = 0; c < cells; ++c)
+                    far[m * cells + a] += double(plan.far_weight[cells - 1 + a - c]) * cell[c];
+        }
         for (std::uint32_t j = 0; j < plan.beams; ++j) {
             double B = 0; // resample from the definition: every column, weight by the table
             for (std::uint32_t c = 0; c < plan.columns; ++c) {
@@ -175,9 +199,15 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
                 P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) *
                      o.beams[std::size_t(k) * plan.beams + src];
             }
+            double level = 0;
+            for (std::uint32_t m = 0; m < plan.far_channels; ++m)
+                for (std::uint32_t c = 0; c < cells; ++c)
+                    level += (m == 0 ? 1.0 : -phase(j, m)) * share(j, c) * far[m * cells + c];
+            P += std::max(level, 0.0);
             const double gotB = o.beams[std::size_t(k) * plan.beams + j],
                          gotP = o.polar[std::size_t(k) * plan.beams + j];
-            // Sums of <= ~10 positive float terms: float arithmetic is good to ~1e-6 relative.
+            // Sums of <= ~10 positive float terms (the far cells: a few dozen, each stored once in
+            // float): float arithmetic is good to ~1e-6 relative.
             EXPECT_NEAR(gotB, B, 2e-6 * B + 1e-30);
             EXPECT_NEAR(gotP, P, 2e-6 * P + 1e-30);
             if (P > 0) max_rel = std::max(max_rel, std::abs(gotP - P) / P);

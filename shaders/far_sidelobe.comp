@@ -1,0 +1,68 @@
+// Stage 4c, far side lobes (docs/pipeline.md, "Side lobes"): the horizontal pattern beyond the
+// side-lobe kernel's reach, on a coarse grid of cells uniform in the beams' separation variable
+// (Plan::far_cells). Two passes of this shader run before sidelobe.comp, which adds each beam's
+// share of its two cells:
+//   kFarPass 0 (deposit):  far_energy[m][c] = sum over the beams [first, end) of cell c, in increasing
+//                          order, of far_deposit_weight(beam j, c, m) * B(j);
+//   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
+// for each channel m < far_channels (sonar_kernels.h, Plan::far_channels).
+// An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
+// that resample.comp writes) and a workgroup one (channel, cell) (y = m * cells + c), so every table
+// load is the same for the whole workgroup: one scalar load from the uniform view on lavapipe
+// (src/vk/pipelines.h says why).
+// The CPU backend (src/stages/cpu_beamform.cpp) makes the same sums in the same order.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+#include "sonar_shared.h"
+#define REAL float
+#define VKS_ATAN2 atan
+#include "sonar_math.h"
+#include "sonar_kernels.h"
+
+layout(local_size_x = kWorkgroupSize) in;
+layout(constant_id = kSpecFarPass) const uint kFarPass = 0u;
+
+layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
+// Plan::far_beam_cell (8 per beam), then Plan::far_cell_beams as floats (2 per cell, exact below
+// 2^24), then Plan::far_weight (2 cells - 1); and the same as a uniform block where it fits.
+layout(std430, binding = kBindingFarTable) readonly buffer FarTableBuffer { float far_table[]; };
+layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
+layout(constant_id = kSpecTableVec4s0) const uint kFarTableVec4s = 1u;
+layout(std140, binding = kBindingFarTableUniform) uniform FarTableBlock { vec4 far_table4[kFarTableVec4s]; };
+layout(std430, binding = kBindingFarEnergy) buffer FarEnergyBuffer { vec4 far_energy4[]; };
+layout(std430, binding = kBindingFarCells) writeonly buffer FarCellsBuffer { vec4 far_cells4[]; };
+
+float table(uint i) {
+    return kUniformTables != 0u ? far_table4[i >> 2u][i & 3u] : far_table[i];
+}
+
+void main() {
+    uint quads = params.bins_padded / 4u;
+    uint q = gl_GlobalInvocationID.x;
+    uint cells = params.far_cells;
+    uint m = gl_WorkGroupID.y / cells;
+    uint c = gl_WorkGroupID.y - m * cells;
+    if (q >= quads || m >= params.far_channels) {
+        return;
+    }
+    uint spans = 8u * params.beams;
+    uint channel_base = m * cells;
+    vec4 sum = vec4(0.0);
+    if (kFarPass == 0u) {
+        uint end = uint(table(spans + 2u * c + 1u));
+        for (uint j = uint(table(spans + 2u * c)); j < end; ++j) {
+            uint i = 8u * j;
+            vec4 cell = vec4(table(i), table(i + 1u), table(i + 2u), table(i + 3u));
+            vec4 phase = vec4(table(i + 4u), table(i + 5u), table(i + 6u), table(i + 7u));
+            sum += far_deposit_weight(cell, phase, c, m) * beam_profiles4[j * quads + q];
+        }
+        far_energy4[(channel_base + c) * quads + q] = sum;
+        return;
+    }
+    uint weights = spans + 2u * cells;
+    for (uint b = 0u; b < cells; ++b) {
+        sum += table(weights + cells - 1u + c - b) * far_energy4[(channel_base + b) * quads + q];
+    }
+    far_cells4[(channel_base + c) * quads + q] = sum;
+}
