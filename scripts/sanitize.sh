@@ -27,12 +27,11 @@ echo "sanitize: build took $((built - start)) s" >&2
 # LeakSanitizer's exit-time scan no longer sees their globals, and every block they still reference
 # is reported as an indirect leak with an unsymbolizable "<unknown module>" stack, which no
 # suppression can match. With them loaded, their caches are reachable, and lsan.supp covers what the
-# driver truly never frees. vksonar's own allocations are checked as before.
-preload=""
-for lib in libvulkan_lvp.so libVkLayer_khronos_validation.so; do
-  path=$(ldconfig -p | awk -v l="$lib" '$1 == l && !found {print $NF; found = 1}')
-  if [ -n "$path" ]; then preload="${preload:+$preload:}$path"; fi
-done
+# driver truly never frees. vksonar's own allocations are checked as before. A small preloaded
+# library opens them (RTLD_LOCAL | RTLD_NODELETE; scripts/keep_vulkan_loaded.c says why they are not
+# preloaded themselves: the layer's exported vkGetInstanceProcAddr would replace the loader's).
+preload="$(cd "$BUILD_DIR" && pwd)/keep_vulkan_loaded.so"
+cc -shared -fPIC -O2 -o "$preload" scripts/keep_vulkan_loaded.c -ldl
 # The tests spawn the CLI (also instrumented) and inherit the options above.
 # install_consumer is left out: it builds an uninstrumented consumer of the installed (instrumented)
 # static library, which cannot link; the main test job runs it. SANITIZE_EXCLUDE overrides the regex.

@@ -9,6 +9,8 @@
 #include <memory>
 #include <mutex>
 #include <new>
+#include <set>
+#include <string>
 #include <thread>
 #include <unordered_map>
 #include <vector>
@@ -560,7 +562,7 @@ TEST_F(EmbedTest, MissingRequirementsGiveClearErrors) {
     HostVulkan no_device = host::host_vulkan(*host->engine);
     no_device.device = VK_NULL_HANDLE;
     EXPECT_EQ(Context::adopt(no_device).error().code, ErrorCode::invalid_argument);
-    // The host's entry points, from the loader vksonar links: checked against the device and accepted.
+    // The host's entry points (here the loader's own): every function vksonar calls resolves, accepted.
     VulkanFunctions functions;
     functions.vkGetInstanceProcAddr = vkGetInstanceProcAddr;
     functions.vkGetDeviceProcAddr = vkGetDeviceProcAddr;
@@ -604,6 +606,137 @@ TEST_F(EmbedTest, MissingRequirementsGiveClearErrors) {
     // The scene-renderer entry points on a depth renderer and vice versa do not compile (api_test.cpp).
     EXPECT_EQ(host->messages.load(), 0u);
     EXPECT_EQ(old_host->messages.load(), 0u);
+}
+
+// The host's entry points as a host with its own loader, layers or volk would pass them: getters that
+// record every name vksonar resolves, return null for one name on request, and hand out vkQueueSubmit
+// and vkCmdDispatch as wrappers that count their calls before forwarding to the loader's functions.
+// Static because a PFN carries no user data; each test resets it (tests in one binary run one at a time).
+struct HostGetters {
+    static inline std::mutex mutex;
+    static inline std::set<std::string> asked;
+    static inline std::string refused; // a name the device getter returns null for ("": none)
+    static inline std::atomic<int> submits{0}, dispatches{0};
+    static inline PFN_vkQueueSubmit real_submit = nullptr;
+    static inline PFN_vkCmdDispatch real_dispatch = nullptr;
+
+    static void reset(std::string refuse = {}) {
+        std::lock_guard<std::mutex> lock(mutex);
+        asked.clear();
+        refused = std::move(refuse);
+        submits = 0;
+        dispatches = 0;
+    }
+    static bool was_asked(const std::string& name) {
+        std::lock_guard<std::mutex> lock(mutex);
+        return asked.count(name) != 0;
+    }
+    static void record(const char* name) {
+        std::lock_guard<std::mutex> lock(mutex);
+        asked.insert(name);
+    }
+
+    static VKAPI_ATTR VkResult VKAPI_CALL counting_submit(VkQueue queue, std::uint32_t count,
+                                                          const VkSubmitInfo* submits_, VkFence fence) {
+        ++submits;
+        return real_submit(queue, count, submits_, fence);
+    }
+    static VKAPI_ATTR void VKAPI_CALL counting_dispatch(VkCommandBuffer commands, std::uint32_t x, std::uint32_t y,
+                                                        std::uint32_t z) {
+        ++dispatches;
+        real_dispatch(commands, x, y, z);
+    }
+    static VKAPI_ATTR PFN_vkVoidFunction VKAPI_CALL get_instance_proc_addr(VkInstance instance, const char* name) {
+        record(name);
+        return vkGetInstanceProcAddr(instance, name);
+    }
+    static VKAPI_ATTR PFN_vkVoidFunction VKAPI_CALL get_device_proc_addr(VkDevice device, const char* name) {
+        record(name);
+        if (refused == name) return nullptr;
+        const PFN_vkVoidFunction real = vkGetDeviceProcAddr(device, name);
+        if (std::strcmp(name, "vkQueueSubmit") == 0) {
+            real_submit = reinterpret_cast<PFN_vkQueueSubmit>(real);
+            return reinterpret_cast<PFN_vkVoidFunction>(&counting_submit);
+        }
+        if (std::strcmp(name, "vkCmdDispatch") == 0) {
+            real_dispatch = reinterpret_cast<PFN_vkCmdDispatch>(real);
+            return reinterpret_cast<PFN_vkVoidFunction>(&counting_dispatch);
+        }
+        return real;
+    }
+    static VulkanFunctions functions() {
+        VulkanFunctions table;
+        table.vkGetInstanceProcAddr = get_instance_proc_addr;
+        table.vkGetDeviceProcAddr = get_device_proc_addr;
+        return table;
+    }
+};
+
+TEST_F(EmbedTest, CallsGoThroughTheHostsFunctionPointers) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    HostGetters::reset();
+    const VulkanFunctions functions = HostGetters::functions();
+    HostVulkan through_host = host::host_vulkan(*host->engine);
+    through_host.functions = &functions;
+    auto context = Context::adopt(through_host);
+    ASSERT_TRUE(context.ok()) << context.error().message;
+    // Resolved once, by adopt, through the host's getters: instance and device functions.
+    EXPECT_TRUE(HostGetters::was_asked("vkGetPhysicalDeviceProperties"));
+    EXPECT_TRUE(HostGetters::was_asked("vkCmdDispatch"));
+    EXPECT_TRUE(HostGetters::was_asked("vkQueueSubmit"));
+    EXPECT_TRUE(HostGetters::was_asked("vkCmdDrawIndexed"));
+    EXPECT_FALSE(HostGetters::was_asked("vkCreateDevice")) << "an adopted context resolves only what it calls";
+    EXPECT_EQ(HostGetters::submits.load(), 0) << "adopt submits nothing";
+
+    // The host-depth path: the host's depth image, processed through the wrappers.
+    const SonarConfig config = host::demo_config();
+    auto sonar = HostDepthRenderer::create(*context, config, host::depth_desc(host->options));
+    ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+    Frame frame = sonar->make_frame();
+    ASSERT_TRUE(sonar->process(host::depth_image(*host->engine), 0, frame).ok());
+    EXPECT_GT(sum(frame.clean), 0.0);
+    EXPECT_GT(HostGetters::submits.load(), 0);
+    EXPECT_GT(HostGetters::dispatches.load(), 0);
+
+    // The same image through a context without the host's functions (the loader's): the same scan.
+    auto plain_context = Context::adopt(host::host_vulkan(*host->engine));
+    ASSERT_TRUE(plain_context.ok()) << plain_context.error().message;
+    auto plain = HostDepthRenderer::create(*plain_context, config, host::depth_desc(host->options));
+    ASSERT_TRUE(plain.ok()) << plain.error().message;
+    Frame plain_frame = plain->make_frame();
+    const int dispatches_before = HostGetters::dispatches.load();
+    ASSERT_TRUE(plain->process(host::depth_image(*host->engine), 0, plain_frame).ok());
+    EXPECT_EQ(HostGetters::dispatches.load(), dispatches_before) << "the plain context must not use the wrappers";
+    EXPECT_EQ(frame.clean, plain_frame.clean);
+
+    // A scene render (depth pass, graphics pipeline) through the host's functions too.
+    auto scene = host::to_scene(host::demo_scene(), config.default_backscatter_db);
+    ASSERT_TRUE(scene.ok());
+    auto renderer = Renderer::create(*context, config, *scene);
+    ASSERT_TRUE(renderer.ok()) << renderer.error().message;
+    Frame rendered = renderer->make_frame();
+    const int submits_before = HostGetters::submits.load();
+    ASSERT_TRUE(renderer->render(host::to_pose(demo_camera()), 0, rendered).ok());
+    EXPECT_GT(sum(rendered.clean), 0.0);
+    EXPECT_GT(HostGetters::submits.load(), submits_before);
+    EXPECT_EQ(host->messages.load(), 0u);
+}
+
+TEST_F(EmbedTest, AdoptNamesTheFunctionTheHostsGetterDoesNotResolve) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    HostGetters::reset("vkCmdDispatch");
+    const VulkanFunctions functions = HostGetters::functions();
+    HostVulkan through_host = host::host_vulkan(*host->engine);
+    through_host.functions = &functions;
+    auto refused = Context::adopt(through_host);
+    HostGetters::reset();
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::unsupported);
+    EXPECT_EQ(refused.error().message,
+              "Context::adopt: HostVulkan.functions->vkGetDeviceProcAddr returns null for vkCmdDispatch");
+    EXPECT_EQ(host->messages.load(), 0u);
 }
 
 } // namespace

@@ -124,6 +124,25 @@ TEST(VkContext, CreatesDeviceWithDescription) {
     EXPECT_EQ(context->validation_messages(), 0u);
 }
 
+// Context::create fills the whole dispatch table (src/vk/functions.h) from the loader; the getters'
+// device functions go straight to the driver or layer, past the loader's trampolines.
+TEST(VkContext, OwnContextLoadsEveryFunction) {
+    VKSONAR_REQUIRE_VULKAN();
+    const vk::Functions& fn = context_vulkan(*vulkan_context())->fn;
+    std::string missing;
+#define VKSONAR_TEST_NULL(name)                                                                                        \
+    if (fn.name == nullptr) missing += " " #name;
+    VKSONAR_VK_GLOBAL_FUNCTIONS(VKSONAR_TEST_NULL)
+    VKSONAR_VK_INSTANCE_FUNCTIONS(VKSONAR_TEST_NULL)
+    VKSONAR_VK_OWN_INSTANCE_FUNCTIONS(VKSONAR_TEST_NULL)
+    VKSONAR_VK_DEVICE_FUNCTIONS(VKSONAR_TEST_NULL)
+    VKSONAR_VK_OWN_DEVICE_FUNCTIONS(VKSONAR_TEST_NULL)
+#undef VKSONAR_TEST_NULL
+    EXPECT_EQ(missing, "") << "null in the table";
+    EXPECT_NE(fn.vkGetDeviceProcAddr, nullptr);
+    EXPECT_EQ(fn.vkGetInstanceProcAddr, &vkGetInstanceProcAddr) << "the loader's, the one bootstrap function";
+}
+
 TEST(VkContext, CpuOnlyHasNoVulkan) {
     Context context = Context::cpu_only();
     EXPECT_FALSE(context.has_vulkan());
@@ -413,7 +432,9 @@ TEST(VkContext, CountsValidationMessages) {
     info.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     ::testing::internal::CaptureStderr();
     VkBuffer buffer = VK_NULL_HANDLE;
-    if (vkCreateBuffer(vk.device, &info, nullptr, &buffer) == VK_SUCCESS) vkDestroyBuffer(vk.device, buffer, nullptr);
+    // Through the context's table: the layer must see the calls vksonar makes through it.
+    if (vk.fn.vkCreateBuffer(vk.device, &info, nullptr, &buffer) == VK_SUCCESS)
+        vk.fn.vkDestroyBuffer(vk.device, buffer, nullptr);
     const std::string printed = ::testing::internal::GetCapturedStderr();
     EXPECT_GE(created->validation_messages(), 1u);
     EXPECT_NE(printed.find("validation error"), std::string::npos) << printed;

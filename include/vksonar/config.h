@@ -28,7 +28,11 @@ struct EffectsConfig {
     EffectMode tvg = EffectMode::automatic;                // time-varied gain; auto: off
 };
 
+// The shape of a beam pattern (SonarConfig::vertical_pattern, horizontal_pattern; README "The model");
+// chebyshev: all side lobes at SonarConfig::*_sidelobe_db.
 enum class BeamPattern : std::uint8_t { box, sinc, hann, gaussian, chebyshev };
+// How `beams` beams divide the fan when no explicit table is given: equal angles, or equal steps of
+// sin(angle) (as a line array steers them).
 enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 // How the beams divide the directions (docs/pipeline.md, "Beam geometry"). line_array: a horizontal
 // line array (Oculus, Gemini, BlueView) hears a direction by its cosine along the array axis, so a
@@ -37,11 +41,17 @@ enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 // of one azimuth and its pattern a function of the azimuth difference, as an acoustic lens (ARIS) forms
 // it and as the legacy plugins do. A fan of 180 degrees or more has no single array axis: planar.
 enum class BeamGeometry : std::uint8_t { line_array, planar };
+// Speckle on the intensity (host stage 5): rayleigh (Exp(1) intensity), gamma (Gamma(L, 1/L) with L =
+// speckle_looks), gaussian (the legacy |N(1, sigma)|).
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
+// How a pixel's echo is spread over range bins: the nearest bin, split between the two nearest, or over
+// the pixel's own range extent, at least one bin (README "Accuracy and what it costs").
 enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
 // geometric: the face normal of the triangle that won each pixel, recorded by the depth pass.
 enum class NormalMethod : std::uint8_t { sobel3, sobel5, geometric };
+// The palette of the fan and polar images the CLI writes (Frame::display is the value before it).
 enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
+// Arithmetic of the CPU backend's stages (the Vulkan backend is always f32).
 enum class Precision : std::uint8_t { f32, f64 };
 // Storage of the per-pixel echo buffer (energy, slant range) between the echo and profile passes.
 enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
@@ -49,6 +59,8 @@ enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
 // step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
 enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 
+// Every parameter of one sonar; the defaults are the `default` preset's. A plain value, copied by
+// whatever takes it (Renderer::create validates its copy). Its two member functions are pure.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct SonarConfig {
     std::string name = "default";
@@ -132,22 +144,36 @@ struct SonarConfig {
     std::uint32_t range_bins() const;
 };
 
-// Loading: presets are embedded in the library; files are JSON. Errors name file, key and value.
+// Loading: presets are embedded in the library; files are JSON. Errors are one line naming file, key
+// and value. Every function below returns a new value and changes none of its arguments; none keeps
+// state between calls, so all may be called from any thread at once.
+
+// The embedded preset `name` (assets/presets/NAME.json on top of the defaults), validated. Fails with
+// ErrorCode::invalid_argument listing the valid names for an unknown one.
 [[nodiscard]] Result<SonarConfig> load_preset(const std::string& name);
+// The embedded presets' names, sorted.
 [[nodiscard]] std::vector<std::string> preset_names();
-// Applies a JSON object (text) on top of `base`; `origin` names the source in error messages.
+// `base` with a JSON object's keys (text; // comments allowed) applied on top; `origin` names the
+// source in error messages. Fails with ErrorCode::parse for malformed JSON or a non-object, and
+// ErrorCode::invalid_argument for an unknown key or a bad value. Checks each key, not the whole config
+// (validate() does, as Renderer::create).
 [[nodiscard]] Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string& json_text,
                                                     const std::string& origin);
+// apply_config_json on a file's text; ErrorCode::io if it cannot be read.
 [[nodiscard]] Result<SonarConfig> apply_config_file(const SonarConfig& base, const std::string& path);
-// Applies one `key=value` override (dotted keys, e.g. effects.speckle=off).
+// `base` with one `key=value` override applied (dotted keys, e.g. effects.speckle=off). Fails with
+// ErrorCode::invalid_argument for text that is not key=value, an unknown key, a bad value or text
+// that is not UTF-8.
 [[nodiscard]] Result<SonarConfig> apply_config_override(const SonarConfig& base, const std::string& key_equals_value);
-// Accuracy presets fast | balanced (the defaults) | accurate: sets the accuracy.* keys (README, "Accuracy and what it
-// costs").
+// `base` with an accuracy preset fast | balanced (the defaults) | accurate applied: sets the accuracy.*
+// keys (README, "Accuracy and what it costs"). ErrorCode::invalid_argument for another name.
 [[nodiscard]] Result<SonarConfig> apply_quality(const SonarConfig& base, const std::string& name);
+// "fast", "balanced", "accurate".
 [[nodiscard]] std::vector<std::string> quality_names();
 // The `key=value` overrides a quality stands for (empty for an unknown name).
 [[nodiscard]] std::vector<std::string> quality_settings(const std::string& name);
-// The fully resolved config as JSON text (for meta.json and `vksonar presets --show`).
+// The fully resolved config as JSON text, every key (for meta.json and `vksonar presets --show`);
+// apply_config_json of it gives the config back.
 [[nodiscard]] std::string config_to_json(const SonarConfig& config);
 
 } // namespace vksonar

@@ -29,25 +29,24 @@ struct ContextOptions {
     const VkAllocationCallbacks* allocator = nullptr;
 };
 
-// The host's Vulkan entry points, optional in HostVulkan (as VMA's VmaVulkanFunctions). vksonar links
-// the Vulkan loader (CMake's Vulkan::Vulkan) and calls the loader's exported functions; it does not
-// route its calls through these pointers. Given, Context::adopt checks with them, before any other
-// Vulkan call, that vksonar's calls will reach the host's device: (1) both pointers are set
-// (else ErrorCode::invalid_argument naming the null one); (2) they come from the loader vksonar
-// links: vkGetInstanceProcAddr(NULL, "vkCreateInstance") gives the same function through both
-// (else ErrorCode::unsupported: a second or statically linked loader, or an ICD called without the
-// loader, which would crash vksonar's calls); (3) the host's vkGetDeviceProcAddr resolves every
-// device function vksonar calls on HostVulkan::device (else ErrorCode::unsupported naming it).
-// Left null, adopt assumes (1)-(3), as before.
-// Thread-safety: a plain value, read only during adopt.
+// The host's Vulkan entry points, optional in HostVulkan (as VMA's VmaVulkanFunctions). vksonar calls
+// every Vulkan function through a table of pointers its context loads once: given these, from them
+// (instance functions with vkGetInstanceProcAddr(HostVulkan::instance, ...), device functions with
+// vkGetDeviceProcAddr(HostVulkan::device, ...)), so vksonar's calls go where the host's go: a host
+// with its own or a statically linked loader, its own layers, or volk works. Context::adopt resolves
+// every function vksonar calls before it calls any, and fails with ErrorCode::invalid_argument if a
+// pointer here is null, or ErrorCode::unsupported naming the first function a getter returns null for.
+// Left null (HostVulkan::functions == nullptr), adopt loads the table from the Vulkan loader vksonar
+// links (libvulkan), which must then be the loader the host's instance and device come from.
+// Thread-safety: a plain value, read only during adopt (the pointers it yields are kept).
 struct VulkanFunctions {
     PFN_vkGetInstanceProcAddr vkGetInstanceProcAddr = nullptr; // required
     PFN_vkGetDeviceProcAddr vkGetDeviceProcAddr = nullptr;     // required
 };
 
 // A host engine's Vulkan objects, borrowed by Context::adopt. vksonar never destroys any of them; they
-// must outlive the Context and every Renderer made from it. vksonar calls the Vulkan loader's exported
-// functions (libvulkan), so the host must have created them through the same loader.
+// must outlive the Context and every Renderer made from it. vksonar reaches them through the host's
+// entry points if `functions` is given, else through the Vulkan loader it links (VulkanFunctions).
 // Thread-safety: a plain value, read only during adopt; the callbacks and queue lock it names must be
 // callable from every thread that uses the Context.
 struct HostVulkan {
@@ -69,8 +68,10 @@ struct HostVulkan {
     // (and their pUserData) must outlive the Context and every Renderer made from it, and be callable
     // from any thread that uses them.
     const VkAllocationCallbacks* allocator = nullptr;
-    // Optional: the host's entry points, checked by adopt (VulkanFunctions says what is and is not
-    // done with them). Borrowed: read only during adopt.
+    // Optional: the host's entry points, through which vksonar makes every call on these objects
+    // (VulkanFunctions). Borrowed: the struct is read only during adopt; the functions its getters
+    // return must stay callable, from any thread that uses the Context, while it and its renderers
+    // exist.
     const VulkanFunctions* functions = nullptr;
 };
 
@@ -98,22 +99,26 @@ public:
     // Destroys the device and instance if create() made them (after vkDeviceWaitIdle); every Renderer
     // and HostDepthRenderer made from it must be destroyed first.
     ~Context();
+    // Moves the instance and device (and what owning them means); the moved-from context is CPU-only.
     Context(Context&&) noexcept;
     Context& operator=(Context&&) noexcept;
     Context(AdoptedContext&&) = delete; // would drop the type that says the device is borrowed
     Context& operator=(AdoptedContext&&) = delete;
 
-    // Creates and owns an instance and device (Vulkan 1.1, a graphics+compute queue). Returns the
-    // context, or ErrorCode::no_device if no device is usable (the message suggests the CPU backend),
-    // ErrorCode::invalid_argument for a device_index that does not exist, ErrorCode::vulkan if a
-    // Vulkan call fails. options.vulkan == false gives cpu_only(). Reads no environment variable
-    // (context_options_from_env does, for tools). Thread-safety: may be called from any thread.
+    // Creates and owns an instance and device (Vulkan 1.1, a graphics+compute queue), its functions
+    // loaded through the linked loader's vkGetInstanceProcAddr (the one loader export vksonar calls).
+    // Returns the context, or ErrorCode::no_device if no device is usable (the message suggests the
+    // CPU backend) or device_index does not exist, ErrorCode::unsupported naming a function the loader
+    // does not resolve, ErrorCode::vulkan if a Vulkan call fails. options.vulkan == false gives
+    // cpu_only(). Reads no environment variable (context_options_from_env does, for tools).
+    // Thread-safety: may be called from any thread.
     [[nodiscard]] static Result<Context> create(const ContextOptions& options = {});
-    // Wraps (borrows) the host's instance, device and queue: see AdoptedContext. Checks the
-    // requirements above and fails with ErrorCode::unsupported naming the first one missing, or
-    // ErrorCode::invalid_argument for null handles, a half-given queue lock or function table, or a
-    // queue family the device does not have. Thread-safety: may be called from any thread; makes no
-    // Vulkan object and submits nothing.
+    // Wraps (borrows) the host's instance, device and queue: see AdoptedContext. Resolves every
+    // function vksonar calls through HostVulkan::functions (or the linked loader; VulkanFunctions),
+    // checks the requirements above and fails with ErrorCode::unsupported naming the first function
+    // or requirement missing, or ErrorCode::invalid_argument for null handles, a half-given queue lock
+    // or function table, or a queue family the device does not have. Thread-safety: may be called from
+    // any thread; makes no Vulkan object and submits nothing.
     [[nodiscard]] static Result<AdoptedContext> adopt(const HostVulkan& host);
     // A context without Vulkan, for the CPU backend. Never fails, allocates nothing.
     static Context cpu_only();
@@ -138,7 +143,7 @@ private:
 // Thread-safety: as Context.
 class AdoptedContext final : public Context {
 public:
-    // An empty adopted context (no Vulkan): use Context::adopt.
+    // An empty adopted context (no Vulkan): use Context::adopt. Moves as Context does.
     AdoptedContext() = default;
     AdoptedContext(AdoptedContext&&) noexcept = default;
     AdoptedContext& operator=(AdoptedContext&&) noexcept = default;

@@ -21,6 +21,7 @@ enum class SaveFlags : std::uint32_t {
     labels = 1u << 4,
 };
 
+// Set operations on SaveFlags (constexpr, pure); ~ keeps only the flags above.
 constexpr SaveFlags operator|(SaveFlags a, SaveFlags b) {
     return static_cast<SaveFlags>(static_cast<std::uint32_t>(a) | static_cast<std::uint32_t>(b));
 }
@@ -53,12 +54,16 @@ struct ObjectVisibility {
     std::uint32_t outside = 0;  // of the rest, slant range outside [range_min, range_max)
 };
 
+// How long one stage of a frame took (Frame::times, in the order they ran): GPU timestamps or host
+// clocks around the stage's submission (RendererOptions::stage_timing); host stages on host clocks.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct StageTime {
     std::string stage; // "depth", "normals", "echo", "beamform", "noise", "image"
     double ms = 0;
 };
 
+// One effect as the renderer resolved it from config and scene (Frame::effects; EffectsConfig): on or
+// off, and why ("auto: fully developed speckle", "off in config").
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct EffectState {
     std::string name;
@@ -66,6 +71,9 @@ struct EffectState {
     std::string why;
 };
 
+// One ping's output and what it was made from. Make it with the renderer's make_frame() (sized for that
+// renderer; render refuses a frame of another size) and reuse it: render, process and read_back
+// overwrite the arrays they fill and allocate nothing. Owned by the caller; it refers to nothing else.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one (a Renderer
 // writes it only inside render, process and read_back).
 struct Frame {

@@ -91,11 +91,13 @@ public:
     // adopted; a compute queue is enough) and options.backend == Backend::vulkan. Fails with
     // ErrorCode::invalid_argument for a CPU context, the CPU backend or a bad config or desc, and with
     // ErrorCode::unsupported if the image does not cover the sonar or the format cannot be sampled.
-    // `context` must outlive the renderer; `config`, `desc` and `options` are copied.
+    // `context` must outlive the renderer; `config`, `desc` and `options` are copied. Thread-safety:
+    // may be called from any thread, also while other renderers on the same context work.
     [[nodiscard]] static Result<HostDepthRenderer>
     create(Context& context, const SonarConfig& config, const HostDepthDesc& desc, const RendererOptions& options = {});
 
-    // A frame sized for this renderer (the only allocation; reuse it for every ping).
+    // A new frame sized for this renderer and its save_mask (the only allocation; reuse it for every
+    // ping). Owned by the caller.
     Frame make_frame() const;
 
     // The noise seed (RendererOptions::seed): (seed, frame_index) key the noise of every frame.
@@ -105,14 +107,17 @@ public:
     // Converts the host's image (in depth.layout, after depth.wait_semaphore) into vksonar's depth
     // buffer, runs normals/echo/beamform on the context's queue, waits for them, then the host
     // stages: fills `frame` (made by make_frame) as Renderer::render does. The host must not write the
-    // image until process() returns. Fails with ErrorCode::invalid_argument for a frame not made by
-    // this renderer, ErrorCode::vulkan if a Vulkan call fails.
+    // image until process() returns. Allocates nothing. Fails with ErrorCode::invalid_argument for a
+    // frame of another size or an image without image/view or in a layout that cannot be sampled,
+    // ErrorCode::vulkan if a Vulkan call fails.
     [[nodiscard]] Result<void> process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame);
     // Records the same GPU work into the host's command buffer (primary, recording, outside a render
     // pass, from a pool of the context's queue family) with the barriers it needs, and returns without
     // submitting: the host submits it with its own semaphores and fence, and the sonar runs inside the
     // host's frame without a CPU wait. One ping in flight: the host must have seen the previous
     // recorded ping finish before calling record() again, and before destroying the renderer.
+    // Allocates nothing. Fails with ErrorCode::invalid_argument for a null command buffer or an image
+    // process() would refuse, ErrorCode::vulkan if a Vulkan call fails; on failure nothing is recorded.
     [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
     // After the command buffer given to record() has finished executing (the host waited for its
     // fence): copies the result to host memory and runs the host stages (noise, gain) into `frame`.
@@ -120,7 +125,8 @@ public:
     // the GPU work has not finished.
     [[nodiscard]] Result<void> read_back(std::uint64_t frame_index, Frame& frame);
     // The clean polar scan on the GPU after a recorded ping (before speckle, noise and gain, which are
-    // host stages), for drawing it in the engine. Owned by the renderer: the host borrows it.
+    // host stages), for drawing it in the engine. Owned by the renderer: the host borrows it. The same
+    // buffer for the renderer's life; never fails.
     GpuBufferView polar_buffer() const;
 
     // The config as validated (copied at create).

@@ -19,6 +19,8 @@
 
 namespace vksonar {
 
+// Where a Renderer runs its stages: the Vulkan device of its Context, or the CPU reference (same math;
+// needs no Vulkan). Host stages (noise, gain, labels) run on the CPU either way.
 enum class Backend : std::uint8_t { vulkan, cpu };
 
 // How the Vulkan backend reads its small tables (materials, column and beam tables, side-lobe
@@ -35,6 +37,7 @@ enum class ResampleMethod : std::uint8_t { automatic, gather };
 // always host clocks; timestamps: timestamp queries where the queue has them, else host clocks.
 enum class StageTiming : std::uint8_t { automatic, host, timestamps };
 
+// How a renderer runs, fixed at create (copied there).
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct RendererOptions {
     Backend backend = Backend::vulkan;
@@ -64,20 +67,28 @@ struct Access; // internal: src/core/access.h
 class Renderer {
 public:
     // An empty renderer, to move one from create() into: render() on it fails with
-    // ErrorCode::invalid_argument and make_frame() gives an empty Frame; seed(), config() and validity()
-    // need a renderer from create(). Move-only; destroying it frees every buffer and Vulkan object it
-    // made (after its submissions finished), none of the Context's or Scene's.
+    // ErrorCode::invalid_argument and make_frame() gives an empty Frame; set_seed(), seed(), config(),
+    // validity() and label_flow's frames need a renderer from create(). Move-only; destroying it frees
+    // every buffer and Vulkan object it made (after its submissions finished), none of the Context's
+    // or Scene's.
     Renderer();
     ~Renderer();
     Renderer(Renderer&&) noexcept;
     Renderer& operator=(Renderer&&) noexcept;
 
-    // Validates the config, resolves effects against the scene, builds the plan, uploads the scene.
-    // The context and scene must outlive the renderer.
+    // Validates the config, resolves effects against the scene, builds the plan, creates every buffer,
+    // pipeline and command buffer it will use and uploads the scene (submitting on the context's queue
+    // and waiting). Fails with ErrorCode::invalid_argument for a config or material that does not
+    // validate (naming the key), ErrorCode::no_device for Backend::vulkan on a CPU-only context,
+    // ErrorCode::unsupported for a grid past the device's limits or an adopted queue without graphics,
+    // ErrorCode::vulkan if a Vulkan call fails. The context and scene must outlive the renderer;
+    // config and options are copied. Thread-safety: may be called from any thread, also while other
+    // renderers on the same context create or render.
     [[nodiscard]] static Result<Renderer> create(Context& context, const SonarConfig& config, const Scene& scene,
                                                  const RendererOptions& options = {});
 
-    // A frame sized for this renderer (the only allocation; reuse it for every render).
+    // A new frame sized for this renderer and its save_mask (the only allocation; reuse it for every
+    // render). Owned by the caller.
     Frame make_frame() const;
 
     // The noise seed (RendererOptions::seed): (seed, frame_index) key the noise of every frame, so a
@@ -85,7 +96,10 @@ public:
     void set_seed(std::uint64_t seed);
     std::uint64_t seed() const;
 
-    // Renders the scene from `pose` into `frame`. frame_index keys the noise RNG with the seed.
+    // Renders the scene from `pose` into `frame` (from make_frame) and waits for it. frame_index keys the
+    // noise RNG with the seed. Allocates nothing. Fails with ErrorCode::invalid_argument for an empty
+    // renderer, a non-finite pose or a frame of another size, ErrorCode::vulkan if a Vulkan call fails
+    // (the frame's contents are then unspecified).
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
 
     // Flow between two frames this renderer made with SaveFlags::labels, in a static scene

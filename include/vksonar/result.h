@@ -11,6 +11,7 @@
 
 namespace vksonar {
 
+// What kind of failure an Error is.
 enum class ErrorCode {
     invalid_argument, // a config value, pose or CLI argument makes no sense
     io,               // a file could not be read or written
@@ -21,6 +22,7 @@ enum class ErrorCode {
     internal,         // a bug in vksonar
 };
 
+// A failure: what kind, one line of text for a person, and the VkResult of a failed Vulkan call.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct Error {
     ErrorCode code = ErrorCode::internal;
@@ -28,6 +30,9 @@ struct Error {
     VkResult vk_result = VK_SUCCESS;
 };
 
+// Either a T or an Error (as std::expected). Check ok() (or bool) first: value(), * and -> need ok(),
+// error() needs !ok() (the wrong one is a precondition violation: std::get throws
+// std::bad_variant_access). Owns its T or Error; moves out of it with std::move(result).value().
 // Thread-safety: a plain value (as T): safe to read from many threads at once, to write from one.
 template <class T> class [[nodiscard]] Result {
 public:
@@ -49,6 +54,8 @@ private:
     std::variant<T, Error> value_;
 };
 
+// Success or an Error. error() is meaningful only when !ok() (else a default Error: code internal,
+// empty message).
 template <> class [[nodiscard]] Result<void> {
 public:
     Result() = default;
@@ -93,6 +100,7 @@ inline std::string escape_control_chars(std::string text) {
 }
 } // namespace detail
 
+// An Error with `message` made one printable line (control characters escaped C-style). Pure.
 inline Error make_error(ErrorCode code, std::string message, VkResult vk_result = VK_SUCCESS) {
     return Error{code, detail::escape_control_chars(std::move(message)), vk_result};
 }

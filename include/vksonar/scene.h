@@ -104,6 +104,7 @@ struct SceneLoadOptions {
 struct SceneBounds {
     bool empty = true;
     double min_m[3] = {0, 0, 0}, max_m[3] = {0, 0, 0};
+    // The length of the box's diagonal, m; 0 when empty. Pure.
     double diagonal_m() const;
 };
 
@@ -112,17 +113,25 @@ struct SceneBounds {
 class Scene {
 public:
     // An empty scene (no mesh, no material, no draw), to build with add_mesh / add_material / add_draw.
-    // Move-only; the scene owns its arrays and frees them on destruction.
+    // Move-only; the scene owns its arrays and frees them on destruction; a moved-from scene stays
+    // usable.
     Scene();
     ~Scene();
     Scene(Scene&&) noexcept;
     Scene& operator=(Scene&&) noexcept;
 
-    // Loads .gltf or .glb. Fails with a one-line error naming the file and what is wrong.
+    // Loads .gltf or .glb (and the buffers it names, under options.asset_root) into a new scene. Fails
+    // with a one-line error naming the file and what is wrong: ErrorCode::io (a file cannot be read),
+    // ErrorCode::parse (malformed glTF or extras), ErrorCode::unsupported (a required extension vksonar
+    // does not decode), ErrorCode::invalid_argument (a bad options.scale). Thread-safety: may be
+    // called from any thread; loads share nothing.
     [[nodiscard]] static Result<Scene> load_gltf(const std::string& path, const SceneLoadOptions& options = {});
 
     // Builds a scene from arrays an engine already has: positions xyz (mesh-local), triangle indices.
-    // Adds one mesh and returns its index; then place it with add_draw.
+    // Adds one mesh (the arrays are copied; the caller keeps its own) and returns its index; then place
+    // it with add_draw. Fails with ErrorCode::invalid_argument for null or empty arrays, an index count
+    // that is not a multiple of 3, an index out of range or a non-finite coordinate; the scene is then
+    // unchanged.
     [[nodiscard]] Result<std::uint32_t> add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
                                                  const std::uint32_t* indices, std::uint32_t index_count);
     // Adds a material (copied; not validated until a Renderer is made from the scene, which then names
@@ -144,7 +153,8 @@ public:
     // (SceneInstance); empty for a scene built with add_mesh / add_draw. Valid as long as the scene.
     const std::vector<SceneInstance>& instances() const;
     const std::vector<std::string>& classes() const;
-    // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text.
+    // Effects the scene file asks for (glTF scene extras "vksonar": {"effects": {...}}), as JSON text;
+    // empty when it asks for none. Valid as long as the scene.
     const std::string& effects_json() const;
 
 private:

@@ -21,14 +21,15 @@ struct ModelValidity {
     std::string domain; // the domain in words, with the figures ("frequency in [200, 1e+06] Hz")
     std::string action; // what vksonar does outside it ("extrapolates the fit"); "none" when ok
 
-    // "francois_garrison: frequency = 3e+06 Hz is outside [200, 1e+06] Hz (...); extrapolates ..."
+    // The entry as the one line the CLI prints for !ok: "francois_garrison: frequency = 3e+06 is outside
+    // the model's domain (frequency in [200, 1e+06] Hz, ...); vksonar extrapolates ...". Pure.
     std::string warning() const;
 };
 
 // The models a config (and the scene's materials) uses, each checked against its domain, in a fixed
 // order: francois_garrison (absorption auto), far_field_beam_pattern (a beam pattern effect not off),
 // chebyshev_large_array (per chebyshev pattern), rough_facet (per rough material, incidence not off).
-// Meaningful for a config that validates.
+// Meaningful for a config that validates. Pure: returns a new vector, may be called from any thread.
 [[nodiscard]] std::vector<ModelValidity> model_validity(const SonarConfig& config,
                                                         const std::vector<AcousticMaterial>& materials = {});
 

@@ -18,99 +18,28 @@ Error unsupported(const std::string& what) {
     return make_error(ErrorCode::unsupported, "Context::adopt: " + what);
 }
 
-// Every device-level function vksonar calls (src/vk), resolved through the host's vkGetDeviceProcAddr.
-constexpr const char* kDeviceFunctions[] = {
-    "vkAllocateCommandBuffers",
-    "vkAllocateDescriptorSets",
-    "vkAllocateMemory",
-    "vkBeginCommandBuffer",
-    "vkBindBufferMemory",
-    "vkBindImageMemory",
-    "vkCmdBeginRenderPass",
-    "vkCmdBindDescriptorSets",
-    "vkCmdBindIndexBuffer",
-    "vkCmdBindPipeline",
-    "vkCmdBindVertexBuffers",
-    "vkCmdCopyBuffer",
-    "vkCmdCopyImageToBuffer",
-    "vkCmdDispatch",
-    "vkCmdDrawIndexed",
-    "vkCmdEndRenderPass",
-    "vkCmdFillBuffer",
-    "vkCmdPipelineBarrier",
-    "vkCmdPushConstants",
-    "vkCmdResetQueryPool",
-    "vkCmdSetEvent",
-    "vkCmdSetScissor",
-    "vkCmdSetViewport",
-    "vkCmdWriteTimestamp",
-    "vkCreateBuffer",
-    "vkCreateCommandPool",
-    "vkCreateComputePipelines",
-    "vkCreateDescriptorPool",
-    "vkCreateDescriptorSetLayout",
-    "vkCreateEvent",
-    "vkCreateFence",
-    "vkCreateFramebuffer",
-    "vkCreateGraphicsPipelines",
-    "vkCreateImage",
-    "vkCreateImageView",
-    "vkCreatePipelineLayout",
-    "vkCreateQueryPool",
-    "vkCreateRenderPass",
-    "vkCreateShaderModule",
-    "vkDestroyBuffer",
-    "vkDestroyCommandPool",
-    "vkDestroyDescriptorPool",
-    "vkDestroyDescriptorSetLayout",
-    "vkDestroyEvent",
-    "vkDestroyFence",
-    "vkDestroyFramebuffer",
-    "vkDestroyImage",
-    "vkDestroyImageView",
-    "vkDestroyPipeline",
-    "vkDestroyPipelineLayout",
-    "vkDestroyQueryPool",
-    "vkDestroyRenderPass",
-    "vkDestroyShaderModule",
-    "vkEndCommandBuffer",
-    "vkFreeMemory",
-    "vkGetBufferMemoryRequirements",
-    "vkGetEventStatus",
-    "vkGetImageMemoryRequirements",
-    "vkGetQueryPoolResults",
-    "vkMapMemory",
-    "vkQueueSubmit",
-    "vkResetCommandPool",
-    "vkResetEvent",
-    "vkResetFences",
-    "vkUpdateDescriptorSets",
-    "vkWaitForFences",
-};
-
-// VulkanFunctions' checks (context.h): set, from the loader vksonar links, resolving what vksonar calls.
-Result<void> check_functions(const VulkanFunctions& functions, VkDevice device) {
-    if (functions.vkGetInstanceProcAddr == nullptr || functions.vkGetDeviceProcAddr == nullptr) {
-        return make_error(
-            ErrorCode::invalid_argument,
-            std::string("Context::adopt: HostVulkan.functions->") +
-                (functions.vkGetInstanceProcAddr == nullptr ? "vkGetInstanceProcAddr" : "vkGetDeviceProcAddr") +
-                " is null (both are required when functions is given)");
-    }
-    // A global command: no dispatchable handle, so asking both loaders is safe whichever the host has.
-    if (functions.vkGetInstanceProcAddr(VK_NULL_HANDLE, "vkCreateInstance") !=
-        vkGetInstanceProcAddr(VK_NULL_HANDLE, "vkCreateInstance")) {
-        return unsupported("HostVulkan.functions do not come from the Vulkan loader vksonar links (libvulkan): "
-                           "vksonar calls the loader's exported functions, so the host must load Vulkan through "
-                           "the same loader");
-    }
-    for (const char* name : kDeviceFunctions) {
-        if (functions.vkGetDeviceProcAddr(device, name) == nullptr) {
-            return unsupported(std::string("the host's vkGetDeviceProcAddr does not resolve ") + name +
-                               " on HostVulkan.device");
+// The dispatch table (vk/functions.h) from the host's getters if it gave HostVulkan::functions, else
+// from the loader vksonar links; either way every function vksonar calls on the host's instance and
+// device is resolved here, before any call, and a missing one is named.
+Result<void> load_functions(const HostVulkan& host, vk::Functions& fn) {
+    std::string whose = "Context::adopt: the Vulkan loader's ";
+    if (host.functions != nullptr) {
+        const VulkanFunctions& functions = *host.functions;
+        if (functions.vkGetInstanceProcAddr == nullptr || functions.vkGetDeviceProcAddr == nullptr) {
+            return make_error(
+                ErrorCode::invalid_argument,
+                std::string("Context::adopt: HostVulkan.functions->") +
+                    (functions.vkGetInstanceProcAddr == nullptr ? "vkGetInstanceProcAddr" : "vkGetDeviceProcAddr") +
+                    " is null (both are required when functions is given)");
         }
+        fn.vkGetInstanceProcAddr = functions.vkGetInstanceProcAddr;
+        fn.vkGetDeviceProcAddr = functions.vkGetDeviceProcAddr;
+        whose = "Context::adopt: HostVulkan.functions->";
+    } else {
+        fn.vkGetInstanceProcAddr = vkGetInstanceProcAddr; // the bootstrap (vk/functions.h)
     }
-    return {};
+    if (auto loaded = vk::load_instance_functions(fn, host.instance, false, whose); !loaded) return loaded;
+    return vk::load_device_functions(fn, host.device, false, whose);
 }
 
 } // namespace
@@ -125,25 +54,24 @@ Result<AdoptedContext> Context::adopt(const HostVulkan& host) {
         return make_error(ErrorCode::invalid_argument,
                           "Context::adopt: HostVulkan.lock_queue and unlock_queue must be given together");
     }
-    if (host.functions != nullptr) {
-        if (auto checked = check_functions(*host.functions, host.device); !checked) return checked.error();
-    }
+    auto vulkan = std::make_unique<VulkanContext>();
+    VulkanContext& context = *vulkan;
+    if (auto loaded = load_functions(host, context.fn); !loaded) return loaded.error();
     // The shaders are SPIR-V 1.3 (--target-env vulkan1.1), which a 1.0 instance or device may not accept.
     if (host.instance_api_version != 0 && host.instance_api_version < VK_API_VERSION_1_1) {
         return unsupported("the instance was created for Vulkan " + version_text(host.instance_api_version) +
                            " (VkApplicationInfo.apiVersion); vksonar needs Vulkan 1.1");
     }
-    auto vulkan = std::make_unique<VulkanContext>();
-    VulkanContext& context = *vulkan;
-    vkGetPhysicalDeviceProperties(host.physical_device, &context.properties);
+    const vk::Functions& fn = context.fn;
+    fn.vkGetPhysicalDeviceProperties(host.physical_device, &context.properties);
     if (context.properties.apiVersion < VK_API_VERSION_1_1) {
         return unsupported(std::string("device ") + context.properties.deviceName + " supports Vulkan " +
                            version_text(context.properties.apiVersion) + "; vksonar needs Vulkan 1.1");
     }
     std::uint32_t family_count = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, nullptr);
+    fn.vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, nullptr);
     std::vector<VkQueueFamilyProperties> families(family_count);
-    vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, families.data());
+    fn.vkGetPhysicalDeviceQueueFamilyProperties(host.physical_device, &family_count, families.data());
     if (host.queue_family >= family_count) {
         return make_error(ErrorCode::invalid_argument,
                           "Context::adopt: HostVulkan.queue_family = " + std::to_string(host.queue_family) +

@@ -22,7 +22,8 @@ namespace vksonar::vk {
 
 VkBufferMemoryBarrier buffer_barrier(VkBuffer buffer, VkAccessFlags src_access, VkAccessFlags dst_access);
 
-void pipeline_barrier(VkCommandBuffer commands, VkPipelineStageFlags src_stages, VkPipelineStageFlags dst_stages,
-                      std::uint32_t buffer_barrier_count, const VkBufferMemoryBarrier* buffer_barriers);
+void pipeline_barrier(const VulkanContext& context, VkCommandBuffer commands, VkPipelineStageFlags src_stages,
+                      VkPipelineStageFlags dst_stages, std::uint32_t buffer_barrier_count,
+                      const VkBufferMemoryBarrier* buffer_barriers);
 
 } // namespace vksonar::vk

@@ -36,13 +36,13 @@ bool env_flag(const char* name) {
     return value && (std::strcmp(value, "1") == 0 || std::strcmp(value, "true") == 0 || std::strcmp(value, "on") == 0);
 }
 
-bool has_layer(const char* name) {
+bool has_layer(const vk::Functions& fn, const char* name) {
     std::uint32_t count = 0;
-    if (vkEnumerateInstanceLayerProperties(&count, nullptr) != VK_SUCCESS) {
+    if (fn.vkEnumerateInstanceLayerProperties(&count, nullptr) != VK_SUCCESS) {
         return false;
     }
     std::vector<VkLayerProperties> layers(count);
-    if (vkEnumerateInstanceLayerProperties(&count, layers.data()) != VK_SUCCESS) {
+    if (fn.vkEnumerateInstanceLayerProperties(&count, layers.data()) != VK_SUCCESS) {
         return false;
     }
     for (const auto& layer : layers) {
@@ -53,13 +53,13 @@ bool has_layer(const char* name) {
     return false;
 }
 
-bool has_instance_extension(const char* layer, const char* name) {
+bool has_instance_extension(const vk::Functions& fn, const char* layer, const char* name) {
     std::uint32_t count = 0;
-    if (vkEnumerateInstanceExtensionProperties(layer, &count, nullptr) != VK_SUCCESS) {
+    if (fn.vkEnumerateInstanceExtensionProperties(layer, &count, nullptr) != VK_SUCCESS) {
         return false;
     }
     std::vector<VkExtensionProperties> extensions(count);
-    if (vkEnumerateInstanceExtensionProperties(layer, &count, extensions.data()) != VK_SUCCESS) {
+    if (fn.vkEnumerateInstanceExtensionProperties(layer, &count, extensions.data()) != VK_SUCCESS) {
         return false;
     }
     for (const auto& extension : extensions) {
@@ -70,13 +70,13 @@ bool has_instance_extension(const char* layer, const char* name) {
     return false;
 }
 
-bool has_device_extension(VkPhysicalDevice device, const char* name) {
+bool has_device_extension(const vk::Functions& fn, VkPhysicalDevice device, const char* name) {
     std::uint32_t count = 0;
-    if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, nullptr) != VK_SUCCESS) {
+    if (fn.vkEnumerateDeviceExtensionProperties(device, nullptr, &count, nullptr) != VK_SUCCESS) {
         return false;
     }
     std::vector<VkExtensionProperties> extensions(count);
-    if (vkEnumerateDeviceExtensionProperties(device, nullptr, &count, extensions.data()) != VK_SUCCESS) {
+    if (fn.vkEnumerateDeviceExtensionProperties(device, nullptr, &count, extensions.data()) != VK_SUCCESS) {
         return false;
     }
     for (const auto& extension : extensions) {
@@ -88,11 +88,11 @@ bool has_device_extension(VkPhysicalDevice device, const char* name) {
 }
 
 // The first queue family with graphics and compute, or -1.
-int find_queue_family(VkPhysicalDevice device, std::uint32_t* timestamp_valid_bits) {
+int find_queue_family(const vk::Functions& fn, VkPhysicalDevice device, std::uint32_t* timestamp_valid_bits) {
     std::uint32_t count = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(device, &count, nullptr);
+    fn.vkGetPhysicalDeviceQueueFamilyProperties(device, &count, nullptr);
     std::vector<VkQueueFamilyProperties> families(count);
-    vkGetPhysicalDeviceQueueFamilyProperties(device, &count, families.data());
+    fn.vkGetPhysicalDeviceQueueFamilyProperties(device, &count, families.data());
     for (std::uint32_t i = 0; i < count; ++i) {
         VkQueueFlags needed = VK_QUEUE_GRAPHICS_BIT | VK_QUEUE_COMPUTE_BIT;
         if ((families[i].queueFlags & needed) == needed && families[i].queueCount > 0) {
@@ -134,27 +134,34 @@ Error no_device(const std::string& why) {
     return make_error(ErrorCode::no_device, why + "; use `--backend cpu` to render without Vulkan");
 }
 
+// A missing function is named as "Context::create: the Vulkan loader's vkGetInstanceProcAddr returns null for ...".
+constexpr const char* kWhose = "Context::create: the Vulkan loader's ";
+
 Result<void> create_instance(VulkanContext& context, bool want_validation) {
+    vk::Functions& fn = context.fn;
+    // The bootstrap: the one function vksonar takes from the loader it links (vk/functions.h).
+    fn.vkGetInstanceProcAddr = vkGetInstanceProcAddr;
+    if (auto loaded = vk::load_global_functions(fn, kWhose); !loaded) return loaded.error();
     std::vector<const char*> layers;
     std::vector<const char*> extensions;
     bool debug_utils = false;
     bool validation_features = false;
-    if (want_validation && has_layer(kValidationLayer)) {
+    if (want_validation && has_layer(fn, kValidationLayer)) {
         layers.push_back(kValidationLayer);
         context.validation = true;
-        if (has_instance_extension(nullptr, VK_EXT_DEBUG_UTILS_EXTENSION_NAME) ||
-            has_instance_extension(kValidationLayer, VK_EXT_DEBUG_UTILS_EXTENSION_NAME)) {
+        if (has_instance_extension(fn, nullptr, VK_EXT_DEBUG_UTILS_EXTENSION_NAME) ||
+            has_instance_extension(fn, kValidationLayer, VK_EXT_DEBUG_UTILS_EXTENSION_NAME)) {
             extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
             debug_utils = true;
         }
-        if (has_instance_extension(kValidationLayer, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME)) {
+        if (has_instance_extension(fn, kValidationLayer, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME)) {
             extensions.push_back(VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME);
             validation_features = true;
         }
     }
     VkInstanceCreateFlags flags = 0;
 #ifdef VK_KHR_portability_enumeration
-    if (has_instance_extension(nullptr, VK_KHR_PORTABILITY_ENUMERATION_EXTENSION_NAME)) {
+    if (has_instance_extension(fn, nullptr, VK_KHR_PORTABILITY_ENUMERATION_EXTENSION_NAME)) {
         extensions.push_back(VK_KHR_PORTABILITY_ENUMERATION_EXTENSION_NAME);
         flags |= VK_INSTANCE_CREATE_ENUMERATE_PORTABILITY_BIT_KHR;
     }
@@ -196,7 +203,7 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
     info.ppEnabledLayerNames = layers.data();
     info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
     info.ppEnabledExtensionNames = extensions.data();
-    VkResult result = vkCreateInstance(&info, context.allocator, &context.instance);
+    VkResult result = fn.vkCreateInstance(&info, context.allocator, &context.instance);
     if (result == VK_ERROR_INCOMPATIBLE_DRIVER) {
         return no_device("no Vulkan driver (vkCreateInstance: VK_ERROR_INCOMPATIBLE_DRIVER)");
     }
@@ -204,23 +211,26 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
         return vk::vk_error(result, "vkCreateInstance");
     }
     context.owns_instance = true;
+    if (auto loaded = vk::load_instance_functions(fn, context.instance, true, kWhose); !loaded) {
+        return loaded.error();
+    }
 
     if (debug_utils) {
-        auto create_messenger = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
-            vkGetInstanceProcAddr(context.instance, "vkCreateDebugUtilsMessengerEXT"));
-        if (create_messenger) {
-            VKS_VK_TRY(
-                create_messenger(context.instance, &messenger_info, context.allocator, &context.debug_messenger));
+        vk::load_debug_utils_functions(fn, context.instance);
+        if (fn.vkCreateDebugUtilsMessengerEXT && fn.vkDestroyDebugUtilsMessengerEXT) {
+            VKS_VK_TRY(fn.vkCreateDebugUtilsMessengerEXT(context.instance, &messenger_info, context.allocator,
+                                                         &context.debug_messenger));
         }
     }
     return {};
 }
 
 Result<void> create_device(VulkanContext& context, int device_index) {
+    vk::Functions& fn = context.fn;
     std::uint32_t count = 0;
-    VKS_VK_TRY(vkEnumeratePhysicalDevices(context.instance, &count, nullptr));
+    VKS_VK_TRY(fn.vkEnumeratePhysicalDevices(context.instance, &count, nullptr));
     std::vector<VkPhysicalDevice> devices(count);
-    VKS_VK_TRY(vkEnumeratePhysicalDevices(context.instance, &count, devices.data()));
+    VKS_VK_TRY(fn.vkEnumeratePhysicalDevices(context.instance, &count, devices.data()));
     if (count == 0) {
         return no_device("no Vulkan device found");
     }
@@ -232,13 +242,13 @@ Result<void> create_device(VulkanContext& context, int device_index) {
                              std::to_string(count) + " device(s))");
         }
         context.physical_device = devices[static_cast<std::size_t>(device_index)];
-        family = find_queue_family(context.physical_device, &timestamp_bits);
+        family = find_queue_family(fn, context.physical_device, &timestamp_bits);
         if (family < 0) {
             return no_device("Vulkan device " + std::to_string(device_index) + " has no graphics+compute queue");
         }
     } else {
         for (VkPhysicalDevice device : devices) {
-            family = find_queue_family(device, &timestamp_bits);
+            family = find_queue_family(fn, device, &timestamp_bits);
             if (family >= 0) {
                 context.physical_device = device;
                 break;
@@ -250,14 +260,14 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     }
     context.queue_family = static_cast<std::uint32_t>(family);
     context.timestamp_valid_bits = timestamp_bits;
-    vkGetPhysicalDeviceProperties(context.physical_device, &context.properties);
+    fn.vkGetPhysicalDeviceProperties(context.physical_device, &context.properties);
     context.description = describe(context.properties);
     if (context.properties.apiVersion < VK_API_VERSION_1_1) {
         return no_device("Vulkan device " + context.description + " supports only Vulkan 1.0 (1.1 needed)");
     }
 
     std::vector<const char*> extensions;
-    if (has_device_extension(context.physical_device, "VK_KHR_portability_subset")) {
+    if (has_device_extension(fn, context.physical_device, "VK_KHR_portability_subset")) {
         extensions.push_back("VK_KHR_portability_subset");
     }
     float priority = 1.0f;
@@ -272,28 +282,29 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     info.pQueueCreateInfos = &queue_info;
     info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
     info.ppEnabledExtensionNames = extensions.data();
-    VKS_VK_TRY(vkCreateDevice(context.physical_device, &info, context.allocator, &context.device));
+    VKS_VK_TRY(fn.vkCreateDevice(context.physical_device, &info, context.allocator, &context.device));
     context.owns_device = true;
-    vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);
+    if (auto loaded = vk::load_device_functions(fn, context.device, true, kWhose); !loaded) {
+        return loaded.error();
+    }
+    fn.vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);
     return {};
 }
 
 } // namespace
 
+// A function is null here only if create failed while loading the table (then what it would destroy
+// cannot be destroyed through it either).
 VulkanContext::~VulkanContext() {
-    if (owns_device && device != VK_NULL_HANDLE) {
-        vkDeviceWaitIdle(device);
-        vkDestroyDevice(device, allocator);
+    if (owns_device && device != VK_NULL_HANDLE && fn.vkDestroyDevice != nullptr) {
+        if (fn.vkDeviceWaitIdle != nullptr) fn.vkDeviceWaitIdle(device);
+        fn.vkDestroyDevice(device, allocator);
     }
     if (debug_messenger != VK_NULL_HANDLE && instance != VK_NULL_HANDLE) {
-        auto destroy_messenger = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
-            vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
-        if (destroy_messenger) {
-            destroy_messenger(instance, debug_messenger, allocator);
-        }
+        fn.vkDestroyDebugUtilsMessengerEXT(instance, debug_messenger, allocator);
     }
-    if (owns_instance && instance != VK_NULL_HANDLE) {
-        vkDestroyInstance(instance, allocator);
+    if (owns_instance && instance != VK_NULL_HANDLE && fn.vkDestroyInstance != nullptr) {
+        fn.vkDestroyInstance(instance, allocator);
     }
 }
 

@@ -24,7 +24,7 @@
 
 namespace vksonar::vk {
 
-using OwnedEvent = Owned<VkEvent, vkDestroyEvent>;
+using OwnedEvent = Owned<VkEvent, &Functions::vkDestroyEvent>;
 
 // Destroyed in reverse order of declaration; nothing is in use by then (see ~HostDepthPass), so the
 // order only has to keep no_scene alive as long as the backend that references it.
@@ -113,7 +113,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
                               std::to_string(desc.format));
     }
     VkFormatProperties properties;
-    vkGetPhysicalDeviceFormatProperties(context.physical_device, desc.format, &properties);
+    context.fn.vkGetPhysicalDeviceFormatProperties(context.physical_device, desc.format, &properties);
     if ((properties.optimalTilingFeatures & VK_FORMAT_FEATURE_SAMPLED_IMAGE_BIT) == 0) {
         return make_error(ErrorCode::unsupported, "Vulkan device " + context.description + " cannot sample format " +
                                                       std::to_string(desc.format) +
@@ -170,8 +170,8 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     set_layout_info.bindingCount = 1;
     set_layout_info.pBindings = &binding;
     VkDescriptorSetLayout set_layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &set_layout_info, allocator, &set_layout));
-    o.image_set_layout = OwnedDescriptorSetLayout(device, set_layout, allocator);
+    VKS_VK_TRY(context.fn.vkCreateDescriptorSetLayout(device, &set_layout_info, allocator, &set_layout));
+    o.image_set_layout = OwnedDescriptorSetLayout(context, set_layout);
 
     // Set 0 is the backend's compute set (params, depth, material id), set 1 the host image.
     const std::array<VkDescriptorSetLayout, 2> set_layouts{b.set_layout_.get(), set_layout};
@@ -183,12 +183,12 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     layout_info.pushConstantRangeCount = 1;
     layout_info.pPushConstantRanges = &push_range;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
-    o.import_layout = OwnedPipelineLayout(device, layout, allocator);
+    VKS_VK_TRY(context.fn.vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    o.import_layout = OwnedPipelineLayout(context, layout);
 
-    auto module = create_shader_module(device, allocator, import_depth_comp_spv, sizeof(import_depth_comp_spv));
+    auto module = create_shader_module(context, import_depth_comp_spv, sizeof(import_depth_comp_spv));
     if (!module) return module.error();
-    auto pipeline = create_compute_pipeline(device, allocator, layout, module->get(), nullptr, 0);
+    auto pipeline = create_compute_pipeline(context, layout, module->get(), nullptr, 0);
     if (!pipeline) return pipeline.error();
     o.import_pipeline = std::move(pipeline.value());
 
@@ -199,20 +199,20 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     pool_info.poolSizeCount = 1;
     pool_info.pPoolSizes = &pool_size;
     VkDescriptorPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
-    o.image_pool = OwnedDescriptorPool(device, pool, allocator);
+    VKS_VK_TRY(context.fn.vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
+    o.image_pool = OwnedDescriptorPool(context, pool);
     VkDescriptorSetAllocateInfo set_info{};
     set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
     set_info.descriptorPool = pool;
     set_info.descriptorSetCount = 1;
     set_info.pSetLayouts = &set_layout;
-    VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &o.image_set));
+    VKS_VK_TRY(context.fn.vkAllocateDescriptorSets(device, &set_info, &o.image_set));
 
     VkEventCreateInfo event_info{};
     event_info.sType = VK_STRUCTURE_TYPE_EVENT_CREATE_INFO;
     VkEvent event = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateEvent(device, &event_info, allocator, &event));
-    o.done = OwnedEvent(device, event, allocator);
+    VKS_VK_TRY(context.fn.vkCreateEvent(device, &event_info, allocator, &event));
+    o.done = OwnedEvent(context, event);
     return {};
 }
 
@@ -241,12 +241,14 @@ void HostDepthPass::bind_image(const HostDepthImage& image) {
     write.descriptorCount = 1;
     write.descriptorType = VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE;
     write.pImageInfo = &info;
-    vkUpdateDescriptorSets(objects_->backend->context_.device, 1, &write, 0, nullptr);
+    const VulkanContext& context = objects_->backend->context_;
+    context.fn.vkUpdateDescriptorSets(context.device, 1, &write, 0, nullptr);
 }
 
 void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage& image) {
     Objects& o = *objects_;
     VulkanBackend& b = *o.backend;
+    const VulkanContext& context = b.context_;
     // The host's writes (by default its depth attachment writes) -> this pass's sampled reads. The
     // layout stays the host's: vksonar only reads the image.
     VkImageMemoryBarrier barrier{};
@@ -264,25 +266,26 @@ void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage
                                                ? image.src_stage
                                                : VkPipelineStageFlags(VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT |
                                                                       VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT);
-    vkCmdPipelineBarrier(commands, src_stage, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, nullptr, 0, nullptr, 1,
-                         &barrier);
+    context.fn.vkCmdPipelineBarrier(commands, src_stage, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 0, nullptr, 0,
+                                    nullptr, 1, &barrier);
 
     // The previous ping's stages read depth_/material_id_; make them wait before this one overwrites.
     std::array<VkBufferMemoryBarrier, 2> reuse{
         buffer_barrier(b.depth_.get(), kShaderOrTransferRead, VK_ACCESS_SHADER_WRITE_BIT),
         buffer_barrier(b.material_id_.get(), kShaderOrTransferRead, VK_ACCESS_SHADER_WRITE_BIT)};
-    pipeline_barrier(commands, kComputeOrTransfer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 2, reuse.data());
+    pipeline_barrier(context, commands, kComputeOrTransfer, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 2, reuse.data());
 
-    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_pipeline.get());
+    context.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_pipeline.get());
     const std::array<VkDescriptorSet, 2> sets{b.descriptor_set_, o.image_set};
-    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_layout.get(), 0,
-                            static_cast<std::uint32_t>(sets.size()), sets.data(), 0, nullptr);
-    vkCmdPushConstants(commands, o.import_layout.get(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(o.push), &o.push);
-    vkCmdDispatch(commands, group_count(std::uint64_t(b.plan_.columns) * b.plan_.rows), 1, 1);
+    context.fn.vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, o.import_layout.get(), 0,
+                                       static_cast<std::uint32_t>(sets.size()), sets.data(), 0, nullptr);
+    context.fn.vkCmdPushConstants(commands, o.import_layout.get(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(o.push),
+                                  &o.push);
+    context.fn.vkCmdDispatch(commands, group_count(std::uint64_t(b.plan_.columns) * b.plan_.rows), 1, 1);
     std::array<VkBufferMemoryBarrier, 2> written{
         buffer_barrier(b.depth_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead),
         buffer_barrier(b.material_id_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead)};
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 2, written.data());
+    pipeline_barrier(context, commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 2, written.data());
 }
 
 Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_mask, Frame& frame) {
@@ -301,13 +304,13 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
     std::uint32_t stage_total = 0;
     for (const StageInfo& stage : kStageTable)
         if (stage.runs(b.plan_)) stages[stage_total++] = &stage;
-    VKS_VK_TRY(vkResetCommandPool(context.device, b.command_pool_.get(), 0));
+    VKS_VK_TRY(context.fn.vkResetCommandPool(context.device, b.command_pool_.get(), 0));
     for (std::uint32_t i = 0; i <= stage_total; ++i) {
         VkCommandBuffer commands = b.command_buffers_[i];
         VkCommandBufferBeginInfo begin{};
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-        VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
+        VKS_VK_TRY(context.fn.vkBeginCommandBuffer(commands, &begin));
         static_assert(kStageTable[0].id == StageId::depth, "the import takes the first stage's place");
         const bool import = i == 0;
         if (import) {
@@ -317,7 +320,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         } else {
             b.record_readback(commands, save_mask);
         }
-        VKS_VK_TRY(vkEndCommandBuffer(commands));
+        VKS_VK_TRY(context.fn.vkEndCommandBuffer(commands));
 
         const auto start = std::chrono::steady_clock::now();
         VkSubmitInfo submit{};
@@ -331,9 +334,9 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
             submit.pWaitDstStageMask = &wait_stage;
         }
         VkFence fence = b.fence_.get();
-        VKS_VK_TRY(vkResetFences(context.device, 1, &fence));
+        VKS_VK_TRY(context.fn.vkResetFences(context.device, 1, &fence));
         VKS_VK_TRY(queue_submit(context, submit, fence));
-        VKS_VK_TRY(vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        VKS_VK_TRY(context.fn.vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         if (i < stage_total) { // the readback is a transfer, not a stage
             frame.times.push_back(StageTime{stages[i]->host_depth_name, ms});
@@ -351,8 +354,9 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     if (auto r = check_image(image); !r) return r;
     Objects& o = *objects_;
     VulkanBackend& b = *o.backend;
+    const VulkanContext& context = b.context_;
     // The previous ping has finished (one ping in flight), so the event can be reset from the host.
-    VKS_VK_TRY(vkResetEvent(b.context_.device, o.done.get()));
+    VKS_VK_TRY(context.fn.vkResetEvent(context.device, o.done.get()));
     bind_image(image);
     for (const StageInfo& stage : kStageTable) {
         if (!stage.runs(b.plan_)) continue;
@@ -367,8 +371,9 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     const Buffer& polar = b.sidelobes_ ? b.polar_ : b.beam_profiles_;
     VkBufferMemoryBarrier visible = buffer_barrier(polar.get(), VK_ACCESS_SHADER_WRITE_BIT,
                                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT);
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 1, &visible);
-    vkCmdSetEvent(commands, o.done.get(), VK_PIPELINE_STAGE_TRANSFER_BIT);
+    pipeline_barrier(context, commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 1,
+                     &visible);
+    context.fn.vkCmdSetEvent(commands, o.done.get(), VK_PIPELINE_STAGE_TRANSFER_BIT);
     o.recorded = true;
     o.recorded_mask = save_mask;
     return {};
@@ -379,7 +384,8 @@ Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
     if (!o.recorded) {
         return make_error(ErrorCode::invalid_argument, "Renderer::read_back: nothing was recorded (call record first)");
     }
-    const VkResult status = vkGetEventStatus(o.backend->context_.device, o.done.get());
+    const VulkanContext& context = o.backend->context_;
+    const VkResult status = context.fn.vkGetEventStatus(context.device, o.done.get());
     if (status == VK_EVENT_RESET) {
         return make_error(ErrorCode::invalid_argument,
                           "Renderer::read_back: the command buffer given to record() has not finished executing "

@@ -6,18 +6,18 @@
 
 namespace vksonar::vk {
 
-Result<OwnedShaderModule> create_shader_module(VkDevice device, const VkAllocationCallbacks* allocator,
-                                               const std::uint32_t* code, std::size_t bytes) {
+Result<OwnedShaderModule> create_shader_module(const VulkanContext& context, const std::uint32_t* code,
+                                               std::size_t bytes) {
     VkShaderModuleCreateInfo info{};
     info.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
     info.codeSize = bytes;
     info.pCode = code;
     VkShaderModule module = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateShaderModule(device, &info, allocator, &module));
-    return OwnedShaderModule(device, module, allocator);
+    VKS_VK_TRY(context.fn.vkCreateShaderModule(context.device, &info, context.allocator, &module));
+    return OwnedShaderModule(context, module);
 }
 
-Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, const VkAllocationCallbacks* allocator) {
+Result<OwnedDescriptorSetLayout> create_compute_set_layout(const VulkanContext& context) {
     std::array<VkDescriptorSetLayoutBinding, binding_count> bindings{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
         bindings[i].binding = i;
@@ -30,13 +30,13 @@ Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device, cons
     info.bindingCount = binding_count;
     info.pBindings = bindings.data();
     VkDescriptorSetLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorSetLayout(device, &info, allocator, &layout));
-    return OwnedDescriptorSetLayout(device, layout, allocator);
+    VKS_VK_TRY(context.fn.vkCreateDescriptorSetLayout(context.device, &info, context.allocator, &layout));
+    return OwnedDescriptorSetLayout(context, layout);
 }
 
-Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
-                                              VkPipelineLayout layout, VkShaderModule module,
-                                              const SpecConstant* constants, std::uint32_t count) {
+Result<OwnedPipeline> create_compute_pipeline(const VulkanContext& context, VkPipelineLayout layout,
+                                              VkShaderModule module, const SpecConstant* constants,
+                                              std::uint32_t count) {
     // The values are laid out as the constants come; each map entry points at its own.
     std::array<VkSpecializationMapEntry, 16> entries{};
     std::array<std::uint32_t, 16> values{};
@@ -57,12 +57,12 @@ Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocatio
     info.stage.pSpecializationInfo = count > 0 ? &specialization : nullptr;
     info.layout = layout;
     VkPipeline pipeline = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateComputePipelines(device, VK_NULL_HANDLE, 1, &info, allocator, &pipeline));
-    return OwnedPipeline(device, pipeline, allocator);
+    VKS_VK_TRY(
+        context.fn.vkCreateComputePipelines(context.device, VK_NULL_HANDLE, 1, &info, context.allocator, &pipeline));
+    return OwnedPipeline(context, pipeline);
 }
 
-Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                 bool face_normals) {
+Result<OwnedRenderPass> create_depth_render_pass(const VulkanContext& context, bool face_normals) {
     std::array<VkAttachmentDescription, 3> attachments{};
     for (auto& attachment : attachments) {
         attachment.samples = VK_SAMPLE_COUNT_1_BIT;
@@ -116,13 +116,13 @@ Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAlloca
     info.dependencyCount = static_cast<std::uint32_t>(dependencies.size());
     info.pDependencies = dependencies.data();
     VkRenderPass render_pass = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateRenderPass(device, &info, allocator, &render_pass));
-    return OwnedRenderPass(device, render_pass, allocator);
+    VKS_VK_TRY(context.fn.vkCreateRenderPass(context.device, &info, context.allocator, &render_pass));
+    return OwnedRenderPass(context, render_pass);
 }
 
-Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
-                                            VkRenderPass render_pass, VkPipelineLayout layout, VkShaderModule vertex,
-                                            VkShaderModule fragment, std::uint32_t colour_attachments) {
+Result<OwnedPipeline> create_depth_pipeline(const VulkanContext& context, VkRenderPass render_pass,
+                                            VkPipelineLayout layout, VkShaderModule vertex, VkShaderModule fragment,
+                                            std::uint32_t colour_attachments) {
     std::array<VkPipelineShaderStageCreateInfo, 2> stages{};
     stages[0].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
     stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
@@ -206,8 +206,9 @@ Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationC
     info.renderPass = render_pass;
     info.subpass = 0;
     VkPipeline pipeline = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateGraphicsPipelines(device, VK_NULL_HANDLE, 1, &info, allocator, &pipeline));
-    return OwnedPipeline(device, pipeline, allocator);
+    VKS_VK_TRY(
+        context.fn.vkCreateGraphicsPipelines(context.device, VK_NULL_HANDLE, 1, &info, context.allocator, &pipeline));
+    return OwnedPipeline(context, pipeline);
 }
 
 } // namespace vksonar::vk

@@ -62,11 +62,10 @@ constexpr VkFormat kDepthFormat = VK_FORMAT_D32_SFLOAT;
 constexpr VkFormat kMaterialFormat = VK_FORMAT_R32_UINT;
 constexpr VkFormat kFaceNormalFormat = VK_FORMAT_R32G32B32A32_SFLOAT; // colour attachment + copy: mandatory
 
-[[nodiscard]] Result<OwnedShaderModule> create_shader_module(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                             const std::uint32_t* code, std::size_t bytes);
+[[nodiscard]] Result<OwnedShaderModule> create_shader_module(const VulkanContext& context, const std::uint32_t* code,
+                                                             std::size_t bytes);
 
-[[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(VkDevice device,
-                                                                         const VkAllocationCallbacks* allocator);
+[[nodiscard]] Result<OwnedDescriptorSetLayout> create_compute_set_layout(const VulkanContext& context);
 
 // One specialization constant: its id (shared::kSpec*) and value.
 struct SpecConstant {
@@ -159,28 +158,26 @@ struct FarSidelobeSpecialization {
 };
 
 // constants: count specialization constants (none: nullptr, 0), e.g. EchoSpecialization::constants().
-[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                            VkPipelineLayout layout, VkShaderModule module,
-                                                            const SpecConstant* constants, std::uint32_t count);
+[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(const VulkanContext& context, VkPipelineLayout layout,
+                                                            VkShaderModule module, const SpecConstant* constants,
+                                                            std::uint32_t count);
 template <std::size_t N>
-[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                            VkPipelineLayout layout, VkShaderModule module,
+[[nodiscard]] Result<OwnedPipeline> create_compute_pipeline(const VulkanContext& context, VkPipelineLayout layout,
+                                                            VkShaderModule module,
                                                             const std::array<SpecConstant, N>& constants) {
-    return create_compute_pipeline(device, allocator, layout, module, constants.data(), static_cast<std::uint32_t>(N));
+    return create_compute_pipeline(context, layout, module, constants.data(), static_cast<std::uint32_t>(N));
 }
 
 // Render pass of the depth pass: attachment 0 = material id (R32_UINT), 1 = depth (D32), and with
 // face_normals 2 = face normal (RGBA32F, colour location 1), all cleared and left in
 // TRANSFER_SRC_OPTIMAL for the copy to storage buffers.
-[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                               bool face_normals);
+[[nodiscard]] Result<OwnedRenderPass> create_depth_render_pass(const VulkanContext& context, bool face_normals);
 
 // Graphics pipeline of the depth pass: vec3 positions, reversed-Z (GREATER), no culling, dynamic
 // viewport/scissor (one per slice), DepthPush push constants in both stages. colour_attachments: 1
 // (material id), or 2 with the face-normal attachment (depth_geometric.vert/.frag).
-[[nodiscard]] Result<OwnedPipeline> create_depth_pipeline(VkDevice device, const VkAllocationCallbacks* allocator,
-                                                          VkRenderPass render_pass, VkPipelineLayout layout,
-                                                          VkShaderModule vertex, VkShaderModule fragment,
-                                                          std::uint32_t colour_attachments);
+[[nodiscard]] Result<OwnedPipeline> create_depth_pipeline(const VulkanContext& context, VkRenderPass render_pass,
+                                                          VkPipelineLayout layout, VkShaderModule vertex,
+                                                          VkShaderModule fragment, std::uint32_t colour_attachments);
 
 } // namespace vksonar::vk

@@ -35,7 +35,7 @@ int find_memory_type(const VkPhysicalDeviceMemoryProperties& properties, std::ui
 Result<OwnedMemory> allocate(const VulkanContext& context, const VkMemoryRequirements& requirements,
                              VkMemoryPropertyFlags required, VkMemoryPropertyFlags preferred) {
     VkPhysicalDeviceMemoryProperties properties;
-    vkGetPhysicalDeviceMemoryProperties(context.physical_device, &properties);
+    context.fn.vkGetPhysicalDeviceMemoryProperties(context.physical_device, &properties);
     int type = find_memory_type(properties, requirements.memoryTypeBits, required, preferred);
     if (type < 0) {
         return make_error(ErrorCode::vulkan,
@@ -48,8 +48,8 @@ Result<OwnedMemory> allocate(const VulkanContext& context, const VkMemoryRequire
     info.allocationSize = requirements.size;
     info.memoryTypeIndex = static_cast<std::uint32_t>(type);
     VkDeviceMemory memory = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkAllocateMemory(context.device, &info, context.allocator, &memory));
-    return OwnedMemory(context.device, memory, context.allocator);
+    VKS_VK_TRY(context.fn.vkAllocateMemory(context.device, &info, context.allocator, &memory));
+    return OwnedMemory(context, memory);
 }
 
 } // namespace
@@ -63,11 +63,11 @@ Result<Buffer> create_buffer(const VulkanContext& context, VkDeviceSize size, Vk
     info.usage = usage;
     info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
     VkBuffer buffer = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateBuffer(context.device, &info, context.allocator, &buffer));
-    result.buffer = OwnedBuffer(context.device, buffer, context.allocator);
+    VKS_VK_TRY(context.fn.vkCreateBuffer(context.device, &info, context.allocator, &buffer));
+    result.buffer = OwnedBuffer(context, buffer);
 
     VkMemoryRequirements requirements;
-    vkGetBufferMemoryRequirements(context.device, buffer, &requirements);
+    context.fn.vkGetBufferMemoryRequirements(context.device, buffer, &requirements);
     VkMemoryPropertyFlags required = 0, preferred = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
     if (use == MemoryUse::readback) {
         required = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
@@ -81,9 +81,9 @@ Result<Buffer> create_buffer(const VulkanContext& context, VkDeviceSize size, Vk
         return memory.error();
     }
     result.memory = std::move(memory.value());
-    VKS_VK_TRY(vkBindBufferMemory(context.device, buffer, result.memory.get(), 0));
+    VKS_VK_TRY(context.fn.vkBindBufferMemory(context.device, buffer, result.memory.get(), 0));
     if (use != MemoryUse::device) {
-        VKS_VK_TRY(vkMapMemory(context.device, result.memory.get(), 0, VK_WHOLE_SIZE, 0, &result.mapped));
+        VKS_VK_TRY(context.fn.vkMapMemory(context.device, result.memory.get(), 0, VK_WHOLE_SIZE, 0, &result.mapped));
     }
     return result;
 }
@@ -105,17 +105,17 @@ Result<Image> create_image_2d(const VulkanContext& context, std::uint32_t width,
     info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
     info.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
     VkImage image = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateImage(context.device, &info, context.allocator, &image));
-    result.image = OwnedImage(context.device, image, context.allocator);
+    VKS_VK_TRY(context.fn.vkCreateImage(context.device, &info, context.allocator, &image));
+    result.image = OwnedImage(context, image);
 
     VkMemoryRequirements requirements;
-    vkGetImageMemoryRequirements(context.device, image, &requirements);
+    context.fn.vkGetImageMemoryRequirements(context.device, image, &requirements);
     auto memory = allocate(context, requirements, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
     if (!memory) {
         return memory.error();
     }
     result.memory = std::move(memory.value());
-    VKS_VK_TRY(vkBindImageMemory(context.device, image, result.memory.get(), 0));
+    VKS_VK_TRY(context.fn.vkBindImageMemory(context.device, image, result.memory.get(), 0));
 
     VkImageViewCreateInfo view_info{};
     view_info.sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO;
@@ -124,8 +124,8 @@ Result<Image> create_image_2d(const VulkanContext& context, std::uint32_t width,
     view_info.format = format;
     view_info.subresourceRange = {aspect, 0, 1, 0, 1};
     VkImageView view = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateImageView(context.device, &view_info, context.allocator, &view));
-    result.view = OwnedImageView(context.device, view, context.allocator);
+    VKS_VK_TRY(context.fn.vkCreateImageView(context.device, &view_info, context.allocator, &view));
+    result.view = OwnedImageView(context, view);
     return result;
 }
 
@@ -140,7 +140,7 @@ Result<void> upload_to_buffer(VulkanContext& context, const Buffer& destination,
     std::memcpy(staging->mapped, data, bytes);
     return submit_once(context, [&](VkCommandBuffer commands) {
         VkBufferCopy region{0, 0, bytes};
-        vkCmdCopyBuffer(commands, staging->get(), destination.get(), 1, &region);
+        context.fn.vkCmdCopyBuffer(commands, staging->get(), destination.get(), 1, &region);
     });
 }
 

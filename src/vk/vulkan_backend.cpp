@@ -35,7 +35,7 @@ VulkanBackend::~VulkanBackend() {
     // render() always waits for its submission; this only guards against a failed wait.
     if (fence_) {
         VkFence fence = fence_.get();
-        vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
+        context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
     }
 }
 
@@ -128,8 +128,8 @@ Result<void> VulkanBackend::create_depth_pass() {
     VkDevice device = context_.device;
     const VkAllocationCallbacks* allocator = context_.allocator;
     VkFormatProperties depth_format, material_format;
-    vkGetPhysicalDeviceFormatProperties(context_.physical_device, kDepthFormat, &depth_format);
-    vkGetPhysicalDeviceFormatProperties(context_.physical_device, kMaterialFormat, &material_format);
+    context_.fn.vkGetPhysicalDeviceFormatProperties(context_.physical_device, kDepthFormat, &depth_format);
+    context_.fn.vkGetPhysicalDeviceFormatProperties(context_.physical_device, kMaterialFormat, &material_format);
     const VkFormatFeatureFlags copy = VK_FORMAT_FEATURE_TRANSFER_SRC_BIT;
     if ((depth_format.optimalTilingFeatures & (VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | copy)) !=
             (VK_FORMAT_FEATURE_DEPTH_STENCIL_ATTACHMENT_BIT | copy) ||
@@ -150,7 +150,7 @@ Result<void> VulkanBackend::create_depth_pass() {
     material_image_ = std::move(material_image.value());
     if (face_normals_) { // normal_method = geometric: the face-normal attachment, only then
         VkFormatProperties normal_format;
-        vkGetPhysicalDeviceFormatProperties(context_.physical_device, kFaceNormalFormat, &normal_format);
+        context_.fn.vkGetPhysicalDeviceFormatProperties(context_.physical_device, kFaceNormalFormat, &normal_format);
         if ((normal_format.optimalTilingFeatures & (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) !=
             (VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | copy)) {
             return make_error(ErrorCode::unsupported, "Vulkan device " + context_.description +
@@ -164,7 +164,7 @@ Result<void> VulkanBackend::create_depth_pass() {
         face_normal_image_ = std::move(normal_image.value());
     }
 
-    auto render_pass = create_depth_render_pass(device, allocator, face_normals_);
+    auto render_pass = create_depth_render_pass(context_, face_normals_);
     if (!render_pass) return render_pass.error();
     render_pass_ = std::move(render_pass.value());
 
@@ -179,8 +179,8 @@ Result<void> VulkanBackend::create_depth_pass() {
     framebuffer_info.height = plan_.rows;
     framebuffer_info.layers = 1;
     VkFramebuffer framebuffer = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateFramebuffer(device, &framebuffer_info, allocator, &framebuffer));
-    framebuffer_ = OwnedFramebuffer(device, framebuffer, allocator);
+    VKS_VK_TRY(context_.fn.vkCreateFramebuffer(device, &framebuffer_info, allocator, &framebuffer));
+    framebuffer_ = OwnedFramebuffer(context_, framebuffer);
 
     VkPushConstantRange push_range{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
                                    sizeof(shared::DepthPush)};
@@ -189,18 +189,18 @@ Result<void> VulkanBackend::create_depth_pass() {
     layout_info.pushConstantRangeCount = 1;
     layout_info.pPushConstantRanges = &push_range;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
-    depth_layout_ = OwnedPipelineLayout(device, layout, allocator);
+    VKS_VK_TRY(context_.fn.vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    depth_layout_ = OwnedPipelineLayout(context_, layout);
 
-    auto vertex = face_normals_ ? create_shader_module(device, allocator, depth_geometric_vert_spv,
-                                                       sizeof(depth_geometric_vert_spv))
-                                : create_shader_module(device, allocator, depth_vert_spv, sizeof(depth_vert_spv));
+    auto vertex = face_normals_
+                      ? create_shader_module(context_, depth_geometric_vert_spv, sizeof(depth_geometric_vert_spv))
+                      : create_shader_module(context_, depth_vert_spv, sizeof(depth_vert_spv));
     if (!vertex) return vertex.error();
-    auto fragment = face_normals_ ? create_shader_module(device, allocator, depth_geometric_frag_spv,
-                                                         sizeof(depth_geometric_frag_spv))
-                                  : create_shader_module(device, allocator, depth_frag_spv, sizeof(depth_frag_spv));
+    auto fragment = face_normals_
+                        ? create_shader_module(context_, depth_geometric_frag_spv, sizeof(depth_geometric_frag_spv))
+                        : create_shader_module(context_, depth_frag_spv, sizeof(depth_frag_spv));
     if (!fragment) return fragment.error();
-    auto pipeline = create_depth_pipeline(device, allocator, render_pass_.get(), depth_layout_.get(), vertex->get(),
+    auto pipeline = create_depth_pipeline(context_, render_pass_.get(), depth_layout_.get(), vertex->get(),
                                           fragment->get(), face_normals_ ? 2u : 1u);
     if (!pipeline) return pipeline.error();
     depth_pipeline_ = std::move(pipeline.value());
@@ -357,7 +357,7 @@ Result<void> VulkanBackend::create_compute() {
     readback_ = std::move(readback.value());
 
     // Descriptors: one set for every compute stage.
-    auto set_layout = create_compute_set_layout(device, allocator);
+    auto set_layout = create_compute_set_layout(context_);
     if (!set_layout) return set_layout.error();
     set_layout_ = std::move(set_layout.value());
     VkDescriptorSetLayout set_layout_handle = set_layout_.get();
@@ -366,8 +366,8 @@ Result<void> VulkanBackend::create_compute() {
     layout_info.setLayoutCount = 1;
     layout_info.pSetLayouts = &set_layout_handle;
     VkPipelineLayout layout = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
-    compute_layout_ = OwnedPipelineLayout(device, layout, allocator);
+    VKS_VK_TRY(context_.fn.vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
+    compute_layout_ = OwnedPipelineLayout(context_, layout);
 
     std::array<VkDescriptorPoolSize, 2> pool_sizes{
         {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, kUniformBindings},
@@ -378,14 +378,14 @@ Result<void> VulkanBackend::create_compute() {
     pool_info.poolSizeCount = static_cast<std::uint32_t>(pool_sizes.size());
     pool_info.pPoolSizes = pool_sizes.data();
     VkDescriptorPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
-    descriptor_pool_ = OwnedDescriptorPool(device, pool, allocator);
+    VKS_VK_TRY(context_.fn.vkCreateDescriptorPool(device, &pool_info, allocator, &pool));
+    descriptor_pool_ = OwnedDescriptorPool(context_, pool);
     VkDescriptorSetAllocateInfo set_info{};
     set_info.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
     set_info.descriptorPool = pool;
     set_info.descriptorSetCount = 1;
     set_info.pSetLayouts = &set_layout_handle;
-    VKS_VK_TRY(vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
+    VKS_VK_TRY(context_.fn.vkAllocateDescriptorSets(device, &set_info, &descriptor_set_));
 
     const std::array<const Buffer*, binding_count> bound{
         &params_,          &depth_,      &material_id_,     &normals_,    &echo_,         &profiles_,
@@ -411,14 +411,14 @@ Result<void> VulkanBackend::create_compute() {
         writes[i].descriptorType = descriptor_type(i);
         writes[i].pBufferInfo = &infos[i];
     }
-    vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
+    context_.fn.vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
 
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
     auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
                     const auto& constants) -> Result<void> {
-        auto module = create_shader_module(device, allocator, code, bytes);
+        auto module = create_shader_module(context_, code, bytes);
         if (!module) return module.error();
-        auto created = create_compute_pipeline(device, allocator, compute_layout_.get(), module->get(), constants);
+        auto created = create_compute_pipeline(context_, compute_layout_.get(), module->get(), constants);
         if (!created) return created.error();
         pipeline = std::move(created.value());
         return {};
@@ -490,22 +490,22 @@ Result<void> VulkanBackend::create_commands() {
     pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
     pool_info.queueFamilyIndex = context_.queue_family;
     VkCommandPool pool = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateCommandPool(device, &pool_info, allocator, &pool));
-    command_pool_ = OwnedCommandPool(device, pool, allocator);
+    VKS_VK_TRY(context_.fn.vkCreateCommandPool(device, &pool_info, allocator, &pool));
+    command_pool_ = OwnedCommandPool(context_, pool);
     VkCommandBufferAllocateInfo allocate_info{};
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
     allocate_info.commandPool = pool;
     allocate_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
     allocate_info.commandBufferCount = kCommandBufferCount;
-    VKS_VK_TRY(vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
+    VKS_VK_TRY(context_.fn.vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
 
     VkFenceCreateInfo fence_info{};
     fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
     // Signalled: the destructor waits on it, also when nothing was ever submitted (every submit resets it first).
     fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
     VkFence fence = VK_NULL_HANDLE;
-    VKS_VK_TRY(vkCreateFence(device, &fence_info, allocator, &fence));
-    fence_ = OwnedFence(device, fence, allocator);
+    VKS_VK_TRY(context_.fn.vkCreateFence(device, &fence_info, allocator, &fence));
+    fence_ = OwnedFence(context_, fence);
 
     // Stage times: timestamp queries where the queue has them, except on CPU devices. lavapipe's
     // timestamps do not bracket compute dispatches (a dispatch's time shows up in a neighbouring
@@ -521,8 +521,8 @@ Result<void> VulkanBackend::create_commands() {
         query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
         query_info.queryCount = kCommandBufferCount + 1;
         VkQueryPool query_pool = VK_NULL_HANDLE;
-        VKS_VK_TRY(vkCreateQueryPool(device, &query_info, allocator, &query_pool));
-        query_pool_ = OwnedQueryPool(device, query_pool, allocator);
+        VKS_VK_TRY(context_.fn.vkCreateQueryPool(device, &query_info, allocator, &query_pool));
+        query_pool_ = OwnedQueryPool(context_, query_pool);
     }
     return {};
 }

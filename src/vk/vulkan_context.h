@@ -10,10 +10,14 @@
 #include <vulkan/vulkan_core.h>
 
 #include "core/access.h"
+#include "vk/functions.h"
 
 namespace vksonar {
 
 struct VulkanContext {
+    // Every Vulkan function vksonar calls, loaded once by create / adopt (vk/functions.h). Only read
+    // after that. Call sites spell it context.fn.vkCmdDispatch(...).
+    vk::Functions fn;
     VkInstance instance = VK_NULL_HANDLE;
     VkPhysicalDevice physical_device = VK_NULL_HANDLE;
     VkDevice device = VK_NULL_HANDLE;

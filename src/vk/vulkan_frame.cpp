@@ -13,15 +13,15 @@
 namespace vksonar::vk {
 
 void VulkanBackend::bind_compute(VkCommandBuffer commands, VkPipeline pipeline) {
-    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
-    vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, compute_layout_.get(), 0, 1, &descriptor_set_, 0,
-                            nullptr);
+    context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline);
+    context_.fn.vkCmdBindDescriptorSets(commands, VK_PIPELINE_BIND_POINT_COMPUTE, compute_layout_.get(), 0, 1,
+                                        &descriptor_set_, 0, nullptr);
 }
 
 // A compute stage's output becomes readable by the next compute stage and by the readback copies.
 void VulkanBackend::compute_barrier(VkCommandBuffer commands, const Buffer& written) {
     VkBufferMemoryBarrier barrier = buffer_barrier(written.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead);
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 1, &barrier);
+    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 1, &barrier);
 }
 
 void VulkanBackend::record_depth(VkCommandBuffer commands) {
@@ -36,81 +36,84 @@ void VulkanBackend::record_depth(VkCommandBuffer commands) {
     begin.renderArea = {{0, 0}, {plan_.columns, plan_.rows}};
     begin.clearValueCount = face_normals_ ? 3u : 2u;
     begin.pClearValues = clears.data();
-    vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
+    context_.fn.vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
     const std::size_t draws = scene_.draws.size(), clusters = clusters_.size();
     if (clusters > 0) {
-        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline_.get());
+        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline_.get());
         VkBuffer vertex_buffer = vertices_.get();
         VkDeviceSize zero = 0;
-        vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
-        vkCmdBindIndexBuffer(commands, indices_.get(), 0, VK_INDEX_TYPE_UINT32);
+        context_.fn.vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
+        context_.fn.vkCmdBindIndexBuffer(commands, indices_.get(), 0, VK_INDEX_TYPE_UINT32);
         for (std::uint32_t s = 0; s < plan_.slices; ++s) {
             const float x = static_cast<float>(s * plan_.slice_columns);
             VkViewport viewport{x, 0.0f, float(plan_.slice_columns), float(plan_.rows), 0.0f, 1.0f};
             VkRect2D scissor{{static_cast<std::int32_t>(s * plan_.slice_columns), 0},
                              {plan_.slice_columns, plan_.rows}};
-            vkCmdSetViewport(commands, 0, 1, &viewport);
-            vkCmdSetScissor(commands, 0, 1, &scissor);
+            context_.fn.vkCmdSetViewport(commands, 0, 1, &viewport);
+            context_.fn.vkCmdSetScissor(commands, 0, 1, &scissor);
             std::uint32_t pushed_draw = ~0u; // clusters of one draw are consecutive: one push for them all
             for (std::size_t c = 0; c < clusters; ++c) {
                 const DepthCluster& cluster = clusters_[c];
                 if (!clusters_drawn_[s * clusters + c]) continue;
                 if (cluster.draw != pushed_draw) {
-                    vkCmdPushConstants(commands, depth_layout_.get(),
-                                       VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
-                                       sizeof(shared::DepthPush), &draw_pushes_[s * draws + cluster.draw]);
+                    context_.fn.vkCmdPushConstants(commands, depth_layout_.get(),
+                                                   VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                                   sizeof(shared::DepthPush), &draw_pushes_[s * draws + cluster.draw]);
                     pushed_draw = cluster.draw;
                 }
-                vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
-                                 static_cast<std::int32_t>(cluster.first_vertex), 0);
+                context_.fn.vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
+                                             static_cast<std::int32_t>(cluster.first_vertex), 0);
             }
         }
     }
-    vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)
+    context_.fn.vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)
 
     VkBufferImageCopy region{};
     region.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, 1};
     region.imageExtent = {plan_.columns, plan_.rows, 1};
-    vkCmdCopyImageToBuffer(commands, depth_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depth_.get(), 1,
-                           &region);
+    context_.fn.vkCmdCopyImageToBuffer(commands, depth_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depth_.get(),
+                                       1, &region);
     region.imageSubresource.aspectMask = VK_IMAGE_ASPECT_COLOR_BIT;
-    vkCmdCopyImageToBuffer(commands, material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, material_id_.get(), 1,
-                           &region);
+    context_.fn.vkCmdCopyImageToBuffer(commands, material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                                       material_id_.get(), 1, &region);
     std::uint32_t barrier_count = 2;
     std::array<VkBufferMemoryBarrier, 3> barriers{
         buffer_barrier(depth_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
         buffer_barrier(material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
         {}};
     if (face_normals_) { // into the normals buffer, which the normals pass then orients in place
-        vkCmdCopyImageToBuffer(commands, face_normal_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, normals_.get(),
-                               1, &region);
+        context_.fn.vkCmdCopyImageToBuffer(commands, face_normal_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                                           normals_.get(), 1, &region);
         barriers[barrier_count++] = buffer_barrier(normals_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
                                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
     }
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, barrier_count, barriers.data());
+    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, barrier_count,
+                     barriers.data());
 }
 
 void VulkanBackend::record_normals(VkCommandBuffer commands) {
     bind_compute(commands, normals_pipeline_.get());
-    vkCmdDispatch(commands, group_count(std::uint64_t(plan_.rows) * ceil_div(plan_.columns, kNormalsRun)), 1, 1);
+    context_.fn.vkCmdDispatch(commands, group_count(std::uint64_t(plan_.rows) * ceil_div(plan_.columns, kNormalsRun)),
+                              1, 1);
     compute_barrier(commands, normals_);
 }
 
 void VulkanBackend::record_echo(VkCommandBuffer commands) {
     bind_compute(commands, echo_pipeline_.get());
-    vkCmdDispatch(commands, group_count(ceil_div(plan_.columns, kEchoPixels)), plan_.rows, 1);
+    context_.fn.vkCmdDispatch(commands, group_count(ceil_div(plan_.columns, kEchoPixels)), plan_.rows, 1);
     compute_barrier(commands, echo_);
 }
 
 void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     // profile.comp accumulates into zeroed profiles.
-    vkCmdFillBuffer(commands, profiles_.get(), 0, VK_WHOLE_SIZE, 0);
+    context_.fn.vkCmdFillBuffer(commands, profiles_.get(), 0, VK_WHOLE_SIZE, 0);
     VkBufferMemoryBarrier zeroed = buffer_barrier(profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1, &zeroed);
+    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1,
+                     &zeroed);
     bind_compute(commands, profile_pipeline_.get());
     // one invocation per pixel column (planar) or per kConesPerInvocation cone columns (line_array)
-    vkCmdDispatch(
+    context_.fn.vkCmdDispatch(
         commands,
         group_count(plan_.line_array ? ceil_div(plan_.profile_columns, kConesPerInvocation) : plan_.profile_columns), 1,
         1);
@@ -119,20 +122,20 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     // resample and sidelobe: x = groups of 4-bin quads, y = runs of beams.
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
     const std::uint32_t bin_groups = group_count(ceil_div(plan_.bins, 4));
-    vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
-    vkCmdDispatch(commands, bin_groups, beam_runs, 1);
+    context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
+    context_.fn.vkCmdDispatch(commands, bin_groups, beam_runs, 1);
     compute_barrier(commands, beam_profiles_);
     if (far_sidelobes_) { // x = groups of 4-bin quads, y = channels x cells; sidelobe.comp reads the result
-        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_deposit_pipeline_.get());
-        vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
+        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_deposit_pipeline_.get());
+        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
         compute_barrier(commands, far_energy_);
-        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_convolve_pipeline_.get());
-        vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
+        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_convolve_pipeline_.get());
+        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
         compute_barrier(commands, far_cells_);
     }
     if (sidelobes_) {
-        vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
-        vkCmdDispatch(commands, bin_groups, beam_runs, 1);
+        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
+        context_.fn.vkCmdDispatch(commands, bin_groups, beam_runs, 1);
         compute_barrier(commands, polar_);
     }
 }
@@ -159,7 +162,7 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
     auto copy = [&](const Buffer& source, const Region& region) {
         if (region.bytes == 0) return;
         VkBufferCopy copy_region{0, region.offset, region.bytes};
-        vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
+        context_.fn.vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
     };
     copy(sidelobes_ ? polar_ : beam_profiles_, polar_region_);
     if (any(save_mask & SaveFlags::depth)) {
@@ -173,7 +176,7 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
         copy(beam_profiles_, beam_profiles_region_);
     }
     VkBufferMemoryBarrier barrier = buffer_barrier(target, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT);
-    pipeline_barrier(commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
+    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
 }
 
 Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count) {
@@ -182,9 +185,9 @@ Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffe
     submit.commandBufferCount = count;
     submit.pCommandBuffers = command_buffers;
     VkFence fence = fence_.get();
-    VKS_VK_TRY(vkResetFences(context_.device, 1, &fence));
+    VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
     VKS_VK_TRY(queue_submit(context_, submit, fence));
-    VKS_VK_TRY(vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+    VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     return {};
 }
 
@@ -224,7 +227,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         if (stage.runs(plan_)) stages[stage_total++] = stage.id;
     const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
-    VKS_VK_TRY(vkResetCommandPool(context_.device, command_pool_.get(), 0));
+    VKS_VK_TRY(context_.fn.vkResetCommandPool(context_.device, command_pool_.get(), 0));
     std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
         VkCommandBuffer commands = command_buffers_[i];
@@ -232,10 +235,10 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         VkCommandBufferBeginInfo begin{};
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-        VKS_VK_TRY(vkBeginCommandBuffer(commands, &begin));
+        VKS_VK_TRY(context_.fn.vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
-            vkCmdResetQueryPool(commands, query_pool_.get(), 0, kCommandBufferCount + 1);
-            vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
+            context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kCommandBufferCount + 1);
+            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
         if (i < stage_total) {
             record_stage(commands, stages[i]);
@@ -243,9 +246,9 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
             record_readback(commands, save_mask);
         }
         if (timestamps_) {
-            vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
+            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
         }
-        VKS_VK_TRY(vkEndCommandBuffer(commands));
+        VKS_VK_TRY(context_.fn.vkEndCommandBuffer(commands));
     }
 
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
@@ -253,9 +256,9 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     if (timestamps_) {
         if (auto r = submit_and_wait(recorded.data(), buffer_total); !r) return r;
         std::array<std::uint64_t, kCommandBufferCount + 1> ticks{};
-        VKS_VK_TRY(vkGetQueryPoolResults(context_.device, query_pool_.get(), 0, buffer_total + 1,
-                                         sizeof(std::uint64_t) * ticks.size(), ticks.data(), sizeof(std::uint64_t),
-                                         VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+        VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
+            context_.device, query_pool_.get(), 0, buffer_total + 1, sizeof(std::uint64_t) * ticks.size(), ticks.data(),
+            sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
         const std::uint64_t mask = context_.timestamp_valid_bits >= 64
                                        ? ~std::uint64_t(0)
                                        : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
