@@ -29,17 +29,6 @@ std::string backend_param_name(const ::testing::TestParamInfo<Backend>& info) {
 
 // ---- closed forms (README "The model", docs/pipeline.md "Frames and grids"), in double ----------------------
 
-// sinc^2(x) = 0.5: the half-power point of a uniform line array.
-double sinc_half_power_x() {
-    double lo = 0.5, hi = 3.0; // sinc^2 falls monotonically from 1 to 0 on (0, pi)
-    for (int i = 0; i < 200; ++i) {
-        const double mid = 0.5 * (lo + hi);
-        const double s = std::sin(mid) / mid;
-        (s * s > 0.5 ? lo : hi) = mid;
-    }
-    return 0.5 * (lo + hi);
-}
-
 // Power pattern of a uniform line array whose two-way -3 dB beamwidth is `beamwidth_rad`:
 // sinc^2(x_3dB sin(a) / sin(bw / 2)).
 double sinc_pattern(double beamwidth_rad, double a) {

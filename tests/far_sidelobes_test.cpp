@@ -21,17 +21,6 @@ constexpr double kDeg = kPi / 180.0;
 
 class FarSidelobes : public BackendTest {};
 
-// sinc^2(x) = 1/2: the half-power point of a uniform line array, by bisection.
-double sinc_half_power_x() {
-    double lo = 0.5, hi = 3.0;
-    for (int i = 0; i < 200; ++i) {
-        const double mid = 0.5 * (lo + hi);
-        const double s = std::sin(mid) / mid;
-        (s * s > 0.5 ? lo : hi) = mid;
-    }
-    return 0.5 * (lo + hi);
-}
-
 // The line array's power pattern at a separation `sep` in sine between two beams (the model's
 // variable: sin(theta') - sin(theta), over its whole range [-2, 2], docs/pipeline.md "Beam
 // geometry"), half power at sin(beamwidth / 2).

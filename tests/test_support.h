@@ -207,6 +207,19 @@ inline bool all_finite(const std::vector<float>& v) {
     return true;
 }
 
+// x with sinc(x)^2 = 1/2: the half-power point of a uniform line array, by bisection on [0.5, 3]
+// (sinc^2 falls monotonically from 1 to 0 on (0, pi)); closed-form references build their sinc^2
+// patterns on it, independently of the library's pattern constant.
+inline double sinc_half_power_x() {
+    double lo = 0.5, hi = 3.0;
+    for (int i = 0; i < 200; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        const double s = std::sin(mid) / mid;
+        (s * s > 0.5 ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
 inline double to_db(double x) {
     return 10.0 * std::log10(x);
 }

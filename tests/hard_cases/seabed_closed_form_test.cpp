@@ -30,17 +30,6 @@ struct SeabedCase {
     double rms_slope = 0.1; // rough only
 };
 
-// x with sinc(x)^2 = 1/2, by bisection on [1, 2] (sinc^2 falls monotonically there).
-double sinc_half_power_x() {
-    double lo = 1.0, hi = 2.0;
-    for (int i = 0; i < 100; ++i) {
-        const double x = 0.5 * (lo + hi);
-        const double s = std::sin(x) / x;
-        (s * s > 0.5 ? lo : hi) = x;
-    }
-    return 0.5 * (lo + hi);
-}
-
 // R^T of the pose rotation R = Rz(yaw) Ry(pitch) Rx(roll) (README: positive pitch points the nose down,
 // i.e. turns +x towards -z), yaw 0: world -> sonar frame.
 struct SonarFromWorld {
