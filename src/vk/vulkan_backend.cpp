@@ -208,14 +208,21 @@ Result<void> VulkanBackend::create_depth_pass() {
 }
 
 Result<void> VulkanBackend::create_compute() {
-    VkDevice device = context_.device;
-    const VkAllocationCallbacks* allocator = context_.allocator;
-    const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
-    const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     // Beamform intermediates are bin-fastest with bins padded to a multiple of 4, so resample and
     // sidelobe can load four range bins as one vec4 (see resample.comp).
     gpu_params_ = plan_.params;
     gpu_params_.bins_padded = (plan_.bins + 3u) & ~3u;
+    if (auto r = create_working_buffers(); !r) return r;
+    auto views = upload_tables();
+    if (!views) return views.error();
+    if (auto r = create_readback(); !r) return r;
+    if (auto r = create_descriptors(views.value()); !r) return r;
+    return create_compute_pipelines(views.value());
+}
+
+Result<void> VulkanBackend::create_working_buffers() {
+    const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
+    const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
     const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.profile_columns;
     const std::size_t far_floats = std::size_t(gpu_params_.bins_padded) * plan_.far_cells * plan_.far_channels;
@@ -249,6 +256,11 @@ Result<void> VulkanBackend::create_compute() {
         *w.buffer = std::move(buffer.value());
     }
 
+    return {};
+}
+
+Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
+    const VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
     // Tables, uploaded once. Resample's per-column (beam, weight) and per-beam (first, end column)
     // pairs are interleaved so one load brings both.
     std::vector<shared::MaterialGpu> materials = plan_.materials;
@@ -335,9 +347,17 @@ Result<void> VulkanBackend::create_compute() {
         auto buffer = create_buffer(context_, size, t.usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
         if (!buffer) return buffer.error();
         *t.buffer = std::move(buffer.value());
-        if (auto r = upload_to_buffer(context_, *t.buffer, t.data, t.bytes); !r) return r;
+        if (auto r = upload_to_buffer(context_, *t.buffer, t.data, t.bytes); !r) return r.error();
     }
 
+    return TableViews{materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s, far_table_vec4s};
+}
+
+Result<void> VulkanBackend::create_readback() {
+    const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
+    const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
+    const std::size_t padded_cells = std::size_t(gpu_params_.bins_padded) * plan_.beams;
+    const std::size_t profile_cells = std::size_t(gpu_params_.bins_padded) * plan_.profile_columns;
     // One host-visible buffer receives everything a frame may read back.
     VkDeviceSize readback_bytes = 0;
     auto place = [&](Region& region, std::size_t bytes) {
@@ -356,6 +376,15 @@ Result<void> VulkanBackend::create_compute() {
     if (!readback) return readback.error();
     readback_ = std::move(readback.value());
 
+    return {};
+}
+
+Result<void> VulkanBackend::create_descriptors(const TableViews& views) {
+    VkDevice device = context_.device;
+    const VkAllocationCallbacks* allocator = context_.allocator;
+    const std::uint32_t materials_vec4s = views.materials, column_table_vec4s = views.column_table,
+                        beam_table_vec4s = views.beam_table, sidelobe_vec4s = views.sidelobe,
+                        far_table_vec4s = views.far_table;
     // Descriptors: one set for every compute stage.
     auto set_layout = create_compute_set_layout(context_);
     if (!set_layout) return set_layout.error();
@@ -413,6 +442,13 @@ Result<void> VulkanBackend::create_compute() {
     }
     context_.fn.vkUpdateDescriptorSets(device, binding_count, writes.data(), 0, nullptr);
 
+    return {};
+}
+
+Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
+    const std::uint32_t materials_vec4s = views.materials, column_table_vec4s = views.column_table,
+                        beam_table_vec4s = views.beam_table, sidelobe_vec4s = views.sidelobe,
+                        far_table_vec4s = views.far_table;
     // Pipelines, specialized on the resolved effects: a disabled term is compiled out.
     auto make = [&](OwnedPipeline& pipeline, const std::uint32_t* code, std::size_t bytes,
                     const auto& constants) -> Result<void> {

@@ -75,7 +75,16 @@ public:
 private:
     Result<void> create_scene_buffers();
     Result<void> create_depth_pass();
-    Result<void> create_compute();
+    Result<void> create_compute(); // the steps below, in order
+    // Each table's uniform view in vec4s (0: read through its storage binding; pipelines.h).
+    struct TableViews {
+        std::uint32_t materials = 0, column_table = 0, beam_table = 0, sidelobe = 0, far_table = 0;
+    };
+    Result<void> create_working_buffers();
+    Result<TableViews> upload_tables();
+    Result<void> create_readback();
+    Result<void> create_descriptors(const TableViews& views);
+    Result<void> create_compute_pipelines(const TableViews& views);
     Result<void> create_commands();
 
     // One stage of kStageTable (the depth stage is the depth pass; the host-depth path records its
