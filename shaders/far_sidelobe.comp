@@ -7,9 +7,9 @@
 //   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
 // for each channel m < far_channels (sonar_kernels.h, Plan::far_channels).
 // An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
-// that resample.comp writes) and a workgroup one (channel, cell) (y = m * cells + c), so every table
-// load is the same for the whole workgroup: one scalar load from the uniform view on lavapipe
-// (src/vk/pipelines.h says why).
+// that resample.comp writes); a deposit workgroup one (channel, cell) (y = m * cells + c), a convolve
+// workgroup one channel (y = m). Every table load is the same for the whole workgroup: one scalar
+// load from the uniform view on lavapipe (src/vk/pipelines.h says why).
 // The CPU backend (src/stages/cpu_beamform.cpp) makes the same sums in the same order.
 #version 450
 #extension GL_GOOGLE_include_directive : require
@@ -41,8 +41,8 @@ void main() {
     uint quads = params.bins_padded / 4u;
     uint q = gl_GlobalInvocationID.x;
     uint cells = params.far_cells;
-    uint m = gl_WorkGroupID.y / cells;
-    uint c = gl_WorkGroupID.y - m * cells;
+    uint m = kFarPass == 0u ? gl_WorkGroupID.y / cells : gl_WorkGroupID.y;
+    uint c = kFarPass == 0u ? gl_WorkGroupID.y - m * cells : 0u;
     if (q >= quads || m >= params.far_channels) {
         return;
     }
@@ -60,9 +60,19 @@ void main() {
         far_energy4[(channel_base + c) * quads + q] = sum;
         return;
     }
-    uint weights = spans + 2u * cells;
+    // Convolve: a workgroup per channel (y = m, c unused), each lane every cell of its quad, its
+    // energies loaded once into registers (lavapipe runs each storage load as a loop over the lanes;
+    // cells^2 of them per quad made this pass the far side lobes' main cost there).
+    vec4 energy[kMaxFarCells];
     for (uint b = 0u; b < cells; ++b) {
-        sum += table(weights + cells - 1u + c - b) * far_energy4[(channel_base + b) * quads + q];
+        energy[b] = far_energy4[(channel_base + b) * quads + q];
     }
-    far_cells4[(channel_base + c) * quads + q] = sum;
+    uint weights = spans + 2u * cells;
+    for (uint a = 0u; a < cells; ++a) {
+        vec4 level = vec4(0.0);
+        for (uint b = 0u; b < cells; ++b) {
+            level += table(weights + cells - 1u + a - b) * energy[b];
+        }
+        far_cells4[(channel_base + a) * quads + q] = level;
+    }
 }

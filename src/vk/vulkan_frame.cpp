@@ -125,12 +125,13 @@ void VulkanBackend::record_beamform(VkCommandBuffer commands) {
     context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
     context_.fn.vkCmdDispatch(commands, bin_groups, beam_runs, 1);
     compute_barrier(commands, beam_profiles_);
-    if (far_sidelobes_) { // x = groups of 4-bin quads, y = channels x cells; sidelobe.comp reads the result
+    if (far_sidelobes_) { // x = groups of 4-bin quads, y = channels x cells (deposit) or channels
+                          // (convolve); sidelobe.comp reads the result
         context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_deposit_pipeline_.get());
         context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
         compute_barrier(commands, far_energy_);
         context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_convolve_pipeline_.get());
-        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
+        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_channels, 1);
         compute_barrier(commands, far_cells_);
     }
     if (sidelobes_) {
