@@ -27,8 +27,10 @@ using nlohmann::json;
 
 namespace {
 
+using vksonar::testing::fresh_test_dir;
 using vksonar::testing::quote;
 using vksonar::testing::read_text;
+using vksonar::testing::remove_test_dir;
 using vksonar::testing::write_text;
 
 // ---- the box finder on hand-made labels ------------------------------------------------------------
@@ -159,16 +161,8 @@ using vksonar::testing::CliRun;
 
 class BoxesCli : public ::testing::Test {
 protected:
-    void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_boxes_test_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
+    void SetUp() override { dir_ = fresh_test_dir("vksonar_boxes_test_"); }
+    void TearDown() override { remove_test_dir(dir_); }
 
     CliRun run(const std::vector<std::string>& args) const { return vksonar::testing::run_cli(dir_, args); }
 

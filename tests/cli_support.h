@@ -1,15 +1,19 @@
-// Helpers for the tests that run the vksonar executable as a process (cli_test.cpp,
-// hard_cases/bad_input_test.cpp, boxes_test.cpp): shell quoting, whole-file text I/O and one run of
-// the CLI with its exit code and output.
+// Helpers for the tests that run the vksonar executable as a process or work on files (cli_test.cpp,
+// hard_cases/bad_input_test.cpp, boxes_test.cpp and the scene-file tests): shell quoting, whole-file
+// text I/O, one run of the CLI with its exit code and output, and a folder per test.
 #pragma once
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <system_error>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 namespace vksonar::testing {
 
@@ -50,6 +54,24 @@ struct CliRun {
         return lines;
     }
 };
+
+// An empty folder for the running test: <temp>/<prefix><pid>_<test name>, emptied first (a crashed
+// earlier run may have left files there). The fixtures remove it in TearDown with remove_test_dir.
+inline std::filesystem::path fresh_test_dir(const std::string& prefix) {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    const std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()) + "_" + info->name());
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    return dir;
+}
+
+// Removes a test's folder; errors are ignored (TearDown must not throw, and a leftover folder in the
+// temp directory is harmless).
+inline void remove_test_dir(const std::filesystem::path& dir) {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+}
 
 // Runs VKSONAR_CLI with `args` (stdin from /dev/null), its stdout and stderr caught in files in `dir`.
 inline CliRun run_cli(const std::filesystem::path& dir, const std::vector<std::string>& args) {

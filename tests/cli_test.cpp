@@ -28,23 +28,19 @@ namespace fs = std::filesystem;
 namespace {
 
 using vksonar::testing::CliRun;
+using vksonar::testing::fresh_test_dir;
 using vksonar::testing::quote;
 using vksonar::testing::read_text;
+using vksonar::testing::remove_test_dir;
 using vksonar::testing::write_text;
 
 class Cli : public ::testing::Test {
 protected:
     void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_cli_test_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
+        dir_ = fresh_test_dir("vksonar_cli_test_");
         write_text(dir_ / "quad.gltf", kQuadGltf);
     }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
+    void TearDown() override { remove_test_dir(dir_); }
 
     CliRun run(const std::vector<std::string>& args) const { return vksonar::testing::run_cli(dir_, args); }
 

@@ -16,12 +16,15 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "cli_support.h"
 #include "legacy/legacy.h"
 #include "test_support.h"
 
 namespace fs = std::filesystem;
 using namespace vksonar;
 using namespace vksonar::legacy;
+using vksonar::testing::fresh_test_dir;
+using vksonar::testing::remove_test_dir;
 
 namespace {
 
@@ -452,16 +455,8 @@ long ply_vertices(const fs::path& path) {
 
 class LegacyCli : public ::testing::Test {
 protected:
-    void SetUp() override {
-        dir_ = fs::temp_directory_path() / ("vksonar_legacy_cli_" + std::to_string(::getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
+    void SetUp() override { dir_ = fresh_test_dir("vksonar_legacy_cli_"); }
+    void TearDown() override { remove_test_dir(dir_); }
     fs::path dir_;
 };
 

@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cli_support.h"
 #include "core/access.h"
 #include "scene/draco_pack.h"
 #include "scene/gltf_draco.h"
@@ -32,6 +33,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+using testing::fresh_test_dir;
+using testing::remove_test_dir;
 
 const std::string kHarbour = VKSONAR_ASSET_DIR "/scenes/harbour.gltf";
 constexpr int kBits = 14; // Blender's default position quantization
@@ -40,12 +43,10 @@ class SceneDraco : public ::testing::Test {
 protected:
     void SetUp() override {
         if (!gltf::draco_available()) GTEST_SKIP() << "this build has no libdraco";
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_draco_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::create_directories(dir_);
+        dir_ = fresh_test_dir("vksonar_draco_");
     }
     void TearDown() override {
-        if (!dir_.empty()) fs::remove_all(dir_);
+        if (!dir_.empty()) remove_test_dir(dir_);
     }
     std::string pack(const std::string& name, int bits = kBits) {
         const std::string out = (dir_ / name).string();

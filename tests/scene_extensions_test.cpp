@@ -30,6 +30,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+using testing::fresh_test_dir;
+using testing::remove_test_dir;
 
 std::string base64(const std::string& bytes) {
     static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -106,12 +108,8 @@ int quad_positions(Doc& d) {
 
 class SceneExtensions : public ::testing::Test {
 protected:
-    void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_ext_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::create_directories(dir_);
-    }
-    void TearDown() override { fs::remove_all(dir_); }
+    void SetUp() override { dir_ = fresh_test_dir("vksonar_ext_"); }
+    void TearDown() override { remove_test_dir(dir_); }
 
     Result<Scene> load(const std::string& name, const std::string& text) const {
         testing::write_text(dir_ / name, text);

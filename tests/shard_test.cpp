@@ -19,8 +19,10 @@
 #include "cli_support.h"
 
 namespace fs = std::filesystem;
+using vksonar::testing::fresh_test_dir;
 using vksonar::testing::quote;
 using vksonar::testing::read_text;
+using vksonar::testing::remove_test_dir;
 using vksonar::testing::write_text;
 
 namespace {
@@ -39,20 +41,14 @@ struct ShardRun {
 class Shard : public ::testing::Test {
 protected:
     void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_shard_test_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
+        dir_ = fresh_test_dir("vksonar_shard_test_");
         std::string poses = "x,y,z,roll,pitch,yaw\n";
         for (int i = 0; i < 7; ++i)
             poses +=
                 std::to_string(0.3 * i) + ",0," + std::to_string(-0.1 * i) + ",0,10," + std::to_string(4 * i) + "\n";
         write_text(dir_ / "poses.csv", poses);
     }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
+    void TearDown() override { remove_test_dir(dir_); }
 
     // Runs vksonar with `env` (NAME=value ...) in an environment cleared of the engines' variables.
     ShardRun run(const std::vector<std::string>& args, const std::vector<std::string>& env = {}) const {

@@ -28,17 +28,16 @@ struct CliResult {
     std::string err;
 };
 
+using vksonar::testing::fresh_test_dir;
 using vksonar::testing::quote;
 using vksonar::testing::read_text;
+using vksonar::testing::remove_test_dir;
 using vksonar::testing::write_text;
 
 class BadInput : public ::testing::Test {
 protected:
     void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vksonar_bad_input_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
+        dir_ = fresh_test_dir("vksonar_bad_input_");
         // The smallest valid scene: one triangle 10 m ahead (buffer: 3 float VEC3, no indices).
         write_text(dir_ / "ok.gltf",
                    R"({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
@@ -47,10 +46,7 @@ protected:
   "bufferViews": [{"buffer": 0, "byteLength": 36}],
   "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [10, -1, 0], "max": [10, 1, 1]}]})");
     }
-    void TearDown() override {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
+    void TearDown() override { remove_test_dir(dir_); }
 
     CliResult run(const std::vector<std::string>& args) const {
         std::string command = "timeout " + std::to_string(kTimeoutSeconds) + " " + quote(VKSONAR_CLI);

@@ -22,8 +22,10 @@ namespace vksonar {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::fresh_test_dir;
 using testing::quote;
 using testing::read_text;
+using testing::remove_test_dir;
 using testing::write_text;
 
 constexpr std::size_t kTriangleBytes = 36; // three float xyz positions
@@ -47,14 +49,12 @@ std::string triangle_gltf(const std::string& uri, std::size_t byte_length = kTri
 class SceneFiles : public ::testing::Test {
 protected:
     void SetUp() override {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        root_ = fs::temp_directory_path() / ("vksonar_scene_files_" + std::to_string(::getpid()) + "_" + info->name());
-        fs::remove_all(root_);
+        root_ = fresh_test_dir("vksonar_scene_files_");
         fs::create_directories(root_ / "scenes" / "sub");
         fs::create_directories(root_ / "elsewhere");
         write_text(root_ / "elsewhere" / "triangle.bin", triangle_bytes());
     }
-    void TearDown() override { fs::remove_all(root_); }
+    void TearDown() override { remove_test_dir(root_); }
 
     // Writes scenes/scene.gltf naming `uri` and loads it.
     Result<Scene> load(const std::string& uri, const SceneLoadOptions& options = {},
