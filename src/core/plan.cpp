@@ -721,7 +721,7 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
         else
             c0 = std::min(c0, cells - 2);
         const std::uint32_t c1 = p.circular ? (c0 + 1) % cells : c0 + 1;
-        const float share = static_cast<float>(std::clamp(x - std::floor(x) + (std::floor(x) - c0), 0.0, 1.0));
+        const float share = static_cast<float>(std::clamp(x - c0, 0.0, 1.0)); // c0 = floor(x) but at the last cell
         p.far_beam_cell[8 * j + 0] = static_cast<float>(c0);
         p.far_beam_cell[8 * j + 1] = static_cast<float>(c1);
         p.far_beam_cell[8 * j + 2] = share;
