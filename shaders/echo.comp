@@ -82,6 +82,7 @@ EchoConstants echo_constants() {
     k.vpattern_k = params.vpattern_k;
     k.vpattern_halfwidth_rad = params.vpattern_halfwidth_rad;
     k.vpattern_chebyshev_a = params.vpattern_chebyshev_a;
+    k.elevation_gate_sin = params.elevation_gate_sin;
     return k;
 }
 

@@ -216,6 +216,7 @@ struct EchoConstants {
     REAL vpattern_k;
     REAL vpattern_halfwidth_rad;
     REAL vpattern_chebyshev_a;
+    REAL elevation_gate_sin; // SonarParams::elevation_gate_sin
 };
 
 // Which of the echo equation's terms a pipeline carries (the effect bits and the scene's materials).
@@ -235,19 +236,28 @@ VKS_FN uint material_index(uint material_id, uint material_count) {
     return m < material_count ? m : 0u;
 }
 
-// The vertical pattern's power over the pixel (u, v) (1 with the effect off): a function of the pixel's
-// place in the grid alone, which the CPU backend reads from a table made once (cpu_echo.cpp).
+// The power of a ray at elevation sine sin_e: 0 beyond the elevation gate (SonarParams), else `power`.
+VKS_FN REAL elevation_gated(REAL power, REAL sin_e, REAL gate_sin) {
+    return abs(sin_e) <= gate_sin ? power : REAL(0);
+}
+
+// The vertical pattern's power over the pixel (u, v), 0 beyond the elevation gate; 1 with the effect
+// off (the pixel grid is then the beam, as the legacy plugins have it). A function of the pixel's place
+// in the grid alone, which the CPU backend reads from a table made once (cpu_echo.cpp).
 VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v) {
     REAL vertical = REAL(1);
     if (terms.vertical_pattern && terms.vertical_shape == kPatternBox) {
         vertical = pattern_power(kPatternBox, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
-                                 pixel_elevation(u, v));
+                                 pixel_elevation(u, v)); // zero beyond vfov / 2, inside the gate
     } else if (terms.vertical_pattern) {
         // The pattern averaged over the pixel's height, by two-point Gauss-Legendre in v (exact where the
         // pattern is quadratic across the pixel). The centre alone is wrong next to a null, where the
         // pattern grows as the square of the distance d from it: a row of height D holds d^2 + D^2 / 12
         // of it, the centre gives d^2 (-1.25 dB for the row at the null). The box keeps its sharp edge.
+        // Each point is gated on its own: a row that straddles the gate keeps the half inside it.
         REAL half_gap = REAL(0.28867513459481287) * k.pixel_dv; // D / (2 sqrt 3)
+        REAL upper_sin = pixel_elevation_sin(u, v - half_gap);
+        REAL lower_sin = pixel_elevation_sin(u, v + half_gap);
         REAL upper;
         REAL lower;
         if (terms.vertical_shape == kPatternGaussian) {
@@ -256,12 +266,11 @@ VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL 
             lower = pattern_power(kPatternGaussian, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
                                   pixel_elevation(u, v + half_gap));
         } else { // the aperture patterns, from the elevation's sine (no arctangent, no sine)
-            upper = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a,
-                                           pixel_elevation_sin(u, v - half_gap));
-            lower = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a,
-                                           pixel_elevation_sin(u, v + half_gap));
+            upper = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, upper_sin);
+            lower = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, lower_sin);
         }
-        vertical = REAL(0.5) * (upper + lower);
+        return REAL(0.5) * (elevation_gated(upper, upper_sin, k.elevation_gate_sin) +
+                            elevation_gated(lower, lower_sin, k.elevation_gate_sin));
     }
     return vertical;
 }

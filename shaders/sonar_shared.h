@@ -176,9 +176,16 @@ struct SonarParams {
     float inv_cone_step;
     uint far_cells;    // far side lobes: cells of the coarse grid (Plan::far_cells), 0: none
     uint far_channels; // 3: sinc^2's phase channels, 1: the lobes' mean (Plan::far_channels)
+
+    // The elevation gate (Plan::elevation_gate_sin): a pixel ray whose |sin elevation| is above it gets
+    // no vertical power, so that every azimuth sees the same elevations; 2 (no gate) where none applies.
+    float elevation_gate_sin;
+    uint pad_gate0;
+    uint pad_gate1;
+    uint pad_gate2;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SonarParams) == 36 * 4, "SonarParams must match the GLSL std140 block");
+static_assert(sizeof(SonarParams) == 40 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
 // Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.

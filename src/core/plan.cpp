@@ -396,7 +396,10 @@ Result<void> plan_pixel_grid(Plan& p) {
     p.tan_half_h = std::tan(0.5 * p.slice_width_rad);
 
     double tan_half_v = std::tan(half_coverage);
-    if (c.mode == SonarMode::physical) tan_half_v *= std::sqrt(1.0 + p.tan_half_h * p.tan_half_h);
+    if (c.mode == SonarMode::physical) {
+        tan_half_v *= std::sqrt(1.0 + p.tan_half_h * p.tan_half_h);
+        p.elevation_gate_sin = std::sin(half_coverage);
+    }
     p.tan_half_v = tan_half_v;
     p.vertical_coverage_rad = 2.0 * std::atan(p.tan_half_v); // at the slice's centre column
     const double rows = std::ceil(c.rows_per_vfov * p.vertical_coverage_rad / (c.vfov_deg * kDegToRad));
@@ -854,6 +857,7 @@ void plan_gpu_params(Plan& p) {
     }
     g.vpattern_halfwidth_rad = static_cast<float>(p.vpattern_halfwidth_rad);
     g.vpattern_chebyshev_a = static_cast<float>(p.vpattern_chebyshev_a);
+    g.elevation_gate_sin = static_cast<float>(p.elevation_gate_sin);
     g.profile_columns = p.profile_columns;
     g.line_array = p.line_array ? 1u : 0u;
     // the same floats plan_profile_columns computed the CPU's cone coordinates from

@@ -34,7 +34,8 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              g.alpha_db_per_m,
              g.vpattern_k,
              g.vpattern_halfwidth_rad,
-             g.vpattern_chebyshev_a};
+             g.vpattern_chebyshev_a,
+             g.elevation_gate_sin};
     } else {
         k = {plan.tan_half_h,
              plan.tan_half_v,
@@ -47,7 +48,8 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              plan.alpha_db_per_m,
              plan.vpattern_k,
              plan.vpattern_halfwidth_rad,
-             plan.vpattern_chebyshev_a};
+             plan.vpattern_chebyshev_a,
+             plan.elevation_gate_sin};
     }
     k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(plan.slice_columns);
     k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);

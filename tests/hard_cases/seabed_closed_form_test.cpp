@@ -10,7 +10,7 @@
 // dA = r dr dphi_g in ground polar coordinates around the nadir, and b_v^2 the sinc^2 vertical pattern
 // whose half power lies at +-vfov / 2 (its constant found here by bisection). The coverage is the rule
 // of docs/pipeline.md, computed here too: out to the larger of vertical_coverage x vfov / 2 and the
-// pattern's first null (x = pi), held at every azimuth of a slice.
+// pattern's first null (x = pi), the same elevations at every azimuth (the elevation gate).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -52,7 +52,7 @@ struct SonarFromWorld {
 // line_array as far as the edge beam's cone leans out at the covered elevations, asin(sin(hfov / 2) /
 // cos(half coverage)), at most 89 degrees.
 struct Coverage {
-    double null_rad, tan_half_v;
+    double null_rad, half_rad, tan_half_v;
     double covered_rad; // azimuths the pixel grid covers, in slices of covered_rad / slices
 };
 Coverage vertical_coverage(const SonarConfig& config, std::uint32_t slices) {
@@ -65,7 +65,7 @@ Coverage vertical_coverage(const SonarConfig& config, std::uint32_t slices) {
         covered = 2 * std::min(reach < 1 ? std::asin(reach) : 0.5 * kPi, 89 * kDeg);
     }
     const double tan_half_slice = std::tan(0.5 * covered / slices);
-    return {null, std::tan(half) * std::sqrt(1 + tan_half_slice * tan_half_slice), covered};
+    return {null, half, std::tan(half) * std::sqrt(1 + tan_half_slice * tan_half_slice), covered};
 }
 
 struct SeabedReference {
@@ -80,6 +80,7 @@ SeabedReference seabed_reference(const SeabedCase& sc, const SonarConfig& config
     const double k_v = sinc_half_power_x() / std::sin(0.5 * config.vfov_deg * kDeg);
     const double half_fan = 0.5 * config.hfov_deg * kDeg, slice = coverage.covered_rad / plan.slices;
     const double half_covered = 0.5 * coverage.covered_rad, tan_half_v = coverage.tan_half_v;
+    const double sin_gate = std::sin(coverage.half_rad);
     const bool line_array = config.beam_geometry == BeamGeometry::line_array;
     const double h = sc.height_m;
     const SonarFromWorld q(sc.pitch_deg * kDeg, sc.roll_deg * kDeg);
@@ -127,11 +128,12 @@ SeabedReference seabed_reference(const SeabedCase& sc, const SonarConfig& config
                 const double x = k_v * sin_psi;
                 const double amp = std::abs(x) < 1e-9 ? 1.0 : std::sin(x) / x;
                 const double e = radial * amp * amp;
-                // Coverage: in its slice's camera, |v| = |P_z| / (P . f_s) <= tan_half_v.
+                // Coverage: in its slice's camera, |v| = |P_z| / (P . f_s) <= tan_half_v, and inside the
+                // elevation gate (which the slice's camera holds at every azimuth: both, to check that).
                 const double s_index = std::min(std::floor((half_covered - azimuth) / slice), plan.slices - 1.0);
                 const double centre = half_covered - (s_index + 0.5) * slice;
                 const double forward = P[0] * std::cos(centre) + P[1] * std::sin(centre);
-                if (std::abs(P[2]) <= tan_half_v * forward) {
+                if (std::abs(P[2]) <= tan_half_v * forward && std::abs(sin_psi) <= sin_gate) {
                     ref.seen[k] += e;
                     if (std::abs(sin_psi) > std::sin(null_psi_rad)) ref.near_null[k] += e;
                 } else {
