@@ -1,5 +1,6 @@
-// The CPU StageBackend: runs the four reference stages on buffers allocated once at construction.
-// Arithmetic precision follows plan.config.cpu_precision (f64 -> double, else float).
+// The CPU StageBackend: walks kStageTable and runs each stage's CPU function (run_*, defined here
+// next to the buffers they share, allocated once at construction). Arithmetic precision follows
+// plan.config.cpu_precision (f64 -> double, else float).
 #include <algorithm>
 #include <chrono>
 #include <cmath>

@@ -119,25 +119,17 @@ struct StageInfo {
     StageId id;
     const char* name;                    // Frame::stages_run, Frame::times, `vksonar bench` columns
     bool (*runs)(const Plan&);           // whether the plan needs it (effects on demand)
-    StageBuffers (*reads)(const Plan&);  // with this plan (a stage that runs)
-    StageBuffers (*writes)(const Plan&); // with this plan
-    CpuStage cpu;
-    VulkanStage vulkan;          // the backend's own depth pass
-    const char* host_depth_name; // the name with a host engine's depth image (HostDepthRenderer)
-    VulkanStage host_depth;      // with it
-    SaveFlags saves;             // the Frame images its outputs fill when asked for ...
-    StageBuffers saved;          // ... read back from these buffers after the last stage
+    StageBuffers (*reads)(const Plan&);  // with this plan, when it runs
+    StageBuffers (*writes)(const Plan&); // with this plan, when it runs
+    CpuStage cpu;                        // on the CPU backend
+    VulkanStage vulkan;                  // on the Vulkan backend, which draws the scene itself
+    const char* host_depth_name;         // the name and the code with a host engine's depth image
+    VulkanStage host_depth;              // (HostDepthRenderer): only the depth stage differs
+    SaveFlags saves;                     // the Frame images its outputs fill when asked for ...
+    StageBuffers saved;                  // ... read back from these buffers after the last stage
 };
 
-namespace stage_table {
-
-inline constexpr std::array<const char*, 4> kDepthShaders{"depth.vert", "depth.frag", "depth_geometric.vert",
-                                                          "depth_geometric.frag"};
-inline constexpr std::array<const char*, 4> kImportShaders{"import_depth.comp"};
-inline constexpr std::array<const char*, 4> kNormalsShaders{"normals.comp"};
-inline constexpr std::array<const char*, 4> kEchoShaders{"echo.comp"};
-inline constexpr std::array<const char*, 4> kBeamformShaders{"profile.comp", "resample.comp", "far_sidelobe.comp",
-                                                             "sidelobe.comp"};
+namespace stage_table { // the table's entries, named
 
 constexpr Dispatches no_dispatch(const Plan&) {
     return {}; // a render pass: its draws follow the scene (vk::record_depth)
@@ -155,83 +147,116 @@ constexpr Dispatches echo_dispatch(const Plan& plan) {
 // (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of beams, or
 // channels x cells (far deposit), or channels (far convolve).
 enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convolve, sidelobe };
+constexpr bool far_sidelobes(const Plan& plan) {
+    return plan.effects.horizontal_pattern && plan.far_cells > 0;
+}
 constexpr Dispatches beamform_dispatch(const Plan& plan) {
     const std::uint32_t bin_groups = group_count(ceil_div(plan.bins, 4));
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan.beams, kBeamsPerInvocation));
-    const bool sidelobes = plan.effects.horizontal_pattern, far = sidelobes && plan.far_cells > 0;
     Dispatches d{};
     d[profile] = {"profile.comp", group_count(plan.line_array ? ceil_div(plan.profile_columns, kConesPerInvocation)
                                                               : plan.profile_columns)};
     d[resample] = {"resample.comp", bin_groups, beam_runs};
-    if (far) d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};
-    if (far) d[far_convolve] = {"far_sidelobe.comp", bin_groups, plan.far_channels};
-    if (sidelobes) d[sidelobe] = {"sidelobe.comp", bin_groups, beam_runs};
+    if (far_sidelobes(plan)) {
+        d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};
+        d[far_convolve] = {"far_sidelobe.comp", bin_groups, plan.far_channels};
+    }
+    if (plan.effects.horizontal_pattern) d[sidelobe] = {"sidelobe.comp", bin_groups, beam_runs};
     return d;
 }
 
-constexpr StageBuffers face_normals_if(const Plan& plan) {
-    return plan.face_normals ? StageBuffers::face_normals : StageBuffers::none;
-}
+inline constexpr VulkanStage kDepthPass{
+    {"depth.vert", "depth.frag", "depth_geometric.vert", "depth_geometric.frag"}, vk::record_depth, no_dispatch};
+inline constexpr VulkanStage kImport{{"import_depth.comp"}, vk::record_import, import_dispatch};
+inline constexpr VulkanStage kNormals{{"normals.comp"}, vk::record_normals, normals_dispatch};
+inline constexpr VulkanStage kEcho{{"echo.comp"}, vk::record_echo, echo_dispatch};
+inline constexpr VulkanStage kBeamform{
+    {"profile.comp", "resample.comp", "far_sidelobe.comp", "sidelobe.comp"}, vk::record_beamform, beamform_dispatch};
+
 constexpr bool always(const Plan&) {
     return true;
+}
+constexpr bool incidence(const Plan& plan) {
+    return plan.effects.incidence; // only the incidence effect reads normals
+}
+
+constexpr StageBuffers depth_reads(const Plan&) {
+    return StageBuffers::scene;
+}
+constexpr StageBuffers depth_writes(const Plan& plan) {
+    return StageBuffers::depth | StageBuffers::material |
+           (plan.face_normals ? StageBuffers::face_normals : StageBuffers::none);
+}
+constexpr StageBuffers normals_reads(const Plan& plan) {
+    return StageBuffers::depth | StageBuffers::tables |
+           (plan.face_normals ? StageBuffers::face_normals : StageBuffers::none);
+}
+constexpr StageBuffers normals_writes(const Plan&) {
+    return StageBuffers::normals;
+}
+constexpr StageBuffers echo_reads(const Plan& plan) {
+    return StageBuffers::depth | StageBuffers::material | StageBuffers::tables |
+           (plan.effects.incidence ? StageBuffers::normals : StageBuffers::none);
+}
+constexpr StageBuffers echo_writes(const Plan&) {
+    return StageBuffers::echo;
+}
+constexpr StageBuffers beamform_reads(const Plan&) {
+    return StageBuffers::echo | StageBuffers::tables;
+}
+// every column's profile before any beam reads it; the far side lobes before the near ones
+constexpr StageBuffers beamform_writes(const Plan& plan) {
+    return StageBuffers::profiles | StageBuffers::beam_profiles | StageBuffers::polar |
+           (far_sidelobes(plan) ? StageBuffers::far_sidelobes : StageBuffers::none);
 }
 
 } // namespace stage_table
 
 inline constexpr std::array<StageInfo, 4> kStageTable{{
-    {StageId::depth,
-     "depth",
-     stage_table::always,
-     [](const Plan&) { return StageBuffers::scene; },
-     [](const Plan& plan) { return StageBuffers::depth | StageBuffers::material | stage_table::face_normals_if(plan); },
-     {cpu::run_depth<float>, cpu::run_depth<double>},
-     {stage_table::kDepthShaders, vk::record_depth, stage_table::no_dispatch},
-     "import",
-     {stage_table::kImportShaders, vk::record_import, stage_table::import_dispatch},
-     SaveFlags::depth,
-     StageBuffers::depth | StageBuffers::material},
-    // only the incidence effect reads normals
-    {StageId::normals,
-     "normals",
-     [](const Plan& plan) { return plan.effects.incidence; },
-     [](const Plan& plan) { return StageBuffers::depth | StageBuffers::tables | stage_table::face_normals_if(plan); },
-     [](const Plan&) { return StageBuffers::normals; },
-     {cpu::run_normals<float>, cpu::run_normals<double>},
-     {stage_table::kNormalsShaders, vk::record_normals, stage_table::normals_dispatch},
-     "normals",
-     {stage_table::kNormalsShaders, vk::record_normals, stage_table::normals_dispatch},
-     SaveFlags::normals,
-     StageBuffers::normals},
-    {StageId::echo,
-     "echo",
-     stage_table::always,
-     [](const Plan& plan) {
-         return StageBuffers::depth | StageBuffers::material | StageBuffers::tables |
-                (plan.effects.incidence ? StageBuffers::normals : StageBuffers::none);
-     },
-     [](const Plan&) { return StageBuffers::echo; },
-     {cpu::run_echo<float>, cpu::run_echo<double>},
-     {stage_table::kEchoShaders, vk::record_echo, stage_table::echo_dispatch},
-     "echo",
-     {stage_table::kEchoShaders, vk::record_echo, stage_table::echo_dispatch},
-     SaveFlags::echo,
-     StageBuffers::echo},
-    // every column's profile before any beam reads it; the far side lobes before the near ones
-    {StageId::beamform,
-     "beamform",
-     stage_table::always,
-     [](const Plan&) { return StageBuffers::echo | StageBuffers::tables; },
-     [](const Plan& plan) {
-         const bool far = plan.effects.horizontal_pattern && plan.far_cells > 0;
-         return StageBuffers::profiles | StageBuffers::beam_profiles | StageBuffers::polar |
-                (far ? StageBuffers::far_sidelobes : StageBuffers::none);
-     },
-     {cpu::run_beamform<float>, cpu::run_beamform<double>},
-     {stage_table::kBeamformShaders, vk::record_beamform, stage_table::beamform_dispatch},
-     "beamform",
-     {stage_table::kBeamformShaders, vk::record_beamform, stage_table::beamform_dispatch},
-     SaveFlags::profiles,
-     StageBuffers::profiles | StageBuffers::beam_profiles},
+    {.id = StageId::depth,
+     .name = "depth",
+     .runs = stage_table::always,
+     .reads = stage_table::depth_reads,
+     .writes = stage_table::depth_writes,
+     .cpu = {cpu::run_depth<float>, cpu::run_depth<double>},
+     .vulkan = stage_table::kDepthPass,
+     .host_depth_name = "import",
+     .host_depth = stage_table::kImport,
+     .saves = SaveFlags::depth,
+     .saved = StageBuffers::depth | StageBuffers::material},
+    {.id = StageId::normals,
+     .name = "normals",
+     .runs = stage_table::incidence,
+     .reads = stage_table::normals_reads,
+     .writes = stage_table::normals_writes,
+     .cpu = {cpu::run_normals<float>, cpu::run_normals<double>},
+     .vulkan = stage_table::kNormals,
+     .host_depth_name = "normals",
+     .host_depth = stage_table::kNormals,
+     .saves = SaveFlags::normals,
+     .saved = StageBuffers::normals},
+    {.id = StageId::echo,
+     .name = "echo",
+     .runs = stage_table::always,
+     .reads = stage_table::echo_reads,
+     .writes = stage_table::echo_writes,
+     .cpu = {cpu::run_echo<float>, cpu::run_echo<double>},
+     .vulkan = stage_table::kEcho,
+     .host_depth_name = "echo",
+     .host_depth = stage_table::kEcho,
+     .saves = SaveFlags::echo,
+     .saved = StageBuffers::echo},
+    {.id = StageId::beamform,
+     .name = "beamform",
+     .runs = stage_table::always,
+     .reads = stage_table::beamform_reads,
+     .writes = stage_table::beamform_writes,
+     .cpu = {cpu::run_beamform<float>, cpu::run_beamform<double>},
+     .vulkan = stage_table::kBeamform,
+     .host_depth_name = "beamform",
+     .host_depth = stage_table::kBeamform,
+     .saves = SaveFlags::profiles,
+     .saved = StageBuffers::profiles | StageBuffers::beam_profiles},
 }};
 inline constexpr std::size_t kStageCount = kStageTable.size();
 

@@ -1,6 +1,7 @@
-// The Vulkan StageBackend, per frame: depth pass (one render pass, one viewport per slice) -> copy to
-// storage buffers -> normals -> echo -> profile -> resample -> sidelobe -> readback. Nothing is
-// created here; render() records, submits, waits and copies out.
+// The Vulkan StageBackend, per frame: kStageTable's record functions, defined here (depth pass, one
+// render pass with one viewport per slice, copied to storage buffers -> normals -> echo -> profile ->
+// resample -> far side lobes -> sidelobe), then the readback. Nothing is created here; render()
+// records, submits, waits and copies out.
 #include <chrono>
 #include <cstring>
 
