@@ -149,7 +149,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     b.resolve_passes();
     const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
     const VkPhysicalDeviceLimits& limits = context.properties.limits;
-    if (group_count(pixels) > limits.maxComputeWorkGroupCount[0] || pixels * 16 > limits.maxStorageBufferRange) {
+    if (!dispatches_fit(plan, limits, true) || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "HostDepthDesc: " + std::to_string(plan.columns) + " x " +
                                                       std::to_string(plan.rows) +
                                                       " pixels exceed the device's compute limits");

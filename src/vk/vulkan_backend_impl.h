@@ -31,6 +31,10 @@ constexpr VkPipelineStageFlags kComputeOrTransfer =
     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
 constexpr VkAccessFlags kShaderOrTransferRead = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
 
+// Whether every dispatch of the stages the plan runs (kStageTable's, on the backend's own path or on
+// the host-depth path) fits the device's workgroup counts.
+bool dispatches_fit(const Plan& plan, const VkPhysicalDeviceLimits& limits, bool host_depth);
+
 template <class T> std::size_t bytes_of(const std::vector<T>& v) {
     return v.size() * sizeof(T);
 }
@@ -84,7 +88,7 @@ private:
     Result<void> create_compute_pipelines(const TableViews& views);
     Result<void> create_commands();
 
-    // The stages' commands: kStageTable's record functions (vulkan_frame.cpp), friends above.
+    // (The stages' commands are kStageTable's record functions, the friends above.)
     // The polar scan, then the buffers of the saved images (kStageTable's saved).
     void record_readback(VkCommandBuffer commands, SaveFlags save_mask);
     struct Saved {
