@@ -1,5 +1,6 @@
-// The CPU StageBackend: runs the four reference stages on buffers allocated once at construction.
-// Arithmetic precision follows plan.config.cpu_precision (f64 -> double, else float).
+// The CPU StageBackend: walks kStageTable and runs each stage's CPU function (run_*, defined here
+// next to the buffers they share, allocated once at construction). Arithmetic precision follows
+// plan.config.cpu_precision (f64 -> double, else float).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -46,35 +47,123 @@ void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, 
 }
 constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32, kColumnBlock = 64;
 
-// Copies into a preallocated frame vector; assign() reuses the capacity make_frame() reserved.
-template <class T> void store(std::vector<T>& dst, const std::vector<T>& src) {
-    dst.assign(src.begin(), src.end());
+// A saved image: the stage's buffer when it ran, none when it did not (normals with incidence off).
+template <class T> void save(std::vector<T>& dst, const std::vector<T>& src, bool ran) {
+    if (ran) {
+        dst.assign(src.begin(), src.end()); // reuses the capacity make_frame() reserved
+    } else {
+        dst.clear();
+    }
 }
+
+} // namespace
+
+// The CPU backend's working buffers, allocated once at construction, and the frame being rendered:
+// what the table's run_* functions work on.
+template <class Real> struct StageContext {
+    StageContext(const Plan& plan_in, const SceneData& scene_in, host::Workers* workers_in)
+        : plan(plan_in), scene(scene_in), workers(workers_in) {
+        const std::uint32_t parts = workers != nullptr ? workers->count() : 1;
+        const std::size_t pixels = static_cast<std::size_t>(plan.rows) * plan.columns;
+        depth.assign(pixels, 0.0f);
+        material.assign(pixels, shared::kNoMaterial);
+        if (plan.effects.incidence) normals.assign(pixels * 4, 0.0f);
+        if (plan.face_normals) face.assign(pixels * 4, 0.0f);
+        echo.assign(pixels * 2, 0.0f);
+        echo_table.assign(echo_table_count(plan), Real(0));
+        cpu::echo_table<Real>(plan, echo_table.data());
+        profiles.assign(static_cast<std::size_t>(plan.bins) * plan.profile_columns, 0.0f);
+        beam_profiles.assign(static_cast<std::size_t>(plan.bins) * plan.beams, 0.0f);
+        scratch.assign(std::max<std::size_t>(beamform_accumulator_count(plan), 1), Real(0));
+        resample_w.assign(std::max<std::size_t>(resample_weight_count(plan), 1), Real(0));
+        resample_weights<Real>(plan, resample_w.data());
+        if (plan.effects.incidence && !plan.face_normals)
+            normals_scratch.assign(std::max<std::size_t>(normals_scratch_count(plan), 1) * parts, Real(0));
+        draws.resize(static_cast<std::size_t>(plan.slices) * scene.draws.size());
+        build_depth_clusters(scene, clusters);
+        clusters_drawn.resize(std::size_t(plan.slices) * clusters.size());
+    }
+
+    Plan plan;              // copied: the backend may outlive the caller's Plan object
+    const SceneData& scene; // the scene must outlive the renderer (renderer.h)
+    host::Workers* workers; // the Renderer's threads, borrowed (null: all on the caller)
+    // this frame's
+    Pose pose{};
+    SaveFlags save_mask = SaveFlags::none;
+    float* polar = nullptr; // the side-lobe pass writes the polar scan straight into the frame
+
+    std::vector<shared::DepthPush> draws;
+    std::vector<DepthCluster> clusters;
+    std::vector<std::uint8_t> clusters_drawn; // slices * clusters, 0 = the cluster cannot reach that slice
+    std::vector<float> depth;
+    std::vector<std::uint32_t> material;
+    std::vector<float> face; // face normals of the depth pass (normal_method = geometric only)
+    std::vector<float> normals, echo, profiles, beam_profiles;
+    std::vector<Real> scratch, normals_scratch; // scratch: the profile accumulators (beamform_accumulator_count)
+    std::vector<Real> echo_table;               // echo_table, filled once
+    std::vector<Real> resample_w;               // resample_weights, filled once
+};
+
+template <class Real> void run_depth(StageContext<Real>& s) {
+    compose_depth_draws(s.plan, s.scene, s.pose, s.draws);
+    cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
+    const DepthClusters clusters{s.clusters, s.clusters_drawn};
+    depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
+               s.plan.face_normals ? s.face.data() : nullptr, &clusters);
+}
+
+template <class Real> void run_normals(StageContext<Real>& s) {
+    if (s.plan.face_normals) {
+        split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            geometric_normals_rows<Real>(s.plan, s.depth.data(), s.face.data(), s.normals.data(), begin, end);
+        });
+        return;
+    }
+    // each part slides its own ring of rows: part i's scratch starts at i * per_part
+    const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(s.plan), 1);
+    split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
+        normals_rows<Real>(s.plan, s.depth.data(), s.normals.data(), s.normals_scratch.data() + part * per_part, begin,
+                           end);
+    });
+}
+
+template <class Real> void run_echo(StageContext<Real>& s) {
+    // normals only where the normals stage ran (incidence on)
+    const float* normals = s.plan.effects.incidence ? s.normals.data() : nullptr;
+    split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+        echo_rows<Real>(s.plan, s.depth.data(), s.material.data(), normals, s.echo.data(), s.echo_table.data(), begin,
+                        end);
+    });
+}
+
+template <class Real> void run_beamform(StageContext<Real>& s) {
+    // the float profiles only when saved: the resample reads the accumulators
+    float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
+    split_blocks(s.workers, s.plan.profile_columns, kColumnBlock,
+                 [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                     beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end);
+                 });
+    split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+        beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
+                             end);
+    });
+}
+
+// The table's pointers name these; they are defined here, next to the buffers they touch.
+template void run_depth<float>(StageContext<float>&);
+template void run_depth<double>(StageContext<double>&);
+template void run_normals<float>(StageContext<float>&);
+template void run_normals<double>(StageContext<double>&);
+template void run_echo<float>(StageContext<float>&);
+template void run_echo<double>(StageContext<double>&);
+template void run_beamform<float>(StageContext<float>&);
+template void run_beamform<double>(StageContext<double>&);
+
+namespace {
 
 template <class Real> class CpuBackend final : public StageBackend {
 public:
-    CpuBackend(const Plan& plan, const SceneData& scene, host::Workers* workers)
-        : plan_(plan), scene_(scene), workers_(workers) {
-        const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
-        const std::size_t pixels = static_cast<std::size_t>(plan_.rows) * plan_.columns;
-        depth_.assign(pixels, 0.0f);
-        material_.assign(pixels, shared::kNoMaterial);
-        if (plan_.effects.incidence) normals_.assign(pixels * 4, 0.0f);
-        if (plan_.face_normals) face_.assign(pixels * 4, 0.0f);
-        echo_.assign(pixels * 2, 0.0f);
-        echo_table_.assign(echo_table_count(plan_), Real(0));
-        echo_table<Real>(plan_, echo_table_.data());
-        profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.profile_columns, 0.0f);
-        beam_profiles_.assign(static_cast<std::size_t>(plan_.bins) * plan_.beams, 0.0f);
-        scratch_.assign(std::max<std::size_t>(beamform_accumulator_count(plan_), 1), Real(0));
-        resample_w_.assign(std::max<std::size_t>(resample_weight_count(plan_), 1), Real(0));
-        resample_weights<Real>(plan_, resample_w_.data());
-        if (plan_.effects.incidence && !plan_.face_normals)
-            normals_scratch_.assign(std::max<std::size_t>(normals_scratch_count(plan_), 1) * parts, Real(0));
-        draws_.resize(static_cast<std::size_t>(plan_.slices) * scene_.draws.size());
-        build_depth_clusters(scene_, clusters_);
-        clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
-    }
+    CpuBackend(const Plan& plan, const SceneData& scene, host::Workers* workers) : stage_(plan, scene, workers) {}
 
     Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override {
         const double pose_values[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
@@ -90,31 +179,21 @@ public:
         // A frame reused across renders reports this render's stages only (capacity is kept).
         frame.times.clear();
         frame.stages_run.clear();
-        // The side-lobe pass writes the polar scan straight into the frame (make_frame sized it).
-        frame.clean.resize(static_cast<std::size_t>(plan_.bins) * plan_.beams);
+        frame.clean.resize(static_cast<std::size_t>(stage_.plan.bins) * stage_.plan.beams); // make_frame sized it
+        stage_.pose = pose;
+        stage_.save_mask = save_mask;
+        stage_.polar = frame.clean.data();
         for (const StageInfo& stage : kStageTable) {
-            if (!stage.runs(plan_)) continue;
+            if (!stage.runs(stage_.plan)) continue;
             const auto start = Clock::now();
-            run(stage.id, pose, save_mask, frame.clean.data());
+            cpu_function<Real>(stage.cpu)(stage_);
             frame.times.push_back({stage.name, ms_since(start)});
             frame.stages_run.emplace_back(stage.name);
         }
-
-        if (any(save_mask & SaveFlags::depth)) {
-            store(frame.depth, depth_);
-            store(frame.material, material_);
-        }
-        if (any(save_mask & SaveFlags::normals)) {
-            if (plan_.effects.incidence) {
-                store(frame.normals, normals_);
-            } else {
-                frame.normals.clear(); // the normals stage did not run (incidence off)
-            }
-        }
-        if (any(save_mask & SaveFlags::echo)) store(frame.echo, echo_);
-        if (any(save_mask & SaveFlags::profiles)) {
-            store(frame.profiles, profiles_);
-            store(frame.beam_profiles, beam_profiles_);
+        for (const StageInfo& stage : kStageTable) {
+            if (!any(save_mask & stage.saves)) continue;
+            const bool ran = stage.runs(stage_.plan);
+            for_each_buffer(stage.saved, [&](StageBuffers buffer) { save_buffer(buffer, ran, frame); });
         }
         return {};
     }
@@ -122,69 +201,26 @@ public:
     const char* name() const override { return "cpu"; }
 
 private:
-    // One stage of kStageTable on this backend's buffers.
-    void run(StageId stage, const Pose& pose, SaveFlags save_mask, float* polar) {
-        switch (stage) {
-        case StageId::depth: {
-            compose_depth_draws(plan_, scene_, pose, draws_);
-            cull_depth_clusters(clusters_, scene_.draws.size(), draws_, clusters_drawn_);
-            const DepthClusters clusters{clusters_, clusters_drawn_};
-            depth_pass(plan_, scene_, draws_, depth_.data(), material_.data(),
-                       plan_.face_normals ? face_.data() : nullptr, &clusters);
-            break;
-        }
-        case StageId::normals:
-            if (plan_.face_normals) {
-                split_blocks(workers_, plan_.rows, kRowBlock,
-                             [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                                 cpu::geometric_normals_rows<Real>(plan_, depth_.data(), face_.data(), normals_.data(),
-                                                                   begin, end);
-                             });
-            } else { // each part slides its own ring of rows: part i's scratch starts at i * per_part
-                const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(plan_), 1);
-                split_blocks(workers_, plan_.rows, kRowBlock,
-                             [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
-                                 cpu::normals_rows<Real>(plan_, depth_.data(), normals_.data(),
-                                                         normals_scratch_.data() + part * per_part, begin, end);
-                             });
-            }
-            break;
-        case StageId::echo: // normals only where the normals stage ran (incidence on)
-            split_blocks(workers_, plan_.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::echo_rows<Real>(plan_, depth_.data(), material_.data(),
-                                     plan_.effects.incidence ? normals_.data() : nullptr, echo_.data(),
-                                     echo_table_.data(), begin, end);
-            });
-            break;
-        case StageId::beamform: { // every column's profile before any beam reads it
-            // the float profiles only when saved: the resample reads the accumulators
-            float* profiles = any(save_mask & SaveFlags::profiles) ? profiles_.data() : nullptr;
-            split_blocks(workers_, plan_.profile_columns, kColumnBlock,
-                         [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                             cpu::beamform_profiles<Real>(plan_, echo_.data(), profiles, scratch_.data(), begin, end);
-                         });
-            split_blocks(workers_, plan_.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                cpu::beamform_beams<Real>(plan_, scratch_.data(), resample_w_.data(), beam_profiles_.data(), polar,
-                                          begin, end);
-            });
-            break;
-        }
+    void save_buffer(StageBuffers buffer, bool ran, Frame& frame) const {
+        switch (buffer) {
+        case StageBuffers::depth:
+            return save(frame.depth, stage_.depth, ran);
+        case StageBuffers::material:
+            return save(frame.material, stage_.material, ran);
+        case StageBuffers::normals:
+            return save(frame.normals, stage_.normals, ran);
+        case StageBuffers::echo:
+            return save(frame.echo, stage_.echo, ran);
+        case StageBuffers::profiles:
+            return save(frame.profiles, stage_.profiles, ran);
+        case StageBuffers::beam_profiles:
+            return save(frame.beam_profiles, stage_.beam_profiles, ran);
+        default: // not one of the Frame's images
+            return;
         }
     }
 
-    Plan plan_;              // copied: the backend may outlive the caller's Plan object
-    const SceneData& scene_; // the scene must outlive the renderer (renderer.h)
-    host::Workers* workers_; // the Renderer's threads, borrowed (null: all on the caller)
-    std::vector<shared::DepthPush> draws_;
-    std::vector<DepthCluster> clusters_;
-    std::vector<std::uint8_t> clusters_drawn_; // slices * clusters, 0 = the cluster cannot reach that slice
-    std::vector<float> depth_;
-    std::vector<std::uint32_t> material_;
-    std::vector<float> face_; // face normals of the depth pass (normal_method = geometric only)
-    std::vector<float> normals_, echo_, profiles_, beam_profiles_; // the polar scan: in the frame
-    std::vector<Real> scratch_, normals_scratch_; // scratch_: the profile accumulators (beamform_accumulator_count)
-    std::vector<Real> echo_table_;                // echo_table, filled once
-    std::vector<Real> resample_w_;                // resample_weights, filled once
+    StageContext<Real> stage_;
 };
 
 } // namespace

@@ -149,7 +149,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     b.resolve_passes();
     const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
     const VkPhysicalDeviceLimits& limits = context.properties.limits;
-    if (group_count(pixels) > limits.maxComputeWorkGroupCount[0] || pixels * 16 > limits.maxStorageBufferRange) {
+    if (!dispatches_fit(plan, limits, true) || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "HostDepthDesc: " + std::to_string(plan.columns) + " x " +
                                                       std::to_string(plan.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -245,7 +245,12 @@ void HostDepthPass::bind_image(const HostDepthImage& image) {
     context.fn.vkUpdateDescriptorSets(context.device, 1, &write, 0, nullptr);
 }
 
-void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage& image) {
+// The depth entry of kStageTable on the host-depth path.
+void record_import(RecordContext& record) {
+    record.host_depth->record_import_pass(record.commands, *record.image, record.dispatches[0]);
+}
+
+void HostDepthPass::record_import_pass(VkCommandBuffer commands, const HostDepthImage& image, const Dispatch& groups) {
     Objects& o = *objects_;
     VulkanBackend& b = *o.backend;
     const VulkanContext& context = b.context_;
@@ -281,7 +286,7 @@ void HostDepthPass::record_import(VkCommandBuffer commands, const HostDepthImage
                                        static_cast<std::uint32_t>(sets.size()), sets.data(), 0, nullptr);
     context.fn.vkCmdPushConstants(commands, o.import_layout.get(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(o.push),
                                   &o.push);
-    context.fn.vkCmdDispatch(commands, group_count(std::uint64_t(b.plan_.columns) * b.plan_.rows), 1, 1);
+    b.dispatch(commands, groups);
     std::array<VkBufferMemoryBarrier, 2> written{
         buffer_barrier(b.depth_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead),
         buffer_barrier(b.material_id_.get(), VK_ACCESS_SHADER_WRITE_BIT, kShaderOrTransferRead)};
@@ -297,9 +302,10 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
     frame.stages_run.clear();
     bind_image(image);
 
-    // One command buffer per stage of kStageTable (the import of the host's image in the depth stage's
-    // place) and one for the readback, submitted one at a time and timed on the host (the backend's
-    // timestamp path is tied to its own render(); a submit costs ~10 us against stages of ms).
+    // One command buffer per stage of kStageTable (its host_depth side: the import of the host's image
+    // in the depth pass's place) and one for the readback, submitted one at a time and timed on the
+    // host (the backend's timestamp path is tied to its own render(); a submit costs ~10 us against
+    // stages of ms).
     std::array<const StageInfo*, kStageCount> stages{};
     std::uint32_t stage_total = 0;
     for (const StageInfo& stage : kStageTable)
@@ -311,12 +317,9 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(context.fn.vkBeginCommandBuffer(commands, &begin));
-        static_assert(kStageTable[0].id == StageId::depth, "the import takes the first stage's place");
-        const bool import = i == 0;
-        if (import) {
-            record_import(commands, image);
-        } else if (i < stage_total) {
-            b.record_stage(commands, stages[i]->id);
+        if (i < stage_total) {
+            RecordContext record{b, commands, stages[i]->host_depth.dispatches(b.plan_), this, &image};
+            stages[i]->host_depth.record(record);
         } else {
             b.record_readback(commands, save_mask);
         }
@@ -328,7 +331,8 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         submit.commandBufferCount = 1;
         submit.pCommandBuffers = &commands;
         const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
-        if (import && image.wait_semaphore != VK_NULL_HANDLE) {
+        // the first stage reads the host's image (stage_table_test): it waits for the host's semaphore
+        if (i == 0 && image.wait_semaphore != VK_NULL_HANDLE) {
             submit.waitSemaphoreCount = 1;
             submit.pWaitSemaphores = &image.wait_semaphore;
             submit.pWaitDstStageMask = &wait_stage;
@@ -360,11 +364,8 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     bind_image(image);
     for (const StageInfo& stage : kStageTable) {
         if (!stage.runs(b.plan_)) continue;
-        if (stage.id == StageId::depth) {
-            record_import(commands, image); // the host's image in the depth pass's place
-        } else {
-            b.record_stage(commands, stage.id);
-        }
+        RecordContext stage_record{b, commands, stage.host_depth.dispatches(b.plan_), this, &image};
+        stage.host_depth.record(stage_record);
     }
     b.record_readback(commands, save_mask);
     // The polar scan stays readable by whatever the host records next (e.g. a fragment shader drawing it).

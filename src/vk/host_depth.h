@@ -8,6 +8,7 @@
 
 #include "core/plan.h"
 #include "stages/stage_backend.h"
+#include "stages/stage_table.h"
 #include "vksonar/frame.h"
 #include "vksonar/host_depth.h"
 #include "vksonar/renderer.h"
@@ -18,6 +19,8 @@ struct VulkanContext;
 }
 
 namespace vksonar::vk {
+
+struct RecordContext;
 
 // A StageBackend so that Renderer::render's frame checks and host stages serve process() and
 // read_back() too: Renderer arms the pass (arm_process / arm_read_back), then calls render().
@@ -55,7 +58,8 @@ private:
     Result<void> check_image(const HostDepthImage& image) const;
     void bind_image(const HostDepthImage& image);
     // The import pass, preceded by the barrier that makes the host's writes to the image visible.
-    void record_import(VkCommandBuffer commands, const HostDepthImage& image);
+    friend void record_import(RecordContext& record);
+    void record_import_pass(VkCommandBuffer commands, const HostDepthImage& image, const Dispatch& groups);
     void copy_frame_out(SaveFlags save_mask, Frame& frame) const;
 
     std::unique_ptr<Objects> objects_;

@@ -39,6 +39,19 @@ VulkanBackend::~VulkanBackend() {
     }
 }
 
+bool dispatches_fit(const Plan& plan, const VkPhysicalDeviceLimits& limits, bool host_depth) {
+    for (const StageInfo& stage : kStageTable) {
+        if (!stage.runs(plan)) continue;
+        for (const Dispatch& d : (host_depth ? stage.host_depth : stage.vulkan).dispatches(plan)) {
+            if (d.shader != nullptr &&
+                (d.x > limits.maxComputeWorkGroupCount[0] || d.y > limits.maxComputeWorkGroupCount[1] ||
+                 d.z > limits.maxComputeWorkGroupCount[2]))
+                return false;
+        }
+    }
+    return true;
+}
+
 void VulkanBackend::resolve_passes() {
     incidence_ = plan_.effects.incidence;
     sidelobes_ = plan_.effects.horizontal_pattern;
@@ -61,14 +74,7 @@ Result<void> VulkanBackend::init() {
                 std::to_string(limits.maxFramebufferHeight) + " (lower pixels_per_beam or rows_per_vfov)");
     }
     const std::uint64_t pixels = std::uint64_t(plan_.columns) * plan_.rows;
-    const std::uint64_t largest_dispatch =
-        std::max({std::uint64_t(group_count(ceil_div(plan_.columns, kEchoPixels))),
-                  std::uint64_t(group_count(plan_.rows * ceil_div(plan_.columns, kNormalsRun))),
-                  std::uint64_t(group_count(ceil_div(plan_.bins, 4)))});
-    if (largest_dispatch > limits.maxComputeWorkGroupCount[0] ||
-        ceil_div(plan_.beams, kBeamsPerInvocation) > limits.maxComputeWorkGroupCount[1] ||
-        plan_.rows > limits.maxComputeWorkGroupCount[1] || // echo: one row of workgroups per pixel row
-        pixels * 16 > limits.maxStorageBufferRange) {
+    if (!dispatches_fit(plan_, limits, false) || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");

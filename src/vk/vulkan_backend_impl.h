@@ -17,19 +17,10 @@
 
 namespace vksonar {
 struct VulkanContext;
-}
+struct HostDepthImage;
+} // namespace vksonar
 
 namespace vksonar::vk {
-
-// Work per invocation (specialization constant 1 of the shaders): more work per invocation pays on
-// lavapipe (docs/benchmarks.md) and costs nothing on a GPU at these sizes.
-constexpr std::uint32_t kNormalsRun = 8; // pixels of one row per normals invocation
-constexpr std::uint32_t kEchoPixels = 4; // consecutive pixels per echo invocation
-// Beams per resample/sidelobe workgroup (each invocation one bin of them); sidelobe.comp holds at most 32.
-constexpr std::uint32_t kBeamsPerInvocation = 16;
-// line_array: cone columns per profile invocation; a pixel between two of them is loaded once, not
-// twice (a quarter of the pixels a gather touches at 4, against all of them at 1).
-constexpr std::uint32_t kConesPerInvocation = 4;
 
 // The timed stages, in order. Each is recorded into its own command buffer so that, without
 // timestamp queries, they can be submitted and timed one by one.
@@ -40,13 +31,9 @@ constexpr VkPipelineStageFlags kComputeOrTransfer =
     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
 constexpr VkAccessFlags kShaderOrTransferRead = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
 
-inline std::uint32_t group_count(std::uint64_t invocations) {
-    return static_cast<std::uint32_t>((invocations + shared::kWorkgroupSize - 1) / shared::kWorkgroupSize);
-}
-
-inline std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
-    return (a + b - 1) / b;
-}
+// Whether every dispatch of the stages the plan runs (kStageTable's, on the backend's own path or on
+// the host-depth path) fits the device's workgroup counts.
+bool dispatches_fit(const Plan& plan, const VkPhysicalDeviceLimits& limits, bool host_depth);
 
 template <class T> std::size_t bytes_of(const std::vector<T>& v) {
     return v.size() * sizeof(T);
@@ -59,9 +46,23 @@ struct Region {
 };
 
 class HostDepthPass; // host_depth.cpp: runs these stages on a host engine's depth image
+class VulkanBackend;
+
+// What a stage's record function (kStageTable's vulkan / host_depth) records into.
+struct RecordContext {
+    VulkanBackend& backend;
+    VkCommandBuffer commands;
+    Dispatches dispatches;                 // the stage's, for the backend's plan
+    HostDepthPass* host_depth = nullptr;   // the host-depth path: its import pass ...
+    const HostDepthImage* image = nullptr; // ... and the host's image of this ping
+};
 
 class VulkanBackend final : public StageBackend {
     friend class HostDepthPass; // reuses the compute stages, buffers and readback without the depth pass
+    friend void record_depth(RecordContext& record);
+    friend void record_normals(RecordContext& record);
+    friend void record_echo(RecordContext& record);
+    friend void record_beamform(RecordContext& record);
 
 public:
     VulkanBackend(VulkanContext& context, const Plan& plan, const SceneData& scene, const RendererOptions& options)
@@ -87,16 +88,17 @@ private:
     Result<void> create_compute_pipelines(const TableViews& views);
     Result<void> create_commands();
 
-    // One stage of kStageTable (the depth stage is the depth pass; the host-depth path records its
-    // import in its place).
-    void record_stage(VkCommandBuffer commands, StageId stage);
-    void record_depth(VkCommandBuffer commands);
-    void record_normals(VkCommandBuffer commands);
-    void record_echo(VkCommandBuffer commands);
-    void record_beamform(VkCommandBuffer commands);
+    // (The stages' commands are kStageTable's record functions, the friends above.)
+    // The polar scan, then the buffers of the saved images (kStageTable's saved).
     void record_readback(VkCommandBuffer commands, SaveFlags save_mask);
+    struct Saved {
+        const Buffer* buffer = nullptr; // null: not one of the Frame's images
+        const Region* region = nullptr;
+    };
+    Saved saved_buffer(StageBuffers buffer) const;
     void bind_compute(VkCommandBuffer commands, VkPipeline pipeline);
     void compute_barrier(VkCommandBuffer commands, const Buffer& written);
+    void dispatch(VkCommandBuffer commands, const Dispatch& groups);
 
     Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
     void copy_out(const Region& region, void* destination) const;

@@ -1,6 +1,7 @@
-// The Vulkan StageBackend, per frame: depth pass (one render pass, one viewport per slice) -> copy to
-// storage buffers -> normals -> echo -> profile -> resample -> sidelobe -> readback. Nothing is
-// created here; render() records, submits, waits and copies out.
+// The Vulkan StageBackend, per frame: kStageTable's record functions, defined here (depth pass, one
+// render pass with one viewport per slice, copied to storage buffers -> normals -> echo -> profile ->
+// resample -> far side lobes -> sidelobe), then the readback. Nothing is created here; render()
+// records, submits, waits and copies out.
 #include <chrono>
 #include <cstring>
 
@@ -24,137 +25,145 @@ void VulkanBackend::compute_barrier(VkCommandBuffer commands, const Buffer& writ
     pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, kComputeOrTransfer, 1, &barrier);
 }
 
-void VulkanBackend::record_depth(VkCommandBuffer commands) {
+// The depth pass: one render pass, one viewport per slice, then its images copied to the buffers the
+// compute stages read.
+void record_depth(RecordContext& record) {
+    VulkanBackend& b = record.backend;
+    VkCommandBuffer commands = record.commands;
+    const Functions& fn = b.context_.fn;
     std::array<VkClearValue, 3> clears{};
     clears[0].color.uint32[0] = shared::kNoMaterial;
     clears[1].depthStencil = {0.0f, 0}; // reversed-Z: 0 is the far plane / no hit
     clears[2].color.float32[0] = 0.0f;  // face normals (geometric only): 0 = none
     VkRenderPassBeginInfo begin{};
     begin.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
-    begin.renderPass = render_pass_.get();
-    begin.framebuffer = framebuffer_.get();
-    begin.renderArea = {{0, 0}, {plan_.columns, plan_.rows}};
-    begin.clearValueCount = face_normals_ ? 3u : 2u;
+    begin.renderPass = b.render_pass_.get();
+    begin.framebuffer = b.framebuffer_.get();
+    begin.renderArea = {{0, 0}, {b.plan_.columns, b.plan_.rows}};
+    begin.clearValueCount = b.face_normals_ ? 3u : 2u;
     begin.pClearValues = clears.data();
-    context_.fn.vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
-    const std::size_t draws = scene_.draws.size(), clusters = clusters_.size();
+    fn.vkCmdBeginRenderPass(commands, &begin, VK_SUBPASS_CONTENTS_INLINE);
+    const std::size_t draws = b.scene_.draws.size(), clusters = b.clusters_.size();
     if (clusters > 0) {
-        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline_.get());
-        VkBuffer vertex_buffer = vertices_.get();
+        fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_GRAPHICS, b.depth_pipeline_.get());
+        VkBuffer vertex_buffer = b.vertices_.get();
         VkDeviceSize zero = 0;
-        context_.fn.vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
-        context_.fn.vkCmdBindIndexBuffer(commands, indices_.get(), 0, VK_INDEX_TYPE_UINT32);
-        for (std::uint32_t s = 0; s < plan_.slices; ++s) {
-            const float x = static_cast<float>(s * plan_.slice_columns);
-            VkViewport viewport{x, 0.0f, float(plan_.slice_columns), float(plan_.rows), 0.0f, 1.0f};
-            VkRect2D scissor{{static_cast<std::int32_t>(s * plan_.slice_columns), 0},
-                             {plan_.slice_columns, plan_.rows}};
-            context_.fn.vkCmdSetViewport(commands, 0, 1, &viewport);
-            context_.fn.vkCmdSetScissor(commands, 0, 1, &scissor);
+        fn.vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
+        fn.vkCmdBindIndexBuffer(commands, b.indices_.get(), 0, VK_INDEX_TYPE_UINT32);
+        for (std::uint32_t s = 0; s < b.plan_.slices; ++s) {
+            const float x = static_cast<float>(s * b.plan_.slice_columns);
+            VkViewport viewport{x, 0.0f, float(b.plan_.slice_columns), float(b.plan_.rows), 0.0f, 1.0f};
+            VkRect2D scissor{{static_cast<std::int32_t>(s * b.plan_.slice_columns), 0},
+                             {b.plan_.slice_columns, b.plan_.rows}};
+            fn.vkCmdSetViewport(commands, 0, 1, &viewport);
+            fn.vkCmdSetScissor(commands, 0, 1, &scissor);
             std::uint32_t pushed_draw = ~0u; // clusters of one draw are consecutive: one push for them all
             for (std::size_t c = 0; c < clusters; ++c) {
-                const DepthCluster& cluster = clusters_[c];
-                if (!clusters_drawn_[s * clusters + c]) continue;
+                const DepthCluster& cluster = b.clusters_[c];
+                if (!b.clusters_drawn_[s * clusters + c]) continue;
                 if (cluster.draw != pushed_draw) {
-                    context_.fn.vkCmdPushConstants(commands, depth_layout_.get(),
-                                                   VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
-                                                   sizeof(shared::DepthPush), &draw_pushes_[s * draws + cluster.draw]);
+                    fn.vkCmdPushConstants(commands, b.depth_layout_.get(),
+                                          VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                          sizeof(shared::DepthPush), &b.draw_pushes_[s * draws + cluster.draw]);
                     pushed_draw = cluster.draw;
                 }
-                context_.fn.vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
-                                             static_cast<std::int32_t>(cluster.first_vertex), 0);
+                fn.vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
+                                    static_cast<std::int32_t>(cluster.first_vertex), 0);
             }
         }
     }
-    context_.fn.vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)
+    fn.vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)
 
     VkBufferImageCopy region{};
     region.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, 1};
-    region.imageExtent = {plan_.columns, plan_.rows, 1};
-    context_.fn.vkCmdCopyImageToBuffer(commands, depth_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, depth_.get(),
-                                       1, &region);
+    region.imageExtent = {b.plan_.columns, b.plan_.rows, 1};
+    fn.vkCmdCopyImageToBuffer(commands, b.depth_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, b.depth_.get(), 1,
+                              &region);
     region.imageSubresource.aspectMask = VK_IMAGE_ASPECT_COLOR_BIT;
-    context_.fn.vkCmdCopyImageToBuffer(commands, material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
-                                       material_id_.get(), 1, &region);
+    fn.vkCmdCopyImageToBuffer(commands, b.material_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                              b.material_id_.get(), 1, &region);
     std::uint32_t barrier_count = 2;
     std::array<VkBufferMemoryBarrier, 3> barriers{
-        buffer_barrier(depth_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
-        buffer_barrier(material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
+        buffer_barrier(b.depth_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
+        buffer_barrier(b.material_id_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, kShaderOrTransferRead),
         {}};
-    if (face_normals_) { // into the normals buffer, which the normals pass then orients in place
-        context_.fn.vkCmdCopyImageToBuffer(commands, face_normal_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
-                                           normals_.get(), 1, &region);
-        barriers[barrier_count++] = buffer_barrier(normals_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+    if (b.face_normals_) { // into the normals buffer, which the normals pass then orients in place
+        fn.vkCmdCopyImageToBuffer(commands, b.face_normal_image_.get(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
+                                  b.normals_.get(), 1, &region);
+        barriers[barrier_count++] = buffer_barrier(b.normals_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
                                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
     }
-    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, barrier_count,
+    pipeline_barrier(b.context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, kComputeOrTransfer, barrier_count,
                      barriers.data());
 }
 
-void VulkanBackend::record_normals(VkCommandBuffer commands) {
-    bind_compute(commands, normals_pipeline_.get());
-    context_.fn.vkCmdDispatch(commands, group_count(std::uint64_t(plan_.rows) * ceil_div(plan_.columns, kNormalsRun)),
-                              1, 1);
-    compute_barrier(commands, normals_);
+void record_normals(RecordContext& record) {
+    VulkanBackend& b = record.backend;
+    b.bind_compute(record.commands, b.normals_pipeline_.get());
+    b.dispatch(record.commands, record.dispatches[0]);
+    b.compute_barrier(record.commands, b.normals_);
 }
 
-void VulkanBackend::record_echo(VkCommandBuffer commands) {
-    bind_compute(commands, echo_pipeline_.get());
-    context_.fn.vkCmdDispatch(commands, group_count(ceil_div(plan_.columns, kEchoPixels)), plan_.rows, 1);
-    compute_barrier(commands, echo_);
+void record_echo(RecordContext& record) {
+    VulkanBackend& b = record.backend;
+    b.bind_compute(record.commands, b.echo_pipeline_.get());
+    b.dispatch(record.commands, record.dispatches[0]);
+    b.compute_barrier(record.commands, b.echo_);
 }
 
-void VulkanBackend::record_beamform(VkCommandBuffer commands) {
+void record_beamform(RecordContext& record) {
+    using namespace stage_table; // the BeamformDispatch indices
+    VulkanBackend& b = record.backend;
+    VkCommandBuffer commands = record.commands;
+    const Functions& fn = b.context_.fn;
     // profile.comp accumulates into zeroed profiles.
-    context_.fn.vkCmdFillBuffer(commands, profiles_.get(), 0, VK_WHOLE_SIZE, 0);
-    VkBufferMemoryBarrier zeroed = buffer_barrier(profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+    fn.vkCmdFillBuffer(commands, b.profiles_.get(), 0, VK_WHOLE_SIZE, 0);
+    VkBufferMemoryBarrier zeroed = buffer_barrier(b.profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
                                                   VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1,
+    pipeline_barrier(b.context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1,
                      &zeroed);
-    bind_compute(commands, profile_pipeline_.get());
-    // one invocation per pixel column (planar) or per kConesPerInvocation cone columns (line_array)
-    context_.fn.vkCmdDispatch(
-        commands,
-        group_count(plan_.line_array ? ceil_div(plan_.profile_columns, kConesPerInvocation) : plan_.profile_columns), 1,
-        1);
-    compute_barrier(commands, profiles_);
+    b.bind_compute(commands, b.profile_pipeline_.get());
+    b.dispatch(commands, record.dispatches[profile]);
+    b.compute_barrier(commands, b.profiles_);
 
-    // resample and sidelobe: x = groups of 4-bin quads, y = runs of beams.
-    const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan_.beams, kBeamsPerInvocation));
-    const std::uint32_t bin_groups = group_count(ceil_div(plan_.bins, 4));
-    context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, resample_pipeline_.get());
-    context_.fn.vkCmdDispatch(commands, bin_groups, beam_runs, 1);
-    compute_barrier(commands, beam_profiles_);
-    if (far_sidelobes_) { // x = groups of 4-bin quads, y = channels x cells (deposit) or channels
-                          // (convolve); sidelobe.comp reads the result
-        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_deposit_pipeline_.get());
-        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_cells * plan_.far_channels, 1);
-        compute_barrier(commands, far_energy_);
-        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, far_convolve_pipeline_.get());
-        context_.fn.vkCmdDispatch(commands, bin_groups, plan_.far_channels, 1);
-        compute_barrier(commands, far_cells_);
+    fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.resample_pipeline_.get());
+    b.dispatch(commands, record.dispatches[resample]);
+    b.compute_barrier(commands, b.beam_profiles_);
+    if (b.far_sidelobes_) { // sidelobe.comp reads the result
+        fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.far_deposit_pipeline_.get());
+        b.dispatch(commands, record.dispatches[far_deposit]);
+        b.compute_barrier(commands, b.far_energy_);
+        fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.far_convolve_pipeline_.get());
+        b.dispatch(commands, record.dispatches[far_convolve]);
+        b.compute_barrier(commands, b.far_cells_);
     }
-    if (sidelobes_) {
-        context_.fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, sidelobe_pipeline_.get());
-        context_.fn.vkCmdDispatch(commands, bin_groups, beam_runs, 1);
-        compute_barrier(commands, polar_);
+    if (b.sidelobes_) {
+        fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.sidelobe_pipeline_.get());
+        b.dispatch(commands, record.dispatches[sidelobe]);
+        b.compute_barrier(commands, b.polar_);
     }
 }
 
-void VulkanBackend::record_stage(VkCommandBuffer commands, StageId stage) {
-    switch (stage) {
-    case StageId::depth:
-        record_depth(commands);
-        break;
-    case StageId::normals:
-        record_normals(commands);
-        break;
-    case StageId::echo:
-        record_echo(commands);
-        break;
-    case StageId::beamform:
-        record_beamform(commands);
-        break;
+void VulkanBackend::dispatch(VkCommandBuffer commands, const Dispatch& groups) {
+    context_.fn.vkCmdDispatch(commands, groups.x, groups.y, groups.z);
+}
+
+VulkanBackend::Saved VulkanBackend::saved_buffer(StageBuffers buffer) const {
+    switch (buffer) {
+    case StageBuffers::depth:
+        return {&depth_, &depth_region_};
+    case StageBuffers::material:
+        return {&material_id_, &material_region_};
+    case StageBuffers::normals:
+        return {&normals_, &normals_region_};
+    case StageBuffers::echo:
+        return {&echo_, &echo_region_};
+    case StageBuffers::profiles:
+        return {&profiles_, &profiles_region_};
+    case StageBuffers::beam_profiles:
+        return {&beam_profiles_, &beam_profiles_region_};
+    default:
+        return {};
     }
 }
 
@@ -166,15 +175,12 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
         context_.fn.vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
     };
     copy(sidelobes_ ? polar_ : beam_profiles_, polar_region_);
-    if (any(save_mask & SaveFlags::depth)) {
-        copy(depth_, depth_region_);
-        copy(material_id_, material_region_);
-    }
-    if (any(save_mask & SaveFlags::normals) && incidence_) copy(normals_, normals_region_);
-    if (any(save_mask & SaveFlags::echo)) copy(echo_, echo_region_);
-    if (any(save_mask & SaveFlags::profiles)) {
-        copy(profiles_, profiles_region_);
-        copy(beam_profiles_, beam_profiles_region_);
+    for (const StageInfo& stage : kStageTable) {
+        if (!any(save_mask & stage.saves) || !stage.runs(plan_)) continue; // copy_frame_out zeroes what did not run
+        for_each_buffer(stage.saved, [&](StageBuffers buffer) {
+            const Saved saved = saved_buffer(buffer);
+            if (saved.buffer != nullptr) copy(*saved.buffer, *saved.region);
+        });
     }
     VkBufferMemoryBarrier barrier = buffer_barrier(target, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT);
     pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
@@ -222,10 +228,10 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
 
     // Record: one command buffer per stage of kStageTable that this plan runs, then one for the readback.
-    std::array<StageId, kStageCount> stages{};
+    std::array<const StageInfo*, kStageCount> stages{};
     std::uint32_t stage_total = 0;
     for (const StageInfo& stage : kStageTable)
-        if (stage.runs(plan_)) stages[stage_total++] = stage.id;
+        if (stage.runs(plan_)) stages[stage_total++] = &stage;
     const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
     VKS_VK_TRY(context_.fn.vkResetCommandPool(context_.device, command_pool_.get(), 0));
@@ -242,7 +248,8 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
         if (i < stage_total) {
-            record_stage(commands, stages[i]);
+            RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_)};
+            stages[i]->vulkan.record(record);
         } else {
             record_readback(commands, save_mask);
         }
@@ -277,7 +284,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     }
     // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
-        const char* name = kStageTable[static_cast<std::size_t>(stages[i])].name;
+        const char* name = stages[i]->name;
         frame.times.push_back(StageTime{name, stage_ms[i]});
         frame.stages_run.emplace_back(name);
     }

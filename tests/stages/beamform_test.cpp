@@ -432,7 +432,7 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
         auto plan = make_plan(config, scene_data(scene.value()));
         ASSERT_TRUE(plan) << plan.error().message;
         // Else the renders below would compare the gather with itself.
-        EXPECT_TRUE(vk::resample_can_walk(plan.value(), vk::kBeamsPerInvocation));
+        EXPECT_TRUE(vk::resample_can_walk(plan.value(), kBeamsPerInvocation));
         auto walked = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles);
         RendererOptions gather;
         gather.resample = ResampleMethod::gather;
@@ -453,15 +453,15 @@ TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
     SonarConfig config = quiet_config();
     auto fan = make_plan(config, scene_data(scene));
     ASSERT_TRUE(fan) << fan.error().message;
-    ASSERT_TRUE(vk::resample_can_walk(fan.value(), vk::kBeamsPerInvocation));
+    ASSERT_TRUE(vk::resample_can_walk(fan.value(), kBeamsPerInvocation));
     config.hfov_deg = 360.0;
     auto circle = make_plan(config, scene_data(scene));
     ASSERT_TRUE(circle) << circle.error().message;
-    EXPECT_FALSE(vk::resample_can_walk(circle.value(), vk::kBeamsPerInvocation));
+    EXPECT_FALSE(vk::resample_can_walk(circle.value(), kBeamsPerInvocation));
     // Beam 40's span reaches back over beam 38's columns, which give beam 40 nothing.
     Plan widened = fan.value();
     widened.beam_column_begin[40] = widened.beam_column_begin[39];
-    EXPECT_FALSE(vk::resample_can_walk(widened, vk::kBeamsPerInvocation));
+    EXPECT_FALSE(vk::resample_can_walk(widened, kBeamsPerInvocation));
 }
 
 } // namespace
