@@ -7,6 +7,7 @@
 //    (asserted on Frame::stages_run and the plan, never on time).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -688,6 +689,13 @@ TEST(EffectsAuto, EveryEffectReportsItsStateAndWhy) {
                 plan.effects.spreading && plan.effects.absorption && plan.effects.ambient_noise);
     EXPECT_FALSE(plan.effects.tvg);
     EXPECT_EQ(state_of(plan, "tvg")->why.rfind("auto: ", 0), 0u);
+    // The vertical pattern says how far up and down it is simulated: to the 20-degree sinc's first null,
+    // asin(pi / k) with k from its half-power point (vertical_coverage x vfov / 2 = 20 deg is less).
+    const double k = sinc_half_power_x() / std::sin(10.0 * kDeg);
+    char within[64];
+    std::snprintf(within, sizeof within, "within +-%.1f deg", std::asin(kPi / k) / kDeg);
+    EXPECT_NE(state_of(plan, "vertical_pattern")->why.find(within), std::string::npos)
+        << state_of(plan, "vertical_pattern")->why << " (expected " << within << ")";
 }
 
 TEST(EffectsAuto, AbsorptionIsOffBelowATenthOfADbOverTheRangeWindow) {

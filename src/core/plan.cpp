@@ -617,8 +617,14 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
             any_angle_dependent ? "a drawn material uses the angle-dependent Lambert model"
                                 : "no drawn material is angle-dependent: no normals pass",
             e.states);
+    // Where the pixel grid stops, the vertical side lobes beyond it are not simulated: say how far it goes.
+    const std::string elevations =
+        p.elevation_gate_sin <= 1.0
+            ? " at elevations within +-" + fmt(std::round(std::asin(p.elevation_gate_sin) / kDegToRad * 10.0) / 10.0) +
+                  " deg (the depth pass's coverage; side lobes beyond it are not simulated)"
+            : "";
     resolve(e.vertical_pattern, c.effects.vertical_pattern, true, "vertical_pattern",
-            "vertical beam pattern always shapes seabed returns", e.states);
+            "vertical beam pattern always shapes seabed returns" + elevations, e.states);
     resolve(e.horizontal_pattern, c.effects.horizontal_pattern, half_taps > 0, "horizontal_pattern",
             half_taps > 0 ? "side-lobe kernel spans " + std::to_string(2 * half_taps + 1) + " beams" + lobes_why
                           : "beam pattern narrower than the beam spacing",
