@@ -89,15 +89,6 @@ void main() {
         }
     }
     if (kFarSidelobes != 0u) {
-        // The run's beams lie in increasing order on the grid, so consecutive beams mostly read the
-        // same two cells: each cell's channels are loaded when the run first reaches it (the branch
-        // is uniform over the workgroup) and held, not loaded again for every beam: lavapipe runs
-        // each of these loads as a loop over the lanes. Each beam still sums s0 * cell0 + s1 * cell1.
-        uint cells = params.far_cells;
-        uint held0 = 0xffffffffu;
-        uint held1 = 0xffffffffu;
-        vec4 at0[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
-        vec4 at1[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
         for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
             uint j = uint(first_beam) + r;
             if (j < uint(beams)) {
@@ -106,29 +97,10 @@ void main() {
                 vec4 phase = vec4(far_entry(i + 4u), far_entry(i + 5u), far_entry(i + 6u), far_entry(i + 7u));
                 uint c0 = uint(cell.x), c1 = uint(cell.y);
                 float s0 = far_cell_share(cell, c0), s1 = far_cell_share(cell, c1);
-                if (c0 != held0) {
-                    if (c0 == held1) {
-                        at0 = at1;
-                    } else {
-                        for (uint m = 0u; m < params.far_channels; ++m) {
-                            at0[m] = far_cells4[(m * cells + c0) * quads + q];
-                        }
-                    }
-                    held0 = c0;
-                }
-                if (c1 != held1) {
-                    if (c1 == held0) {
-                        at1 = at0;
-                    } else {
-                        for (uint m = 0u; m < params.far_channels; ++m) {
-                            at1[m] = far_cells4[(m * cells + c1) * quads + q];
-                        }
-                    }
-                    held1 = c1;
-                }
+                uint cells = params.far_cells;
                 vec4 l[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
                 for (uint m = 0u; m < params.far_channels; ++m) {
-                    l[m] = s0 * at0[m] + s1 * at1[m];
+                    l[m] = s0 * far_cells4[(m * cells + c0) * quads + q] + s1 * far_cells4[(m * cells + c1) * quads + q];
                 }
                 for (uint b = 0u; b < 4u; ++b) {
                     sums[r][b] += far_sidelobe_level(phase, l[0][b], l[1][b], l[2][b]);
