@@ -108,8 +108,15 @@ template <class Real> void run_depth(StageContext<Real>& s) {
     compose_depth_draws(s.plan, s.scene, s.pose, s.draws);
     cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
     const DepthClusters clusters{s.clusters, s.clusters_drawn};
-    depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
-               s.plan.face_normals ? s.face.data() : nullptr, &clusters);
+    // Bands of rows, two per thread: the pixel fill is most of the pass, and the seabed's rows hold
+    // most of it, so one band per thread would leave a thread waiting; every band sets up each
+    // triangle again, so not many more.
+    const std::uint32_t threads = s.workers ? s.workers->count() : 1u;
+    const std::uint32_t band = (s.plan.rows + 2 * threads - 1) / (2 * threads);
+    split_blocks(s.workers, s.plan.rows, band, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+        depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
+                   s.plan.face_normals ? s.face.data() : nullptr, &clusters, begin, end);
+    });
 }
 
 template <class Real> void run_normals(StageContext<Real>& s) {

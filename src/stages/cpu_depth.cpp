@@ -101,8 +101,8 @@ struct Target {
     float* depth;
     std::uint32_t* material;
     std::uint32_t columns;
-    std::int64_t x_begin, x_end; // scissor columns [x_begin, x_end)
-    std::int64_t rows;
+    std::int64_t x_begin, x_end;     // scissor columns [x_begin, x_end)
+    std::int64_t row_begin, row_end; // the band of rows this pass writes (depth_pass)
     std::uint32_t material_id;
     float* face_normal = nullptr;  // rows * columns * 4 or null (normal_method = geometric)
     float triangle_normal[3] = {}; // the current triangle's unit plane normal, clip-linear coordinates
@@ -137,8 +137,8 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
     const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
     const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
     const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
-    const std::int64_t y0 = first_pixel(min_y, 0, t.rows);
-    const std::int64_t y1 = last_pixel_end(max_y, 0, t.rows);
+    const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
+    const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
 
     for (std::int64_t py = y0; py < y1; ++py) {
         const double cy = static_cast<double>(py) + 0.5;
@@ -248,18 +248,23 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
 } // namespace
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal, const DepthClusters* clusters) {
+                std::uint32_t* material, float* face_normal, const DepthClusters* clusters, std::uint32_t row_begin,
+                std::uint32_t row_end) {
     const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
-    const std::size_t pixels = static_cast<std::size_t>(rows) * columns;
-    std::fill(depth, depth + pixels, 0.0f);
-    std::fill(material, material + pixels, shared::kNoMaterial);
-    if (face_normal) std::fill(face_normal, face_normal + 4 * pixels, 0.0f);
+    row_end = std::min(row_end, rows);
+    if (row_begin >= row_end) return;
+    const std::size_t first = static_cast<std::size_t>(row_begin) * columns;
+    const std::size_t last = static_cast<std::size_t>(row_end) * columns;
+    std::fill(depth + first, depth + last, 0.0f);
+    std::fill(material + first, material + last, shared::kNoMaterial);
+    if (face_normal) std::fill(face_normal + 4 * first, face_normal + 4 * last, 0.0f);
 
     const std::size_t draw_count = scene.draws.size();
     const double half_w = 0.5 * W, half_h = 0.5 * rows;
     for (std::uint32_t s = 0; s < plan.slices; ++s) {
-        Target target{depth, material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
-                      rows,  0};
+        Target target{
+            depth,     material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
+            row_begin, row_end,  0};
         target.face_normal = face_normal;
         const double x_offset = static_cast<double>(s) * W;
         if (clusters) {

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "cpu_stage_support.h"
@@ -229,6 +230,66 @@ TEST(CpuDepth, TopLeftRuleCoversSharedEdgesThroughPixelCentresExactlyOnce) {
                     << "split " << k << " pixel " << c << "," << j;
             }
         }
+    }
+}
+
+TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
+    // The CPU backend runs the pass as bands of rows on its threads (cpu_backend.cpp): every pixel must
+    // see the same triangles in the same order as in one pass over the image, ties (the strict GREATER
+    // test keeps the first draw) and clipped triangles crossing band edges included. A room around the
+    // sonar (every slice, near-plane clipping), two crossing planes at equal depth in the middle, and
+    // 200 random triangles in front; the face-normal buffer too.
+    SceneBuilder b;
+    const double lo[3] = {-10, -10, -10}, hi[3] = {10, 10, 10};
+    const std::uint32_t m0 = b.material(-20.0), m1 = b.material(-10.0), m2 = b.material(-30.0);
+    b.draw(b.box(lo, hi), m0);
+    b.draw(b.mesh({8, -6, -3, 8, 6, -3, 8, 6, 3, 8, -6, 3}, {0, 1, 2, 0, 2, 3}), m1);
+    b.draw(b.mesh({8, -3, -6, 8, 3, -6, 8, 3, 6, 8, -3, 6}, {0, 1, 2, 0, 2, 3}), m2); // same plane: ties
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> coord(-4.0f, 4.0f), ahead(1.0f, 7.0f);
+    std::vector<float> soup;
+    std::vector<std::uint32_t> soup_indices;
+    for (std::uint32_t t = 0; t < 200; ++t) {
+        for (int k = 0; k < 3; ++k) {
+            soup.insert(soup.end(), {ahead(rng), coord(rng), coord(rng)});
+            soup_indices.push_back(3 * t + std::uint32_t(k));
+        }
+    }
+    b.draw(b.mesh(soup, soup_indices), m1);
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0;
+    config.beams = 64;
+    const Plan plan = plan_for(config, b.scene);
+    std::vector<shared::DepthPush> draws;
+    compose_depth_draws(plan, b.scene, Pose{}, draws);
+    const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
+    std::vector<float> depth(pixels, -1.0f), face(4 * pixels, -1.0f);
+    std::vector<std::uint32_t> material(pixels, 12345u);
+    cpu::depth_pass(plan, b.scene, draws, depth.data(), material.data(), face.data());
+    ASSERT_GT(std::count(material.begin(), material.end(), m0), 0);
+    ASSERT_GT(std::count(material.begin(), material.end(), m1), 0);
+    for (std::uint32_t bands : {2u, 3u, 7u, plan.rows}) {
+        std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
+        std::vector<std::uint32_t> band_material(pixels, 12345u);
+        const std::uint32_t step = (plan.rows + bands - 1) / bands;
+        for (std::uint32_t begin = 0; begin < plan.rows; begin += step) // each clears only its own rows
+            cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), nullptr,
+                            begin, begin + step);
+        EXPECT_EQ(band_depth, depth) << bands << " bands";
+        EXPECT_EQ(band_material, material) << bands << " bands";
+        EXPECT_EQ(band_face, face) << bands << " bands";
+    }
+    // And a band leaves every other row as it was (threads write their bands at the same time).
+    const std::uint32_t begin = plan.rows / 3, end = 2 * plan.rows / 3;
+    std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
+    std::vector<std::uint32_t> band_material(pixels, 12345u);
+    cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), nullptr, begin,
+                    end);
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const bool inside = p >= std::size_t(begin) * plan.columns && p < std::size_t(end) * plan.columns;
+        ASSERT_EQ(band_depth[p], inside ? depth[p] : -1.0f) << "pixel " << p;
+        ASSERT_EQ(band_material[p], inside ? material[p] : 12345u) << "pixel " << p;
+        ASSERT_EQ(band_face[4 * p], inside ? face[4 * p] : -1.0f) << "pixel " << p;
     }
 }
 
