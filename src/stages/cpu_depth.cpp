@@ -106,6 +106,10 @@ struct Target {
     std::uint32_t material_id;
     float* face_normal = nullptr;  // rows * columns * 4 or null (normal_method = geometric)
     float triangle_normal[3] = {}; // the current triangle's unit plane normal, clip-linear coordinates
+    // The band's edges in y_ndc, and whether it is less than the whole image (then triangles and
+    // clusters wholly above or below it are skipped before their setup).
+    double band_top_ndc = -1.0, band_bottom_ndc = 1.0;
+    bool band = false;
 };
 
 // First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
@@ -192,6 +196,35 @@ void plane_normal(const ClipVertex* v, float out[3]) {
         out[k] = len > 0.0 && std::isfinite(len) ? static_cast<float>(n[k] / len) : 0.0f;
 }
 
+// Bits: 1 above the band (y_ndc < top), 2 below it (y_ndc > bottom), as half-spaces of clip space (so
+// also for w <= 0), with a margin far below a pixel and far above float rounding (cull_depth_clusters).
+unsigned band_outcode(double y, double w, double magnitude, const Target& t) {
+    const double tol = 1e-5 * magnitude;
+    unsigned code = 0;
+    if (y < t.band_top_ndc * w - tol) code |= 1u;
+    if (y > t.band_bottom_ndc * w + tol) code |= 2u;
+    return code;
+}
+
+// Whether some corner of the cluster's bounding box is not wholly above or below the band.
+bool cluster_reaches_band(const DepthCluster& cluster, const shared::DepthPush& push, const Target& t) {
+    const float* m = push.clip_from_local;
+    unsigned every = 3u;
+    for (int corner = 0; corner < 8 && every; ++corner) {
+        const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
+                             corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
+                             corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
+        double y = m[13], w = m[15], magnitude = std::abs(y) + std::abs(w);
+        for (int k = 0; k < 3; ++k) {
+            y += double(m[k * 4 + 1]) * p[k];
+            w += double(m[k * 4 + 3]) * p[k];
+            magnitude += std::abs(double(m[k * 4 + 1]) * p[k]) + std::abs(double(m[k * 4 + 3]) * p[k]);
+        }
+        every &= band_outcode(y, w, magnitude, t);
+    }
+    return every == 0u;
+}
+
 bool finite(const ClipVertex& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
 }
@@ -220,6 +253,12 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
         if (!ok) continue;
         const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
         if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
+        if (target.band) {          // entirely above or below this band of rows
+            unsigned every = 3u;
+            for (int k = 0; k < 3; ++k)
+                every &= band_outcode(poly[k].y, poly[k].w, std::abs(poly[k].y) + std::abs(poly[k].w), target);
+            if (every) continue;
+        }
         if (target.face_normal) plane_normal(poly, target.triangle_normal);
         int n = 3;
         if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
@@ -266,6 +305,9 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
             depth,     material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
             row_begin, row_end,  0};
         target.face_normal = face_normal;
+        target.band = row_begin > 0 || row_end < rows;
+        target.band_top_ndc = 2.0 * row_begin / rows - 1.0;
+        target.band_bottom_ndc = 2.0 * row_end / rows - 1.0;
         const double x_offset = static_cast<double>(s) * W;
         if (clusters) {
             const std::size_t count = clusters->runs.size();
@@ -273,6 +315,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
                 const DepthCluster& run = clusters->runs[c];
                 const std::size_t slot = s * draw_count + run.draw;
                 if (slot >= draws.size() || !clusters->drawn[s * count + c]) continue;
+                if (target.band && !cluster_reaches_band(run, draws[slot], target)) continue;
                 rasterize_run(scene, draws[slot], run.first_vertex, scene.indices.data() + run.first_index,
                               run.index_count, x_offset, half_w, half_h, target);
             }
