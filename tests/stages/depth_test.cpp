@@ -246,7 +246,7 @@ TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
     b.draw(b.mesh({8, -6, -3, 8, 6, -3, 8, 6, 3, 8, -6, 3}, {0, 1, 2, 0, 2, 3}), m1);
     b.draw(b.mesh({8, -3, -6, 8, 3, -6, 8, 3, 6, 8, -3, 6}, {0, 1, 2, 0, 2, 3}), m2); // same plane: ties
     std::mt19937 rng(7);
-    std::uniform_real_distribution<float> coord(-4.0f, 4.0f), ahead(1.0f, 7.0f);
+    std::uniform_real_distribution<float> coord(-1.0f, 1.0f), ahead(4.0f, 8.0f);
     std::vector<float> soup;
     std::vector<std::uint32_t> soup_indices;
     for (std::uint32_t t = 0; t < 200; ++t) {
@@ -256,9 +256,25 @@ TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
         }
     }
     b.draw(b.mesh(soup, soup_indices), m1);
+    // A seabed grid of 48 x 48 quads, 2 m below: several clusters of 512 triangles, some of them wholly
+    // above or below a band (the bands skip those).
+    std::vector<float> grid;
+    std::vector<std::uint32_t> grid_indices;
+    const std::uint32_t n = 48;
+    for (std::uint32_t i = 0; i <= n; ++i)
+        for (std::uint32_t j = 0; j <= n; ++j)
+            grid.insert(grid.end(), {2.0f + 0.15f * float(i), -3.6f + 0.15f * float(j), -2.0f});
+    for (std::uint32_t i = 0; i < n; ++i) {
+        for (std::uint32_t j = 0; j < n; ++j) {
+            const std::uint32_t v = i * (n + 1) + j;
+            grid_indices.insert(grid_indices.end(), {v, v + n + 1, v + 1, v + 1, v + n + 1, v + n + 2});
+        }
+    }
+    b.draw(b.mesh(grid, grid_indices), m2);
     SonarConfig config = small_config();
     config.hfov_deg = 130.0;
     config.beams = 64;
+    config.vertical_coverage = 6.0; // +-30 degrees: the grid below the soup
     const Plan plan = plan_for(config, b.scene);
     std::vector<shared::DepthPush> draws;
     compose_depth_draws(plan, b.scene, Pose{}, draws);
@@ -268,16 +284,27 @@ TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
     cpu::depth_pass(plan, b.scene, draws, depth.data(), material.data(), face.data());
     ASSERT_GT(std::count(material.begin(), material.end(), m0), 0);
     ASSERT_GT(std::count(material.begin(), material.end(), m1), 0);
-    for (std::uint32_t bands : {2u, 3u, 7u, plan.rows}) {
-        std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
-        std::vector<std::uint32_t> band_material(pixels, 12345u);
-        const std::uint32_t step = (plan.rows + bands - 1) / bands;
-        for (std::uint32_t begin = 0; begin < plan.rows; begin += step) // each clears only its own rows
-            cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), nullptr,
-                            begin, begin + step);
-        EXPECT_EQ(band_depth, depth) << bands << " bands";
-        EXPECT_EQ(band_material, material) << bands << " bands";
-        EXPECT_EQ(band_face, face) << bands << " bands";
+    ASSERT_GT(std::count(material.begin(), material.end(), m2), 0);
+    // By whole meshes, and by clusters as the CPU backend draws them.
+    std::vector<DepthCluster> runs;
+    std::vector<std::uint8_t> drawn;
+    build_depth_clusters(b.scene, runs);
+    cull_depth_clusters(runs, b.scene.draws.size(), draws, drawn);
+    ASSERT_GT(runs.size(), 4u);
+    const cpu::DepthClusters clusters{runs, drawn};
+    for (const cpu::DepthClusters* by : {static_cast<const cpu::DepthClusters*>(nullptr), &clusters}) {
+        for (std::uint32_t bands : {2u, 3u, 7u, plan.rows}) {
+            std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
+            std::vector<std::uint32_t> band_material(pixels, 12345u);
+            const std::uint32_t step = (plan.rows + bands - 1) / bands;
+            for (std::uint32_t begin = 0; begin < plan.rows; begin += step) // each clears only its own rows
+                cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), by,
+                                begin, begin + step);
+            const char* how = by ? "clusters" : "meshes";
+            EXPECT_EQ(band_depth, depth) << bands << " bands, " << how;
+            EXPECT_EQ(band_material, material) << bands << " bands, " << how;
+            EXPECT_EQ(band_face, face) << bands << " bands, " << how;
+        }
     }
     // And a band leaves every other row as it was (threads write their bands at the same time).
     const std::uint32_t begin = plan.rows / 3, end = 2 * plan.rows / 3;
