@@ -128,6 +128,22 @@ std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
     return static_cast<std::int64_t>(f);
 }
 
+// Narrows [x0, x1) to the pixels of row centre cy that could be on e's covered side: where the edge
+// crosses the row, solved for x and widened by a pixel each way, so the exact test in the loop still
+// decides every pixel (the same bytes as testing the whole box) and a thin or slanted triangle no
+// longer tests its box's empty corners. Horizontal edges, and a crossing that is not finite, leave it.
+void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
+    if (e.dy == 0.0) return;
+    const double cross = e.ax + e.dx * (cy - e.ay) / e.dy;
+    if (!std::isfinite(cross)) return;
+    // e(cx) = sign (dx (cy - ay) - dy (cx - ax)) grows with cx where -sign dy > 0: covered to the right.
+    if (-e.sign * e.dy > 0.0) {
+        x0 = std::max(x0, first_pixel(cross - 1.0, x0, x1));
+    } else {
+        x1 = std::min(x1, last_pixel_end(cross + 1.0, x0, x1));
+    }
+}
+
 void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {
     // Orientation from the same canonical edge function the coverage test uses.
     double area = make_edge(v0, v1).eval(v2.x, v2.y);
@@ -147,7 +163,11 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
     for (std::int64_t py = y0; py < y1; ++py) {
         const double cy = static_cast<double>(py) + 0.5;
         const std::size_t row_base = static_cast<std::size_t>(py) * t.columns;
-        for (std::int64_t px = x0; px < x1; ++px) {
+        std::int64_t row_x0 = x0, row_x1 = x1;
+        row_span(e0, cy, row_x0, row_x1);
+        row_span(e1, cy, row_x0, row_x1);
+        row_span(e2, cy, row_x0, row_x1);
+        for (std::int64_t px = row_x0; px < row_x1; ++px) {
             const double cx = static_cast<double>(px) + 0.5;
             const double w0 = e0.eval(cx, cy);
             if (!e0.covers(w0)) continue;
