@@ -4,6 +4,9 @@
 // trajectory, --save list) is read and validated first; only then is the output directory created,
 // and it is removed again if anything fails before the first frame is on disk. Each file is written
 // under a temporary name and renamed, so a reader never sees half a file.
+//
+// run_render (at the end) reads as the list of steps; the per-frame files are written by
+// render_frame.cpp.
 #include <unistd.h>
 
 #include <algorithm>
@@ -550,10 +553,10 @@ struct RenderJob {
     std::uint64_t seed = 1;
     SaveSet save;
     std::string out_path;
-    bool dataset = false; // --out FILE.h5 (or .hdf5)
-    bool bag = false;     // --out FILE.mcap
-    std::optional<McapOptions> bag_options;
-    bool default_scene = false; // no --scene: the bundled one
+    bool dataset = false;                   // --out FILE.h5 (or .hdf5)
+    bool bag = false;                       // --out FILE.mcap
+    std::optional<McapOptions> bag_options; // open_bag adds compression and the shard record
+    bool default_scene = false;             // no --scene: the bundled one
     std::string scene_path;
     bool trajectory = false; // --trajectory (poses holds its lines)
     std::vector<TrajectoryPose> poses;
