@@ -4,6 +4,9 @@
 // trajectory, --save list) is read and validated first; only then is the output directory created,
 // and it is removed again if anything fails before the first frame is on disk. Each file is written
 // under a temporary name and renamed, so a reader never sees half a file.
+//
+// run_render (at the end) reads as the list of steps; the per-frame files are written by
+// render_frame.cpp.
 #include <unistd.h>
 
 #include <algorithm>
@@ -28,6 +31,7 @@
 #include "cli/dataset_mcap.h"
 #include "cli/inputs.h"
 #include "cli/merge.h"
+#include "cli/render_frame.h"
 #include "cli/shard.h"
 #include "cli/write_behind.h"
 #include "core/plan.h"
@@ -108,20 +112,6 @@ constexpr const char* kUsage =
 const std::vector<std::string> kSaveItems = {"default",  "fan",     "polar", "polar_png", "polar_u16",
                                              "depth",    "normals", "echo",  "cloud",     "multibeam",
                                              "raw_scan", "labels",  "flow"};
-
-// What a render writes. meta.json always (it says what the arrays are); the rest as --save lists it,
-// or, without --save, the default set.
-struct SaveSet {
-    bool fan = true, polar = true, polar_png = true, polar_u16 = true; // the default set
-    bool depth = false, normals = false, echo = false, cloud = false;
-    bool multibeam = false, raw_scan = false; // uuv-legacy intermediates
-    bool labels = false;                      // ground truth per cell and on the fan (docs/labels.md)
-    bool flow = false;                        // labels' flow to the next frame of the trajectory
-    SaveFlags mask() const {
-        return (depth ? SaveFlags::depth : SaveFlags::none) | (normals ? SaveFlags::normals : SaveFlags::none) |
-               (echo ? SaveFlags::echo : SaveFlags::none) | (labels || flow ? SaveFlags::labels : SaveFlags::none);
-    }
-};
 
 struct TrajectoryPose {
     Pose pose;
@@ -528,406 +518,186 @@ std::string save_list(const SaveSet& s) {
     return list;
 }
 
-// Writes through `write(temporary path)`, then renames onto `path`.
-template <class WriteFn> void write_atomically(const fs::path& path, WriteFn&& write) {
-    const fs::path temporary = path.parent_path() / (".~" + path.filename().string());
-    Result<void> written = write(temporary.string());
-    std::error_code ec;
-    if (!written) {
-        fs::remove(temporary, ec);
-        throw Failure(written.error().message);
-    }
-    fs::rename(temporary, path, ec);
-    if (ec) {
-        const std::string why = ec.message(); // before remove() reuses ec
-        fs::remove(temporary, ec);
-        // A directory where an output file goes is the user's to move (bad input); anything else is ours.
-        if (fs::is_directory(path, ec)) throw BadInput("cannot write " + path.string() + ": a directory is in the way");
-        throw Failure("cannot write " + path.string() + ": " + why);
-    }
+// ---- the steps of a render (run_render below runs them in order) ----------------------------------
+
+Args parse_render_args(const std::vector<std::string>& argv) {
+    return parse_args(argv,
+                      {{"--scene", true, false},
+                       {"--sonar", true, false},
+                       {"--config", true, false},
+                       {"--pose", true, false},
+                       {"--trajectory", true, false},
+                       {"--set", true, true},
+                       {"--quality", true, false},
+                       {"--seed", true, false},
+                       {"--backend", true, false},
+                       {"--save", true, true},
+                       {"--out", true, false},
+                       {"--asset-root", true, false},
+                       {"--compress", false, false},
+                       {"--ros-prefix", true, false},
+                       {"--ros-frame", true, false},
+                       {"--rate", true, false},
+                       {"--ros-sonar-dtype", true, false},
+                       {"--shard", true, false},
+                       {"--shard-count", true, false},
+                       {"--help", false, false}},
+                      "render");
 }
 
-// ---- per-frame outputs -------------------------------------------------------------------------
-
-// Legacy modes: the legacy chain's buffers, reused across frames.
-struct LegacyState {
-    SonarMode mode = SonarMode::physical;
-    std::vector<float> depth; // metres along the optical axis, 0 = no hit
-    legacy::UuvImages uuv;
-    legacy::GtriImages gtri;
-    std::vector<legacy::GtriPoint> cloud;
-    host::Image gray; // single-channel intermediates as grey PNGs
-};
-
-struct Outputs {
-    const Plan& plan;
-    const SaveSet& save;
-    const host::FanRenderer& fan;
-    std::string config_json;
-    nlohmann::ordered_json config_parsed; // config_json parsed once (meta.json's "config" every frame)
-    std::string meta_plan_part;           // host::meta_json_plan_part(plan), made once
-    std::string scene_path;
-    std::string backend;
-    std::string backend_reason; // why this backend (--backend, or what auto saw)
-    std::string device;
-    // Scratch reused across frames.
-    host::Image image;
-    std::vector<std::uint16_t> quantized;
-    std::vector<float> view_range;
-    LegacyState* legacy = nullptr;        // set in legacy modes
-    const ShardRecord* shard = nullptr;   // a shard of the trajectory: meta.json says which
-    nlohmann::ordered_json objects;       // host::objects_json(scene), made once
-    std::vector<std::uint16_t> fan_ids;   // --save labels: instance or class ids on the fan image
-    std::vector<std::string> class_names; // Scene::classes(): boxes.json's class names
-    host::BoxFinder box_finder;           // --save labels: boxes.json, its scratch kept across frames
-    std::vector<host::Box> boxes;
-    std::string boxes_text; // the frame's boxes.json (frame_boxes)
-};
-
-// `time_s`: the trajectory's time column, or null when it has none.
-std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
-    nlohmann::ordered_json extra;
-    extra["config"] = out.config_parsed;
-    extra["scene"] = out.scene_path;
-    if (time_s) extra["time_s"] = *time_s;
-    extra["pose"] = {{"x_m", pose.x_m},
-                     {"y_m", pose.y_m},
-                     {"z_m", pose.z_m},
-                     {"roll_deg", pose.roll_deg},
-                     {"pitch_deg", pose.pitch_deg},
-                     {"yaw_deg", pose.yaw_deg}};
-    extra["objects"] = out.objects;
-    extra["backend"] = out.backend;
-    extra["backend_reason"] = out.backend_reason;
-    extra["device"] = out.device;
-    if (out.shard)
-        extra["shard"] = {{"index", out.shard->index}, {"count", out.shard->count}, {"source", out.shard->source}};
-    if (out.legacy && out.legacy->mode == SonarMode::uuv_legacy) {
-        extra["mode"] = "uuv-legacy";
-        extra["legacy"] = {
-            {"fan.png", "uuv_simulator visual scan (400 rows, fixed 17 m range), see docs/legacy.md"},
-            {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy scan"},
-            {"raw_scan", "raw_scan.npy (--save raw_scan): the legacy 400-row float scan after dilation and speckle"},
-            {"scan_rows", out.legacy->uuv.scan_rows},
-            {"scan_cols", out.legacy->uuv.scan_cols},
-            {"scan_range_m", legacy::kUuvRangeM},
-            {"depth_image", {{"width", out.legacy->uuv.width}, {"height", out.legacy->uuv.height}}}};
-    } else if (out.legacy && out.legacy->mode == SonarMode::gtri_legacy) {
-        extra["mode"] = "gtri-legacy";
-        extra["legacy"] = {
-            {"fan.png", "GTRI 600x600 image (forward up, apex at the centre), see docs/legacy.md"},
-            {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy image"},
-            {"cloud.ply", "the GTRI point cloud before the x jitter, intensity = retro 0..255 (--save cloud)"},
-            {"points", out.legacy->cloud.size()},
-            {"pixels_per_m", legacy::kGtriRangePixels / out.plan.config.range_max_m}};
-    } else {
-        extra["mode"] = "physical";
-    }
-    return extra.dump();
-}
-
-// One channel of floats as a grey PNG: value in [0, 1] -> 0..255 (the plugin's convertTo(CV_8U, 255)).
-void gray_image(const float* values, std::size_t stride, std::uint32_t width, std::uint32_t height,
-                host::Image& image) {
-    image.width = width;
-    image.height = height;
-    image.rgb.resize(static_cast<std::size_t>(width) * height * 3);
-    for (std::size_t i = 0; i < static_cast<std::size_t>(width) * height; ++i) {
-        const float v = values[i * stride];
-        const auto g =
-            static_cast<std::uint8_t>(std::lround(std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) * 255.0f : 0.0f));
-        image.rgb[i * 3 + 0] = image.rgb[i * 3 + 1] = image.rgb[i * 3 + 2] = g;
-    }
-}
-
-// Runs the legacy chain on this frame's depth pass and writes fan.png (the legacy image) and the
-// requested legacy intermediates.
-void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, const Frame& frame) {
-    const Plan& plan = out.plan;
-    LegacyState& L = legacy_state;
-    legacy::legacy_depth_from_frame(plan, frame, L.depth);
-    if (L.depth.empty()) throw Failure("legacy mode: the depth pass returned no depth image");
-    constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-    const double hfov = plan.config.hfov_deg * kDegToRad;
-    auto write_ply = [&](const char* comment) {
-        write_atomically(dir / "cloud.ply", [&](const std::string& p) {
-            return host::write_points_ply(p, reinterpret_cast<const float*>(L.cloud.data()), L.cloud.size(), comment);
-        });
-    };
-    if (L.mode == SonarMode::uuv_legacy) {
-        legacy::uuv_legacy(L.depth.data(), plan.columns, plan.rows, hfov, frame.seed, frame.frame_index, L.uuv);
-        if (out.save.fan)
-            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
-        const legacy::UuvImages& u = L.uuv;
-        if (out.save.normals) {
-            L.gray.width = u.width;
-            L.gray.height = u.height;
-            L.gray.rgb.resize(u.normals.size());
-            for (std::size_t i = 0; i < u.normals.size(); ++i)
-                L.gray.rgb[i] = static_cast<std::uint8_t>(std::lround(std::clamp(u.normals[i], 0.0f, 1.0f) * 255.0f));
-            write_atomically(dir / "normals.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
-        }
-        if (out.save.multibeam) {
-            gray_image(u.multibeam.data(), 1, u.width, u.height, L.gray);
-            write_atomically(dir / "multibeam.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / "multibeam.npy", [&](const std::string& p) {
-                return host::write_npy_f32(p, u.multibeam.data(), u.height, u.width);
-            });
-        }
-        if (out.save.raw_scan) {
-            gray_image(u.raw_scan.data(), 1, u.scan_cols, u.scan_rows, L.gray);
-            write_atomically(dir / "raw_scan.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / "raw_scan.npy", [&](const std::string& p) {
-                return host::write_npy_f32(p, u.raw_scan.data(), u.scan_rows, u.scan_cols);
-            });
-        }
-        if (out.save.cloud) {
-            legacy::uuv_cloud_from_frame(plan, frame, L.uuv, L.cloud);
-            write_ply("uuv-legacy depth-camera cloud in the sonar frame: x forward, y port (left), z up; "
-                      "intensity = multibeam value 0..1");
-        }
-    } else {
-        legacy::gtri_cloud_from_frame(plan, frame, L.cloud);
-        legacy::gtri_legacy(L.cloud, hfov, plan.config.range_max_m, frame.seed, frame.frame_index, L.gtri);
-        if (out.save.fan)
-            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
-        if (out.save.cloud)
-            write_ply("gtri-legacy cloud in the sonar frame: x forward, y port (left), z up; intensity = retro 0..255");
-    }
-}
-
-// The frame's boxes.json text, for the frame folder and the dataset file alike, so the two never differ.
-// Leaves Frame::instance on the fan image (instance_fan.npy) in out.fan_ids: the boxes' fan extents are
-// read off those ids, so the two files always agree.
-const std::string& frame_boxes(Outputs& out, const Frame& frame) {
-    const std::uint32_t width = out.fan.width(), height = out.fan.height();
-    out.fan.nearest_cell(frame.instance, out.fan_ids);
-    out.box_finder.find(frame, out.fan_ids, width, height, out.boxes);
-    out.boxes_text = host::boxes_json_text(frame, width, height, out.boxes, out.class_names);
-    return out.boxes_text;
-}
-
-// --save labels: the per-cell label arrays (as polar.npy's [bins, beams]), the fan-image versions of
-// instance and class, nearest cell (docs/labels.md), and each object's box (boxes.json, docs/datasets.md).
-void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
-    const std::uint32_t bins = frame.bins, beams = frame.beams;
-    const auto u16 = [&](const char* name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
-                         std::uint32_t cols) {
-        write_atomically(dir / name,
-                         [&](const std::string& p) { return host::write_npy_u16(p, v.data(), rows, cols); });
-    };
-    const auto f32 = [&](const char* name, const std::vector<float>& v, std::uint32_t channels) {
-        write_atomically(dir / name,
-                         [&](const std::string& p) { return host::write_npy_f32(p, v.data(), bins, beams, channels); });
-    };
-    u16("instance.npy", frame.instance, bins, beams);
-    f32("instance_fraction.npy", frame.instance_fraction, 1);
-    u16("class.npy", frame.object_class, bins, beams);
-    f32("elevation.npy", frame.elevation, 1);
-    f32("elevation_spread.npy", frame.elevation_spread, 1);
-    f32("point.npy", frame.point, 3);
-    const std::uint32_t width = out.fan.width(), height = out.fan.height();
-    out.fan.nearest_cell(frame.object_class, out.fan_ids);
-    u16("class_fan.npy", out.fan_ids, height, width);
-    const std::string& boxes = frame_boxes(out, frame);
-    u16("instance_fan.npy", out.fan_ids, height, width);
-    write_atomically(dir / "boxes.json", [&](const std::string& p) { return host::write_text_file(p, boxes); });
-    host::label_image(out.fan_ids, width, height, out.image);
-    write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
-}
-
-// flow: --save flow's d_bin, d_beam per cell toward the next frame (null without it).
-void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s,
-                 const std::vector<float>* flow) {
-    const Plan& plan = out.plan;
-    if (out.legacy) {
-        write_legacy(*out.legacy, out, dir, frame);
-    } else if (out.save.fan) {
-        out.fan.render(frame, out.image);
-        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
-    }
-    if (out.save.polar_png) {
-        host::polar_image(plan, frame, out.image);
-        write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
-    }
-    if (out.save.polar)
-        write_atomically(dir / "polar.npy", [&](const std::string& p) {
-            return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
-        });
-    if (out.save.polar_u16) {
-        host::quantize_display(frame, out.quantized);
-        write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
-            return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
-        });
-    }
-    if (out.save.depth) {
-        host::depth_to_view_range(plan, frame, out.view_range);
-        write_atomically(dir / "depth.npy", [&](const std::string& p) {
-            return host::write_npy_f32(p, out.view_range.data(), frame.rows, frame.columns);
-        });
-    }
-    if (out.save.normals)
-        write_atomically(dir / "normals.npy", [&](const std::string& p) {
-            return host::write_npy_f32(p, frame.normals.data(), frame.rows, frame.columns, 4);
-        });
-    if (out.save.echo)
-        write_atomically(dir / "echo.npy", [&](const std::string& p) {
-            return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
-        });
-    if (out.save.labels) write_labels(out, dir, frame);
-    if (flow)
-        write_atomically(dir / "flow.npy", [&](const std::string& p) {
-            return host::write_npy_f32(p, flow->data(), frame.bins, frame.beams, 2);
-        });
-    if (out.save.cloud && !out.legacy)
-        write_atomically(dir / "cloud.ply",
-                         [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
-    const std::string extra = extra_meta_fields(out, pose, time_s);
-    write_atomically(dir / "meta.json", [&](const std::string& p) {
-        return host::write_meta_json(p, plan, frame, extra, &out.meta_plan_part);
-    });
-}
-
-} // namespace
-
-int run_render(const std::vector<std::string>& argv) {
-    const Args args = parse_args(argv,
-                                 {{"--scene", true, false},
-                                  {"--sonar", true, false},
-                                  {"--config", true, false},
-                                  {"--pose", true, false},
-                                  {"--trajectory", true, false},
-                                  {"--set", true, true},
-                                  {"--quality", true, false},
-                                  {"--seed", true, false},
-                                  {"--backend", true, false},
-                                  {"--save", true, true},
-                                  {"--out", true, false},
-                                  {"--asset-root", true, false},
-                                  {"--compress", false, false},
-                                  {"--ros-prefix", true, false},
-                                  {"--ros-frame", true, false},
-                                  {"--rate", true, false},
-                                  {"--ros-sonar-dtype", true, false},
-                                  {"--shard", true, false},
-                                  {"--shard-count", true, false},
-                                  {"--help", false, false}},
-                                 "render");
-    if (args.has("--help")) {
-        std::fputs(kUsage, stdout);
-        return 0;
-    }
-    if (!args.positional.empty())
-        throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
-    if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
-    if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
-
-    // 1. Options that need no files.
+// What the command line asks for, read and checked before any output exists (parse_job), completed
+// by the scene (load_scene_and_config: a --pose frame pose).
+struct RenderJob {
+    std::string backend_name = "auto"; // --backend: auto, vulkan or cpu
     Backend backend = Backend::vulkan;
-    std::string backend_name = args.value("--backend", "auto");
-    if (backend_name == "cpu")
-        backend = Backend::cpu;
-    else if (backend_name != "vulkan" && backend_name != "auto")
-        throw BadInput("--backend: '" + backend_name + "' is not a backend (auto, vulkan or cpu)");
-    const std::uint64_t seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
-    SaveSet save = parse_save(args.values("--save"));
-    if (save.flow && !args.has("--trajectory"))
-        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
-    const std::string out_path = args.value("--out");
-    const bool dataset = is_dataset_path(out_path);
-    const bool bag = is_mcap_path(out_path);
-    if (dataset) check_dataset_save(save, !args.values("--save").empty(), out_path);
-    std::optional<McapOptions> bag_options;
-    if (bag) bag_options = mcap_options(args, save, out_path);
-    for (const char* option : {"--ros-prefix", "--ros-frame", "--rate", "--ros-sonar-dtype"})
-        if (args.has(option) && !bag) throw BadInput(std::string(option) + ": only for a ROS 2 bag (--out FILE.mcap)");
-    if (args.has("--compress") && !dataset && !bag)
-        throw BadInput("--compress: only a .h5 dataset or a .mcap bag is compressed (--out FILE.h5|FILE.mcap)");
-
-    // 2. Scene (its effects sit between the preset and the config file).
-    const bool default_scene = !args.has("--scene");
-    const std::string scene_path = default_scene ? find_default_scene().string() : args.value("--scene");
-    if (!default_scene) {
-        std::error_code ec;
-        if (!fs::is_regular_file(scene_path, ec)) throw BadInput("--scene " + scene_path + ": no such file");
-    }
-
-    // 3. Poses.
+    std::uint64_t seed = 1;
+    SaveSet save;
+    std::string out_path;
+    bool dataset = false;                   // --out FILE.h5 (or .hdf5)
+    bool bag = false;                       // --out FILE.mcap
+    std::optional<McapOptions> bag_options; // open_bag adds compression and the shard record
+    bool default_scene = false;             // no --scene: the bundled one
+    std::string scene_path;
+    bool trajectory = false; // --trajectory (poses holds its lines)
     std::vector<TrajectoryPose> poses;
     bool timed = false;      // the trajectory has a time column
     bool frame_pose = false; // --pose frame
-    if (args.has("--trajectory")) {
-        poses = read_trajectory(args.value("--trajectory"), timed);
-        if (bag) check_bag_times(poses, timed, args);
+    std::optional<ShardRecord> shard;
+    std::size_t first = 0, end = 0; // the block of poses this run renders (all of them without a shard)
+};
+
+// Options that need no files: the backend, seed, --save and the output format's own options.
+void parse_options(const Args& args, RenderJob& job) {
+    job.backend_name = args.value("--backend", "auto");
+    if (job.backend_name == "cpu")
+        job.backend = Backend::cpu;
+    else if (job.backend_name != "vulkan" && job.backend_name != "auto")
+        throw BadInput("--backend: '" + job.backend_name + "' is not a backend (auto, vulkan or cpu)");
+    job.seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
+    job.save = parse_save(args.values("--save"));
+    if (job.save.flow && !args.has("--trajectory"))
+        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
+    job.out_path = args.value("--out");
+    job.dataset = is_dataset_path(job.out_path);
+    job.bag = is_mcap_path(job.out_path);
+    if (job.dataset) check_dataset_save(job.save, !args.values("--save").empty(), job.out_path);
+    if (job.bag) job.bag_options = mcap_options(args, job.save, job.out_path);
+    for (const char* option : {"--ros-prefix", "--ros-frame", "--rate", "--ros-sonar-dtype"})
+        if (args.has(option) && !job.bag)
+            throw BadInput(std::string(option) + ": only for a ROS 2 bag (--out FILE.mcap)");
+    if (args.has("--compress") && !job.dataset && !job.bag)
+        throw BadInput("--compress: only a .h5 dataset or a .mcap bag is compressed (--out FILE.h5|FILE.mcap)");
+}
+
+// The poses: the trajectory's lines, one --pose, or the default pose. --pose frame is a placeholder
+// here: load_scene_and_config computes it once the scene is loaded.
+void read_poses(const Args& args, RenderJob& job) {
+    job.trajectory = args.has("--trajectory");
+    if (job.trajectory) {
+        job.poses = read_trajectory(args.value("--trajectory"), job.timed);
+        if (job.bag) check_bag_times(job.poses, job.timed, args);
     } else if (args.has("--pose") && args.value("--pose") == "frame") {
-        frame_pose = true; // computed from the scene once it is loaded
-        poses.push_back({Pose{}, 0});
+        job.frame_pose = true;
+        job.poses.push_back({Pose{}, 0});
     } else if (args.has("--pose")) {
-        poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
+        job.poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
     } else {
         Pose pose;
-        if (default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
-        poses.push_back({pose, 0});
+        if (job.default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
+        job.poses.push_back({pose, 0});
     }
+}
 
-    // 3b. The shard: a block of the trajectory's frames (shard.h), from --shard or the engine's environment.
-    std::optional<ShardRecord> shard;
-    if (args.has("--trajectory")) {
+// The shard: a block of the trajectory's frames (shard.h), from --shard or the engine's environment.
+void pick_shard(const Args& args, RenderJob& job) {
+    if (job.trajectory) {
         auto flag = [&](const char* name) { return args.has(name) ? std::optional(args.value(name)) : std::nullopt; };
-        shard = resolve_shard(flag("--shard"), flag("--shard-count"), poses.size(), process_env());
-        if (shard) {
-            shard->trajectory = args.value("--trajectory");
-            shard->trajectory_hash = file_fnv1a64(shard->trajectory);
+        job.shard = resolve_shard(flag("--shard"), flag("--shard-count"), job.poses.size(), process_env());
+        if (job.shard) {
+            job.shard->trajectory = args.value("--trajectory");
+            job.shard->trajectory_hash = file_fnv1a64(job.shard->trajectory);
         }
     } else if (args.has("--shard") || args.has("--shard-count")) {
         throw BadInput(std::string(args.has("--shard") ? "--shard" : "--shard-count") +
                        ": shards split a trajectory; give --trajectory POSES.csv");
     }
-    const std::size_t first = shard ? shard->first : 0, end = shard ? shard->end : poses.size();
+    job.first = job.shard ? job.shard->first : 0;
+    job.end = job.shard ? job.shard->end : job.poses.size();
+}
 
-    // 4. Config layers: preset < scene effects < --config < --quality < --set. The user's layers are checked
-    //    before the (possibly slow) scene load, then applied again above the scene's effects.
+// Everything the command line says, checked in the order the errors are reported: options, scene
+// file, poses, shard. The config layers and the scene itself come next (load_scene_and_config).
+RenderJob parse_job(const Args& args) {
+    if (!args.positional.empty())
+        throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
+    if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
+    if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
+    RenderJob job;
+    parse_options(args, job);
+    job.default_scene = !args.has("--scene");
+    job.scene_path = job.default_scene ? find_default_scene().string() : args.value("--scene");
+    if (!job.default_scene) {
+        std::error_code ec;
+        if (!fs::is_regular_file(job.scene_path, ec)) throw BadInput("--scene " + job.scene_path + ": no such file");
+    }
+    read_poses(args, job);
+    pick_shard(args, job);
+    return job;
+}
+
+// The user's config layers on top of `config`: --config < --quality < --set, then the checks of the
+// result. Run twice (load_scene_and_config): once on the preset, before the (possibly slow) scene
+// load, and again above the scene's effects.
+SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig config) {
+    // A value the config file made invalid (and no later layer changed) is reported with the file.
+    std::string file_problem, file_path;
+    if (args.has("--config")) {
+        std::error_code ec;
+        const std::string path = args.value("--config");
+        if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
+        const std::string before = config_problem(config);
+        auto layered = apply_config_file(config, path);
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+        if (std::string after = config_problem(config); after != before) {
+            file_problem = std::move(after);
+            file_path = path;
+        }
+    }
+    if (args.has("--quality")) {
+        auto layered = apply_quality(config, args.value("--quality"));
+        if (!layered) throw BadInput("--quality: " + layered.error().message);
+        config = layered.value();
+    }
+    for (const auto& item : args.values("--set")) {
+        auto layered = apply_config_override(config, item);
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+    }
+    if (std::string problem = config_problem(config); !problem.empty()) {
+        const bool from_file = !file_problem.empty() && problem == file_problem;
+        throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
+    }
+    if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
+        throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
+                       ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
+    return config;
+}
+
+struct SceneAndConfig {
+    Scene scene;
+    SonarConfig config;
+};
+
+// The config layers (preset < scene effects < --config < --quality < --set) and the scene; fills in
+// a --pose frame pose. Still nothing on disk.
+SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
     const SonarConfig preset = sonar_base_config(args.value("--sonar", "default"));
-    auto apply_user_layers = [&](SonarConfig config) {
-        // A value the config file made invalid (and no later layer changed) is reported with the file.
-        std::string file_problem, file_path;
-        if (args.has("--config")) {
-            std::error_code ec;
-            const std::string path = args.value("--config");
-            if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
-            const std::string before = config_problem(config);
-            auto layered = apply_config_file(config, path);
-            if (!layered) throw BadInput(layered.error().message);
-            config = layered.value();
-            if (std::string after = config_problem(config); after != before) {
-                file_problem = std::move(after);
-                file_path = path;
-            }
-        }
-        if (args.has("--quality")) {
-            auto layered = apply_quality(config, args.value("--quality"));
-            if (!layered) throw BadInput("--quality: " + layered.error().message);
-            config = layered.value();
-        }
-        for (const auto& item : args.values("--set")) {
-            auto layered = apply_config_override(config, item);
-            if (!layered) throw BadInput(layered.error().message);
-            config = layered.value();
-        }
-        if (std::string problem = config_problem(config); !problem.empty()) {
-            const bool from_file = !file_problem.empty() && problem == file_problem;
-            throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
-        }
-        if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
-            throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
-                           ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
-        return config;
-    };
-    SonarConfig config = apply_user_layers(preset);
+    SonarConfig config = apply_user_layers(args, job.save, preset);
     const std::string asset_root = args.value("--asset-root", config.scene_asset_root);
-    auto scene = Scene::load_gltf(scene_path, SceneLoadOptions{asset_root, config.scene_scale});
+    auto scene = Scene::load_gltf(job.scene_path, SceneLoadOptions{asset_root, config.scene_scale});
     if (!scene) {
-        if (default_scene) throw Failure(scene.error().message);
+        if (job.default_scene) throw Failure(scene.error().message);
         throw BadInput(scene.error().message);
     }
     // What the loader skipped or ignored (points and lines, unknown material keys, skins) is the
@@ -937,262 +707,417 @@ int run_render(const std::vector<std::string>& argv) {
     const std::string& scene_effects = scene->effects_json();
     if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
         auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}",
-                                         scene_path + " (scene extras vksonar.effects)");
+                                         job.scene_path + " (scene extras vksonar.effects)");
         if (!layered) throw BadInput(layered.error().message);
-        config = apply_user_layers(layered.value());
+        config = apply_user_layers(args, job.save, layered.value());
     }
     config.scene_asset_root = asset_root; // meta.json's config says which folder the scene's files came from
-    if (bag && config.mode != SonarMode::physical)
-        throw BadInput("--out " + out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
+    if (job.bag && config.mode != SonarMode::physical)
+        throw BadInput("--out " + job.out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
                        (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
-    warn_if_unit_mistake(scene.value(), config, scene_path);
-    if (frame_pose) poses = {{pose_framing(scene.value(), config, scene_path), 0, 0.0}};
+    warn_if_unit_mistake(scene.value(), config, job.scene_path);
+    if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), 0, 0.0}};
+    return {std::move(scene.value()), std::move(config)};
+}
 
-    // 5. Everything is valid: create the output directory (removed again if we fail before a frame).
-    std::optional<OutputDir> out_dir;
-    std::optional<DatasetFile> dataset_file;
-    if (dataset || bag)
-        dataset_file.emplace(out_path, shard.has_value()); // a shard's file is resumed (or refused), not removed
+// The output directory, or the .h5 / .mcap file's place: made only once every input is valid, and
+// removed again if the run fails before a frame is on disk.
+struct OutputTarget {
+    std::optional<OutputDir> dir;    // frame folders
+    std::optional<DatasetFile> file; // .h5 or .mcap
+};
+
+void create_output(const RenderJob& job, OutputTarget& target) {
+    if (job.dataset || job.bag)
+        target.file.emplace(job.out_path, job.shard.has_value()); // a shard's file is resumed (or refused), not removed
     else
-        out_dir.emplace(out_path);
+        target.dir.emplace(job.out_path);
+}
 
-    // 6. Device and renderer. --backend auto (the default) picks by the device (choose_backend).
-    std::string backend_reason = "--backend " + backend_name;
-    Context context = backend_name == "auto" ? choose_backend(backend, backend_reason) : make_context(backend);
-    if (backend_name == "auto") backend_name = backend == Backend::cpu ? "cpu" : "vulkan";
-    const std::string device = backend == Backend::vulkan ? context.device_description() : "cpu";
+// The device and which backend runs on it; meta.json says which and why.
+struct Device {
+    Context context;
+    Backend backend = Backend::vulkan;
+    std::string backend_name;   // vulkan or cpu (auto resolved)
+    std::string backend_reason; // --backend, or what auto saw
+    std::string description;    // the Vulkan device, or "cpu"
+};
+
+// --backend auto (the default) picks by the device (choose_backend).
+Device open_device(const RenderJob& job) {
+    Backend backend = job.backend;
+    std::string reason = "--backend " + job.backend_name;
+    Context context = job.backend_name == "auto" ? choose_backend(backend, reason) : make_context(backend);
+    std::string name = job.backend_name;
+    if (name == "auto") name = backend == Backend::cpu ? "cpu" : "vulkan";
+    std::string description = backend == Backend::vulkan ? context.device_description() : "cpu";
+    return {std::move(context), backend, std::move(name), std::move(reason), std::move(description)};
+}
+
+Renderer make_renderer(Device& device, const SonarConfig& config, const Scene& scene, const RenderJob& job) {
     RendererOptions renderer_options = renderer_options_from_env();
-    renderer_options.backend = backend;
-    renderer_options.seed = seed;
+    renderer_options.backend = device.backend;
+    renderer_options.seed = job.seed;
     // Legacy modes start from the depth pass (and its material ids, for the GTRI retro).
     renderer_options.save_mask =
-        save.mask() | (config.mode != SonarMode::physical ? SaveFlags::depth : SaveFlags::none);
-    auto renderer = Renderer::create(context, config, scene.value(), renderer_options);
+        job.save.mask() | (config.mode != SonarMode::physical ? SaveFlags::depth : SaveFlags::none);
+    auto renderer = Renderer::create(device.context, config, scene, renderer_options);
     if (!renderer) {
         const Error& e = renderer.error();
         if (e.code == ErrorCode::invalid_argument || e.code == ErrorCode::parse || e.code == ErrorCode::unsupported)
             throw BadInput(e.message);
-        throw Failure(e.message + (backend == Backend::vulkan ? " (try --backend cpu)" : ""));
+        throw Failure(e.message + (device.backend == Backend::vulkan ? " (try --backend cpu)" : ""));
     }
-    const Plan& plan = renderer_plan(renderer.value());
     // A model taken outside its domain: one line each, before any frame (meta.json lists them all).
     for (const ModelValidity& v : renderer->validity())
         if (!v.ok) std::fprintf(stderr, "warning: %s\n", v.warning().c_str());
-    const host::FanRenderer fan(plan);
-    LegacyState legacy_state;
+    return std::move(renderer.value());
+}
+
+// What the per-frame writers need (render_frame.h), made once for the whole run.
+Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& device, const host::FanRenderer& fan,
+                     LegacyState& legacy_state, const Scene& scene) {
     legacy_state.mode = plan.config.mode;
     const std::string config_text = config_to_json(plan.config);
-    Outputs outputs{plan,
-                    save,
-                    fan,
-                    config_text,
-                    nlohmann::ordered_json::parse(config_text),
-                    host::meta_json_plan_part(plan),
-                    scene_path,
-                    backend_name,
-                    backend_reason,
-                    device,
-                    {},
-                    {},
-                    {},
-                    plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
-                    shard ? &*shard : nullptr,
-                    {},
-                    {},
-                    {},
-                    {},
-                    {},
-                    {}};
-    outputs.objects = host::objects_json(scene.value());
-    outputs.class_names = scene->classes();
-    // 7. Frames: rendered here, written on a background thread (write_behind.h) through a ring of
-    //    three frames, so rendering goes on while the previous frames are written.
-    const bool trajectory = args.has("--trajectory");
-    std::vector<Frame> slots;
-    // (--save flow holds a frame back until the next one is rendered: at least two slots)
-    for (std::size_t i = 0; i < std::min<std::size_t>(3, std::max<std::size_t>(end - first, save.flow ? 2 : 1)); ++i)
-        slots.push_back(renderer->make_frame());
-    std::unique_ptr<DatasetWriter> dataset_writer;
-    std::vector<char> done(poses.size(), 0); // a shard's frames already on disk (re-run: skipped)
-    if (dataset) {
-        DatasetMeta meta = dataset_meta(plan, scene_path, backend_name, device, seed);
-        meta.objects_json = outputs.objects.dump();
-        meta.shard = shard;
-        DatasetOptions options;
-        options.polar_u16 = save.polar_u16;
-        options.labels = save.labels;
-        options.flow = save.flow;
-        options.compress = args.has("--compress");
-        options.has_time = timed;
-        dataset_writer = open_dataset_writer(out_path, plan, meta, options, *dataset_file, done);
-    } else if (shard && !bag) {
-        FolderManifest manifest{
-            *shard,
-            run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard),
-            {},
-            backend_name,
-            device};
-        for (std::size_t i = first; i < end; ++i)
-            manifest.lines.push_back(poses[i].line);
-        start_folder_shard(out_dir->path().string(), manifest, done);
-    }
-    std::unique_ptr<McapDatasetWriter> bag_writer;
+    return Outputs{plan,
+                   job.save,
+                   fan,
+                   config_text,
+                   nlohmann::ordered_json::parse(config_text),
+                   host::meta_json_plan_part(plan),
+                   job.scene_path,
+                   device.backend_name,
+                   device.backend_reason,
+                   device.description,
+                   {},
+                   {},
+                   {},
+                   plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
+                   job.shard ? &*job.shard : nullptr,
+                   host::objects_json(scene),
+                   {},
+                   scene.classes(),
+                   {},
+                   {},
+                   {}};
+}
+
+// ---- where the frames go -----------------------------------------------------------------------
+
+// The writers of a .h5 or .mcap run (null for frame folders) and, for a re-run shard, which of the
+// trajectory's frames are already on disk (`done`: skipped).
+struct Writers {
+    std::unique_ptr<DatasetWriter> dataset;
+    std::vector<char> done;
+    std::unique_ptr<McapDatasetWriter> bag;
     bool bag_complete = false; // a re-run shard whose bag holds its whole block already
-    const double bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
-    if (bag) {
-        bag_options->zstd = args.has("--compress");
-        bag_options->library = "vksonar 0.1.0 (its own MCAP writer)";
-        if (shard) {
-            // The shard's record and the run's identity, for `vksonar merge` and a re-run
-            // (merge_mcap.cpp); the identity also names what the bag's messages depend on.
-            Identity identity =
-                run_identity(config_text, seed, scene_path, backend_name, save_list(save), timed, &*shard);
-            char rate[32];
-            std::snprintf(rate, sizeof rate, "%.17g", bag_rate);
-            identity.insert(identity.end(), {{"ros_prefix", bag_options->prefix},
-                                             {"ros_frame", bag_options->frame},
-                                             {"ros_sonar_dtype", bag_options->sonar_u16 ? "uint16" : "float32"},
-                                             {"rate", timed ? std::string("time column") : std::string(rate)}});
-            bag_options->shard = shard_metadata(*shard, identity, backend_name, device, bag_options->zstd);
-            BagResume resumed = bag_shard_resume(out_path, plan, *bag_options, *shard, identity);
-            for (std::uint64_t k = 0; k < resumed.frames; ++k)
-                done[first + k] = 1;
-            bag_writer = std::move(resumed.writer);
-            bag_complete = resumed.complete;
-        }
-        if (!bag_writer && !bag_complete) {
-            auto created = McapDatasetWriter::create(out_path, plan, *bag_options);
-            if (!created) throw Failure(created.error().message);
-            bag_writer = std::move(created.value());
-        }
+    double bag_rate = 10.0;    // --rate
+};
+
+void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs, const Args& args, DatasetFile& file,
+                  Writers& writers) {
+    DatasetMeta meta = dataset_meta(plan, job.scene_path, outputs.backend, outputs.device, job.seed);
+    meta.objects_json = outputs.objects.dump();
+    meta.shard = job.shard;
+    DatasetOptions options;
+    options.polar_u16 = job.save.polar_u16;
+    options.labels = job.save.labels;
+    options.flow = job.save.flow;
+    options.compress = args.has("--compress");
+    options.has_time = job.timed;
+    writers.dataset = open_dataset_writer(job.out_path, plan, meta, options, file, writers.done);
+}
+
+// A shard of frame folders: its manifest (which lines, which run) in the output directory; a re-run
+// marks the frames already there in `done`.
+void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const OutputDir& dir, Writers& writers) {
+    FolderManifest manifest{*job.shard,
+                            run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
+                                         save_list(job.save), job.timed, &*job.shard),
+                            {},
+                            outputs.backend,
+                            outputs.device};
+    for (std::size_t i = job.first; i < job.end; ++i)
+        manifest.lines.push_back(job.poses[i].line);
+    start_folder_shard(dir.path().string(), manifest, writers.done);
+}
+
+// A shard's bag: its record and the run's identity, for `vksonar merge` and a re-run
+// (merge_mcap.cpp); the identity also names what the bag's messages depend on. A re-run goes on
+// after the frames already in the bag.
+void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& outputs, McapOptions& bag_options,
+                      Writers& writers) {
+    const ShardRecord& shard = *job.shard;
+    Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
+                                     save_list(job.save), job.timed, &shard);
+    char rate[32];
+    std::snprintf(rate, sizeof rate, "%.17g", writers.bag_rate);
+    identity.insert(identity.end(), {{"ros_prefix", bag_options.prefix},
+                                     {"ros_frame", bag_options.frame},
+                                     {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},
+                                     {"rate", job.timed ? std::string("time column") : std::string(rate)}});
+    bag_options.shard = shard_metadata(shard, identity, outputs.backend, outputs.device, bag_options.zstd);
+    BagResume resumed = bag_shard_resume(job.out_path, plan, bag_options, shard, identity);
+    for (std::uint64_t k = 0; k < resumed.frames; ++k)
+        writers.done[job.first + k] = 1;
+    writers.bag = std::move(resumed.writer);
+    writers.bag_complete = resumed.complete;
+}
+
+void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, Writers& writers) {
+    McapOptions& bag_options = *job.bag_options;
+    bag_options.zstd = args.has("--compress");
+    bag_options.library = "vksonar 0.1.0 (its own MCAP writer)";
+    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, writers);
+    if (!writers.bag && !writers.bag_complete) {
+        auto created = McapDatasetWriter::create(job.out_path, plan, bag_options);
+        if (!created) throw Failure(created.error().message);
+        writers.bag = std::move(created.value());
     }
-    WriteBehind writer(std::move(slots), [&](const WriteBehind::Slot& slot) {
-        if (bag) { // (a complete bag shard has no writer, and no frame comes here)
-            const bool u16 = bag_options->polar || bag_options->sonar_u16;
-            if (u16) host::quantize_display(slot.frame, outputs.quantized);
-            if (bag_options->fan) outputs.fan.render(slot.frame, outputs.image);
-            // Without a time column, time_s is the frame's ordinal in the whole trajectory (a shard's
-            // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
-            // unsharded run's.
-            const double seconds = timed ? slot.time_s : slot.time_s / bag_rate;
-            const auto stamp_ns = static_cast<std::uint64_t>(std::llround(seconds * 1e9));
-            auto appended = bag_writer->append(slot.frame, slot.pose, stamp_ns, &outputs.image,
-                                               u16 ? outputs.quantized.data() : nullptr);
-            if (!appended) throw Failure(appended.error().message);
-            dataset_file->keep();
-            return;
-        }
-        if (dataset_writer) {
-            const std::uint16_t* u16 = nullptr;
-            if (save.polar_u16) {
-                host::quantize_display(slot.frame, outputs.quantized);
-                u16 = outputs.quantized.data();
-            }
-            auto appended =
-                dataset_writer->append(slot.frame, slot.pose, slot.time_s, u16, save.flow ? slot.flow.data() : nullptr,
-                                       save.labels ? &frame_boxes(outputs, slot.frame) : nullptr);
-            if (!appended) throw Failure(appended.error().message);
-            dataset_file->keep(); // only this thread calls keep(); read after the join
-            return;
-        }
-        fs::path dir = out_dir->path();
-        if (trajectory) {
-            dir /= frame_dir_name(slot.line);
-            std::error_code ec;
-            fs::create_directories(dir, ec);
-            if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
-        }
-        write_frame(outputs, dir, slot.frame, slot.pose, timed ? &slot.time_s : nullptr,
-                    save.flow ? &slot.flow : nullptr); // meta.json last: done
-        out_dir->keep(); // a whole frame is on disk (only this thread calls keep(); read after the join)
-    });
-    const std::size_t todo = static_cast<std::size_t>(std::count(done.begin() + first, done.begin() + end, 0));
-    if (shard)
-        std::fprintf(stderr, "vksonar: %s\n",
-                     shard_summary(*shard, end > first ? poses[first].line : 0, end > first ? poses[end - 1].line : 0,
-                                   end - first - todo)
-                         .c_str());
-    const bool progress = trajectory && ::isatty(::fileno(stderr));
-    const auto start = std::chrono::steady_clock::now();
-    auto last_progress = start;
-    auto show_progress = [&](bool final) {
+}
+
+Writers open_writers(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, OutputTarget& target) {
+    Writers writers;
+    writers.done.assign(job.poses.size(), 0);
+    if (job.dataset)
+        open_dataset(job, plan, outputs, args, *target.file, writers);
+    else if (job.shard && !job.bag)
+        start_folder_manifest(job, outputs, *target.dir, writers);
+    writers.bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
+    if (job.bag) open_bag(args, job, plan, outputs, writers);
+    return writers;
+}
+
+// ---- writing one frame (on the write-behind thread) ----------------------------------------------
+
+void write_bag_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, Writers& writers) {
+    const McapOptions& bag_options = *job.bag_options;
+    const bool u16 = bag_options.polar || bag_options.sonar_u16;
+    if (u16) host::quantize_display(slot.frame, outputs.quantized);
+    if (bag_options.fan) outputs.fan.render(slot.frame, outputs.image);
+    // Without a time column, time_s is the frame's ordinal in the whole trajectory (a shard's
+    // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
+    // unsharded run's.
+    const double seconds = job.timed ? slot.time_s : slot.time_s / writers.bag_rate;
+    const auto stamp_ns = static_cast<std::uint64_t>(std::llround(seconds * 1e9));
+    auto appended =
+        writers.bag->append(slot.frame, slot.pose, stamp_ns, &outputs.image, u16 ? outputs.quantized.data() : nullptr);
+    if (!appended) throw Failure(appended.error().message);
+}
+
+void write_dataset_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, Writers& writers) {
+    const SaveSet& save = job.save;
+    const std::uint16_t* u16 = nullptr;
+    if (save.polar_u16) {
+        host::quantize_display(slot.frame, outputs.quantized);
+        u16 = outputs.quantized.data();
+    }
+    auto appended =
+        writers.dataset->append(slot.frame, slot.pose, slot.time_s, u16, save.flow ? slot.flow.data() : nullptr,
+                                save.labels ? &frame_boxes(outputs, slot.frame) : nullptr);
+    if (!appended) throw Failure(appended.error().message);
+}
+
+// A trajectory's frame goes to DIR/frame_NNNNNN/ (NNNNNN its line), a single pose's to DIR itself.
+void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs,
+                        const OutputDir& out_dir) {
+    fs::path dir = out_dir.path();
+    if (job.trajectory) {
+        dir /= frame_dir_name(slot.line);
+        std::error_code ec;
+        fs::create_directories(dir, ec);
+        if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
+    }
+    write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
+                job.save.flow ? &slot.flow : nullptr); // meta.json last: done
+}
+
+// The write-behind thread's function. Once a whole frame is on disk the output is kept (only this
+// thread calls keep(); it is read after the join). A complete bag shard has no writer, and no frame
+// comes here.
+void write_slot(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, Writers& writers,
+                OutputTarget& target) {
+    if (job.bag) {
+        write_bag_frame(slot, job, outputs, writers);
+        target.file->keep();
+    } else if (writers.dataset) {
+        write_dataset_frame(slot, job, outputs, writers);
+        target.file->keep();
+    } else {
+        write_folder_frame(slot, job, outputs, *target.dir);
+        target.dir->keep();
+    }
+}
+
+// ---- the frame loop ------------------------------------------------------------------------------
+
+// "N/M frames written, R frames/s, S s left" on a terminal during a trajectory, at most 4 times a second.
+class Progress {
+public:
+    Progress(const WriteBehind& writer, std::size_t todo, bool shown) : writer_(writer), todo_(todo), shown_(shown) {}
+
+    void show(bool final) {
         const auto now = std::chrono::steady_clock::now();
-        if (!progress || (!final && now - last_progress < std::chrono::milliseconds(250))) return;
-        last_progress = now;
-        const std::uint64_t written = writer.written();
-        const double seconds = std::chrono::duration<double>(now - start).count();
+        if (!shown_ || (!final && now - last_ < std::chrono::milliseconds(250))) return;
+        last_ = now;
+        const std::uint64_t written = writer_.written();
+        const double seconds = std::chrono::duration<double>(now - start_).count();
         const double rate = seconds > 0 ? static_cast<double>(written) / seconds : 0.0;
-        const double left = rate > 0 ? static_cast<double>(todo - written) / rate : 0.0;
+        const double left = rate > 0 ? static_cast<double>(todo_ - written) / rate : 0.0;
         std::fprintf(stderr, "\rvksonar: %llu/%zu frames written, %.1f frames/s, %.0f s left   ",
-                     static_cast<unsigned long long>(written), todo, rate, left);
+                     static_cast<unsigned long long>(written), todo_, rate, left);
         std::fflush(stderr);
-    };
-    const auto render_into = [&](std::size_t i, WriteBehind::Slot& slot) {
-        const TrajectoryPose& item = poses[i];
-        auto rendered = renderer->render(item.pose, item.line, slot.frame);
-        if (!rendered) {
-            const std::string where =
-                trajectory ? args.value("--trajectory") + ":" + std::to_string(item.line) + ": " : std::string();
-            throw Failure(where + rendered.error().message);
-        }
-        slot.pose = item.pose;
-        slot.line = item.line;
-        slot.time_s = timed ? item.time_s : static_cast<double>(i); // the .h5 time: the global ordinal
-    };
-    // --save flow: frame i is held back until frame i + 1 is rendered, its flow computed, then submitted.
-    // The next frame is rendered for it even where it is not this run's to write (a re-run shard's
-    // frame already on disk, the first frame of the next shard), so every shard's flow is the
-    // unsharded run's; the trajectory's last frame has no next one: its flow is all NaN.
-    WriteBehind::Slot* held = nullptr;
-    const auto submit_held = [&](const WriteBehind::Slot* next) {
-        if (next) {
-            auto flowed = renderer->label_flow(held->frame, held->pose, next->frame, next->pose, held->flow);
-            if (!flowed) throw Failure(flowed.error().message);
-        } else {
-            held->flow.assign(std::size_t(2) * held->frame.bins * held->frame.beams,
-                              std::numeric_limits<float>::quiet_NaN());
-        }
-        writer.submit();
-        held = nullptr;
-    };
-    for (std::size_t i = first; i < end; ++i) {
-        if (done[i] && !held) continue;                         // a re-run shard: this frame is complete on disk
-        WriteBehind::Slot& slot = writer.acquire(held ? 1 : 0); // rethrows a write error: the run stops there
-        render_into(i, slot);
-        if (held) submit_held(&slot);
-        if (done[i]) continue; // rendered for the previous frame's flow only; the slot is reused
-        if (save.flow) {
-            held = &slot;
-        } else {
-            writer.submit();
-        }
-        show_progress(false);
     }
-    if (held) {
-        if (end < poses.size()) { // the next shard's first frame
-            WriteBehind::Slot& next = writer.acquire(1);
-            render_into(end, next);
+    // The line ends once the run is done.
+    void finish() {
+        show(true);
+        if (shown_) std::fputc('\n', stderr);
+    }
+    double seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
+
+private:
+    const WriteBehind& writer_;
+    std::size_t todo_;
+    bool shown_;
+    std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+    std::chrono::steady_clock::time_point last_ = start_;
+};
+
+// Renders the block [first, end) into the write-behind ring, skipping the frames already on disk.
+// --save flow: frame i is held back until frame i + 1 is rendered, its flow computed, then submitted.
+// The next frame is rendered for it even where it is not this run's to write (a re-run shard's
+// frame already on disk, the first frame of the next shard), so every shard's flow is the
+// unsharded run's; the trajectory's last frame has no next one: its flow is all NaN.
+class FrameLoop {
+public:
+    FrameLoop(const Args& args, const RenderJob& job, Renderer& renderer, WriteBehind& writer)
+        : args_(args), job_(job), renderer_(renderer), writer_(writer) {}
+
+    void run(const std::vector<char>& done, Progress& progress) {
+        for (std::size_t i = job_.first; i < job_.end; ++i) {
+            if (done[i] && !held_) continue;                          // a re-run shard: this frame is complete on disk
+            WriteBehind::Slot& slot = writer_.acquire(held_ ? 1 : 0); // rethrows a write error: the run stops there
+            render_into(i, slot);
+            if (held_) submit_held(&slot);
+            if (done[i]) continue; // rendered for the previous frame's flow only; the slot is reused
+            if (job_.save.flow) {
+                held_ = &slot;
+            } else {
+                writer_.submit();
+            }
+            progress.show(false);
+        }
+        if (!held_) return;
+        if (job_.end < job_.poses.size()) { // the next shard's first frame
+            WriteBehind::Slot& next = writer_.acquire(1);
+            render_into(job_.end, next);
             submit_held(&next);
         } else {
             submit_held(nullptr);
         }
     }
-    writer.finish();
-    if (dataset_writer)
-        if (auto closed = dataset_writer->close(); !closed) throw Failure(closed.error().message);
-    if (bag_writer)
-        if (auto closed = bag_writer->close(); !closed) throw Failure(closed.error().message);
-    show_progress(true);
-    if (progress) std::fputc('\n', stderr);
-    if (shard) {
-        // A shard's output is its result even when its block is empty or was already complete.
-        if (dataset_file) dataset_file->keep();
-        if (out_dir) out_dir->keep();
-        const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        std::fprintf(stderr, "vksonar: shard %llu/%llu: %zu frames rendered in %.2f s (%.2f frames/s)\n",
-                     static_cast<unsigned long long>(shard->index), static_cast<unsigned long long>(shard->count), todo,
-                     seconds, seconds > 0 ? static_cast<double>(todo) / seconds : 0.0);
+
+private:
+    void render_into(std::size_t i, WriteBehind::Slot& slot) {
+        const TrajectoryPose& item = job_.poses[i];
+        auto rendered = renderer_.render(item.pose, item.line, slot.frame);
+        if (!rendered) {
+            const std::string where =
+                job_.trajectory ? args_.value("--trajectory") + ":" + std::to_string(item.line) + ": " : std::string();
+            throw Failure(where + rendered.error().message);
+        }
+        slot.pose = item.pose;
+        slot.line = item.line;
+        slot.time_s = job_.timed ? item.time_s : static_cast<double>(i); // the .h5 time: the global ordinal
     }
+
+    // `next`: the frame after the held one, or null where the trajectory ends.
+    void submit_held(const WriteBehind::Slot* next) {
+        if (next) {
+            auto flowed = renderer_.label_flow(held_->frame, held_->pose, next->frame, next->pose, held_->flow);
+            if (!flowed) throw Failure(flowed.error().message);
+        } else {
+            held_->flow.assign(std::size_t(2) * held_->frame.bins * held_->frame.beams,
+                               std::numeric_limits<float>::quiet_NaN());
+        }
+        writer_.submit();
+        held_ = nullptr;
+    }
+
+    const Args& args_;
+    const RenderJob& job_;
+    Renderer& renderer_;
+    WriteBehind& writer_;
+    WriteBehind::Slot* held_ = nullptr;
+};
+
+// The frame ring: up to three frames, so rendering goes on while the previous frames are written
+// (--save flow holds a frame back until the next one is rendered: at least two slots).
+std::vector<Frame> make_slots(const RenderJob& job, Renderer& renderer) {
+    std::vector<Frame> slots;
+    const std::size_t count =
+        std::min<std::size_t>(3, std::max<std::size_t>(job.end - job.first, job.save.flow ? 2 : 1));
+    for (std::size_t i = 0; i < count; ++i)
+        slots.push_back(renderer.make_frame());
+    return slots;
+}
+
+// Waits for the writes, closes the .h5 / .mcap, ends the progress line; a shard says what it did.
+void finish_run(const RenderJob& job, WriteBehind& writer, Writers& writers, OutputTarget& target, Progress& progress,
+                std::size_t todo) {
+    writer.finish();
+    if (writers.dataset)
+        if (auto closed = writers.dataset->close(); !closed) throw Failure(closed.error().message);
+    if (writers.bag)
+        if (auto closed = writers.bag->close(); !closed) throw Failure(closed.error().message);
+    progress.finish();
+    if (!job.shard) return;
+    // A shard's output is its result even when its block is empty or was already complete.
+    if (target.file) target.file->keep();
+    if (target.dir) target.dir->keep();
+    const double seconds = progress.seconds();
+    std::fprintf(stderr, "vksonar: shard %llu/%llu: %zu frames rendered in %.2f s (%.2f frames/s)\n",
+                 static_cast<unsigned long long>(job.shard->index), static_cast<unsigned long long>(job.shard->count),
+                 todo, seconds, seconds > 0 ? static_cast<double>(todo) / seconds : 0.0);
+}
+
+} // namespace
+
+// Order matters for the "no partial output" promise (top of the file): everything that can be
+// checked is checked before create_output.
+int run_render(const std::vector<std::string>& argv) {
+    const Args args = parse_render_args(argv);
+    if (args.has("--help")) {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
+    RenderJob job = parse_job(args);
+    const SceneAndConfig loaded = load_scene_and_config(args, job);
+    OutputTarget target;
+    create_output(job, target);
+
+    Device device = open_device(job);
+    Renderer renderer = make_renderer(device, loaded.config, loaded.scene, job);
+    const Plan& plan = renderer_plan(renderer);
+    const host::FanRenderer fan(plan);
+    LegacyState legacy_state;
+    Outputs outputs = make_outputs(plan, job, device, fan, legacy_state, loaded.scene);
+    std::vector<Frame> slots = make_slots(job, renderer);
+    Writers writers = open_writers(args, job, plan, outputs, target);
+
+    // Frames are rendered here and written on a background thread (write_behind.h).
+    WriteBehind writer(std::move(slots),
+                       [&](const WriteBehind::Slot& slot) { write_slot(slot, job, outputs, writers, target); });
+    const std::size_t todo =
+        static_cast<std::size_t>(std::count(writers.done.begin() + job.first, writers.done.begin() + job.end, 0));
+    if (job.shard)
+        std::fprintf(stderr, "vksonar: %s\n",
+                     shard_summary(*job.shard, job.end > job.first ? job.poses[job.first].line : 0,
+                                   job.end > job.first ? job.poses[job.end - 1].line : 0, job.end - job.first - todo)
+                         .c_str());
+    Progress progress(writer, todo, job.trajectory && ::isatty(::fileno(stderr)));
+    FrameLoop(args, job, renderer, writer).run(writers.done, progress);
+    finish_run(job, writer, writers, target, progress, todo);
     return 0;
 }
 
