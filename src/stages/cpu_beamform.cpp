@@ -110,19 +110,129 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
         block(std::integral_constant<std::uint32_t, 1>());
 }
 
+// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
+// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
+// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
+// increasing order, as the shader's; the bins side by side are independent sums (vectorized).
+constexpr std::uint32_t kFarRows = 8;
+
+template <class Real> struct FarRows {
+    std::array<Real, 3 * shared::kMaxFarCells * kFarRows> energy; // [(m * cells + c) * kFarRows + row]
+    std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
+};
+
+template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
+    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+    return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
+}
+
+// A beam's far side-lobe values, as the kernels compute them from Plan::far_beam_cell, made once per plan
+// (after the resample weights): its two cells c0, c1, their shares s0, s1 (far_cell_share), its phase
+// (cos, sin), and per channel m its deposit weights into c0 and c1 (far_deposit_weight).
+constexpr std::size_t kFarBeamValues = 12;
+enum FarBeam : std::size_t { kFarC0, kFarC1, kFarS0, kFarS1, kFarCos, kFarSin, kFarDeposit };
+
+template <class Real>
+void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
+                       std::uint32_t rows, FarRows<Real>& far) {
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
+    const std::size_t used = std::size_t(channels) * cells * kFarRows;
+    std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
+    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
+    // cell); a beam of zero energy would add exactly +-0.
+    for (std::uint32_t r = 0; r < rows; ++r) {
+        const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
+        for (std::uint32_t i = 0; i < beams; ++i) {
+            if (B[i] == 0.0f) continue;
+            const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+            const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+            const Real energy = static_cast<Real>(B[i]);
+            for (std::uint32_t m = 0; m < channels; ++m) {
+                far.energy[(m * cells + c0) * kFarRows + r] += f[kFarDeposit + 2 * m] * energy;
+                far.energy[(m * cells + c1) * kFarRows + r] += f[kFarDeposit + 2 * m + 1] * energy;
+            }
+        }
+    }
+    // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
+    // +-0 to sums that start at +0 (the weights are finite).
+    std::array<std::uint16_t, 3 * shared::kMaxFarCells> live;
+    std::size_t live_count = 0;
+    for (std::size_t mb = 0; mb < std::size_t(channels) * cells; ++mb) {
+        bool any = false;
+        for (std::uint32_t r = 0; r < kFarRows; ++r) {
+            Real& e = far.energy[mb * kFarRows + r];
+            e = static_cast<Real>(static_cast<float>(e));
+            any = any || e != Real(0);
+        }
+        if (any) live[live_count++] = static_cast<std::uint16_t>(mb);
+    }
+    // Four cells a at a time: 4 x kFarRows independent sums, each over its live cells b in increasing order.
+    const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
+    for (std::uint32_t m = 0; m < channels; ++m) {
+        std::size_t first = 0, end = 0; // the live cells of channel m: live[first, end)
+        while (first < live_count && live[first] < m * cells)
+            ++first;
+        end = first;
+        while (end < live_count && live[end] < (m + 1) * cells)
+            ++end;
+        for (std::uint32_t a = 0; a < cells; a += 4) {
+            const std::uint32_t n = std::min(4u, cells - a);
+            Real sum[4][kFarRows] = {};
+            for (std::size_t i = first; i < end; ++i) {
+                const std::uint32_t b = live[i] - m * cells;
+                const Real* e = far.energy.data() + std::size_t(live[i]) * kFarRows;
+                for (std::uint32_t q = 0; q < 4; ++q) {
+                    const Real wb = static_cast<Real>(*(w + std::min(a + q, cells - 1) - b));
+                    for (std::uint32_t r = 0; r < kFarRows; ++r)
+                        sum[q][r] += wb * e[r];
+                }
+            }
+            for (std::uint32_t q = 0; q < n; ++q) {
+                float* level = far.level.data() + (std::size_t(m) * cells + a + q) * kFarRows;
+                for (std::uint32_t r = 0; r < kFarRows; ++r)
+                    level[r] = static_cast<float>(sum[q][r]);
+            }
+        }
+    }
+}
 } // namespace
 
-std::size_t resample_weight_count(const Plan& plan) {
+namespace {
+
+std::size_t column_weight_count(const Plan& plan) {
     std::size_t n = 0;
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         n += plan.beam_column_end[j] - plan.beam_column_begin[j];
     return n;
 }
 
+} // namespace
+
+std::size_t resample_weight_count(const Plan& plan) {
+    return column_weight_count(plan) + (plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0);
+}
+
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
+    using M = Math<Real>;
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c)
             *weights++ = resample_weight<Real>(plan, j, c);
+    if (plan.far_cells == 0) return;
+    for (std::uint32_t j = 0; j < plan.beams; ++j) { // FarBeam, the values the kernels give
+        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
+        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+        Real* f = weights + std::size_t(j) * kFarBeamValues;
+        f[0] = static_cast<Real>(c0);
+        f[1] = static_cast<Real>(c1);
+        f[2] = M::far_cell_share(bc, c0);
+        f[3] = M::far_cell_share(bc, c1);
+        f[4] = phase.x;
+        f[5] = phase.y;
+        for (std::uint32_t m = 0; m < 3; ++m) {
+            f[6 + 2 * m] = M::far_deposit_weight(bc, phase, c0, m);
+            f[7 + 2 * m] = M::far_deposit_weight(bc, phase, c1, m);
+        }
+    }
 }
 
 template <class Real>
@@ -165,63 +275,6 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
             profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
 }
 
-// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
-// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
-// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
-// increasing order, as the shader's; the bins side by side are independent sums (vectorized).
-constexpr std::uint32_t kFarRows = 8;
-
-template <class Real> struct FarRows {
-    std::array<Real, 3 * shared::kMaxFarCells * kFarRows> energy; // [(m * cells + c) * kFarRows + row]
-    std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
-};
-
-template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
-    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
-    return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
-}
-
-template <class Real>
-void far_sidelobe_rows(const Plan& plan, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
-                       FarRows<Real>& far) {
-    using M = Math<Real>;
-    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
-    const std::size_t used = std::size_t(channels) * cells * kFarRows;
-    std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
-    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
-    // cell); a beam of zero energy would add exactly +-0.
-    for (std::uint32_t r = 0; r < rows; ++r) {
-        const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
-        for (std::uint32_t i = 0; i < beams; ++i) {
-            if (B[i] == 0.0f) continue;
-            const typename M::vec4 bc = far_table_vec4<Real>(plan, i, 0), phase = far_table_vec4<Real>(plan, i, 4);
-            const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-            const Real energy = static_cast<Real>(B[i]);
-            for (std::uint32_t m = 0; m < channels; ++m) {
-                far.energy[(m * cells + c0) * kFarRows + r] += M::far_deposit_weight(bc, phase, c0, m) * energy;
-                far.energy[(m * cells + c1) * kFarRows + r] += M::far_deposit_weight(bc, phase, c1, m) * energy;
-            }
-        }
-    }
-    for (std::size_t i = 0; i < used; ++i)
-        far.energy[i] = static_cast<Real>(static_cast<float>(far.energy[i]));
-    const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
-    for (std::uint32_t m = 0; m < channels; ++m) {
-        for (std::uint32_t a = 0; a < cells; ++a) {
-            Real sum[kFarRows] = {};
-            for (std::uint32_t b = 0; b < cells; ++b) {
-                const Real wb = static_cast<Real>(*(w + a - b));
-                const Real* e = far.energy.data() + (std::size_t(m) * cells + b) * kFarRows;
-                for (std::uint32_t r = 0; r < kFarRows; ++r)
-                    sum[r] += wb * e[r];
-            }
-            float* level = far.level.data() + (std::size_t(m) * cells + a) * kFarRows;
-            for (std::uint32_t r = 0; r < kFarRows; ++r)
-                level[r] = static_cast<float>(sum[r]);
-        }
-    }
-}
-
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
@@ -245,23 +298,23 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     // far_sidelobe_level of its two cells (sidelobe.comp).
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
     FarRows<Real> far;
-    std::uint32_t far_first = bin_begin; // the first bin of the batch `far` holds
+    std::uint32_t far_first = bin_begin;                           // the first bin of the batch `far` holds
+    const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
-        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
-        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-        const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
+        const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
         const std::uint32_t r = k - far_first;
         Real l[3] = {Real(0), Real(0), Real(0)};
         for (std::uint32_t m = 0; m < channels; ++m)
-            l[m] = s0 * static_cast<Real>(far.level[(m * cells + c0) * kFarRows + r]) +
-                   s1 * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
-        return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
+            l[m] = f[kFarS0] * static_cast<Real>(far.level[(m * cells + c0) * kFarRows + r]) +
+                   f[kFarS1] * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
+        return M::far_sidelobe_level(typename M::vec4(f[kFarCos], f[kFarSin], Real(0), Real(0)), l[0], l[1], l[2]);
     };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;
-            far_sidelobe_rows<Real>(plan, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
+            far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
         }
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
