@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -206,10 +207,30 @@ std::size_t column_weight_count(const Plan& plan) {
     return n;
 }
 
+std::size_t far_beam_count(const Plan& plan) {
+    return plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0;
+}
+
+// The side-lobe convolution's interior beams (whose taps all fall inside the fan, not wrapping) in
+// groups of four, j = K + 4 q for q < sidelobe_group_count: beamform_beams sums a group's four beams
+// as the lanes of one vector. Their weights, made once per plan, are stored per group tap by tap, the
+// four beams' weights of tap t side by side: [q][t][lane].
+std::size_t sidelobe_group_count(const Plan& plan) {
+    if (!plan.effects.horizontal_pattern) return 0;
+    const std::int64_t K = (static_cast<std::int64_t>(plan.sidelobe_taps) - 1) / 2;
+    const std::int64_t last = static_cast<std::int64_t>(plan.beams) - K - 4; // the last group's first beam
+    return last >= K ? static_cast<std::size_t>((last - K) / 4 + 1) : 0;
+}
+
+// Four values of Real side by side (GCC's vector extension: one SSE register for float).
+template <class Real> struct Lanes;
+template <> struct Lanes<float> { typedef float type __attribute__((vector_size(16))); };
+template <> struct Lanes<double> { typedef double type __attribute__((vector_size(32))); };
+
 } // namespace
 
 std::size_t resample_weight_count(const Plan& plan) {
-    return column_weight_count(plan) + (plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0);
+    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps;
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -217,8 +238,7 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c)
             *weights++ = resample_weight<Real>(plan, j, c);
-    if (plan.far_cells == 0) return;
-    for (std::uint32_t j = 0; j < plan.beams; ++j) { // FarBeam, the values the kernels give
+    for (std::uint32_t j = 0; j < plan.beams && plan.far_cells > 0; ++j) { // FarBeam, the values the kernels give
         const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
         const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
         Real* f = weights + std::size_t(j) * kFarBeamValues;
@@ -233,6 +253,13 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
             f[7 + 2 * m] = M::far_deposit_weight(bc, phase, c1, m);
         }
     }
+    weights += far_beam_count(plan);
+    const std::uint32_t taps = plan.sidelobe_taps;
+    const std::size_t K = (taps - 1) / 2;
+    for (std::size_t q = 0; q < sidelobe_group_count(plan); ++q)
+        for (std::uint32_t t = 0; t < taps; ++t)
+            for (std::uint32_t l = 0; l < 4; ++l)
+                *weights++ = static_cast<Real>(plan.sidelobe_weight[(K + 4 * q + l) * taps + t]);
 }
 
 template <class Real>
@@ -300,6 +327,8 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     FarRows<Real> far;
     std::uint32_t far_first = bin_begin;                           // the first bin of the batch `far` holds
     const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
+    const Real* group_weights = far_beam + far_beam_count(plan);   // sidelobe_group_count's weights
+    const std::size_t groups = sidelobe_group_count(plan);
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
         const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
@@ -325,30 +354,49 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
         }
         std::int64_t j = 0;
         while (j < nb) {
-            if (j >= K && j + 3 + K < nb) {
-                // Four interior beams at once: independent sums, each still in increasing t, over the
-                // taps where any of the four has a weight (a zero weight adds exactly +0).
-                const float* w0 = weights + static_cast<std::size_t>(j) * taps;
-                const float* w1 = w0 + taps;
-                const float* w2 = w1 + taps;
-                const float* w3 = w2 + taps;
-                const float* src = B + (j - K);
-                const std::uint32_t t_begin =
-                    std::min(std::min(tap_begin[j], tap_begin[j + 1]), std::min(tap_begin[j + 2], tap_begin[j + 3]));
-                const std::uint32_t t_end =
-                    std::max(std::max(tap_end[j], tap_end[j + 1]), std::max(tap_end[j + 2], tap_end[j + 3]));
-                Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
-                for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                    s0 += static_cast<Real>(w0[t]) * static_cast<Real>(src[t]);
-                    s1 += static_cast<Real>(w1[t]) * static_cast<Real>(src[t + 1]);
-                    s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
-                    s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
+            if (j == K && groups > 0) {
+                // The interior beams, four groups (16 beams) at a time: each beam's sum is one lane, still
+                // in increasing t, over the taps where any beam of the groups has a weight (a zero
+                // weight adds exactly +0).
+                using V = typename Lanes<Real>::type;
+                for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
+                    const std::size_t n = std::min<std::size_t>(4, groups - q0);
+                    const std::size_t j0 = std::size_t(K) + 4 * q0;
+                    std::uint32_t t_begin = taps, t_end = 0;
+                    for (std::size_t i = j0; i < j0 + 4 * n; ++i) {
+                        t_begin = std::min(t_begin, tap_begin[i]);
+                        t_end = std::max(t_end, tap_end[i]);
+                    }
+                    const Real* wq = group_weights + q0 * 4 * taps;
+                    const float* src = B + 4 * q0; // beam j0 + l takes src[t + l]
+                    V s[4] = {};
+                    // s[g] += w(g, t) * src[t + 4 g .. + 3] (out parameters: a double V is an AVX-sized value)
+                    auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
+                        V w, x;
+                        std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
+                        for (std::uint32_t l = 0; l < 4; ++l)
+                            x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                        sum += w * x;
+                    };
+                    if (n == 4) {
+                        for (std::uint32_t t = t_begin; t < t_end; ++t) {
+                            mac(s[0], 0, t);
+                            mac(s[1], 1, t);
+                            mac(s[2], 2, t);
+                            mac(s[3], 3, t);
+                        }
+                    } else {
+                        for (std::uint32_t t = t_begin; t < t_end; ++t)
+                            for (std::size_t g = 0; g < n; ++g)
+                                mac(s[g], g, t);
+                    }
+                    for (std::size_t g = 0; g < n; ++g)
+                        for (std::uint32_t l = 0; l < 4; ++l) {
+                            const std::int64_t jj = static_cast<std::int64_t>(j0 + 4 * g + l);
+                            out[jj] = static_cast<float>(s[g][l] + far_at(jj, k));
+                        }
                 }
-                out[j] = static_cast<float>(s0 + far_at(j, k));
-                out[j + 1] = static_cast<float>(s1 + far_at(j + 1, k));
-                out[j + 2] = static_cast<float>(s2 + far_at(j + 2, k));
-                out[j + 3] = static_cast<float>(s3 + far_at(j + 3, k));
-                j += 4;
+                j += static_cast<std::int64_t>(4 * groups);
                 continue;
             }
             const float* w = weights + static_cast<std::size_t>(j) * taps;
