@@ -140,18 +140,46 @@ void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam
     const std::size_t used = std::size_t(channels) * cells * kFarRows;
     std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
     // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
-    // cell); a beam of zero energy would add exactly +-0.
+    // cell); a beam of zero energy would add exactly +-0. The sums of the two cells the last beam fed
+    // are held in registers (per channel) and written back when a beam feeds another cell: the same
+    // additions in the same order, without a load and store per addition (consecutive beams share cells).
+    constexpr std::uint32_t kNone = ~0u;
     for (std::uint32_t r = 0; r < rows; ++r) {
         const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
+        Real* E = far.energy.data() + r;
+        auto at = [&](std::uint32_t m, std::uint32_t c) -> Real& { return E[(m * cells + c) * kFarRows]; };
+        std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
+        Real sa[3] = {}, sb[3] = {};
         for (std::uint32_t i = 0; i < beams; ++i) {
             if (B[i] == 0.0f) continue;
             const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
             const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+            if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
+                Real na[3], nb[3];
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    if (ca != kNone && ca != c0 && ca != c1) at(m, ca) = sa[m];
+                    if (cb != kNone && cb != c0 && cb != c1) at(m, cb) = sb[m];
+                }
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    na[m] = c0 == ca ? sa[m] : (c0 == cb ? sb[m] : at(m, c0));
+                    nb[m] = c1 == ca ? sa[m] : (c1 == cb ? sb[m] : at(m, c1));
+                }
+                for (std::uint32_t m = 0; m < channels; ++m) {
+                    sa[m] = na[m];
+                    sb[m] = nb[m];
+                }
+                ca = c0;
+                cb = c1;
+            }
             const Real energy = static_cast<Real>(B[i]);
             for (std::uint32_t m = 0; m < channels; ++m) {
-                far.energy[(m * cells + c0) * kFarRows + r] += f[kFarDeposit + 2 * m] * energy;
-                far.energy[(m * cells + c1) * kFarRows + r] += f[kFarDeposit + 2 * m + 1] * energy;
+                sa[m] += f[kFarDeposit + 2 * m] * energy;
+                sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
             }
+        }
+        for (std::uint32_t m = 0; m < channels && ca != kNone; ++m) {
+            at(m, ca) = sa[m];
+            at(m, cb) = sb[m];
         }
     }
     // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
@@ -374,8 +402,12 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
                         V w, x;
                         std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
-                        for (std::uint32_t l = 0; l < 4; ++l)
-                            x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                        if constexpr (std::is_same_v<Real, float>) {
+                            std::memcpy(&x, src + t + 4 * g, sizeof x);
+                        } else {
+                            for (std::uint32_t l = 0; l < 4; ++l)
+                                x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                        }
                         sum += w * x;
                     };
                     if (n == 4) {
