@@ -8,6 +8,9 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -26,6 +29,134 @@ std::size_t accumulator_stride(const Plan& plan) {
     return plan.profile_columns + 16u;
 }
 
+// exp of four floats, bit-identical to glibc's expf where its ifunc picks __expf_fma (a CPU with FMA
+// and AVX2): the same steps in double precision, fused where that build fuses them, with its table of
+// 2^(i/32) and its polynomial (glibc 2.36, sysdeps/ieee754/flt-32/e_expf.c). Checked against expf on
+// every float below 88 in magnitude; valid there only (range_shares' arguments lie within +-8).
+#if defined(__x86_64__) && defined(__GNUC__)
+#define VKSONAR_EXP4 1
+alignas(32) constexpr std::uint64_t kExp2Table[32] = {
+    0x3ff0000000000000, 0x3fefd9b0d3158574, 0x3fefb5586cf9890f, 0x3fef9301d0125b51, 0x3fef72b83c7d517b,
+    0x3fef54873168b9aa, 0x3fef387a6e756238, 0x3fef1e9df51fdee1, 0x3fef06fe0a31b715, 0x3feef1a7373aa9cb,
+    0x3feedea64c123422, 0x3feece086061892d, 0x3feebfdad5362a27, 0x3feeb42b569d4f82, 0x3feeab07dd485429,
+    0x3feea47eb03a5585, 0x3feea09e667f3bcd, 0x3fee9f75e8ec5f74, 0x3feea11473eb0187, 0x3feea589994cce13,
+    0x3feeace5422aa0db, 0x3feeb737b0cdc5e5, 0x3feec49182a3f090, 0x3feed503b23e255d, 0x3feee89f995ad3ad,
+    0x3feeff76f2fb5e47, 0x3fef199bdd85529c, 0x3fef3720dcef9069, 0x3fef5818dcfba487, 0x3fef7c97337b9b5f,
+    0x3fefa4afa2a490da, 0x3fefd0765b6e4540};
+
+double double_from_bits(std::uint64_t u) {
+    double d;
+    std::memcpy(&d, &u, sizeof d);
+    return d;
+}
+
+// expf of four floats (as doubles: xd), as glibc's __expf_fma computes it.
+__attribute__((target("avx2,fma"), always_inline)) inline __m128 exp4(__m256d xd) {
+    const __m256d invln2 = _mm256_set1_pd(double_from_bits(0x40471547652b82fe)); // 32 / ln 2
+    const __m256d shift = _mm256_set1_pd(double_from_bits(0x4338000000000000));  // 0x1.8p52
+    const __m256d kd = _mm256_fmadd_pd(invln2, xd, shift); // k = round(x 32 / ln 2) in the low bits
+    const __m256i ki = _mm256_castpd_si256(kd);
+    const __m256d r = _mm256_fmsub_pd(invln2, xd, _mm256_sub_pd(kd, shift));
+    // the table entries by scalar loads: a gather is slow where microcode mitigates Downfall
+    alignas(32) std::uint64_t k[4];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), ki);
+    const __m256i table =
+        _mm256_set_epi64x(static_cast<long long>(kExp2Table[k[3] & 31]), static_cast<long long>(kExp2Table[k[2] & 31]),
+                          static_cast<long long>(kExp2Table[k[1] & 31]), static_cast<long long>(kExp2Table[k[0] & 31]));
+    const __m256d scale = _mm256_castsi256_pd(_mm256_add_epi64(table, _mm256_slli_epi64(ki, 47)));
+    const __m256d z = _mm256_fmadd_pd(r, _mm256_set1_pd(double_from_bits(0x3ebc6af84b912394)),
+                                      _mm256_set1_pd(double_from_bits(0x3f2ebfce50fac4f3)));
+    const __m256d r2 = _mm256_mul_pd(r, r);
+    __m256d p = _mm256_fmadd_pd(r, _mm256_set1_pd(double_from_bits(0x3f962e42ff0c52d6)), _mm256_set1_pd(1.0));
+    p = _mm256_fmadd_pd(z, r2, p);
+    return _mm256_cvtpd_ps(_mm256_mul_pd(p, scale));
+}
+
+// y[i] = expf(x[i]) for i < n, n a multiple of 4 (exp4_matches_expf's check).
+__attribute__((target("avx2,fma"))) void exp4_blocks(const float* x, float* y, int n) {
+    for (int i = 0; i < n; i += 4)
+        _mm_storeu_ps(y + i, exp4(_mm256_cvtps_pd(_mm_loadu_ps(x + i))));
+}
+
+// footprint_share(lo, hi, centre, g, inv_norm, k) for k = k_first + i, i < n, four bins at a time: the
+// same operations lane by lane (no fused multiply-add), sinhc_of's series where |g half_len| < 0.5. Returns
+// false where a lane needs sinhc_of's other branch or an exponent outside exp4's range; the caller then
+// computes the shares one by one. shares has room for n rounded up to 4.
+__attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, float centre, float g, float inv_norm,
+                                                           int k_first, int n, float* shares) {
+    const __m128 vlo = _mm_set1_ps(lo), vhi = _mm_set1_ps(hi), vcentre = _mm_set1_ps(centre), vg = _mm_set1_ps(g);
+    const __m128 vinv = _mm_set1_ps(inv_norm), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    __m128 bad = _mm_setzero_ps();
+    for (int i = 0; i < n; i += 4) {
+        const __m128i k = _mm_add_epi32(_mm_set1_epi32(k_first + i), _mm_setr_epi32(0, 1, 2, 3));
+        // max(lo, k), min(hi, k + 1): lo, hi are not NaN (range_spread); a signed zero changes no share
+        const __m128 a = _mm_max_ps(vlo, _mm_cvtepi32_ps(k));
+        const __m128 b = _mm_min_ps(vhi, _mm_cvtepi32_ps(_mm_add_epi32(k, _mm_set1_epi32(1))));
+        const __m128 live = _mm_cmpgt_ps(b, a);
+        const __m128 len = _mm_sub_ps(b, a);
+        const __m128 half_len = _mm_mul_ps(half, len);
+        const __m128 arg = _mm_and_ps(live, _mm_mul_ps(vg, _mm_sub_ps(_mm_add_ps(a, half_len), vcentre)));
+        const __m128 y = _mm_mul_ps(vg, half_len);
+        bad = _mm_or_ps(bad, _mm_and_ps(live, _mm_cmpge_ps(_mm_and_ps(y, abs_mask), half)));
+        bad = _mm_or_ps(bad, _mm_cmpge_ps(_mm_and_ps(arg, abs_mask), _mm_set1_ps(80.0f)));
+        const __m128 e = exp4(_mm256_cvtps_pd(arg));
+        const __m128 y2 = _mm_mul_ps(y, y);
+        // 1 + y2 / 6 * (1 + y2 / 20 * (1 + y2 / 42)), as sinhc_of
+        const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
+        const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
+        const __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
+        const __m128 share = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(len, e), sinhc), vinv);
+        _mm_storeu_ps(shares + i, _mm_and_ps(live, share));
+    }
+    return _mm_movemask_ps(bad) == 0;
+}
+
+// Whether exp4_blocks gives std::exp's floats here: glibc's ifunc condition, and a check on a spread of
+// arguments in case this glibc's expf is another one. A property of the machine, fixed once known.
+bool exp4_matches_expf() {
+    static const bool matches = [] {
+        if (!__builtin_cpu_supports("fma") || !__builtin_cpu_supports("avx2")) return false;
+        constexpr int kChecks = 1024;
+        float x[kChecks], y[kChecks];
+        for (int i = 0; i < kChecks; ++i)
+            x[i] = -9.0f + 18.0f * static_cast<float>(i) / kChecks + 1e-4f * static_cast<float>(i % 7);
+        exp4_blocks(x, y, kChecks);
+        for (int i = 0; i < kChecks; ++i) {
+            const float expected = std::exp(x[i]);
+            if (std::memcmp(&y[i], &expected, sizeof expected) != 0) return false;
+        }
+        return true;
+    }();
+    return matches;
+}
+#else
+bool footprint_shares4(float, float, float, float, float, int, int, float*) {
+    return false;
+}
+bool exp4_matches_expf() {
+    return false;
+}
+#endif
+
+// The shares of bins k_first + i, i < n (<= kMaxSpreadBins), as range_share gives them; shares has room
+// for kMaxSpreadBins rounded up to 4. The footprint kernel's in float go four at a time through
+// footprint_shares4 where exp4 matches expf: the same values, computed as footprint_share does.
+constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
+
+template <class Real>
+[[gnu::always_inline]] inline void range_shares(const typename Math<Real>::RangeSpread& s, int n, bool exp4,
+                                                Real* shares) {
+    using M = Math<Real>;
+    if constexpr (std::is_same_v<Real, float>) {
+        if (exp4 && s.kernel == shared::kRangeKernelFootprint &&
+            footprint_shares4(s.lo, s.hi, s.centre, s.g, s.inv_norm, s.k_first, n, shares))
+            return;
+    }
+    for (int i = 0; i < n; ++i)
+        shares[i] = M::range_share(s, s.k_first + i);
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
@@ -37,6 +168,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
+    const bool exp4 = exp4_matches_expf();
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
@@ -51,11 +183,9 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
             const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
             // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-            constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
-            Real shares[kMaxSpreadBins];
+            Real shares[kMaxSpreadBins + 3];
             const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-            for (int i = 0; i < spread_bins; ++i)
-                shares[i] = M::range_share(spread, spread.k_first + i);
+            range_shares<Real>(spread, spread_bins, exp4, shares);
             for (int cone = first_cone; cone <= last_cone; ++cone) {
                 const Real weight = M::cone_share(x, cone, count);
                 if (!(weight > Real(0))) continue;
@@ -311,6 +441,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
     for (std::size_t k = 0; k < bins; ++k)
         std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
+    const bool exp4 = exp4_matches_expf();
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
     }
@@ -320,8 +451,11 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
             const Real e = static_cast<Real>(e2[2 * c]);
             if (!(e > Real(0))) continue;
             const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
-            for (int k = spread.k_first; k <= spread.k_last; ++k)
-                acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
+            Real shares[kMaxSpreadBins + 3];
+            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+            range_shares<Real>(spread, spread_bins, exp4, shares);
+            for (int i = 0; i < spread_bins; ++i)
+                acc[static_cast<std::size_t>(spread.k_first + i) * S + c] += shares[i] * e;
         }
     }
     if (profiles == nullptr) return;
