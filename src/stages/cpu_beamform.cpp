@@ -273,45 +273,53 @@ void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam
     // cell); a beam of zero energy would add exactly +-0. The sums of the two cells the last beam fed
     // are held in registers (per channel) and written back when a beam feeds another cell: the same
     // additions in the same order, without a load and store per addition (consecutive beams share cells).
+    // The channel count as a constant, so that the held sums stay in registers.
     constexpr std::uint32_t kNone = ~0u;
-    for (std::uint32_t r = 0; r < rows; ++r) {
-        const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
-        Real* E = far.energy.data() + r;
-        auto at = [&](std::uint32_t m, std::uint32_t c) -> Real& { return E[(m * cells + c) * kFarRows]; };
-        std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
-        Real sa[3] = {}, sb[3] = {};
-        for (std::uint32_t i = 0; i < beams; ++i) {
-            if (B[i] == 0.0f) continue;
-            const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
-            const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
-            if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
-                Real na[3], nb[3];
-                for (std::uint32_t m = 0; m < channels; ++m) {
-                    if (ca != kNone && ca != c0 && ca != c1) at(m, ca) = sa[m];
-                    if (cb != kNone && cb != c0 && cb != c1) at(m, cb) = sb[m];
+    auto deposit = [&](auto channel_count) {
+        constexpr std::uint32_t kChannels = decltype(channel_count)::value;
+        for (std::uint32_t r = 0; r < rows; ++r) {
+            const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
+            Real* E = far.energy.data() + r;
+            auto at = [&](std::uint32_t m, std::uint32_t c) -> Real& { return E[(m * cells + c) * kFarRows]; };
+            std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
+            Real sa[kChannels] = {}, sb[kChannels] = {};
+            for (std::uint32_t i = 0; i < beams; ++i) {
+                if (B[i] == 0.0f) continue;
+                const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+                const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+                if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
+                    Real na[kChannels], nb[kChannels];
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        if (ca != kNone && ca != c0 && ca != c1) at(m, ca) = sa[m];
+                        if (cb != kNone && cb != c0 && cb != c1) at(m, cb) = sb[m];
+                    }
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        na[m] = c0 == ca ? sa[m] : (c0 == cb ? sb[m] : at(m, c0));
+                        nb[m] = c1 == ca ? sa[m] : (c1 == cb ? sb[m] : at(m, c1));
+                    }
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        sa[m] = na[m];
+                        sb[m] = nb[m];
+                    }
+                    ca = c0;
+                    cb = c1;
                 }
-                for (std::uint32_t m = 0; m < channels; ++m) {
-                    na[m] = c0 == ca ? sa[m] : (c0 == cb ? sb[m] : at(m, c0));
-                    nb[m] = c1 == ca ? sa[m] : (c1 == cb ? sb[m] : at(m, c1));
+                const Real energy = static_cast<Real>(B[i]);
+                for (std::uint32_t m = 0; m < kChannels; ++m) {
+                    sa[m] += f[kFarDeposit + 2 * m] * energy;
+                    sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
                 }
-                for (std::uint32_t m = 0; m < channels; ++m) {
-                    sa[m] = na[m];
-                    sb[m] = nb[m];
-                }
-                ca = c0;
-                cb = c1;
             }
-            const Real energy = static_cast<Real>(B[i]);
-            for (std::uint32_t m = 0; m < channels; ++m) {
-                sa[m] += f[kFarDeposit + 2 * m] * energy;
-                sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
+            for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
+                at(m, ca) = sa[m];
+                at(m, cb) = sb[m];
             }
         }
-        for (std::uint32_t m = 0; m < channels && ca != kNone; ++m) {
-            at(m, ca) = sa[m];
-            at(m, cb) = sb[m];
-        }
-    }
+    };
+    if (channels == 3)
+        deposit(std::integral_constant<std::uint32_t, 3>());
+    else
+        deposit(std::integral_constant<std::uint32_t, 1>());
     // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
     // +-0 to sums that start at +0 (the weights are finite).
     std::array<std::uint16_t, 3 * shared::kMaxFarCells> live;
