@@ -112,6 +112,111 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, f
     return _mm_movemask_ps(bad) == 0;
 }
 
+// The five-row windows of four pixels for footprint_spread4, lane by lane: each pixel's (energy, range)
+// and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
+struct SpreadLanes {
+    alignas(16) float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+};
+
+// range_spread with the footprint kernel (float) for four pixels as SSE lanes: the same operations in the
+// same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which matches
+// expf here), into out[0..3]. False where a pixel's bin coordinate is NaN (the caller then uses the
+// scalar kernel).
+__attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in, float range_min, float ibw,
+                                                           float jump_rel, int bins, Math<float>::RangeSpread* out) {
+    const __m128 zero = _mm_setzero_ps(), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f), two = _mm_set1_ps(2.0f);
+    const __m128 sign = _mm_set1_ps(-0.0f), vibw = _mm_set1_ps(ibw);
+    auto abs = [&](__m128 v) { return _mm_andnot_ps(sign, v); };
+    auto neg = [&](__m128 v) { return _mm_xor_ps(v, sign); };
+    auto select = [](__m128 mask, __m128 a, __m128 b) {
+        return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+    };
+    // std::min(p, q) = (q < p) ? q : p = _mm_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm_max_ps(q, p)
+    auto min = [](__m128 p, __m128 q) { return _mm_min_ps(q, p); };
+    auto max = [](__m128 p, __m128 q) { return _mm_max_ps(q, p); };
+    const __m128 r = _mm_load_ps(in.r), up2_r = _mm_load_ps(in.up2_r), up_r = _mm_load_ps(in.up_r),
+                 down_r = _mm_load_ps(in.down_r), down2_r = _mm_load_ps(in.down2_r);
+    const __m128 x = _mm_mul_ps(_mm_sub_ps(r, _mm_set1_ps(range_min)), vibw); // range_bin_coord
+    if (_mm_movemask_ps(_mm_cmpunord_ps(x, x)) != 0) return false;
+    auto steps_agree = [&](__m128 s, __m128 t) {
+        const __m128 as = abs(s), at = abs(t);
+        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(_mm_mul_ps(s, t), zero), _mm_cmple_ps(as, _mm_mul_ps(two, at))),
+                          _mm_cmple_ps(at, _mm_mul_ps(two, as)));
+    };
+    auto edge_offset = [&](__m128 r_q, __m128 r_beyond, __m128 r_opposite) { // footprint_edge_offset
+        const __m128 s = _mm_sub_ps(r_q, r);
+        const __m128 same =
+            _mm_or_ps(_mm_or_ps(_mm_cmple_ps(abs(s), _mm_mul_ps(_mm_set1_ps(jump_rel), r)),
+                                _mm_and_ps(_mm_cmpgt_ps(r_beyond, zero), steps_agree(s, _mm_sub_ps(r_beyond, r_q)))),
+                      _mm_and_ps(_mm_cmpgt_ps(r_opposite, zero), steps_agree(s, _mm_sub_ps(r, r_opposite))));
+        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(r_q, zero), same), _mm_mul_ps(half, s));
+    };
+    const __m128 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
+    const __m128 a2 = select(_mm_cmpneq_ps(a, zero), a, neg(b)), b2 = select(_mm_cmpneq_ps(b, zero), b, neg(a));
+    const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
+    const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
+    const __m128 centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
+    const __m128 width = min(max(_mm_sub_ps(xh, xl), one), _mm_set1_ps(shared::kMaxFootprintBins));
+    const __m128 lo = _mm_sub_ps(centre, _mm_mul_ps(half, width)), hi = _mm_add_ps(centre, _mm_mul_ps(half, width));
+    // the density's slope (footprint_log_slope) where both neighbours' footprints are on this surface
+    const __m128 w_up = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(up2_r, r))), vibw);
+    const __m128 w_down = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(r, down2_r))), vibw);
+    const __m128 span = _mm_mul_ps(_mm_add_ps(_mm_mul_ps(two, _mm_sub_ps(up_r, down_r)), _mm_sub_ps(up2_r, down2_r)),
+                                   _mm_set1_ps(0.25f * ibw));
+    const __m128 e_up = _mm_load_ps(in.up_e), e_down = _mm_load_ps(in.down_e);
+    __m128 has_g = _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpneq_ps(b, zero)),
+                              _mm_and_ps(_mm_cmpgt_ps(up2_r, zero), _mm_cmpgt_ps(down2_r, zero)));
+    has_g = _mm_and_ps(has_g, _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(e_up, zero), _mm_cmpgt_ps(e_down, zero)),
+                                         _mm_and_ps(_mm_cmpgt_ps(w_up, zero), _mm_cmpgt_ps(w_down, zero))));
+    has_g = _mm_and_ps(has_g, _mm_cmpgt_ps(abs(span), zero));
+    const int g_mask = _mm_movemask_ps(has_g);
+    __m128 g = zero;
+    if (g_mask != 0) {
+        alignas(16) float ratio[4];
+        _mm_store_ps(ratio, _mm_div_ps(_mm_mul_ps(e_up, w_down), _mm_mul_ps(e_down, w_up)));
+        for (int l = 0; l < 4; ++l)
+            ratio[l] = (g_mask & (1 << l)) ? std::log(ratio[l]) : 0.0f;
+        const __m128 slope = _mm_div_ps(_mm_load_ps(ratio), span);
+        const __m128 cap = min(one, _mm_div_ps(_mm_set1_ps(8.0f), width));
+        g = _mm_and_ps(has_g, min(max(slope, neg(cap)), cap));
+    }
+    // inv_norm = 1 / (width sinhc_of(0.5 g width))
+    const __m128 y = _mm_mul_ps(_mm_mul_ps(half, g), width);
+    const __m128 y2 = _mm_mul_ps(y, y);
+    const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
+    const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
+    __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
+    const __m128 wide = _mm_cmpge_ps(abs(y), half); // NaN-free: g and width are finite
+    if (_mm_movemask_ps(wide) != 0) {
+        const __m128 ey = exp4(_mm256_cvtps_pd(y)), e_minus = exp4(_mm256_cvtps_pd(neg(y)));
+        sinhc = select(wide, _mm_div_ps(_mm_sub_ps(ey, e_minus), _mm_mul_ps(two, y)), sinhc);
+    }
+    const __m128 inv_norm = _mm_div_ps(one, _mm_mul_ps(width, sinhc));
+    alignas(16) float lo_l[4], hi_l[4], centre_l[4], g_l[4], inv_l[4];
+    alignas(16) std::int32_t first_l[4], last_l[4];
+    _mm_store_ps(lo_l, lo);
+    _mm_store_ps(hi_l, hi);
+    _mm_store_ps(centre_l, centre);
+    _mm_store_ps(g_l, g);
+    _mm_store_ps(inv_l, inv_norm);
+    _mm_store_si128(reinterpret_cast<__m128i*>(first_l), _mm_cvttps_epi32(_mm_floor_ps(lo)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(last_l), _mm_cvttps_epi32(_mm_floor_ps(hi)));
+    for (int l = 0; l < 4; ++l) {
+        Math<float>::RangeSpread& o = out[l];
+        o.kernel = shared::kRangeKernelFootprint;
+        o.k_first = std::max(first_l[l], 0);
+        o.k_last = std::min(last_l[l], bins - 1);
+        o.tent_k0 = 0;
+        o.tent_w1 = 0.0f;
+        o.lo = lo_l[l];
+        o.hi = hi_l[l];
+        o.centre = centre_l[l];
+        o.g = g_l[l];
+        o.inv_norm = inv_l[l];
+    }
+    return true;
+}
+
 // Whether exp4_blocks gives std::exp's floats here: glibc's ifunc condition, and a check on a spread of
 // arguments in case this glibc's expf is another one. A property of the machine, fixed once known.
 bool exp4_matches_expf() {
@@ -131,6 +236,12 @@ bool exp4_matches_expf() {
     return matches;
 }
 #else
+struct SpreadLanes {
+    float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+};
+bool footprint_spread4(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
+    return false;
+}
 bool footprint_shares4(float, float, float, float, float, int, int, float*) {
     return false;
 }
@@ -157,6 +268,42 @@ template <class Real>
         shares[i] = M::range_share(s, s.k_first + i);
 }
 
+// The spreads of up to four hit pixels (row j, columns c[0 .. n)) into out: four at a time through
+// footprint_spread4 where the kernel is the footprint in float and exp4 matches expf (a batch of fewer
+// than four repeats its last pixel), else pixel_spread one by one. The same spreads either way.
+template <class Real>
+void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const std::uint32_t* c, int n, bool exp4,
+                   Real range_min, Real inv_bin_width, typename Math<Real>::RangeSpread* out) {
+    if constexpr (std::is_same_v<Real, float>) {
+        if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
+            const std::uint32_t C = plan.columns, R = plan.rows;
+            SpreadLanes in;
+            for (int l = 0; l < 4; ++l) {
+                const std::uint32_t col = c[std::min(l, n - 1)];
+                auto row = [&](std::int64_t jj, float* e, float* r) {
+                    const bool inside = jj >= 0 && jj < static_cast<std::int64_t>(R);
+                    const float* q = echo2 + 2 * (static_cast<std::size_t>(inside ? jj : 0) * C + col);
+                    e[l] = inside ? q[0] : 0.0f;
+                    r[l] = inside ? q[1] : 0.0f;
+                };
+                const std::int64_t jj = j;
+                row(jj, in.e, in.r);
+                row(jj - 2, in.up2_e, in.up2_r);
+                row(jj - 1, in.up_e, in.up_r);
+                row(jj + 1, in.down_e, in.down_r);
+                row(jj + 2, in.down2_e, in.down2_r);
+            }
+            if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
+                                  static_cast<int>(plan.bins), out))
+                return;
+        }
+    }
+    for (int l = 0; l < n; ++l) {
+        const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * plan.columns + c[l])]);
+        out[l] = pixel_spread<Real>(plan, echo2, j, c[l], e, range_min, inv_bin_width);
+    }
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
@@ -174,27 +321,41 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         std::uint32_t c = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
+        // Hit pixels in batches of four (pixel_spreads), each then spread in increasing column order.
+        std::uint32_t batch[4];
+        int batched = 0;
+        auto flush = [&] {
+            typename M::RangeSpread spreads[4];
+            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+            for (int b = 0; b < batched; ++b) {
+                const typename M::RangeSpread& spread = spreads[b];
+                const std::uint32_t pc = batch[b];
+                const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + pc)]);
+                const Real x = static_cast<Real>(cone_x[pc]);
+                const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
+                const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+                // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
+                Real shares[kMaxSpreadBins + 3];
+                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+                range_shares<Real>(spread, spread_bins, exp4, shares);
+                for (int cone = first_cone; cone <= last_cone; ++cone) {
+                    const Real weight = M::cone_share(x, cone, count);
+                    if (!(weight > Real(0))) continue;
+                    const Real weighted = weight * e;
+                    Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
+                    for (int i = 0; i < spread_bins; ++i)
+                        column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
+                }
+            }
+            batched = 0;
+        };
         for (; c < C && cone_x[c] < hi; ++c) {
             const float* e2 = echo2 + 2 * (static_cast<std::size_t>(j) * C + c);
-            const Real e = static_cast<Real>(e2[0]);
-            if (!(e > Real(0))) continue;
-            const Real x = static_cast<Real>(cone_x[c]);
-            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
-            const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
-            const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
-            // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-            Real shares[kMaxSpreadBins + 3];
-            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-            range_shares<Real>(spread, spread_bins, exp4, shares);
-            for (int cone = first_cone; cone <= last_cone; ++cone) {
-                const Real weight = M::cone_share(x, cone, count);
-                if (!(weight > Real(0))) continue;
-                const Real weighted = weight * e;
-                Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
-                for (int i = 0; i < spread_bins; ++i)
-                    column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
-            }
+            if (!(static_cast<Real>(e2[0]) > Real(0))) continue;
+            batch[batched++] = c;
+            if (batched == 4) flush();
         }
+        if (batched > 0) flush();
     }
 }
 
@@ -455,16 +616,29 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     }
     for (std::uint32_t j = 0; j < R && bins > 0 && !plan.line_array; ++j) {
         const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
+        std::uint32_t batch[4]; // hit pixels, four at a time (pixel_spreads)
+        int batched = 0;
+        auto flush = [&] {
+            typename M::RangeSpread spreads[4];
+            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+            for (int b = 0; b < batched; ++b) {
+                const typename M::RangeSpread& spread = spreads[b];
+                const std::uint32_t c = batch[b];
+                const Real e = static_cast<Real>(e2[2 * c]);
+                Real shares[kMaxSpreadBins + 3];
+                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+                range_shares<Real>(spread, spread_bins, exp4, shares);
+                for (int i = 0; i < spread_bins; ++i)
+                    acc[static_cast<std::size_t>(spread.k_first + i) * S + c] += shares[i] * e;
+            }
+            batched = 0;
+        };
         for (std::uint32_t c = column_begin; c < column_end; ++c) {
-            const Real e = static_cast<Real>(e2[2 * c]);
-            if (!(e > Real(0))) continue;
-            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
-            Real shares[kMaxSpreadBins + 3];
-            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-            range_shares<Real>(spread, spread_bins, exp4, shares);
-            for (int i = 0; i < spread_bins; ++i)
-                acc[static_cast<std::size_t>(spread.k_first + i) * S + c] += shares[i] * e;
+            if (!(static_cast<Real>(e2[2 * c]) > Real(0))) continue;
+            batch[batched++] = c;
+            if (batched == 4) flush();
         }
+        if (batched > 0) flush();
     }
     if (profiles == nullptr) return;
     for (std::size_t k = 0; k < bins; ++k)
