@@ -538,15 +538,19 @@ std::size_t far_beam_count(const Plan& plan) {
     return plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0;
 }
 
-// The side-lobe convolution's interior beams (whose taps all fall inside the fan, not wrapping) in
-// groups of four, j = K + 4 q for q < sidelobe_group_count: beamform_beams sums a group's four beams
-// as the lanes of one vector. Their weights, made once per plan, are stored per group tap by tap, the
-// four beams' weights of tap t side by side: [q][t][lane].
+// The side-lobe convolution's beams in groups of four, j = 4 q + lane: beamform_beams sums a group's
+// four beams as the lanes of one vector, from a copy of the bin row padded by K beams either side (zeros,
+// or the wrapped beams with plan.circular) so that every tap reads inside it. Their weights, made once
+// per plan, are stored per group tap by tap, the four beams' weights of tap t side by side:
+// [q][t][lane] (0 for the lanes past the last beam). Not made for a row of more than kMaxPaddedRow beams
+// with its padding, which takes the scalar loop.
+constexpr std::size_t kMaxPaddedRow = 8192;
+
 std::size_t sidelobe_group_count(const Plan& plan) {
     if (!plan.effects.horizontal_pattern) return 0;
-    const std::int64_t K = (static_cast<std::int64_t>(plan.sidelobe_taps) - 1) / 2;
-    const std::int64_t last = static_cast<std::int64_t>(plan.beams) - K - 4; // the last group's first beam
-    return last >= K ? static_cast<std::size_t>((last - K) / 4 + 1) : 0;
+    const std::size_t K = (plan.sidelobe_taps - 1) / 2;
+    if (plan.beams + 2 * K + 4 > kMaxPaddedRow) return 0;
+    return (plan.beams + 3) / 4;
 }
 
 // Four values of Real side by side (GCC's vector extension: one SSE register for float).
@@ -582,11 +586,12 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     }
     weights += far_beam_count(plan);
     const std::uint32_t taps = plan.sidelobe_taps;
-    const std::size_t K = (taps - 1) / 2;
     for (std::size_t q = 0; q < sidelobe_group_count(plan); ++q)
         for (std::uint32_t t = 0; t < taps; ++t)
-            for (std::uint32_t l = 0; l < 4; ++l)
-                *weights++ = static_cast<Real>(plan.sidelobe_weight[(K + 4 * q + l) * taps + t]);
+            for (std::uint32_t l = 0; l < 4; ++l) {
+                const std::size_t j = 4 * q + l;
+                *weights++ = j < plan.beams ? static_cast<Real>(plan.sidelobe_weight[j * taps + t]) : Real(0);
+            }
 }
 
 template <class Real>
@@ -696,57 +701,61 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             std::fill(out, out + beams, 0.0f);
             continue;
         }
+        if (groups > 0) {
+            // Every beam, four groups (16 beams) at a time: each beam's sum is one lane, still in
+            // increasing t, over the taps where any beam of the groups has a weight, from the padded row
+            // (a zero weight, or a zero beyond the fan's edge, adds exactly +0: the same sums as the
+            // scalar loop below, which leaves those terms out).
+            float padded[kMaxPaddedRow]; // padded[i]: beam i - K
+            for (std::int64_t i = 0; i < nb + 2 * K + 4; ++i) {
+                const std::int64_t b = i - K;
+                padded[i] = b >= 0 && b < nb ? B[b] : (plan.circular ? B[(b + nb) % nb] : 0.0f);
+            }
+            using V = typename Lanes<Real>::type;
+            for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
+                const std::size_t n = std::min<std::size_t>(4, groups - q0);
+                const std::size_t j0 = 4 * q0, j_end = std::min<std::size_t>(j0 + 4 * n, beams);
+                std::uint32_t t_begin = taps, t_end = 0;
+                for (std::size_t i = j0; i < j_end; ++i) {
+                    t_begin = std::min(t_begin, tap_begin[i]);
+                    t_end = std::max(t_end, tap_end[i]);
+                }
+                const Real* wq = group_weights + q0 * 4 * taps;
+                const float* src = padded + j0; // beam j0 + l takes src[t + l]
+                V s[4] = {};
+                // s[g] += w(g, t) * src[t + 4 g .. + 3] (out parameters: a double V is an AVX-sized value)
+                auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
+                    V w, x;
+                    std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
+                    if constexpr (std::is_same_v<Real, float>) {
+                        std::memcpy(&x, src + t + 4 * g, sizeof x);
+                    } else {
+                        for (std::uint32_t l = 0; l < 4; ++l)
+                            x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                    }
+                    sum += w * x;
+                };
+                if (n == 4) {
+                    for (std::uint32_t t = t_begin; t < t_end; ++t) {
+                        mac(s[0], 0, t);
+                        mac(s[1], 1, t);
+                        mac(s[2], 2, t);
+                        mac(s[3], 3, t);
+                    }
+                } else {
+                    for (std::uint32_t t = t_begin; t < t_end; ++t)
+                        for (std::size_t g = 0; g < n; ++g)
+                            mac(s[g], g, t);
+                }
+                for (std::size_t jj = j0; jj < j_end; ++jj) {
+                    const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
+                    out[jj] = static_cast<float>(s[g][l] + far_at(static_cast<std::int64_t>(jj), k));
+                }
+            }
+            continue;
+        }
         std::int64_t j = 0;
         while (j < nb) {
-            if (j == K && groups > 0) {
-                // The interior beams, four groups (16 beams) at a time: each beam's sum is one lane, still
-                // in increasing t, over the taps where any beam of the groups has a weight (a zero
-                // weight adds exactly +0).
-                using V = typename Lanes<Real>::type;
-                for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
-                    const std::size_t n = std::min<std::size_t>(4, groups - q0);
-                    const std::size_t j0 = std::size_t(K) + 4 * q0;
-                    std::uint32_t t_begin = taps, t_end = 0;
-                    for (std::size_t i = j0; i < j0 + 4 * n; ++i) {
-                        t_begin = std::min(t_begin, tap_begin[i]);
-                        t_end = std::max(t_end, tap_end[i]);
-                    }
-                    const Real* wq = group_weights + q0 * 4 * taps;
-                    const float* src = B + 4 * q0; // beam j0 + l takes src[t + l]
-                    V s[4] = {};
-                    // s[g] += w(g, t) * src[t + 4 g .. + 3] (out parameters: a double V is an AVX-sized value)
-                    auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
-                        V w, x;
-                        std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
-                        if constexpr (std::is_same_v<Real, float>) {
-                            std::memcpy(&x, src + t + 4 * g, sizeof x);
-                        } else {
-                            for (std::uint32_t l = 0; l < 4; ++l)
-                                x[l] = static_cast<Real>(src[t + 4 * g + l]);
-                        }
-                        sum += w * x;
-                    };
-                    if (n == 4) {
-                        for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                            mac(s[0], 0, t);
-                            mac(s[1], 1, t);
-                            mac(s[2], 2, t);
-                            mac(s[3], 3, t);
-                        }
-                    } else {
-                        for (std::uint32_t t = t_begin; t < t_end; ++t)
-                            for (std::size_t g = 0; g < n; ++g)
-                                mac(s[g], g, t);
-                    }
-                    for (std::size_t g = 0; g < n; ++g)
-                        for (std::uint32_t l = 0; l < 4; ++l) {
-                            const std::int64_t jj = static_cast<std::int64_t>(j0 + 4 * g + l);
-                            out[jj] = static_cast<float>(s[g][l] + far_at(jj, k));
-                        }
-                }
-                j += static_cast<std::int64_t>(4 * groups);
-                continue;
-            }
             const float* w = weights + static_cast<std::size_t>(j) * taps;
             if (plan.circular) { // source j - K + t modulo beams (plan.circular: K < beams / 2)
                 Real sum = Real(0);
