@@ -560,8 +560,17 @@ template <> struct Lanes<double> { typedef double type __attribute__((vector_siz
 
 } // namespace
 
+// With far side lobes, each group's far read-back values as lanes (FarBeam's c0 and c1 as offsets into
+// FarRows::level, s0, s1, cos, sin): [q][value][lane], after the group weights.
+constexpr std::size_t kFarGroupValues = 6;
+
+std::size_t far_group_count(const Plan& plan) {
+    return plan.far_cells > 0 ? sidelobe_group_count(plan) : 0;
+}
+
 std::size_t resample_weight_count(const Plan& plan) {
-    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps;
+    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps +
+           far_group_count(plan) * kFarGroupValues * 4;
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -592,6 +601,17 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
                 const std::size_t j = 4 * q + l;
                 *weights++ = j < plan.beams ? static_cast<Real>(plan.sidelobe_weight[j * taps + t]) : Real(0);
             }
+    const Real* far_beam = weights - sidelobe_group_count(plan) * 4 * taps - far_beam_count(plan);
+    for (std::size_t q = 0; q < far_group_count(plan); ++q, weights += kFarGroupValues * 4)
+        for (std::uint32_t l = 0; l < 4; ++l) { // the lanes past the last beam repeat it
+            const Real* f = far_beam + std::min<std::size_t>(4 * q + l, plan.beams - 1) * kFarBeamValues;
+            weights[0 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC0]) * kFarRows);
+            weights[1 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC1]) * kFarRows);
+            weights[2 * 4 + l] = f[kFarS0];
+            weights[3 * 4 + l] = f[kFarS1];
+            weights[4 * 4 + l] = f[kFarCos];
+            weights[5 * 4 + l] = f[kFarSin];
+        }
 }
 
 template <class Real>
@@ -678,6 +698,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
     const Real* group_weights = far_beam + far_beam_count(plan);   // sidelobe_group_count's weights
     const std::size_t groups = sidelobe_group_count(plan);
+    const Real* far_group = group_weights + groups * 4 * taps; // far_group_count's read-back lanes
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
         const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
@@ -746,6 +767,38 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     for (std::uint32_t t = t_begin; t < t_end; ++t)
                         for (std::size_t g = 0; g < n; ++g)
                             mac(s[g], g, t);
+                }
+                if constexpr (std::is_same_v<Real, float>) {
+                    if (cells > 0) { // far_at's values as lanes, from far_group's table
+                        const std::uint32_t r = k - far_first;
+                        for (std::size_t g = 0; g < n; ++g) {
+                            const float* fg = far_group + (q0 + g) * kFarGroupValues * 4;
+                            const float* level = far.level.data() + r;
+                            V l[3] = {};
+                            for (std::uint32_t m = 0; m < channels; ++m) {
+                                const float* lm = level + std::size_t(m) * cells * kFarRows;
+                                V v0, v1;
+                                for (std::uint32_t i = 0; i < 4; ++i) {
+                                    v0[i] = lm[static_cast<std::uint32_t>(fg[i])];
+                                    v1[i] = lm[static_cast<std::uint32_t>(fg[4 + i])];
+                                }
+                                V s0, s1;
+                                std::memcpy(&s0, fg + 8, sizeof s0);
+                                std::memcpy(&s1, fg + 12, sizeof s1);
+                                l[m] = s0 * v0 + s1 * v1;
+                            }
+                            V cs, sn;
+                            std::memcpy(&cs, fg + 16, sizeof cs);
+                            std::memcpy(&sn, fg + 20, sizeof sn);
+                            const V level_far = l[0] - cs * l[1] - sn * l[2];
+                            // far_sidelobe_level: std::max(x, 0) = (x < 0) ? 0 : x
+                            const V far_value = level_far < V{} ? V{} : level_far;
+                            const V sum = s[g] + far_value;
+                            for (std::size_t jj = j0 + 4 * g, i = 0; i < 4 && jj < j_end; ++i, ++jj)
+                                out[jj] = sum[i];
+                        }
+                        continue;
+                    }
                 }
                 for (std::size_t jj = j0; jj < j_end; ++jj) {
                     const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
