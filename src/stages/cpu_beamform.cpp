@@ -7,6 +7,10 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -25,6 +29,281 @@ std::size_t accumulator_stride(const Plan& plan) {
     return plan.profile_columns + 16u;
 }
 
+// exp of four floats, bit-identical to glibc's expf where its ifunc picks __expf_fma (a CPU with FMA
+// and AVX2): the same steps in double precision, fused where that build fuses them, with its table of
+// 2^(i/32) and its polynomial (glibc 2.36, sysdeps/ieee754/flt-32/e_expf.c). Checked against expf on
+// every float below 88 in magnitude; valid there only (range_shares' arguments lie within +-8).
+#if defined(__x86_64__) && defined(__GNUC__)
+#define VKSONAR_EXP4 1
+alignas(32) constexpr std::uint64_t kExp2Table[32] = {
+    0x3ff0000000000000, 0x3fefd9b0d3158574, 0x3fefb5586cf9890f, 0x3fef9301d0125b51, 0x3fef72b83c7d517b,
+    0x3fef54873168b9aa, 0x3fef387a6e756238, 0x3fef1e9df51fdee1, 0x3fef06fe0a31b715, 0x3feef1a7373aa9cb,
+    0x3feedea64c123422, 0x3feece086061892d, 0x3feebfdad5362a27, 0x3feeb42b569d4f82, 0x3feeab07dd485429,
+    0x3feea47eb03a5585, 0x3feea09e667f3bcd, 0x3fee9f75e8ec5f74, 0x3feea11473eb0187, 0x3feea589994cce13,
+    0x3feeace5422aa0db, 0x3feeb737b0cdc5e5, 0x3feec49182a3f090, 0x3feed503b23e255d, 0x3feee89f995ad3ad,
+    0x3feeff76f2fb5e47, 0x3fef199bdd85529c, 0x3fef3720dcef9069, 0x3fef5818dcfba487, 0x3fef7c97337b9b5f,
+    0x3fefa4afa2a490da, 0x3fefd0765b6e4540};
+
+double double_from_bits(std::uint64_t u) {
+    double d;
+    std::memcpy(&d, &u, sizeof d);
+    return d;
+}
+
+// expf of four floats (as doubles: xd), as glibc's __expf_fma computes it.
+__attribute__((target("avx2,fma"), always_inline)) inline __m128 exp4(__m256d xd) {
+    const __m256d invln2 = _mm256_set1_pd(double_from_bits(0x40471547652b82fe)); // 32 / ln 2
+    const __m256d shift = _mm256_set1_pd(double_from_bits(0x4338000000000000));  // 0x1.8p52
+    const __m256d kd = _mm256_fmadd_pd(invln2, xd, shift); // k = round(x 32 / ln 2) in the low bits
+    const __m256i ki = _mm256_castpd_si256(kd);
+    const __m256d r = _mm256_fmsub_pd(invln2, xd, _mm256_sub_pd(kd, shift));
+    // the table entries by scalar loads: a gather is slow where microcode mitigates Downfall
+    alignas(32) std::uint64_t k[4];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(k), ki);
+    const __m256i table =
+        _mm256_set_epi64x(static_cast<long long>(kExp2Table[k[3] & 31]), static_cast<long long>(kExp2Table[k[2] & 31]),
+                          static_cast<long long>(kExp2Table[k[1] & 31]), static_cast<long long>(kExp2Table[k[0] & 31]));
+    const __m256d scale = _mm256_castsi256_pd(_mm256_add_epi64(table, _mm256_slli_epi64(ki, 47)));
+    const __m256d z = _mm256_fmadd_pd(r, _mm256_set1_pd(double_from_bits(0x3ebc6af84b912394)),
+                                      _mm256_set1_pd(double_from_bits(0x3f2ebfce50fac4f3)));
+    const __m256d r2 = _mm256_mul_pd(r, r);
+    __m256d p = _mm256_fmadd_pd(r, _mm256_set1_pd(double_from_bits(0x3f962e42ff0c52d6)), _mm256_set1_pd(1.0));
+    p = _mm256_fmadd_pd(z, r2, p);
+    return _mm256_cvtpd_ps(_mm256_mul_pd(p, scale));
+}
+
+// y[i] = expf(x[i]) for i < n, n a multiple of 4 (exp4_matches_expf's check).
+__attribute__((target("avx2,fma"))) void exp4_blocks(const float* x, float* y, int n) {
+    for (int i = 0; i < n; i += 4)
+        _mm_storeu_ps(y + i, exp4(_mm256_cvtps_pd(_mm_loadu_ps(x + i))));
+}
+
+// footprint_share(lo, hi, centre, g, inv_norm, k) for k = k_first + i, i < n, four bins at a time: the
+// same operations lane by lane (no fused multiply-add), sinhc_of's series where |g half_len| < 0.5. Returns
+// false where a lane needs sinhc_of's other branch or an exponent outside exp4's range; the caller then
+// computes the shares one by one. shares has room for n rounded up to 4.
+__attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, float centre, float g, float inv_norm,
+                                                           int k_first, int n, float* shares) {
+    const __m128 vlo = _mm_set1_ps(lo), vhi = _mm_set1_ps(hi), vcentre = _mm_set1_ps(centre), vg = _mm_set1_ps(g);
+    const __m128 vinv = _mm_set1_ps(inv_norm), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    __m128 bad = _mm_setzero_ps();
+    for (int i = 0; i < n; i += 4) {
+        const __m128i k = _mm_add_epi32(_mm_set1_epi32(k_first + i), _mm_setr_epi32(0, 1, 2, 3));
+        // max(lo, k), min(hi, k + 1): lo, hi are not NaN (range_spread); a signed zero changes no share
+        const __m128 a = _mm_max_ps(vlo, _mm_cvtepi32_ps(k));
+        const __m128 b = _mm_min_ps(vhi, _mm_cvtepi32_ps(_mm_add_epi32(k, _mm_set1_epi32(1))));
+        const __m128 live = _mm_cmpgt_ps(b, a);
+        const __m128 len = _mm_sub_ps(b, a);
+        const __m128 half_len = _mm_mul_ps(half, len);
+        const __m128 arg = _mm_and_ps(live, _mm_mul_ps(vg, _mm_sub_ps(_mm_add_ps(a, half_len), vcentre)));
+        const __m128 y = _mm_mul_ps(vg, half_len);
+        bad = _mm_or_ps(bad, _mm_and_ps(live, _mm_cmpge_ps(_mm_and_ps(y, abs_mask), half)));
+        bad = _mm_or_ps(bad, _mm_cmpge_ps(_mm_and_ps(arg, abs_mask), _mm_set1_ps(80.0f)));
+        const __m128 e = exp4(_mm256_cvtps_pd(arg));
+        const __m128 y2 = _mm_mul_ps(y, y);
+        // 1 + y2 / 6 * (1 + y2 / 20 * (1 + y2 / 42)), as sinhc_of
+        const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
+        const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
+        const __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
+        const __m128 share = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(len, e), sinhc), vinv);
+        _mm_storeu_ps(shares + i, _mm_and_ps(live, share));
+    }
+    return _mm_movemask_ps(bad) == 0;
+}
+
+// The five-row windows of four pixels for footprint_spread4, lane by lane: each pixel's (energy, range)
+// and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
+struct SpreadLanes {
+    alignas(16) float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+};
+
+// range_spread with the footprint kernel (float) for four pixels as SSE lanes: the same operations in the
+// same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which matches
+// expf here), into out[0..3]. False where a pixel's bin coordinate is NaN (the caller then uses the
+// scalar kernel).
+__attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in, float range_min, float ibw,
+                                                           float jump_rel, int bins, Math<float>::RangeSpread* out) {
+    const __m128 zero = _mm_setzero_ps(), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f), two = _mm_set1_ps(2.0f);
+    const __m128 sign = _mm_set1_ps(-0.0f), vibw = _mm_set1_ps(ibw);
+    auto abs = [&](__m128 v) { return _mm_andnot_ps(sign, v); };
+    auto neg = [&](__m128 v) { return _mm_xor_ps(v, sign); };
+    auto select = [](__m128 mask, __m128 a, __m128 b) {
+        return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+    };
+    // std::min(p, q) = (q < p) ? q : p = _mm_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm_max_ps(q, p)
+    auto min = [](__m128 p, __m128 q) { return _mm_min_ps(q, p); };
+    auto max = [](__m128 p, __m128 q) { return _mm_max_ps(q, p); };
+    const __m128 r = _mm_load_ps(in.r), up2_r = _mm_load_ps(in.up2_r), up_r = _mm_load_ps(in.up_r),
+                 down_r = _mm_load_ps(in.down_r), down2_r = _mm_load_ps(in.down2_r);
+    const __m128 x = _mm_mul_ps(_mm_sub_ps(r, _mm_set1_ps(range_min)), vibw); // range_bin_coord
+    if (_mm_movemask_ps(_mm_cmpunord_ps(x, x)) != 0) return false;
+    auto steps_agree = [&](__m128 s, __m128 t) {
+        const __m128 as = abs(s), at = abs(t);
+        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(_mm_mul_ps(s, t), zero), _mm_cmple_ps(as, _mm_mul_ps(two, at))),
+                          _mm_cmple_ps(at, _mm_mul_ps(two, as)));
+    };
+    auto edge_offset = [&](__m128 r_q, __m128 r_beyond, __m128 r_opposite) { // footprint_edge_offset
+        const __m128 s = _mm_sub_ps(r_q, r);
+        const __m128 same =
+            _mm_or_ps(_mm_or_ps(_mm_cmple_ps(abs(s), _mm_mul_ps(_mm_set1_ps(jump_rel), r)),
+                                _mm_and_ps(_mm_cmpgt_ps(r_beyond, zero), steps_agree(s, _mm_sub_ps(r_beyond, r_q)))),
+                      _mm_and_ps(_mm_cmpgt_ps(r_opposite, zero), steps_agree(s, _mm_sub_ps(r, r_opposite))));
+        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(r_q, zero), same), _mm_mul_ps(half, s));
+    };
+    const __m128 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
+    const __m128 a2 = select(_mm_cmpneq_ps(a, zero), a, neg(b)), b2 = select(_mm_cmpneq_ps(b, zero), b, neg(a));
+    const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
+    const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
+    const __m128 centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
+    const __m128 width = min(max(_mm_sub_ps(xh, xl), one), _mm_set1_ps(shared::kMaxFootprintBins));
+    const __m128 lo = _mm_sub_ps(centre, _mm_mul_ps(half, width)), hi = _mm_add_ps(centre, _mm_mul_ps(half, width));
+    // the density's slope (footprint_log_slope) where both neighbours' footprints are on this surface
+    const __m128 w_up = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(up2_r, r))), vibw);
+    const __m128 w_down = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(r, down2_r))), vibw);
+    const __m128 span = _mm_mul_ps(_mm_add_ps(_mm_mul_ps(two, _mm_sub_ps(up_r, down_r)), _mm_sub_ps(up2_r, down2_r)),
+                                   _mm_set1_ps(0.25f * ibw));
+    const __m128 e_up = _mm_load_ps(in.up_e), e_down = _mm_load_ps(in.down_e);
+    __m128 has_g = _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpneq_ps(b, zero)),
+                              _mm_and_ps(_mm_cmpgt_ps(up2_r, zero), _mm_cmpgt_ps(down2_r, zero)));
+    has_g = _mm_and_ps(has_g, _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(e_up, zero), _mm_cmpgt_ps(e_down, zero)),
+                                         _mm_and_ps(_mm_cmpgt_ps(w_up, zero), _mm_cmpgt_ps(w_down, zero))));
+    has_g = _mm_and_ps(has_g, _mm_cmpgt_ps(abs(span), zero));
+    const int g_mask = _mm_movemask_ps(has_g);
+    __m128 g = zero;
+    if (g_mask != 0) {
+        alignas(16) float ratio[4];
+        _mm_store_ps(ratio, _mm_div_ps(_mm_mul_ps(e_up, w_down), _mm_mul_ps(e_down, w_up)));
+        for (int l = 0; l < 4; ++l)
+            ratio[l] = (g_mask & (1 << l)) ? std::log(ratio[l]) : 0.0f;
+        const __m128 slope = _mm_div_ps(_mm_load_ps(ratio), span);
+        const __m128 cap = min(one, _mm_div_ps(_mm_set1_ps(8.0f), width));
+        g = _mm_and_ps(has_g, min(max(slope, neg(cap)), cap));
+    }
+    // inv_norm = 1 / (width sinhc_of(0.5 g width))
+    const __m128 y = _mm_mul_ps(_mm_mul_ps(half, g), width);
+    const __m128 y2 = _mm_mul_ps(y, y);
+    const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
+    const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
+    __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
+    const __m128 wide = _mm_cmpge_ps(abs(y), half); // NaN-free: g and width are finite
+    if (_mm_movemask_ps(wide) != 0) {
+        const __m128 ey = exp4(_mm256_cvtps_pd(y)), e_minus = exp4(_mm256_cvtps_pd(neg(y)));
+        sinhc = select(wide, _mm_div_ps(_mm_sub_ps(ey, e_minus), _mm_mul_ps(two, y)), sinhc);
+    }
+    const __m128 inv_norm = _mm_div_ps(one, _mm_mul_ps(width, sinhc));
+    alignas(16) float lo_l[4], hi_l[4], centre_l[4], g_l[4], inv_l[4];
+    alignas(16) std::int32_t first_l[4], last_l[4];
+    _mm_store_ps(lo_l, lo);
+    _mm_store_ps(hi_l, hi);
+    _mm_store_ps(centre_l, centre);
+    _mm_store_ps(g_l, g);
+    _mm_store_ps(inv_l, inv_norm);
+    _mm_store_si128(reinterpret_cast<__m128i*>(first_l), _mm_cvttps_epi32(_mm_floor_ps(lo)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(last_l), _mm_cvttps_epi32(_mm_floor_ps(hi)));
+    for (int l = 0; l < 4; ++l) {
+        Math<float>::RangeSpread& o = out[l];
+        o.kernel = shared::kRangeKernelFootprint;
+        o.k_first = std::max(first_l[l], 0);
+        o.k_last = std::min(last_l[l], bins - 1);
+        o.tent_k0 = 0;
+        o.tent_w1 = 0.0f;
+        o.lo = lo_l[l];
+        o.hi = hi_l[l];
+        o.centre = centre_l[l];
+        o.g = g_l[l];
+        o.inv_norm = inv_l[l];
+    }
+    return true;
+}
+
+// Whether exp4_blocks gives std::exp's floats here: glibc's ifunc condition, and a check on a spread of
+// arguments in case this glibc's expf is another one. A property of the machine, fixed once known.
+bool exp4_matches_expf() {
+    static const bool matches = [] {
+        if (!__builtin_cpu_supports("fma") || !__builtin_cpu_supports("avx2")) return false;
+        constexpr int kChecks = 1024;
+        float x[kChecks], y[kChecks];
+        for (int i = 0; i < kChecks; ++i)
+            x[i] = -9.0f + 18.0f * static_cast<float>(i) / kChecks + 1e-4f * static_cast<float>(i % 7);
+        exp4_blocks(x, y, kChecks);
+        for (int i = 0; i < kChecks; ++i) {
+            const float expected = std::exp(x[i]);
+            if (std::memcmp(&y[i], &expected, sizeof expected) != 0) return false;
+        }
+        return true;
+    }();
+    return matches;
+}
+#else
+struct SpreadLanes {
+    float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+};
+bool footprint_spread4(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
+    return false;
+}
+bool footprint_shares4(float, float, float, float, float, int, int, float*) {
+    return false;
+}
+bool exp4_matches_expf() {
+    return false;
+}
+#endif
+
+// The shares of bins k_first + i, i < n (<= kMaxSpreadBins), as range_share gives them; shares has room
+// for kMaxSpreadBins rounded up to 4. The footprint kernel's in float go four at a time through
+// footprint_shares4 where exp4 matches expf: the same values, computed as footprint_share does.
+constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
+
+template <class Real>
+[[gnu::always_inline]] inline void range_shares(const typename Math<Real>::RangeSpread& s, int n, bool exp4,
+                                                Real* shares) {
+    using M = Math<Real>;
+    if constexpr (std::is_same_v<Real, float>) {
+        if (exp4 && s.kernel == shared::kRangeKernelFootprint &&
+            footprint_shares4(s.lo, s.hi, s.centre, s.g, s.inv_norm, s.k_first, n, shares))
+            return;
+    }
+    for (int i = 0; i < n; ++i)
+        shares[i] = M::range_share(s, s.k_first + i);
+}
+
+// The spreads of up to four hit pixels (row j, columns c[0 .. n)) into out: four at a time through
+// footprint_spread4 where the kernel is the footprint in float and exp4 matches expf (a batch of fewer
+// than four repeats its last pixel), else pixel_spread one by one. The same spreads either way.
+template <class Real>
+void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const std::uint32_t* c, int n, bool exp4,
+                   Real range_min, Real inv_bin_width, typename Math<Real>::RangeSpread* out) {
+    if constexpr (std::is_same_v<Real, float>) {
+        if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
+            const std::uint32_t C = plan.columns, R = plan.rows;
+            SpreadLanes in;
+            for (int l = 0; l < 4; ++l) {
+                const std::uint32_t col = c[std::min(l, n - 1)];
+                auto row = [&](std::int64_t jj, float* e, float* r) {
+                    const bool inside = jj >= 0 && jj < static_cast<std::int64_t>(R);
+                    const float* q = echo2 + 2 * (static_cast<std::size_t>(inside ? jj : 0) * C + col);
+                    e[l] = inside ? q[0] : 0.0f;
+                    r[l] = inside ? q[1] : 0.0f;
+                };
+                const std::int64_t jj = j;
+                row(jj, in.e, in.r);
+                row(jj - 2, in.up2_e, in.up2_r);
+                row(jj - 1, in.up_e, in.up_r);
+                row(jj + 1, in.down_e, in.down_r);
+                row(jj + 2, in.down2_e, in.down2_r);
+            }
+            if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
+                                  static_cast<int>(plan.bins), out))
+                return;
+        }
+    }
+    for (int l = 0; l < n; ++l) {
+        const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * plan.columns + c[l])]);
+        out[l] = pixel_spread<Real>(plan, echo2, j, c[l], e, range_min, inv_bin_width);
+    }
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
@@ -36,34 +315,47 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
+    const bool exp4 = exp4_matches_expf();
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         std::uint32_t c = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
+        // Hit pixels in batches of four (pixel_spreads), each then spread in increasing column order.
+        std::uint32_t batch[4];
+        int batched = 0;
+        auto flush = [&] {
+            typename M::RangeSpread spreads[4];
+            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+            for (int b = 0; b < batched; ++b) {
+                const typename M::RangeSpread& spread = spreads[b];
+                const std::uint32_t pc = batch[b];
+                const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + pc)]);
+                const Real x = static_cast<Real>(cone_x[pc]);
+                const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
+                const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+                // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
+                Real shares[kMaxSpreadBins + 3];
+                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+                range_shares<Real>(spread, spread_bins, exp4, shares);
+                for (int cone = first_cone; cone <= last_cone; ++cone) {
+                    const Real weight = M::cone_share(x, cone, count);
+                    if (!(weight > Real(0))) continue;
+                    const Real weighted = weight * e;
+                    Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
+                    for (int i = 0; i < spread_bins; ++i)
+                        column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
+                }
+            }
+            batched = 0;
+        };
         for (; c < C && cone_x[c] < hi; ++c) {
             const float* e2 = echo2 + 2 * (static_cast<std::size_t>(j) * C + c);
-            const Real e = static_cast<Real>(e2[0]);
-            if (!(e > Real(0))) continue;
-            const Real x = static_cast<Real>(cone_x[c]);
-            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
-            const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
-            const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
-            // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-            constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
-            Real shares[kMaxSpreadBins];
-            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-            for (int i = 0; i < spread_bins; ++i)
-                shares[i] = M::range_share(spread, spread.k_first + i);
-            for (int cone = first_cone; cone <= last_cone; ++cone) {
-                const Real weight = M::cone_share(x, cone, count);
-                if (!(weight > Real(0))) continue;
-                const Real weighted = weight * e;
-                Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
-                for (int i = 0; i < spread_bins; ++i)
-                    column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
-            }
+            if (!(static_cast<Real>(e2[0]) > Real(0))) continue;
+            batch[batched++] = c;
+            if (batched == 4) flush();
         }
+        if (batched > 0) flush();
     }
 }
 
@@ -110,19 +402,216 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
         block(std::integral_constant<std::uint32_t, 1>());
 }
 
+// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
+// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
+// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
+// increasing order, as the shader's; the bins side by side are independent sums (vectorized).
+constexpr std::uint32_t kFarRows = 8;
+
+template <class Real> struct FarRows {
+    std::array<Real, 3 * shared::kMaxFarCells * kFarRows> energy; // [(m * cells + c) * kFarRows + row]
+    std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
+};
+
+template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
+    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+    return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
+}
+
+// A beam's far side-lobe values, as the kernels compute them from Plan::far_beam_cell, made once per plan
+// (after the resample weights): its two cells c0, c1, their shares s0, s1 (far_cell_share), its phase
+// (cos, sin), and per channel m its deposit weights into c0 and c1 (far_deposit_weight).
+constexpr std::size_t kFarBeamValues = 12;
+enum FarBeam : std::size_t { kFarC0, kFarC1, kFarS0, kFarS1, kFarCos, kFarSin, kFarDeposit };
+
+template <class Real>
+void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
+                       std::uint32_t rows, FarRows<Real>& far) {
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
+    const std::size_t used = std::size_t(channels) * cells * kFarRows;
+    std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
+    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
+    // cell); a beam of zero energy would add exactly +-0. The sums of the two cells the last beam fed
+    // are held in registers (per channel) and written back when a beam feeds another cell: the same
+    // additions in the same order, without a load and store per addition (consecutive beams share cells).
+    // The channel count as a constant, so that the held sums stay in registers.
+    constexpr std::uint32_t kNone = ~0u;
+    auto deposit = [&](auto channel_count) {
+        constexpr std::uint32_t kChannels = decltype(channel_count)::value;
+        for (std::uint32_t r = 0; r < rows; ++r) {
+            const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
+            Real* E = far.energy.data() + r;
+            auto at = [&](std::uint32_t m, std::uint32_t c) -> Real& { return E[(m * cells + c) * kFarRows]; };
+            std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
+            Real sa[kChannels] = {}, sb[kChannels] = {};
+            for (std::uint32_t i = 0; i < beams; ++i) {
+                if (B[i] == 0.0f) continue;
+                const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+                const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+                if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
+                    Real na[kChannels], nb[kChannels];
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        if (ca != kNone && ca != c0 && ca != c1) at(m, ca) = sa[m];
+                        if (cb != kNone && cb != c0 && cb != c1) at(m, cb) = sb[m];
+                    }
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        na[m] = c0 == ca ? sa[m] : (c0 == cb ? sb[m] : at(m, c0));
+                        nb[m] = c1 == ca ? sa[m] : (c1 == cb ? sb[m] : at(m, c1));
+                    }
+                    for (std::uint32_t m = 0; m < kChannels; ++m) {
+                        sa[m] = na[m];
+                        sb[m] = nb[m];
+                    }
+                    ca = c0;
+                    cb = c1;
+                }
+                const Real energy = static_cast<Real>(B[i]);
+                for (std::uint32_t m = 0; m < kChannels; ++m) {
+                    sa[m] += f[kFarDeposit + 2 * m] * energy;
+                    sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
+                }
+            }
+            for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
+                at(m, ca) = sa[m];
+                at(m, cb) = sb[m];
+            }
+        }
+    };
+    if (channels == 3)
+        deposit(std::integral_constant<std::uint32_t, 3>());
+    else
+        deposit(std::integral_constant<std::uint32_t, 1>());
+    // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
+    // +-0 to sums that start at +0 (the weights are finite).
+    std::array<std::uint16_t, 3 * shared::kMaxFarCells> live;
+    std::size_t live_count = 0;
+    for (std::size_t mb = 0; mb < std::size_t(channels) * cells; ++mb) {
+        bool any = false;
+        for (std::uint32_t r = 0; r < kFarRows; ++r) {
+            Real& e = far.energy[mb * kFarRows + r];
+            e = static_cast<Real>(static_cast<float>(e));
+            any = any || e != Real(0);
+        }
+        if (any) live[live_count++] = static_cast<std::uint16_t>(mb);
+    }
+    // Four cells a at a time: 4 x kFarRows independent sums, each over its live cells b in increasing order.
+    const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
+    for (std::uint32_t m = 0; m < channels; ++m) {
+        std::size_t first = 0, end = 0; // the live cells of channel m: live[first, end)
+        while (first < live_count && live[first] < m * cells)
+            ++first;
+        end = first;
+        while (end < live_count && live[end] < (m + 1) * cells)
+            ++end;
+        for (std::uint32_t a = 0; a < cells; a += 4) {
+            const std::uint32_t n = std::min(4u, cells - a);
+            Real sum[4][kFarRows] = {};
+            for (std::size_t i = first; i < end; ++i) {
+                const std::uint32_t b = live[i] - m * cells;
+                const Real* e = far.energy.data() + std::size_t(live[i]) * kFarRows;
+                for (std::uint32_t q = 0; q < 4; ++q) {
+                    const Real wb = static_cast<Real>(*(w + std::min(a + q, cells - 1) - b));
+                    for (std::uint32_t r = 0; r < kFarRows; ++r)
+                        sum[q][r] += wb * e[r];
+                }
+            }
+            for (std::uint32_t q = 0; q < n; ++q) {
+                float* level = far.level.data() + (std::size_t(m) * cells + a + q) * kFarRows;
+                for (std::uint32_t r = 0; r < kFarRows; ++r)
+                    level[r] = static_cast<float>(sum[q][r]);
+            }
+        }
+    }
+}
 } // namespace
 
-std::size_t resample_weight_count(const Plan& plan) {
+namespace {
+
+std::size_t column_weight_count(const Plan& plan) {
     std::size_t n = 0;
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         n += plan.beam_column_end[j] - plan.beam_column_begin[j];
     return n;
 }
 
+std::size_t far_beam_count(const Plan& plan) {
+    return plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0;
+}
+
+// The side-lobe convolution's beams in groups of four, j = 4 q + lane: beamform_beams sums a group's
+// four beams as the lanes of one vector, from a copy of the bin row padded by K beams either side (zeros,
+// or the wrapped beams with plan.circular) so that every tap reads inside it. Their weights, made once
+// per plan, are stored per group tap by tap, the four beams' weights of tap t side by side:
+// [q][t][lane] (0 for the lanes past the last beam). Not made for a row of more than kMaxPaddedRow beams
+// with its padding, which takes the scalar loop.
+constexpr std::size_t kMaxPaddedRow = 8192;
+
+std::size_t sidelobe_group_count(const Plan& plan) {
+    if (!plan.effects.horizontal_pattern) return 0;
+    const std::size_t K = (plan.sidelobe_taps - 1) / 2;
+    if (plan.beams + 2 * K + 4 > kMaxPaddedRow) return 0;
+    return (plan.beams + 3) / 4;
+}
+
+// Four values of Real side by side (GCC's vector extension: one SSE register for float).
+template <class Real> struct Lanes;
+template <> struct Lanes<float> { typedef float type __attribute__((vector_size(16))); };
+template <> struct Lanes<double> { typedef double type __attribute__((vector_size(32))); };
+
+} // namespace
+
+// With far side lobes, each group's far read-back values as lanes (FarBeam's c0 and c1 as offsets into
+// FarRows::level, s0, s1, cos, sin): [q][value][lane], after the group weights.
+constexpr std::size_t kFarGroupValues = 6;
+
+std::size_t far_group_count(const Plan& plan) {
+    return plan.far_cells > 0 ? sidelobe_group_count(plan) : 0;
+}
+
+std::size_t resample_weight_count(const Plan& plan) {
+    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps +
+           far_group_count(plan) * kFarGroupValues * 4;
+}
+
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
+    using M = Math<Real>;
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c)
             *weights++ = resample_weight<Real>(plan, j, c);
+    for (std::uint32_t j = 0; j < plan.beams && plan.far_cells > 0; ++j) { // FarBeam, the values the kernels give
+        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
+        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
+        Real* f = weights + std::size_t(j) * kFarBeamValues;
+        f[0] = static_cast<Real>(c0);
+        f[1] = static_cast<Real>(c1);
+        f[2] = M::far_cell_share(bc, c0);
+        f[3] = M::far_cell_share(bc, c1);
+        f[4] = phase.x;
+        f[5] = phase.y;
+        for (std::uint32_t m = 0; m < 3; ++m) {
+            f[6 + 2 * m] = M::far_deposit_weight(bc, phase, c0, m);
+            f[7 + 2 * m] = M::far_deposit_weight(bc, phase, c1, m);
+        }
+    }
+    weights += far_beam_count(plan);
+    const std::uint32_t taps = plan.sidelobe_taps;
+    for (std::size_t q = 0; q < sidelobe_group_count(plan); ++q)
+        for (std::uint32_t t = 0; t < taps; ++t)
+            for (std::uint32_t l = 0; l < 4; ++l) {
+                const std::size_t j = 4 * q + l;
+                *weights++ = j < plan.beams ? static_cast<Real>(plan.sidelobe_weight[j * taps + t]) : Real(0);
+            }
+    const Real* far_beam = weights - sidelobe_group_count(plan) * 4 * taps - far_beam_count(plan);
+    for (std::size_t q = 0; q < far_group_count(plan); ++q, weights += kFarGroupValues * 4)
+        for (std::uint32_t l = 0; l < 4; ++l) { // the lanes past the last beam repeat it
+            const Real* f = far_beam + std::min<std::size_t>(4 * q + l, plan.beams - 1) * kFarBeamValues;
+            weights[0 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC0]) * kFarRows);
+            weights[1 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC1]) * kFarRows);
+            weights[2 * 4 + l] = f[kFarS0];
+            weights[3 * 4 + l] = f[kFarS1];
+            weights[4 * 4 + l] = f[kFarCos];
+            weights[5 * 4 + l] = f[kFarSin];
+        }
 }
 
 template <class Real>
@@ -146,80 +635,40 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
     for (std::size_t k = 0; k < bins; ++k)
         std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
+    const bool exp4 = exp4_matches_expf();
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
     }
     for (std::uint32_t j = 0; j < R && bins > 0 && !plan.line_array; ++j) {
         const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
+        std::uint32_t batch[4]; // hit pixels, four at a time (pixel_spreads)
+        int batched = 0;
+        auto flush = [&] {
+            typename M::RangeSpread spreads[4];
+            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+            for (int b = 0; b < batched; ++b) {
+                const typename M::RangeSpread& spread = spreads[b];
+                const std::uint32_t c = batch[b];
+                const Real e = static_cast<Real>(e2[2 * c]);
+                Real shares[kMaxSpreadBins + 3];
+                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+                range_shares<Real>(spread, spread_bins, exp4, shares);
+                for (int i = 0; i < spread_bins; ++i)
+                    acc[static_cast<std::size_t>(spread.k_first + i) * S + c] += shares[i] * e;
+            }
+            batched = 0;
+        };
         for (std::uint32_t c = column_begin; c < column_end; ++c) {
-            const Real e = static_cast<Real>(e2[2 * c]);
-            if (!(e > Real(0))) continue;
-            const typename M::RangeSpread spread = pixel_spread<Real>(plan, echo2, j, c, e, range_min, inv_bin_width);
-            for (int k = spread.k_first; k <= spread.k_last; ++k)
-                acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
+            if (!(static_cast<Real>(e2[2 * c]) > Real(0))) continue;
+            batch[batched++] = c;
+            if (batched == 4) flush();
         }
+        if (batched > 0) flush();
     }
     if (profiles == nullptr) return;
     for (std::size_t k = 0; k < bins; ++k)
         for (std::uint32_t c = column_begin; c < column_end; ++c)
             profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
-}
-
-// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
-// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
-// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
-// increasing order, as the shader's; the bins side by side are independent sums (vectorized).
-constexpr std::uint32_t kFarRows = 8;
-
-template <class Real> struct FarRows {
-    std::array<Real, 3 * shared::kMaxFarCells * kFarRows> energy; // [(m * cells + c) * kFarRows + row]
-    std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
-};
-
-template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
-    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
-    return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
-}
-
-template <class Real>
-void far_sidelobe_rows(const Plan& plan, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
-                       FarRows<Real>& far) {
-    using M = Math<Real>;
-    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
-    const std::size_t used = std::size_t(channels) * cells * kFarRows;
-    std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
-    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
-    // cell); a beam of zero energy would add exactly +-0.
-    for (std::uint32_t r = 0; r < rows; ++r) {
-        const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
-        for (std::uint32_t i = 0; i < beams; ++i) {
-            if (B[i] == 0.0f) continue;
-            const typename M::vec4 bc = far_table_vec4<Real>(plan, i, 0), phase = far_table_vec4<Real>(plan, i, 4);
-            const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-            const Real energy = static_cast<Real>(B[i]);
-            for (std::uint32_t m = 0; m < channels; ++m) {
-                far.energy[(m * cells + c0) * kFarRows + r] += M::far_deposit_weight(bc, phase, c0, m) * energy;
-                far.energy[(m * cells + c1) * kFarRows + r] += M::far_deposit_weight(bc, phase, c1, m) * energy;
-            }
-        }
-    }
-    for (std::size_t i = 0; i < used; ++i)
-        far.energy[i] = static_cast<Real>(static_cast<float>(far.energy[i]));
-    const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
-    for (std::uint32_t m = 0; m < channels; ++m) {
-        for (std::uint32_t a = 0; a < cells; ++a) {
-            Real sum[kFarRows] = {};
-            for (std::uint32_t b = 0; b < cells; ++b) {
-                const Real wb = static_cast<Real>(*(w + a - b));
-                const Real* e = far.energy.data() + (std::size_t(m) * cells + b) * kFarRows;
-                for (std::uint32_t r = 0; r < kFarRows; ++r)
-                    sum[r] += wb * e[r];
-            }
-            float* level = far.level.data() + (std::size_t(m) * cells + a) * kFarRows;
-            for (std::uint32_t r = 0; r < kFarRows; ++r)
-                level[r] = static_cast<float>(sum[r]);
-        }
-    }
 }
 
 template <class Real>
@@ -245,23 +694,26 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     // far_sidelobe_level of its two cells (sidelobe.comp).
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
     FarRows<Real> far;
-    std::uint32_t far_first = bin_begin; // the first bin of the batch `far` holds
+    std::uint32_t far_first = bin_begin;                           // the first bin of the batch `far` holds
+    const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
+    const Real* group_weights = far_beam + far_beam_count(plan);   // sidelobe_group_count's weights
+    const std::size_t groups = sidelobe_group_count(plan);
+    const Real* far_group = group_weights + groups * 4 * taps; // far_group_count's read-back lanes
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
-        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
-        const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-        const Real s0 = M::far_cell_share(bc, c0), s1 = M::far_cell_share(bc, c1);
+        const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
+        const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
         const std::uint32_t r = k - far_first;
         Real l[3] = {Real(0), Real(0), Real(0)};
         for (std::uint32_t m = 0; m < channels; ++m)
-            l[m] = s0 * static_cast<Real>(far.level[(m * cells + c0) * kFarRows + r]) +
-                   s1 * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
-        return M::far_sidelobe_level(phase, l[0], l[1], l[2]);
+            l[m] = f[kFarS0] * static_cast<Real>(far.level[(m * cells + c0) * kFarRows + r]) +
+                   f[kFarS1] * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
+        return M::far_sidelobe_level(typename M::vec4(f[kFarCos], f[kFarSin], Real(0), Real(0)), l[0], l[1], l[2]);
     };
     for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;
-            far_sidelobe_rows<Real>(plan, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
+            far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
         }
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         float* out = polar + static_cast<std::size_t>(k) * beams;
@@ -270,34 +722,93 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             std::fill(out, out + beams, 0.0f);
             continue;
         }
+        if (groups > 0) {
+            // Every beam, four groups (16 beams) at a time: each beam's sum is one lane, still in
+            // increasing t, over the taps where any beam of the groups has a weight, from the padded row
+            // (a zero weight, or a zero beyond the fan's edge, adds exactly +0: the same sums as the
+            // scalar loop below, which leaves those terms out).
+            float padded[kMaxPaddedRow]; // padded[i]: beam i - K
+            for (std::int64_t i = 0; i < nb + 2 * K + 4; ++i) {
+                const std::int64_t b = i - K;
+                padded[i] = b >= 0 && b < nb ? B[b] : (plan.circular ? B[(b + nb) % nb] : 0.0f);
+            }
+            using V = typename Lanes<Real>::type;
+            for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
+                const std::size_t n = std::min<std::size_t>(4, groups - q0);
+                const std::size_t j0 = 4 * q0, j_end = std::min<std::size_t>(j0 + 4 * n, beams);
+                std::uint32_t t_begin = taps, t_end = 0;
+                for (std::size_t i = j0; i < j_end; ++i) {
+                    t_begin = std::min(t_begin, tap_begin[i]);
+                    t_end = std::max(t_end, tap_end[i]);
+                }
+                const Real* wq = group_weights + q0 * 4 * taps;
+                const float* src = padded + j0; // beam j0 + l takes src[t + l]
+                V s[4] = {};
+                // s[g] += w(g, t) * src[t + 4 g .. + 3] (out parameters: a double V is an AVX-sized value)
+                auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
+                    V w, x;
+                    std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
+                    if constexpr (std::is_same_v<Real, float>) {
+                        std::memcpy(&x, src + t + 4 * g, sizeof x);
+                    } else {
+                        for (std::uint32_t l = 0; l < 4; ++l)
+                            x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                    }
+                    sum += w * x;
+                };
+                if (n == 4) {
+                    for (std::uint32_t t = t_begin; t < t_end; ++t) {
+                        mac(s[0], 0, t);
+                        mac(s[1], 1, t);
+                        mac(s[2], 2, t);
+                        mac(s[3], 3, t);
+                    }
+                } else {
+                    for (std::uint32_t t = t_begin; t < t_end; ++t)
+                        for (std::size_t g = 0; g < n; ++g)
+                            mac(s[g], g, t);
+                }
+                if constexpr (std::is_same_v<Real, float>) {
+                    if (cells > 0) { // far_at's values as lanes, from far_group's table
+                        const std::uint32_t r = k - far_first;
+                        for (std::size_t g = 0; g < n; ++g) {
+                            const float* fg = far_group + (q0 + g) * kFarGroupValues * 4;
+                            const float* level = far.level.data() + r;
+                            V l[3] = {};
+                            for (std::uint32_t m = 0; m < channels; ++m) {
+                                const float* lm = level + std::size_t(m) * cells * kFarRows;
+                                V v0, v1;
+                                for (std::uint32_t i = 0; i < 4; ++i) {
+                                    v0[i] = lm[static_cast<std::uint32_t>(fg[i])];
+                                    v1[i] = lm[static_cast<std::uint32_t>(fg[4 + i])];
+                                }
+                                V s0, s1;
+                                std::memcpy(&s0, fg + 8, sizeof s0);
+                                std::memcpy(&s1, fg + 12, sizeof s1);
+                                l[m] = s0 * v0 + s1 * v1;
+                            }
+                            V cs, sn;
+                            std::memcpy(&cs, fg + 16, sizeof cs);
+                            std::memcpy(&sn, fg + 20, sizeof sn);
+                            const V level_far = l[0] - cs * l[1] - sn * l[2];
+                            // far_sidelobe_level: std::max(x, 0) = (x < 0) ? 0 : x
+                            const V far_value = level_far < V{} ? V{} : level_far;
+                            const V sum = s[g] + far_value;
+                            for (std::size_t jj = j0 + 4 * g, i = 0; i < 4 && jj < j_end; ++i, ++jj)
+                                out[jj] = sum[i];
+                        }
+                        continue;
+                    }
+                }
+                for (std::size_t jj = j0; jj < j_end; ++jj) {
+                    const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
+                    out[jj] = static_cast<float>(s[g][l] + far_at(static_cast<std::int64_t>(jj), k));
+                }
+            }
+            continue;
+        }
         std::int64_t j = 0;
         while (j < nb) {
-            if (j >= K && j + 3 + K < nb) {
-                // Four interior beams at once: independent sums, each still in increasing t, over the
-                // taps where any of the four has a weight (a zero weight adds exactly +0).
-                const float* w0 = weights + static_cast<std::size_t>(j) * taps;
-                const float* w1 = w0 + taps;
-                const float* w2 = w1 + taps;
-                const float* w3 = w2 + taps;
-                const float* src = B + (j - K);
-                const std::uint32_t t_begin =
-                    std::min(std::min(tap_begin[j], tap_begin[j + 1]), std::min(tap_begin[j + 2], tap_begin[j + 3]));
-                const std::uint32_t t_end =
-                    std::max(std::max(tap_end[j], tap_end[j + 1]), std::max(tap_end[j + 2], tap_end[j + 3]));
-                Real s0 = Real(0), s1 = Real(0), s2 = Real(0), s3 = Real(0);
-                for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                    s0 += static_cast<Real>(w0[t]) * static_cast<Real>(src[t]);
-                    s1 += static_cast<Real>(w1[t]) * static_cast<Real>(src[t + 1]);
-                    s2 += static_cast<Real>(w2[t]) * static_cast<Real>(src[t + 2]);
-                    s3 += static_cast<Real>(w3[t]) * static_cast<Real>(src[t + 3]);
-                }
-                out[j] = static_cast<float>(s0 + far_at(j, k));
-                out[j + 1] = static_cast<float>(s1 + far_at(j + 1, k));
-                out[j + 2] = static_cast<float>(s2 + far_at(j + 2, k));
-                out[j + 3] = static_cast<float>(s3 + far_at(j + 3, k));
-                j += 4;
-                continue;
-            }
             const float* w = weights + static_cast<std::size_t>(j) * taps;
             if (plan.circular) { // source j - K + t modulo beams (plan.circular: K < beams / 2)
                 Real sum = Real(0);

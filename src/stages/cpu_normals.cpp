@@ -14,8 +14,12 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <type_traits>
 #include <vector>
+
+#include <emmintrin.h>
+#include <xmmintrin.h>
 
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
@@ -47,6 +51,77 @@ template <class Real> void slice_rotation(const Plan& plan, std::uint32_t s, Rea
         cs = std::cos(phi);
         sn = std::sin(phi);
     }
+}
+
+// sobel3_normal of the four pixels x .. x + 3 of a row (float), as SSE lanes: where a pixel's whole
+// 3x3 window is on its surface (the smooth branch) and its normal is not degenerate, the same
+// operations as sobel3_normal and oriented_normal, in the same order (glm's cross, dot, length and
+// division by the length, std::max/min's choice between equal zeros), are written to out (4 floats per
+// pixel) and its bit in the returned mask is set; the other pixels are left to the scalar kernel.
+// up, mid, down: column 0 of the ring rows j - 1, j, j + 1 ((x, y, z, range) per column, two columns
+// of zeros either side).
+int sobel3_smooth4(const float* up, const float* mid, const float* down, std::int64_t x, float jump_rel, float* out) {
+    // The (x, y, z, range) of columns x + o .. x + o + 3 of a row, as four vectors of lanes.
+    struct Lanes {
+        __m128 x, y, z, r;
+    };
+    auto load = [](const float* row, std::int64_t c) {
+        __m128 a = _mm_loadu_ps(row + 4 * c), b = _mm_loadu_ps(row + 4 * c + 4), e = _mm_loadu_ps(row + 4 * c + 8),
+               d = _mm_loadu_ps(row + 4 * c + 12);
+        _MM_TRANSPOSE4_PS(a, b, e, d);
+        return Lanes{a, b, e, d};
+    };
+    const Lanes lu = load(up, x - 1), cu = load(up, x), ru = load(up, x + 1);
+    const Lanes lm = load(mid, x - 1), cm = load(mid, x), rm = load(mid, x + 1);
+    const Lanes ld = load(down, x - 1), cd = load(down, x), rd = load(down, x + 1);
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    const __m128 jump = _mm_mul_ps(_mm_set1_ps(jump_rel), cm.r);
+    auto same = [&](const Lanes& q) { // same_surface(q, p.range, jump)
+        return _mm_and_ps(_mm_cmpgt_ps(q.r, zero), _mm_cmple_ps(_mm_and_ps(_mm_sub_ps(q.r, cm.r), abs_mask), jump));
+    };
+    __m128 ok = _mm_cmpgt_ps(cm.r, zero);
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_and_ps(same(lu), same(lm)), _mm_and_ps(same(ld), same(cu))));
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_and_ps(same(cd), same(ru)), _mm_and_ps(same(rm), same(rd))));
+    if (_mm_movemask_ps(ok) == 0) return 0;
+    const __m128 two = _mm_set1_ps(2.0f);
+    // (a - b) + 2 (c - d) + (e - f), left to right
+    auto tangent = [&](__m128 a, __m128 b, __m128 c, __m128 d, __m128 e, __m128 f) {
+        return _mm_add_ps(_mm_add_ps(_mm_sub_ps(a, b), _mm_mul_ps(two, _mm_sub_ps(c, d))), _mm_sub_ps(e, f));
+    };
+    const __m128 txx = tangent(ru.x, lu.x, rm.x, lm.x, rd.x, ld.x), txy = tangent(ru.y, lu.y, rm.y, lm.y, rd.y, ld.y),
+                 txz = tangent(ru.z, lu.z, rm.z, lm.z, rd.z, ld.z);
+    const __m128 tyx = tangent(ld.x, lu.x, cd.x, cu.x, rd.x, ru.x), tyy = tangent(ld.y, lu.y, cd.y, cu.y, rd.y, ru.y),
+                 tyz = tangent(ld.z, lu.z, cd.z, cu.z, rd.z, ru.z);
+    // cross(tx, ty)
+    __m128 nx = _mm_sub_ps(_mm_mul_ps(txy, tyz), _mm_mul_ps(tyy, txz));
+    __m128 ny = _mm_sub_ps(_mm_mul_ps(txz, tyx), _mm_mul_ps(tyz, txx));
+    __m128 nz = _mm_sub_ps(_mm_mul_ps(txx, tyy), _mm_mul_ps(tyx, txy));
+    auto dot = [](__m128 ax, __m128 ay, __m128 az, __m128 bx, __m128 by, __m128 bz) {
+        return _mm_add_ps(_mm_add_ps(_mm_mul_ps(ax, bx), _mm_mul_ps(ay, by)), _mm_mul_ps(az, bz));
+    };
+    const __m128 len = _mm_sqrt_ps(dot(nx, ny, nz, nx, ny, nz));
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpgt_ps(len, zero), _mm_cmplt_ps(len, _mm_set1_ps(1e30f))));
+    const int mask = _mm_movemask_ps(ok);
+    if (mask == 0) return 0;
+    nx = _mm_div_ps(nx, len);
+    ny = _mm_div_ps(ny, len);
+    nz = _mm_div_ps(nz, len);
+    const __m128 flip = _mm_and_ps(_mm_cmpgt_ps(dot(nx, ny, nz, cm.x, cm.y, cm.z), zero), _mm_set1_ps(-0.0f));
+    nx = _mm_xor_ps(nx, flip);
+    ny = _mm_xor_ps(ny, flip);
+    nz = _mm_xor_ps(nz, flip);
+    // incidence_cos: std::min(std::max(-d / r, 0), 1); std::max(a, b) is _mm_max_ps(b, a), min alike
+    const __m128 d = dot(nx, ny, nz, cm.x, cm.y, cm.z);
+    const __m128 cosine =
+        _mm_min_ps(_mm_set1_ps(1.0f), _mm_max_ps(zero, _mm_div_ps(_mm_xor_ps(d, _mm_set1_ps(-0.0f)), cm.r)));
+    __m128 o0 = nx, o1 = ny, o2 = nz, o3 = cosine;
+    _MM_TRANSPOSE4_PS(o0, o1, o2, o3);
+    _mm_storeu_ps(out, o0);
+    _mm_storeu_ps(out + 4, o1);
+    _mm_storeu_ps(out + 8, o2);
+    _mm_storeu_ps(out + 12, o3);
+    return mask;
 }
 
 } // namespace
@@ -136,10 +211,10 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         float* out_row = normals4 + 4 * j * C;
         const Real *up2 = row_at(j - 2), *up = row_at(j - 1), *mid = row_at(j), *down = row_at(j + 1),
                    *down2 = row_at(j + 2);
-        for (std::int64_t x = 0; x < C; ++x) {
+        auto pixel = [&](std::int64_t x) {
             if (!(mid[4 * x + 3] > Real(0))) { // no hit: no normal
                 store(out_row + 4 * x, typename M::vec4(Real(0)));
-                continue;
+                return;
             }
             if (sobel5) {
                 auto column5 = [&](std::int64_t c) {
@@ -151,6 +226,32 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
                 auto column3 = [&](std::int64_t c) { return Column3{sample(up, c), sample(mid, c), sample(down, c)}; };
                 store(out_row + 4 * x, M::sobel3_normal(column3(x - 1), column3(x), column3(x + 1), jump_rel));
             }
+        };
+        std::int64_t x = 0;
+        for (; x < C; ++x) {
+            if constexpr (std::is_same_v<Real, float>) {
+                // Four pixels at a time where their windows are smooth (sobel3_smooth4), the others by the
+                // scalar kernel; the windows of the last four columns reach into the zero columns.
+                if (!sobel5 && x % 4 == 0 && x + 4 <= C) {
+                    alignas(16) float fast[16];
+                    const int done = sobel3_smooth4(up, mid, down, x, jump_rel, fast);
+                    if (done == 0xf) {
+                        std::memcpy(out_row + 4 * x, fast, sizeof fast);
+                        x += 3;
+                        continue;
+                    }
+                    for (int i = 0; i < 4; ++i, ++x) {
+                        if (done & (1 << i)) {
+                            std::memcpy(out_row + 4 * x, fast + 4 * i, 4 * sizeof(float));
+                            continue;
+                        }
+                        pixel(x);
+                    }
+                    --x;
+                    continue;
+                }
+            }
+            pixel(x);
         }
     }
 }

@@ -62,8 +62,8 @@ template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* scratch);
 std::size_t beamform_scratch_count(const Plan& plan);
 std::size_t beamform_accumulator_count(const Plan& plan); // bins x (profile_columns + padding)
-// The resample's weights, beam after beam, each beam's columns in increasing order (a function of the
-// plan alone: filled once).
+// The resample's weights, beam after beam, each beam's columns in increasing order, then (with far side
+// lobes) each beam's far side-lobe cells, shares and deposit weights (a function of the plan alone: filled once).
 std::size_t resample_weight_count(const Plan& plan);
 template <class Real> void resample_weights(const Plan& plan, Real* weights);
 
