@@ -131,11 +131,14 @@ std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
 // Narrows [x0, x1) to the pixels of row centre cy that could be on e's covered side: where the edge
 // crosses the row, solved for x and widened by a pixel each way, so the exact test in the loop still
 // decides every pixel (the same bytes as testing the whole box) and a thin or slanted triangle no
-// longer tests its box's empty corners. Horizontal edges, and a crossing that is not finite, leave it.
+// longer tests its box's empty corners. Horizontal edges leave it, and so do huge ones (below).
 void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
     if (e.dy == 0.0) return;
-    const double cross = e.ax + e.dx * (cy - e.ay) / e.dy;
-    if (!std::isfinite(cross)) return;
+    const double run = e.dx * (cy - e.ay) / e.dy;
+    // Below 2^40 in magnitude the crossing's rounding error is under 2^-11 pixel, far inside the
+    // widening; beyond (a vertex near w = 0, a nearly horizontal edge) the row keeps its box.
+    if (!(std::abs(run) < 0x1p40 && std::abs(e.ax) < 0x1p40)) return;
+    const double cross = e.ax + run;
     // e(cx) = sign (dx (cy - ay) - dy (cx - ax)) grows with cx where -sign dy > 0: covered to the right.
     if (-e.sign * e.dy > 0.0) {
         x0 = std::max(x0, first_pixel(cross - 1.0, x0, x1));
