@@ -28,7 +28,9 @@ constexpr const char* kUsage =
     "Renderer::render: all stages, readback and the host noise stage), frames/s and the ratio\n"
     "full frame / depth pass, paired frame by frame. RSS and the live heap (malloc'd, not freed) are read\n"
     "after 10 frames and after M frames (default 1000, counting the timed ones).\n"
-    "Targets: ratio <= 1.5, >= 60 frames/s, RSS growth <= 1 MiB, 0 allocations per frame.\n";
+    "Targets (README \"Speed\"): >= 150 frames/s (goal 200) and the post-depth stages (full frame - depth)\n"
+    "<= 1.5x the depth pass, on the faster backend of a machine without a GPU; RSS growth <= 1 MiB,\n"
+    "0 allocations per frame. full frame / depth is printed too (the retired target, for comparison).\n";
 
 struct SpeedSamples {
     std::vector<double> full_ms, depth_ms, ratio, stage_sum_ms;
@@ -193,10 +195,15 @@ int run_bench_speed(const std::vector<std::string>& argv) {
 
     std::printf("depth pass alone: %s\n", samples.depth_source.c_str());
     std::printf("  (the config cannot switch off the stages after depth; echo and beamform always run)\n");
-    std::printf("frames/s (1000 / median full frame): %s  target >= 60: %s\n", fmt(fps, 1).c_str(),
-                verdict(fps >= 60.0));
-    std::printf("full frame / depth pass (median of per-frame ratios): %s  (ratio of medians %s)  target <= 1.5: %s\n",
-                fmt(ratio, 2).c_str(), fmt(full / std::max(1e-9, depth), 2).c_str(), verdict(ratio <= 1.5));
+    std::printf("frames/s (1000 / median full frame): %s  target >= 150: %s\n", fmt(fps, 1).c_str(),
+                verdict(fps >= 150.0));
+    // (full - depth) / depth = full / depth - 1 frame by frame, so its median is the ratio's minus 1.
+    std::printf("post-depth stages / depth pass ((full frame - depth) / depth, median of per-frame ratios): %s  "
+                "target <= 1.5: %s\n",
+                fmt(ratio - 1.0, 2).c_str(), verdict(ratio - 1.0 <= 1.5));
+    std::printf("full frame / depth pass (median of per-frame ratios): %s  (ratio of medians %s; the retired "
+                "target was <= 1.5)\n",
+                fmt(ratio, 2).c_str(), fmt(full / std::max(1e-9, depth), 2).c_str());
     const double growth = rss_end - rss_10;
     std::printf("RSS after %u frames: %s MiB; after %llu frames: %s MiB; difference %+.3f MiB  target <= 1 MiB: %s\n",
                 kWarmup, fmt(rss_10, 2).c_str(), static_cast<unsigned long long>(frame_index), fmt(rss_end, 2).c_str(),
