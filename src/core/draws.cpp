@@ -130,6 +130,21 @@ void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out
     }
 }
 
+void cluster_corner_clip(const DepthCluster& cluster, const float* m, int corner, double clip[4], double magnitude[4]) {
+    const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
+                         corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
+                         corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
+    for (int r = 0; r < 4; ++r) {
+        clip[r] = double(m[12 + r]);
+        magnitude[r] = std::abs(clip[r]);
+        for (int k = 0; k < 3; ++k) {
+            const double term = double(m[k * 4 + r]) * p[k];
+            clip[r] += term;
+            magnitude[r] += std::abs(term);
+        }
+    }
+}
+
 void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
                          const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn) {
     const std::size_t slices = draws ? pushes.size() / draws : 0;
@@ -140,19 +155,8 @@ void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t 
             const float* m = pushes[s * draws + cluster.draw].clip_from_local;
             unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
             for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
-                const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
-                                     corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
-                                     corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
                 double clip[4], magnitude[4];
-                for (int r = 0; r < 4; ++r) {
-                    clip[r] = double(m[12 + r]);
-                    magnitude[r] = std::abs(clip[r]);
-                    for (int k = 0; k < 3; ++k) {
-                        const double term = double(m[k * 4 + r]) * p[k];
-                        clip[r] += term;
-                        magnitude[r] += std::abs(term);
-                    }
-                }
+                cluster_corner_clip(cluster, m, corner, clip, magnitude);
                 // The GPU sums these terms in float: its clip coordinates may differ from these by a few
                 // ulp of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
                 const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);

@@ -194,6 +194,12 @@ struct DepthCluster {
 // Draws whose mesh or index range is out of bounds, and indices past the vertex data, get no cluster.
 void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out);
 
+// Clip coordinates (x, y, z, w) of corner `corner` (bit 0: max x, bit 1: max y, bit 2: max z) of the
+// cluster's bounding box through clip_from_local (column-major float, as DepthPush), summed in double,
+// and for each the sum of its terms' magnitudes: the scale of the float rounding a GPU adds to it.
+void cluster_corner_clip(const DepthCluster& cluster, const float* clip_from_local, int corner, double clip[4],
+                         double magnitude[4]);
+
 // drawn[s * clusters.size() + c] = 0 where cluster c cannot put a fragment in slice s: its bounding
 // box, through the draw's composed (float) clip_from_local, lies wholly outside one plane of the clip
 // volume -w <= x, y <= w, 0 <= z <= w (clearly outside: by more than the GPU's rounding of the

@@ -229,21 +229,14 @@ unsigned band_outcode(double y, double w, double magnitude, const Target& t) {
     return code;
 }
 
-// Whether some corner of the cluster's bounding box is not wholly above or below the band.
+// Whether some corner of the cluster's bounding box is not wholly above or below the band (the same
+// corners and margin as cull_depth_clusters).
 bool cluster_reaches_band(const DepthCluster& cluster, const shared::DepthPush& push, const Target& t) {
-    const float* m = push.clip_from_local;
     unsigned every = 3u;
     for (int corner = 0; corner < 8 && every; ++corner) {
-        const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
-                             corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
-                             corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
-        double y = m[13], w = m[15], magnitude = std::abs(y) + std::abs(w);
-        for (int k = 0; k < 3; ++k) {
-            y += double(m[k * 4 + 1]) * p[k];
-            w += double(m[k * 4 + 3]) * p[k];
-            magnitude += std::abs(double(m[k * 4 + 1]) * p[k]) + std::abs(double(m[k * 4 + 3]) * p[k]);
-        }
-        every &= band_outcode(y, w, magnitude, t);
+        double clip[4], magnitude[4];
+        cluster_corner_clip(cluster, push.clip_from_local, corner, clip, magnitude);
+        every &= band_outcode(clip[1], clip[3], magnitude[1] + magnitude[3], t);
     }
     return every == 0u;
 }
