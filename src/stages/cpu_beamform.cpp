@@ -304,6 +304,36 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
     }
 }
 
+// Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
+// range shares: sink(c, e, k_first, spread_bins, shares), the spreads made four pixels at a time
+// (pixel_spreads) and their shares by range_shares. Both profile layouts (planar and cone columns) add
+// through it.
+template <class Real, class Sink>
+void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j, std::uint32_t column_begin,
+                           std::uint32_t column_end, bool exp4, Real range_min, Real inv_bin_width, const Sink& sink) {
+    const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * plan.columns;
+    std::uint32_t batch[4];
+    int batched = 0;
+    auto flush = [&] {
+        typename Math<Real>::RangeSpread spreads[4];
+        pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+        for (int b = 0; b < batched; ++b) {
+            const typename Math<Real>::RangeSpread& spread = spreads[b];
+            Real shares[kMaxSpreadBins + 3];
+            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
+            range_shares<Real>(spread, spread_bins, exp4, shares);
+            sink(batch[b], static_cast<Real>(e2[2 * batch[b]]), spread.k_first, spread_bins, shares);
+        }
+        batched = 0;
+    };
+    for (std::uint32_t c = column_begin; c < column_end; ++c) {
+        if (!(static_cast<Real>(e2[2 * c]) > Real(0))) continue;
+        batch[batched++] = c;
+        if (batched == 4) flush();
+    }
+    if (batched > 0) flush();
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
@@ -320,42 +350,25 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
-        std::uint32_t c = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
-        // Hit pixels in batches of four (pixel_spreads), each then spread in increasing column order.
-        std::uint32_t batch[4];
-        int batched = 0;
-        auto flush = [&] {
-            typename M::RangeSpread spreads[4];
-            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
-            for (int b = 0; b < batched; ++b) {
-                const typename M::RangeSpread& spread = spreads[b];
-                const std::uint32_t pc = batch[b];
-                const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + pc)]);
+        const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
+        const std::uint32_t c_end = static_cast<std::uint32_t>(
+            std::find_if(cone_x + c_begin, cone_x + C, [hi](float x) { return !(x < hi); }) - cone_x);
+        for_each_spread_pixel<Real>(
+            plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width,
+            [&](std::uint32_t pc, Real e, int k_first, int spread_bins, const Real* shares) {
                 const Real x = static_cast<Real>(cone_x[pc]);
                 const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
                 const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
                 // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-                Real shares[kMaxSpreadBins + 3];
-                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-                range_shares<Real>(spread, spread_bins, exp4, shares);
                 for (int cone = first_cone; cone <= last_cone; ++cone) {
                     const Real weight = M::cone_share(x, cone, count);
                     if (!(weight > Real(0))) continue;
                     const Real weighted = weight * e;
-                    Real* column = acc + static_cast<std::size_t>(spread.k_first) * S + cone;
+                    Real* column = acc + static_cast<std::size_t>(k_first) * S + cone;
                     for (int i = 0; i < spread_bins; ++i)
                         column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
                 }
-            }
-            batched = 0;
-        };
-        for (; c < C && cone_x[c] < hi; ++c) {
-            const float* e2 = echo2 + 2 * (static_cast<std::size_t>(j) * C + c);
-            if (!(static_cast<Real>(e2[0]) > Real(0))) continue;
-            batch[batched++] = c;
-            if (batched == 4) flush();
-        }
-        if (batched > 0) flush();
+            });
     }
 }
 
@@ -617,7 +630,6 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end) {
-    using M = Math<Real>;
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     Real range_min, inv_bin_width;
@@ -638,32 +650,13 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     const bool exp4 = exp4_matches_expf();
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
-    }
-    for (std::uint32_t j = 0; j < R && bins > 0 && !plan.line_array; ++j) {
-        const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * C;
-        std::uint32_t batch[4]; // hit pixels, four at a time (pixel_spreads)
-        int batched = 0;
-        auto flush = [&] {
-            typename M::RangeSpread spreads[4];
-            pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
-            for (int b = 0; b < batched; ++b) {
-                const typename M::RangeSpread& spread = spreads[b];
-                const std::uint32_t c = batch[b];
-                const Real e = static_cast<Real>(e2[2 * c]);
-                Real shares[kMaxSpreadBins + 3];
-                const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
-                range_shares<Real>(spread, spread_bins, exp4, shares);
-                for (int i = 0; i < spread_bins; ++i)
-                    acc[static_cast<std::size_t>(spread.k_first + i) * S + c] += shares[i] * e;
-            }
-            batched = 0;
-        };
-        for (std::uint32_t c = column_begin; c < column_end; ++c) {
-            if (!(static_cast<Real>(e2[2 * c]) > Real(0))) continue;
-            batch[batched++] = c;
-            if (batched == 4) flush();
-        }
-        if (batched > 0) flush();
+    } else {
+        for (std::uint32_t j = 0; j < R && bins > 0; ++j)
+            for_each_spread_pixel<Real>(plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width,
+                                        [&](std::uint32_t c, Real e, int k_first, int spread_bins, const Real* shares) {
+                                            for (int i = 0; i < spread_bins; ++i)
+                                                acc[static_cast<std::size_t>(k_first + i) * S + c] += shares[i] * e;
+                                        });
     }
     if (profiles == nullptr) return;
     for (std::size_t k = 0; k < bins; ++k)
