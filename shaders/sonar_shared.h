@@ -16,8 +16,8 @@ using uint = std::uint32_t;
 #define VKS_CONST const
 #endif
 
-VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
-VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kWorkgroupSize = 64u; // 1-D compute workgroups (per pixel, per column, per cell)
+VKS_CONST uint kMaxSlices = 16u;     // hfov 360 deg at >= 22.5 deg per slice
 // Views of the depth pass: the slices, then the vertical side lobes' tier views (Plan::views).
 VKS_CONST uint kMaxViews = 24u;
 VKS_CONST uint kMaxFarCells = 256u;       // far side lobes' grid (Plan::far_cells): far_sidelobe.comp's shared array
@@ -213,7 +213,7 @@ struct SliceInfo {
     float down_x;
     float down_y;
     float down_z;
-    uint wedge; // 1: a tier view, its azimuths limited to its wedge [wedge_start, wedge_end)
+    uint wedge;          // 1: a tier view, its azimuths limited to its wedge [wedge_start, wedge_end)
     float wedge_start_x; // (cos, sin) of the wedge's starboard edge azimuth
     float wedge_start_y;
     float wedge_end_x; // (cos, sin) of its port edge azimuth

@@ -444,6 +444,26 @@ Result<void> plan_pixel_grid(Plan& p) {
 // 13 dB and more below the main lobe; their returns need the range footprint, not fine azimuths).
 constexpr double kTierPixelRatio = 2.0;
 
+// The most the tier views' pixels may be coarser than the slices' before the side lobes are left out.
+constexpr double kMaxTierPixelRatio = 4.0;
+
+// Whether the line array's cone coordinate increases along every row of the view (its axis cosine, the
+// ray's y over its length, decreases with u), sampled at every pixel centre in double, with a margin.
+bool cone_increases_along_rows(const Plan& p, const ViewGeometry& v) {
+    for (std::uint32_t row = 0; row < p.rows; ++row) {
+        const double vv = math_f64::pixel_coord(row, p.rows, v.tan_half_v);
+        double previous = 2.0;
+        for (std::uint32_t col = 0; col < p.slice_columns; ++col) {
+            const double u = math_f64::pixel_coord(col, p.slice_columns, v.tan_half_h);
+            const double y = v.forward[1] + u * v.right[1] + vv * v.down[1];
+            const double axis = y / std::sqrt(1.0 + u * u + vv * vv);
+            if (!(axis < previous - 1e-6)) return false;
+            previous = axis;
+        }
+    }
+    return true;
+}
+
 // A tier view's camera: looking at azimuth `centre`, pitched by `pitch` (positive: down), right axis level.
 ViewGeometry tier_camera(double centre, double pitch) {
     ViewGeometry v;
@@ -563,6 +583,26 @@ Result<void> plan_tier_views(Plan& p) {
     const std::size_t below = tiers.size();
     for (const ViewGeometry& v : tier_band(p, gate, 0.5 * kPi, false))
         tiers.push_back(v);
+    // What the tier views can hold: pixels at most kMaxTierPixelRatio times the slices' (a fan of a few
+    // degrees has slices of a few columns; its tier views would be as many columns over 90 degrees), and
+    // a cone coordinate that increases along each of their rows (the profile stage's gather needs it).
+    double worst_ratio = 0.0;
+    bool monotonic = true;
+    for (const ViewGeometry& v : tiers) {
+        worst_ratio = std::max({worst_ratio, v.tan_half_h / p.tan_half_h, v.tan_half_v / p.tan_half_v});
+        monotonic = monotonic && cone_increases_along_rows(p, v);
+    }
+    if (worst_ratio > kMaxTierPixelRatio || !monotonic) {
+        const std::string why = !monotonic
+                                    ? "the tier views' rows would not run along the beams (vfov " + fmt(c.vfov_deg) +
+                                          ", hfov " + fmt(c.hfov_deg) + ")"
+                                    : "the tier views' pixels would be " + fmt(std::round(worst_ratio * 10) / 10) +
+                                          "x the slices' (at most " + fmt(kMaxTierPixelRatio) + "x)";
+        if (mode == EffectMode::on)
+            return make_error(ErrorCode::invalid_argument, "config: effects.vertical_sidelobes = on, but " + why);
+        p.vertical_sidelobes_why = "auto: off: " + why;
+        return {};
+    }
     if (p.slices + tiers.size() > shared::kMaxViews)
         return make_error(ErrorCode::invalid_argument,
                           "config: accuracy.max_slice = " + fmt(c.max_slice_deg) + " gives " +
@@ -660,9 +700,10 @@ void plan_profile_columns(Plan& p) {
     p.cone_step_rad = hfov / p.profile_columns;
 }
 
-// Step (after the memory check): line_array, every pixel's cone coordinate.
-void plan_cone_table(Plan& p) {
-    if (!p.line_array) return;
+// Step (after the memory check): line_array, every pixel's cone coordinate. Along each view's row it
+// must not decrease (the profile stage's gather searches a view's row for a cone column's pixels).
+Result<void> plan_cone_table(Plan& p) {
+    if (!p.line_array) return {};
     const double hfov = p.config.hfov_deg * kDegToRad;
     const float half_fov = static_cast<float>(0.5 * hfov);
     const float inv_step = static_cast<float>(1.0 / p.cone_step_rad);
@@ -674,8 +715,14 @@ void plan_cone_table(Plan& p) {
             const float u = math_f32::pixel_coord(col % p.slice_columns, p.slice_columns, view.tan_half_h);
             const float axis = math_f32::array_axis_cosine(u, v, view);
             p.pixel_cone_coord[std::size_t(row) * p.columns + col] = math_f32::cone_coord(axis, half_fov, inv_step);
+            if (col % p.slice_columns != 0 && p.pixel_cone_coord[std::size_t(row) * p.columns + col] <
+                                                  p.pixel_cone_coord[std::size_t(row) * p.columns + col - 1])
+                return make_error(ErrorCode::internal,
+                                  "plan: the cone coordinate decreases along row " + std::to_string(row) + " of view " +
+                                      std::to_string(col / p.slice_columns) + " (hfov " + fmt(p.config.hfov_deg) + ")");
         }
     }
+    return {};
 }
 
 // Step: the range window: bin width, the echo stage's gate, bin centres.
@@ -1108,7 +1155,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     }
     plan_profile_columns(p);
     if (auto fits = check_memory(p); !fits) return fits.error();
-    plan_cone_table(p);
+    if (auto cones = plan_cone_table(p); !cones) return cones.error();
     plan_range_window(p);
     plan_clip_planes(p);
     plan_horizontal_pattern(p);

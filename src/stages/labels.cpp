@@ -226,21 +226,27 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
     for (std::uint32_t row = 0; row < plan.rows && plan.line_array; ++row) {
         // The pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1, q_end),
         // each visited once with the sum of its two cone columns' shares of this beam.
+        // Per view: along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
-        std::uint32_t c = static_cast<std::uint32_t>(std::lower_bound(cone_x, cone_x + plan.columns, lo) - cone_x);
-        for (; c < plan.columns && cone_x[c] < hi; ++c) {
-            const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
-            // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
-            if (!(frame.echo[2 * p] > 0.0f)) continue;
-            const double x = cone_x[c];
-            const auto first = static_cast<std::int64_t>(std::floor(x));
-            double weight = 0.0;
-            for (std::int64_t q = first; q <= first + 1; ++q)
-                if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
-                    weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
-                              beam_weight(static_cast<std::uint32_t>(q));
-            if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const float* view_x = cone_x + std::size_t(view) * plan.slice_columns;
+            const std::uint32_t view_end = (view + 1) * plan.slice_columns;
+            std::uint32_t c =
+                static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + plan.slice_columns, lo) - cone_x);
+            for (; c < view_end && cone_x[c] < hi; ++c) {
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+                // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
+                if (!(frame.echo[2 * p] > 0.0f)) continue;
+                const double x = cone_x[c];
+                const auto first = static_cast<std::int64_t>(std::floor(x));
+                double weight = 0.0;
+                for (std::int64_t q = first; q <= first + 1; ++q)
+                    if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
+                        weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
+                                  beam_weight(static_cast<std::uint32_t>(q));
+                if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+            }
         }
     }
 
