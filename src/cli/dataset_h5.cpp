@@ -331,9 +331,11 @@ public:
         }
         if (!ok) return fail("cannot write frame " + std::to_string(frames_));
         ++frames_;
-        // The frame counts only once all its rows are written; flushed so a killed run leaves it readable,
-        // and recorded for a resume only once the flush has returned (read_commit).
-        if (!set_count("frames_written", frames_) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit())
+        // The frame counts only once its rows and their indexes are in the file: flushed, then
+        // frames_written flushed on its own (one flush would write it before the indexes), so a reader of
+        // a killed run finds it readable; then recorded for a resume (read_commit).
+        if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !set_count("frames_written", frames_) ||
+            H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit())
             return fail("cannot flush frame " + std::to_string(frames_ - 1));
         return {};
     }
