@@ -5,11 +5,10 @@ Run by ctest (tests/CMakeLists.txt, `dataset_resume_torn`) with an interpreter t
 The shim (tests/preload/kill_at_write.cpp) SIGKILLs the render at its Nth write to the .h5, so every
 write of one frame's flush (the new chunks, the metadata about in address order, the superblock, the
 commit record) is a kill point, deterministically, and each write over a page is also cut in half.
-HDF5 writes frames_written before the chunk indexes and the end of the file last, so a resume that
+One HDF5 flush writes frames_written before the chunk indexes and the end of the file last, so a resume that
 trusted frames_written read an unindexed frame as zeros or allocated the next frame over it (before the
-commit record, /polar and the labels differed at 4 of a frame's ~23 writes and the re-run failed at 6
-more). Checks, each of
-which can fail:
+commit record, /polar and the labels differed at 4 of a frame's ~23 writes and the re-run failed at 5
+more). Checks, each of which can fail:
   - each killed shard, run again, exits 0 and equals the uninterrupted shard bit for bit, every array;
   - a shard whose recorded frames were changed on disk is started over (one warning line), not resumed.
 """
