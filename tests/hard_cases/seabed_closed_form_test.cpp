@@ -301,7 +301,8 @@ TEST_P(SeabedClosedForm, TheSliceLayoutDoesNotMoveTheFirstReturns) {
     // slice's rows reach past that edge at its centre (they hold it at its edges); without the
     // elevation gate those rows caught the first side lobe there and 15-degree slices did not: here
     // 18.3 dB at worst over the bins' totals, 0.86 dB rms (tilted_seafloor: 25.6 / 3.5 dB). With the
-    // gate 1.11 / 0.05 dB, what is left being where the two grids' rows fall next to the pattern's null.
+    // gate 1.11 / 0.05 dB, what is left being where the two grids' rows fall next to the pattern's null; with
+    // the side lobes' tier views (the default) 0.06 / 0.005 dB: the first returns come through the side lobes.
     SonarConfig config = seabed_config();
     Scene scene;
     add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
