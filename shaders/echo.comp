@@ -110,7 +110,11 @@ vec2 echo_pixel(uint row, uint column) {
         return vec2(0.0);
     }
     uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
-    PixelView view = view_of_slice(slice_info[slice]);
+    // a slice from two table reads (level_slice_view), a tier view whole
+    PixelView view = slice < params.slices
+                         ? level_slice_view(slice_info[slice].forward_x, slice_info[slice].forward_y, params.tan_half_h,
+                                            params.tan_half_v, params.elevation_gate_sin)
+                         : view_of_slice(slice_info[slice]);
     float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, view.tan_half_h);
     float v = pixel_coord(row, params.rows, view.tan_half_v);
     MaterialGpu mat = material(material_index(material_id[p], material_count()));

@@ -27,6 +27,16 @@ layout(std430, binding = kBindingNormals) buffer NormalsBuffer { vec4 normals4[]
 // A uniform block: every lane of a row run reads the same slice (one scalar load on lavapipe).
 layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxViews]; };
 
+// The view of pixel column c's slice or tier view: a slice from two table reads (level_slice_view),
+// a tier view whole (lavapipe runs every uniform read at a lane-varying index as a gather).
+PixelView pixel_view(uint view) {
+    if (view < params.slices) {
+        return level_slice_view(slice_info[view].forward_x, slice_info[view].forward_y, params.tan_half_h,
+                                params.tan_half_v, params.elevation_gate_sin);
+    }
+    return view_of_slice(slice_info[view]);
+}
+
 uint view_of_column(uint c) {
     return slice_of_column(c, 1.0 / float(params.slice_columns)); // no integer divide per pixel
 }
@@ -53,8 +63,9 @@ Sample load(int column, int row) {
     if (!(d > 0.0)) {
         return no_sample();
     }
-    PixelView view = view_of_slice(slice_info[view_of_column(c)]);
-    float u = pixel_coord(c - view_of_column(c) * params.slice_columns, params.slice_columns, view.tan_half_h);
+    uint index = view_of_column(c);
+    PixelView view = pixel_view(index);
+    float u = pixel_coord(c - index * params.slice_columns, params.slice_columns, view.tan_half_h);
     float v = pixel_coord(j, params.rows, view.tan_half_v);
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
     return sample_at(z, pixel_ray(u, v, view));
@@ -148,7 +159,7 @@ void run_geometric(uint row, uint first, uint last) {
             normals4[i] = vec4(0.0);
             continue;
         }
-        normals4[i] = geometric_normal(p, normals4[i].xyz, view_of_slice(slice_info[column / params.slice_columns]));
+        normals4[i] = geometric_normal(p, normals4[i].xyz, pixel_view(column / params.slice_columns));
     }
 }
 

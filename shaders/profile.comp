@@ -107,29 +107,37 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
     }
 }
 
-void gather_cone_columns(uint first_cone, uint end_cone) {
-    uint columns = params.columns;
-    uint width = params.slice_columns;
-    uint views = columns / width;
-    float lo = float(first_cone) - 1.0;
-    // per view, the first pixel column of row 0 with a cone coordinate above lo
-    uint first[kMaxViews];
-    for (uint s = 0u; s < views; ++s) {
-        uint a = s * width;
-        uint b = a + width;
-        while (a < b) {
-            uint mid = (a + b) / 2u;
-            if (cone_coords[mid] > lo) {
-                b = mid;
-            } else {
-                a = mid + 1u;
-            }
+// The first pixel column of [begin, end) on row 0 with a cone coordinate above lo (binary search).
+uint first_above(uint begin, uint end, float lo) {
+    while (begin < end) {
+        uint mid = (begin + end) / 2u;
+        if (cone_coords[mid] > lo) {
+            end = mid;
+        } else {
+            begin = mid + 1u;
         }
-        first[s] = a;
+    }
+    return begin;
+}
+
+// The slices of the main band are one run of columns along which the cone coordinate increases (they
+// join at their seams); each tier view of the vertical side lobes is a run of its own.
+void gather_cone_columns(uint first_cone, uint end_cone) {
+    uint width = params.slice_columns;
+    uint slices_end = params.slices * width;
+    uint tiers = params.columns / width - params.slices;
+    float lo = float(first_cone) - 1.0;
+    uint first_slices = first_above(0u, slices_end, lo);
+    uint first_tier[kMaxViews];
+    for (uint t = 0u; t < tiers; ++t) {
+        uint begin = slices_end + t * width;
+        first_tier[t] = first_above(begin, begin + width, lo);
     }
     for (uint row = 0u; row < params.rows; ++row) {
-        for (uint s = 0u; s < views; ++s) {
-            gather_view(row, s * width, (s + 1u) * width, first[s], first_cone, end_cone);
+        gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone);
+        for (uint t = 0u; t < tiers; ++t) {
+            uint begin = slices_end + t * width;
+            gather_view(row, begin, begin + width, first_tier[t], first_cone, end_cone);
         }
     }
 }

@@ -61,6 +61,25 @@ VKS_FN PixelView view_of_slice(SliceInfo s) {
     return view;
 }
 
+// A slice of the main band as a view: a level camera at azimuth (cos, sin) = (cs, sn), its elevation
+// band |sin e| <= gate_sin (2: none), no wedge. The same values view_of_slice reads from its SliceInfo
+// entry (plan.cpp fills both from the same floats): the shaders build it from two table reads instead of
+// seventeen.
+VKS_FN PixelView level_slice_view(REAL cs, REAL sn, REAL tan_half_h, REAL tan_half_v, REAL gate_sin) {
+    PixelView view;
+    view.forward = vec3(cs, sn, REAL(0));
+    view.right = vec3(sn, -cs, REAL(0));
+    view.down = vec3(REAL(0), REAL(0), REAL(-1));
+    view.tan_half_h = tan_half_h;
+    view.tan_half_v = tan_half_v;
+    view.sin_elevation_min = -gate_sin;
+    view.sin_elevation_max = gate_sin;
+    view.wedge = false;
+    view.wedge_start = vec2(REAL(1), REAL(0));
+    view.wedge_end = vec2(REAL(1), REAL(0));
+    return view;
+}
+
 // Sonar-frame direction of pixel (u, v) of a view, scaled so that its view-space z is 1:
 // forward + u right + v down. The pixel's position is view_z * pixel_ray(...). For a slice (a level
 // camera at azimuth phi: forward (cos, sin, 0), right (sin, -cos, 0), down (0, 0, -1)) the zero terms

@@ -82,6 +82,7 @@ template <class Real> struct StageContext {
         draws.resize(static_cast<std::size_t>(plan.views) * scene.draws.size());
         build_depth_clusters(scene, clusters);
         clusters_drawn.resize(std::size_t(plan.views) * clusters.size());
+        view_drawn.assign(plan.views, 1);
     }
 
     Plan plan;              // copied: the backend may outlive the caller's Plan object
@@ -94,7 +95,8 @@ template <class Real> struct StageContext {
 
     std::vector<shared::DepthPush> draws;
     std::vector<DepthCluster> clusters;
-    std::vector<std::uint8_t> clusters_drawn; // slices * clusters, 0 = the cluster cannot reach that slice
+    std::vector<std::uint8_t> clusters_drawn; // views * clusters, 0 = the cluster cannot reach that view
+    std::vector<std::uint8_t> view_drawn;     // views: 0 = no cluster reaches it this frame (all its pixels empty)
     std::vector<float> depth;
     std::vector<std::uint32_t> material;
     std::vector<float> face; // face normals of the depth pass (normal_method = geometric only)
@@ -107,6 +109,14 @@ template <class Real> struct StageContext {
 template <class Real> void run_depth(StageContext<Real>& s) {
     compose_depth_draws(s.plan, s.scene, s.pose, s.draws);
     cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
+    // A view no cluster reaches (a tier view above a scene with nothing overhead) is empty: the stages
+    // after the depth pass only zero its pixels.
+    const std::size_t count = s.clusters.size();
+    for (std::uint32_t v = 0; v < s.plan.views; ++v) {
+        const auto first = s.clusters_drawn.begin() + std::ptrdiff_t(v * count);
+        s.view_drawn[v] =
+            std::find(first, first + std::ptrdiff_t(count), std::uint8_t(1)) != first + std::ptrdiff_t(count);
+    }
     const DepthClusters clusters{s.clusters, s.clusters_drawn};
     // Bands of rows, two per thread: the pixel fill is most of the pass, and the seabed's rows hold
     // most of it, so one band per thread would leave a thread waiting; every band sets up each
@@ -130,7 +140,7 @@ template <class Real> void run_normals(StageContext<Real>& s) {
     const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(s.plan), 1);
     split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
         normals_rows<Real>(s.plan, s.depth.data(), s.normals.data(), s.normals_scratch.data() + part * per_part, begin,
-                           end);
+                           end, s.view_drawn.data());
     });
 }
 
@@ -139,17 +149,17 @@ template <class Real> void run_echo(StageContext<Real>& s) {
     const float* normals = s.plan.effects.incidence ? s.normals.data() : nullptr;
     split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         echo_rows<Real>(s.plan, s.depth.data(), s.material.data(), normals, s.echo.data(), s.echo_table.data(), begin,
-                        end);
+                        end, s.view_drawn.data());
     });
 }
 
 template <class Real> void run_beamform(StageContext<Real>& s) {
     // the float profiles only when saved: the resample reads the accumulators
     float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
-    split_blocks(s.workers, s.plan.profile_columns, kColumnBlock,
-                 [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                     beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end);
-                 });
+    split_blocks(
+        s.workers, s.plan.profile_columns, kColumnBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end, s.view_drawn.data());
+        });
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
                              end);

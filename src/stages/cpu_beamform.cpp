@@ -340,7 +340,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
 // first, then by increasing pixel column, then bin: the order of profile.comp's gather.
 template <class Real>
 void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_t cone_begin, std::uint32_t cone_end,
-                   Real range_min, Real inv_bin_width) {
+                   Real range_min, Real inv_bin_width, const std::uint8_t* view_drawn) {
     using M = Math<Real>;
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
@@ -354,6 +354,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         // each other in column order, as profile.comp gathers them)
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
+            if (view_drawn != nullptr && view_drawn[view] == 0) continue; // nothing drawn there
             const float* first = cone_x + view * W;
             const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
             const std::uint32_t c_end = static_cast<std::uint32_t>(
@@ -635,7 +636,7 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
 
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
-                       std::uint32_t column_end) {
+                       std::uint32_t column_end, const std::uint8_t* view_drawn) {
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     Real range_min, inv_bin_width;
@@ -655,7 +656,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
         std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
     const bool exp4 = exp4_matches_expf();
     if (plan.line_array) {
-        cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width);
+        cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width, view_drawn);
     } else {
         for (std::uint32_t j = 0; j < R && bins > 0; ++j)
             for_each_spread_pixel<Real>(plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width,
@@ -855,8 +856,10 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
 
 template void resample_weights<float>(const Plan&, float*);
 template void resample_weights<double>(const Plan&, double*);
-template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
-template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t);
+template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t,
+                                       const std::uint8_t*);
+template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t,
+                                        const std::uint8_t*);
 template void beamform_beams<float>(const Plan&, const float*, const float*, float*, float*, std::uint32_t,
                                     std::uint32_t);
 template void beamform_beams<double>(const Plan&, const double*, const double*, float*, float*, std::uint32_t,

@@ -4,6 +4,7 @@
 // Constants: float reads the shaders' float values (SonarParams); double reads the Plan's doubles.
 // The factors that depend on the pixel's place in the grid alone (its solid angle and the vertical
 // pattern) come from a table made once per plan (echo_table), by the kernels echo_of_pixel calls.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <type_traits>
@@ -98,7 +99,7 @@ template <class Real> void echo_table(const Plan& plan, Real* table) {
 // solid angle and the vertical power, read from echo_table: the same functions of the same values.
 template <class Real>
 void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
-               const Real* table, std::uint32_t row_begin, std::uint32_t row_end) {
+               const Real* table, std::uint32_t row_begin, std::uint32_t row_end, const std::uint8_t* view_drawn) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
     const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4);
@@ -110,6 +111,12 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);
         const Real* u = table + s * view_table;
         const std::uint32_t c0 = s * W;
+        if (view_drawn != nullptr && view_drawn[s] == 0) { // nothing drawn there: no hits
+            for (std::uint32_t j = row_begin; j < row_end; ++j)
+                std::fill(echo2 + 2 * (static_cast<std::size_t>(j) * C + c0),
+                          echo2 + 2 * (static_cast<std::size_t>(j) * C + c0 + W), 0.0f);
+            continue;
+        }
         for (std::uint32_t j = row_begin; j < row_end; ++j) {
             const Real v = M::pixel_coord(j, R, k.tan_half_v);
             const Real* row_terms = u + W + 2 * static_cast<std::size_t>(j) * W;
@@ -159,8 +166,8 @@ template void echo<double>(const Plan&, const float*, const std::uint32_t*, cons
 template void echo_table<float>(const Plan&, float*);
 template void echo_table<double>(const Plan&, double*);
 template void echo_rows<float>(const Plan&, const float*, const std::uint32_t*, const float*, float*, const float*,
-                               std::uint32_t, std::uint32_t);
+                               std::uint32_t, std::uint32_t, const std::uint8_t*);
 template void echo_rows<double>(const Plan&, const float*, const std::uint32_t*, const float*, float*, const double*,
-                                std::uint32_t, std::uint32_t);
+                                std::uint32_t, std::uint32_t, const std::uint8_t*);
 
 } // namespace vksonar::cpu

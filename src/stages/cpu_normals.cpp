@@ -127,7 +127,7 @@ std::size_t normals_scratch_count(const Plan& plan) {
 // outside the image (the zero row and columns around it): no_sample(), without a bounds test.
 template <class Real>
 void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
-                  std::uint32_t row_end) {
+                  std::uint32_t row_end, const std::uint8_t* view_drawn) {
     using M = Math<Real>;
     using Sample = typename M::Sample;
     using Column3 = typename M::Column3;
@@ -161,6 +161,10 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         row += 8; // column 0
         const float* d = depth + j * C;
         for (std::uint32_t s = 0; s < plan.views; ++s) {
+            if (view_drawn != nullptr && view_drawn[s] == 0) { // nothing drawn there: no hits
+                std::fill(row + 4 * std::int64_t(s) * W, row + 4 * std::int64_t(s + 1) * W, Real(0));
+                continue;
+            }
             const typename M::PixelView view = pixel_view<Real>(plan, s);
             const Real v =
                 M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), view.tan_half_v);
@@ -236,6 +240,11 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         };
         std::int64_t x = 0;
         for (; x < C; ++x) {
+            if (view_drawn != nullptr && x % W == 0 && view_drawn[x / W] == 0) { // an empty view: no normals
+                std::fill(out_row + 4 * x, out_row + 4 * (x + W), 0.0f);
+                x += W - 1;
+                continue;
+            }
             if constexpr (std::is_same_v<Real, float>) {
                 // Four pixels at a time where their windows are smooth (sobel3_smooth4), the others by the
                 // scalar kernel; the windows of the last four columns reach into the zero columns.
@@ -311,8 +320,10 @@ template void geometric_normals_rows<float>(const Plan&, const float*, const flo
                                             std::uint32_t);
 template void geometric_normals_rows<double>(const Plan&, const float*, const float*, float*, std::uint32_t,
                                              std::uint32_t);
-template void normals_rows<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t);
-template void normals_rows<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t);
+template void normals_rows<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t,
+                                  const std::uint8_t*);
+template void normals_rows<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t,
+                                   const std::uint8_t*);
 template void geometric_normals<float>(const Plan&, const float*, const float*, float*);
 template void geometric_normals<double>(const Plan&, const float*, const float*, float*);
 template void normals<float>(const Plan&, const float*, float*);

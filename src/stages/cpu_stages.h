@@ -74,24 +74,26 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights);
 // bins x profile_columns), bins [bin_begin, bin_end) of the resample (from acc, with resample_weights)
 // and side-lobe passes (after every column's profile is done). Each output value is
 // computed by one part, in the same order as the whole-image functions above, so the result does not
-// depend on how the image is split.
+// depend on how the image is split. view_drawn (optional, one byte per view): 0 where the depth pass
+// drew nothing in that view this frame (its pixels are all empty: the loops only zero their outputs).
 template <class Real>
 void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* scratch, std::uint32_t row_begin,
-                  std::uint32_t row_end);
+                  std::uint32_t row_end, const std::uint8_t* view_drawn = nullptr);
 template <class Real>
 void geometric_normals_rows(const Plan& plan, const float* depth, const float* face4, float* normals4,
                             std::uint32_t row_begin, std::uint32_t row_end);
 // table: echo_table's, made once per plan.
 template <class Real>
 void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* material, const float* normals4, float* echo2,
-               const Real* table, std::uint32_t row_begin, std::uint32_t row_end);
+               const Real* table, std::uint32_t row_begin, std::uint32_t row_end,
+               const std::uint8_t* view_drawn = nullptr);
 // The echo stage's factors of a pixel's place in the grid: u per slice column, then (solid angle,
 // vertical power) per row and slice column (echo_table_count values).
 std::size_t echo_table_count(const Plan& plan);
 template <class Real> void echo_table(const Plan& plan, Real* table);
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
-                       std::uint32_t column_end);
+                       std::uint32_t column_end, const std::uint8_t* view_drawn = nullptr);
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end);
