@@ -127,6 +127,13 @@ struct Plan {
     // Ground-truth labels were asked for (SaveFlags::labels): the depth pass writes each draw's instance
     // id into the high 16 bits of the material image (compose_depth_draws), for the labels stage.
     bool labels = false;
+    // The most sub-pixel returns a frame can list (src/core/subpixel.h; 0: the scene has no cluster that
+    // could be smaller or thinner than a pixel inside the range gate, and the profile step adds none).
+    std::uint32_t subpixel_capacity = 0;
+    // With subpixel_capacity > 0: the material (appended to `materials`, no backscatter) that objects a few
+    // pixels across are drawn with, so that their depth hides what lies behind them while their echo comes
+    // from their returns alone.
+    std::uint32_t subpixel_silent_material = 0;
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
 

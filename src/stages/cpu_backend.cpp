@@ -82,6 +82,7 @@ template <class Real> struct StageContext {
         draws.resize(static_cast<std::size_t>(plan.slices) * scene.draws.size());
         build_depth_clusters(scene, clusters);
         clusters_drawn.resize(std::size_t(plan.slices) * clusters.size());
+        subpixel.prepare(plan, scene, clusters);
     }
 
     Plan plan;              // copied: the backend may outlive the caller's Plan object
@@ -95,6 +96,7 @@ template <class Real> struct StageContext {
     std::vector<shared::DepthPush> draws;
     std::vector<DepthCluster> clusters;
     std::vector<std::uint8_t> clusters_drawn; // slices * clusters, 0 = the cluster cannot reach that slice
+    SubpixelReturns subpixel;                 // the frame's sub-pixel returns (core/subpixel.h)
     std::vector<float> depth;
     std::vector<std::uint32_t> material;
     std::vector<float> face; // face normals of the depth pass (normal_method = geometric only)
@@ -107,6 +109,9 @@ template <class Real> struct StageContext {
 template <class Real> void run_depth(StageContext<Real>& s) {
     compose_depth_draws(s.plan, s.scene, s.pose, s.draws);
     cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
+    // the objects a few pixels across or less: their returns (added by the profile step) instead of their
+    // pixels' echo
+    s.subpixel.build(s.plan, s.scene, s.pose, s.clusters, s.draws, s.clusters_drawn);
     const DepthClusters clusters{s.clusters, s.clusters_drawn};
     // Bands of rows, two per thread: the pixel fill is most of the pass, and the seabed's rows hold
     // most of it, so one band per thread would leave a thread waiting; every band sets up each
@@ -146,10 +151,12 @@ template <class Real> void run_echo(StageContext<Real>& s) {
 template <class Real> void run_beamform(StageContext<Real>& s) {
     // the float profiles only when saved: the resample reads the accumulators
     float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
-    split_blocks(s.workers, s.plan.profile_columns, kColumnBlock,
-                 [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                     beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end);
-                 });
+    const SubpixelInput subpixel{s.subpixel, s.depth.data(), s.material.data()};
+    const SubpixelInput* with_subpixel = s.plan.subpixel_capacity > 0 ? &subpixel : nullptr;
+    split_blocks(
+        s.workers, s.plan.profile_columns, kColumnBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end, with_subpixel);
+        });
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
                              end);

@@ -1,0 +1,445 @@
+// Sub-pixel objects: which clusters skip the raster at a pose, and their triangles' returns
+// (src/core/subpixel.h; the math: docs/pipeline.md "Sub-pixel objects").
+#include "core/subpixel.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+
+#include "core/plan.h"
+#include "core/sonar_math.hpp"
+#include "scene/scene_data.h"
+
+namespace vksonar {
+namespace {
+
+using Vec3 = std::array<double, 3>;
+using M = Math<double>;
+
+// A triangle is split into n x n pieces (n^2 similar triangles) so that no piece is longer than a
+// pixel: at most kMaxSplit per side (a cable's triangles, one pixel wide at 8 pixels long, are far
+// shorter than that at the default quality; past it a piece is longer than a pixel, its energy still whole).
+constexpr std::uint32_t kMaxSplit = 8;
+// A small cluster (bounding sphere under two pixels) has triangles at most ~2 pixels long: 3 per side.
+constexpr std::uint32_t kSmallSplit = 3;
+
+Vec3 transform_point(const std::array<double, 16>& m, const Vec3& p) {
+    Vec3 r{};
+    for (int row = 0; row < 3; ++row)
+        r[row] = m[12 + row] + m[row] * p[0] + m[4 + row] * p[1] + m[8 + row] * p[2];
+    return r;
+}
+
+Vec3 sub(const Vec3& a, const Vec3& b) {
+    return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+double dot(const Vec3& a, const Vec3& b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+Vec3 cross(const Vec3& a, const Vec3& b) {
+    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+double norm(const Vec3& a) {
+    return std::sqrt(dot(a, a));
+}
+
+std::array<double, 16> multiply(const std::array<double, 16>& a, const std::array<double, 16>& b) {
+    std::array<double, 16> r{};
+    for (int col = 0; col < 4; ++col)
+        for (int row = 0; row < 4; ++row) {
+            double s = 0;
+            for (int k = 0; k < 4; ++k)
+                s += a[k * 4 + row] * b[col * 4 + k];
+            r[col * 4 + row] = s;
+        }
+    return r;
+}
+
+// A cluster's size in the world: the centre of its box, the radius of the sphere about it that holds
+// its vertices, and the middle one of its box's three extents (the box's axes through world_from_local):
+// a cable's box is long along one axis and a diameter across the other two.
+struct ClusterSize {
+    Vec3 centre;
+    double radius = 0, middle_extent = 0;
+};
+
+ClusterSize cluster_size(const SceneData& scene, const DepthCluster& cluster) {
+    const std::array<double, 16>& m = scene.draws[cluster.draw].world_from_local;
+    const Vec3 local_centre{0.5 * (double(cluster.bounds_min[0]) + cluster.bounds_max[0]),
+                            0.5 * (double(cluster.bounds_min[1]) + cluster.bounds_max[1]),
+                            0.5 * (double(cluster.bounds_min[2]) + cluster.bounds_max[2])};
+    ClusterSize size;
+    size.centre = transform_point(m, local_centre);
+    for (std::uint32_t k = 0; k < cluster.index_count; ++k) {
+        const std::size_t v = std::size_t(cluster.first_vertex) + scene.indices[cluster.first_index + k];
+        const Vec3 p =
+            transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+        size.radius = std::max(size.radius, norm(sub(p, size.centre)));
+    }
+    double extent[3];
+    for (int a = 0; a < 3; ++a) {
+        const double axis = std::sqrt(m[4 * a] * m[4 * a] + m[4 * a + 1] * m[4 * a + 1] + m[4 * a + 2] * m[4 * a + 2]);
+        extent[a] = axis * (double(cluster.bounds_max[a]) - cluster.bounds_min[a]);
+    }
+    std::sort(extent, extent + 3);
+    size.middle_extent = extent[1];
+    return size;
+}
+
+// Whether a mesh is closed (every edge, by its ends' positions, shared by exactly two of its triangles,
+// once each way) and then which way its triangles face: +1 counter-clockwise out (positive signed
+// volume), -1 in; 0 for an open mesh (a sheet: the sonar sees both of its sides). Positions, not indices:
+// the loader gives each run of a mesh its own copies of the vertices (order_triangles_spatially), and a
+// generated mesh may repeat a pole's vertex per segment. Positions are compared on a grid of 1e-6 of the
+// mesh's size, so that copies that differ by rounding (sin(pi) is not 0) still meet.
+std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
+    const std::uint32_t triangles = mesh.index_count / 3;
+    const std::size_t vertex_limit = scene.positions.size() / 3;
+    auto position = [&](std::uint32_t t, int i, Vec3& p) {
+        const std::size_t v = std::size_t(mesh.first_vertex) + scene.indices[mesh.first_index + 3 * t + i];
+        if (v >= vertex_limit) return false;
+        p = {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]};
+        return true;
+    };
+    double size = 0;
+    for (std::uint32_t t = 0; t < triangles; ++t)
+        for (int i = 0; i < 3; ++i) {
+            Vec3 p;
+            if (!position(t, i, p)) return 0;
+            size = std::max({size, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
+        }
+    if (!(size > 0)) return 0;
+    const double quantum = 1e-6 * size;
+    using Key = std::array<std::int64_t, 3>;
+    auto key = [&](const Vec3& p) {
+        return Key{std::llround(p[0] / quantum), std::llround(p[1] / quantum), std::llround(p[2] / quantum)};
+    };
+    struct Edge {
+        Key lo, hi;
+        int direction;
+    };
+    std::vector<Edge> edges;
+    edges.reserve(std::size_t(triangles) * 3);
+    double volume = 0;
+    for (std::uint32_t t = 0; t < triangles; ++t) {
+        Vec3 p[3] = {}; // every position was checked above
+        for (int i = 0; i < 3; ++i)
+            position(t, i, p[i]);
+        volume += dot(p[0], cross(p[1], p[2]));
+        for (int i = 0; i < 3; ++i) {
+            const Key from = key(p[i]), to = key(p[(i + 1) % 3]);
+            if (from == to) continue; // a degenerate edge (a pole's sliver) joins nothing
+            edges.push_back(from < to ? Edge{from, to, 1} : Edge{to, from, -1});
+        }
+    }
+    std::sort(edges.begin(), edges.end(),
+              [](const Edge& x, const Edge& y) { return x.lo < y.lo || (x.lo == y.lo && x.hi < y.hi); });
+    auto same = [](const Edge& x, const Edge& y) { return x.lo == y.lo && x.hi == y.hi; };
+    for (std::size_t i = 0; i < edges.size(); i += 2) {
+        if (i + 1 >= edges.size() || !same(edges[i], edges[i + 1]) ||
+            edges[i].direction + edges[i + 1].direction != 0 || (i + 2 < edges.size() && same(edges[i + 2], edges[i])))
+            return 0;
+    }
+    return volume > 0 ? 1 : (volume < 0 ? -1 : 0);
+}
+
+double determinant3(const std::array<double, 16>& m) {
+    return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) +
+           m[8] * (m[1] * m[6] - m[5] * m[2]);
+}
+
+// The pixel's sides (focal-normalized, at the image centre; towards a slice's edges a pixel is smaller, by
+// cos^2 of its angle off the axis at most): an object under two of the smaller side across skips the
+// raster, one up to four of the larger side (the coarser sampling) is drawn silent (subpixel.h).
+struct PixelSides {
+    double small, large;
+};
+PixelSides pixel_sides(const Plan& plan) {
+    const double du = 2.0 * plan.tan_half_h / plan.slice_columns, dv = 2.0 * plan.tan_half_v / plan.rows;
+    return {std::min(du, dv), std::max(du, dv)};
+}
+constexpr double kSilentPixels = 4.0; // up to this many of the larger pixel side across: drawn silent
+
+// The sphere about a draw's mesh box centre that holds its vertices, in the world.
+ClusterSize draw_size(const SceneData& scene, const std::vector<DepthCluster>& clusters, std::uint32_t begin,
+                      std::uint32_t end) {
+    const std::array<double, 16>& m = scene.draws[clusters[begin].draw].world_from_local;
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = clusters[begin].bounds_min[a];
+        hi[a] = clusters[begin].bounds_max[a];
+    }
+    for (std::uint32_t c = begin; c < end; ++c)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], double(clusters[c].bounds_min[a]));
+            hi[a] = std::max(hi[a], double(clusters[c].bounds_max[a]));
+        }
+    ClusterSize size;
+    size.centre = transform_point(m, {0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])});
+    for (std::uint32_t c = begin; c < end; ++c)
+        for (std::uint32_t k = 0; k < clusters[c].index_count; ++k) {
+            const std::size_t v = std::size_t(clusters[c].first_vertex) + scene.indices[clusters[c].first_index + k];
+            const Vec3 p =
+                transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+            size.radius = std::max(size.radius, norm(sub(p, size.centre)));
+        }
+    return size;
+}
+
+// The candidates (SubpixelReturns::Candidate): each draw that could be at most kSilentPixels of the larger
+// pixel side across somewhere within gate_max of the sonar, else each of its clusters that could be
+// thinner than a pixel there; f(begin, end, thin, size, most pieces its triangles can give).
+template <class F>
+void for_each_candidate(const Plan& plan, const SceneData& scene, const std::vector<DepthCluster>& clusters,
+                        const F& f) {
+    const PixelSides pixel = pixel_sides(plan);
+    const std::uint64_t per_piece = plan.line_array ? 2u : 1u; // a piece feeds two cone columns
+    for (std::uint32_t begin = 0; begin < clusters.size();) {
+        std::uint32_t end = begin + 1;
+        std::uint64_t triangles = clusters[begin].index_count / 3;
+        while (end < clusters.size() && clusters[end].draw == clusters[begin].draw)
+            triangles += clusters[end++].index_count / 3;
+        const ClusterSize size = draw_size(scene, clusters, begin, end);
+        if (size.radius < 0.5 * kSilentPixels * pixel.large * (plan.gate_max_m + size.radius)) {
+            f(begin, end, false, size, triangles * kSmallSplit * kSmallSplit * per_piece);
+        } else {
+            for (std::uint32_t c = begin; c < end; ++c) {
+                const ClusterSize cs = cluster_size(scene, clusters[c]);
+                if (cs.middle_extent < pixel.small * plan.gate_max_m)
+                    f(c, c + 1, true, cs,
+                      std::uint64_t(clusters[c].index_count / 3) * kMaxSplit * kMaxSplit * per_piece);
+            }
+        }
+        begin = end;
+    }
+}
+
+M::EchoConstants echo_constants(const Plan& plan) {
+    M::EchoConstants k{plan.tan_half_h,
+                       plan.tan_half_v,
+                       2.0 * plan.tan_half_h / plan.slice_columns,
+                       2.0 * plan.tan_half_v / plan.rows,
+                       plan.depth_a,
+                       plan.depth_b,
+                       plan.gate_min_m,
+                       plan.gate_max_m,
+                       plan.alpha_db_per_m,
+                       plan.vpattern_k,
+                       plan.vpattern_halfwidth_rad,
+                       plan.vpattern_chebyshev_a,
+                       plan.elevation_gate_sin};
+    return k;
+}
+
+} // namespace
+
+std::uint32_t subpixel_capacity(const Plan& plan, const SceneData& scene) {
+    if (scene.draws.empty() || plan.slice_columns == 0 || plan.rows == 0) return 0;
+    std::vector<DepthCluster> clusters;
+    build_depth_clusters(scene, clusters);
+    std::uint64_t total = 0;
+    for_each_candidate(
+        plan, scene, clusters,
+        [&](std::uint32_t, std::uint32_t, bool, const ClusterSize&, std::uint64_t pieces) { total += pieces; });
+    return static_cast<std::uint32_t>(std::min<std::uint64_t>(total, kMaxSubpixelReturns));
+}
+
+void SubpixelReturns::prepare(const Plan& plan, const SceneData& scene, const std::vector<DepthCluster>& clusters) {
+    capacity_ = plan.subpixel_capacity;
+    candidates_.clear();
+    count_ = clusters_taken_ = draws_silent_ = 0;
+    column_begin_.assign(std::size_t(plan.profile_columns) + 1, 0u);
+    returns_.assign(capacity_, shared::SubpixelReturn{});
+    unsorted_.assign(capacity_, shared::SubpixelReturn{});
+    unsorted_column_.assign(capacity_, 0u);
+    if (capacity_ == 0) return;
+    std::vector<std::int32_t> mesh_facings(scene.meshes.size(), 2); // 2: not looked at yet
+    for_each_candidate(plan, scene, clusters,
+                       [&](std::uint32_t begin, std::uint32_t end, bool thin, const ClusterSize& size, std::uint64_t) {
+                           const SceneDraw& draw = scene.draws[clusters[begin].draw];
+                           std::int32_t& facing = mesh_facings[draw.mesh];
+                           if (facing == 2) facing = mesh_facing(scene, scene.meshes[draw.mesh]);
+                           // a mirroring world_from_local turns the triangles' winding over
+                           candidates_.push_back({begin,
+                                                  end,
+                                                  determinant3(draw.world_from_local) < 0 ? -facing : facing,
+                                                  thin,
+                                                  {size.centre[0], size.centre[1], size.centre[2]},
+                                                  size.radius,
+                                                  size.middle_extent});
+                       });
+}
+
+void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose& pose,
+                            const std::vector<DepthCluster>& clusters, std::vector<shared::DepthPush>& pushes,
+                            std::vector<std::uint8_t>& drawn) {
+    count_ = clusters_taken_ = draws_silent_ = 0;
+    std::fill(column_begin_.begin(), column_begin_.end(), 0u);
+    if (capacity_ == 0) return;
+    const PixelSides pixel = pixel_sides(plan);
+    const double pa = pixel.small; // pieces are split to under this
+    const std::array<double, 16> sonar_world = sonar_from_world(pose);
+    const M::EchoConstants k = echo_constants(plan);
+    const M::EchoTerms terms{plan.effects.incidence,     plan.rough_materials,   plan.effects.vertical_pattern,
+                             plan.params.vpattern_shape, plan.effects.spreading, plan.effects.absorption};
+    const std::uint32_t W = plan.slice_columns, H = plan.rows;
+    const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
+    const int cone_count = static_cast<int>(plan.profile_columns);
+    const std::size_t cluster_count = clusters.size();
+
+    // One piece: its centroid q (sonar frame), area and unit normal n (counter-clockwise), into the list.
+    auto add_piece = [&](const Vec3& q, double area, const Vec3& n, std::int32_t facing,
+                         const shared::MaterialGpu& mat) -> bool {
+        const double r = norm(q);
+        if (!(r > 0)) return true;
+        const double c = dot(n, q) / r; // cos of the ray to the piece against its counter-clockwise normal
+        const double cos_incidence = facing > 0 ? -c : (facing < 0 ? c : std::abs(c));
+        if (!(cos_incidence > 0)) return true; // faces away: the object's own front hides it
+        const double energy = M::facet_echo(k, terms, mat, area, std::min(cos_incidence, 1.0), r,
+                                            M::ray_vertical_power(k, terms, q[2] / r));
+        if (!(energy > 0)) return true;
+        // its pixel: the first slice whose columns hold its direction
+        for (std::uint32_t s = 0; s < plan.slices; ++s) {
+            const double az = plan.slice_info[s].center_azimuth_rad, cs = std::cos(az), sn = std::sin(az);
+            const double view_z = q[0] * cs + q[1] * sn;
+            if (!(view_z > 0)) continue;
+            const double u = (q[0] * sn - q[1] * cs) / view_z, v = -q[2] / view_z;
+            if (!(std::abs(u) <= plan.tan_half_h)) continue;
+            if (!(std::abs(v) <= plan.tan_half_v)) return true; // above or below the pixel grid: not heard
+            const auto column = std::min(static_cast<std::uint32_t>((u / plan.tan_half_h + 1.0) * 0.5 * W), W - 1);
+            const auto row = std::min(static_cast<std::uint32_t>((v / plan.tan_half_v + 1.0) * 0.5 * H), H - 1);
+            shared::SubpixelReturn ret{row * plan.columns + s * W + column, static_cast<float>(r), 0.0f,
+                                       static_cast<float>(view_z)};
+            auto push = [&](std::uint32_t profile_column, double e) {
+                if (count_ >= capacity_) return false;
+                ret.energy = static_cast<float>(e);
+                unsorted_[count_] = ret;
+                unsorted_column_[count_] = profile_column;
+                ++count_;
+                return true;
+            };
+            if (!plan.line_array) return push(s * W + column, energy);
+            // the cone columns of its steering angle, sin(theta) = y / r (array_axis_cosine)
+            const double x = M::cone_coord(q[1] / r, half_fov, inv_cone_step);
+            const int below = static_cast<int>(std::floor(x));
+            for (int cone = std::max(below, 0); cone <= std::min(below + 1, cone_count - 1); ++cone) {
+                const double share = M::cone_share(x, cone, cone_count);
+                if (share > 0 && !push(static_cast<std::uint32_t>(cone), energy * share)) return false;
+            }
+            return true;
+        }
+        return true;
+    };
+
+    const std::size_t draw_count = scene.draws.size();
+    for (const Candidate& candidate : candidates_) {
+        const std::uint32_t draw_index = clusters[candidate.cluster_begin].draw;
+        const SceneDraw& draw = scene.draws[draw_index];
+        const Vec3 centre =
+            transform_point(sonar_world, {candidate.centre[0], candidate.centre[1], candidate.centre[2]});
+        const double distance = norm(centre), nearest = distance - candidate.radius;
+        // Heard at all (else the depth pass keeps it: it draws nothing inside the gate either way)?
+        if (!(nearest < plan.gate_max_m && distance + candidate.radius > plan.gate_min_m)) continue;
+        bool skip_raster, silent = false;
+        if (candidate.thin) {
+            skip_raster = nearest > 0 && candidate.middle_extent < pixel.small * nearest;
+            if (!skip_raster) continue;
+        } else {
+            skip_raster = candidate.radius < pixel.small * distance; // under two pixels across
+            silent = !skip_raster && candidate.radius < 0.5 * kSilentPixels * pixel.large * distance;
+            if (!skip_raster && !silent) continue;
+        }
+        const std::array<double, 16> sonar_local = multiply(sonar_world, draw.world_from_local);
+        const shared::MaterialGpu& mat =
+            plan.materials[M::material_index(draw.material, static_cast<std::uint32_t>(plan.materials.size()))];
+        const std::uint32_t first = count_;
+        bool fits = true;
+        for (std::uint32_t ci = candidate.cluster_begin; ci < candidate.cluster_end && fits; ++ci) {
+            const DepthCluster& cluster = clusters[ci];
+            for (std::uint32_t t = 0; t + 3 <= cluster.index_count && fits; t += 3) {
+                Vec3 p[3];
+                for (int i = 0; i < 3; ++i) {
+                    const std::size_t v =
+                        std::size_t(cluster.first_vertex) + scene.indices[cluster.first_index + t + i];
+                    p[i] = transform_point(
+                        sonar_local, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+                }
+                const Vec3 e1 = sub(p[1], p[0]), e2 = sub(p[2], p[0]);
+                const Vec3 normal = cross(e1, e2);
+                const double twice_area = norm(normal);
+                if (!(twice_area > 0)) continue;
+                const Vec3 n{normal[0] / twice_area, normal[1] / twice_area, normal[2] / twice_area};
+                const Vec3 centroid{(p[0][0] + p[1][0] + p[2][0]) / 3, (p[0][1] + p[1][1] + p[2][1]) / 3,
+                                    (p[0][2] + p[1][2] + p[2][2]) / 3};
+                const double longest = std::max({norm(e1), norm(e2), norm(sub(p[2], p[1]))});
+                const double near = std::max(norm(centroid) - longest, 1e-6);
+                const auto split = static_cast<std::uint32_t>(
+                    std::clamp(std::ceil(longest / (near * pa)), 1.0, static_cast<double>(kMaxSplit)));
+                // split^2 pieces: the triangles of the grid p0 + (i e1 + j e2) / split, upright (i + j <
+                // split) and inverted (i + j < split - 1), each of area / split^2, centroid at (i + o, j + o)
+                // / split with o = 1/3 upright, 2/3 inverted.
+                const double piece_area = 0.5 * twice_area / (double(split) * split), inv = 1.0 / split;
+                for (std::uint32_t i = 0; i < split && fits; ++i) {
+                    for (std::uint32_t j = 0; i + j < split && fits; ++j) {
+                        for (int kind = 0; kind < 2 && fits; ++kind) {
+                            if (kind == 1 && i + j + 1 >= split) break;
+                            const double o = kind == 0 ? 1.0 / 3.0 : 2.0 / 3.0;
+                            const double a = (i + o) * inv, b = (j + o) * inv;
+                            const Vec3 q{p[0][0] + a * e1[0] + b * e2[0], p[0][1] + a * e1[1] + b * e2[1],
+                                         p[0][2] + a * e1[2] + b * e2[2]};
+                            fits = add_piece(q, piece_area, n, candidate.facing, mat);
+                        }
+                    }
+                }
+            }
+        }
+        if (!fits) { // the list is full: this object and the rest go to the depth pass as before
+            count_ = first;
+            break;
+        }
+        if (skip_raster) {
+            for (std::uint32_t ci = candidate.cluster_begin; ci < candidate.cluster_end; ++ci)
+                for (std::size_t s = 0; s < plan.slices; ++s)
+                    drawn[s * cluster_count + ci] = 0;
+            clusters_taken_ += candidate.cluster_end - candidate.cluster_begin;
+        } else { // drawn for its depth only (the instance, with labels, stays above the material)
+            for (std::size_t s = 0; s < plan.slices; ++s) {
+                std::uint32_t& id = pushes[s * draw_count + draw_index].material_id;
+                id = (id & ~shared::kMaterialIdMask) | plan.subpixel_silent_material;
+            }
+            ++draws_silent_;
+        }
+    }
+
+    // sorted by column, each column's returns in the order they were listed
+    for (std::uint32_t i = 0; i < count_; ++i)
+        ++column_begin_[unsorted_column_[i] + 1];
+    for (std::size_t c = 1; c < column_begin_.size(); ++c)
+        column_begin_[c] += column_begin_[c - 1];
+    for (std::uint32_t i = 0; i < count_; ++i) {
+        // column_begin_[c] runs ahead as c's returns are placed, then is moved back below
+        returns_[column_begin_[unsorted_column_[i]]++] = unsorted_[i];
+    }
+    for (std::size_t c = column_begin_.size() - 1; c > 0; --c)
+        column_begin_[c] = column_begin_[c - 1];
+    column_begin_[0] = 0;
+}
+
+std::size_t SubpixelReturns::buffer_bytes(const Plan& plan) {
+    if (plan.subpixel_capacity == 0) return 16;
+    const std::size_t header = (std::size_t(plan.profile_columns) + 2 + 3) & ~std::size_t(3);
+    return header * sizeof(std::uint32_t) + std::size_t(plan.subpixel_capacity) * sizeof(shared::SubpixelReturn);
+}
+
+void SubpixelReturns::write_buffer(const Plan& plan, void* destination) const {
+    if (capacity_ == 0) return;
+    auto* bytes = static_cast<char*>(destination);
+    std::memcpy(bytes, column_begin_.data(), column_begin_.size() * sizeof(std::uint32_t));
+    std::memcpy(bytes + column_begin_.size() * sizeof(std::uint32_t), &plan.subpixel_silent_material,
+                sizeof(std::uint32_t));
+    const std::size_t header = (std::size_t(plan.profile_columns) + 2 + 3) & ~std::size_t(3);
+    std::memcpy(bytes + header * sizeof(std::uint32_t), returns_.data(), count_ * sizeof(shared::SubpixelReturn));
+}
+
+} // namespace vksonar
