@@ -287,6 +287,11 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
     const int cone_count = static_cast<int>(plan.profile_columns);
     const std::size_t cluster_count = clusters.size();
+    // each slice's axis (cos, sin of its centre azimuth), as compose_depth_draws takes it
+    std::array<std::array<double, 2>, shared::kMaxSlices> slice_axis{};
+    for (std::uint32_t s = 0; s < plan.slices && s < shared::kMaxSlices; ++s)
+        slice_axis[s] = {std::cos(plan.slice_info[s].center_azimuth_rad),
+                         std::sin(plan.slice_info[s].center_azimuth_rad)};
 
     // One piece: its centroid q (sonar frame), area and unit normal n (counter-clockwise), into the list.
     auto add_piece = [&](const Vec3& q, double area, const Vec3& n, std::int32_t facing,
@@ -301,7 +306,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
         if (!(energy > 0)) return true;
         // its pixel: the first slice whose columns hold its direction
         for (std::uint32_t s = 0; s < plan.slices; ++s) {
-            const double az = plan.slice_info[s].center_azimuth_rad, cs = std::cos(az), sn = std::sin(az);
+            const double cs = slice_axis[s][0], sn = slice_axis[s][1];
             const double view_z = q[0] * cs + q[1] * sn;
             if (!(view_z > 0)) continue;
             const double u = (q[0] * sn - q[1] * cs) / view_z, v = -q[2] / view_z;
@@ -369,6 +374,14 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
                 const Vec3 normal = cross(e1, e2);
                 const double twice_area = norm(normal);
                 if (!(twice_area > 0)) continue;
+                // A closed mesh's triangle that faces away at all three corners faces away at every piece
+                // (a piece's centroid is a mean of the corners, n . q their mean): skipped whole.
+                if (candidate.facing != 0) {
+                    const double side = candidate.facing > 0 ? 1.0 : -1.0;
+                    if (side * dot(normal, p[0]) >= 0 && side * dot(normal, p[1]) >= 0 &&
+                        side * dot(normal, p[2]) >= 0)
+                        continue;
+                }
                 const Vec3 n{normal[0] / twice_area, normal[1] / twice_area, normal[2] / twice_area};
                 const Vec3 centroid{(p[0][0] + p[1][0] + p[2][0]) / 3, (p[0][1] + p[1][1] + p[2][1]) / 3,
                                     (p[0][2] + p[1][2] + p[2][2]) / 3};
