@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "core/plan.h"
 #include "core/sonar_math.hpp"
@@ -18,11 +19,15 @@ using Vec3 = std::array<double, 3>;
 using M = Math<double>;
 
 // A triangle is split into n x n pieces (n^2 similar triangles) so that no piece is longer than a
-// pixel: at most kMaxSplit per side (a cable's triangles, one pixel wide at 8 pixels long, are far
-// shorter than that at the default quality; past it a piece is longer than a pixel, its energy still whole).
+// pixel (the smaller side): n = ceil(longest edge / (nearest distance x pixel)), at most kMaxSplit (past
+// it a piece is longer than a pixel, its energy still whole: a coarse mesh's triangle 8 pixels long).
 constexpr std::uint32_t kMaxSplit = 8;
-// A small cluster (bounding sphere under two pixels) has triangles at most ~2 pixels long: 3 per side.
-constexpr std::uint32_t kSmallSplit = 3;
+
+// The split of a triangle with longest edge `longest` whose nearest point may be as near as `near`.
+std::uint32_t split_of(double longest, double near, double pixel) {
+    if (!(near > 0)) return kMaxSplit;
+    return static_cast<std::uint32_t>(std::clamp(std::ceil(longest / (near * pixel)), 1.0, double(kMaxSplit)));
+}
 
 Vec3 transform_point(const std::array<double, 16>& m, const Vec3& p) {
     Vec3 r{};
@@ -64,26 +69,53 @@ struct ClusterSize {
     double radius = 0, middle_extent = 0;
 };
 
-ClusterSize cluster_size(const SceneData& scene, const DepthCluster& cluster) {
-    const std::array<double, 16>& m = scene.draws[cluster.draw].world_from_local;
-    const Vec3 local_centre{0.5 * (double(cluster.bounds_min[0]) + cluster.bounds_max[0]),
-                            0.5 * (double(cluster.bounds_min[1]) + cluster.bounds_max[1]),
-                            0.5 * (double(cluster.bounds_min[2]) + cluster.bounds_max[2])};
-    ClusterSize size;
-    size.centre = transform_point(m, local_centre);
-    for (std::uint32_t k = 0; k < cluster.index_count; ++k) {
-        const std::size_t v = std::size_t(cluster.first_vertex) + scene.indices[cluster.first_index + k];
-        const Vec3 p =
-            transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
-        size.radius = std::max(size.radius, norm(sub(p, size.centre)));
-    }
-    double extent[3];
+// The extents of the box [lo, hi] along its axes through m, sorted.
+std::array<double, 3> box_extents(const std::array<double, 16>& m, const double* lo, const double* hi) {
+    std::array<double, 3> extent{};
     for (int a = 0; a < 3; ++a) {
         const double axis = std::sqrt(m[4 * a] * m[4 * a] + m[4 * a + 1] * m[4 * a + 1] + m[4 * a + 2] * m[4 * a + 2]);
-        extent[a] = axis * (double(cluster.bounds_max[a]) - cluster.bounds_min[a]);
+        extent[a] = axis * (hi[a] - lo[a]);
     }
-    std::sort(extent, extent + 3);
+    std::sort(extent.begin(), extent.end());
+    return extent;
+}
+
+// The radius about `centre` that holds the vertices of clusters [begin, end) through m.
+double vertex_radius(const SceneData& scene, const std::vector<DepthCluster>& clusters, std::uint32_t begin,
+                     std::uint32_t end, const std::array<double, 16>& m, const Vec3& centre) {
+    double radius = 0;
+    for (std::uint32_t c = begin; c < end; ++c)
+        for (std::uint32_t k = 0; k < clusters[c].index_count; ++k) {
+            const std::size_t v = std::size_t(clusters[c].first_vertex) + scene.indices[clusters[c].first_index + k];
+            const Vec3 p =
+                transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+            radius = std::max(radius, norm(sub(p, centre)));
+        }
+    return radius;
+}
+
+// The size of clusters [begin, end) (one draw's) together. The box is tight on the vertices, so half
+// its largest extent is a lower bound on the radius: where that already reaches `enough`, the vertices
+// are not walked and the radius is that bound (a large seabed costs no pass over its vertices).
+ClusterSize size_of(const SceneData& scene, const std::vector<DepthCluster>& clusters, std::uint32_t begin,
+                    std::uint32_t end, double enough) {
+    const std::array<double, 16>& m = scene.draws[clusters[begin].draw].world_from_local;
+    double lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = clusters[begin].bounds_min[a];
+        hi[a] = clusters[begin].bounds_max[a];
+    }
+    for (std::uint32_t c = begin; c < end; ++c)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], double(clusters[c].bounds_min[a]));
+            hi[a] = std::max(hi[a], double(clusters[c].bounds_max[a]));
+        }
+    const std::array<double, 3> extent = box_extents(m, lo, hi);
+    ClusterSize size;
+    size.centre = transform_point(m, {0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])});
     size.middle_extent = extent[1];
+    size.radius = 0.5 * extent[2];
+    if (size.radius < enough) size.radius = vertex_radius(scene, clusters, begin, end, m, size.centre);
     return size;
 }
 
@@ -161,35 +193,34 @@ PixelSides pixel_sides(const Plan& plan) {
 }
 constexpr double kSilentPixels = 4.0; // up to this many of the larger pixel side across: drawn silent
 
-// The sphere about a draw's mesh box centre that holds its vertices, in the world.
-ClusterSize draw_size(const SceneData& scene, const std::vector<DepthCluster>& clusters, std::uint32_t begin,
-                      std::uint32_t end) {
+// The most pieces a draw candidate's triangles give (before the line array's two cone columns): it
+// is drawn silent or skipped only at a distance D > radius / (2 kSilentPixels / 2 x larger pixel side),
+// so no point of it is nearer than that less its radius, and each triangle splits at most as split_of
+// says from there.
+std::uint64_t draw_pieces(const SceneData& scene, const std::vector<DepthCluster>& clusters, std::uint32_t begin,
+                          std::uint32_t end, double radius, const PixelSides& pixel) {
     const std::array<double, 16>& m = scene.draws[clusters[begin].draw].world_from_local;
-    double lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-        lo[a] = clusters[begin].bounds_min[a];
-        hi[a] = clusters[begin].bounds_max[a];
-    }
+    const double nearest = radius / (0.5 * kSilentPixels * pixel.large) - radius;
+    std::uint64_t pieces = 0;
     for (std::uint32_t c = begin; c < end; ++c)
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], double(clusters[c].bounds_min[a]));
-            hi[a] = std::max(hi[a], double(clusters[c].bounds_max[a]));
+        for (std::uint32_t t = 0; t + 3 <= clusters[c].index_count; t += 3) {
+            Vec3 p[3];
+            for (int i = 0; i < 3; ++i) {
+                const std::size_t v =
+                    std::size_t(clusters[c].first_vertex) + scene.indices[clusters[c].first_index + t + i];
+                p[i] = transform_point(
+                    m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+            }
+            const double longest = std::max({norm(sub(p[1], p[0])), norm(sub(p[2], p[0])), norm(sub(p[2], p[1]))});
+            const std::uint64_t split = split_of(longest, nearest - longest, pixel.small);
+            pieces += split * split;
         }
-    ClusterSize size;
-    size.centre = transform_point(m, {0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])});
-    for (std::uint32_t c = begin; c < end; ++c)
-        for (std::uint32_t k = 0; k < clusters[c].index_count; ++k) {
-            const std::size_t v = std::size_t(clusters[c].first_vertex) + scene.indices[clusters[c].first_index + k];
-            const Vec3 p =
-                transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
-            size.radius = std::max(size.radius, norm(sub(p, size.centre)));
-        }
-    return size;
+    return pieces;
 }
 
 // The candidates (SubpixelReturns::Candidate): each draw that could be at most kSilentPixels of the larger
 // pixel side across somewhere within gate_max of the sonar, else each of its clusters that could be
-// thinner than a pixel there; f(begin, end, thin, size, most pieces its triangles can give).
+// thinner than a pixel there; f(begin, end, thin, size, most returns its triangles can give).
 template <class F>
 void for_each_candidate(const Plan& plan, const SceneData& scene, const std::vector<DepthCluster>& clusters,
                         const F& f) {
@@ -197,18 +228,22 @@ void for_each_candidate(const Plan& plan, const SceneData& scene, const std::vec
     const std::uint64_t per_piece = plan.line_array ? 2u : 1u; // a piece feeds two cone columns
     for (std::uint32_t begin = 0; begin < clusters.size();) {
         std::uint32_t end = begin + 1;
-        std::uint64_t triangles = clusters[begin].index_count / 3;
         while (end < clusters.size() && clusters[end].draw == clusters[begin].draw)
-            triangles += clusters[end++].index_count / 3;
-        const ClusterSize size = draw_size(scene, clusters, begin, end);
-        if (size.radius < 0.5 * kSilentPixels * pixel.large * (plan.gate_max_m + size.radius)) {
-            f(begin, end, false, size, triangles * kSmallSplit * kSmallSplit * per_piece);
+            ++end;
+        // radius < silent * (gate_max + radius), silent = kSilentPixels / 2 x the larger pixel side
+        const double silent = 0.5 * kSilentPixels * pixel.large;
+        const double largest = silent < 1 ? silent * plan.gate_max_m / (1 - silent) : plan.gate_max_m;
+        const ClusterSize size = size_of(scene, clusters, begin, end, largest);
+        if (size.radius < largest) {
+            f(begin, end, false, size, draw_pieces(scene, clusters, begin, end, size.radius, pixel) * per_piece);
         } else {
             for (std::uint32_t c = begin; c < end; ++c) {
-                const ClusterSize cs = cluster_size(scene, clusters[c]);
-                if (cs.middle_extent < pixel.small * plan.gate_max_m)
-                    f(c, c + 1, true, cs,
-                      std::uint64_t(clusters[c].index_count / 3) * kMaxSplit * kMaxSplit * per_piece);
+                const std::array<double, 16>& m = scene.draws[clusters[c].draw].world_from_local;
+                const double lo[3] = {clusters[c].bounds_min[0], clusters[c].bounds_min[1], clusters[c].bounds_min[2]};
+                const double hi[3] = {clusters[c].bounds_max[0], clusters[c].bounds_max[1], clusters[c].bounds_max[2]};
+                if (!(box_extents(m, lo, hi)[1] < pixel.small * plan.gate_max_m)) continue;
+                f(c, c + 1, true, size_of(scene, clusters, c, c + 1, std::numeric_limits<double>::infinity()),
+                  std::uint64_t(clusters[c].index_count / 3) * kMaxSplit * kMaxSplit * per_piece);
             }
         }
         begin = end;
@@ -378,17 +413,14 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
                 // (a piece's centroid is a mean of the corners, n . q their mean): skipped whole.
                 if (candidate.facing != 0) {
                     const double side = candidate.facing > 0 ? 1.0 : -1.0;
-                    if (side * dot(normal, p[0]) >= 0 && side * dot(normal, p[1]) >= 0 &&
-                        side * dot(normal, p[2]) >= 0)
+                    if (side * dot(normal, p[0]) >= 0 && side * dot(normal, p[1]) >= 0 && side * dot(normal, p[2]) >= 0)
                         continue;
                 }
                 const Vec3 n{normal[0] / twice_area, normal[1] / twice_area, normal[2] / twice_area};
                 const Vec3 centroid{(p[0][0] + p[1][0] + p[2][0]) / 3, (p[0][1] + p[1][1] + p[2][1]) / 3,
                                     (p[0][2] + p[1][2] + p[2][2]) / 3};
                 const double longest = std::max({norm(e1), norm(e2), norm(sub(p[2], p[1]))});
-                const double near = std::max(norm(centroid) - longest, 1e-6);
-                const auto split = static_cast<std::uint32_t>(
-                    std::clamp(std::ceil(longest / (near * pa)), 1.0, static_cast<double>(kMaxSplit)));
+                const std::uint32_t split = split_of(longest, norm(centroid) - longest, pa);
                 // split^2 pieces: the triangles of the grid p0 + (i e1 + j e2) / split, upright (i + j <
                 // split) and inverted (i + j < split - 1), each of area / split^2, centroid at (i + o, j + o)
                 // / split with o = 1/3 upright, 2/3 inverted.
