@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 
+#include "core/angles.h"
 #include "core/plan.h"
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
@@ -119,12 +120,18 @@ ClusterSize size_of(const SceneData& scene, const std::vector<DepthCluster>& clu
     return size;
 }
 
-// Whether a mesh is closed (every edge, by its ends' positions, shared by exactly two of its triangles,
-// once each way) and then which way its triangles face: +1 counter-clockwise out (positive signed
-// volume), -1 in; 0 for an open mesh (a sheet: the sonar sees both of its sides). Positions, not indices:
-// the loader gives each run of a mesh its own copies of the vertices (order_triangles_spatially), and a
-// generated mesh may repeat a pole's vertex per segment. Positions are compared on a grid of 1e-6 of the
-// mesh's size, so that copies that differ by rounding (sin(pi) is not 0) still meet.
+// Which way a mesh's triangles face, if it has an outside: +1 counter-clockwise out, -1 in, 0 none (an
+// open sheet: the sonar sees both of its sides). It has one when its triangles are consistently wound
+// (every edge, by its ends' positions, shared by at most two triangles, once each way) and closed, or
+// closed but for holes that are small against its area (an open tube's ends: the isoperimetric bound
+// of its boundary's length, L^2 / 4 pi, under 1 % of its area). The side is the sign of its signed
+// volume about its box's centre: the volume of the mesh closed by cones from the centre to its holes,
+// which take at most the holes' area times the mesh's radius / 3 from it (an open tube loses a third):
+// where they could take more the mesh counts as open.
+// Positions, not indices: the loader gives each run of a mesh its own copies of the vertices
+// (order_triangles_spatially), and a generated mesh may repeat a pole's vertex per segment. Positions
+// are compared on a grid of 1e-6 of the mesh's size, so that copies that differ by rounding (sin(pi) is
+// not 0) still meet.
 std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
     const std::uint32_t triangles = mesh.index_count / 3;
     const std::size_t vertex_limit = scene.positions.size() / 3;
@@ -135,13 +142,20 @@ std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
         return true;
     };
     double size = 0;
+    Vec3 lo{}, hi{};
     for (std::uint32_t t = 0; t < triangles; ++t)
         for (int i = 0; i < 3; ++i) {
             Vec3 p;
             if (!position(t, i, p)) return 0;
             size = std::max({size, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = t == 0 && i == 0 ? p[a] : std::min(lo[a], p[a]);
+                hi[a] = t == 0 && i == 0 ? p[a] : std::max(hi[a], p[a]);
+            }
         }
     if (!(size > 0)) return 0;
+    const Vec3 centre{0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])};
+    const double radius = 0.5 * norm(sub(hi, lo));
     const double quantum = 1e-6 * size;
     using Key = std::array<std::int64_t, 3>;
     auto key = [&](const Vec3& p) {
@@ -150,30 +164,74 @@ std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
     struct Edge {
         Key lo, hi;
         int direction;
+        double length;
     };
     std::vector<Edge> edges;
     edges.reserve(std::size_t(triangles) * 3);
-    double volume = 0;
+    double volume6 = 0, area = 0; // six times the signed volume
     for (std::uint32_t t = 0; t < triangles; ++t) {
         Vec3 p[3] = {}; // every position was checked above
-        for (int i = 0; i < 3; ++i)
-            position(t, i, p[i]);
-        volume += dot(p[0], cross(p[1], p[2]));
         for (int i = 0; i < 3; ++i) {
-            const Key from = key(p[i]), to = key(p[(i + 1) % 3]);
+            position(t, i, p[i]);
+            p[i] = sub(p[i], centre);
+        }
+        const Vec3 n = cross(p[1], p[2]);
+        volume6 += dot(p[0], n);
+        area += 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+        for (int i = 0; i < 3; ++i) {
+            const Vec3& a = p[i];
+            const Vec3& b = p[(i + 1) % 3];
+            const Key from = key({a[0] + centre[0], a[1] + centre[1], a[2] + centre[2]});
+            const Key to = key({b[0] + centre[0], b[1] + centre[1], b[2] + centre[2]});
             if (from == to) continue; // a degenerate edge (a pole's sliver) joins nothing
-            edges.push_back(from < to ? Edge{from, to, 1} : Edge{to, from, -1});
+            const double length = norm(sub(b, a));
+            edges.push_back(from < to ? Edge{from, to, 1, length} : Edge{to, from, -1, length});
         }
     }
     std::sort(edges.begin(), edges.end(),
               [](const Edge& x, const Edge& y) { return x.lo < y.lo || (x.lo == y.lo && x.hi < y.hi); });
     auto same = [](const Edge& x, const Edge& y) { return x.lo == y.lo && x.hi == y.hi; };
-    for (std::size_t i = 0; i < edges.size(); i += 2) {
-        if (i + 1 >= edges.size() || !same(edges[i], edges[i + 1]) ||
-            edges[i].direction + edges[i + 1].direction != 0 || (i + 2 < edges.size() && same(edges[i + 2], edges[i])))
-            return 0;
+    // The edges only one triangle has, in the direction it has them: the holes' rims.
+    std::vector<Edge> rim;
+    for (std::size_t i = 0; i < edges.size();) {
+        std::size_t n = 1;
+        while (i + n < edges.size() && same(edges[i], edges[i + n]))
+            ++n;
+        if (n > 2 || (n == 2 && edges[i].direction + edges[i + 1].direction != 0)) return 0;
+        if (n == 1)
+            rim.push_back(edges[i].direction > 0 ? edges[i] : Edge{edges[i].hi, edges[i].lo, 1, edges[i].length});
+        i += n;
     }
-    return volume > 0 ? 1 : (volume < 0 ? -1 : 0);
+    // Each hole's rim walked round from edge to edge (a rim vertex with two ways on is no hole's: then
+    // the whole rim counts as one): the most area it can enclose, perimeter^2 / 4 pi.
+    std::sort(rim.begin(), rim.end(), [](const Edge& x, const Edge& y) { return x.lo < y.lo; });
+    std::vector<std::uint8_t> walked(rim.size(), 0);
+    double holes = 0, whole = 0;
+    bool loops = true;
+    for (std::size_t i = 0; i < rim.size(); ++i) {
+        whole += rim[i].length;
+        if (i + 1 < rim.size() && rim[i + 1].lo == rim[i].lo) loops = false;
+    }
+    for (std::size_t start = 0; start < rim.size() && loops; ++start) {
+        if (walked[start]) continue;
+        double perimeter = 0;
+        std::size_t e = start;
+        while (!walked[e]) {
+            walked[e] = 1;
+            perimeter += rim[e].length;
+            const auto next = std::lower_bound(rim.begin(), rim.end(), rim[e].hi,
+                                               [](const Edge& x, const Key& k) { return x.lo < k; });
+            if (next == rim.end() || next->lo != rim[e].hi) {
+                loops = false; // a rim that does not close
+                break;
+            }
+            e = static_cast<std::size_t>(next - rim.begin());
+        }
+        holes += perimeter * perimeter / (4 * kPi);
+    }
+    if (!loops) holes = whole * whole / (4 * kPi);
+    if (holes > 0.01 * area || !(std::abs(volume6) > 2 * holes * radius)) return 0; // 6 x (1/3) A r
+    return volume6 > 0 ? 1 : -1;
 }
 
 double determinant3(const std::array<double, 16>& m) {
