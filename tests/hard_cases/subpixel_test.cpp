@@ -143,6 +143,35 @@ TEST_P(Subpixel, SpheresKeepTheEnergyOfTheirAreaAtEverySize) {
     }
 }
 
+// With the vertical pattern and absorption on, a small sphere's echo carries them as a pixel's does:
+// the closed form times the sinc^2 pattern at its elevation (half power at +-vfov / 2) and
+// 10^(-2 alpha r / 10) with the plan's alpha; 4 cm spheres at 15 m, 0 to 9 degrees up and down.
+TEST_P(Subpixel, SmallSpheresCarryTheVerticalPatternAndAbsorption) {
+    SonarConfig config = closed_form_config();
+    config.effects.vertical_pattern = EffectMode::on;
+    config.effects.absorption = EffectMode::on;
+    const double a = 0.02, range = 15.0, mu = 0.01;
+    const double k_v = sinc_half_power_x() / std::sin(0.5 * config.vfov_deg * kDeg);
+    for (double elevation_deg : {0.0, 3.0, -6.0, 9.0}) {
+        SCOPED_TRACE(elevation_deg);
+        const double e = elevation_deg * kDeg;
+        Scene scene;
+        add_closed_sphere(scene, a, {range * std::cos(e), 0.0, range * std::sin(e)}, 48, 24, lambert(-20.0));
+        auto rendered = render_checked(GetParam(), config, scene);
+        ASSERT_TRUE(rendered);
+        const Plan& plan = renderer_plan(rendered->renderer);
+        ASSERT_GT(plan.alpha_db_per_m, 0.0);
+        const double x = k_v * std::sin(e);
+        const double pattern = x == 0 ? 1.0 : std::pow(std::sin(x) / x, 2);
+        const double expected = mu * 2 * kPi * a * a / (3 * std::pow(range, 4)) * pattern *
+                                std::pow(10.0, -0.2 * plan.alpha_db_per_m * range);
+        const double got = total(rendered->frame.clean);
+        std::printf("[subpixel] %s 4 cm sphere at %+.0f deg, pattern and absorption: %+.3f dB\n",
+                    GetParam() == Backend::vulkan ? "vulkan" : "cpu", elevation_deg, db(got / expected));
+        EXPECT_LT(std::abs(db(got / expected)), 0.05);
+    }
+}
+
 // A 1 cm cable across the fan at 10 m (y from -5 to 5 m, 26.6 degrees either side): a continuous line,
 // every beam it crosses at the level of mu a (pi / 2) cos^4(theta) / X^3 per radian of steering angle,
 // times the beam's width in steering angle.
