@@ -910,7 +910,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
                                                : std::numeric_limits<double>::infinity());
     plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only);
     plan_gpu_params(p);
-    p.subpixel_capacity = subpixel_capacity(p, scene);
+    plan_subpixel(p, scene);
     if (p.subpixel_capacity > 0) {
         p.subpixel_silent_material =
             static_cast<std::uint32_t>(p.materials.size()); // < kMaterialIdMask (plan_materials)

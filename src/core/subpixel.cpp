@@ -276,7 +276,7 @@ std::uint64_t draw_pieces(const SceneData& scene, const std::vector<DepthCluster
     return pieces;
 }
 
-// The candidates (SubpixelReturns::Candidate): each draw that could be at most kSilentPixels of the larger
+// The candidates (Plan::subpixel_candidates): each draw that could be at most kSilentPixels of the larger
 // pixel side across somewhere within gate_max of the sonar, else each of its clusters that could be
 // thinner than a pixel there; f(begin, end, thin, size, most returns its triangles can give).
 template <class F>
@@ -327,41 +327,44 @@ M::EchoConstants echo_constants(const Plan& plan) {
 
 } // namespace
 
-std::uint32_t subpixel_capacity(const Plan& plan, const SceneData& scene) {
-    if (scene.draws.empty() || plan.slice_columns == 0 || plan.rows == 0) return 0;
+void plan_subpixel(Plan& plan, const SceneData& scene) {
+    plan.subpixel_candidates.clear();
+    plan.subpixel_capacity = 0;
+    if (scene.draws.empty() || plan.slice_columns == 0 || plan.rows == 0) return;
     std::vector<DepthCluster> clusters;
     build_depth_clusters(scene, clusters);
+    std::vector<std::int32_t> mesh_facings(scene.meshes.size(), 2); // 2: not looked at yet
     std::uint64_t total = 0;
     for_each_candidate(
         plan, scene, clusters,
-        [&](std::uint32_t, std::uint32_t, bool, const ClusterSize&, std::uint64_t pieces) { total += pieces; });
-    return static_cast<std::uint32_t>(std::min<std::uint64_t>(total, kMaxSubpixelReturns));
+        [&](std::uint32_t begin, std::uint32_t end, bool thin, const ClusterSize& size, std::uint64_t pieces) {
+            const SceneDraw& draw = scene.draws[clusters[begin].draw];
+            std::int32_t& facing = mesh_facings[draw.mesh];
+            if (facing == 2) facing = mesh_facing(scene, scene.meshes[draw.mesh]);
+            SubpixelCandidate c;
+            c.cluster_begin = begin;
+            c.cluster_end = end;
+            // a mirroring world_from_local turns the triangles' winding over
+            c.facing = determinant3(draw.world_from_local) < 0 ? -facing : facing;
+            c.thin = thin;
+            for (int a = 0; a < 3; ++a)
+                c.centre[a] = size.centre[a];
+            c.radius = size.radius;
+            c.middle_extent = size.middle_extent;
+            plan.subpixel_candidates.push_back(c);
+            total += pieces;
+        });
+    plan.subpixel_capacity = static_cast<std::uint32_t>(std::min<std::uint64_t>(total, kMaxSubpixelReturns));
+    if (plan.subpixel_capacity == 0) plan.subpixel_candidates.clear();
 }
 
-void SubpixelReturns::prepare(const Plan& plan, const SceneData& scene, const std::vector<DepthCluster>& clusters) {
+void SubpixelReturns::prepare(const Plan& plan) {
     capacity_ = plan.subpixel_capacity;
-    candidates_.clear();
     count_ = clusters_taken_ = draws_silent_ = 0;
     column_begin_.assign(std::size_t(plan.profile_columns) + 1, 0u);
     returns_.assign(capacity_, shared::SubpixelReturn{});
     unsorted_.assign(capacity_, shared::SubpixelReturn{});
     unsorted_column_.assign(capacity_, 0u);
-    if (capacity_ == 0) return;
-    std::vector<std::int32_t> mesh_facings(scene.meshes.size(), 2); // 2: not looked at yet
-    for_each_candidate(plan, scene, clusters,
-                       [&](std::uint32_t begin, std::uint32_t end, bool thin, const ClusterSize& size, std::uint64_t) {
-                           const SceneDraw& draw = scene.draws[clusters[begin].draw];
-                           std::int32_t& facing = mesh_facings[draw.mesh];
-                           if (facing == 2) facing = mesh_facing(scene, scene.meshes[draw.mesh]);
-                           // a mirroring world_from_local turns the triangles' winding over
-                           candidates_.push_back({begin,
-                                                  end,
-                                                  determinant3(draw.world_from_local) < 0 ? -facing : facing,
-                                                  thin,
-                                                  {size.centre[0], size.centre[1], size.centre[2]},
-                                                  size.radius,
-                                                  size.middle_extent});
-                       });
 }
 
 void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose& pose,
@@ -431,7 +434,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     };
 
     const std::size_t draw_count = scene.draws.size();
-    for (const Candidate& candidate : candidates_) {
+    for (const SubpixelCandidate& candidate : plan.subpixel_candidates) {
         const std::uint32_t draw_index = clusters[candidate.cluster_begin].draw;
         const SceneDraw& draw = scene.draws[draw_index];
         const Vec3 centre =

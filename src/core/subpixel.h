@@ -29,16 +29,16 @@ struct Plan;
 struct SceneData;
 struct DepthCluster;
 
-// The most returns a frame of this plan can list (0: no cluster of the scene can be sub-pixel inside the
-// range gate): the returns of every cluster that could be, at its finest split, capped at kMaxSubpixelReturns.
-std::uint32_t subpixel_capacity(const Plan& plan, const SceneData& scene);
+// make_plan's step: the candidates (Plan::subpixel_candidates) and the most returns a frame can list
+// (Plan::subpixel_capacity; 0: nothing of the scene can be sub-pixel inside the range gate): the
+// returns of every candidate at its finest split, capped at kMaxSubpixelReturns.
+void plan_subpixel(Plan& plan, const SceneData& scene);
 constexpr std::uint32_t kMaxSubpixelReturns = 1u << 18; // 4 MiB of returns
 
 class SubpixelReturns {
 public:
-    // Sizes everything once for the plan (plan.subpixel_capacity) and finds the candidate clusters and
-    // the orientation of their meshes. clusters: build_depth_clusters's, kept by the caller.
-    void prepare(const Plan& plan, const SceneData& scene, const std::vector<DepthCluster>& clusters);
+    // Sizes everything once for the plan (plan.subpixel_capacity).
+    void prepare(const Plan& plan);
 
     // One frame: the candidate clusters that are sub-pixel at this pose are taken out of the depth pass
     // (drawn = 0 in every slice; drawn: cull_depth_clusters's flags) and their returns listed, sorted by
@@ -61,19 +61,6 @@ public:
     void write_buffer(const Plan& plan, void* destination) const;
 
 private:
-    // A draw that may be small at some pose within the gate, or a thin cluster of another draw: the
-    // clusters [cluster_begin, cluster_end), their facing (+1: counter-clockwise faces out, a closed
-    // mesh; -1: in; 0: open, both sides seen), and in the world the centre and radius of the sphere that
-    // holds their vertices, and (thin) the middle one of the cluster box's three extents.
-    struct Candidate {
-        std::uint32_t cluster_begin, cluster_end;
-        std::int32_t facing;
-        bool thin;
-        double centre[3];
-        double radius;
-        double middle_extent;
-    };
-    std::vector<Candidate> candidates_;
     std::vector<std::uint32_t> column_begin_;
     std::vector<shared::SubpixelReturn> returns_, unsorted_;
     std::vector<std::uint32_t> unsorted_column_;

@@ -82,7 +82,7 @@ template <class Real> struct StageContext {
         draws.resize(static_cast<std::size_t>(plan.slices) * scene.draws.size());
         build_depth_clusters(scene, clusters);
         clusters_drawn.resize(std::size_t(plan.slices) * clusters.size());
-        subpixel.prepare(plan, scene, clusters);
+        subpixel.prepare(plan);
     }
 
     Plan plan;              // copied: the backend may outlive the caller's Plan object

@@ -116,7 +116,7 @@ Result<void> VulkanBackend::create_scene_buffers() {
     build_depth_clusters(scene, clusters_);
     draw_pushes_.resize(std::size_t(plan_.slices) * scene.draws.size());
     clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
-    subpixel_returns_.prepare(plan_, scene, clusters_);
+    subpixel_returns_.prepare(plan_);
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     auto vertices =
