@@ -251,6 +251,76 @@ PixelSides pixel_sides(const Plan& plan) {
 }
 constexpr double kSilentPixels = 4.0; // up to this many of the larger pixel side across: drawn silent
 
+// How thick a cluster is across its length, in the world: twice the largest distance of its vertices
+// from its principal axis (the line through their mean along the covariance's main eigenvector), which
+// finds a cable's run in any direction (its box is thin only along the mesh's own axes). Infinity where
+// it cannot be under `limit`: three of its vertices span too tall a triangle, or their rms distance from
+// the axis already reaches limit / 2; only a thin candidate costs the second pass.
+double cluster_thickness(const SceneData& scene, const DepthCluster& cluster, double limit) {
+    const std::array<double, 16>& m = scene.draws[cluster.draw].world_from_local;
+    auto vertex = [&](std::uint32_t k) {
+        const std::size_t v = std::size_t(cluster.first_vertex) + scene.indices[cluster.first_index + k];
+        return transform_point(m, {scene.positions[3 * v], scene.positions[3 * v + 1], scene.positions[3 * v + 2]});
+    };
+    const std::uint32_t n = cluster.index_count;
+    if (n == 0) return std::numeric_limits<double>::infinity();
+    // An exact reject first, from three of its vertices: within limit / 2 of one line, a triangle is no
+    // taller than limit over its longest side (its area at most half its diameter times the strip's
+    // width). A seabed's patch fails that at once, without a pass over its vertices.
+    const std::uint32_t samples[2][3] = {{0, n / 2, n - 1}, {n / 4, (3 * n) / 4, n / 3}};
+    for (const auto& sample : samples) {
+        const Vec3 a = vertex(sample[0]), b = vertex(sample[1]), c = vertex(sample[2]);
+        const double longest = std::max({norm(sub(b, a)), norm(sub(c, a)), norm(sub(c, b))});
+        if (longest > 0 && norm(cross(sub(b, a), sub(c, a))) / longest > limit)
+            return std::numeric_limits<double>::infinity();
+    }
+    const Vec3 origin = vertex(0); // sums relative to a vertex: no cancellation far from the world's origin
+    Vec3 sum{};
+    double cov[3][3] = {};
+    for (std::uint32_t k = 0; k < n; ++k) {
+        const Vec3 p = sub(vertex(k), origin);
+        for (int i = 0; i < 3; ++i) {
+            sum[i] += p[i];
+            for (int j = 0; j <= i; ++j)
+                cov[i][j] += p[i] * p[j];
+        }
+    }
+    const Vec3 mean{sum[0] / n, sum[1] / n, sum[2] / n};
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j <= i; ++j) {
+            cov[i][j] = cov[i][j] / n - mean[i] * mean[j];
+            cov[j][i] = cov[i][j];
+        }
+    // the main axis by power iteration from the box's longest axis (its eigenvalue dominates a line's)
+    Vec3 axis{1, 0, 0};
+    double best = -1;
+    for (int a = 0; a < 3; ++a)
+        if (cov[a][a] > best) {
+            best = cov[a][a];
+            axis = {a == 0 ? 1.0 : 0.0, a == 1 ? 1.0 : 0.0, a == 2 ? 1.0 : 0.0};
+        }
+    for (int iteration = 0; iteration < 64; ++iteration) {
+        Vec3 next{};
+        for (int i = 0; i < 3; ++i)
+            next[i] = cov[i][0] * axis[0] + cov[i][1] * axis[1] + cov[i][2] * axis[2];
+        const double length = norm(next);
+        if (!(length > 0)) break;
+        axis = {next[0] / length, next[1] / length, next[2] / length};
+    }
+    Vec3 c_axis{};
+    for (int i = 0; i < 3; ++i)
+        c_axis[i] = cov[i][0] * axis[0] + cov[i][1] * axis[1] + cov[i][2] * axis[2];
+    const double across = cov[0][0] + cov[1][1] + cov[2][2] - dot(axis, c_axis); // rms^2 off the axis
+    if (!(across < 0.25 * limit * limit)) return std::numeric_limits<double>::infinity();
+    double widest = 0;
+    for (std::uint32_t k = 0; k < n; ++k) {
+        const Vec3 d = sub(sub(vertex(k), origin), mean);
+        const double along = dot(d, axis);
+        widest = std::max(widest, dot(d, d) - along * along);
+    }
+    return 2 * std::sqrt(widest);
+}
+
 // The most pieces a draw candidate's triangles give (before the line array's two cone columns): it
 // is drawn silent or skipped only at a distance D > radius / (2 kSilentPixels / 2 x larger pixel side),
 // so no point of it is nearer than that less its radius, and each triangle splits at most as split_of
@@ -299,9 +369,13 @@ void for_each_candidate(const Plan& plan, const SceneData& scene, const std::vec
                 const std::array<double, 16>& m = scene.draws[clusters[c].draw].world_from_local;
                 const double lo[3] = {clusters[c].bounds_min[0], clusters[c].bounds_min[1], clusters[c].bounds_min[2]};
                 const double hi[3] = {clusters[c].bounds_max[0], clusters[c].bounds_max[1], clusters[c].bounds_max[2]};
-                if (!(box_extents(m, lo, hi)[1] < pixel.small * plan.gate_max_m)) continue;
-                f(c, c + 1, true, size_of(scene, clusters, c, c + 1, std::numeric_limits<double>::infinity()),
-                  std::uint64_t(clusters[c].index_count / 3) * kMaxSplit * kMaxSplit * per_piece);
+                const double limit = pixel.small * plan.gate_max_m;
+                double thickness = box_extents(m, lo, hi)[1];
+                if (!(thickness < limit)) thickness = cluster_thickness(scene, clusters[c], limit);
+                if (!(thickness < limit)) continue;
+                ClusterSize cs = size_of(scene, clusters, c, c + 1, std::numeric_limits<double>::infinity());
+                cs.middle_extent = std::min(cs.middle_extent, thickness);
+                f(c, c + 1, true, cs, std::uint64_t(clusters[c].index_count / 3) * kMaxSplit * kMaxSplit * per_piece);
             }
         }
         begin = end;
