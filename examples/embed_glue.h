@@ -34,6 +34,9 @@ inline vksonar::SonarConfig demo_config() {
     config.effects.speckle = vksonar::EffectMode::off;
     config.effects.ambient_noise = vksonar::EffectMode::off;
     config.effects.tvg = vksonar::EffectMode::off;
+    // The engine's camera is one perspective view: it cannot hold the tier views that the vertical side
+    // lobes need (elevations down to the nadir), so the standalone render it is compared with has none.
+    config.effects.vertical_sidelobes = vksonar::EffectMode::off;
     return config;
 }
 

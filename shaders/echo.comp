@@ -68,12 +68,16 @@ MaterialGpu material(uint m) {
     return g;
 }
 
-EchoConstants echo_constants() {
+// The views of the depth pass (sonar_shared.h): each pixel's half extents, ray and cell.
+layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxViews]; };
+
+// The echo constants of a view: its half extents and pixel size.
+EchoConstants echo_constants(PixelView view) {
     EchoConstants k;
-    k.tan_half_h = params.tan_half_h;
-    k.tan_half_v = params.tan_half_v;
-    k.pixel_du = 2.0 * params.tan_half_h / float(params.slice_columns);
-    k.pixel_dv = 2.0 * params.tan_half_v / float(params.rows);
+    k.tan_half_h = view.tan_half_h;
+    k.tan_half_v = view.tan_half_v;
+    k.pixel_du = 2.0 * view.tan_half_h / float(params.slice_columns);
+    k.pixel_dv = 2.0 * view.tan_half_v / float(params.rows);
     k.depth_a = params.depth_a;
     k.depth_b = params.depth_b;
     k.gate_min_m = params.gate_min_m;
@@ -82,7 +86,6 @@ EchoConstants echo_constants() {
     k.vpattern_k = params.vpattern_k;
     k.vpattern_halfwidth_rad = params.vpattern_halfwidth_rad;
     k.vpattern_chebyshev_a = params.vpattern_chebyshev_a;
-    k.elevation_gate_sin = params.elevation_gate_sin;
     return k;
 }
 
@@ -107,11 +110,12 @@ vec2 echo_pixel(uint row, uint column) {
         return vec2(0.0);
     }
     uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
-    float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, params.tan_half_h);
-    float v = pixel_coord(row, params.rows, params.tan_half_v);
+    PixelView view = view_of_slice(slice_info[slice]);
+    float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, view.tan_half_h);
+    float v = pixel_coord(row, params.rows, view.tan_half_v);
     MaterialGpu mat = material(material_index(material_id[p], material_count()));
     float cos_incidence = kIncidence ? normals4[p].w : 0.0;
-    return echo_of_pixel(echo_constants(), echo_terms(), d, u, v, mat, cos_incidence);
+    return echo_of_pixel(echo_constants(view), echo_terms(), d, u, v, view, mat, cos_incidence);
 }
 
 // x: runs of kPixelsPerInvocation columns of one row, y: the row (a 2-D grid: no divide by columns).

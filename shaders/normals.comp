@@ -25,7 +25,22 @@ layout(std430, binding = kBindingDepth) readonly buffer DepthBuffer { float dept
 // Written by every method; read too by geometric, where the depth pass copied its face normals here.
 layout(std430, binding = kBindingNormals) buffer NormalsBuffer { vec4 normals4[]; };
 // A uniform block: every lane of a row run reads the same slice (one scalar load on lavapipe).
-layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxSlices]; };
+layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxViews]; };
+
+uint view_of_column(uint c) {
+    return slice_of_column(c, 1.0 / float(params.slice_columns)); // no integer divide per pixel
+}
+
+// Whether the pixel columns a and b (a neighbour, in the image) see one surface side by side: the same
+// view, or two slices of the main band (their seams join). A tier view's edges are the image's edges.
+bool joined(int a, int b) {
+    if (a < 0 || b < 0 || a >= int(params.columns) || b >= int(params.columns)) {
+        return true; // load() gives no sample outside the image anyway
+    }
+    uint va = view_of_column(uint(a));
+    uint vb = view_of_column(uint(b));
+    return va == vb || (va < params.slices && vb < params.slices);
+}
 
 // The pixel's Sample (sonar_kernels.h): invalid outside the image or without a hit.
 Sample load(int column, int row) {
@@ -38,11 +53,11 @@ Sample load(int column, int row) {
     if (!(d > 0.0)) {
         return no_sample();
     }
-    uint slice = slice_of_column(c, 1.0 / float(params.slice_columns)); // no integer divide per pixel
-    float u = pixel_coord(c - slice * params.slice_columns, params.slice_columns, params.tan_half_h);
-    float v = pixel_coord(j, params.rows, params.tan_half_v);
+    PixelView view = view_of_slice(slice_info[view_of_column(c)]);
+    float u = pixel_coord(c - view_of_column(c) * params.slice_columns, params.slice_columns, view.tan_half_h);
+    float v = pixel_coord(j, params.rows, view.tan_half_v);
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
-    return sample_at(z, pixel_ray(u, v, slice_info[slice].cos_center, slice_info[slice].sin_center));
+    return sample_at(z, pixel_ray(u, v, view));
 }
 
 Column3 load_column(int column, int row) {
@@ -51,6 +66,20 @@ Column3 load_column(int column, int row) {
     col.mid = load(column, row);
     col.down = load(column, row + 1);
     return col;
+}
+
+Column3 no_column3() {
+    Column3 col;
+    col.up = no_sample();
+    col.mid = no_sample();
+    col.down = no_sample();
+    return col;
+}
+
+// The window column `col` of pixel column `column` as the centre pixel `centre` sees it: nothing across
+// a seam that does not join (joined).
+Column3 seen3(Column3 col, int column, uint centre) {
+    return joined(column, int(centre)) ? col : no_column3();
 }
 
 Column5 load_column5(int column, int row) {
@@ -63,6 +92,19 @@ Column5 load_column5(int column, int row) {
     return col;
 }
 
+Column5 seen5(Column5 col, int column, uint centre) {
+    if (joined(column, int(centre))) {
+        return col;
+    }
+    Column5 none;
+    none.up2 = no_sample();
+    none.up = no_sample();
+    none.mid = no_sample();
+    none.down = no_sample();
+    none.down2 = no_sample();
+    return none;
+}
+
 void run_sobel5(uint row, uint first, uint last) {
     Column5 l2 = load_column5(int(first) - 2, int(row));
     Column5 l1 = load_column5(int(first) - 1, int(row));
@@ -70,8 +112,11 @@ void run_sobel5(uint row, uint first, uint last) {
     Column5 r1 = load_column5(int(first) + 1, int(row));
     for (uint column = first; column < last; ++column) {
         Column5 r2 = load_column5(int(column) + 2, int(row));
+        int x = int(column);
         normals4[row * params.columns + column] =
-            c.mid.valid ? sobel5_normal(l2, l1, c, r1, r2, params.edge_relative_jump) : vec4(0.0);
+            c.mid.valid ? sobel5_normal(seen5(l2, x - 2, column), seen5(l1, x - 1, column), c, seen5(r1, x + 1, column),
+                                        seen5(r2, x + 2, column), params.edge_relative_jump)
+                        : vec4(0.0);
         l2 = l1;
         l1 = c;
         c = r1;
@@ -84,7 +129,10 @@ void run_sobel3(uint row, uint first, uint last) {
     Column3 c = load_column(int(first), int(row));
     for (uint column = first; column < last; ++column) {
         Column3 r = load_column(int(column) + 1, int(row));
-        normals4[row * params.columns + column] = c.mid.valid ? sobel3_normal(l, c, r, params.edge_relative_jump) : vec4(0.0);
+        int x = int(column);
+        normals4[row * params.columns + column] =
+            c.mid.valid ? sobel3_normal(seen3(l, x - 1, column), c, seen3(r, x + 1, column), params.edge_relative_jump)
+                        : vec4(0.0);
         l = c;
         c = r;
     }
@@ -100,9 +148,7 @@ void run_geometric(uint row, uint first, uint last) {
             normals4[i] = vec4(0.0);
             continue;
         }
-        uint slice = column / params.slice_columns;
-        normals4[i] = geometric_normal(p, normals4[i].xyz, params.tan_half_h, params.tan_half_v,
-                                       slice_info[slice].cos_center, slice_info[slice].sin_center);
+        normals4[i] = geometric_normal(p, normals4[i].xyz, view_of_slice(slice_info[column / params.slice_columns]));
     }
 }
 

@@ -60,65 +60,77 @@ layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { fl
 // pixel whose cone coordinate lies within one column of them; each such pixel's window is loaded and
 // its range spread computed once, then added to the (at most two) of its cone columns this invocation
 // owns. So every profile cell receives its additions in the order of the CPU backend's scatter
-// (src/stages/cpu_beamform.cpp): rows, then pixel columns, then bins. Along a row the cone coordinate
-// increases with the pixel column, so the first such pixel is found by a binary search on the first
-// row and then moves by a few columns from row to row.
-void gather_cone_columns(uint first_cone, uint end_cone) {
-    uint columns = params.columns;
-    uint rows = params.rows;
+// (src/stages/cpu_beamform.cpp): rows, then pixel columns, then bins. Along a row of one view the cone
+// coordinate increases with the pixel column (the plan checks it), so in each view the first such
+// pixel is found by a binary search on the first row and then moves by a few columns from row to row.
+void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone) {
+    uint row_start = row * params.columns;
     float lo = float(first_cone) - 1.0;
     float hi = float(end_cone);
     int count = int(params.profile_columns);
-    // first pixel column of row 0 with a cone coordinate above lo
-    uint first = 0u;
-    uint last = columns;
-    while (first < last) {
-        uint mid = (first + last) / 2u;
-        if (cone_coords[mid] > lo) {
-            last = mid;
-        } else {
-            first = mid + 1u;
+    while (first > view_begin && cone_coords[row_start + first - 1u] > lo) {
+        --first;
+    }
+    while (first < view_end && !(cone_coords[row_start + first] > lo)) {
+        ++first;
+    }
+    for (uint c = first; c < view_end; ++c) {
+        float x = cone_coords[row_start + c];
+        if (!(x < hi)) {
+            break;
+        }
+        // its cone columns floor(x) and floor(x) + 1, those of them this invocation owns
+        int below = int(floor(x));
+        int cone_a = max(below, int(first_cone));
+        int cone_b = min(below + 1, int(end_cone) - 1);
+        float weight_a = cone_a <= cone_b ? cone_share(x, cone_a, count) : 0.0;
+        float weight_b = cone_b > cone_a ? cone_share(x, cone_b, count) : 0.0;
+        vec2 er = load_echo(row_start + c);
+        if (!(er.x > 0.0) || !(weight_a > 0.0 || weight_b > 0.0)) {
+            continue;
+        }
+        RangeSpread spread = pixel_spread(row, c, er);
+        precise float weighted_a = weight_a * er.x;
+        precise float weighted_b = weight_b * er.x;
+        uint base_a = uint(cone_a) * params.bins_padded;
+        uint base_b = uint(cone_b) * params.bins_padded;
+        for (int k = spread.k_first; k <= spread.k_last; ++k) {
+            float share = range_share(spread, k);
+            if (weight_a > 0.0) {
+                precise float add = share * weighted_a;
+                profiles[base_a + uint(k)] += add;
+            }
+            if (weight_b > 0.0) {
+                precise float add = share * weighted_b;
+                profiles[base_b + uint(k)] += add;
+            }
         }
     }
-    for (uint row = 0u; row < rows; ++row) {
-        uint row_start = row * columns;
-        while (first > 0u && cone_coords[row_start + first - 1u] > lo) {
-            --first;
+}
+
+void gather_cone_columns(uint first_cone, uint end_cone) {
+    uint columns = params.columns;
+    uint width = params.slice_columns;
+    uint views = columns / width;
+    float lo = float(first_cone) - 1.0;
+    // per view, the first pixel column of row 0 with a cone coordinate above lo
+    uint first[kMaxViews];
+    for (uint s = 0u; s < views; ++s) {
+        uint a = s * width;
+        uint b = a + width;
+        while (a < b) {
+            uint mid = (a + b) / 2u;
+            if (cone_coords[mid] > lo) {
+                b = mid;
+            } else {
+                a = mid + 1u;
+            }
         }
-        while (first < columns && !(cone_coords[row_start + first] > lo)) {
-            ++first;
-        }
-        for (uint c = first; c < columns; ++c) {
-            float x = cone_coords[row_start + c];
-            if (!(x < hi)) {
-                break;
-            }
-            // its cone columns floor(x) and floor(x) + 1, those of them this invocation owns
-            int below = int(floor(x));
-            int cone_a = max(below, int(first_cone));
-            int cone_b = min(below + 1, int(end_cone) - 1);
-            float weight_a = cone_a <= cone_b ? cone_share(x, cone_a, count) : 0.0;
-            float weight_b = cone_b > cone_a ? cone_share(x, cone_b, count) : 0.0;
-            vec2 er = load_echo(row_start + c);
-            if (!(er.x > 0.0) || !(weight_a > 0.0 || weight_b > 0.0)) {
-                continue;
-            }
-            RangeSpread spread = pixel_spread(row, c, er);
-            precise float weighted_a = weight_a * er.x;
-            precise float weighted_b = weight_b * er.x;
-            uint base_a = uint(cone_a) * params.bins_padded;
-            uint base_b = uint(cone_b) * params.bins_padded;
-            for (int k = spread.k_first; k <= spread.k_last; ++k) {
-                float share = range_share(spread, k);
-                if (weight_a > 0.0) {
-                    precise float add = share * weighted_a;
-                    profiles[base_a + uint(k)] += add;
-                }
-                if (weight_b > 0.0) {
-                    precise float add = share * weighted_b;
-                    profiles[base_b + uint(k)] += add;
-                }
-            }
+        first[s] = a;
+    }
+    for (uint row = 0u; row < params.rows; ++row) {
+        for (uint s = 0u; s < views; ++s) {
+            gather_view(row, s * width, (s + 1u) * width, first[s], first_cone, end_cone);
         }
     }
 }

@@ -30,11 +30,61 @@
 // ---------------------------------------------------------------------------------------------
 // Pixel positions (stages 2 and 3)
 
-// Sonar-frame direction of pixel (u, v) of the slice whose centre azimuth has cosine cs and sine sn,
-// scaled so that its view-space z is 1: f_s + u r_s + v d with f_s = (cs, sn, 0), r_s = (sn, -cs, 0),
-// d = (0, 0, -1). The pixel's position is view_z * pixel_ray(...).
-VKS_FN vec3 pixel_ray(REAL u, REAL v, REAL cs, REAL sn) {
-    return vec3(cs + u * sn, sn - u * cs, -v);
+// One view of the depth pass (SliceInfo, sonar_shared.h) in the working precision: its camera basis in
+// the sonar frame, its half extents, and the cell of directions it is the one to see.
+struct PixelView {
+    vec3 forward;
+    vec3 right;
+    vec3 down;
+    REAL tan_half_h;
+    REAL tan_half_v;
+    REAL sin_elevation_min;
+    REAL sin_elevation_max;
+    bool wedge;
+    vec2 wedge_start; // (cos, sin) of the wedge's starboard edge
+    vec2 wedge_end;   // (cos, sin) of its port edge
+};
+
+// The view of a SliceInfo entry (the float path of both backends reads these floats).
+VKS_FN PixelView view_of_slice(SliceInfo s) {
+    PixelView view;
+    view.forward = vec3(REAL(s.forward_x), REAL(s.forward_y), REAL(s.forward_z));
+    view.right = vec3(REAL(s.right_x), REAL(s.right_y), REAL(s.right_z));
+    view.down = vec3(REAL(s.down_x), REAL(s.down_y), REAL(s.down_z));
+    view.tan_half_h = REAL(s.tan_half_h);
+    view.tan_half_v = REAL(s.tan_half_v);
+    view.sin_elevation_min = REAL(s.sin_elevation_min);
+    view.sin_elevation_max = REAL(s.sin_elevation_max);
+    view.wedge = s.wedge != 0u;
+    view.wedge_start = vec2(REAL(s.wedge_start_x), REAL(s.wedge_start_y));
+    view.wedge_end = vec2(REAL(s.wedge_end_x), REAL(s.wedge_end_y));
+    return view;
+}
+
+// Sonar-frame direction of pixel (u, v) of a view, scaled so that its view-space z is 1:
+// forward + u right + v down. The pixel's position is view_z * pixel_ray(...). For a slice (a level
+// camera at azimuth phi: forward (cos, sin, 0), right (sin, -cos, 0), down (0, 0, -1)) the zero terms
+// add exactly nothing.
+VKS_FN vec3 pixel_ray(REAL u, REAL v, PixelView view) {
+    return view.forward + u * view.right + v * view.down;
+}
+
+// The sine of the elevation of the ray through (u, v) of a view: its z over its length (the basis is
+// orthonormal, so |ray| = |(u, v, 1)|). For a slice this is pixel_elevation_sin(u, v), bit for bit.
+VKS_FN REAL view_elevation_sin(REAL u, REAL v, PixelView view) {
+    return (view.forward.z + u * view.right.z + v * view.down.z) / sqrt(REAL(1) + u * u + v * v);
+}
+
+// Whether the ray through (u, v) lies in the view's azimuth wedge (a tier view: the wedges of a band
+// split its azimuths, each direction in exactly one: the starboard edge in, the port edge out); always
+// true for a slice, whose side planes hold its azimuths.
+VKS_FN bool in_view_wedge(REAL u, REAL v, PixelView view) {
+    if (!view.wedge) {
+        return true;
+    }
+    vec3 ray = pixel_ray(u, v, view);
+    return ray.y * view.wedge_start.x - ray.x * view.wedge_start.y >= REAL(0) &&
+           ray.y * view.wedge_end.x - ray.x * view.wedge_end.y < REAL(0);
 }
 
 // A reconstructed pixel: sonar-frame position, slant range, and whether the depth pass hit anything
@@ -191,10 +241,14 @@ VKS_FN vec4 sobel5_normal(Column5 l2, Column5 l1, Column5 c, Column5 r1, Column5
 }
 
 // normal_method = geometric: the depth pass's face normal q (clip-linear coordinates, sonar_math.h)
-// of a pixel in the slice at (cs, sn), mapped to the sonar frame and oriented.
-VKS_FN vec4 geometric_normal(Sample p, vec3 q, REAL tan_half_h, REAL tan_half_v, REAL cs, REAL sn) {
-    vec3 n = vec3(face_normal_sonar_x(q.x, q.z, tan_half_h, cs, sn), face_normal_sonar_y(q.x, q.z, tan_half_h, cs, sn),
-                  face_normal_sonar_z(q.y, tan_half_v));
+// of a pixel of a view, mapped to the sonar frame and oriented: the camera-frame normal
+// (q.x / tan_half_h, q.y / tan_half_v, q.z) in the view's basis (right, down, forward).
+VKS_FN vec4 geometric_normal(Sample p, vec3 q, PixelView view) {
+    REAL nr = q.x / view.tan_half_h;
+    REAL nd = q.y / view.tan_half_v;
+    vec3 n = vec3(nr * view.right.x + q.z * view.forward.x + nd * view.down.x,
+                  q.z * view.forward.y + nr * view.right.y + nd * view.down.y,
+                  nd * view.down.z + nr * view.right.z + q.z * view.forward.z);
     return oriented_normal(p, n);
 }
 
@@ -216,7 +270,6 @@ struct EchoConstants {
     REAL vpattern_k;
     REAL vpattern_halfwidth_rad;
     REAL vpattern_chebyshev_a;
-    REAL elevation_gate_sin; // SonarParams::elevation_gate_sin
 };
 
 // Which of the echo equation's terms a pipeline carries (the effect bits and the scene's materials).
@@ -236,17 +289,20 @@ VKS_FN uint material_index(uint material_id, uint material_count) {
     return m < material_count ? m : 0u;
 }
 
-// The power of a ray at elevation sine sin_e: 0 beyond the elevation gate (SonarParams), else `power`.
-VKS_FN REAL elevation_gated(REAL power, REAL sin_e, REAL gate_sin) {
-    return abs(sin_e) <= gate_sin ? power : REAL(0);
+// The power of a ray at elevation sine sin_e: 0 outside the view's elevation band (the elevation gate
+// of a slice, SonarParams::elevation_gate_sin; a tier's band beyond it), else `power`.
+VKS_FN REAL elevation_gated(REAL power, REAL sin_e, PixelView view) {
+    return sin_e >= view.sin_elevation_min && sin_e <= view.sin_elevation_max ? power : REAL(0);
 }
 
-// The vertical pattern's power over the pixel (u, v), 0 beyond the elevation gate; 1 with the effect
-// off (the pixel grid is then the beam, as the legacy plugins have it). A function of the pixel's place
-// in the grid alone, which the CPU backend reads from a table made once (cpu_echo.cpp).
-VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v) {
+// The vertical pattern's power over the pixel (u, v) of a view, 0 outside the view's cell (its
+// elevation band, and a tier view's azimuth wedge); 1 with the effect off (the pixel grid is then the
+// beam, as the legacy plugins have it). A function of the pixel's place in the grid alone, which the
+// CPU backend reads from a table made once (cpu_echo.cpp). k.pixel_dv is the view's row height.
+VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v, PixelView view) {
     REAL vertical = REAL(1);
     if (terms.vertical_pattern && terms.vertical_shape == kPatternBox) {
+        // a slice's (box and gaussian patterns have no side lobes: no tier views)
         vertical = pattern_power(kPatternBox, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
                                  pixel_elevation(u, v)); // zero beyond vfov / 2, inside the gate
     } else if (terms.vertical_pattern) {
@@ -254,10 +310,11 @@ VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL 
         // pattern is quadratic across the pixel). The centre alone is wrong next to a null, where the
         // pattern grows as the square of the distance d from it: a row of height D holds d^2 + D^2 / 12
         // of it, the centre gives d^2 (-1.25 dB for the row at the null). The box keeps its sharp edge.
-        // Each point is gated on its own: a row that straddles the gate keeps the half inside it.
+        // Each point is gated on its own: a row that straddles the gate keeps the half inside it, and the
+        // tier view beyond the gate the other half.
         REAL half_gap = REAL(0.28867513459481287) * k.pixel_dv; // D / (2 sqrt 3)
-        REAL upper_sin = pixel_elevation_sin(u, v - half_gap);
-        REAL lower_sin = pixel_elevation_sin(u, v + half_gap);
+        REAL upper_sin = view_elevation_sin(u, v - half_gap, view);
+        REAL lower_sin = view_elevation_sin(u, v + half_gap, view);
         REAL upper;
         REAL lower;
         if (terms.vertical_shape == kPatternGaussian) {
@@ -269,8 +326,10 @@ VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL 
             upper = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, upper_sin);
             lower = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, lower_sin);
         }
-        return REAL(0.5) * (elevation_gated(upper, upper_sin, k.elevation_gate_sin) +
-                            elevation_gated(lower, lower_sin, k.elevation_gate_sin));
+        if (!in_view_wedge(u, v, view)) {
+            return REAL(0);
+        }
+        return REAL(0.5) * (elevation_gated(upper, upper_sin, view) + elevation_gated(lower, lower_sin, view));
     }
     return vertical;
 }
@@ -300,15 +359,16 @@ VKS_FN vec2 echo_at_range(EchoConstants k, EchoTerms terms, REAL r, MaterialGpu 
 }
 
 // (energy relative to SL, slant range) of the pixel (u, v) at reversed-Z depth d > 0 with material
-// `mat`; (0, r) outside the range gate. cos_incidence is read only with terms.incidence.
-VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL v, MaterialGpu mat,
+// `mat`; (0, r) outside the range gate. cos_incidence is read only with terms.incidence. k: the
+// view's constants (its half extents and pixel size).
+VKS_FN vec2 echo_of_pixel(EchoConstants k, EchoTerms terms, REAL d, REAL u, REAL v, PixelView view, MaterialGpu mat,
                           REAL cos_incidence) {
     REAL r = depth_slant_range(k, d, u, v);
     if (r < k.gate_min_m || r >= k.gate_max_m) {
         return vec2(REAL(0), r);
     }
     return echo_at_range(k, terms, r, mat, cos_incidence, pixel_solid_angle(u, v, k.pixel_du, k.pixel_dv),
-                         pixel_vertical_power(k, terms, u, v));
+                         pixel_vertical_power(k, terms, u, v, view));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -411,10 +471,10 @@ VKS_FN_INLINE REAL range_share(RangeSpread s, int k) {
 // the two cone columns nearest its own theta, so a column of pixels (one azimuth) bends towards
 // broadside as its elevation grows (docs/pipeline.md, "Beam geometry").
 
-// The cosine along the array axis of pixel (u, v)'s direction in the slice at (cs, sn) (pixel_ray):
+// The cosine along the array axis of pixel (u, v)'s direction in a view (pixel_ray):
 // sin(theta) = cos(elevation) sin(azimuth), without an angle.
-VKS_FN REAL array_axis_cosine(REAL u, REAL v, REAL cs, REAL sn) {
-    return (sn - u * cs) / sqrt(REAL(1) + u * u + v * v);
+VKS_FN REAL array_axis_cosine(REAL u, REAL v, PixelView view) {
+    return pixel_ray(u, v, view).y / sqrt(REAL(1) + u * u + v * v);
 }
 
 // A pixel's coordinate on the cone columns from its axis cosine: column c is centred at c, the fan's
@@ -440,9 +500,10 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
 // than a pixel is not rasterized; the host lists its triangles' pieces with their echo (src/core/subpixel.cpp)
 // and the profile step adds each piece that the depth image does not hide.
 
-// The vertical pattern's power along one ray of elevation sine sin_e, 0 beyond the elevation gate; 1
-// with the effect off. A piece of a sub-pixel object lies on one ray, not across a pixel's height: the
-// pattern at that ray, where pixel_vertical_power averages it over a row.
+// The vertical pattern's power along one ray of elevation sine sin_e; 1 with the effect off. A piece of a
+// sub-pixel object lies on one ray, not across a pixel's height: the pattern at that ray, where
+// pixel_vertical_power averages it over a row. No gate here: the host lists a piece only in the view
+// whose cell (elevation band, tier wedge) holds its ray, so each direction counts once as a pixel's does.
 VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e) {
     if (!terms.vertical_pattern) {
         return REAL(1);
@@ -454,7 +515,7 @@ VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e) {
     } else {
         p = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, sin_e);
     }
-    return elevation_gated(p, sin_e, k.elevation_gate_sin);
+    return p;
 }
 
 // The echo (relative to SL) of a flat piece of surface of `area` m^2 at slant range r whose normal
@@ -467,7 +528,7 @@ VKS_FN REAL facet_echo(EchoConstants k, EchoTerms terms, MaterialGpu mat, REAL a
     return echo_at_range(k, terms, r, mat, cos_incidence, area * cos_incidence / (r * r), vertical).x;
 }
 
-// Whether a sub-pixel return at view z `view_z` (in its pixel's slice) is seen past the surface the
+// Whether a sub-pixel return at view z `view_z` (in its pixel's view) is seen past the surface the
 // depth pass drew in that pixel (reversed-Z depth d, 0 = nothing drawn; material_id its id image's value):
 // hidden only where that surface is nearer by more than 1e-5 of the distance (the depth's float
 // resolution is ~1e-7 of it; a return lying on the surface it sits on stays), and is not one drawn with

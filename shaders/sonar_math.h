@@ -270,19 +270,4 @@ VKS_FN REAL incidence_cos(REAL n_dot_p, REAL range_m) {
     return min(max(-n_dot_p / range_m, REAL(0)), REAL(1));
 }
 
-// Face normal of the depth pass's attachment (normal_method = geometric) in the sonar frame. The
-// attachment holds the plane normal q in clip-linear coordinates (x_clip, y_clip, w_clip) =
-// diag(1 / tan_half_h, 1 / tan_half_v, 1) * camera, so the camera-frame normal is (inverse transpose)
-// (q.x / tan_half_h, q.y / tan_half_v, q.z); camera (right, down, forward) of the slice at azimuth
-// (cos, sin) to sonar: right = (sin, -cos, 0), down = (0, 0, -1), forward = (cos, sin, 0).
-VKS_FN REAL face_normal_sonar_x(REAL qx, REAL qz, REAL tan_half_h, REAL cs, REAL sn) {
-    return (qx / tan_half_h) * sn + qz * cs;
-}
-VKS_FN REAL face_normal_sonar_y(REAL qx, REAL qz, REAL tan_half_h, REAL cs, REAL sn) {
-    return qz * sn - (qx / tan_half_h) * cs;
-}
-VKS_FN REAL face_normal_sonar_z(REAL qy, REAL tan_half_v) {
-    return -(qy / tan_half_v);
-}
-
 #undef VKS_FN

@@ -16,8 +16,10 @@ using uint = std::uint32_t;
 #define VKS_CONST const
 #endif
 
-VKS_CONST uint kWorkgroupSize = 64u;      // 1-D compute workgroups (per pixel, per column, per cell)
-VKS_CONST uint kMaxSlices = 16u;          // hfov 360 deg at >= 22.5 deg per slice
+VKS_CONST uint kWorkgroupSize = 64u; // 1-D compute workgroups (per pixel, per column, per cell)
+VKS_CONST uint kMaxSlices = 16u;     // hfov 360 deg at >= 22.5 deg per slice
+// Views of the depth pass: the slices, then the vertical side lobes' tier views (Plan::views).
+VKS_CONST uint kMaxViews = 24u;
 VKS_CONST uint kMaxFarCells = 256u;       // far side lobes' grid (Plan::far_cells): far_sidelobe.comp's shared array
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 // The material attachment holds material_id | instance << kInstanceShift (the instance only when
@@ -130,7 +132,7 @@ struct SonarParams {
     uint columns;
     uint rows;
     uint slice_columns;
-    uint slices;
+    uint slices; // the main band's views (Plan::slices), which join at their seams; the tier views follow
 
     uint beams;
     uint bins;
@@ -192,15 +194,37 @@ struct SonarParams {
 static_assert(sizeof(SonarParams) == 40 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
-// Per-slice table (storage buffer, std430): the rotation of each slice's camera about the sonar z axis.
+// Per-view table (uniform block of kMaxViews, std140): one entry per view of the depth pass, which
+// lie side by side in the pixel grid, slice_columns columns each (Plan::views). A view is a camera
+// (forward, right, down: an orthonormal basis in the sonar frame, so that pixel (u, v) looks along
+// forward + u right + v down) with its own focal-normalized half extents, and the cell of directions
+// it is the one to see: elevations whose sine lies in [sin_elevation_min, sin_elevation_max] and, for
+// a tier view, azimuths in its wedge. The slices of the main band (views 0 .. slices - 1) are level
+// cameras rotated about z; their azimuths are held by their side planes, so they have no wedge.
 struct SliceInfo {
-    float center_azimuth_rad; // positive to port (left)
-    float cos_center;
-    float sin_center;
-    float pad;
+    float center_azimuth_rad; // positive to port (left): the slice's, or the tier view's wedge centre
+    float tan_half_h;
+    float tan_half_v;
+    uint pad0;
+    float forward_x;
+    float forward_y;
+    float forward_z;
+    float sin_elevation_min;
+    float right_x;
+    float right_y;
+    float right_z;
+    float sin_elevation_max;
+    float down_x;
+    float down_y;
+    float down_z;
+    uint wedge;          // 1: a tier view, its azimuths limited to its wedge [wedge_start, wedge_end)
+    float wedge_start_x; // (cos, sin) of the wedge's starboard edge azimuth
+    float wedge_start_y;
+    float wedge_end_x; // (cos, sin) of its port edge azimuth
+    float wedge_end_y;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SliceInfo) == 16, "SliceInfo must match std430");
+static_assert(sizeof(SliceInfo) == 80, "SliceInfo must match std140 (scalars, 16-byte multiple)");
 #endif
 
 // Acoustic material (storage buffer, std430), indexed by the material id the depth pass writes.

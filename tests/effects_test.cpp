@@ -224,6 +224,9 @@ TEST_P(EffectsTest, VerticalPatternWeightsEachPixelByThePatternAtItsElevation) {
     SonarConfig on = clean_config(), off = clean_config();
     on.effects.vertical_pattern = EffectMode::on;
     off.effects.vertical_pattern = EffectMode::off;
+    // The main band's pattern and gate; beyond the gate the tier views' side lobes have their own test
+    // (SeabedClosedForm.TheSideLobesBringTheSeabedFromTheAltitudeOn).
+    on.effects.vertical_sidelobes = EffectMode::off;
     // The same pixel grid both ways: with the pattern on the coverage reaches at least its first null
     // (23.1 deg for this 20-degree sinc), off it is vertical_coverage x vfov / 2. 2.5 beamwidths (+-25 deg,
     // past the null) is the larger of the two either way, so both renders share rows and tan_half_v.
@@ -675,8 +678,15 @@ TEST(EffectsAuto, EveryEffectReportsItsStateAndWhy) {
     SonarConfig config = load_preset("default").value();
     config.effects.speckle = EffectMode::off;
     const Plan plan = plan_of(config, scene);
-    const std::vector<std::string> names = {"incidence",  "vertical_pattern", "horizontal_pattern", "spreading",
-                                            "absorption", "speckle",          "ambient_noise",      "tvg"};
+    const std::vector<std::string> names = {"incidence",
+                                            "vertical_pattern",
+                                            "vertical_sidelobes",
+                                            "horizontal_pattern",
+                                            "spreading",
+                                            "absorption",
+                                            "speckle",
+                                            "ambient_noise",
+                                            "tvg"};
     ASSERT_EQ(plan.effects.states.size(), names.size());
     for (std::size_t i = 0; i < names.size(); ++i) {
         EXPECT_EQ(plan.effects.states[i].name, names[i]);
@@ -689,13 +699,22 @@ TEST(EffectsAuto, EveryEffectReportsItsStateAndWhy) {
                 plan.effects.spreading && plan.effects.absorption && plan.effects.ambient_noise);
     EXPECT_FALSE(plan.effects.tvg);
     EXPECT_EQ(state_of(plan, "tvg")->why.rfind("auto: ", 0), 0u);
-    // The vertical pattern says how far up and down it is simulated: to the 20-degree sinc's first null,
-    // asin(pi / k) with k from its half-power point (vertical_coverage x vfov / 2 = 20 deg is less).
+    // The vertical side lobes say from where the tier views take over: the 20-degree sinc's first null,
+    // asin(pi / k) with k from its half-power point (vertical_coverage x vfov / 2 = 20 deg is less); with
+    // them off, the vertical pattern says that it stops there.
+    EXPECT_TRUE(plan.effects.vertical_sidelobes);
     const double k = sinc_half_power_x() / std::sin(10.0 * kDeg);
-    char within[64];
+    char beyond[64], within[64];
+    std::snprintf(beyond, sizeof beyond, "beyond +-%.1f deg", std::asin(kPi / k) / kDeg);
     std::snprintf(within, sizeof within, "within +-%.1f deg", std::asin(kPi / k) / kDeg);
-    EXPECT_NE(state_of(plan, "vertical_pattern")->why.find(within), std::string::npos)
-        << state_of(plan, "vertical_pattern")->why << " (expected " << within << ")";
+    EXPECT_NE(state_of(plan, "vertical_sidelobes")->why.find(beyond), std::string::npos)
+        << state_of(plan, "vertical_sidelobes")->why << " (expected " << beyond << ")";
+    config.effects.vertical_sidelobes = EffectMode::off;
+    const Plan main_band = plan_of(config, scene);
+    EXPECT_FALSE(main_band.effects.vertical_sidelobes);
+    EXPECT_EQ(main_band.views, main_band.slices);
+    EXPECT_NE(state_of(main_band, "vertical_pattern")->why.find(within), std::string::npos)
+        << state_of(main_band, "vertical_pattern")->why << " (expected " << within << ")";
 }
 
 TEST(EffectsAuto, AbsorptionIsOffBelowATenthOfADbOverTheRangeWindow) {

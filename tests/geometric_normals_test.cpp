@@ -46,11 +46,14 @@ SonarConfig geometric_config(NormalMethod method = NormalMethod::geometric) {
 
 // Exact unit ray of pixel (column, row) in the sonar frame, from the plan in double.
 void pixel_ray(const Plan& plan, std::uint32_t column, std::uint32_t row, double ray[3]) {
+    // the view's camera (a slice, or a tier view of the vertical side lobes): forward + u right + v down
     const std::uint32_t s = column / plan.slice_columns;
-    const double u = (2.0 * (column - s * plan.slice_columns + 0.5) / plan.slice_columns - 1.0) * plan.tan_half_h;
-    const double v = (2.0 * (row + 0.5) / plan.rows - 1.0) * plan.tan_half_v;
-    const double phi = plan.slice_info[s].center_azimuth_rad, c = std::cos(phi), sn = std::sin(phi);
-    const double d[3] = {c + u * sn, sn - u * c, -v};
+    const ViewGeometry& view = plan.view_geometry[s];
+    const double u = (2.0 * (column - s * plan.slice_columns + 0.5) / plan.slice_columns - 1.0) * view.tan_half_h;
+    const double v = (2.0 * (row + 0.5) / plan.rows - 1.0) * view.tan_half_v;
+    double d[3];
+    for (int k = 0; k < 3; ++k)
+        d[k] = view.forward[k] + u * view.right[k] + v * view.down[k];
     const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     for (int k = 0; k < 3; ++k)
         ray[k] = d[k] / len;

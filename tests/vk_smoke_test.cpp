@@ -356,13 +356,13 @@ TEST(VkBackend, WideFanCoversEverySlice) {
     ASSERT_GT(p.slices, 1u);
     ASSERT_TRUE(h->render().ok());
     const std::uint32_t middle_row = p.rows / 2;
-    for (std::uint32_t column = 0; column < p.columns; ++column) {
+    for (std::uint32_t column = 0; column < p.slices * p.slice_columns; ++column) { // the slices (not the tier views)
         const float d = h->frame.depth[std::size_t(middle_row) * p.columns + column];
         ASSERT_GT(d, 0.0f) << "column " << column << " (slice " << column / p.slice_columns << ") saw nothing";
         // Each slice reconstructs the same plane x = 6 in its own frame.
         const std::uint32_t slice = column / p.slice_columns;
         const double u = (2.0 * (column % p.slice_columns + 0.5) / p.slice_columns - 1.0) * p.tan_half_h;
-        const double x = view_z(p, d) * (p.slice_info[slice].cos_center + u * p.slice_info[slice].sin_center);
+        const double x = view_z(p, d) * (p.slice_info[slice].forward_x + u * p.slice_info[slice].right_x);
         EXPECT_NEAR(x, 6.0, 6.0 * 2e-4) << "column " << column;
     }
     EXPECT_TRUE(all_finite(h->frame.clean));

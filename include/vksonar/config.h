@@ -19,7 +19,11 @@ enum class EffectMode : std::uint8_t { automatic, on, off };
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct EffectsConfig {
     EffectMode incidence = EffectMode::automatic; // Lambert cos(theta); auto: on if a material is angle-dependent
-    EffectMode vertical_pattern = EffectMode::automatic;   // b_v(psi)^2; auto: on
+    EffectMode vertical_pattern = EffectMode::automatic; // b_v(psi)^2; auto: on
+    // The vertical pattern's side lobes beyond its first null, down to the nadir and up to the zenith
+    // (the altitude return): tier views in the depth pass. auto: on where the pattern has side lobes
+    // and the beams are a line array's (physical mode).
+    EffectMode vertical_sidelobes = EffectMode::automatic;
     EffectMode horizontal_pattern = EffectMode::automatic; // side lobes along beams; auto: on
     EffectMode spreading = EffectMode::automatic;          // r^-4; auto: on
     EffectMode absorption = EffectMode::automatic;         // auto: on if 2 alpha range_max >= 0.1 dB

@@ -22,17 +22,25 @@ constexpr const char* kUsage =
     "usage: vksonar bench effects [--backend vulkan|cpu] [--frames N] [--scene FILE] [--sonar PRESET|FILE]\n"
     "                             [--set key=value ...] [--pose x,y,z,roll,pitch,yaw] [--only EFFECT,...]\n"
     "\n"
-    "For each effect (incidence, vertical_pattern, horizontal_pattern, spreading, absorption, speckle,\n"
-    "ambient_noise, tvg) three renderers of the same scene: effects.X=on, effects.X=off and a second,\n"
+    "For each effect (incidence, vertical_pattern, vertical_sidelobes, horizontal_pattern, spreading,\n"
+    "absorption, speckle, ambient_noise, tvg) three renderers of the same scene: effects.X=on, effects.X=off and a "
+    "second,\n"
     "identical effects.X=off (the noise reference); 'labels' is the ground-truth labels stage (--save labels)\n"
     "on vs off the same way. Their frames are interleaved (the order rotates every\n"
     "round), N rounds per effect (default 60); the table holds medians of full-frame wall-clock times and\n"
     "medians of the per-round ratios. Target: off'/off within 1.02 (a disabled effect costs nothing\n"
     "measurable).\n";
 
-const std::array<const char*, 9> kEffects = {"incidence",  "vertical_pattern", "horizontal_pattern", "spreading",
-                                             "absorption", "speckle",          "ambient_noise",      "tvg",
-                                             "labels"};
+const std::array<const char*, 10> kEffects = {"incidence",
+                                              "vertical_pattern",
+                                              "vertical_sidelobes",
+                                              "horizontal_pattern",
+                                              "spreading",
+                                              "absorption",
+                                              "speckle",
+                                              "ambient_noise",
+                                              "tvg",
+                                              "labels"};
 
 struct Variant {
     std::vector<double> full_ms;

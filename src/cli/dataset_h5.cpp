@@ -2,11 +2,18 @@
 // build still works and `--out run.h5` says how to get it.
 #include "cli/dataset_h5.h"
 
+#include <algorithm>
 #include <cstring>
 #include <utility>
 #include <vector>
 
 #ifdef VKSONAR_HAVE_HDF5
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
 #include "cli/h5_util.h"
 #endif
 
@@ -37,7 +44,7 @@ Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& 
                       "--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
 
-Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const DatasetMeta&,
+Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const Plan&, const DatasetMeta&,
                                                              const DatasetOptions&) {
     return make_error(ErrorCode::unsupported, path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
@@ -56,12 +63,120 @@ namespace {
 
 using h5::Hid;
 
+constexpr std::uint64_t kHashSeed = 0xcbf29ce484222325ull;
+
 // A dataset of rows that grows by one row per frame: [frames, row_dims...], one row per chunk.
 struct RowDataset {
     Hid id;
+    const char* name = "";
     hid_t memory_type = H5I_INVALID_HID;
-    std::vector<hsize_t> row; // the dimensions after the frame axis
+    std::vector<hsize_t> row;       // the dimensions after the frame axis
+    std::size_t row_bytes = 0;      // one row in memory (a pointer for /boxes' text)
+    bool text = false;              // /boxes: a row is a pointer to UTF-8 text
+    std::uint64_t hash = kHashSeed; // row_hash over the rows written so far, in order
 };
+
+// ---- the commit record ---------------------------------------------------------------------------
+// HDF5 does not write a file in an order that survives a kill: one H5Fflush writes the new chunks, then
+// the metadata about in address order (the root group's attributes, frames_written among them, before
+// the chunk indexes), then the superblock with the end of the file last, and it rewrites index nodes
+// that hold earlier frames in place. A run killed inside a flush can leave frames_written counting a
+// frame whose chunk is not indexed (read back as zeros), chunks past the recorded end of the file (a
+// resume allocates the next frame over them), or, when a write is cut short, an index that loses
+// earlier frames (tests/python/check_resume_torn.py kills at each write). So the frames that count for a
+// resume are the ones of the last flush that returned: after it the writer records their number and a
+// hash of each dataset's rows in the file's user block (which HDF5 leaves alone), in two slots used in
+// turn, each with its own check, so a record cut off by the kill leaves the one before it. A resume
+// copies that many frames into a new file, checks them against the hashes, and starts the shard over
+// when they differ: the result is the uninterrupted run's, or a warning and a fresh start.
+constexpr hsize_t kUserBlock = 512;
+constexpr std::size_t kSlotBytes = 256, kMaxHashes = 16;
+constexpr char kCommitMagic[8] = {'v', 'k', 's', 'c', 'm', 't', '0', '1'};
+
+struct CommitRecord {
+    std::uint64_t frames = 0;
+    std::vector<std::uint64_t> hashes; // one per row dataset, in the writer's order
+};
+
+// One 8-byte word into a 64-bit hash state.
+inline std::uint64_t hash_word(std::uint64_t h, std::uint64_t w) {
+    h = (h ^ w) * 0x9E3779B97F4A7C15ull;
+    return (h << 31) | (h >> 33);
+}
+
+// Bytes into a 64-bit hash, 32 at a time in four lanes (not cryptographic: it tells a torn or stale
+// frame from the frame that was written, at several GB/s on the writer thread).
+std::uint64_t hash_bytes(std::uint64_t h, const void* data, std::size_t n) {
+    constexpr std::uint64_t k = 0x9E3779B97F4A7C15ull;
+    const auto* p = static_cast<const unsigned char*>(data);
+    std::size_t i = 0;
+    if (n >= 32) {
+        std::uint64_t lane[4] = {h, h ^ 0x1, h ^ 0x2, h ^ 0x3};
+        for (; i + 32 <= n; i += 32) {
+            std::uint64_t w[4];
+            std::memcpy(w, p + i, 32);
+            for (int j = 0; j < 4; ++j)
+                lane[j] = hash_word(lane[j], w[j]);
+        }
+        h = hash_word(hash_word(hash_word(hash_word(h, lane[0]), lane[1]), lane[2]), lane[3]);
+    }
+    for (; i + 8 <= n; i += 8) {
+        std::uint64_t w;
+        std::memcpy(&w, p + i, 8);
+        h = hash_word(h, w);
+    }
+    std::uint64_t tail = n;
+    for (std::size_t j = 0; i + j < n; ++j)
+        tail ^= std::uint64_t(p[i + j]) << (8 * j + 8);
+    h = (h ^ tail) * k;
+    return (h << 29) | (h >> 35);
+}
+
+// One row of `d` (its memory layout) into d.hash.
+void hash_row(RowDataset& d, const void* row) {
+    if (!d.text) {
+        d.hash = hash_bytes(d.hash, row, d.row_bytes);
+        return;
+    }
+    const char* text = *static_cast<const char* const*>(row);
+    d.hash = hash_bytes(d.hash, text, text ? std::strlen(text) : 0);
+}
+
+std::vector<unsigned char> commit_slot(const CommitRecord& r) {
+    std::vector<unsigned char> slot(kSlotBytes, 0);
+    std::memcpy(slot.data(), kCommitMagic, 8);
+    const std::uint64_t count = r.hashes.size();
+    std::memcpy(slot.data() + 8, &r.frames, 8);
+    std::memcpy(slot.data() + 16, &count, 8);
+    std::memcpy(slot.data() + 24, r.hashes.data(), 8 * r.hashes.size());
+    const std::uint64_t check = hash_bytes(kHashSeed, slot.data(), 24 + 8 * kMaxHashes);
+    std::memcpy(slot.data() + 24 + 8 * kMaxHashes, &check, 8);
+    return slot;
+}
+
+// The record of the last flush that returned: the valid slot with the most frames.
+std::optional<CommitRecord> read_commit(const std::string& path) {
+    std::ifstream file(path, std::ios::binary);
+    std::vector<unsigned char> block(2 * kSlotBytes, 0);
+    if (!file.read(reinterpret_cast<char*>(block.data()), std::streamsize(block.size()))) return std::nullopt;
+    std::optional<CommitRecord> best;
+    for (std::size_t s = 0; s < 2; ++s) {
+        const unsigned char* slot = block.data() + s * kSlotBytes;
+        std::uint64_t frames, count, check;
+        std::memcpy(&frames, slot + 8, 8);
+        std::memcpy(&count, slot + 16, 8);
+        std::memcpy(&check, slot + 24 + 8 * kMaxHashes, 8);
+        if (std::memcmp(slot, kCommitMagic, 8) != 0 || count > kMaxHashes ||
+            check != hash_bytes(kHashSeed, slot, 24 + 8 * kMaxHashes))
+            continue;
+        if (best && best->frames >= frames) continue;
+        best.emplace();
+        best->frames = frames;
+        best->hashes.resize(count);
+        std::memcpy(best->hashes.data(), slot + 24, 8 * count);
+    }
+    return best;
+}
 
 // The label arrays (--save labels): all of them or none, as the run asked. `boxes` holds one
 // boxes.json text per frame.
@@ -72,12 +187,20 @@ struct LabelRows {
 class H5Writer final : public DatasetWriter {
 public:
     explicit H5Writer(std::string path) : path_(std::move(path)) {}
+    ~H5Writer() override { abandon(); }
+    H5Writer(const H5Writer&) = delete;
+    H5Writer& operator=(const H5Writer&) = delete;
 
     Result<void> open(const Plan& plan, const DatasetMeta& meta, const DatasetOptions& options) {
         H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); // errors come back as one line, not a stack dump
         if (!make_text_type()) return fail("cannot make the text type");
-        file_ = Hid(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
+        // The user block holds the commit record (read_commit).
+        const Hid create(H5Pcreate(H5P_FILE_CREATE), H5Pclose);
+        if (!create.ok() || H5Pset_userblock(create.get(), kUserBlock) < 0) return fail("cannot make the user block");
+        file_ = Hid(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, create.get(), H5P_DEFAULT), H5Fclose);
         if (!file_.ok()) return fail("cannot create the file");
+        commit_fd_ = ::open(path_.c_str(), O_WRONLY | O_CLOEXEC);
+        if (commit_fd_ < 0) return fail("cannot open the user block");
         const hsize_t bins = plan.bins, beams = plan.beams;
         bool ok = rows(polar_, "polar", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {bins, beams}, options.compress) &&
                   rows(pose_, "pose", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {6}, false) &&
@@ -125,12 +248,14 @@ public:
                  text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash);
         }
         if (!ok) return fail("cannot write the dataset's layout");
-        if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0) return fail("cannot flush");
+        if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit()) return fail("cannot flush");
         return {};
     }
 
-    // Opens an existing shard file to go on writing it (DatasetWriter::resume).
-    Result<void> reopen(const DatasetMeta& meta, const DatasetOptions& options) {
+    // Goes on with an existing shard file (DatasetWriter::resume): its frames of the last flush that
+    // returned (the commit record) are copied into a new file made as open() makes one, checked against
+    // the record's hashes, and the new file replaces the old one; this writer then appends to it.
+    Result<void> resume_from(const Plan& plan, const DatasetMeta& meta, const DatasetOptions& options) {
         auto info = read_dataset_info(path_);
         if (!info) return info.error();
         const ShardRecord& want = *meta.shard;
@@ -149,30 +274,29 @@ public:
                               path_ + " holds another run (" + d + "): remove it or give another --out");
         if (info->frames_written > want.end - want.first)
             return make_error(ErrorCode::invalid_argument, path_ + ": frames_written is larger than the shard");
-        file_ = Hid(H5Fopen(path_.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
-        if (!file_.ok()) return make_error(ErrorCode::io, "cannot open " + path_ + " to resume it");
-        if (!make_text_type()) return make_error(ErrorCode::io, "cannot resume " + path_ + ": no text type");
-        frames_ = info->frames_written;
-        bool ok = reopen_rows(polar_, "polar", H5T_NATIVE_FLOAT) && reopen_rows(pose_, "pose", H5T_NATIVE_DOUBLE) &&
-                  reopen_rows(frame_index_, "frame_index", H5T_NATIVE_UINT64) &&
-                  reopen_rows(time_, "time", H5T_NATIVE_DOUBLE);
-        if (ok && options.polar_u16) ok = reopen_rows(polar_u16_, "polar_u16", H5T_NATIVE_UINT16);
-        if (ok && options.labels) {
-            LabelRows& l = labels_;
-            ok = reopen_rows(l.instance, "instance", H5T_NATIVE_UINT16) &&
-                 reopen_rows(l.instance_fraction, "instance_fraction", H5T_NATIVE_FLOAT) &&
-                 reopen_rows(l.object_class, "class", H5T_NATIVE_UINT16) &&
-                 reopen_rows(l.elevation, "elevation", H5T_NATIVE_FLOAT) &&
-                 reopen_rows(l.elevation_spread, "elevation_spread", H5T_NATIVE_FLOAT) &&
-                 reopen_rows(l.point, "point", H5T_NATIVE_FLOAT) &&
-                 // (a shard file from before /boxes has none: it does not open, and the shard starts over)
-                 reopen_rows(l.boxes, "boxes", text_type_.get());
+        const auto record = read_commit(path_);
+        if (!record)
+            return make_error(ErrorCode::io, path_ + ": no record of its whole frames (cut off before its first "
+                                                     "flush, or written by an older vksonar)");
+        if (record->frames > info->frames_written)
+            return make_error(ErrorCode::io, path_ + ": its commit record counts " + std::to_string(record->frames) +
+                                                 " frames, frames_written " + std::to_string(info->frames_written));
+        const std::string target = path_;
+        const std::filesystem::path where(target);
+        const std::filesystem::path temporary =
+            (where.has_parent_path() ? where.parent_path() : std::filesystem::path(".")) /
+            (".~" + where.filename().string() + ".resuming-" + std::to_string(::getpid()));
+        path_ = temporary.string();
+        auto copied = copy_frames(target, *record, plan, meta, options);
+        std::error_code ec;
+        if (copied) std::filesystem::rename(temporary, where, ec);
+        path_ = target;
+        if (!copied || ec) {
+            abandon();
+            std::filesystem::remove(temporary, ec);
+            if (!copied) return copied.error();
+            return fail("cannot replace it with the resumed file");
         }
-        if (ok && options.flow) ok = reopen_rows(flow_, "flow", H5T_NATIVE_FLOAT);
-        // The frames after frames_written (a frame cut off by the kill) go; the file is not complete
-        // until this run ends.
-        if (!ok || !set_count("complete", 0) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
-            return make_error(ErrorCode::io, "cannot resume " + path_ + ": its arrays do not open as written");
         return {};
     }
 
@@ -207,8 +331,11 @@ public:
         }
         if (!ok) return fail("cannot write frame " + std::to_string(frames_));
         ++frames_;
-        // The frame counts only once all its rows are written; flushed so a killed run leaves it readable.
-        if (!set_count("frames_written", frames_) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0)
+        // The frame counts only once its rows and their indexes are in the file: flushed, then
+        // frames_written flushed on its own (one flush would write it before the indexes), so a reader of
+        // a killed run finds it readable; then recorded for a resume (read_commit).
+        if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !set_count("frames_written", frames_) ||
+            H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit())
             return fail("cannot flush frame " + std::to_string(frames_ - 1));
         return {};
     }
@@ -224,10 +351,113 @@ public:
         time_ = {};
         text_type_ = {};
         if (H5Fclose(file_.release()) < 0) return fail("cannot close the file");
+        if (commit_fd_ >= 0 && ::close(std::exchange(commit_fd_, -1)) != 0) return fail("cannot close the file");
         return {};
     }
 
 private:
+    // The row datasets this file has, in a fixed order: the commit record's hashes follow it.
+    std::vector<RowDataset*> row_sets() {
+        std::vector<RowDataset*> sets;
+        LabelRows& l = labels_;
+        for (RowDataset* d : {&polar_, &pose_, &frame_index_, &time_, &polar_u16_, &l.instance, &l.instance_fraction,
+                              &l.object_class, &l.elevation, &l.elevation_spread, &l.point, &l.boxes, &flow_})
+            if (d->id.ok()) sets.push_back(d);
+        return sets;
+    }
+
+    // Records frames_ and the rows' hashes in the user block, in slot frames_ % 2 (read_commit).
+    bool write_commit() {
+        CommitRecord record;
+        record.frames = frames_;
+        for (const RowDataset* d : row_sets())
+            record.hashes.push_back(d->hash);
+        if (commit_fd_ < 0 || record.hashes.size() > kMaxHashes) return false;
+        const std::vector<unsigned char> slot = commit_slot(record);
+        return ::pwrite(commit_fd_, slot.data(), slot.size(), off_t((frames_ % 2) * kSlotBytes)) ==
+               ssize_t(slot.size());
+    }
+
+    // Closes everything without marking the file complete.
+    void abandon() {
+        polar_ = {};
+        polar_u16_ = {};
+        labels_ = {};
+        flow_ = {};
+        pose_ = {};
+        frame_index_ = {};
+        time_ = {};
+        text_type_ = {};
+        file_ = {};
+        if (commit_fd_ >= 0) ::close(std::exchange(commit_fd_, -1));
+    }
+
+    // resume_from's copy: a new file at path_ with the record's frames of `source`, checked.
+    Result<void> copy_frames(const std::string& source, const CommitRecord& record, const Plan& plan,
+                             const DatasetMeta& meta, const DatasetOptions& options) {
+        if (auto opened = open(plan, meta, options); !opened) return opened.error();
+        const Hid old(H5Fopen(source.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+        if (!old.ok()) return make_error(ErrorCode::io, "cannot open " + source + " to resume it");
+        const std::vector<RowDataset*> sets = row_sets();
+        if (sets.size() != record.hashes.size())
+            return make_error(ErrorCode::io, source + ": its commit record covers other arrays");
+        for (std::size_t k = 0; k < sets.size(); ++k) {
+            if (!copy_rows(old.get(), *sets[k], record.frames))
+                return make_error(ErrorCode::io, source + ": cannot read its first " + std::to_string(record.frames) +
+                                                     " rows of /" + sets[k]->name);
+            if (sets[k]->hash != record.hashes[k])
+                return make_error(ErrorCode::io, source + ": its " + std::to_string(record.frames) +
+                                                     " whole frames do not match their commit record (/" +
+                                                     sets[k]->name + ")");
+        }
+        frames_ = record.frames;
+        if (!set_count("frames_written", frames_) || H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit())
+            return fail("cannot flush the resumed frames");
+        return {};
+    }
+
+    // Copies rows 0..n-1 of dataset d.name in `source` into d (empty, as open() made it), hashing them.
+    bool copy_rows(hid_t source, RowDataset& d, hsize_t n) {
+        const Hid in(H5Dopen2(source, d.name, H5P_DEFAULT), H5Dclose);
+        const Hid in_space(in.ok() ? H5Dget_space(in.get()) : H5I_INVALID_HID, H5Sclose);
+        if (!in_space.ok() || H5Sget_simple_extent_ndims(in_space.get()) != int(d.row.size() + 1)) return false;
+        std::vector<hsize_t> dims(d.row.size() + 1);
+        H5Sget_simple_extent_dims(in_space.get(), dims.data(), nullptr);
+        if (dims[0] < n || !std::equal(d.row.begin(), d.row.end(), dims.begin() + 1)) return false;
+        dims[0] = n;
+        if (H5Dset_extent(d.id.get(), dims.data()) < 0) return false;
+        const Hid out_space(H5Dget_space(d.id.get()), H5Sclose);
+        if (!out_space.ok()) return false;
+        const hsize_t block = std::max<hsize_t>(1, (hsize_t(8) << 20) / std::max<std::size_t>(1, d.row_bytes));
+        std::vector<unsigned char> buffer;
+        std::vector<hsize_t> start(dims.size(), 0), count(dims);
+        for (hsize_t at = 0; at < n; at += block) {
+            start[0] = at;
+            count[0] = std::min(block, n - at);
+            buffer.assign(count[0] * d.row_bytes, 0);
+            const Hid memory(H5Screate_simple(int(count.size()), count.data(), nullptr), H5Sclose);
+            if (!memory.ok() ||
+                H5Sselect_hyperslab(in_space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr) < 0 ||
+                H5Sselect_hyperslab(out_space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr) <
+                    0 ||
+                H5Dread(in.get(), d.memory_type, memory.get(), in_space.get(), H5P_DEFAULT, buffer.data()) < 0)
+                return false;
+            for (hsize_t r = 0; r < count[0]; ++r)
+                hash_row(d, buffer.data() + r * d.row_bytes);
+            const bool written =
+                H5Dwrite(d.id.get(), d.memory_type, memory.get(), out_space.get(), H5P_DEFAULT, buffer.data()) >= 0;
+            if (d.text) {
+#if H5_VERSION_GE(1, 12, 0)
+                H5Treclaim(d.memory_type, memory.get(), H5P_DEFAULT, buffer.data());
+#else
+                H5Dvlen_reclaim(d.memory_type, memory.get(), H5P_DEFAULT, buffer.data());
+#endif
+            }
+            if (!written) return false;
+        }
+        return true;
+    }
+
     Error fail(const std::string& what) const {
         return make_error(ErrorCode::io, "cannot write " + path_ + ": " + what);
     }
@@ -255,24 +485,15 @@ private:
         if (compress && (H5Pset_shuffle(create.get()) < 0 || H5Pset_deflate(create.get(), 4) < 0)) return false;
         out.id = Hid(H5Dcreate2(file_.get(), name, file_type, space.get(), H5P_DEFAULT, create.get(), H5P_DEFAULT),
                      H5Dclose);
+        out.name = name;
         out.memory_type = memory_type;
+        out.row_bytes = H5Tget_size(memory_type);
+        for (hsize_t d : row)
+            out.row_bytes *= d;
+        out.text = H5Tis_variable_str(memory_type) > 0;
+        out.hash = kHashSeed;
         out.row = std::move(row);
         return out.id.ok();
-    }
-
-    bool reopen_rows(RowDataset& out, const char* name, hid_t memory_type) {
-        out.id = Hid(H5Dopen2(file_.get(), name, H5P_DEFAULT), H5Dclose);
-        if (!out.id.ok()) return false;
-        const Hid space(H5Dget_space(out.id.get()), H5Sclose);
-        const int rank = space.ok() ? H5Sget_simple_extent_ndims(space.get()) : -1;
-        if (rank < 1) return false;
-        std::vector<hsize_t> dims(static_cast<std::size_t>(rank));
-        H5Sget_simple_extent_dims(space.get(), dims.data(), nullptr);
-        if (dims[0] < frames_) return false;
-        out.memory_type = memory_type;
-        out.row.assign(dims.begin() + 1, dims.end());
-        dims[0] = frames_;
-        return H5Dset_extent(out.id.get(), dims.data()) >= 0;
     }
 
     bool append_row(RowDataset& d, const void* data) {
@@ -285,10 +506,12 @@ private:
         if (H5Dset_extent(d.id.get(), dims.data()) < 0) return false;
         const Hid file_space(H5Dget_space(d.id.get()), H5Sclose);
         const Hid memory_space(H5Screate_simple(int(count.size()), count.data(), nullptr), H5Sclose);
-        return file_space.ok() && memory_space.ok() &&
-               H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr) >=
-                   0 &&
-               H5Dwrite(d.id.get(), d.memory_type, memory_space.get(), file_space.get(), H5P_DEFAULT, data) >= 0;
+        if (!file_space.ok() || !memory_space.ok() ||
+            H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start.data(), nullptr, count.data(), nullptr) < 0 ||
+            H5Dwrite(d.id.get(), d.memory_type, memory_space.get(), file_space.get(), H5P_DEFAULT, data) < 0)
+            return false;
+        hash_row(d, data);
+        return true;
     }
 
     static bool vector(hid_t file, const char* name, const std::vector<double>& values) {
@@ -307,7 +530,9 @@ private:
         const char* data = value.c_str();
         return attribute(name, type.get(), type.get(), &data);
     }
-    bool number(const char* name, double value) { return attribute(name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &value); }
+    bool number(const char* name, double value) {
+        return attribute(name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &value);
+    }
     bool count(const char* name, std::uint64_t value) {
         return attribute(name, H5T_STD_U64LE, H5T_NATIVE_UINT64, &value);
     }
@@ -328,15 +553,16 @@ private:
     LabelRows labels_;
     RowDataset flow_;
     hsize_t frames_ = 0;
+    int commit_fd_ = -1; // the file again, for the commit record in its user block
 };
 
 } // namespace
 
-Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const DatasetMeta& meta,
-                                                             const DatasetOptions& options) {
+Result<std::unique_ptr<DatasetWriter>> DatasetWriter::resume(const std::string& path, const Plan& plan,
+                                                             const DatasetMeta& meta, const DatasetOptions& options) {
     H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
     auto writer = std::make_unique<H5Writer>(path);
-    if (auto opened = writer->reopen(meta, options); !opened) return opened.error();
+    if (auto opened = writer->resume_from(plan, meta, options); !opened) return opened.error();
     return std::unique_ptr<DatasetWriter>(std::move(writer));
 }
 

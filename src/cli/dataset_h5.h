@@ -17,7 +17,8 @@
 //   trajectory and trajectory_fnv1a64.
 // Each frame is one chunk; the file is flushed after every frame and `frames_written` says how many
 // are whole, so a run that is killed leaves a readable file of the frames before it. `complete` turns
-// 1 only when the run ends without an error.
+// 1 only when the run ends without an error. The file's 512-byte user block holds the commit record a
+// resume trusts instead of frames_written (dataset_h5.cpp, read_commit).
 #pragma once
 
 #include <cstdint>
@@ -73,11 +74,13 @@ public:
     // Creates (or truncates) `path`. Fails with one line naming the file.
     static Result<std::unique_ptr<DatasetWriter>> create(const std::string& path, const Plan& plan,
                                                          const DatasetMeta& meta, const DatasetOptions& options);
-    // Reopens `path`, written by an earlier run of the same shard, to go on after its last whole frame
-    // (frames_written()); a partly written frame after it is dropped. ErrorCode::io: the file cannot be
-    // read as a dataset (start over); ErrorCode::invalid_argument: it holds another run or shard.
-    static Result<std::unique_ptr<DatasetWriter>> resume(const std::string& path, const DatasetMeta& meta,
-                                                         const DatasetOptions& options);
+    // Goes on with `path`, written by an earlier run of the same shard, after the frames of its last
+    // flush that returned (frames_written()): they are copied into a new file, checked against the
+    // hashes recorded with them, and the new file replaces `path`; anything the kill cut off is dropped.
+    // ErrorCode::io: the file cannot be read as a dataset, or its frames do not match their record
+    // (start over); ErrorCode::invalid_argument: it holds another run or shard (the file is untouched).
+    static Result<std::unique_ptr<DatasetWriter>> resume(const std::string& path, const Plan& plan,
+                                                         const DatasetMeta& meta, const DatasetOptions& options);
     virtual ~DatasetWriter() = default;
     virtual std::uint64_t frames_written() const = 0;
     // Appends one frame; `display_u16` is the quantized display (bins * beams) when polar_u16 is on,

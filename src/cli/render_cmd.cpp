@@ -483,7 +483,7 @@ std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, cons
                                                    std::vector<char>& done) {
     std::error_code ec;
     if (meta.shard && fs::is_regular_file(path, ec)) {
-        auto resumed = DatasetWriter::resume(path, meta, options);
+        auto resumed = DatasetWriter::resume(path, plan, meta, options);
         if (resumed) {
             file.keep(); // its frames are a result already
             for (std::uint64_t k = 0; k < resumed.value()->frames_written(); ++k)

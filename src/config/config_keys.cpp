@@ -348,6 +348,9 @@ std::vector<ConfigKey> make_table() {
 
         VKS_EFFECT(incidence, "cos(theta) terms, the normals pass (auto: on if a drawn material is lambert or rough)"),
         VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),
+        VKS_EFFECT(vertical_sidelobes,
+                   "The vertical pattern's side lobes at every elevation, the altitude return (auto: on with a "
+                   "line array and a pattern that has side lobes)"),
         VKS_EFFECT(
             horizontal_pattern,
             "Side lobes along beams (auto: on; main lobe only when the side lobes stay below the display window)"),

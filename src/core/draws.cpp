@@ -54,21 +54,16 @@ Mat4 sonar_from_world(const Pose& pose) {
 
 namespace {
 
-// clip_from_sonar for one slice: camera axes (right, down, forward) then the reversed-Z projection
+// clip_from_sonar for one view: camera axes (right, down, forward) then the reversed-Z projection
 // clip = (x / tan_half_h, y / tan_half_v, A + B z, z) so that z_ndc = A / z + B.
-Mat4 clip_from_sonar(const Plan& plan, std::uint32_t slice) {
-    const double phi = plan.slice_info[slice].center_azimuth_rad;
-    const double c = std::cos(phi), s = std::sin(phi);
-    // rows of camera_from_sonar
-    const double right[3] = {s, -c, 0};
-    const double down[3] = {0, 0, -1};
-    const double forward[3] = {c, s, 0};
+Mat4 clip_from_sonar(const Plan& plan, std::uint32_t view) {
+    const ViewGeometry& g = plan.view_geometry[view];
     Mat4 m{};
     for (int k = 0; k < 3; ++k) {
-        m[k * 4 + 0] = right[k] / plan.tan_half_h;
-        m[k * 4 + 1] = down[k] / plan.tan_half_v;
-        m[k * 4 + 2] = plan.depth_b * forward[k];
-        m[k * 4 + 3] = forward[k];
+        m[k * 4 + 0] = g.right[k] / g.tan_half_h;
+        m[k * 4 + 1] = g.down[k] / g.tan_half_v;
+        m[k * 4 + 2] = plan.depth_b * g.forward[k];
+        m[k * 4 + 3] = g.forward[k];
     }
     m[12 + 2] = plan.depth_a;
     return m;
@@ -79,12 +74,12 @@ Mat4 clip_from_sonar(const Plan& plan, std::uint32_t slice) {
 void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
                          std::vector<shared::DepthPush>& out) {
     const std::size_t draws = scene.draws.size();
-    out.resize(plan.slices * draws);
+    out.resize(plan.views * draws);
     const Mat4 sonar_world = sonar_from_world(pose);
     for (std::size_t i = 0; i < draws; ++i) {
         const SceneDraw& d = scene.draws[i];
         const Mat4 sonar_local = multiply(sonar_world, d.world_from_local);
-        for (std::uint32_t s = 0; s < plan.slices; ++s) {
+        for (std::uint32_t s = 0; s < plan.views; ++s) {
             const Mat4 clip_local = multiply(clip_from_sonar(plan, s), sonar_local);
             shared::DepthPush& push = out[s * draws + i];
             for (int k = 0; k < 16; ++k)

@@ -411,13 +411,246 @@ Result<void> plan_pixel_grid(Plan& p) {
     }
     p.rows = std::max(2u, static_cast<std::uint32_t>(rows));
 
-    p.slice_info.resize(p.slices);
+    // The slices: level cameras at their centre azimuths. The float table rounds the double centre's
+    // cosine and sine; the double geometry takes them of the float centre (as the depth pass always has).
+    p.view_geometry.assign(p.slices, ViewGeometry{});
+    p.slice_info.assign(p.slices, shared::SliceInfo{});
     for (std::uint32_t s = 0; s < p.slices; ++s) {
         const double centre = 0.5 * covered - (s + 0.5) * p.slice_width_rad;
-        p.slice_info[s] = {static_cast<float>(centre), static_cast<float>(std::cos(centre)),
-                           static_cast<float>(std::sin(centre)), 0.0f};
+        const float centre_f = static_cast<float>(centre), cs = static_cast<float>(std::cos(centre)),
+                    sn = static_cast<float>(std::sin(centre));
+        const double cd = std::cos(double(centre_f)), sd = std::sin(double(centre_f));
+        ViewGeometry& view = p.view_geometry[s];
+        view = {
+            {cd, sd, 0.0},        {sd, -cd, 0.0}, {0.0, 0.0, -1.0}, p.tan_half_h, p.tan_half_v, -p.elevation_gate_sin,
+            p.elevation_gate_sin, false,          {1.0, 0.0},       {1.0, 0.0}};
+        shared::SliceInfo& info = p.slice_info[s];
+        info.center_azimuth_rad = centre_f;
+        info.tan_half_h = static_cast<float>(p.tan_half_h);
+        info.tan_half_v = static_cast<float>(p.tan_half_v);
+        info.forward_x = cs;
+        info.forward_y = sn;
+        info.right_x = sn;
+        info.right_y = -cs;
+        info.down_z = -1.0f;
+        info.sin_elevation_min = -static_cast<float>(p.elevation_gate_sin);
+        info.sin_elevation_max = static_cast<float>(p.elevation_gate_sin);
     }
+    p.views = p.slices;
 
+    return {};
+}
+
+// The tier views' pixels may be at most this many times the slices' in angle (the side lobes are
+// 13 dB and more below the main lobe; their returns need the range footprint, not fine azimuths).
+constexpr double kTierPixelRatio = 2.0;
+
+// The most the tier views' pixels may be coarser than the slices' before the side lobes are left out.
+constexpr double kMaxTierPixelRatio = 4.0;
+
+// Whether the line array's cone coordinate increases along every row of the view (its axis cosine, the
+// ray's y over its length, decreases with u), sampled at every pixel centre in double, with a margin.
+bool cone_increases_along_rows(const Plan& p, const ViewGeometry& v) {
+    for (std::uint32_t row = 0; row < p.rows; ++row) {
+        const double vv = math_f64::pixel_coord(row, p.rows, v.tan_half_v);
+        double previous = 2.0;
+        for (std::uint32_t col = 0; col < p.slice_columns; ++col) {
+            const double u = math_f64::pixel_coord(col, p.slice_columns, v.tan_half_h);
+            const double y = v.forward[1] + u * v.right[1] + vv * v.down[1];
+            const double axis = y / std::sqrt(1.0 + u * u + vv * vv);
+            if (!(axis < previous - 1e-6)) return false;
+            previous = axis;
+        }
+    }
+    return true;
+}
+
+// A tier view's camera: looking at azimuth `centre`, pitched by `pitch` (positive: down), right axis level.
+ViewGeometry tier_camera(double centre, double pitch) {
+    ViewGeometry v;
+    const double c = std::cos(centre), s = std::sin(centre), cb = std::cos(pitch), sb = std::sin(pitch);
+    const double f[3] = {cb * c, cb * s, -sb}, r[3] = {s, -c, 0.0};
+    for (int i = 0; i < 3; ++i) {
+        v.forward[i] = f[i];
+        v.right[i] = r[i];
+    }
+    v.down[0] = f[1] * r[2] - f[2] * r[1]; // down = forward x right, as a slice's (0, 0, -1)
+    v.down[1] = f[2] * r[0] - f[0] * r[2];
+    v.down[2] = f[0] * r[1] - f[1] * r[0];
+    return v;
+}
+
+// The half extents a camera needs to hold the cell azimuth [a0, a1] x elevation [e0, e1] (sampled
+// densely on its edges, where a cell's projection has its extremes, and on a coarse interior grid);
+// false if a direction of the cell is not in front of it.
+bool cell_extents(const ViewGeometry& v, double a0, double a1, double e0, double e1, double& tan_h, double& tan_v) {
+    constexpr int kEdge = 96, kInner = 12;
+    tan_h = tan_v = 0.0;
+    auto hold = [&](double a, double e) {
+        const double d[3] = {std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)};
+        const double z = d[0] * v.forward[0] + d[1] * v.forward[1] + d[2] * v.forward[2];
+        if (!(z > 0.05)) return false;
+        tan_h = std::max(tan_h, std::abs(d[0] * v.right[0] + d[1] * v.right[1] + d[2] * v.right[2]) / z);
+        tan_v = std::max(tan_v, std::abs(d[0] * v.down[0] + d[1] * v.down[1] + d[2] * v.down[2]) / z);
+        return true;
+    };
+    for (int i = 0; i <= kEdge; ++i) {
+        const double t = double(i) / kEdge, a = a0 + t * (a1 - a0), e = e0 + t * (e1 - e0);
+        if (!hold(a, e0) || !hold(a, e1) || !hold(a0, e) || !hold(a1, e)) return false;
+    }
+    for (int i = 1; i < kInner; ++i)
+        for (int j = 1; j < kInner; ++j)
+            if (!hold(a0 + (a1 - a0) * i / kInner, e0 + (e1 - e0) * j / kInner)) return false;
+    return true;
+}
+
+// The tier views of one band (elevations [e0, e1], down: below the slices): the azimuths in front of
+// the array, [-90, 90) degrees (its baffled elements hear nothing from behind), in n equal wedges, n
+// the fewest whose cameras' pixels stay within kTierPixelRatio of the slices' (at most 4). Each
+// camera is pitched to need the smallest pixels and widened by two pixels past its cell.
+std::vector<ViewGeometry> tier_band(const Plan& p, double e0, double e1, bool down) {
+    std::vector<ViewGeometry> best;
+    double best_ratio = std::numeric_limits<double>::infinity();
+    for (int n = 1; n <= 4; ++n) {
+        std::vector<ViewGeometry> band;
+        double worst = 0.0;
+        for (int w = 0; w < n; ++w) {
+            const double a0 = -0.5 * kPi + kPi * w / n, a1 = a0 + kPi / n, centre = 0.5 * (a0 + a1);
+            ViewGeometry chosen;
+            double chosen_ratio = std::numeric_limits<double>::infinity();
+            for (int i = 1; i <= 90; ++i) {
+                const double pitch = i * kDegToRad;
+                ViewGeometry v = tier_camera(centre, down ? pitch : -pitch);
+                double tan_h = 0.0, tan_v = 0.0;
+                if (!cell_extents(v, a0, a1, e0, e1, tan_h, tan_v)) continue;
+                const double ratio = std::max(tan_h / p.tan_half_h, tan_v / p.tan_half_v);
+                if (ratio < chosen_ratio) {
+                    chosen_ratio = ratio;
+                    v.tan_half_h = tan_h * (1.0 + 4.0 / p.slice_columns);
+                    v.tan_half_v = tan_v * (1.0 + 4.0 / p.rows);
+                    v.wedge = true;
+                    v.wedge_start[0] = std::cos(a0);
+                    v.wedge_start[1] = std::sin(a0);
+                    v.wedge_end[0] = std::cos(a1);
+                    v.wedge_end[1] = std::sin(a1);
+                    chosen = v;
+                }
+            }
+            worst = std::max(worst, chosen_ratio);
+            band.push_back(chosen);
+        }
+        if (worst < best_ratio) {
+            best_ratio = worst;
+            best = band;
+        }
+        if (worst <= kTierPixelRatio) break;
+    }
+    return best;
+}
+
+// Step (after the pixel grid): the vertical side lobes. Where they are simulated, tier views below
+// and above the slices' band see every elevation beyond the elevation gate; they join the pixel
+// grid after the slices. Only with a line array's beams (a tier pixel's beam is its cone, which any
+// direction has; planar beams are the pixel columns' azimuths) and a vertical pattern with side lobes.
+Result<void> plan_tier_views(Plan& p) {
+    const SonarConfig& c = p.config;
+    const EffectMode mode = c.effects.vertical_sidelobes;
+    const bool has_lobes = c.vertical_pattern == BeamPattern::sinc || c.vertical_pattern == BeamPattern::hann ||
+                           c.vertical_pattern == BeamPattern::chebyshev;
+    std::string without;
+    if (c.mode != SonarMode::physical)
+        without = "the legacy modes have no vertical side lobes";
+    else if (c.effects.vertical_pattern == EffectMode::off)
+        without = "the vertical pattern is off";
+    else if (!has_lobes)
+        without = "the " + std::string(c.vertical_pattern == BeamPattern::box ? "box" : "gaussian") +
+                  " vertical pattern has no side lobes";
+    else if (!p.line_array)
+        without = "planar beams (" + p.beam_geometry_why + "): tier views need the line_array beam geometry";
+    else if (!(p.elevation_gate_sin < 1.0))
+        without = "the depth pass covers every elevation";
+    if (mode == EffectMode::off) {
+        p.vertical_sidelobes_why = "off in config";
+        return {};
+    }
+    if (!without.empty()) {
+        if (mode == EffectMode::on)
+            return make_error(ErrorCode::invalid_argument, "config: effects.vertical_sidelobes = on, but " + without);
+        p.vertical_sidelobes_why = "auto: " + without;
+        return {};
+    }
+    const double gate = std::asin(p.elevation_gate_sin);
+    std::vector<ViewGeometry> tiers = tier_band(p, -0.5 * kPi, -gate, true);
+    const std::size_t below = tiers.size();
+    for (const ViewGeometry& v : tier_band(p, gate, 0.5 * kPi, false))
+        tiers.push_back(v);
+    // What the tier views can hold: pixels at most kMaxTierPixelRatio times the slices' (a fan of a few
+    // degrees has slices of a few columns; its tier views would be as many columns over 90 degrees), and
+    // a cone coordinate that increases along each of their rows (the profile stage's gather needs it).
+    double worst_ratio = 0.0;
+    bool monotonic = true;
+    for (const ViewGeometry& v : tiers) {
+        worst_ratio = std::max({worst_ratio, v.tan_half_h / p.tan_half_h, v.tan_half_v / p.tan_half_v});
+        monotonic = monotonic && cone_increases_along_rows(p, v);
+    }
+    if (worst_ratio > kMaxTierPixelRatio || !monotonic) {
+        const std::string why = !monotonic
+                                    ? "the tier views' rows would not run along the beams (vfov " + fmt(c.vfov_deg) +
+                                          ", hfov " + fmt(c.hfov_deg) + ")"
+                                    : "the tier views' pixels would be " + fmt(std::round(worst_ratio * 10) / 10) +
+                                          "x the slices' (at most " + fmt(kMaxTierPixelRatio) + "x)";
+        if (mode == EffectMode::on)
+            return make_error(ErrorCode::invalid_argument, "config: effects.vertical_sidelobes = on, but " + why);
+        p.vertical_sidelobes_why = "auto: off: " + why;
+        return {};
+    }
+    if (p.slices + tiers.size() > shared::kMaxViews)
+        return make_error(ErrorCode::invalid_argument,
+                          "config: accuracy.max_slice = " + fmt(c.max_slice_deg) + " gives " +
+                              std::to_string(p.slices) + " slices and " + std::to_string(tiers.size()) +
+                              " tier views for the vertical side lobes; at most " + std::to_string(shared::kMaxViews) +
+                              " views (raise max_slice or set effects.vertical_sidelobes off)");
+    // Each band's elevation range, as its views gate it: beyond the slices' gate (the slices keep
+    // |sin e| <= gate, the tiers the rest, so every direction is counted once).
+    const float gate_f = static_cast<float>(p.elevation_gate_sin);
+    for (std::size_t i = 0; i < tiers.size(); ++i) {
+        ViewGeometry& v = tiers[i];
+        const bool down = i < below;
+        v.sin_elevation_min = down ? -2.0 : std::nextafter(p.elevation_gate_sin, 2.0);
+        v.sin_elevation_max = down ? std::nextafter(-p.elevation_gate_sin, -2.0) : 2.0;
+        shared::SliceInfo info{};
+        info.center_azimuth_rad = static_cast<float>(std::atan2(v.forward[1], v.forward[0]));
+        info.tan_half_h = static_cast<float>(v.tan_half_h);
+        info.tan_half_v = static_cast<float>(v.tan_half_v);
+        info.forward_x = static_cast<float>(v.forward[0]);
+        info.forward_y = static_cast<float>(v.forward[1]);
+        info.forward_z = static_cast<float>(v.forward[2]);
+        info.right_x = static_cast<float>(v.right[0]);
+        info.right_y = static_cast<float>(v.right[1]);
+        info.right_z = static_cast<float>(v.right[2]);
+        info.down_x = static_cast<float>(v.down[0]);
+        info.down_y = static_cast<float>(v.down[1]);
+        info.down_z = static_cast<float>(v.down[2]);
+        info.sin_elevation_min = down ? -2.0f : std::nextafter(gate_f, 2.0f);
+        info.sin_elevation_max = down ? std::nextafter(-gate_f, -2.0f) : 2.0f;
+        info.wedge = 1u;
+        info.wedge_start_x = static_cast<float>(v.wedge_start[0]);
+        info.wedge_start_y = static_cast<float>(v.wedge_start[1]);
+        info.wedge_end_x = static_cast<float>(v.wedge_end[0]);
+        info.wedge_end_y = static_cast<float>(v.wedge_end[1]);
+        p.view_geometry.push_back(v);
+        p.slice_info.push_back(info);
+    }
+    p.views = static_cast<std::uint32_t>(p.view_geometry.size());
+    p.columns = p.slice_columns * p.views;
+    double ratio = 0.0;
+    for (const ViewGeometry& v : tiers)
+        ratio = std::max({ratio, v.tan_half_h / p.tan_half_h, v.tan_half_v / p.tan_half_v});
+    p.vertical_sidelobes_why =
+        (mode == EffectMode::on ? std::string("on in config") : std::string("auto")) +
+        ": the vertical pattern's side lobes beyond +-" + fmt(std::round(gate / kDegToRad * 10.0) / 10.0) +
+        " deg, to the nadir and the zenith: " + std::to_string(below) + " + " + std::to_string(tiers.size() - below) +
+        " tier views, pixels up to " + fmt(std::round(ratio * 100.0) / 100.0) + "x the slices'";
     return {};
 }
 
@@ -437,7 +670,21 @@ void use_host_grid(Plan& p, const HostPixelGrid& grid) {
     p.tan_half_v = grid.tan_half_v;
     p.slice_width_rad = 2.0 * std::atan(grid.tan_half_h);
     p.vertical_coverage_rad = 2.0 * std::atan(grid.tan_half_v);
-    p.slice_info.assign(1, shared::SliceInfo{0.0f, 1.0f, 0.0f, 0.0f});
+    p.views = 1;
+    ViewGeometry view;
+    view.tan_half_h = grid.tan_half_h;
+    view.tan_half_v = grid.tan_half_v;
+    p.view_geometry.assign(1, view);
+    shared::SliceInfo info{};
+    info.tan_half_h = static_cast<float>(grid.tan_half_h);
+    info.tan_half_v = static_cast<float>(grid.tan_half_v);
+    info.forward_x = 1.0f;
+    info.right_y = -1.0f;
+    info.down_z = -1.0f;
+    info.sin_elevation_min = -2.0f;
+    info.sin_elevation_max = 2.0f;
+    p.slice_info.assign(1, info);
+    p.vertical_sidelobes_why = "a host engine's depth image: its own pixel grid";
 }
 
 // Step (after the pixel grid): the columns of the range profiles. line_array: the cone columns over the
@@ -454,23 +701,29 @@ void plan_profile_columns(Plan& p) {
     p.cone_step_rad = hfov / p.profile_columns;
 }
 
-// Step (after the memory check): line_array, every pixel's cone coordinate.
-void plan_cone_table(Plan& p) {
-    if (!p.line_array) return;
+// Step (after the memory check): line_array, every pixel's cone coordinate. Along each view's row it
+// must not decrease (the profile stage's gather searches a view's row for a cone column's pixels).
+Result<void> plan_cone_table(Plan& p) {
+    if (!p.line_array) return {};
     const double hfov = p.config.hfov_deg * kDegToRad;
     const float half_fov = static_cast<float>(0.5 * hfov);
     const float inv_step = static_cast<float>(1.0 / p.cone_step_rad);
-    const float tan_half_h = static_cast<float>(p.tan_half_h), tan_half_v = static_cast<float>(p.tan_half_v);
     p.pixel_cone_coord.resize(static_cast<std::size_t>(p.rows) * p.columns);
     for (std::uint32_t row = 0; row < p.rows; ++row) {
-        const float v = math_f32::pixel_coord(row, p.rows, tan_half_v);
         for (std::uint32_t col = 0; col < p.columns; ++col) {
-            const shared::SliceInfo& slice = p.slice_info[col / p.slice_columns];
-            const float u = math_f32::pixel_coord(col % p.slice_columns, p.slice_columns, tan_half_h);
-            const float axis = math_f32::array_axis_cosine(u, v, slice.cos_center, slice.sin_center);
+            const math_f32::PixelView view = math_f32::view_of_slice(p.slice_info[col / p.slice_columns]);
+            const float v = math_f32::pixel_coord(row, p.rows, view.tan_half_v);
+            const float u = math_f32::pixel_coord(col % p.slice_columns, p.slice_columns, view.tan_half_h);
+            const float axis = math_f32::array_axis_cosine(u, v, view);
             p.pixel_cone_coord[std::size_t(row) * p.columns + col] = math_f32::cone_coord(axis, half_fov, inv_step);
+            if (col % p.slice_columns != 0 && p.pixel_cone_coord[std::size_t(row) * p.columns + col] <
+                                                  p.pixel_cone_coord[std::size_t(row) * p.columns + col - 1])
+                return make_error(ErrorCode::internal,
+                                  "plan: the cone coordinate decreases along row " + std::to_string(row) + " of view " +
+                                      std::to_string(col / p.slice_columns) + " (hfov " + fmt(p.config.hfov_deg) + ")");
         }
     }
+    return {};
 }
 
 // Step: the range window: bin width, the echo stage's gate, bin centres.
@@ -497,7 +750,9 @@ void plan_clip_planes(Plan& p) {
     // Clip planes: the corner ray of a slice reaches gate_min at view z = gate_min / |(u, v, 1)|, so the
     // near plane sits there (slightly closer), the far plane at gate_max, and the echo stage cuts at the
     // exact slant range.
-    const double corner = std::sqrt(1.0 + p.tan_half_h * p.tan_half_h + p.tan_half_v * p.tan_half_v);
+    double corner = 0.0;
+    for (const ViewGeometry& v : p.view_geometry)
+        corner = std::max(corner, std::sqrt(1.0 + v.tan_half_h * v.tan_half_h + v.tan_half_v * v.tan_half_v));
     p.near_m = 0.999 * p.gate_min_m / corner;
     p.far_m = p.gate_max_m;
     p.depth_a = p.near_m * p.far_m / (p.far_m - p.near_m);
@@ -619,13 +874,17 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
                                 : "no drawn material is angle-dependent: no normals pass",
             e.states);
     // Where the pixel grid stops, the vertical side lobes beyond it are not simulated: say how far it goes.
+    const bool tiers = p.views > p.slices;
     const std::string elevations =
-        p.elevation_gate_sin <= 1.0
+        p.elevation_gate_sin <= 1.0 && !tiers
             ? " at elevations within +-" + fmt(std::round(std::asin(p.elevation_gate_sin) / kDegToRad * 10.0) / 10.0) +
                   " deg (the depth pass's coverage; side lobes beyond it are not simulated)"
-            : "";
+        : tiers ? " at every elevation (beyond the main band through vertical_sidelobes)"
+                : "";
     resolve(e.vertical_pattern, c.effects.vertical_pattern, true, "vertical_pattern",
             "vertical beam pattern always shapes seabed returns" + elevations, e.states);
+    e.vertical_sidelobes = tiers;
+    e.states.push_back({"vertical_sidelobes", tiers, p.vertical_sidelobes_why});
     resolve(e.horizontal_pattern, c.effects.horizontal_pattern, half_taps > 0, "horizontal_pattern",
             half_taps > 0 ? "side-lobe kernel spans " + std::to_string(2 * half_taps + 1) + " beams" + lobes_why
                           : "beam pattern narrower than the beam spacing",
@@ -892,10 +1151,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
         use_host_grid(p, *host_grid);
     } else if (auto grid = plan_pixel_grid(p); !grid) {
         return grid.error();
+    } else if (auto tiers = plan_tier_views(p); !tiers) {
+        return tiers.error();
     }
     plan_profile_columns(p);
     if (auto fits = check_memory(p); !fits) return fits.error();
-    plan_cone_table(p);
+    if (auto cones = plan_cone_table(p); !cones) return cones.error();
     plan_range_window(p);
     plan_clip_planes(p);
     plan_horizontal_pattern(p);

@@ -21,8 +21,8 @@ namespace vksonar {
 struct SceneData;
 
 struct ResolvedEffects {
-    bool incidence = true, vertical_pattern = true, horizontal_pattern = true, spreading = true, absorption = true,
-         speckle = true, ambient_noise = true, tvg = false;
+    bool incidence = true, vertical_pattern = true, vertical_sidelobes = false, horizontal_pattern = true,
+         spreading = true, absorption = true, speckle = true, ambient_noise = true, tvg = false;
     std::vector<EffectState> states; // name, on, why (for meta.json)
     std::uint32_t shader_flags() const;
 };
@@ -38,13 +38,27 @@ struct SubpixelCandidate {
     double middle_extent = 0;
 };
 
+// One view of the depth pass in double (SliceInfo holds the same, rounded to float): a camera basis in
+// the sonar frame, its half extents and the cell of directions it is the one to see (sonar_shared.h).
+struct ViewGeometry {
+    double forward[3] = {1, 0, 0}, right[3] = {0, -1, 0}, down[3] = {0, 0, -1};
+    double tan_half_h = 0, tan_half_v = 0;
+    double sin_elevation_min = -2, sin_elevation_max = 2;
+    bool wedge = false;                                    // a tier view: azimuths in [start, end)
+    double wedge_start[2] = {1, 0}, wedge_end[2] = {1, 0}; // (cos, sin) of the wedge's edges
+};
+
 struct Plan {
     SonarConfig config; // the validated config this plan was made from
 
-    // Pixel grid of the depth pass: `slices` frusta side by side, port to starboard.
+    // Pixel grid of the depth pass: `views` frusta side by side, each slice_columns wide: first the
+    // `slices` of the main band, port to starboard (level cameras rotated about z, seeing elevations
+    // within the elevation gate), then the tier views that see the elevations beyond it where the
+    // vertical side lobes are simulated (docs/pipeline.md, "Vertical side lobes").
     std::uint32_t slices = 1;
-    std::uint32_t slice_columns = 0; // pixel columns per slice
-    std::uint32_t columns = 0;       // slices * slice_columns
+    std::uint32_t views = 1;
+    std::uint32_t slice_columns = 0; // pixel columns per view
+    std::uint32_t columns = 0;       // views * slice_columns
     std::uint32_t rows = 0;
     double slice_width_rad = 0; // horizontal angle covered by one slice
     double vertical_coverage_rad = 0;
@@ -57,7 +71,9 @@ struct Plan {
     double tan_half_h = 0, tan_half_v = 0;
     double near_m = 0, far_m = 0;    // depth-pass clip planes (near < range_min so slant ranges are not clipped)
     double depth_a = 0, depth_b = 0; // view z = depth_a / (d - depth_b); d = 1 at near, 0 at far
-    std::vector<shared::SliceInfo> slice_info; // slices
+    std::vector<ViewGeometry> view_geometry;   // views
+    std::vector<shared::SliceInfo> slice_info; // views: view_geometry in float, as the shaders read it
+    std::string vertical_sidelobes_why;        // the tier views: how many, or why there are none
 
     // Beam geometry (docs/pipeline.md, "Beam geometry"): line_array as resolved from the config (planar
     // for the legacy modes and for fans of 180 degrees or more, which have no single array axis), and why.

@@ -59,13 +59,14 @@ using vec4 = glm::dvec4;
     using vec2 = ns::vec2; using vec3 = ns::vec3; using vec4 = ns::vec4;                                             \
     using Sample = ns::Sample; using Column3 = ns::Column3; using Column5 = ns::Column5;                              \
     using EchoConstants = ns::EchoConstants; using EchoTerms = ns::EchoTerms; using RangeSpread = ns::RangeSpread;      \
+    using PixelView = ns::PixelView;                                                                                 \
     VKS_FORWARD(ns, pixel_coord) VKS_FORWARD(ns, pixel_solid_angle) VKS_FORWARD(ns, view_z_from_depth)               \
     VKS_FORWARD(ns, slant_range) VKS_FORWARD(ns, pixel_azimuth) VKS_FORWARD(ns, pixel_elevation)                     \
     VKS_FORWARD(ns, pattern_power) VKS_FORWARD(ns, echo_energy) VKS_FORWARD(ns, range_bin_coord)                     \
     VKS_FORWARD(ns, footprint_edge_offset) VKS_FORWARD(ns, footprint_lo) VKS_FORWARD(ns, footprint_hi)               \
     VKS_FORWARD(ns, footprint_share) VKS_FORWARD(ns, footprint_log_slope) VKS_FORWARD(ns, sinhc_of)                  \
-    VKS_FORWARD(ns, incidence_cos) VKS_FORWARD(ns, face_normal_sonar_x) VKS_FORWARD(ns, face_normal_sonar_y)          \
-    VKS_FORWARD(ns, face_normal_sonar_z) VKS_FORWARD(ns, specular_facet) VKS_FORWARD(ns, scatter_factor)             \
+    VKS_FORWARD(ns, incidence_cos) VKS_FORWARD(ns, view_of_slice) VKS_FORWARD(ns, view_elevation_sin)                 \
+    VKS_FORWARD(ns, in_view_wedge) VKS_FORWARD(ns, specular_facet) VKS_FORWARD(ns, scatter_factor)             \
     VKS_FORWARD(ns, resample_share) VKS_FORWARD(ns, pixel_ray) VKS_FORWARD(ns, no_sample)                            \
     VKS_FORWARD(ns, sample_at) VKS_FORWARD(ns, facing_normal) VKS_FORWARD(ns, oriented_normal)                       \
     VKS_FORWARD(ns, sobel3_normal) VKS_FORWARD(ns, sobel5_normal) VKS_FORWARD(ns, geometric_normal)                  \

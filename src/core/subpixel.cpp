@@ -394,8 +394,7 @@ M::EchoConstants echo_constants(const Plan& plan) {
                        plan.alpha_db_per_m,
                        plan.vpattern_k,
                        plan.vpattern_halfwidth_rad,
-                       plan.vpattern_chebyshev_a,
-                       plan.elevation_gate_sin};
+                       plan.vpattern_chebyshev_a};
     return k;
 }
 
@@ -457,12 +456,6 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
     const int cone_count = static_cast<int>(plan.profile_columns);
     const std::size_t cluster_count = clusters.size();
-    // each slice's axis (cos, sin of its centre azimuth), as compose_depth_draws takes it
-    std::array<std::array<double, 2>, shared::kMaxSlices> slice_axis{};
-    for (std::uint32_t s = 0; s < plan.slices && s < shared::kMaxSlices; ++s)
-        slice_axis[s] = {std::cos(plan.slice_info[s].center_azimuth_rad),
-                         std::sin(plan.slice_info[s].center_azimuth_rad)};
-
     // One piece: its centroid q (sonar frame), area and unit normal n (counter-clockwise), into the list.
     auto add_piece = [&](const Vec3& q, double area, const Vec3& n, std::int32_t facing,
                          const shared::MaterialGpu& mat) -> bool {
@@ -474,16 +467,25 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
         const double energy = M::facet_echo(k, terms, mat, area, std::min(cos_incidence, 1.0), r,
                                             M::ray_vertical_power(k, terms, q[2] / r));
         if (!(energy > 0)) return true;
-        // its pixel: the first slice whose columns hold its direction
-        for (std::uint32_t s = 0; s < plan.slices; ++s) {
-            const double cs = slice_axis[s][0], sn = slice_axis[s][1];
-            const double view_z = q[0] * cs + q[1] * sn;
+        // Its pixel: in the view whose cell holds its direction (the elevation band, a tier view's azimuth
+        // wedge: each direction in one view, as the pixels' vertical power counts it), or with the vertical
+        // pattern off (no cells: every pixel counts) the first view whose frustum holds it.
+        const double sin_e = q[2] / r;
+        for (std::uint32_t s = 0; s < plan.views; ++s) {
+            const ViewGeometry& view = plan.view_geometry[s];
+            const double view_z = q[0] * view.forward[0] + q[1] * view.forward[1] + q[2] * view.forward[2];
             if (!(view_z > 0)) continue;
-            const double u = (q[0] * sn - q[1] * cs) / view_z, v = -q[2] / view_z;
-            if (!(std::abs(u) <= plan.tan_half_h)) continue;
-            if (!(std::abs(v) <= plan.tan_half_v)) return true; // above or below the pixel grid: not heard
-            const auto column = std::min(static_cast<std::uint32_t>((u / plan.tan_half_h + 1.0) * 0.5 * W), W - 1);
-            const auto row = std::min(static_cast<std::uint32_t>((v / plan.tan_half_v + 1.0) * 0.5 * H), H - 1);
+            const double u = (q[0] * view.right[0] + q[1] * view.right[1] + q[2] * view.right[2]) / view_z;
+            const double v = (q[0] * view.down[0] + q[1] * view.down[1] + q[2] * view.down[2]) / view_z;
+            if (!(std::abs(u) <= view.tan_half_h && std::abs(v) <= view.tan_half_v)) continue;
+            if (terms.vertical_pattern) {
+                if (!(sin_e >= view.sin_elevation_min && sin_e <= view.sin_elevation_max)) continue;
+                if (view.wedge && !(q[1] * view.wedge_start[0] - q[0] * view.wedge_start[1] >= 0 &&
+                                    q[1] * view.wedge_end[0] - q[0] * view.wedge_end[1] < 0))
+                    continue;
+            }
+            const auto column = std::min(static_cast<std::uint32_t>((u / view.tan_half_h + 1.0) * 0.5 * W), W - 1);
+            const auto row = std::min(static_cast<std::uint32_t>((v / view.tan_half_v + 1.0) * 0.5 * H), H - 1);
             shared::SubpixelReturn ret{row * plan.columns + s * W + column, static_cast<float>(r), 0.0f,
                                        static_cast<float>(view_z)};
             auto push = [&](std::uint32_t profile_column, double e) {
@@ -504,7 +506,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
             }
             return true;
         }
-        return true;
+        return true; // in no view: outside the pixel grid, not heard
     };
 
     const std::size_t draw_count = scene.draws.size();
@@ -580,11 +582,11 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
         }
         if (skip_raster) {
             for (std::uint32_t ci = candidate.cluster_begin; ci < candidate.cluster_end; ++ci)
-                for (std::size_t s = 0; s < plan.slices; ++s)
+                for (std::size_t s = 0; s < plan.views; ++s)
                     drawn[s * cluster_count + ci] = 0;
             clusters_taken_ += candidate.cluster_end - candidate.cluster_begin;
         } else { // drawn for its depth only (the instance, with labels, stays above the material)
-            for (std::size_t s = 0; s < plan.slices; ++s) {
+            for (std::size_t s = 0; s < plan.views; ++s) {
                 std::uint32_t& id = pushes[s * draw_count + draw_index].material_id;
                 id = (id & ~shared::kMaterialIdMask) | plan.subpixel_silent_material;
             }

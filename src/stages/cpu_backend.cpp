@@ -79,9 +79,9 @@ template <class Real> struct StageContext {
         resample_weights<Real>(plan, resample_w.data());
         if (plan.effects.incidence && !plan.face_normals)
             normals_scratch.assign(std::max<std::size_t>(normals_scratch_count(plan), 1) * parts, Real(0));
-        draws.resize(static_cast<std::size_t>(plan.slices) * scene.draws.size());
+        draws.resize(static_cast<std::size_t>(plan.views) * scene.draws.size());
         build_depth_clusters(scene, clusters);
-        clusters_drawn.resize(std::size_t(plan.slices) * clusters.size());
+        clusters_drawn.resize(std::size_t(plan.views) * clusters.size());
         subpixel.prepare(plan);
     }
 

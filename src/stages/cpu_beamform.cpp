@@ -346,29 +346,35 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const std::size_t S = accumulator_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
     const bool exp4 = exp4_matches_expf();
+    const std::uint32_t W = plan.slice_columns;
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
-        // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end)
+        // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end), in each
+        // view (along a view's row the cone coordinate increases with the column; the views follow
+        // each other in column order, as profile.comp gathers them)
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
-        const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(cone_x, cone_x + C, lo) - cone_x);
-        const std::uint32_t c_end = static_cast<std::uint32_t>(
-            std::find_if(cone_x + c_begin, cone_x + C, [hi](float x) { return !(x < hi); }) - cone_x);
-        for_each_spread_pixel<Real>(
-            plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width,
-            [&](std::uint32_t pc, Real e, int k_first, int spread_bins, const Real* shares) {
-                const Real x = static_cast<Real>(cone_x[pc]);
-                const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
-                const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
-                // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-                for (int cone = first_cone; cone <= last_cone; ++cone) {
-                    const Real weight = M::cone_share(x, cone, count);
-                    if (!(weight > Real(0))) continue;
-                    const Real weighted = weight * e;
-                    Real* column = acc + static_cast<std::size_t>(k_first) * S + cone;
-                    for (int i = 0; i < spread_bins; ++i)
-                        column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
-                }
-            });
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const float* first = cone_x + view * W;
+            const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
+            const std::uint32_t c_end = static_cast<std::uint32_t>(
+                std::find_if(cone_x + c_begin, first + W, [hi](float x) { return !(x < hi); }) - cone_x);
+            for_each_spread_pixel<Real>(
+                plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width,
+                [&](std::uint32_t pc, Real e, int k_first, int spread_bins, const Real* shares) {
+                    const Real x = static_cast<Real>(cone_x[pc]);
+                    const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
+                    const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+                    // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
+                    for (int cone = first_cone; cone <= last_cone; ++cone) {
+                        const Real weight = M::cone_share(x, cone, count);
+                        if (!(weight > Real(0))) continue;
+                        const Real weighted = weight * e;
+                        Real* column = acc + static_cast<std::size_t>(k_first) * S + cone;
+                        for (int i = 0; i < spread_bins; ++i)
+                            column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
+                    }
+                });
+        }
     }
 }
 

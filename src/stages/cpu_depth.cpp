@@ -316,7 +316,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
 
     const std::size_t draw_count = scene.draws.size();
     const double half_w = 0.5 * W, half_h = 0.5 * rows;
-    for (std::uint32_t s = 0; s < plan.slices; ++s) {
+    for (std::uint32_t s = 0; s < plan.views; ++s) {
         Target target{
             depth,     material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
             row_begin, row_end,  0};

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/half.h"
+#include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 
@@ -17,14 +18,15 @@ namespace vksonar::cpu {
 
 namespace {
 
-// The echo stage's constants in the working precision: float reads the shaders' float values
-// (SonarParams), double the Plan's doubles.
-template <class Real> typename Math<Real>::EchoConstants echo_constants(const Plan& plan) {
+// The echo stage's constants of a view in the working precision: float reads the shaders' float values
+// (SonarParams, SliceInfo), double the Plan's doubles.
+template <class Real> typename Math<Real>::EchoConstants echo_constants(const Plan& plan, std::uint32_t view) {
     const shared::SonarParams& g = plan.params;
+    const typename Math<Real>::PixelView pv = pixel_view<Real>(plan, view);
     typename Math<Real>::EchoConstants k;
     if constexpr (std::is_same_v<Real, float>) {
-        k = {g.tan_half_h,
-             g.tan_half_v,
+        k = {pv.tan_half_h,
+             pv.tan_half_v,
              0.0f,
              0.0f,
              g.depth_a,
@@ -34,11 +36,10 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              g.alpha_db_per_m,
              g.vpattern_k,
              g.vpattern_halfwidth_rad,
-             g.vpattern_chebyshev_a,
-             g.elevation_gate_sin};
+             g.vpattern_chebyshev_a};
     } else {
-        k = {plan.tan_half_h,
-             plan.tan_half_v,
+        k = {pv.tan_half_h,
+             pv.tan_half_v,
              0.0,
              0.0,
              plan.depth_a,
@@ -48,8 +49,7 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              plan.alpha_db_per_m,
              plan.vpattern_k,
              plan.vpattern_halfwidth_rad,
-             plan.vpattern_chebyshev_a,
-             plan.elevation_gate_sin};
+             plan.vpattern_chebyshev_a};
     }
     k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(plan.slice_columns);
     k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);
@@ -67,25 +67,29 @@ template <class Real> typename Math<Real>::EchoTerms echo_terms(const Plan& plan
 
 } // namespace
 
+// Per view: u per column (W), then (solid angle, vertical power) per pixel (R x W).
 std::size_t echo_table_count(const Plan& plan) {
-    return static_cast<std::size_t>(plan.slice_columns) * (1 + 2 * static_cast<std::size_t>(plan.rows));
+    return static_cast<std::size_t>(plan.views) * plan.slice_columns * (1 + 2 * static_cast<std::size_t>(plan.rows));
 }
 
 template <class Real> void echo_table(const Plan& plan, Real* table) {
     using M = Math<Real>;
-    const typename M::EchoConstants k = echo_constants<Real>(plan);
     // the terms without incidence: the table does not depend on it
     const typename M::EchoTerms terms = echo_terms<Real>(plan, nullptr);
     const std::uint32_t R = plan.rows, W = plan.slice_columns;
-    Real* u = table;
-    Real* pixel = table + W;
-    for (std::uint32_t x = 0; x < W; ++x)
-        u[x] = M::pixel_coord(x, W, k.tan_half_h);
-    for (std::uint32_t j = 0; j < R; ++j) {
-        const Real v = M::pixel_coord(j, R, k.tan_half_v);
-        for (std::uint32_t x = 0; x < W; ++x, pixel += 2) {
-            pixel[0] = M::pixel_solid_angle(u[x], v, k.pixel_du, k.pixel_dv);
-            pixel[1] = M::pixel_vertical_power(k, terms, u[x], v);
+    for (std::uint32_t s = 0; s < plan.views; ++s) {
+        const typename M::EchoConstants k = echo_constants<Real>(plan, s);
+        const typename M::PixelView view = pixel_view<Real>(plan, s);
+        Real* u = table + s * echo_table_count(plan) / plan.views;
+        Real* pixel = u + W;
+        for (std::uint32_t x = 0; x < W; ++x)
+            u[x] = M::pixel_coord(x, W, k.tan_half_h);
+        for (std::uint32_t j = 0; j < R; ++j) {
+            const Real v = M::pixel_coord(j, R, k.tan_half_v);
+            for (std::uint32_t x = 0; x < W; ++x, pixel += 2) {
+                pixel[0] = M::pixel_solid_angle(u[x], v, k.pixel_du, k.pixel_dv);
+                pixel[1] = M::pixel_vertical_power(k, terms, u[x], v, view);
+            }
         }
     }
 }
@@ -97,16 +101,18 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
                const Real* table, std::uint32_t row_begin, std::uint32_t row_end) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
-    const typename M::EchoConstants k = echo_constants<Real>(plan);
     const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
-    const Real* u = table;
+    const std::size_t view_table = echo_table_count(plan) / plan.views;
 
-    for (std::uint32_t j = row_begin; j < row_end; ++j) {
-        const Real v = M::pixel_coord(j, R, k.tan_half_v);
-        const Real* row_terms = table + W + 2 * static_cast<std::size_t>(j) * W;
-        for (std::uint32_t c0 = 0; c0 < C; c0 += W) {
+    for (std::uint32_t s = 0; s < plan.views; ++s) {
+        const typename M::EchoConstants k = echo_constants<Real>(plan, s);
+        const Real* u = table + s * view_table;
+        const std::uint32_t c0 = s * W;
+        for (std::uint32_t j = row_begin; j < row_end; ++j) {
+            const Real v = M::pixel_coord(j, R, k.tan_half_v);
+            const Real* row_terms = u + W + 2 * static_cast<std::size_t>(j) * W;
             for (std::uint32_t x = 0; x < W; ++x) {
                 const std::size_t p = static_cast<std::size_t>(j) * C + c0 + x;
                 float* out = echo2 + 2 * p;

@@ -7,9 +7,9 @@
 // normal_method = geometric (geometric_normals): no stencil; the depth pass recorded each pixel's face
 // normal, which is mapped to the sonar frame, turned to face the sonar and given its cos incidence.
 //
-// Constants: in float the stage reads the same float values the shaders get (SonarParams,
-// SliceInfo.cos/sin_center); in double it reads the Plan's double values and recomputes the slice
-// rotation in double from the slice azimuth, exactly as compose_depth_draws does.
+// Constants: in float the stage reads the same float values the shaders get (SonarParams, SliceInfo);
+// in double it reads the Plan's double values, the views' geometry as compose_depth_draws does.
+// Neighbours across a seam that does not join (a tier view's edges: columns_join) read as no sample.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -21,6 +21,7 @@
 #include <emmintrin.h>
 #include <xmmintrin.h>
 
+#include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
 
@@ -38,19 +39,6 @@ template <class Real> PixelGeometry<Real> pixel_geometry(const Plan& plan) {
     else
         return {static_cast<Real>(plan.tan_half_h), static_cast<Real>(plan.tan_half_v), static_cast<Real>(plan.depth_a),
                 static_cast<Real>(plan.depth_b)};
-}
-
-// The rotation of slice s: the float path reads the floats the shaders get (SliceInfo), the double
-// path takes cos/sin in double of the slice azimuth, as compose_depth_draws does.
-template <class Real> void slice_rotation(const Plan& plan, std::uint32_t s, Real& cs, Real& sn) {
-    if constexpr (std::is_same_v<Real, float>) {
-        cs = plan.slice_info[s].cos_center;
-        sn = plan.slice_info[s].sin_center;
-    } else {
-        const double phi = plan.slice_info[s].center_azimuth_rad;
-        cs = std::cos(phi);
-        sn = std::sin(phi);
-    }
 }
 
 // sobel3_normal of the four pixels x .. x + 3 of a row (float), as SSE lanes: where a pixel's whole
@@ -127,10 +115,10 @@ int sobel3_smooth4(const float* up, const float* mid, const float* down, std::in
 } // namespace
 
 std::size_t normals_scratch_count(const Plan& plan) {
-    // per column: the ray (x, y; its z is -v per row); five rows of (Px, Py, Pz, r) (the 5x5 window of
-    // sobel5; sobel3 uses 3) and a row of zeros (the rows outside the image), each with two columns of
-    // zeros either side (the columns outside the image)
-    return static_cast<std::size_t>(plan.columns) * 2 + (kRingRows + 1) * (plan.columns + 4) * 4;
+    // per column: the ray at v = 0 (x, y, z; each row adds v times its view's down axis); five rows of (Px, Py, Pz, r)
+    // (the 5x5 window of sobel5; sobel3 uses 3) and a row of zeros (the rows outside the image), each with two columns
+    // of zeros either side (the columns outside the image)
+    return static_cast<std::size_t>(plan.columns) * 3 + (kRingRows + 1) * (plan.columns + 4) * 4;
 }
 
 // The loops around the kernels of shaders/sonar_kernels.h (sobel3_normal, sobel5_normal) that
@@ -150,39 +138,46 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     const std::uint32_t W = plan.slice_columns;
     const std::int64_t stride = (C + 4) * 4; // a ring row: columns -2 .. C + 1
 
-    // pixel_ray per column, without its z (-v, per row): P = z * ray, so per pixel only z changes.
+    // pixel_ray per column at v = 0; a row adds v times its view's down axis (a slice's: (0, 0, -1), so
+    // that its rays are (x, y, -v) exactly).
     Real* ray_x = scratch;
     Real* ray_y = scratch + C;
-    Real* ring = scratch + 2 * C; // rows j % kRingRows, then the zero row
+    Real* ray_z = scratch + 2 * C;
+    Real* ring = scratch + 3 * C; // rows j % kRingRows, then the zero row
     Real* zero_row = ring + kRingRows * stride;
     std::fill(zero_row, zero_row + stride, Real(0));
     for (std::int64_t c = 0; c < C; ++c) {
         const std::uint32_t col = static_cast<std::uint32_t>(c), s = col / W;
-        Real cs, sn;
-        slice_rotation(plan, s, cs, sn);
-        const auto ray = M::pixel_ray(M::pixel_coord(col - s * W, W, geometry.tan_half_h), Real(0), cs, sn);
+        const typename M::PixelView view = pixel_view<Real>(plan, s);
+        const auto ray = M::pixel_ray(M::pixel_coord(col - s * W, W, view.tan_half_h), Real(0), view);
         ray_x[c] = ray.x;
         ray_y[c] = ray.y;
+        ray_z[c] = ray.z;
     }
     auto fill_row = [&](std::int64_t j) {
         Real* row = ring + (j % kRingRows) * stride;
         std::fill(row, row + 8, Real(0));
         std::fill(row + stride - 8, row + stride, Real(0));
         row += 8; // column 0
-        const Real v =
-            M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), geometry.tan_half_v);
         const float* d = depth + j * C;
-        for (std::int64_t c = 0; c < C; ++c) {
-            Real* q = row + 4 * c;
-            if (d[c] > 0.0f) {
-                const Real z = M::view_z_from_depth(static_cast<Real>(d[c]), geometry.depth_a, geometry.depth_b);
-                const Sample p = M::sample_at(z, typename M::vec3(ray_x[c], ray_y[c], -v));
-                q[0] = p.pos.x;
-                q[1] = p.pos.y;
-                q[2] = p.pos.z;
-                q[3] = p.range;
-            } else {
-                q[0] = q[1] = q[2] = q[3] = Real(0);
+        for (std::uint32_t s = 0; s < plan.views; ++s) {
+            const typename M::PixelView view = pixel_view<Real>(plan, s);
+            const Real v =
+                M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), view.tan_half_v);
+            const typename M::vec3 step = v * view.down;
+            for (std::int64_t c = std::int64_t(s) * W; c < std::int64_t(s + 1) * W; ++c) {
+                Real* q = row + 4 * c;
+                if (d[c] > 0.0f) {
+                    const Real z = M::view_z_from_depth(static_cast<Real>(d[c]), geometry.depth_a, geometry.depth_b);
+                    const Sample p =
+                        M::sample_at(z, typename M::vec3(ray_x[c] + step.x, ray_y[c] + step.y, ray_z[c] + step.z));
+                    q[0] = p.pos.x;
+                    q[1] = p.pos.y;
+                    q[2] = p.pos.z;
+                    q[3] = p.range;
+                } else {
+                    q[0] = q[1] = q[2] = q[3] = Real(0);
+                }
             }
         }
     };
@@ -190,7 +185,7 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     auto row_at = [&](std::int64_t j) -> const Real* {
         return (j < 0 || j >= R ? zero_row : ring + (j % kRingRows) * stride) + 8;
     };
-    auto sample = [](const Real* row, std::int64_t c) -> Sample {
+    auto sample_at_column = [](const Real* row, std::int64_t c) -> Sample {
         const Real* q = row + 4 * c;
         return Sample{typename M::vec3(q[0], q[1], q[2]), q[3], q[3] > Real(0)};
     };
@@ -201,6 +196,13 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         out[3] = static_cast<float>(n.w);
     };
     const bool sobel5 = plan.params.normal_method == shared::kNormalsSobel5;
+    // With tier views, a window must not reach across a seam that does not join (columns_join): the
+    // group of a column is 0 for the slices (which join), its view for a tier view.
+    const bool tiers = plan.views > plan.slices;
+    auto group = [&](std::int64_t c) -> std::int64_t {
+        const std::int64_t view = std::clamp<std::int64_t>(c, 0, C - 1) / W;
+        return view < std::int64_t(plan.slices) ? 0 : view;
+    };
 
     // The ring holds rows j-2 .. j+2 of the row being computed: those before the first row's j+2 first.
     for (std::int64_t j = std::max<std::int64_t>(std::int64_t(row_begin) - 2, 0);
@@ -216,6 +218,11 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
                 store(out_row + 4 * x, typename M::vec4(Real(0)));
                 return;
             }
+            // a neighbour column across a seam that does not join reads as the zero row (no sample)
+            auto rows_of = [&](std::int64_t c, const Real* r) {
+                return tiers && group(c) != group(x) ? zero_row + 8 : r;
+            };
+            auto sample = [&](const Real* r, std::int64_t c) { return sample_at_column(rows_of(c, r), c); };
             if (sobel5) {
                 auto column5 = [&](std::int64_t c) {
                     return Column5{sample(up2, c), sample(up, c), sample(mid, c), sample(down, c), sample(down2, c)};
@@ -232,7 +239,7 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
             if constexpr (std::is_same_v<Real, float>) {
                 // Four pixels at a time where their windows are smooth (sobel3_smooth4), the others by the
                 // scalar kernel; the windows of the last four columns reach into the zero columns.
-                if (!sobel5 && x % 4 == 0 && x + 4 <= C) {
+                if (!sobel5 && x % 4 == 0 && x + 4 <= C && (!tiers || group(x - 1) == group(x + 4))) {
                     alignas(16) float fast[16];
                     const int done = sobel3_smooth4(up, mid, down, x, jump_rel, fast);
                     if (done == 0xf) {
@@ -263,7 +270,6 @@ void geometric_normals_rows(const Plan& plan, const float* depth, const float* f
     const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
     for (std::uint32_t j = row_begin; j < row_end; ++j) {
-        const Real v = M::pixel_coord(j, R, geometry.tan_half_v);
         for (std::uint32_t c = 0; c < C; ++c) {
             const std::size_t i = static_cast<std::size_t>(j) * C + c;
             float* out = normals4 + 4 * i;
@@ -272,14 +278,13 @@ void geometric_normals_rows(const Plan& plan, const float* depth, const float* f
                 continue;
             }
             const std::uint32_t s = c / W;
-            const Real u = M::pixel_coord(c - s * W, W, geometry.tan_half_h);
-            Real cs, sn;
-            slice_rotation(plan, s, cs, sn);
+            const typename M::PixelView view = pixel_view<Real>(plan, s);
+            const Real u = M::pixel_coord(c - s * W, W, view.tan_half_h);
+            const Real v = M::pixel_coord(j, R, view.tan_half_v);
             const Real z = M::view_z_from_depth(static_cast<Real>(depth[i]), geometry.depth_a, geometry.depth_b);
-            const auto p = M::sample_at(z, M::pixel_ray(u, v, cs, sn));
+            const auto p = M::sample_at(z, M::pixel_ray(u, v, view));
             const float* q = face4 + 4 * i;
-            const auto n = M::geometric_normal(p, typename M::vec3(q[0], q[1], q[2]), geometry.tan_half_h,
-                                               geometry.tan_half_v, cs, sn);
+            const auto n = M::geometric_normal(p, typename M::vec3(q[0], q[1], q[2]), view);
             out[0] = static_cast<float>(n.x);
             out[1] = static_cast<float>(n.y);
             out[2] = static_cast<float>(n.z);

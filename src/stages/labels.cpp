@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/angles.h"
+#include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
 #include "host/workers.h"
 #include "scene/scene_data.h"
@@ -84,9 +85,9 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     if (scene != nullptr) {
         alone_ = std::make_unique<Alone>();
         alone_->scene = scene;
-        alone_->draws.resize(static_cast<std::size_t>(plan_.slices) * scene->draws.size());
+        alone_->draws.resize(static_cast<std::size_t>(plan_.views) * scene->draws.size());
         build_depth_clusters(*scene, alone_->clusters);
-        alone_->drawn.resize(static_cast<std::size_t>(plan_.slices) * alone_->clusters.size());
+        alone_->drawn.resize(static_cast<std::size_t>(plan_.views) * alone_->clusters.size());
         alone_->drawn_alone.resize(alone_->drawn.size());
         alone_->depth.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
         alone_->material.resize(alone_->depth.size());
@@ -115,8 +116,9 @@ inline std::uint32_t instance_of(std::uint32_t material_id) {
 // The slant range of pixel (row, column) at reversed-Z depth d > 0 (as the echo stage reconstructs it).
 inline double pixel_slant_range(const Plan& plan, std::uint32_t row, std::uint32_t column, double d) {
     const std::uint32_t W = plan.slice_columns;
-    const double u = M::pixel_coord(column % W, W, plan.tan_half_h);
-    const double v = M::pixel_coord(row, plan.rows, plan.tan_half_v);
+    const ViewGeometry& view = plan.view_geometry[column / W];
+    const double u = M::pixel_coord(column % W, W, view.tan_half_h);
+    const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
     return M::slant_range(M::view_z_from_depth(d, plan.depth_a, plan.depth_b), u, v);
 }
 
@@ -149,7 +151,6 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
     const std::uint32_t W = plan.slice_columns;
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
     for (std::uint32_t row = row_begin; row < row_end; ++row) {
-        const double v = M::pixel_coord(row, plan.rows, plan.tan_half_v);
         for (std::uint32_t column = 0; column < plan.columns; ++column) {
             const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
             PixelLabel& out = pixels[p];
@@ -161,13 +162,14 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
             if (out.spread.k_last - out.spread.k_first < kCachedShares)
                 for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
                     out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
-            const double u = M::pixel_coord(column % W, W, plan.tan_half_h);
-            const shared::SliceInfo& slice = plan.slice_info[column / W];
-            const M::vec3 ray = M::pixel_ray(u, v, slice.cos_center, slice.sin_center);
+            const M::PixelView view = pixel_view<double>(plan, column / W);
+            const double u = M::pixel_coord(column % W, W, view.tan_half_h);
+            const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
+            const M::vec3 ray = M::pixel_ray(u, v, view);
             const double inv_length = 1.0 / std::sqrt(1.0 + u * u + v * v);
             for (int i = 0; i < 3; ++i)
                 out.dir[i] = static_cast<float>(ray[i] * inv_length);
-            out.elevation = static_cast<float>(M::pixel_elevation(u, v));
+            out.elevation = static_cast<float>(std::asin(std::clamp(ray.z * inv_length, -1.0, 1.0)));
             out.range = frame.echo[2 * p + 1];
             out.instance = instance_of(frame.material[p]);
         }
@@ -224,21 +226,27 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
     for (std::uint32_t row = 0; row < plan.rows && plan.line_array; ++row) {
         // The pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1, q_end),
         // each visited once with the sum of its two cone columns' shares of this beam.
+        // Per view: along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
-        std::uint32_t c = static_cast<std::uint32_t>(std::lower_bound(cone_x, cone_x + plan.columns, lo) - cone_x);
-        for (; c < plan.columns && cone_x[c] < hi; ++c) {
-            const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
-            // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
-            if (!(frame.echo[2 * p] > 0.0f)) continue;
-            const double x = cone_x[c];
-            const auto first = static_cast<std::int64_t>(std::floor(x));
-            double weight = 0.0;
-            for (std::int64_t q = first; q <= first + 1; ++q)
-                if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
-                    weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
-                              beam_weight(static_cast<std::uint32_t>(q));
-            if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const float* view_x = cone_x + std::size_t(view) * plan.slice_columns;
+            const std::uint32_t view_end = (view + 1) * plan.slice_columns;
+            std::uint32_t c =
+                static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + plan.slice_columns, lo) - cone_x);
+            for (; c < view_end && cone_x[c] < hi; ++c) {
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+                // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
+                if (!(frame.echo[2 * p] > 0.0f)) continue;
+                const double x = cone_x[c];
+                const auto first = static_cast<std::int64_t>(std::floor(x));
+                double weight = 0.0;
+                for (std::int64_t q = first; q <= first + 1; ++q)
+                    if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
+                        weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
+                                  beam_weight(static_cast<std::uint32_t>(q));
+                if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+            }
         }
     }
 
@@ -385,16 +393,26 @@ void polar_coordinates(const Plan& plan, const double p[3], double& bin, double&
 // occluder; the neighbours absorb the pixel grid's own range steps at grazing incidence). False outside
 // the depth pass's coverage.
 bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) {
-    const double azimuth = std::atan2(p[1], p[0]);
-    const double elevation = std::asin(std::clamp(p[2] / r, -1.0, 1.0));
     const std::uint32_t W = plan.slice_columns;
-    for (std::uint32_t s = 0; s < plan.slices; ++s) {
-        double off = plan.slice_info[s].center_azimuth_rad - azimuth; // pixel_azimuth = centre - atan(u)
-        off = std::remainder(off, 2.0 * kPi);
-        if (!(std::abs(off) <= 0.5 * plan.slice_width_rad + 1e-9)) continue;
-        const double u = std::tan(off);
-        const double v = -std::tan(elevation) * std::sqrt(1.0 + u * u); // pixel_elevation inverted
-        const double cx = (u / plan.tan_half_h + 1.0) * 0.5 * W, cy = (v / plan.tan_half_v + 1.0) * 0.5 * plan.rows;
+    const double direction[3] = {p[0] / r, p[1] / r, p[2] / r};
+    const double sin_elevation = direction[2];
+    for (std::uint32_t s = 0; s < plan.views; ++s) {
+        // the view whose cell holds the direction (its elevation band and azimuths: in front of a slice's
+        // camera, between its side planes; a tier view's wedge), where the pixel grid sees it
+        const ViewGeometry& g = plan.view_geometry[s];
+        if (g.wedge && !(sin_elevation >= g.sin_elevation_min && sin_elevation <= g.sin_elevation_max)) continue;
+        const double z = direction[0] * g.forward[0] + direction[1] * g.forward[1] + direction[2] * g.forward[2];
+        if (!(z > 0.0)) continue;
+        const double u = (direction[0] * g.right[0] + direction[1] * g.right[1] + direction[2] * g.right[2]) / z;
+        const double v = (direction[0] * g.down[0] + direction[1] * g.down[1] + direction[2] * g.down[2]) / z;
+        if (g.wedge) {
+            if (!(direction[1] * g.wedge_start[0] - direction[0] * g.wedge_start[1] >= 0.0 &&
+                  direction[1] * g.wedge_end[0] - direction[0] * g.wedge_end[1] < 0.0))
+                continue;
+        } else if (!(std::abs(u) <= g.tan_half_h + 1e-12)) {
+            continue;
+        }
+        const double cx = (u / g.tan_half_h + 1.0) * 0.5 * W, cy = (v / g.tan_half_v + 1.0) * 0.5 * plan.rows;
         if (!(cx >= 0.0 && cx < W && cy >= 0.0 && cy < plan.rows)) return false;
         const auto column = static_cast<std::int64_t>(cx), row = static_cast<std::int64_t>(cy);
         const double tolerance = plan.bin_width_m + 1e-3 * r;

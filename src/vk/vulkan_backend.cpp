@@ -114,8 +114,8 @@ Result<void> VulkanBackend::create_scene_buffers() {
         }
     }
     build_depth_clusters(scene, clusters_);
-    draw_pushes_.resize(std::size_t(plan_.slices) * scene.draws.size());
-    clusters_drawn_.resize(std::size_t(plan_.slices) * clusters_.size());
+    draw_pushes_.resize(std::size_t(plan_.views) * scene.draws.size());
+    clusters_drawn_.resize(std::size_t(plan_.views) * clusters_.size());
     subpixel_returns_.prepare(plan_);
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
@@ -280,9 +280,9 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     if (materials.empty()) {
         materials.push_back(shared::MaterialGpu{0.0f, shared::kScatterConstant, 0.0f, 0.0f}); // nothing reflects
     }
-    // The slice table is a uniform block of kMaxSlices entries (normals.comp); the plan has <= that many.
+    // The view table is a uniform block of kMaxViews entries (normals.comp); the plan has <= that many.
     std::vector<shared::SliceInfo> slice_info = plan_.slice_info;
-    slice_info.resize(shared::kMaxSlices, shared::SliceInfo{});
+    slice_info.resize(shared::kMaxViews, shared::SliceInfo{});
     std::vector<std::uint32_t> column_table(2 * std::size_t(plan_.profile_columns));
     for (std::size_t c = 0; c < plan_.profile_columns; ++c) {
         column_table[2 * c] = plan_.column_beam[c];

@@ -50,7 +50,7 @@ void record_depth(RecordContext& record) {
         VkDeviceSize zero = 0;
         fn.vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
         fn.vkCmdBindIndexBuffer(commands, b.indices_.get(), 0, VK_INDEX_TYPE_UINT32);
-        for (std::uint32_t s = 0; s < b.plan_.slices; ++s) {
+        for (std::uint32_t s = 0; s < b.plan_.views; ++s) {
             const float x = static_cast<float>(s * b.plan_.slice_columns);
             VkViewport viewport{x, 0.0f, float(b.plan_.slice_columns), float(b.plan_.rows), 0.0f, 1.0f};
             VkRect2D scissor{{static_cast<std::int32_t>(s * b.plan_.slice_columns), 0},

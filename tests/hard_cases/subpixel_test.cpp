@@ -145,14 +145,16 @@ TEST_P(Subpixel, SpheresKeepTheEnergyOfTheirAreaAtEverySize) {
 
 // With the vertical pattern and absorption on, a small sphere's echo carries them as a pixel's does:
 // the closed form times the sinc^2 pattern at its elevation (half power at +-vfov / 2) and
-// 10^(-2 alpha r / 10) with the plan's alpha; 4 cm spheres at 15 m, 0 to 9 degrees up and down.
+// 10^(-2 alpha r / 10) with the plan's alpha; 4 cm spheres at 15 m, 0 to 9 degrees up and down, and at
+// -35 and +48 degrees, past the elevation gate, where the tier views hold them (the pattern's side lobes:
+// docs/pipeline.md "Vertical side lobes").
 TEST_P(Subpixel, SmallSpheresCarryTheVerticalPatternAndAbsorption) {
     SonarConfig config = closed_form_config();
     config.effects.vertical_pattern = EffectMode::on;
     config.effects.absorption = EffectMode::on;
     const double a = 0.02, range = 15.0, mu = 0.01;
     const double k_v = sinc_half_power_x() / std::sin(0.5 * config.vfov_deg * kDeg);
-    for (double elevation_deg : {0.0, 3.0, -6.0, 9.0}) {
+    for (double elevation_deg : {0.0, 3.0, -6.0, 9.0, -35.0, 48.0}) {
         SCOPED_TRACE(elevation_deg);
         const double e = elevation_deg * kDeg;
         Scene scene;

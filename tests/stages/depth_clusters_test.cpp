@@ -30,7 +30,7 @@ std::vector<std::uint8_t> culled_and_checked(const Plan& plan, const SceneData& 
     compose_depth_draws(plan, scene, pose, pushes);
     build_depth_clusters(scene, clusters);
     cull_depth_clusters(clusters, scene.draws.size(), pushes, drawn);
-    EXPECT_EQ(drawn.size(), std::size_t(plan.slices) * clusters.size());
+    EXPECT_EQ(drawn.size(), std::size_t(plan.views) * clusters.size());
     const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
     std::vector<float> depth_all(pixels), depth_culled(pixels);
     std::vector<std::uint32_t> material_all(pixels), material_culled(pixels);
