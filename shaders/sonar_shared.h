@@ -19,7 +19,7 @@ using uint = std::uint32_t;
 VKS_CONST uint kWorkgroupSize = 64u; // 1-D compute workgroups (per pixel, per column, per cell)
 VKS_CONST uint kMaxSlices = 16u;     // hfov 360 deg at >= 22.5 deg per slice
 // Views of the depth pass: the slices, then the vertical side lobes' tier views (Plan::views).
-VKS_CONST uint kMaxViews = 24u;
+VKS_CONST uint kMaxViews = 40u;
 VKS_CONST uint kMaxFarCells = 256u;       // far side lobes' grid (Plan::far_cells): far_sidelobe.comp's shared array
 VKS_CONST uint kNoMaterial = 0xffffffffu; // material attachment clear value: no geometry hit
 // The material attachment holds material_id | instance << kInstanceShift (the instance only when

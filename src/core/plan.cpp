@@ -441,9 +441,16 @@ Result<void> plan_pixel_grid(Plan& p) {
     return {};
 }
 
-// The tier views' pixels may be at most this many times the slices' in angle (the side lobes are
-// 13 dB and more below the main lobe; their returns need the range footprint, not fine azimuths).
+// The tier views' pixels may be at most this many times the slices' in angle (the square root of their
+// solid angles' ratio: the side lobes are 13 dB and more below the main lobe; their returns need the
+// range footprint, not fine azimuths).
 constexpr double kTierPixelRatio = 2.0;
+
+// A tier view's pixel size relative to a slice's: the square root of the ratio of their solid angles
+// (the views share the grid's rows and columns, so their half extents' products).
+double tier_pixel_ratio(const Plan& p, double tan_h, double tan_v) {
+    return std::sqrt((tan_h / p.tan_half_h) * (tan_v / p.tan_half_v));
+}
 
 // The most the tier views' pixels may be coarser than the slices' before the side lobes are left out.
 constexpr double kMaxTierPixelRatio = 4.0;
@@ -506,12 +513,12 @@ bool cell_extents(const ViewGeometry& v, double a0, double a1, double e0, double
 
 // The tier views of one band (elevations [e0, e1], down: below the slices): the azimuths in front of
 // the array, [-90, 90) degrees (its baffled elements hear nothing from behind), in n equal wedges, n
-// the fewest whose cameras' pixels stay within kTierPixelRatio of the slices' (at most 4). Each
+// the fewest whose cameras' pixels stay within kTierPixelRatio of the slices' (at most 8). Each
 // camera is pitched to need the smallest pixels and widened by two pixels past its cell.
 std::vector<ViewGeometry> tier_band(const Plan& p, double e0, double e1, bool down) {
     std::vector<ViewGeometry> best;
     double best_ratio = std::numeric_limits<double>::infinity();
-    for (int n = 1; n <= 4; ++n) {
+    for (int n = 1; n <= 8; ++n) {
         std::vector<ViewGeometry> band;
         double worst = 0.0;
         for (int w = 0; w < n; ++w) {
@@ -523,7 +530,7 @@ std::vector<ViewGeometry> tier_band(const Plan& p, double e0, double e1, bool do
                 ViewGeometry v = tier_camera(centre, down ? pitch : -pitch);
                 double tan_h = 0.0, tan_v = 0.0;
                 if (!cell_extents(v, a0, a1, e0, e1, tan_h, tan_v)) continue;
-                const double ratio = std::max(tan_h / p.tan_half_h, tan_v / p.tan_half_v);
+                const double ratio = tier_pixel_ratio(p, tan_h, tan_v);
                 if (ratio < chosen_ratio) {
                     chosen_ratio = ratio;
                     v.tan_half_h = tan_h * (1.0 + 4.0 / p.slice_columns);
@@ -590,7 +597,7 @@ Result<void> plan_tier_views(Plan& p) {
     double worst_ratio = 0.0;
     bool monotonic = true;
     for (const ViewGeometry& v : tiers) {
-        worst_ratio = std::max({worst_ratio, v.tan_half_h / p.tan_half_h, v.tan_half_v / p.tan_half_v});
+        worst_ratio = std::max(worst_ratio, tier_pixel_ratio(p, v.tan_half_h, v.tan_half_v));
         monotonic = monotonic && cone_increases_along_rows(p, v);
     }
     if (worst_ratio > kMaxTierPixelRatio || !monotonic) {
@@ -643,9 +650,7 @@ Result<void> plan_tier_views(Plan& p) {
     }
     p.views = static_cast<std::uint32_t>(p.view_geometry.size());
     p.columns = p.slice_columns * p.views;
-    double ratio = 0.0;
-    for (const ViewGeometry& v : tiers)
-        ratio = std::max({ratio, v.tan_half_h / p.tan_half_h, v.tan_half_v / p.tan_half_v});
+    const double ratio = worst_ratio;
     p.vertical_sidelobes_why =
         (mode == EffectMode::on ? std::string("on in config") : std::string("auto")) +
         ": the vertical pattern's side lobes beyond +-" + fmt(std::round(gate / kDegToRad * 10.0) / 10.0) +
