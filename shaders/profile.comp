@@ -22,6 +22,7 @@ layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFoo
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
 layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                    // params.line_array
 layout(constant_id = kSpecPerInvocation) const uint kConesPerInvocation = 4u;       // line_array (see below)
+layout(constant_id = kSpecSubpixel) const uint kSubpixel = 0u;                     // Plan::subpixel_capacity > 0
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
@@ -142,11 +143,48 @@ void gather_cone_columns(uint first_cone, uint end_cone) {
     }
 }
 
+// The frame's sub-pixel returns (src/core/subpixel.h): uints, the profile columns' first returns
+// (profile_columns + 1), the silent material, then from the next multiple of 4 the returns, four words
+// each (SubpixelReturn). Each column adds its own after its pixels, so it stays the only writer of its
+// cells; the depth image tells whether a nearer surface hides a return (subpixel_visible).
+layout(std430, binding = kBindingSubpixel) readonly buffer SubpixelBuffer { uint subpixel[]; };
+layout(std430, binding = kBindingDepth) readonly buffer DepthBuffer { float depth[]; };
+layout(std430, binding = kBindingMaterialId) readonly buffer MaterialIdBuffer { uint material_id[]; };
+
+void add_subpixel(uint column) {
+    uint first = subpixel[column];
+    uint end = subpixel[column + 1u];
+    uint silent = subpixel[params.profile_columns + 1u];
+    uint base = (params.profile_columns + 5u) & ~3u;
+    for (uint i = first; i < end; ++i) {
+        uint w = base + 4u * i;
+        uint pixel = subpixel[w];
+        float range_m = uintBitsToFloat(subpixel[w + 1u]);
+        float e = uintBitsToFloat(subpixel[w + 2u]);
+        float view_z = uintBitsToFloat(subpixel[w + 3u]);
+        if (!subpixel_visible(depth[pixel], material_id[pixel], silent, view_z, params.depth_a, params.depth_b)) {
+            continue;
+        }
+        RangeSpread spread = range_spread(kRangeKernelTent, vec2(0.0), vec2(0.0), vec2(e, range_m), vec2(0.0),
+                                          vec2(0.0), params.range_min_m, params.inv_bin_width_m, 0.0, params.bins);
+        for (int k = spread.k_first; k <= spread.k_last; ++k) {
+            precise float add = range_share(spread, k) * e;
+            profiles[column * params.bins_padded + uint(k)] += add;
+        }
+    }
+}
+
 void main() {
     if (kLineArray != 0u) {
         uint first_cone = gl_GlobalInvocationID.x * kConesPerInvocation;
         if (first_cone < params.profile_columns) {
-            gather_cone_columns(first_cone, min(first_cone + kConesPerInvocation, params.profile_columns));
+            uint end_cone = min(first_cone + kConesPerInvocation, params.profile_columns);
+            gather_cone_columns(first_cone, end_cone);
+            if (kSubpixel != 0u) {
+                for (uint c = first_cone; c < end_cone; ++c) {
+                    add_subpixel(c);
+                }
+            }
         }
         return;
     }
@@ -180,5 +218,8 @@ void main() {
         up = er;
         er = next;
         next = next2;
+    }
+    if (kSubpixel != 0u) {
+        add_subpixel(column);
     }
 }

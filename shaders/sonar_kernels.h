@@ -515,6 +515,51 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Sub-pixel returns (stage 4a, docs/pipeline.md "Sub-pixel objects"): an object smaller (or thinner)
+// than a pixel is not rasterized; the host lists its triangles' pieces with their echo (src/core/subpixel.cpp)
+// and the profile step adds each piece that the depth image does not hide.
+
+// The vertical pattern's power along one ray of elevation sine sin_e; 1 with the effect off. A piece of a
+// sub-pixel object lies on one ray, not across a pixel's height: the pattern at that ray, where
+// pixel_vertical_power averages it over a row. No gate here: the host lists a piece only in the view
+// whose cell (elevation band, tier wedge) holds its ray, so each direction counts once as a pixel's does.
+VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e) {
+    if (!terms.vertical_pattern) {
+        return REAL(1);
+    }
+    REAL p;
+    if (terms.vertical_shape == kPatternBox || terms.vertical_shape == kPatternGaussian) {
+        p = pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_halfwidth_rad, k.vpattern_chebyshev_a,
+                          asin(min(max(sin_e, REAL(-1)), REAL(1))));
+    } else {
+        p = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, sin_e);
+    }
+    return p;
+}
+
+// The echo (relative to SL) of a flat piece of surface of `area` m^2 at slant range r whose normal
+// makes cos_incidence with the ray to it: the pixel's equation (echo_at_range) with the piece's solid
+// angle, area cos_incidence / r^2, for the pixel's. So mu f(theta) A cos(theta) / r^4 (times the
+// vertical pattern and absorption); over a Lambert sphere's visible half 2 pi a^2 mu / (3 r^4).
+// 0 outside the range gate.
+VKS_FN REAL facet_echo(EchoConstants k, EchoTerms terms, MaterialGpu mat, REAL area, REAL cos_incidence, REAL r,
+                       REAL vertical) {
+    return echo_at_range(k, terms, r, mat, cos_incidence, area * cos_incidence / (r * r), vertical).x;
+}
+
+// Whether a sub-pixel return at view z `view_z` (in its pixel's view) is seen past the surface the
+// depth pass drew in that pixel (reversed-Z depth d, 0 = nothing drawn; material_id its id image's value):
+// hidden only where that surface is nearer by more than 1e-5 of the distance (the depth's float
+// resolution is ~1e-7 of it; a return lying on the surface it sits on stays), and is not one drawn with
+// the silent material (an object whose echo is its returns: its own front, subpixel.h).
+VKS_FN bool subpixel_visible(REAL d, uint material_id, uint silent_material, REAL view_z, REAL depth_a, REAL depth_b) {
+    if (!(d > REAL(0)) || (material_id & kMaterialIdMask) == silent_material) {
+        return true;
+    }
+    return view_z_from_depth(d, depth_a, depth_b) >= view_z * (REAL(1) - REAL(1e-5));
+}
+
+// ---------------------------------------------------------------------------------------------
 // Far side lobes (stage 4c, docs/pipeline.md "Side lobes"): the pattern beyond the side-lobe
 // kernel's reach, carried on a coarse grid of cells (Plan::far_cells). A beam puts its energy into
 // its two nearest cells and reads the convolved cells back with the same two shares.

@@ -55,7 +55,10 @@ VKS_CONST uint kBindingColumnTableUniform = 18u;
 VKS_CONST uint kBindingBeamTableUniform = 19u;
 VKS_CONST uint kBindingSidelobeWeightUniform = 20u;
 VKS_CONST uint kBindingFarTableUniform = 21u;
-VKS_CONST uint kBindingCount = 22u;
+// The frame's sub-pixel returns (src/core/subpixel.h): profile.comp adds them to its columns' profiles.
+// After the uniform views, so that their numbers stay as they are.
+VKS_CONST uint kBindingSubpixel = 22u;
+VKS_CONST uint kBindingCount = 23u;
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 
@@ -78,6 +81,7 @@ VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (
 VKS_CONST uint kSpecLineArray = 13u;     // profile: 1 = gather pixels onto cone columns (SonarParams::line_array)
 VKS_CONST uint kSpecFarSidelobes = 14u;  // sidelobe: 1 = add the far side lobes' cells (far_sidelobe.comp)
 VKS_CONST uint kSpecFarPass = 15u;       // far_sidelobe: 0 = deposit beams into cells, 1 = convolve the cells
+VKS_CONST uint kSpecSubpixel = 16u;      // profile: 1 = add the frame's sub-pixel returns (Plan::subpixel_capacity > 0)
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass
@@ -234,6 +238,21 @@ struct MaterialGpu {
 };
 #ifdef __cplusplus
 static_assert(sizeof(MaterialGpu) == 16, "MaterialGpu must match std430");
+#endif
+
+// One sub-pixel return (src/core/subpixel.h, docs/pipeline.md "Sub-pixel objects"): a piece of a triangle of
+// an object too small (or too thin) for the pixel grid, its echo computed on the host from its area and
+// material. The list of a frame is sorted by profile column; the buffer (binding kBindingSubpixel, uints)
+// holds the columns' first returns, profile_columns + 1 of them, then, from the next multiple of 4, the
+// returns.
+struct SubpixelReturn {
+    uint pixel;    // row * columns + column: the pixel whose depth may hide it (its direction's)
+    float range_m; // slant range of its centroid
+    float energy;  // relative to SL, times its share of the profile column (line_array: cone_share)
+    float view_z;  // its centroid's view z in that pixel's slice (the occlusion test, subpixel_visible)
+};
+#ifdef __cplusplus
+static_assert(sizeof(SubpixelReturn) == 16, "SubpixelReturn must match std430");
 #endif
 
 // Push constants of the depth pass: one draw (node x primitive) in one slice.

@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/sonar_math.hpp"
+#include "core/subpixel.h"
 #include "scene/scene_data.h"
 
 namespace vksonar {
@@ -1175,6 +1176,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
                                                : std::numeric_limits<double>::infinity());
     plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only);
     plan_gpu_params(p);
+    plan_subpixel(p, scene);
+    if (p.subpixel_capacity > 0) {
+        p.subpixel_silent_material =
+            static_cast<std::uint32_t>(p.materials.size()); // < kMaterialIdMask (plan_materials)
+        p.materials.push_back(shared::MaterialGpu{0.0f, shared::kScatterConstant, 0.0f, 0.0f});
+    }
     return p;
 }
 

@@ -27,6 +27,17 @@ struct ResolvedEffects {
     std::uint32_t shader_flags() const;
 };
 
+// A draw that can be a few pixels across somewhere inside the range gate, or a cluster of another draw
+// that can be thinner than a pixel there (src/core/subpixel.h): what SubpixelReturns looks at each frame.
+struct SubpixelCandidate {
+    std::uint32_t cluster_begin = 0, cluster_end = 0; // build_depth_clusters's runs of it
+    std::int32_t facing = 0; // +1: counter-clockwise faces out, -1: in, 0: no outside (both sides seen)
+    bool thin = false;       // a thin cluster (else a whole draw)
+    double centre[3] = {};   // world: the centre of its box, the radius about it that holds its vertices,
+    double radius = 0;       // and how wide it is across its length (thin: the cluster's thickness)
+    double middle_extent = 0;
+};
+
 // One view of the depth pass in double (SliceInfo holds the same, rounded to float): a camera basis in
 // the sonar frame, its half extents and the cell of directions it is the one to see (sonar_shared.h).
 struct ViewGeometry {
@@ -143,6 +154,14 @@ struct Plan {
     // Ground-truth labels were asked for (SaveFlags::labels): the depth pass writes each draw's instance
     // id into the high 16 bits of the material image (compose_depth_draws), for the labels stage.
     bool labels = false;
+    // The most sub-pixel returns a frame can list (src/core/subpixel.h; 0: the scene has no cluster that
+    // could be smaller or thinner than a pixel inside the range gate, and the profile step adds none).
+    std::uint32_t subpixel_capacity = 0;
+    std::vector<SubpixelCandidate> subpixel_candidates; // in draw and cluster order
+    // With subpixel_capacity > 0: the material (appended to `materials`, no backscatter) that objects a few
+    // pixels across are drawn with, so that their depth hides what lies behind them while their echo comes
+    // from their returns alone.
+    std::uint32_t subpixel_silent_material = 0;
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
 

@@ -83,6 +83,7 @@ template <class Real> struct StageContext {
         build_depth_clusters(scene, clusters);
         clusters_drawn.resize(std::size_t(plan.views) * clusters.size());
         view_drawn.assign(plan.views, 1);
+        subpixel.prepare(plan);
     }
 
     Plan plan;              // copied: the backend may outlive the caller's Plan object
@@ -97,6 +98,7 @@ template <class Real> struct StageContext {
     std::vector<DepthCluster> clusters;
     std::vector<std::uint8_t> clusters_drawn; // views * clusters, 0 = the cluster cannot reach that view
     std::vector<std::uint8_t> view_drawn;     // views: 0 = no cluster reaches it this frame (all its pixels empty)
+    SubpixelReturns subpixel;                 // the frame's sub-pixel returns (core/subpixel.h)
     std::vector<float> depth;
     std::vector<std::uint32_t> material;
     std::vector<float> face; // face normals of the depth pass (normal_method = geometric only)
@@ -109,6 +111,9 @@ template <class Real> struct StageContext {
 template <class Real> void run_depth(StageContext<Real>& s) {
     compose_depth_draws(s.plan, s.scene, s.pose, s.draws);
     cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
+    // the objects a few pixels across or less: their returns (added by the profile step) instead of their
+    // pixels' echo
+    s.subpixel.build(s.plan, s.scene, s.pose, s.clusters, s.draws, s.clusters_drawn);
     // A view no cluster reaches (a tier view above a scene with nothing overhead) is empty: the stages
     // after the depth pass only zero its pixels.
     const std::size_t count = s.clusters.size();
@@ -156,10 +161,13 @@ template <class Real> void run_echo(StageContext<Real>& s) {
 template <class Real> void run_beamform(StageContext<Real>& s) {
     // the float profiles only when saved: the resample reads the accumulators
     float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
-    split_blocks(
-        s.workers, s.plan.profile_columns, kColumnBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-            beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end, s.view_drawn.data());
-        });
+    const SubpixelInput subpixel{s.subpixel, s.depth.data(), s.material.data()};
+    const SubpixelInput* with_subpixel = s.plan.subpixel_capacity > 0 ? &subpixel : nullptr;
+    split_blocks(s.workers, s.plan.profile_columns, kColumnBlock,
+                 [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                     beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end,
+                                             with_subpixel, s.view_drawn.data());
+                 });
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
                              end);

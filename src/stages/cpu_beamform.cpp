@@ -634,9 +634,48 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
         }
 }
 
+namespace {
+
+// The sub-pixel returns of profile columns [column_begin, column_end) that the depth image does not hide,
+// each into the two bins of the tent kernel at its range (sonar_kernels.h; profile.comp's add_subpixel):
+// per column in list order, after the column's pixels.
+template <class Real>
+void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, std::uint32_t column_begin,
+                          std::uint32_t column_end, Real range_min, Real inv_bin_width) {
+    using M = Math<Real>;
+    const std::size_t S = accumulator_stride(plan);
+    Real depth_a, depth_b;
+    if constexpr (std::is_same_v<Real, float>) {
+        depth_a = plan.params.depth_a;
+        depth_b = plan.params.depth_b;
+    } else {
+        depth_a = plan.depth_a;
+        depth_b = plan.depth_b;
+    }
+    const std::uint32_t* begin = in.returns.column_begin();
+    const shared::SubpixelReturn* returns = in.returns.returns();
+    const typename M::vec2 none(Real(0), Real(0));
+    for (std::uint32_t c = column_begin; c < column_end; ++c) {
+        for (std::uint32_t i = begin[c]; i < begin[c + 1]; ++i) {
+            const shared::SubpixelReturn& r = returns[i];
+            if (!M::subpixel_visible(static_cast<Real>(in.depth[r.pixel]), in.material[r.pixel],
+                                     plan.subpixel_silent_material, static_cast<Real>(r.view_z), depth_a, depth_b))
+                continue;
+            const Real e = static_cast<Real>(r.energy);
+            const typename M::RangeSpread spread =
+                M::range_spread(shared::kRangeKernelTent, none, none, typename M::vec2(e, static_cast<Real>(r.range_m)),
+                                none, none, range_min, inv_bin_width, Real(0), plan.bins);
+            for (int k = spread.k_first; k <= spread.k_last; ++k)
+                acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
+        }
+    }
+}
+
+} // namespace
+
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
-                       std::uint32_t column_end, const std::uint8_t* view_drawn) {
+                       std::uint32_t column_end, const SubpixelInput* subpixel, const std::uint8_t* view_drawn) {
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     Real range_min, inv_bin_width;
@@ -665,6 +704,8 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
                                                 acc[static_cast<std::size_t>(k_first + i) * S + c] += shares[i] * e;
                                         });
     }
+    if (subpixel != nullptr && subpixel->returns.count() > 0)
+        add_subpixel_returns<Real>(plan, *subpixel, acc, column_begin, column_end, range_min, inv_bin_width);
     if (profiles == nullptr) return;
     for (std::size_t k = 0; k < bins; ++k)
         for (std::uint32_t c = column_begin; c < column_end; ++c)
@@ -857,9 +898,9 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
 template void resample_weights<float>(const Plan&, float*);
 template void resample_weights<double>(const Plan&, double*);
 template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t,
-                                       const std::uint8_t*);
+                                       const SubpixelInput*, const std::uint8_t*);
 template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t,
-                                        const std::uint8_t*);
+                                        const SubpixelInput*, const std::uint8_t*);
 template void beamform_beams<float>(const Plan&, const float*, const float*, float*, float*, std::uint32_t,
                                     std::uint32_t);
 template void beamform_beams<double>(const Plan&, const double*, const double*, float*, float*, std::uint32_t,

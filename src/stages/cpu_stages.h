@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/plan.h"
+#include "core/subpixel.h"
 #include "scene/scene_data.h"
 #include "sonar_shared.h"
 #include "stages/stage_backend.h"
@@ -91,9 +92,17 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
 // vertical power) per row and slice column (echo_table_count values).
 std::size_t echo_table_count(const Plan& plan);
 template <class Real> void echo_table(const Plan& plan, Real* table);
+// The frame's sub-pixel returns (src/core/subpixel.h) and the depth and material images that may hide them.
+struct SubpixelInput {
+    const SubpixelReturns& returns;
+    const float* depth;
+    const std::uint32_t* material;
+};
+// subpixel: null, or the returns each column adds after its pixels (as profile.comp does).
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
-                       std::uint32_t column_end, const std::uint8_t* view_drawn = nullptr);
+                       std::uint32_t column_end, const SubpixelInput* subpixel = nullptr,
+                       const std::uint8_t* view_drawn = nullptr);
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end);

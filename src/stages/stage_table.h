@@ -58,6 +58,9 @@ enum class StageBuffers : std::uint16_t {
     beam_profiles = 1u << 8,
     far_sidelobes = 1u << 9, // the far side lobes' deposited energy and convolved cells
     polar = 1u << 10,
+    // The frame's sub-pixel returns (core/subpixel.h, Plan::subpixel_capacity > 0): listed with the depth
+    // pass, which leaves their clusters out; the profile step adds them where the depth image shows them.
+    subpixel = 1u << 11,
 };
 constexpr StageBuffers operator|(StageBuffers a, StageBuffers b) {
     return static_cast<StageBuffers>(static_cast<std::uint16_t>(a) | static_cast<std::uint16_t>(b));
@@ -185,7 +188,8 @@ constexpr StageBuffers depth_reads(const Plan&) {
 }
 constexpr StageBuffers depth_writes(const Plan& plan) {
     return StageBuffers::depth | StageBuffers::material |
-           (plan.face_normals ? StageBuffers::face_normals : StageBuffers::none);
+           (plan.face_normals ? StageBuffers::face_normals : StageBuffers::none) |
+           (plan.subpixel_capacity > 0 ? StageBuffers::subpixel : StageBuffers::none);
 }
 constexpr StageBuffers normals_reads(const Plan& plan) {
     return StageBuffers::depth | StageBuffers::tables |
@@ -201,8 +205,10 @@ constexpr StageBuffers echo_reads(const Plan& plan) {
 constexpr StageBuffers echo_writes(const Plan&) {
     return StageBuffers::echo;
 }
-constexpr StageBuffers beamform_reads(const Plan&) {
-    return StageBuffers::echo | StageBuffers::tables;
+constexpr StageBuffers beamform_reads(const Plan& plan) {
+    return StageBuffers::echo | StageBuffers::tables |
+           (plan.subpixel_capacity > 0 ? StageBuffers::subpixel | StageBuffers::depth | StageBuffers::material
+                                       : StageBuffers::none);
 }
 // every column's profile before any beam reads it; the far side lobes before the near ones
 constexpr StageBuffers beamform_writes(const Plan& plan) {

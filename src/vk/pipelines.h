@@ -37,6 +37,7 @@ enum Binding : std::uint32_t {
     binding_beam_table_uniform = shared::kBindingBeamTableUniform,
     binding_sidelobe_weight_uniform = shared::kBindingSidelobeWeightUniform,
     binding_far_table_uniform = shared::kBindingFarTableUniform,
+    binding_subpixel = shared::kBindingSubpixel, // after the uniform views (sonar_shared.h)
     binding_count = shared::kBindingCount,
 };
 
@@ -46,7 +47,8 @@ enum Binding : std::uint32_t {
 // where every storage-buffer load is a branchy loop over the lanes. A table that does not fit is read
 // through its storage binding instead; specialization constant kSpecUniformTables tells the shader which.
 constexpr VkDescriptorType descriptor_type(std::uint32_t binding) {
-    return binding == binding_params || binding == binding_slice_info || binding >= binding_materials_uniform
+    return binding == binding_params || binding == binding_slice_info ||
+                   (binding >= binding_materials_uniform && binding <= binding_far_table_uniform)
                ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER
                : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
 }
@@ -108,11 +110,13 @@ struct ProfileSpecialization {
     std::uint32_t echo_half = 0;
     std::uint32_t line_array = 0;
     std::uint32_t cones_per_invocation = 4; // line_array
-    std::array<SpecConstant, 4> constants() const {
+    std::uint32_t subpixel = 0;             // Plan::subpixel_capacity > 0
+    std::array<SpecConstant, 5> constants() const {
         return {{{shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
                  {shared::kSpecLineArray, line_array},
-                 {shared::kSpecPerInvocation, cones_per_invocation}}};
+                 {shared::kSpecPerInvocation, cones_per_invocation},
+                 {shared::kSpecSubpixel, subpixel}}};
     }
 };
 struct ResampleSpecialization {

@@ -116,6 +116,7 @@ Result<void> VulkanBackend::create_scene_buffers() {
     build_depth_clusters(scene, clusters_);
     draw_pushes_.resize(std::size_t(plan_.views) * scene.draws.size());
     clusters_drawn_.resize(std::size_t(plan_.views) * clusters_.size());
+    subpixel_returns_.prepare(plan_);
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     auto vertices =
@@ -261,6 +262,12 @@ Result<void> VulkanBackend::create_working_buffers() {
         if (!buffer) return buffer.error();
         *w.buffer = std::move(buffer.value());
     }
+    // The sub-pixel returns: written by the host every frame before the submit (render() waits for the
+    // frame, so one buffer serves every frame), sized once for the plan's capacity.
+    auto subpixel = create_buffer(context_, SubpixelReturns::buffer_bytes(plan_), storage, MemoryUse::upload);
+    if (!subpixel) return subpixel.error();
+    subpixel_ = std::move(subpixel.value());
+    if (subpixel_.mapped != nullptr) std::memset(subpixel_.mapped, 0, SubpixelReturns::buffer_bytes(plan_));
 
     return {};
 }
@@ -426,16 +433,16 @@ Result<void> VulkanBackend::create_descriptors(const TableViews& views) {
         &params_,          &depth_,      &material_id_,     &normals_,    &echo_,         &profiles_,
         &beam_profiles_,   &polar_,      &slice_info_,      &materials_,  &column_table_, &beam_table_,
         &sidelobe_weight_, &cone_coord_, &far_table_,       &far_energy_, &far_cells_,    &materials_,
-        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_};
+        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_,  &subpixel_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
-    const std::array<std::uint32_t, binding_count - binding_materials_uniform> uniform_views{
+    const std::array<std::uint32_t, binding_far_table_uniform + 1 - binding_materials_uniform> uniform_views{
         materials_vec4s, column_table_vec4s, beam_table_vec4s, sidelobe_vec4s, far_table_vec4s};
     std::array<VkDescriptorBufferInfo, binding_count> infos{};
     std::array<VkWriteDescriptorSet, binding_count> writes{};
     for (std::uint32_t i = 0; i < binding_count; ++i) {
         VkDeviceSize range = VK_WHOLE_SIZE;
-        if (i >= binding_materials_uniform)
+        if (descriptor_type(i) == VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER && i >= binding_materials_uniform)
             range = 16 * VkDeviceSize(std::max(uniform_views[i - binding_materials_uniform], 1u));
         infos[i] = {bound[i]->get(), 0, range};
         writes[i] = {};
@@ -488,6 +495,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.echo_half = gpu_params_.echo_half;
     profile.line_array = plan_.line_array ? 1u : 0u;
     profile.cones_per_invocation = kConesPerInvocation;
+    profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).

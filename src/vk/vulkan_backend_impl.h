@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/plan.h"
+#include "core/subpixel.h"
 #include "scene/scene_data.h"
 #include "sonar_shared.h"
 #include "stages/stage_backend.h"
@@ -121,6 +122,7 @@ private:
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
     std::vector<std::uint8_t> clusters_drawn_;   // slices * clusters: 0 = culled this frame
+    SubpixelReturns subpixel_returns_;           // the frame's sub-pixel returns (core/subpixel.h)
 
     Buffer vertices_, indices_;
     Image depth_image_, material_image_;
@@ -134,6 +136,7 @@ private:
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
     Buffer cone_coord_;                         // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
     Buffer far_table_, far_energy_, far_cells_; // far side lobes (16-byte stand-ins without them)
+    Buffer subpixel_; // host-visible: subpixel_returns_'s list, written every frame (16 bytes without any)
     Buffer readback_;
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;

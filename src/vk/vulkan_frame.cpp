@@ -226,6 +226,10 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     frame.stages_run.clear();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
+    // the objects a few pixels across or less: their returns (profile.comp adds them) instead of their
+    // pixels' echo
+    subpixel_returns_.build(plan_, scene_, pose, clusters_, draw_pushes_, clusters_drawn_);
+    if (plan_.subpixel_capacity > 0) subpixel_returns_.write_buffer(plan_, subpixel_.mapped);
 
     // Record: one command buffer per stage of kStageTable that this plan runs, then one for the readback.
     std::array<const StageInfo*, kStageCount> stages{};

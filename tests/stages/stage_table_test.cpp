@@ -58,6 +58,20 @@ std::vector<NamedPlan> plans() {
         EXPECT_TRUE(plan) << v.name << ": " << (plan ? "" : plan.error().message);
         if (plan) out.push_back({v.name, std::move(plan.value())});
     }
+    // A scene with an object that can be smaller than a pixel: the depth pass lists its returns and the
+    // profile step reads them with the depth and material images (core/subpixel.h).
+    Scene small;
+    const float box[] = {0, 0, 0, 0.05f, 0, 0, 0.05f, 0.05f, 0, 0, 0.05f, 0, 0, 0, 0.05f, 0.05f, 0, 0.05f};
+    const std::uint32_t triangles[] = {0, 1, 2, 0, 2, 3, 0, 1, 5, 0, 5, 4};
+    auto mesh = small.add_mesh(box, 6, triangles, 12);
+    EXPECT_TRUE(mesh.ok());
+    SceneDraw draw;
+    draw.mesh = mesh.ok() ? mesh.value() : 0;
+    draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 10, 0, 0, 1};
+    EXPECT_TRUE(small.add_draw(draw).ok());
+    auto plan = make_plan(SonarConfig{}, scene_data(small));
+    EXPECT_TRUE(plan && plan.value().subpixel_capacity > 0);
+    if (plan) out.push_back({"sub-pixel objects", std::move(plan.value())});
     return out;
 }
 
