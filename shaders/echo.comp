@@ -24,6 +24,7 @@ layout(std430, binding = kBindingEcho) writeonly buffer EchoBuffer { vec2 echo2[
 // The same buffer with accuracy.intermediates = fp16: (energy * echo_scale, range) as two halves.
 layout(std430, binding = kBindingEcho) writeonly buffer EchoHalfBuffer { uint echo_half2[]; };
 
+layout(constant_id = kSpecTierViews) const uint kTierViews = 0u; // Plan::views > slices, as a constant
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u; // params.echo_half, as a constant (src/vk/pipelines.h)
 
 void store_echo(uint p, vec2 energy_range) {
@@ -111,7 +112,7 @@ vec2 echo_pixel(uint row, uint column) {
     }
     uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
     // a slice from two table reads (level_slice_view), a tier view whole
-    PixelView view = slice < params.slices
+    PixelView view = kTierViews == 0u || slice < params.slices
                          ? level_slice_view(slice_info[slice].forward_x, slice_info[slice].forward_y, params.tan_half_h,
                                             params.tan_half_v, params.elevation_gate_sin)
                          : view_of_slice(slice_info[slice]);

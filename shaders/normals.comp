@@ -29,8 +29,11 @@ layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice
 
 // The view of pixel column c's slice or tier view: a slice from two table reads (level_slice_view),
 // a tier view whole (lavapipe runs every uniform read at a lane-varying index as a gather).
+// With no tier views (a constant: lavapipe would run both sides of a branch) only the slices' code.
+layout(constant_id = kSpecTierViews) const uint kTierViews = 0u;
+
 PixelView pixel_view(uint view) {
-    if (view < params.slices) {
+    if (kTierViews == 0u || view < params.slices) {
         return level_slice_view(slice_info[view].forward_x, slice_info[view].forward_y, params.tan_half_h,
                                 params.tan_half_v, params.elevation_gate_sin);
     }
@@ -44,6 +47,9 @@ uint view_of_column(uint c) {
 // Whether the pixel columns a and b (a neighbour, in the image) see one surface side by side: the same
 // view, or two slices of the main band (their seams join). A tier view's edges are the image's edges.
 bool joined(int a, int b) {
+    if (kTierViews == 0u) {
+        return true; // the slices all join
+    }
     if (a < 0 || b < 0 || a >= int(params.columns) || b >= int(params.columns)) {
         return true; // load() gives no sample outside the image anyway
     }

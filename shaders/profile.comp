@@ -20,6 +20,7 @@ layout(local_size_x = kWorkgroupSize) in;
 
 layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half
+layout(constant_id = kSpecTierViews) const uint kTierViews = 0u; // Plan::views > slices
 layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                    // params.line_array
 layout(constant_id = kSpecPerInvocation) const uint kConesPerInvocation = 4u;       // line_array (see below)
 layout(constant_id = kSpecSubpixel) const uint kSubpixel = 0u;                     // Plan::subpixel_capacity > 0
@@ -126,7 +127,7 @@ uint first_above(uint begin, uint end, float lo) {
 void gather_cone_columns(uint first_cone, uint end_cone) {
     uint width = params.slice_columns;
     uint slices_end = params.slices * width;
-    uint tiers = params.columns / width - params.slices;
+    uint tiers = kTierViews != 0u ? params.columns / width - params.slices : 0u;
     float lo = float(first_cone) - 1.0;
     uint first_slices = first_above(0u, slices_end, lo);
     uint first_tier[kMaxViews];

@@ -83,8 +83,11 @@ struct SpecConstant {
 struct NormalsSpecialization {
     std::uint32_t pixels_per_invocation = 8;
     std::uint32_t normal_method = shared::kNormalsSobel3;
-    std::array<SpecConstant, 2> constants() const {
-        return {{{shared::kSpecPerInvocation, pixels_per_invocation}, {shared::kSpecNormalMethod, normal_method}}};
+    std::uint32_t tier_views = 0; // Plan::views > Plan::slices: else only the slices' code is compiled in
+    std::array<SpecConstant, 3> constants() const {
+        return {{{shared::kSpecPerInvocation, pixels_per_invocation},
+                 {shared::kSpecNormalMethod, normal_method},
+                 {shared::kSpecTierViews, tier_views}}};
     }
 };
 struct EchoSpecialization {
@@ -95,8 +98,10 @@ struct EchoSpecialization {
     std::uint32_t uniform_tables = 0;
     std::uint32_t material_vec4s = 1;
     std::uint32_t echo_half = 0;
-    std::array<SpecConstant, 7> constants() const {
-        return {{{shared::kSpecEffectFlags, effect_flags},
+    std::uint32_t tier_views = 0;
+    std::array<SpecConstant, 8> constants() const {
+        return {{{shared::kSpecTierViews, tier_views},
+                 {shared::kSpecEffectFlags, effect_flags},
                  {shared::kSpecPerInvocation, pixels_per_invocation},
                  {shared::kSpecRoughMaterials, rough_materials},
                  {shared::kSpecVerticalShape, vertical_shape},
@@ -111,8 +116,10 @@ struct ProfileSpecialization {
     std::uint32_t line_array = 0;
     std::uint32_t cones_per_invocation = 4; // line_array
     std::uint32_t subpixel = 0;             // Plan::subpixel_capacity > 0
-    std::array<SpecConstant, 5> constants() const {
-        return {{{shared::kSpecRangeKernel, range_kernel},
+    std::uint32_t tier_views = 0;
+    std::array<SpecConstant, 6> constants() const {
+        return {{{shared::kSpecTierViews, tier_views},
+                 {shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
                  {shared::kSpecLineArray, line_array},
                  {shared::kSpecPerInvocation, cones_per_invocation},

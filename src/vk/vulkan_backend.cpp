@@ -478,6 +478,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         NormalsSpecialization normals;
         normals.pixels_per_invocation = kNormalsRun;
         normals.normal_method = plan_.params.normal_method;
+        normals.tier_views = plan_.views > plan_.slices ? 1u : 0u;
         if (auto r = make(normals_pipeline_, normals_comp_spv, sizeof(normals_comp_spv), normals.constants()); !r)
             return r;
     }
@@ -489,6 +490,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     echo.uniform_tables = both_uniform(materials_vec4s);
     echo.material_vec4s = echo.uniform_tables ? materials_vec4s : 1u;
     echo.echo_half = gpu_params_.echo_half;
+    echo.tier_views = plan_.views > plan_.slices ? 1u : 0u;
     if (auto r = make(echo_pipeline_, echo_comp_spv, sizeof(echo_comp_spv), echo.constants()); !r) return r;
     ProfileSpecialization profile;
     profile.range_kernel = plan_.params.range_kernel;
@@ -496,6 +498,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.line_array = plan_.line_array ? 1u : 0u;
     profile.cones_per_invocation = kConesPerInvocation;
     profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
+    profile.tier_views = plan_.views > plan_.slices ? 1u : 0u;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).
