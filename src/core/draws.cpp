@@ -9,7 +9,6 @@
 #include "scene/scene_data.h"
 
 namespace vksonar {
-namespace {
 
 // Column-major 4x4 in double.
 using Mat4 = std::array<double, 16>;
@@ -26,8 +25,6 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
     }
     return r;
 }
-
-} // namespace
 
 // sonar_from_world = inverse of [R | t] with R = Rz(yaw) Ry(pitch) Rx(roll).
 Mat4 sonar_from_world(const Pose& pose) {

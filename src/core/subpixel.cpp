@@ -50,18 +50,6 @@ double norm(const Vec3& a) {
     return std::sqrt(dot(a, a));
 }
 
-std::array<double, 16> multiply(const std::array<double, 16>& a, const std::array<double, 16>& b) {
-    std::array<double, 16> r{};
-    for (int col = 0; col < 4; ++col)
-        for (int row = 0; row < 4; ++row) {
-            double s = 0;
-            for (int k = 0; k < 4; ++k)
-                s += a[k * 4 + row] * b[col * 4 + k];
-            r[col * 4 + row] = s;
-        }
-    return r;
-}
-
 // A cluster's size in the world: the centre of its box, the radius of the sphere about it that holds
 // its vertices, and the middle one of its box's three extents (the box's axes through world_from_local):
 // a cable's box is long along one axis and a diameter across the other two.
