@@ -89,7 +89,7 @@ VKS_FN vec3 pixel_ray(REAL u, REAL v, PixelView view) {
 }
 
 // The sine of the elevation of the ray through (u, v) of a view: its z over its length (the basis is
-// orthonormal, so |ray| = |(u, v, 1)|). For a slice this is pixel_elevation_sin(u, v), bit for bit.
+// orthonormal, so |ray| = |(u, v, 1)|). For a slice the zero terms add nothing: -v / |(u, v, 1)|, bit for bit.
 VKS_FN REAL view_elevation_sin(REAL u, REAL v, PixelView view) {
     return (view.forward.z + u * view.right.z + v * view.down.z) / sqrt(REAL(1) + u * u + v * v);
 }

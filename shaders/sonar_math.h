@@ -77,7 +77,7 @@ VKS_FN REAL sinc_of(REAL x) {
 // amplitude is cosh(sqrt(A^2 - x^2)) / cosh(A) in the main lobe (x < A) and cos(sqrt(x^2 - A^2)) / cosh(A)
 // beyond it: side lobes of exactly 1 / R, the first null at x = sqrt(A^2 + (pi/2)^2).
 // The aperture patterns (sinc, hann, chebyshev) depend on the angle only through sin(a): their power
-// from sin_a, for callers that have the sine as a ratio (pixel_elevation_sin) and need no arctangent.
+// from sin_a, for callers that have the sine as a ratio (view_elevation_sin) and need no arctangent.
 VKS_FN REAL aperture_pattern_power(uint shape, REAL k, REAL chebyshev_a, REAL sin_a) {
     REAL x = k * sin_a;
     if (shape == kPatternChebyshev) {
@@ -109,11 +109,6 @@ VKS_FN REAL pattern_power(uint shape, REAL k, REAL half_width, REAL chebyshev_a,
         return exp(-k * a * a);
     }
     return aperture_pattern_power(shape, k, chebyshev_a, sin(a));
-}
-
-// sin of pixel_elevation(u, v), as a ratio: -v / |(u, v, 1)|.
-VKS_FN REAL pixel_elevation_sin(REAL u, REAL v) {
-    return -v / sqrt(REAL(1) + u * u + v * v);
 }
 
 // The combined sonar equation per pixel, without the source level (added on the host in dB):

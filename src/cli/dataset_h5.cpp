@@ -342,14 +342,7 @@ public:
 
     Result<void> close() override {
         if (!set_count("complete", 1)) return fail("cannot mark the file complete");
-        polar_ = {};
-        polar_u16_ = {};
-        labels_ = {};
-        flow_ = {};
-        pose_ = {};
-        frame_index_ = {};
-        time_ = {};
-        text_type_ = {};
+        close_datasets();
         if (H5Fclose(file_.release()) < 0) return fail("cannot close the file");
         if (commit_fd_ >= 0 && ::close(std::exchange(commit_fd_, -1)) != 0) return fail("cannot close the file");
         return {};
@@ -378,8 +371,8 @@ private:
                ssize_t(slot.size());
     }
 
-    // Closes everything without marking the file complete.
-    void abandon() {
+    // The datasets and the string type, closed before the file.
+    void close_datasets() {
         polar_ = {};
         polar_u16_ = {};
         labels_ = {};
@@ -388,6 +381,11 @@ private:
         frame_index_ = {};
         time_ = {};
         text_type_ = {};
+    }
+
+    // Closes everything without marking the file complete.
+    void abandon() {
+        close_datasets();
         file_ = {};
         if (commit_fd_ >= 0) ::close(std::exchange(commit_fd_, -1));
     }

@@ -650,12 +650,11 @@ Result<void> plan_tier_views(Plan& p) {
     }
     p.views = static_cast<std::uint32_t>(p.view_geometry.size());
     p.columns = p.slice_columns * p.views;
-    const double ratio = worst_ratio;
     p.vertical_sidelobes_why =
         (mode == EffectMode::on ? std::string("on in config") : std::string("auto")) +
         ": the vertical pattern's side lobes beyond +-" + fmt(std::round(gate / kDegToRad * 10.0) / 10.0) +
         " deg, to the nadir and the zenith: " + std::to_string(below) + " + " + std::to_string(tiers.size() - below) +
-        " tier views, pixels up to " + fmt(std::round(ratio * 100.0) / 100.0) + "x the slices'";
+        " tier views, pixels up to " + fmt(std::round(worst_ratio * 100.0) / 100.0) + "x the slices'";
     return {};
 }
 

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "core/angles.h"
+#include "core/pixel_views.h"
 #include "core/plan.h"
 #include "core/sonar_math.hpp"
 #include "scene/scene_data.h"
@@ -370,22 +371,6 @@ void for_each_candidate(const Plan& plan, const SceneData& scene, const std::vec
     }
 }
 
-M::EchoConstants echo_constants(const Plan& plan) {
-    M::EchoConstants k{plan.tan_half_h,
-                       plan.tan_half_v,
-                       2.0 * plan.tan_half_h / plan.slice_columns,
-                       2.0 * plan.tan_half_v / plan.rows,
-                       plan.depth_a,
-                       plan.depth_b,
-                       plan.gate_min_m,
-                       plan.gate_max_m,
-                       plan.alpha_db_per_m,
-                       plan.vpattern_k,
-                       plan.vpattern_halfwidth_rad,
-                       plan.vpattern_chebyshev_a};
-    return k;
-}
-
 } // namespace
 
 void plan_subpixel(Plan& plan, const SceneData& scene) {
@@ -437,9 +422,9 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     const PixelSides pixel = pixel_sides(plan);
     const double pa = pixel.small; // pieces are split to under this
     const std::array<double, 16> sonar_world = sonar_from_world(pose);
-    const M::EchoConstants k = echo_constants(plan);
-    const M::EchoTerms terms{plan.effects.incidence,     plan.rough_materials,   plan.effects.vertical_pattern,
-                             plan.params.vpattern_shape, plan.effects.spreading, plan.effects.absorption};
+    // (facet_echo and ray_vertical_power read the constants every view shares: view 0's will do)
+    const M::EchoConstants k = echo_constants<double>(plan, 0);
+    const M::EchoTerms terms = echo_terms<double>(plan, true);
     const std::uint32_t W = plan.slice_columns, H = plan.rows;
     const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
     const int cone_count = static_cast<int>(plan.profile_columns);

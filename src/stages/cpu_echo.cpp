@@ -17,57 +17,6 @@
 
 namespace vksonar::cpu {
 
-namespace {
-
-// The echo stage's constants of a view in the working precision: float reads the shaders' float values
-// (SonarParams, SliceInfo), double the Plan's doubles.
-template <class Real> typename Math<Real>::EchoConstants echo_constants(const Plan& plan, std::uint32_t view) {
-    const shared::SonarParams& g = plan.params;
-    const typename Math<Real>::PixelView pv = pixel_view<Real>(plan, view);
-    typename Math<Real>::EchoConstants k;
-    if constexpr (std::is_same_v<Real, float>) {
-        k = {pv.tan_half_h,
-             pv.tan_half_v,
-             0.0f,
-             0.0f,
-             g.depth_a,
-             g.depth_b,
-             g.gate_min_m,
-             g.gate_max_m,
-             g.alpha_db_per_m,
-             g.vpattern_k,
-             g.vpattern_halfwidth_rad,
-             g.vpattern_chebyshev_a};
-    } else {
-        k = {pv.tan_half_h,
-             pv.tan_half_v,
-             0.0,
-             0.0,
-             plan.depth_a,
-             plan.depth_b,
-             plan.gate_min_m,
-             plan.gate_max_m,
-             plan.alpha_db_per_m,
-             plan.vpattern_k,
-             plan.vpattern_halfwidth_rad,
-             plan.vpattern_chebyshev_a};
-    }
-    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(plan.slice_columns);
-    k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);
-    return k;
-}
-
-template <class Real> typename Math<Real>::EchoTerms echo_terms(const Plan& plan, const float* normals4) {
-    return {plan.effects.incidence && normals4 != nullptr,
-            plan.rough_materials,
-            plan.effects.vertical_pattern,
-            plan.params.vpattern_shape,
-            plan.effects.spreading,
-            plan.effects.absorption};
-}
-
-} // namespace
-
 // Per view: u per column (W), then (solid angle, vertical power) per pixel (R x W).
 std::size_t echo_table_count(const Plan& plan) {
     return static_cast<std::size_t>(plan.views) * plan.slice_columns * (1 + 2 * static_cast<std::size_t>(plan.rows));
@@ -76,12 +25,13 @@ std::size_t echo_table_count(const Plan& plan) {
 template <class Real> void echo_table(const Plan& plan, Real* table) {
     using M = Math<Real>;
     // the terms without incidence: the table does not depend on it
-    const typename M::EchoTerms terms = echo_terms<Real>(plan, nullptr);
+    const typename M::EchoTerms terms = echo_terms<Real>(plan, false);
     const std::uint32_t R = plan.rows, W = plan.slice_columns;
+    const std::size_t view_table = echo_table_count(plan) / plan.views;
     for (std::uint32_t s = 0; s < plan.views; ++s) {
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);
         const typename M::PixelView view = pixel_view<Real>(plan, s);
-        Real* u = table + s * echo_table_count(plan) / plan.views;
+        Real* u = table + s * view_table;
         Real* pixel = u + W;
         for (std::uint32_t x = 0; x < W; ++x)
             u[x] = M::pixel_coord(x, W, k.tan_half_h);
@@ -102,7 +52,7 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
                const Real* table, std::uint32_t row_begin, std::uint32_t row_end, const std::uint8_t* view_drawn) {
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
-    const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4);
+    const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4 != nullptr);
     const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
     const std::size_t view_table = echo_table_count(plan) / plan.views;

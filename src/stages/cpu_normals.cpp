@@ -9,7 +9,7 @@
 //
 // Constants: in float the stage reads the same float values the shaders get (SonarParams, SliceInfo);
 // in double it reads the Plan's double values, the views' geometry as compose_depth_draws does.
-// Neighbours across a seam that does not join (a tier view's edges: columns_join) read as no sample.
+// Neighbours across a seam that does not join (a tier view's edges: view_group) read as no sample.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -30,15 +30,14 @@ namespace {
 
 constexpr std::int64_t kRingRows = 5; // rows j-2 .. j+2 of reconstructed positions
 
-// The pixel grid's frustum and depth constants in the working precision: the float path uses the
-// GPU's (already rounded) parameters, the double path the plan's doubles.
-template <class Real> struct PixelGeometry { Real tan_half_h, tan_half_v, depth_a, depth_b; };
+// The depth constants in the working precision: the float path uses the GPU's (already rounded)
+// parameters, the double path the plan's doubles (each view's half extents: pixel_view).
+template <class Real> struct PixelGeometry { Real depth_a, depth_b; };
 template <class Real> PixelGeometry<Real> pixel_geometry(const Plan& plan) {
     if constexpr (std::is_same_v<Real, float>)
-        return {plan.params.tan_half_h, plan.params.tan_half_v, plan.params.depth_a, plan.params.depth_b};
+        return {plan.params.depth_a, plan.params.depth_b};
     else
-        return {static_cast<Real>(plan.tan_half_h), static_cast<Real>(plan.tan_half_v), static_cast<Real>(plan.depth_a),
-                static_cast<Real>(plan.depth_b)};
+        return {static_cast<Real>(plan.depth_a), static_cast<Real>(plan.depth_b)};
 }
 
 // sobel3_normal of the four pixels x .. x + 3 of a row (float), as SSE lanes: where a pixel's whole
@@ -200,12 +199,11 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         out[3] = static_cast<float>(n.w);
     };
     const bool sobel5 = plan.params.normal_method == shared::kNormalsSobel5;
-    // With tier views, a window must not reach across a seam that does not join (columns_join): the
-    // group of a column is 0 for the slices (which join), its view for a tier view.
+    // With tier views, a window must not reach across a seam that does not join: only columns of the
+    // centre's view_group (columns outside the image are zero columns anyway).
     const bool tiers = plan.views > plan.slices;
-    auto group = [&](std::int64_t c) -> std::int64_t {
-        const std::int64_t view = std::clamp<std::int64_t>(c, 0, C - 1) / W;
-        return view < std::int64_t(plan.slices) ? 0 : view;
+    auto group = [&](std::int64_t c) {
+        return view_group(plan, static_cast<std::uint32_t>(std::clamp<std::int64_t>(c, 0, C - 1)));
     };
 
     // The ring holds rows j-2 .. j+2 of the row being computed: those before the first row's j+2 first.
