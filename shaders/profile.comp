@@ -2,6 +2,13 @@
 // walks its rows top to bottom, so every profile cell has exactly one writer and a fixed summation
 // order: no atomics, bit-identical run to run. With the line-array beam geometry the profiles are per
 // cone column instead, each invocation gathering the pixels of its cone columns (gather_cone_columns).
+//
+// Bin lanes: on a GPU one invocation per column leaves the device nearly idle (1k invocations on a
+// 100k-lane chip, each walking every row in turn: 3 ms on an H200). There kBinLanes invocations (one
+// subgroup) share a column: each walks the same pixels (the loads coincide, one transaction for all)
+// and adds only to the bins k with k % kBinLanes == its lane. Every cell keeps one writer and the order
+// of its additions, so the frame is bit-identical for any kBinLanes; lavapipe runs 1 (its lanes are a
+// loop over the same work).
 // The host zeroes `profiles` (vkCmdFillBuffer) first: a memset is far cheaper than per-invocation
 // strided stores.
 //
@@ -24,6 +31,7 @@ layout(constant_id = kSpecTierViews) const uint kTierViews = 0u; // Plan::views 
 layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                    // params.line_array
 layout(constant_id = kSpecPerInvocation) const uint kConesPerInvocation = 4u;       // line_array (see below)
 layout(constant_id = kSpecSubpixel) const uint kSubpixel = 0u;                     // Plan::subpixel_capacity > 0
+layout(constant_id = kSpecBinLanes) const uint kBinLanes = 1u;                      // a power of 2 (see above)
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
@@ -38,6 +46,15 @@ vec2 load_echo(uint p) {
     return echo2[p];
 }
 layout(std430, binding = kBindingProfiles) buffer ProfileBuffer { float profiles[]; };
+
+// This invocation's lane among the kBinLanes sharing its column, and its first bin of a spread: the
+// first k >= k_first with k % kBinLanes == lane.
+uint bin_lane() {
+    return gl_GlobalInvocationID.x & (kBinLanes - 1u);
+}
+int first_lane_bin(int k_first) {
+    return k_first + int((bin_lane() - uint(k_first)) & (kBinLanes - 1u));
+}
 
 // The range spread of pixel (row, column) with echo er, over the five-row window of its column.
 // `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
@@ -95,7 +112,7 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
         precise float weighted_b = weight_b * er.x;
         uint base_a = uint(cone_a) * params.bins_padded;
         uint base_b = uint(cone_b) * params.bins_padded;
-        for (int k = spread.k_first; k <= spread.k_last; ++k) {
+        for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
             float share = range_share(spread, k);
             if (weight_a > 0.0) {
                 precise float add = share * weighted_a;
@@ -168,7 +185,7 @@ void add_subpixel(uint column) {
         }
         RangeSpread spread = range_spread(kRangeKernelTent, vec2(0.0), vec2(0.0), vec2(e, range_m), vec2(0.0),
                                           vec2(0.0), params.range_min_m, params.inv_bin_width_m, 0.0, params.bins);
-        for (int k = spread.k_first; k <= spread.k_last; ++k) {
+        for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
             precise float add = range_share(spread, k) * e;
             profiles[column * params.bins_padded + uint(k)] += add;
         }
@@ -176,8 +193,9 @@ void add_subpixel(uint column) {
 }
 
 void main() {
+    uint unit = gl_GlobalInvocationID.x / kBinLanes; // a pixel column, or a run of cone columns
     if (kLineArray != 0u) {
-        uint first_cone = gl_GlobalInvocationID.x * kConesPerInvocation;
+        uint first_cone = unit * kConesPerInvocation;
         if (first_cone < params.profile_columns) {
             uint end_cone = min(first_cone + kConesPerInvocation, params.profile_columns);
             gather_cone_columns(first_cone, end_cone);
@@ -189,7 +207,7 @@ void main() {
         }
         return;
     }
-    uint column = gl_GlobalInvocationID.x;
+    uint column = unit;
     uint columns = params.columns;
     if (column >= columns) {
         return;
@@ -210,7 +228,7 @@ void main() {
             // `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
             RangeSpread spread = range_spread(kRangeKernel, up2, up, er, next, next2, params.range_min_m,
                                               params.inv_bin_width_m, params.edge_relative_jump, params.bins);
-            for (int k = spread.k_first; k <= spread.k_last; ++k) {
+            for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
                 precise float share = range_share(spread, k) * e;
                 profiles[base + uint(k)] += share;
             }

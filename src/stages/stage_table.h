@@ -90,6 +90,19 @@ constexpr std::uint32_t kBeamsPerInvocation = 16;
 // line_array: cone columns per profile invocation; a pixel between two of them is loaded once, not
 // twice (a quarter of the pixels a gather touches at 4, against all of them at 1).
 constexpr std::uint32_t kConesPerInvocation = 4;
+// Profile invocations sharing one column's bins on a GPU (shaders/profile.comp): one subgroup.
+constexpr std::uint32_t kProfileBinLanes = 32;
+
+// How a device runs the stages whose best layout depends on it (only the profile step so far). A CPU
+// device (lavapipe) runs a workgroup's lanes as loops over the same work, so there few invocations
+// that each do much pay; a GPU needs 10^4-10^5 of them to be busy at all. Frames are bit-identical
+// for every shape (tested).
+struct DeviceShape {
+    std::uint32_t cones_per_invocation = kConesPerInvocation; // profile, line_array
+    std::uint32_t bin_lanes = 1;                              // profile: invocations per column (a power of 2)
+};
+constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1};
+constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes};
 
 constexpr std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
     return (a + b - 1) / b;
@@ -109,7 +122,7 @@ using Dispatches = std::array<Dispatch, kMaxDispatches>; // in recording order; 
 struct VulkanStage {
     std::array<const char*, 4> shaders; // every shader file it may run, null-padded
     void (*record)(vk::RecordContext&); // its commands, barriers after its writes included
-    Dispatches (*dispatches)(const Plan&);
+    Dispatches (*dispatches)(const Plan&, const DeviceShape&);
 };
 
 // In both of the CPU backend's precisions (SonarConfig::cpu_precision), picked at compile time.
@@ -134,31 +147,35 @@ struct StageInfo {
 
 namespace stage_table { // the table's entries, named
 
-constexpr Dispatches no_dispatch(const Plan&) {
+constexpr Dispatches no_dispatch(const Plan&, const DeviceShape&) {
     return {}; // a render pass: its draws follow the scene (vk::record_depth)
 }
-constexpr Dispatches import_dispatch(const Plan& plan) {
+constexpr Dispatches import_dispatch(const Plan& plan, const DeviceShape&) {
     return {{{"import_depth.comp", group_count(std::uint64_t(plan.columns) * plan.rows)}}};
 }
-constexpr Dispatches normals_dispatch(const Plan& plan) {
+constexpr Dispatches normals_dispatch(const Plan& plan, const DeviceShape&) {
     return {{{"normals.comp", group_count(std::uint64_t(plan.rows) * ceil_div(plan.columns, kNormalsRun))}}};
 }
-constexpr Dispatches echo_dispatch(const Plan& plan) {
+constexpr Dispatches echo_dispatch(const Plan& plan, const DeviceShape&) {
     return {{{"echo.comp", group_count(ceil_div(plan.columns, kEchoPixels)), plan.rows}}};
 }
-// profile: one invocation per pixel column (planar) or per kConesPerInvocation cone columns
-// (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of beams, or
+// profile: shape.bin_lanes invocations per pixel column (planar) or per shape.cones_per_invocation
+// cone columns (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of beams, or
 // channels x cells (far deposit), or channels (far convolve).
 enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convolve, sidelobe };
 constexpr bool far_sidelobes(const Plan& plan) {
     return plan.effects.horizontal_pattern && plan.far_cells > 0;
 }
-constexpr Dispatches beamform_dispatch(const Plan& plan) {
+constexpr std::uint64_t profile_invocations(const Plan& plan, const DeviceShape& shape) {
+    const std::uint64_t units =
+        plan.line_array ? ceil_div(plan.profile_columns, shape.cones_per_invocation) : plan.profile_columns;
+    return units * shape.bin_lanes;
+}
+constexpr Dispatches beamform_dispatch(const Plan& plan, const DeviceShape& shape) {
     const std::uint32_t bin_groups = group_count(ceil_div(plan.bins, 4));
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan.beams, kBeamsPerInvocation));
     Dispatches d{};
-    d[profile] = {"profile.comp", group_count(plan.line_array ? ceil_div(plan.profile_columns, kConesPerInvocation)
-                                                              : plan.profile_columns)};
+    d[profile] = {"profile.comp", group_count(profile_invocations(plan, shape))};
     d[resample] = {"resample.comp", bin_groups, beam_runs};
     if (far_sidelobes(plan)) {
         d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};

@@ -149,7 +149,7 @@ Result<void> HostDepthPass::init(VulkanContext& context, const Plan& plan, const
     b.resolve_passes();
     const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
     const VkPhysicalDeviceLimits& limits = context.properties.limits;
-    if (!dispatches_fit(plan, limits, true) || pixels * 16 > limits.maxStorageBufferRange) {
+    if (!dispatches_fit(plan, b.shape_, limits, true) || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "HostDepthDesc: " + std::to_string(plan.columns) + " x " +
                                                       std::to_string(plan.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -318,7 +318,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(context.fn.vkBeginCommandBuffer(commands, &begin));
         if (i < stage_total) {
-            RecordContext record{b, commands, stages[i]->host_depth.dispatches(b.plan_), this, &image};
+            RecordContext record{b, commands, stages[i]->host_depth.dispatches(b.plan_, b.shape_), this, &image};
             stages[i]->host_depth.record(record);
         } else {
             b.record_readback(commands, save_mask);
@@ -364,7 +364,7 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     bind_image(image);
     for (const StageInfo& stage : kStageTable) {
         if (!stage.runs(b.plan_)) continue;
-        RecordContext stage_record{b, commands, stage.host_depth.dispatches(b.plan_), this, &image};
+        RecordContext stage_record{b, commands, stage.host_depth.dispatches(b.plan_, b.shape_), this, &image};
         stage.host_depth.record(stage_record);
     }
     b.record_readback(commands, save_mask);

@@ -117,8 +117,10 @@ struct ProfileSpecialization {
     std::uint32_t cones_per_invocation = 4; // line_array
     std::uint32_t subpixel = 0;             // Plan::subpixel_capacity > 0
     std::uint32_t tier_views = 0;
-    std::array<SpecConstant, 6> constants() const {
+    std::uint32_t bin_lanes = 1; // invocations per column (DeviceShape)
+    std::array<SpecConstant, 7> constants() const {
         return {{{shared::kSpecTierViews, tier_views},
+                 {shared::kSpecBinLanes, bin_lanes},
                  {shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
                  {shared::kSpecLineArray, line_array},

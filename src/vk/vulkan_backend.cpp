@@ -39,10 +39,10 @@ VulkanBackend::~VulkanBackend() {
     }
 }
 
-bool dispatches_fit(const Plan& plan, const VkPhysicalDeviceLimits& limits, bool host_depth) {
+bool dispatches_fit(const Plan& plan, const DeviceShape& shape, const VkPhysicalDeviceLimits& limits, bool host_depth) {
     for (const StageInfo& stage : kStageTable) {
         if (!stage.runs(plan)) continue;
-        for (const Dispatch& d : (host_depth ? stage.host_depth : stage.vulkan).dispatches(plan)) {
+        for (const Dispatch& d : (host_depth ? stage.host_depth : stage.vulkan).dispatches(plan, shape)) {
             if (d.shader != nullptr &&
                 (d.x > limits.maxComputeWorkGroupCount[0] || d.y > limits.maxComputeWorkGroupCount[1] ||
                  d.z > limits.maxComputeWorkGroupCount[2]))
@@ -57,6 +57,18 @@ void VulkanBackend::resolve_passes() {
     sidelobes_ = plan_.effects.horizontal_pattern;
     far_sidelobes_ = sidelobes_ && plan_.far_cells > 0;
     face_normals_ = plan_.face_normals;
+    const bool cpu_device = context_.properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+    switch (options_.profile) {
+    case ProfileLayout::automatic:
+        shape_ = cpu_device ? kCpuDeviceShape : kGpuDeviceShape;
+        break;
+    case ProfileLayout::columns:
+        shape_ = kCpuDeviceShape;
+        break;
+    case ProfileLayout::bin_lanes:
+        shape_ = kGpuDeviceShape;
+        break;
+    }
 }
 
 Result<void> VulkanBackend::init() {
@@ -74,7 +86,7 @@ Result<void> VulkanBackend::init() {
                 std::to_string(limits.maxFramebufferHeight) + " (lower pixels_per_beam or rows_per_vfov)");
     }
     const std::uint64_t pixels = std::uint64_t(plan_.columns) * plan_.rows;
-    if (!dispatches_fit(plan_, limits, false) || pixels * 16 > limits.maxStorageBufferRange) {
+    if (!dispatches_fit(plan_, shape_, limits, false) || pixels * 16 > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported, "vulkan backend: " + std::to_string(plan_.columns) + " x " +
                                                       std::to_string(plan_.rows) +
                                                       " pixels exceed the device's compute limits");
@@ -496,7 +508,8 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.range_kernel = plan_.params.range_kernel;
     profile.echo_half = gpu_params_.echo_half;
     profile.line_array = plan_.line_array ? 1u : 0u;
-    profile.cones_per_invocation = kConesPerInvocation;
+    profile.cones_per_invocation = shape_.cones_per_invocation;
+    profile.bin_lanes = shape_.bin_lanes;
     profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
     profile.tier_views = plan_.views > plan_.slices ? 1u : 0u;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;

@@ -34,7 +34,7 @@ constexpr VkAccessFlags kShaderOrTransferRead = VK_ACCESS_SHADER_READ_BIT | VK_A
 
 // Whether every dispatch of the stages the plan runs (kStageTable's, on the backend's own path or on
 // the host-depth path) fits the device's workgroup counts.
-bool dispatches_fit(const Plan& plan, const VkPhysicalDeviceLimits& limits, bool host_depth);
+bool dispatches_fit(const Plan& plan, const DeviceShape& shape, const VkPhysicalDeviceLimits& limits, bool host_depth);
 
 template <class T> std::size_t bytes_of(const std::vector<T>& v) {
     return v.size() * sizeof(T);
@@ -111,7 +111,8 @@ private:
     VulkanContext& context_;
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
     const SceneData& scene_;
-    RendererOptions options_; // the Vulkan paths (tables, resample, stage_timing)
+    RendererOptions options_; // the Vulkan paths (tables, resample, profile, stage_timing)
+    DeviceShape shape_;       // from the device type and options_.profile (resolve_passes)
     // Which optional passes run, from the plan's effects (init and the host-depth path both call it).
     void resolve_passes();
     bool incidence_ = false, sidelobes_ = false;

@@ -252,7 +252,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
         if (i < stage_total) {
-            RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_)};
+            RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_, shape_)};
             stages[i]->vulkan.record(record);
         } else {
             record_readback(commands, save_mask);

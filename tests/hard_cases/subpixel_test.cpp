@@ -453,6 +453,13 @@ TEST(SubpixelBackends, BothBackendsAddTheSameReturns) {
     EXPECT_GT(peak, 0.0);
     EXPECT_LT(worst, 1e-6);
     EXPECT_NEAR(total(a), total(b), 1e-6 * total(a));
+    // A GPU's profile layout (32 invocations a column, tests/stages/beamform_test.cpp) adds the
+    // returns to the same cells in the same order.
+    RendererOptions lanes;
+    lanes.profile = ProfileLayout::bin_lanes;
+    auto gpu_lanes = render_once(Backend::vulkan, config, scene, {}, kSaveAll, 1, lanes);
+    ASSERT_TRUE(gpu_lanes);
+    EXPECT_EQ(gpu_lanes->frame.clean, b);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, Subpixel, ::testing::Values(Backend::cpu, Backend::vulkan), backend_name);

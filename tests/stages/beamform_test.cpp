@@ -446,6 +446,45 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
     }
 }
 
+// profile.comp's two layouts (RendererOptions::profile): one invocation per column, walking all its
+// bins (lavapipe), or 32 per column, each adding to every 32nd bin (GPUs). Each profile cell keeps one
+// writer and the order of its additions, so the frames are the same bits; on lavapipe both run here.
+// Planar columns, the line array's cone gather with its tier views, and the tent kernel (two bins a
+// pixel: lanes meet at a pixel's edge bins).
+TEST(ProfileLayout, BinLanesGiveTheSameBitsAsColumns) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    struct Case {
+        const char* name;
+        BeamGeometry geometry;
+        RangeKernel kernel;
+    };
+    const Case cases[] = {{"line array, footprint", BeamGeometry::line_array, RangeKernel::footprint},
+                          {"planar, footprint", BeamGeometry::planar, RangeKernel::footprint},
+                          {"line array, tent", BeamGeometry::line_array, RangeKernel::tent}};
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.name);
+        SonarConfig config = quiet_config();
+        config.beam_geometry = k.geometry;
+        config.range_kernel = k.kernel;
+        RendererOptions columns, lanes;
+        columns.profile = ProfileLayout::columns;
+        lanes.profile = ProfileLayout::bin_lanes;
+        auto a = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, columns);
+        auto b = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, lanes);
+        ASSERT_TRUE(a && b);
+        EXPECT_EQ(a->frame.profiles, b->frame.profiles);
+        EXPECT_EQ(a->frame.clean, b->frame.clean);
+        const auto lit =
+            std::count_if(a->frame.profiles.begin(), a->frame.profiles.end(), [](float v) { return v > 0.0f; });
+        EXPECT_GT(lit, 1000); // equal frames are not two empty ones
+    }
+}
+
 // Where the walk would add different terms, the host keeps the gather: a full circle (beams 0 and
 // beams-1 gather from every column), and a span that holds a column giving its beam nothing.
 TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {

@@ -175,22 +175,24 @@ TEST(StageTable, DispatchesRunTheStagesShaders) {
         for (const StageInfo& stage : kStageTable) {
             for (const VulkanStage* side : {&stage.vulkan, &stage.host_depth}) {
                 const std::vector<const char*> shaders = shader_names(*side);
-                for (const Dispatch& d : side->dispatches(p.plan)) {
-                    if (d.shader == nullptr) continue;
-                    bool listed = false;
-                    for (const char* shader : shaders)
-                        listed = listed || std::string(shader) == d.shader;
-                    EXPECT_TRUE(listed) << stage.name << " dispatches " << d.shader << ", not in its shaders";
-                    EXPECT_GE(d.x, 1u);
-                    EXPECT_GE(d.y, 1u);
-                    EXPECT_GE(d.z, 1u);
-                    EXPECT_LE(d.x, 65535u);
-                    EXPECT_LE(d.y, 65535u);
-                    EXPECT_LE(d.z, 65535u);
+                for (const DeviceShape& shape : {kCpuDeviceShape, kGpuDeviceShape}) {
+                    for (const Dispatch& d : side->dispatches(p.plan, shape)) {
+                        if (d.shader == nullptr) continue;
+                        bool listed = false;
+                        for (const char* shader : shaders)
+                            listed = listed || std::string(shader) == d.shader;
+                        EXPECT_TRUE(listed) << stage.name << " dispatches " << d.shader << ", not in its shaders";
+                        EXPECT_GE(d.x, 1u);
+                        EXPECT_GE(d.y, 1u);
+                        EXPECT_GE(d.z, 1u);
+                        EXPECT_LE(d.x, 65535u);
+                        EXPECT_LE(d.y, 65535u);
+                        EXPECT_LE(d.z, 65535u);
+                    }
                 }
             }
         }
-        for (const Dispatch& d : kStageTable[0].vulkan.dispatches(p.plan))
+        for (const Dispatch& d : kStageTable[0].vulkan.dispatches(p.plan, kCpuDeviceShape))
             EXPECT_EQ(d.shader, nullptr) << "the depth pass draws, it does not dispatch";
     }
 }
@@ -211,18 +213,21 @@ TEST(StageTable, DispatchesCoverThePlansGrid) {
         SCOPED_TRACE(p.name);
         const Plan& plan = p.plan;
         const std::uint64_t pixels = std::uint64_t(plan.columns) * plan.rows;
-        const Dispatches import = entry(StageId::depth).host_depth.dispatches(plan);
+        const Dispatches import = entry(StageId::depth).host_depth.dispatches(plan, kCpuDeviceShape);
         expect_covers(import[0].x, 1, pixels, "import: one pixel per invocation");
 
-        const Dispatch normals = entry(StageId::normals).vulkan.dispatches(plan)[0];
+        const Dispatch normals = entry(StageId::normals).vulkan.dispatches(plan, kCpuDeviceShape)[0];
         expect_covers(normals.x, 1, plan.rows * ceil_div(plan.columns, kNormalsRun), "normals: a run of a row");
 
-        const Dispatch echo = entry(StageId::echo).vulkan.dispatches(plan)[0];
+        const Dispatch echo = entry(StageId::echo).vulkan.dispatches(plan, kCpuDeviceShape)[0];
         expect_covers(echo.x, kEchoPixels, plan.columns, "echo: pixels of a row");
         EXPECT_EQ(echo.y, plan.rows) << "echo: one row of workgroups per pixel row";
 
-        const Dispatches beamform = entry(StageId::beamform).vulkan.dispatches(plan);
+        const Dispatches beamform = entry(StageId::beamform).vulkan.dispatches(plan, kCpuDeviceShape);
         expect_covers(beamform[profile].x, plan.line_array ? kConesPerInvocation : 1, plan.profile_columns, "profile");
+        // a GPU: kProfileBinLanes invocations per column (line array: per cone column)
+        const Dispatches gpu = entry(StageId::beamform).vulkan.dispatches(plan, kGpuDeviceShape);
+        expect_covers(gpu[profile].x, 1, plan.profile_columns * std::uint64_t(kProfileBinLanes), "profile, bin lanes");
         const bool sidelobes = plan.effects.horizontal_pattern, far = sidelobes && plan.far_cells > 0;
         for (const std::size_t pass : {std::size_t(resample), std::size_t(sidelobe)}) {
             if (pass == sidelobe && !sidelobes) {
