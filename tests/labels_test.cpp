@@ -288,10 +288,13 @@ TEST_P(LabelBackendTest, BundledSceneTableAndNoChangeToIntensities) {
 }
 
 // GPU vs CPU on the bundled scene: the labels are one host stage on each backend's depth and echo,
-// so they differ only where the two backends' echoes do (float order, lavapipe's rasterization is the
-// CPU rasterizer's rule). Integer labels must be identical wherever the winner is clear: a cell whose
-// top instance holds at least 50.1 % of its energy on the CPU cannot lose it to a 1e-5 relative change
-// (the echo's GPU-vs-CPU tolerance, tests/tolerances.h, is far below the 0.2 % margin).
+// so they differ only where the two backends' echoes do: float order, and the pixels on a triangle's
+// edge that one rasterizer covers and the other does not (lavapipe follows the CPU rasterizer's rule;
+// a real GPU does not, kDepthEdgePixelBudget). Elsewhere a cell whose top instance holds at least
+// 50.1 % of its energy on the CPU cannot lose it to a 1e-5 relative change (the echo's GPU-vs-CPU
+// tolerance, tests/tolerances.h, is far below the 0.2 % margin); one edge pixel more or less can move
+// it. Measured: 0 clear cells differ on lavapipe (required there), 4 of 202832 on an H200; a GPU may
+// differ in 1e-4 of them.
 TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;
@@ -324,7 +327,7 @@ TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
                 "%.2e rad, %zu cells over 1e-3\n",
                 labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off);
     EXPECT_GT(clear, labelled / 2);
-    EXPECT_EQ(differ_clear, 0u);
+    EXPECT_LE(double(differ_clear), vulkan_device_is_cpu() ? 0.0 : 1e-4 * double(clear));
     // A cell's elevation is a mean over the same pixels with weights 1e-5 apart (< 1e-3 rad), except
     // where a depth-edge pixel is hit on one backend only (tolerances.h, kFrameCellBudget): there one
     // pixel more or less moves a cell's mean. At most 1e-4 of the cells may be over.

@@ -28,6 +28,13 @@ inline Context* vulkan_context() {
     return context.get();
 }
 
+// Whether the tests' Vulkan device is a CPU implementation (lavapipe, whose rasterizer follows the CPU
+// backend's rule), not a GPU (Context::device_description ends in "CPU)" for those).
+inline bool vulkan_device_is_cpu() {
+    Context* context = vulkan_context();
+    return context != nullptr && context->device_description().find(", CPU)") != std::string::npos;
+}
+
 inline Context& cpu_context() {
     static Context context = Context::cpu_only();
     return context;

@@ -32,11 +32,12 @@ enum class TableAccess : std::uint8_t { automatic, storage };
 // adds the same terms in the same order as the gather, else gather; gather: always gather. Frames
 // are bit-identical either way; automatic is the fast path.
 enum class ResampleMethod : std::uint8_t { automatic, gather };
-// How profile.comp shares out the range profiles. automatic: columns on CPU devices (lavapipe), bin
-// lanes on GPUs; columns: one invocation per pixel column (line array: per four cone columns), each
-// walking all its rows; bin_lanes: 32 invocations per column (line array: per cone column), each
-// adding to every 32nd bin, which a GPU needs to be busy. Frames are bit-identical either way.
-enum class ProfileLayout : std::uint8_t { automatic, columns, bin_lanes };
+// How the Vulkan backend shares out the beamform passes. automatic: by the device's type; cpu_device:
+// few invocations that each do much (lavapipe runs a workgroup's lanes as loops): one per pixel column
+// (line array: per four cone columns) for the range profiles, 16 beams each for resample and side
+// lobes; gpu: 32 invocations per column (line array: per cone column), each adding to every 32nd bin,
+// and 4 beams each, which a GPU needs to be busy. Frames are bit-identical either way.
+enum class WorkLayout : std::uint8_t { automatic, cpu_device, gpu };
 // How the Vulkan backend measures Frame::times. automatic: timestamp queries where the queue has
 // them, except on CPU devices (lavapipe), else host clocks around one submission per stage; host:
 // always host clocks; timestamps: timestamp queries where the queue has them, else host clocks.
@@ -54,13 +55,13 @@ struct RendererOptions {
     // Vulkan backend paths (ignored by the CPU backend); the defaults are the fast paths.
     TableAccess tables = TableAccess::automatic;
     ResampleMethod resample = ResampleMethod::automatic;
-    ProfileLayout profile = ProfileLayout::automatic;
+    WorkLayout layout = WorkLayout::automatic;
     StageTiming stage_timing = StageTiming::automatic;
 };
 
 // The options `base` with what the environment asks for, for tools and tests; vksonar itself never
 // reads the environment. VKSONAR_HOST_THREADS=N sets host_threads (when base.host_threads is 0),
-// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather, VKSONAR_PROFILE=columns|bin_lanes and
+// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather, VKSONAR_LAYOUT=cpu_device|gpu and
 // VKSONAR_STAGE_TIMING=host|timestamps set the paths above; other values are ignored. Thread-safety: reads the
 // environment (std::getenv).
 [[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});

@@ -319,8 +319,8 @@ RendererOptions renderer_options_from_env(RendererOptions base) {
     }
     if (is("VKSONAR_TABLES", "storage")) base.tables = TableAccess::storage;
     if (is("VKSONAR_RESAMPLE", "gather")) base.resample = ResampleMethod::gather;
-    if (is("VKSONAR_PROFILE", "columns")) base.profile = ProfileLayout::columns;
-    if (is("VKSONAR_PROFILE", "bin_lanes")) base.profile = ProfileLayout::bin_lanes;
+    if (is("VKSONAR_LAYOUT", "cpu_device")) base.layout = WorkLayout::cpu_device;
+    if (is("VKSONAR_LAYOUT", "gpu")) base.layout = WorkLayout::gpu;
     if (is("VKSONAR_STAGE_TIMING", "host")) base.stage_timing = StageTiming::host;
     if (is("VKSONAR_STAGE_TIMING", "timestamps")) base.stage_timing = StageTiming::timestamps;
     return base;

@@ -93,16 +93,21 @@ constexpr std::uint32_t kConesPerInvocation = 4;
 // Profile invocations sharing one column's bins on a GPU (shaders/profile.comp): one subgroup.
 constexpr std::uint32_t kProfileBinLanes = 32;
 
-// How a device runs the stages whose best layout depends on it (only the profile step so far). A CPU
-// device (lavapipe) runs a workgroup's lanes as loops over the same work, so there few invocations
-// that each do much pay; a GPU needs 10^4-10^5 of them to be busy at all. Frames are bit-identical
-// for every shape (tested).
+// Beams per resample/sidelobe invocation on a GPU (a multiple of 4: sidelobe.comp stores vec4s of beams).
+constexpr std::uint32_t kGpuBeamsPerInvocation = 4;
+
+// How a device runs the beamform passes, whose best layout depends on it (RendererOptions::layout). A
+// CPU device (lavapipe) runs a workgroup's lanes as loops over the same work, so there few invocations
+// that each do much pay; a GPU needs 10^4-10^5 of them to be busy at all (the default preset: 1k
+// profile invocations and 128 resample/sidelobe warps on a 132-SM chip). Frames are bit-identical for
+// every shape (tested): each output keeps its one writer and the order of its additions.
 struct DeviceShape {
     std::uint32_t cones_per_invocation = kConesPerInvocation; // profile, line_array
     std::uint32_t bin_lanes = 1;                              // profile: invocations per column (a power of 2)
+    std::uint32_t beams_per_invocation = kBeamsPerInvocation; // resample, sidelobe
 };
-constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1};
-constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes};
+constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation};
+constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation};
 
 constexpr std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
     return (a + b - 1) / b;
@@ -160,7 +165,8 @@ constexpr Dispatches echo_dispatch(const Plan& plan, const DeviceShape&) {
     return {{{"echo.comp", group_count(ceil_div(plan.columns, kEchoPixels)), plan.rows}}};
 }
 // profile: shape.bin_lanes invocations per pixel column (planar) or per shape.cones_per_invocation
-// cone columns (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of beams, or
+// cone columns (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of
+// shape.beams_per_invocation beams, or
 // channels x cells (far deposit), or channels (far convolve).
 enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convolve, sidelobe };
 constexpr bool far_sidelobes(const Plan& plan) {
@@ -173,7 +179,7 @@ constexpr std::uint64_t profile_invocations(const Plan& plan, const DeviceShape&
 }
 constexpr Dispatches beamform_dispatch(const Plan& plan, const DeviceShape& shape) {
     const std::uint32_t bin_groups = group_count(ceil_div(plan.bins, 4));
-    const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan.beams, kBeamsPerInvocation));
+    const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan.beams, shape.beams_per_invocation));
     Dispatches d{};
     d[profile] = {"profile.comp", group_count(profile_invocations(plan, shape))};
     d[resample] = {"resample.comp", bin_groups, beam_runs};

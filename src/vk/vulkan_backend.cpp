@@ -58,14 +58,14 @@ void VulkanBackend::resolve_passes() {
     far_sidelobes_ = sidelobes_ && plan_.far_cells > 0;
     face_normals_ = plan_.face_normals;
     const bool cpu_device = context_.properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
-    switch (options_.profile) {
-    case ProfileLayout::automatic:
+    switch (options_.layout) {
+    case WorkLayout::automatic:
         shape_ = cpu_device ? kCpuDeviceShape : kGpuDeviceShape;
         break;
-    case ProfileLayout::columns:
+    case WorkLayout::cpu_device:
         shape_ = kCpuDeviceShape;
         break;
-    case ProfileLayout::bin_lanes:
+    case WorkLayout::gpu:
         shape_ = kGpuDeviceShape;
         break;
     }
@@ -317,13 +317,13 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     const std::uint32_t materials_vec4s = uniform_vec4s(bytes_of(materials));
     const std::uint32_t column_table_vec4s = uniform_vec4s(bytes_of(column_table));
     const std::uint32_t beam_table_vec4s = uniform_vec4s(bytes_of(beam_table));
-    // The side-lobe table: the weights, then per run of kBeamsPerInvocation beams the first and last
+    // The side-lobe table: the weights, then per run of shape_.beams_per_invocation beams the first and last
     // source beam any of its weights reaches (as floats, exact below 2^24, within [0, beams)):
     // sidelobe.comp loops over those sources only. A line array's kernel spans the most beams at the fan's edges; near
     // broadside most of its taps are 0, and a zero weight adds exactly +0, so skipping them changes no bit.
     std::vector<float> sidelobe_table = plan_.sidelobe_weight;
-    for (std::uint32_t first = 0; first < plan_.beams; first += kBeamsPerInvocation) {
-        const std::uint32_t end = std::min(first + kBeamsPerInvocation, plan_.beams);
+    for (std::uint32_t first = 0; first < plan_.beams; first += shape_.beams_per_invocation) {
+        const std::uint32_t end = std::min(first + shape_.beams_per_invocation, plan_.beams);
         const std::int64_t half_taps = (std::int64_t(plan_.sidelobe_taps) - 1) / 2;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
         for (std::uint32_t j = first; j < end; ++j) {
@@ -517,9 +517,9 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).
     const bool force_gather = options_.resample == ResampleMethod::gather;
     ResampleSpecialization resample;
-    resample.beams_per_invocation = kBeamsPerInvocation;
+    resample.beams_per_invocation = shape_.beams_per_invocation;
     resample.beam_major_out = sidelobes_ ? 1u : 0u; // the side-lobe pass's input layout
-    resample.walk = !force_gather && resample_can_walk(plan_, kBeamsPerInvocation) ? 1u : 0u;
+    resample.walk = !force_gather && resample_can_walk(plan_, shape_.beams_per_invocation) ? 1u : 0u;
     resample.uniform_tables = both_uniform(column_table_vec4s, beam_table_vec4s);
     resample.column_vec4s = resample.uniform_tables ? column_table_vec4s : 1u;
     resample.beam_vec4s = resample.uniform_tables ? beam_table_vec4s : 1u;
@@ -527,7 +527,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         return r;
     if (sidelobes_) {
         SidelobeSpecialization sidelobe;
-        sidelobe.beams_per_invocation = kBeamsPerInvocation;
+        sidelobe.beams_per_invocation = shape_.beams_per_invocation;
         sidelobe.vec4_out = plan_.beams % 4 == 0 ? 1u : 0u;
         sidelobe.uniform_tables = both_uniform(sidelobe_vec4s, far_table_vec4s);
         sidelobe.weight_vec4s = sidelobe.uniform_tables ? sidelobe_vec4s : 1u;

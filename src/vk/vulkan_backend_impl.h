@@ -111,8 +111,8 @@ private:
     VulkanContext& context_;
     Plan plan_; // a copy: the backend must not depend on where the caller keeps its plan
     const SceneData& scene_;
-    RendererOptions options_; // the Vulkan paths (tables, resample, profile, stage_timing)
-    DeviceShape shape_;       // from the device type and options_.profile (resolve_passes)
+    RendererOptions options_; // the Vulkan paths (tables, resample, layout, stage_timing)
+    DeviceShape shape_;       // from the device type and options_.layout (resolve_passes)
     // Which optional passes run, from the plan's effects (init and the host-depth path both call it).
     void resolve_passes();
     bool incidence_ = false, sidelobes_ = false;

@@ -456,7 +456,7 @@ TEST(SubpixelBackends, BothBackendsAddTheSameReturns) {
     // A GPU's profile layout (32 invocations a column, tests/stages/beamform_test.cpp) adds the
     // returns to the same cells in the same order.
     RendererOptions lanes;
-    lanes.profile = ProfileLayout::bin_lanes;
+    lanes.layout = WorkLayout::gpu;
     auto gpu_lanes = render_once(Backend::vulkan, config, scene, {}, kSaveAll, 1, lanes);
     ASSERT_TRUE(gpu_lanes);
     EXPECT_EQ(gpu_lanes->frame.clean, b);

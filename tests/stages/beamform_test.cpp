@@ -446,12 +446,13 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
     }
 }
 
-// profile.comp's two layouts (RendererOptions::profile): one invocation per column, walking all its
-// bins (lavapipe), or 32 per column, each adding to every 32nd bin (GPUs). Each profile cell keeps one
+// The beamform passes' two layouts (RendererOptions::layout): for a CPU device one invocation per
+// column walking all its bins and 16 beams per resample/sidelobe invocation (lavapipe), for a GPU 32
+// per column, each adding to every 32nd bin, and 4 beams (kGpuDeviceShape). Each output keeps one
 // writer and the order of its additions, so the frames are the same bits; on lavapipe both run here.
 // Planar columns, the line array's cone gather with its tier views, and the tent kernel (two bins a
 // pixel: lanes meet at a pixel's edge bins).
-TEST(ProfileLayout, BinLanesGiveTheSameBitsAsColumns) {
+TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
@@ -472,8 +473,8 @@ TEST(ProfileLayout, BinLanesGiveTheSameBitsAsColumns) {
         config.beam_geometry = k.geometry;
         config.range_kernel = k.kernel;
         RendererOptions columns, lanes;
-        columns.profile = ProfileLayout::columns;
-        lanes.profile = ProfileLayout::bin_lanes;
+        columns.layout = WorkLayout::cpu_device;
+        lanes.layout = WorkLayout::gpu;
         auto a = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, columns);
         auto b = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, lanes);
         ASSERT_TRUE(a && b);

@@ -11,6 +11,7 @@
 #include <random>
 #include <vector>
 
+#include "core/pixel_views.h"
 #include "cpu_stage_support.h"
 #include "stages/gpu_cpu_support.h"
 
@@ -445,7 +446,6 @@ TEST_P(DepthGpuCpu, DepthDiffersOnlyOnTriangleEdges) {
     std::size_t hits = 0, mismatched = 0;
     double max_rel_interior = 0, max_abs_range_m = 0;
     for (std::uint32_t row = 0; row < g.rows; ++row) {
-        const double v = math_f64::pixel_coord(row, plan.rows, plan.tan_half_v);
         for (std::uint32_t col = 0; col < g.columns; ++col) {
             const std::size_t i = static_cast<std::size_t>(row) * g.columns + col;
             hits += g.depth[i] > 0;
@@ -457,9 +457,16 @@ TEST_P(DepthGpuCpu, DepthDiffersOnlyOnTriangleEdges) {
                 ++mismatched;
             } else {
                 max_rel_interior = std::max(max_rel_interior, rel);
-                // The same difference as slant range in metres: r = z |(u, v, 1)|.
-                const double u = math_f64::pixel_coord(col % plan.slice_columns, plan.slice_columns, plan.tan_half_h);
-                max_abs_range_m = std::max(max_abs_range_m, std::abs(zg - zc) * std::sqrt(1 + u * u + v * v));
+                // The same difference as slant range in metres, r = z |(u, v, 1)| in the pixel's own view
+                // (a tier view's extents are not the slices'), over the pixels the range window records:
+                // the depth pass also covers the corners beyond range_max, where the bound below would
+                // scale with their range instead.
+                const math_f64::PixelView view = pixel_view<double>(plan, col / plan.slice_columns);
+                const double u = math_f64::pixel_coord(col % plan.slice_columns, plan.slice_columns, view.tan_half_h);
+                const double v = math_f64::pixel_coord(row, plan.rows, view.tan_half_v);
+                const double stretch = std::sqrt(1 + u * u + v * v);
+                if (zc * stretch < plan.config.range_max_m)
+                    max_abs_range_m = std::max(max_abs_range_m, std::abs(zg - zc) * stretch);
             }
         }
     }

@@ -329,21 +329,46 @@ std::vector<float> expect_normals_match(const Plan& plan, const Frame& g) {
     const std::size_t pixels = static_cast<std::size_t>(g.rows) * g.columns;
     std::vector<float> normals(pixels * 4);
     cpu::normals<float>(plan, g.depth.data(), normals.data());
-    double max_angle_deg = 0, max_cos_diff = 0;
-    for (std::size_t i = 0; i < pixels; ++i) {
-        if (g.depth[i] <= 0) continue;
-        // atan2(|a x b|, a . b), not acos(a . b): acos of two float unit vectors bottoms out at
-        // acos(1 - 2^-23) ~ 0.04 deg, which would hide the real difference under rounding.
-        const double a[3] = {normals[4 * i], normals[4 * i + 1], normals[4 * i + 2]};
-        const double b[3] = {g.normals[4 * i], g.normals[4 * i + 1], g.normals[4 * i + 2]};
+    std::vector<float> exact(pixels * 4); // the same stencil in double: which side is off, where they differ
+    cpu::normals<double>(plan, g.depth.data(), exact.data());
+    // atan2(|a x b|, a . b), not acos(a . b): acos of two float unit vectors bottoms out at
+    // acos(1 - 2^-23) ~ 0.04 deg, which would hide the real difference under rounding.
+    auto angle_deg = [](const double* a, const double* b) {
         const double cx = a[1] * b[2] - a[2] * b[1], cy = a[2] * b[0] - a[0] * b[2], cz = a[0] * b[1] - a[1] * b[0];
         const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        const double angle = std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot);
-        max_angle_deg = std::max(max_angle_deg, angle * 180.0 / 3.14159265358979);
+        return std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot) * 180.0 / 3.14159265358979;
+    };
+    double max_angle_deg = 0, max_cos_diff = 0;
+    std::size_t worst = 0, over = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        if (g.depth[i] <= 0) continue;
+        const double a[3] = {normals[4 * i], normals[4 * i + 1], normals[4 * i + 2]};
+        const double b[3] = {g.normals[4 * i], g.normals[4 * i + 1], g.normals[4 * i + 2]};
+        const double angle = angle_deg(a, b);
+        over += angle > kNormalAngleTolDeg;
+        if (angle > max_angle_deg) worst = i;
+        max_angle_deg = std::max(max_angle_deg, angle);
         max_cos_diff = std::max(max_cos_diff, static_cast<double>(std::abs(normals[4 * i + 3] - g.normals[4 * i + 3])));
     }
     std::printf("[normals] method %u: max angle %.2e deg, max |d cos| %.2e\n", plan.params.normal_method, max_angle_deg,
                 max_cos_diff);
+    if (max_angle_deg > 0) {
+        const double a[3] = {normals[4 * worst], normals[4 * worst + 1], normals[4 * worst + 2]};
+        const double b[3] = {g.normals[4 * worst], g.normals[4 * worst + 1], g.normals[4 * worst + 2]};
+        const double x[3] = {exact[4 * worst], exact[4 * worst + 1], exact[4 * worst + 2]};
+        const std::size_t row = worst / g.columns, column = worst % g.columns;
+        std::printf("[normals]   worst: row %zu column %zu (view %zu), %zu pixels over %.2f deg; against double: "
+                    "CPU float %.2e deg, device %.2e deg; depth row above/this/below:",
+                    row, column, column / plan.slice_columns, over, kNormalAngleTolDeg, angle_deg(a, x),
+                    angle_deg(b, x));
+        for (int dr = -1; dr <= 1; ++dr)
+            for (int dc = -1; dc <= 1; ++dc) {
+                const long r = long(row) + dr, c = long(column) + dc;
+                const bool inside = r >= 0 && c >= 0 && r < long(g.rows) && c < long(g.columns);
+                std::printf(" %.7g", inside ? double(g.depth[std::size_t(r) * g.columns + std::size_t(c)]) : -1.0);
+            }
+        std::printf("\n");
+    }
     EXPECT_LE(max_angle_deg, kNormalAngleTolDeg);
     EXPECT_LE(max_cos_diff, kNormalCosTol);
     return normals;

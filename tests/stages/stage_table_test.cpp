@@ -237,6 +237,8 @@ TEST(StageTable, DispatchesCoverThePlansGrid) {
             expect_covers(beamform[pass].x, 4, plan.bins, "resample/sidelobe: 4-bin quads");
             EXPECT_GE(std::uint64_t(beamform[pass].y) * kBeamsPerInvocation, plan.beams);
             EXPECT_LT(std::uint64_t(beamform[pass].y - 1) * kBeamsPerInvocation, plan.beams);
+            EXPECT_GE(std::uint64_t(gpu[pass].y) * kGpuBeamsPerInvocation, plan.beams);
+            EXPECT_LT(std::uint64_t(gpu[pass].y - 1) * kGpuBeamsPerInvocation, plan.beams);
         }
         some_far = some_far || far;
         some_planar = some_planar || !plan.line_array;
