@@ -358,14 +358,15 @@ std::vector<float> expect_normals_match(const Plan& plan, const Frame& g) {
         const double x[3] = {exact[4 * worst], exact[4 * worst + 1], exact[4 * worst + 2]};
         const std::size_t row = worst / g.columns, column = worst % g.columns;
         std::printf("[normals]   worst: row %zu column %zu (view %zu), %zu pixels over %.2f deg; against double: "
-                    "CPU float %.2e deg, device %.2e deg; depth row above/this/below:",
+                    "CPU float %.2e deg, device %.2e deg; normals CPU (%.8f %.8f %.8f) device (%.8f %.8f %.8f) "
+                    "double (%.8f %.8f %.8f); depth row above/this/below:",
                     row, column, column / plan.slice_columns, over, kNormalAngleTolDeg, angle_deg(a, x),
-                    angle_deg(b, x));
+                    angle_deg(b, x), a[0], a[1], a[2], b[0], b[1], b[2], x[0], x[1], x[2]);
         for (int dr = -1; dr <= 1; ++dr)
             for (int dc = -1; dc <= 1; ++dc) {
                 const long r = long(row) + dr, c = long(column) + dc;
                 const bool inside = r >= 0 && c >= 0 && r < long(g.rows) && c < long(g.columns);
-                std::printf(" %.7g", inside ? double(g.depth[std::size_t(r) * g.columns + std::size_t(c)]) : -1.0);
+                std::printf(" %.9g", inside ? double(g.depth[std::size_t(r) * g.columns + std::size_t(c)]) : -1.0);
             }
         std::printf("\n");
     }
