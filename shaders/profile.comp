@@ -82,26 +82,6 @@ layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { fl
 // (src/stages/cpu_beamform.cpp): rows, then pixel columns, then bins. Along a row of one view the cone
 // coordinate increases with the pixel column (the plan checks it), so in each view the first such
 // pixel is found by a binary search on the first row and then moves by a few columns from row to row.
-
-// A pixel's echo e, spread, onto its cone columns a and b with their shares (0: not this invocation's).
-void add_pixel(RangeSpread spread, float e, int cone_a, int cone_b, float weight_a, float weight_b) {
-    precise float weighted_a = weight_a * e;
-    precise float weighted_b = weight_b * e;
-    uint base_a = uint(cone_a) * params.bins_padded;
-    uint base_b = uint(cone_b) * params.bins_padded;
-    for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
-        float share = range_share(spread, k);
-        if (weight_a > 0.0) {
-            precise float add = share * weighted_a;
-            profiles[base_a + uint(k)] += add;
-        }
-        if (weight_b > 0.0) {
-            precise float add = share * weighted_b;
-            profiles[base_b + uint(k)] += add;
-        }
-    }
-}
-
 void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone) {
     uint row_start = row * params.columns;
     float lo = float(first_cone) - 1.0;
@@ -128,96 +108,22 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
         if (!(er.x > 0.0) || !(weight_a > 0.0 || weight_b > 0.0)) {
             continue;
         }
-        add_pixel(pixel_spread(row, c, er), er.x, cone_a, cone_b, weight_a, weight_b);
-    }
-}
-
-// The same with kBinLanes > 1, where a workgroup is the kBinLanes invocations of one cone column. One
-// invocation walking the pixels alone is a chain of dependent loads (a cone coordinate, then the
-// pixel's window, then the profile cell; ~10 round trips a row and view); here the lanes load a
-// window of kBinLanes consecutive pixels' coordinates and windows at once, each lane computes one
-// pixel's spread into shared memory, and then every lane adds the pixels in their order to its own
-// bins. Each cell still gets the same additions in the same order, computed by the same code.
-shared uint lanes_counted;
-shared RangeSpread lane_spread[kBinLanes];
-shared vec4 lane_pixel[kBinLanes]; // e, weight_a, weight_b, 1 = adds something
-shared ivec2 lane_cones[kBinLanes];
-
-// How many of the workgroup's lanes hold `predicate` (every lane gets the count).
-uint count_lanes(bool predicate) {
-    barrier(); // every lane has read the last count
-    if (gl_LocalInvocationID.x == 0u) {
-        lanes_counted = 0u;
-    }
-    barrier();
-    if (predicate) {
-        atomicAdd(lanes_counted, 1u);
-    }
-    barrier();
-    return lanes_counted;
-}
-
-const float kBeyondRow = 3.0e38; // the cone coordinate of a column past the view's end
-
-void gather_view_lanes(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone) {
-    uint row_start = row * params.columns;
-    float lo = float(first_cone) - 1.0;
-    float hi = float(end_cone);
-    int count = int(params.profile_columns);
-    uint lane = gl_LocalInvocationID.x;
-    // The first column with a coordinate above lo: from half a window before the last row's, the
-    // number of lanes at or below lo (coordinates increase along the row).
-    uint start = first > view_begin + kBinLanes / 2u ? first - kBinLanes / 2u : view_begin;
-    for (;;) {
-        uint c = start + lane;
-        float x = c < view_end ? cone_coords[row_start + c] : kBeyondRow;
-        uint below = count_lanes(!(x > lo));
-        if (below == 0u && start > view_begin) {
-            start = start > view_begin + kBinLanes ? start - kBinLanes : view_begin;
-            continue;
-        }
-        if (below == kBinLanes) {
-            start += kBinLanes;
-            if (start >= view_end) {
-                first = view_end;
-                return;
+        RangeSpread spread = pixel_spread(row, c, er);
+        precise float weighted_a = weight_a * er.x;
+        precise float weighted_b = weight_b * er.x;
+        uint base_a = uint(cone_a) * params.bins_padded;
+        uint base_b = uint(cone_b) * params.bins_padded;
+        for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
+            float share = range_share(spread, k);
+            if (weight_a > 0.0) {
+                precise float add = share * weighted_a;
+                profiles[base_a + uint(k)] += add;
             }
-            continue;
-        }
-        first = start + below;
-        break;
-    }
-    // Windows of kBinLanes columns from there, as long as they reach below hi.
-    for (uint window = first;; window += kBinLanes) {
-        uint c = window + lane;
-        float x = c < view_end ? cone_coords[row_start + c] : kBeyondRow;
-        bool inside = x < hi;
-        vec4 pixel = vec4(0.0);
-        if (inside) {
-            int below = int(floor(x));
-            int cone_a = max(below, int(first_cone));
-            int cone_b = min(below + 1, int(end_cone) - 1);
-            float weight_a = cone_a <= cone_b ? cone_share(x, cone_a, count) : 0.0;
-            float weight_b = cone_b > cone_a ? cone_share(x, cone_b, count) : 0.0;
-            vec2 er = load_echo(row_start + c);
-            if (er.x > 0.0 && (weight_a > 0.0 || weight_b > 0.0)) {
-                pixel = vec4(er.x, weight_a, weight_b, 1.0);
-                lane_spread[lane] = pixel_spread(row, c, er);
-                lane_cones[lane] = ivec2(cone_a, cone_b);
+            if (weight_b > 0.0) {
+                precise float add = share * weighted_b;
+                profiles[base_b + uint(k)] += add;
             }
         }
-        lane_pixel[lane] = pixel;
-        uint pixels = count_lanes(inside); // its barriers publish the shared writes above
-        for (uint i = 0u; i < pixels; ++i) {
-            vec4 p = lane_pixel[i];
-            if (p.w != 0.0) {
-                add_pixel(lane_spread[i], p.x, lane_cones[i].x, lane_cones[i].y, p.y, p.z);
-            }
-        }
-        if (pixels < kBinLanes) {
-            break;
-        }
-        barrier(); // every lane has read the window before the next one overwrites it
     }
 }
 
@@ -248,18 +154,10 @@ void gather_cone_columns(uint first_cone, uint end_cone) {
         first_tier[t] = first_above(begin, begin + width, lo);
     }
     for (uint row = 0u; row < params.rows; ++row) {
-        if (kBinLanes > 1u) {
-            gather_view_lanes(row, 0u, slices_end, first_slices, first_cone, end_cone);
-        } else {
-            gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone);
-        }
+        gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone);
         for (uint t = 0u; t < tiers; ++t) {
             uint begin = slices_end + t * width;
-            if (kBinLanes > 1u) {
-                gather_view_lanes(row, begin, begin + width, first_tier[t], first_cone, end_cone);
-            } else {
-                gather_view(row, begin, begin + width, first_tier[t], first_cone, end_cone);
-            }
+            gather_view(row, begin, begin + width, first_tier[t], first_cone, end_cone);
         }
     }
 }

@@ -168,7 +168,10 @@ inline std::unique_ptr<Rendered> render_once(Backend backend, const SonarConfig&
         ADD_FAILURE() << "no context";
         return nullptr;
     }
-    RendererOptions options = paths; // the Vulkan paths (tables, resample, stage_timing)
+    RendererOptions options = paths; // the Vulkan paths (tables, resample, layout, stage_timing)
+    // VKSONAR_LAYOUT=gpu runs a test's Vulkan renders in the GPU layout where it asks for none (ctest
+    // vulkan_gpu_layout: lavapipe runs the layout a GPU gets through the GPU-vs-CPU tests).
+    if (options.layout == WorkLayout::automatic) options.layout = renderer_options_from_env().layout;
     options.backend = backend;
     options.save_mask = save_mask;
     options.seed = seed;
