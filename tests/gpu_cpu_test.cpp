@@ -117,50 +117,42 @@ TEST(PatternFrame, ChebyshevPatternsAgree) {
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Frame& c = p->cpu->frame;
-    // Each backend runs its own depth pass, so pixels next to a triangle edge the two rasterizers
-    // decide differently get other normals (kDepthEdgePixelBudget; measured here: 44 of 82677). The rest
-    // must agree at kEchoRelTol of max(value, kEchoRelFloor x peak), or, near the vertical pattern's
-    // first null (inside the depth pass's coverage), at kVerticalPatternAbsTol of the pixel's echo
-    // without the pattern (tests/tolerances.h: there the value is a small difference of larger
-    // numbers). Pixels compared: ranges equal to float precision.
-    const std::vector<float> flat = echo_without_vertical_pattern(renderer_plan(p->cpu->renderer), c);
+    // The vertical pattern per pixel: the CPU's echo stage on the GPU's depth, materials and normals
+    // against the GPU's echo (as EchoGpuCpu does for the default sinc), at kEchoRelTol of
+    // max(value, kEchoRelFloor x peak) or, near the pattern's first null (inside the depth pass's
+    // coverage), at kVerticalPatternAbsTol of the pixel's echo without the pattern (tests/tolerances.h:
+    // there the value is a small difference of larger numbers). Not each backend's own echo: on a GPU
+    // the depth pass interpolates depth differently from the CPU rasterizer (view z up to 1e-4 apart,
+    // DepthGpuCpu), and the Sobel normals of the grazing seabed turn that into echo differences of
+    // up to 6e-4 in a fifth of the pixels (measured on an H200), which is no property of the pattern.
+    const Plan& plan = renderer_plan(p->gpu->renderer);
+    const std::size_t pixels = static_cast<std::size_t>(g.rows) * g.columns;
+    std::vector<float> echo(pixels * 2);
+    cpu::echo<float>(plan, g.depth.data(), g.material.data(), g.normals.data(), echo.data());
+    const std::vector<float> flat = echo_without_vertical_pattern(plan, g);
     double peak = 0;
-    for (std::size_t i = 0; i < c.echo.size() / 2; ++i)
-        peak = std::max(peak, double(c.echo[2 * i]));
-    std::size_t compared = 0, over = 0, over_in_tiers = 0, shown = 0;
-    const Plan& plan = renderer_plan(p->cpu->renderer);
-    // The CPU stages in double on the GPU's depth would tell which side is off; the CPU backend in
-    // double on its own depth is close enough for the pixels away from edges printed below.
-    SonarConfig f64_config = config;
-    f64_config.cpu_precision = Precision::f64;
-    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
-    ASSERT_TRUE(scene);
-    auto f64 = render_once(Backend::cpu, f64_config, scene.value(), pose, SaveFlags::echo);
-    ASSERT_TRUE(f64);
-    for (std::size_t i = 0; i < g.echo.size() / 2; ++i) {
-        if (c.echo[2 * i] <= 0 || std::abs(g.echo[2 * i + 1] - c.echo[2 * i + 1]) > 1e-5f * c.echo[2 * i + 1]) continue;
-        ++compared;
+    for (std::size_t i = 0; i < pixels; ++i)
+        peak = std::max(peak, double(echo[2 * i]));
+    ASSERT_GT(peak, 0.0);
+    double worst = 0;
+    std::size_t worst_pixel = 0, lit = 0;
+    for (std::size_t i = 0; i < pixels; ++i) {
+        lit += echo[2 * i] > 0;
         const double scale = std::max(
-            {double(c.echo[2 * i]), kEchoRelFloor * peak, kVerticalPatternAbsTol / kEchoRelTol * double(flat[2 * i])});
-        const bool off = std::abs(double(g.echo[2 * i]) - c.echo[2 * i]) > kEchoRelTol * scale;
-        over += off;
-        const std::size_t column = i % g.columns, view = column / plan.slice_columns;
-        over_in_tiers += off && view >= plan.slices;
-        if (off && shown < 6 && i % 97 == 0) { // a spread-out sample of them
-            ++shown;
-            std::printf("[chebyshev]   over: row %zu column %zu view %zu: b %.3e, cpu %.6e gpu %.6e (rel %.2e), cpu "
-                        "in double %.6e\n",
-                        i / g.columns, column, view, double(c.echo[2 * i]) / double(flat[2 * i]), double(c.echo[2 * i]),
-                        double(g.echo[2 * i]), std::abs(double(g.echo[2 * i]) - c.echo[2 * i]) / double(c.echo[2 * i]),
-                        double(f64->frame.echo[2 * i]));
-        }
+            {double(echo[2 * i]), kEchoRelFloor * peak, kVerticalPatternAbsTol / kEchoRelTol * double(flat[2 * i])});
+        const double off = std::abs(double(g.echo[2 * i]) - echo[2 * i]) / scale;
+        if (off > worst) worst_pixel = i;
+        worst = std::max(worst, off);
     }
-    std::printf("[chebyshev] %zu of the %zu over are in tier views\n", over_in_tiers, over);
-    EXPECT_GT(compared, 10000u);
-    EXPECT_LE(static_cast<double>(over), kDepthEdgePixelBudget * compared);
+    std::printf("[chebyshev] echo on the same input: %zu lit pixels, worst %.2e of max(value, floors) at row %zu "
+                "column %zu (b %.3e)\n",
+                lit, worst, worst_pixel / g.columns, worst_pixel % g.columns,
+                flat[2 * worst_pixel] > 0 ? double(echo[2 * worst_pixel]) / double(flat[2 * worst_pixel]) : 0.0);
+    EXPECT_GT(lit, 10000u);
+    EXPECT_LE(worst, kEchoRelTol);
     const CleanAgreement a = compare_clean(config, g, c);
-    std::printf("[chebyshev] %zu echo pixels compared (%zu over), %zu cells above the floor, %zu over %.1f dB\n",
-                compared, over, a.above, a.over, kFrameDbTol);
+    std::printf("[chebyshev] whole frame, each backend its own depth: %zu cells above the floor, %zu over %.1f dB\n",
+                a.above, a.over, kFrameDbTol);
     ASSERT_GT(a.above, 0u);
     EXPECT_LE(static_cast<double>(a.over), kFrameCellBudget * a.above); // tolerance: tests/tolerances.h
 }
