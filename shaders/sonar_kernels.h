@@ -441,12 +441,23 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         VKS_PRECISE REAL hi = centre + REAL(0.5) * width;
         // the density's slope from the neighbours' footprints (both on this surface)
         REAL g = REAL(0);
-        if (a != REAL(0) && b != REAL(0) && up2.y > REAL(0) && down2.y > REAL(0)) {
+        bool up_side = a != REAL(0) && up2.y > REAL(0);
+        bool down_side = b != REAL(0) && down2.y > REAL(0);
+        if (up_side && down_side) {
             VKS_PRECISE REAL w_up = REAL(0.5) * abs(up2.y - r) * inv_bin_width_m;
             VKS_PRECISE REAL w_down = REAL(0.5) * abs(r - down2.y) * inv_bin_width_m;
             // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
             VKS_PRECISE REAL span = (REAL(2) * (up.y - down.y) + (up2.y - down2.y)) * (REAL(0.25) * inv_bin_width_m);
             g = footprint_log_slope(up.x, w_up, down.x, w_down, span, width);
+        } else if (up_side || down_side) {
+            // One side only (the surface's, the view's or the depth pass's last rows): the slope between
+            // the neighbour's footprint on that side and this pixel's own. A flat box there leaves a
+            // ramp of up to 0.9 dB across the footprint of a grazing seabed's last row before range_max.
+            vec2 q = up_side ? up : down;
+            REAL r_q2 = up_side ? up2.y : down2.y;
+            VKS_PRECISE REAL w_q = REAL(0.5) * abs(r_q2 - r) * inv_bin_width_m;
+            VKS_PRECISE REAL span = ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (centre - x);
+            g = footprint_log_slope(q.x, w_q, er.x, xh - xl, span, width);
         }
         s.lo = lo;
         s.hi = hi;

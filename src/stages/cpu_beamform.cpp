@@ -164,19 +164,34 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
     const __m128 span = _mm_mul_ps(_mm_add_ps(_mm_mul_ps(two, _mm_sub_ps(up_r, down_r)), _mm_sub_ps(up2_r, down2_r)),
                                    _mm_set1_ps(0.25f * ibw));
     const __m128 e_up = _mm_load_ps(in.up_e), e_down = _mm_load_ps(in.down_e);
-    __m128 has_g = _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpneq_ps(b, zero)),
-                              _mm_and_ps(_mm_cmpgt_ps(up2_r, zero), _mm_cmpgt_ps(down2_r, zero)));
-    has_g = _mm_and_ps(has_g, _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(e_up, zero), _mm_cmpgt_ps(e_down, zero)),
-                                         _mm_and_ps(_mm_cmpgt_ps(w_up, zero), _mm_cmpgt_ps(w_down, zero))));
-    has_g = _mm_and_ps(has_g, _mm_cmpgt_ps(abs(span), zero));
+    // footprint_log_slope's arguments: both sides (up against down), or with one side only that side's
+    // neighbour q against this pixel's own footprint
+    const __m128 up_side = _mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpgt_ps(up2_r, zero));
+    const __m128 down_side = _mm_and_ps(_mm_cmpneq_ps(b, zero), _mm_cmpgt_ps(down2_r, zero));
+    const __m128 both = _mm_and_ps(up_side, down_side);
+    const __m128 r_q = select(up_side, up_r, down_r), r_q2 = select(up_side, up2_r, down2_r);
+    const __m128 e_q = select(up_side, e_up, e_down);
+    const __m128 w_q = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(r_q2, r))), vibw);
+    const __m128 span_q = _mm_sub_ps(
+        _mm_mul_ps(_mm_sub_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(r, _mm_mul_ps(two, r_q)), r_q2), _mm_set1_ps(0.25f)), r),
+                   vibw),
+        _mm_sub_ps(centre, x));
+    const __m128 e_self = _mm_load_ps(in.e), w_self = _mm_sub_ps(xh, xl);
+    const __m128 e1 = select(both, e_up, e_q), w1 = select(both, w_up, w_q);
+    const __m128 e2 = select(both, e_down, e_self), w2 = select(both, w_down, w_self);
+    const __m128 slope_span = select(both, span, span_q);
+    __m128 has_g = _mm_or_ps(up_side, down_side);
+    has_g = _mm_and_ps(has_g, _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(e1, zero), _mm_cmpgt_ps(e2, zero)),
+                                         _mm_and_ps(_mm_cmpgt_ps(w1, zero), _mm_cmpgt_ps(w2, zero))));
+    has_g = _mm_and_ps(has_g, _mm_cmpgt_ps(abs(slope_span), zero));
     const int g_mask = _mm_movemask_ps(has_g);
     __m128 g = zero;
     if (g_mask != 0) {
         alignas(16) float ratio[4];
-        _mm_store_ps(ratio, _mm_div_ps(_mm_mul_ps(e_up, w_down), _mm_mul_ps(e_down, w_up)));
+        _mm_store_ps(ratio, _mm_div_ps(_mm_mul_ps(e1, w2), _mm_mul_ps(e2, w1)));
         for (int l = 0; l < 4; ++l)
             ratio[l] = (g_mask & (1 << l)) ? std::log(ratio[l]) : 0.0f;
-        const __m128 slope = _mm_div_ps(_mm_load_ps(ratio), span);
+        const __m128 slope = _mm_div_ps(_mm_load_ps(ratio), slope_span);
         const __m128 cap = min(one, _mm_div_ps(_mm_set1_ps(8.0f), width));
         g = _mm_and_ps(has_g, min(max(slope, neg(cap)), cap));
     }

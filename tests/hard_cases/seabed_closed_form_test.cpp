@@ -207,22 +207,23 @@ TEST_P(SeabedClosedForm, EveryBinFromTheFirstReturnToRangeMaxFollowsTheGroundInt
                 seabed_reference(sc, config, plan, coverage, coverage.null_rad - 2 * row_rad, tiers);
             // Compared: every bin with a return whose reference the depth pass's coverage holds whole (what
             // lies outside it, at steep elevations near the first return, is the vertical side lobes' part
-            // beyond the first null). Worst error kept apart for bins seen at a depression angle
-            // below 2 degrees (h = 1 m past 28.7 m): there the balanced row grid (0.31 degrees) puts fewer than
-            // ~6 rows per depression angle, consecutive rows' range steps differ by 30 % and more, and the
-            // footprint built from the neighbours' ranges is no longer a good model of the pixel's extent.
-            // And for bins that draw more than 10 % of their reference from elevations within two rows of the
-            // pattern's first null (the first returns, 35 dB and more below the main lobe's). With the pattern taken at
-            // each pixel's centre these were -0.38 dB at h = 3 m, pitch 0 (next to a null the pattern grows as the
-            // square of the distance d from it: a row of height D holds d^2 + D^2 / 12 of it, the centre gives d^2).
-            // The echo stage now averages the pattern over the pixel's height (two-point Gauss-Legendre); measured
-            // +0.34 dB for those two bins, not analysed further. A regression past 1.5 dB fails.
-            // With the side lobes' tier views every bin from the altitude on is compared. Kept apart there: the
-            // first return's bins (within 4 bins of the altitude, where the seabed's range grows slowest with the
-            // angle from the nadir and the tier views' coarser rows split it between bins: measured within 0.64
-            // dB, h = 1 m), and the bins at and next to the pattern's nulls (a bin whose reference lies 10 dB below
-            // the bins 4 away either side), measured against that neighbourhood's level (a row either side of a
-            // null moves them).
+            // beyond the first null). That includes the bins seen at a depression angle below 2 degrees
+            // (h = 1 m past 28.7 m), where the balanced row grid (0.31 degrees) puts fewer than ~6 rows per
+            // depression angle and one row's footprint spans 5 m: +0.43 dB (line array) / +0.58 (planar)
+            // while the last rows before range_max, whose row beyond lies past the depth pass's far plane,
+            // spread their energy flat; +0.22 / +0.24 dB since they take the density's slope from the side
+            // they have (sonar_kernels.h range_spread). Worst error kept apart for bins that draw more than 10 % of
+            // their reference from elevations within two rows of the pattern's first null (the first returns, 35 dB and
+            // more below the main lobe's). With the pattern taken at each pixel's centre these were -0.38 dB at h = 3
+            // m, pitch 0 (next to a null the pattern grows as the square of the distance d from it: a row of height D
+            // holds d^2 + D^2 / 12 of it, the centre gives d^2). The echo stage now averages the pattern over the
+            // pixel's height (two-point Gauss-Legendre); measured +0.34 dB for those two bins, not analysed further. A
+            // regression past 1.5 dB fails. With the side lobes' tier views every bin from the altitude on is compared.
+            // Kept apart there: the first return's bins (within 4 bins of the altitude, where the seabed's range grows
+            // slowest with the angle from the nadir and the tier views' coarser rows split it between bins: measured
+            // within 0.64 dB, h = 1 m), and the bins at and next to the pattern's nulls (a bin whose reference lies 10
+            // dB below the bins 4 away either side), measured against that neighbourhood's level (a row either side of
+            // a null moves them).
             double worst = 0, worst_low = 0, worst_null = 0, worst_first = 0;
             std::uint32_t worst_bin = 0, compared = 0, low = 0, near_null = 0, first = plan.bins;
             for (std::uint32_t k = 0; k < plan.bins; ++k) {
@@ -257,7 +258,6 @@ TEST_P(SeabedClosedForm, EveryBinFromTheFirstReturnToRangeMaxFollowsTheGroundInt
                 if (sc.height_m / plan.bin_range_m[k] < std::sin(2.0 * kDeg)) {
                     ++low;
                     if (!(std::abs(err) <= std::abs(worst_low))) worst_low = err;
-                    continue;
                 }
                 if (!(std::abs(err) <= std::abs(worst))) {
                     worst = err;
@@ -266,7 +266,8 @@ TEST_P(SeabedClosedForm, EveryBinFromTheFirstReturnToRangeMaxFollowsTheGroundInt
             }
             std::printf(
                 "[seabed] %-10s h %4.1f m pitch %4.1f roll %5.1f %-7s: %3u bins from %5.2f m, worst %+.3f dB at "
-                "%5.2f m; %u bins below 2 deg: worst %+.3f dB; %u next to a null: worst %+.3f dB; first bin %+.3f dB\n",
+                "%5.2f m (%u bins below 2 deg: worst %+.3f dB); %u next to a null: worst %+.3f dB; first bin %+.3f "
+                "dB\n",
                 plan.line_array ? "line_array" : "planar", sc.height_m, sc.pitch_deg, sc.roll_deg,
                 sc.model == AcousticMaterial::Model::rough ? "rough" : "lambert", compared,
                 plan.bin_range_m[std::min(first, plan.bins - 1)], worst, plan.bin_range_m[worst_bin], low, worst_low,
@@ -277,9 +278,6 @@ TEST_P(SeabedClosedForm, EveryBinFromTheFirstReturnToRangeMaxFollowsTheGroundInt
             EXPECT_LE(std::abs(worst), 0.25)
                 << "h " << sc.height_m << " pitch " << sc.pitch_deg << " roll " << sc.roll_deg << ": bin " << worst_bin
                 << " at " << plan.bin_range_m[worst_bin] << " m";
-            // Below 2 degrees: what this row grid reaches (measured: within 0.9 dB out to 40 m at h = 1 m, where
-            // the box footprint of the build before was +-3 dB); a regression past 1.5 dB fails.
-            EXPECT_LE(std::abs(worst_low), 1.5) << "h " << sc.height_m << " below 2 degrees of depression";
             EXPECT_LE(std::abs(worst_null), 1.5) << "h " << sc.height_m << " next to the vertical pattern's null";
             EXPECT_LE(std::abs(worst_first), 1.0) << "h " << sc.height_m << " the first return's bin";
         }
