@@ -67,6 +67,6 @@ failed=$(grep -E '^\[  FAILED  \] .*\([0-9]+ ms\)$' "$out/tests.log" | sort -u)
 lost=$(grep -c 'VK_ERROR_DEVICE_LOST' "$out/tests.log")
 finished=$(grep -c '^\[==========\] .* ran\.' "$out/tests.log")
 echo "tests: $passed passed, $(printf '%s' "$failed" | grep -c .) failed, device lost $lost times;" \
-  "$finished of $shards shards finished within ${TEST_SECONDS:-240} s""
+  "$finished of $shards shards finished within ${TEST_SECONDS:-240} s"
 [ -n "$failed" ] && printf '%s\n' "$failed" | cut -c1-160
 rm -rf "$unpacked"
