@@ -433,8 +433,10 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
     if (kernel == kRangeKernelFootprint) {
         REAL a = footprint_edge_offset(up.y, up2.y, r, down.y, jump_rel);
         REAL b = footprint_edge_offset(down.y, down2.y, r, up.y, jump_rel);
-        VKS_PRECISE REAL xl = x + footprint_lo(a, b) * inv_bin_width_m;
-        VKS_PRECISE REAL xh = x + footprint_hi(a, b) * inv_bin_width_m;
+        REAL a2 = a != REAL(0) ? a : footprint_missing_edge(b, down.y, down2.y, r);
+        REAL b2 = b != REAL(0) ? b : footprint_missing_edge(a, up.y, up2.y, r);
+        VKS_PRECISE REAL xl = x + footprint_lo(a2, b2) * inv_bin_width_m;
+        VKS_PRECISE REAL xh = x + footprint_hi(a2, b2) * inv_bin_width_m;
         VKS_PRECISE REAL centre = REAL(0.5) * (xl + xh);
         REAL width = min(max(xh - xl, REAL(1)), REAL(kMaxFootprintBins));
         VKS_PRECISE REAL lo = centre - REAL(0.5) * width;

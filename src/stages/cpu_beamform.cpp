@@ -152,7 +152,14 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
         return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(r_q, zero), same), _mm_mul_ps(half, s));
     };
     const __m128 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
-    const __m128 a2 = select(_mm_cmpneq_ps(a, zero), a, neg(b)), b2 = select(_mm_cmpneq_ps(b, zero), b, neg(a));
+    auto missing_edge = [&](__m128 other, __m128 r_near, __m128 r_beyond) { // footprint_missing_edge
+        const __m128 s = _mm_sub_ps(r_near, r), t = _mm_sub_ps(r_beyond, r_near);
+        const __m128 scaled =
+            _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(other, zero), _mm_cmpgt_ps(r_beyond, zero)), steps_agree(s, t));
+        return select(scaled, _mm_mul_ps(neg(other), _mm_div_ps(s, t)), neg(other));
+    };
+    const __m128 a2 = select(_mm_cmpneq_ps(a, zero), a, missing_edge(b, down_r, down2_r));
+    const __m128 b2 = select(_mm_cmpneq_ps(b, zero), b, missing_edge(a, up_r, up2_r));
     const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
     const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
     const __m128 centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
