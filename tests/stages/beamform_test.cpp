@@ -12,6 +12,7 @@
 #include <random>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "cpu_stage_support.h"
@@ -457,21 +458,17 @@ TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
     ValidationGuard validation;
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
     ASSERT_TRUE(scene) << scene.error().message;
-    Pose pose;
-    pose.pitch_deg = 10.0;
-    struct Case {
-        const char* name;
-        BeamGeometry geometry;
-        RangeKernel kernel;
-    };
-    const Case cases[] = {{"line array, footprint", BeamGeometry::line_array, RangeKernel::footprint},
-                          {"planar, footprint", BeamGeometry::planar, RangeKernel::footprint},
-                          {"line array, tent", BeamGeometry::line_array, RangeKernel::tent}};
-    for (const Case& k : cases) {
-        SCOPED_TRACE(k.name);
+    const std::pair<BeamGeometry, RangeKernel> cases[] = {{BeamGeometry::line_array, RangeKernel::footprint},
+                                                          {BeamGeometry::planar, RangeKernel::footprint},
+                                                          {BeamGeometry::line_array, RangeKernel::tent}};
+    for (const auto& [geometry, kernel] : cases) {
+        SCOPED_TRACE(std::string(geometry == BeamGeometry::planar ? "planar" : "line array") +
+                     (kernel == RangeKernel::tent ? ", tent" : ", footprint"));
         SonarConfig config = quiet_config();
-        config.beam_geometry = k.geometry;
-        config.range_kernel = k.kernel;
+        config.beam_geometry = geometry;
+        config.range_kernel = kernel;
+        Pose pose;
+        pose.pitch_deg = 10.0;
         RendererOptions columns, lanes;
         columns.layout = WorkLayout::cpu_device;
         lanes.layout = WorkLayout::gpu;
