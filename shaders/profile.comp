@@ -23,8 +23,7 @@
 #include "sonar_math.h"
 #include "sonar_kernels.h"
 
-// kWorkgroupSize invocations a workgroup, or with kBinLanes > 1 one column's lanes (the host sets it).
-layout(local_size_x_id = kSpecWorkgroupSize) in;
+layout(local_size_x = kWorkgroupSize) in;
 
 layout(constant_id = kSpecRangeKernel) const uint kRangeKernel = kRangeKernelFootprint; // params.range_kernel
 layout(constant_id = kSpecEchoHalf) const uint kEchoHalf = 0u;                      // params.echo_half

@@ -105,11 +105,9 @@ struct DeviceShape {
     std::uint32_t cones_per_invocation = kConesPerInvocation; // profile, line_array
     std::uint32_t bin_lanes = 1;                              // profile: invocations per column (a power of 2)
     std::uint32_t beams_per_invocation = kBeamsPerInvocation; // resample, sidelobe
-    // profile: invocations a workgroup; with bin lanes one column's, which share its pixels' spreads
-    std::uint32_t profile_workgroup = shared::kWorkgroupSize;
 };
-constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation, shared::kWorkgroupSize};
-constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation, kProfileBinLanes};
+constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation};
+constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation};
 
 constexpr std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
     return (a + b - 1) / b;
@@ -183,8 +181,7 @@ constexpr Dispatches beamform_dispatch(const Plan& plan, const DeviceShape& shap
     const std::uint32_t bin_groups = group_count(ceil_div(plan.bins, 4));
     const auto beam_runs = static_cast<std::uint32_t>(ceil_div(plan.beams, shape.beams_per_invocation));
     Dispatches d{};
-    d[profile] = {"profile.comp",
-                  static_cast<std::uint32_t>(ceil_div(profile_invocations(plan, shape), shape.profile_workgroup))};
+    d[profile] = {"profile.comp", group_count(profile_invocations(plan, shape))};
     d[resample] = {"resample.comp", bin_groups, beam_runs};
     if (far_sidelobes(plan)) {
         d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};

@@ -117,12 +117,10 @@ struct ProfileSpecialization {
     std::uint32_t cones_per_invocation = 4; // line_array
     std::uint32_t subpixel = 0;             // Plan::subpixel_capacity > 0
     std::uint32_t tier_views = 0;
-    std::uint32_t bin_lanes = 1;                           // invocations per column (DeviceShape)
-    std::uint32_t workgroup_size = shared::kWorkgroupSize; // DeviceShape::profile_workgroup
-    std::array<SpecConstant, 8> constants() const {
+    std::uint32_t bin_lanes = 1; // invocations per column (DeviceShape)
+    std::array<SpecConstant, 7> constants() const {
         return {{{shared::kSpecTierViews, tier_views},
                  {shared::kSpecBinLanes, bin_lanes},
-                 {shared::kSpecWorkgroupSize, workgroup_size},
                  {shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
                  {shared::kSpecLineArray, line_array},

@@ -510,7 +510,6 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.line_array = plan_.line_array ? 1u : 0u;
     profile.cones_per_invocation = shape_.cones_per_invocation;
     profile.bin_lanes = shape_.bin_lanes;
-    profile.workgroup_size = shape_.profile_workgroup;
     profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
     profile.tier_views = plan_.views > plan_.slices ? 1u : 0u;
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;

@@ -227,7 +227,7 @@ TEST(StageTable, DispatchesCoverThePlansGrid) {
         expect_covers(beamform[profile].x, plan.line_array ? kConesPerInvocation : 1, plan.profile_columns, "profile");
         // a GPU: kProfileBinLanes invocations per column (line array: per cone column)
         const Dispatches gpu = entry(StageId::beamform).vulkan.dispatches(plan, kGpuDeviceShape);
-        EXPECT_EQ(gpu[profile].x, plan.profile_columns) << "profile, bin lanes: a workgroup per (cone) column";
+        expect_covers(gpu[profile].x, 1, plan.profile_columns * std::uint64_t(kProfileBinLanes), "profile, bin lanes");
         const bool sidelobes = plan.effects.horizontal_pattern, far = sidelobes && plan.far_cells > 0;
         for (const std::size_t pass : {std::size_t(resample), std::size_t(sidelobe)}) {
             if (pass == sidelobe && !sidelobes) {
