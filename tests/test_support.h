@@ -10,8 +10,10 @@
 #include <utility>
 #include <vector>
 
+#include "core/access.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "vk/vulkan_context.h"
 #include "vksonar/vksonar.h"
 
 namespace vksonar::testing {
@@ -29,10 +31,11 @@ inline Context* vulkan_context() {
 }
 
 // Whether the tests' Vulkan device is a CPU implementation (lavapipe, whose rasterizer follows the CPU
-// backend's rule), not a GPU (Context::device_description ends in "CPU)" for those).
+// backend's rule), not a GPU: the device type the backend picks its work layout by.
 inline bool vulkan_device_is_cpu() {
     Context* context = vulkan_context();
-    return context != nullptr && context->device_description().find(", CPU)") != std::string::npos;
+    const VulkanContext* vulkan = context != nullptr ? context_vulkan(*context) : nullptr;
+    return vulkan != nullptr && vulkan->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
 }
 
 inline Context& cpu_context() {

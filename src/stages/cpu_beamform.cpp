@@ -158,8 +158,12 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
             _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(other, zero), _mm_cmpgt_ps(r_beyond, zero)), steps_agree(s, t));
         return select(scaled, _mm_mul_ps(neg(other), _mm_div_ps(s, t)), neg(other));
     };
-    const __m128 a2 = select(_mm_cmpneq_ps(a, zero), a, missing_edge(b, down_r, down2_r));
-    const __m128 b2 = select(_mm_cmpneq_ps(b, zero), b, missing_edge(a, up_r, up2_r));
+    // (only where a lane lacks a side: inside a surface every pixel has both, and the division is not free)
+    __m128 a2 = a, b2 = b;
+    if (_mm_movemask_ps(_mm_or_ps(_mm_cmpeq_ps(a, zero), _mm_cmpeq_ps(b, zero))) != 0) {
+        a2 = select(_mm_cmpneq_ps(a, zero), a, missing_edge(b, down_r, down2_r));
+        b2 = select(_mm_cmpneq_ps(b, zero), b, missing_edge(a, up_r, up2_r));
+    }
     const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
     const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
     const __m128 centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
