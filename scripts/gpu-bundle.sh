@@ -23,6 +23,7 @@ stage="$(mktemp -d)"
 trap 'rm -rf "$stage"' EXIT
 mkdir -p "$stage/bin" "$stage/lib" "$stage/layer" "$stage/shaders"
 cp "$build/vksonar" "$build/tests/vksonar_tests" "$stage/bin/"
+pwd >"$stage/source_dir" # the test binary finds assets/ and tests/data/ by this absolute path
 cp "$build"/shaders/*.spv.h "$stage/shaders/"
 for f in "$build/vksonar" "$build/tests/vksonar_tests" "$layer_so"; do
   ldd "$f" | awk '/=>/ {print $3}'

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The GPU checks in one run, for a machine with an NVIDIA GPU and driver but nothing else (run as root
-# from a checkout of the commit the bundle was built from; it links the checkout to /work/main, where
-# the test binary looks for the assets): `vksonar bench speed` on the bundled scenes, the CPU-device
+# from a checkout of the commit the bundle was built from; it links the checkout to the source path the
+# bundle was built in, where the test binary looks for the assets): `vksonar bench speed` on the bundled scenes, the CPU-device
 # work layout against the GPU one in the same run, the planar geometry and a 2M-triangle terrain;
 # `bench effects`; then the whole test binary with the validation layer, in as many shards as cores,
 # stopped after TEST_SECONDS (default 240) so a hung device cannot eat the machine's lease.
@@ -24,8 +24,10 @@ for icd in /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json /usr/share/vulka
 done
 nvidia-smi -L 2>/dev/null
 echo "cores: $(nproc); $(uptime)"
-mkdir -p /work
-[ -e /work/main ] || ln -s "$root" /work/main
+source_dir="$(cat "$unpacked/source_dir")"
+if [ "$source_dir" != "$root" ] && [ ! -e "$source_dir" ]; then
+  mkdir -p "$(dirname "$source_dir")" && ln -s "$root" "$source_dir"
+fi
 mkdir -p build/tests build/shaders
 cp "$unpacked/bin/vksonar" build/
 cp "$unpacked/bin/vksonar_tests" build/tests/
