@@ -56,7 +56,23 @@ int first_lane_bin(int k_first) {
     return k_first + int((bin_lane() - uint(k_first)) & (kBinLanes - 1u));
 }
 
-// The range spread of pixel (row, column) with echo er, over the five-row window of its column.
+// The ranges of pixel (row, column)'s row neighbours left and right (x, y), 0 where there is none in its
+// view (slice_columns columns from view_begin; across a view's edge lies another camera's image): what
+// range_spread's extent across the column reads (src/stages/pixel_spread.h row_neighbours).
+vec2 row_neighbour_ranges(uint row, uint column, uint view_begin) {
+    uint p = row * params.columns + column;
+    float left = column > view_begin ? load_echo(p - 1u).y : 0.0;
+    float right = column + 1u < view_begin + params.slice_columns ? load_echo(p + 1u).y : 0.0;
+    return vec2(left, right);
+}
+
+// The first column of column c's view (no integer divide per pixel: sonar_math.h slice_of_column).
+uint view_begin_of(uint c) {
+    return slice_of_column(c, 1.0 / float(params.slice_columns)) * params.slice_columns;
+}
+
+// The range spread of pixel (row, column) with echo er, over the five-row window of its column and its
+// row neighbours.
 // `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
 RangeSpread pixel_spread(uint row, uint column, vec2 er) {
     uint columns = params.columns;
@@ -64,8 +80,9 @@ RangeSpread pixel_spread(uint row, uint column, vec2 er) {
     vec2 up = row >= 1u ? load_echo((row - 1u) * columns + column) : vec2(0.0);
     vec2 down = row + 1u < params.rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
     vec2 down2 = row + 2u < params.rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
-    return range_spread(kRangeKernel, up2, up, er, down, down2, params.range_min_m, params.inv_bin_width_m,
-                        params.edge_relative_jump, params.bins);
+    vec2 across = row_neighbour_ranges(row, column, view_begin_of(column));
+    return range_spread(kRangeKernel, up2, up, er, down, down2, across.x, across.y, params.range_min_m,
+                        params.inv_bin_width_m, params.edge_relative_jump, params.bins);
 }
 
 // Each pixel's cone coordinate (sonar_kernels.h cone_coord), computed once by the plan: the CPU
@@ -184,7 +201,8 @@ void add_subpixel(uint column) {
             continue;
         }
         RangeSpread spread = range_spread(kRangeKernelTent, vec2(0.0), vec2(0.0), vec2(e, range_m), vec2(0.0),
-                                          vec2(0.0), params.range_min_m, params.inv_bin_width_m, 0.0, params.bins);
+                                          vec2(0.0), 0.0, 0.0, params.range_min_m, params.inv_bin_width_m, 0.0,
+                                          params.bins);
         for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
             precise float add = range_share(spread, k) * e;
             profiles[column * params.bins_padded + uint(k)] += add;
@@ -220,14 +238,17 @@ void main() {
     vec2 up = vec2(0.0);
     vec2 er = load_echo(column);
     vec2 next = rows > 1u ? load_echo(columns + column) : vec2(0.0);
+    uint view_begin = view_begin_of(column);
     for (uint row = 0u; row < rows; ++row) {
         // the echo two rows down, loaded once: down2 here, down on the next row, er after that
         vec2 next2 = row + 2u < rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
         float e = er.x;
         if (e > 0.0) {
             // `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
-            RangeSpread spread = range_spread(kRangeKernel, up2, up, er, next, next2, params.range_min_m,
-                                              params.inv_bin_width_m, params.edge_relative_jump, params.bins);
+            vec2 across = row_neighbour_ranges(row, column, view_begin);
+            RangeSpread spread = range_spread(kRangeKernel, up2, up, er, next, next2, across.x, across.y,
+                                              params.range_min_m, params.inv_bin_width_m, params.edge_relative_jump,
+                                              params.bins);
             for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
                 precise float share = range_share(spread, k) * e;
                 profiles[base + uint(k)] += share;

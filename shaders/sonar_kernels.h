@@ -409,10 +409,11 @@ struct RangeSpread {
 };
 
 // The spread of pixel `er` = (energy, range) from the five-row window of its column (up2, up: the rows
-// above; down, down2: below; range 0 = no hit or outside the image). range_min_m, inv_bin_width_m:
+// above; down, down2: below; range 0 = no hit or outside the image) and the ranges of its row neighbours
+// left and right (r_left, r_right; 0 = no hit or outside the pixel's view). range_min_m, inv_bin_width_m:
 // SonarParams; jump_rel: edge_relative_jump.
-VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, vec2 down, vec2 down2, REAL range_min_m,
-                                       REAL inv_bin_width_m, REAL jump_rel, uint bins) {
+VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, vec2 down, vec2 down2, REAL r_left,
+                                       REAL r_right, REAL range_min_m, REAL inv_bin_width_m, REAL jump_rel, uint bins) {
     RangeSpread s;
     s.kernel = kernel;
     s.k_first = 0;
@@ -437,8 +438,18 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         REAL b2 = b != REAL(0) ? b : footprint_missing_edge(a, up.y, up2.y, r);
         VKS_PRECISE REAL xl = x + footprint_lo(a2, b2) * inv_bin_width_m;
         VKS_PRECISE REAL xh = x + footprint_hi(a2, b2) * inv_bin_width_m;
-        VKS_PRECISE REAL centre = REAL(0.5) * (xl + xh);
-        REAL width = min(max(xh - xl, REAL(1)), REAL(kMaxFootprintBins));
+        // Down the column [xl, xh], across it [cl, ch] (bins from r): their sum spans [xl + cl, xh + ch]; a
+        // box of the same variance (of a footprint that is the two boxes convolved) is
+        // sqrt(w_column^2 + w_across^2) wide, centred where theirs add.
+        vec2 across = footprint_across(r_left, r, r_right, jump_rel);
+        VKS_PRECISE REAL cl = across.x * inv_bin_width_m;
+        VKS_PRECISE REAL ch = across.y * inv_bin_width_m;
+        VKS_PRECISE REAL column_centre = REAL(0.5) * (xl + xh);
+        VKS_PRECISE REAL centre = column_centre + REAL(0.5) * (cl + ch);
+        VKS_PRECISE REAL w_down_column = xh - xl;
+        VKS_PRECISE REAL w_across = ch - cl;
+        VKS_PRECISE REAL extent = sqrt(w_down_column * w_down_column + w_across * w_across);
+        REAL width = min(extent > REAL(0) ? max(extent, REAL(kMinFootprintBins)) : REAL(1), REAL(kMaxFootprintBins));
         VKS_PRECISE REAL lo = centre - REAL(0.5) * width;
         VKS_PRECISE REAL hi = centre + REAL(0.5) * width;
         // the density's slope from the neighbours' footprints (both on this surface)
@@ -458,7 +469,8 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
             vec2 q = up_side ? up : down;
             REAL r_q2 = up_side ? up2.y : down2.y;
             VKS_PRECISE REAL w_q = REAL(0.5) * abs(r_q2 - r) * inv_bin_width_m;
-            VKS_PRECISE REAL span = ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (centre - x);
+            VKS_PRECISE REAL span =
+                ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (column_centre - x);
             g = footprint_log_slope(q.x, w_q, er.x, xh - xl, span, width);
         }
         s.lo = lo;

@@ -231,6 +231,22 @@ VKS_FN REAL footprint_hi(REAL a, REAL b) {
     return max(max(a, b), REAL(0));
 }
 
+// The pixel's range extent across its column, from its row neighbours left and right (ranges r_left,
+// r_right; 0 = no hit or the edge of the pixel's view): the offsets to those edges as
+// footprint_edge_offset gives them (with no pixel beyond, the same surface by the jump threshold or the
+// opposite step), a missing side mirrored. Returns (lo, hi), the extent's offsets from r (m), lo <= 0 <= hi.
+// Where the range changes along a row as well as down a column (near the nadir, where the seabed's range
+// has its minimum; a wall at a slant in azimuth) a pixel's echo spans both, and without this term the
+// range kernel had to widen every footprint narrower than a bin to a bin, which smeared the seabed's
+// sharp onset at the altitude over the bins either side (+0.6 to +1 dB in its bin at h = 1-2 m).
+VKS_FN vec2 footprint_across(REAL r_left, REAL r, REAL r_right, REAL jump_rel) {
+    REAL a = footprint_edge_offset(r_left, REAL(0), r, r_right, jump_rel);
+    REAL b = footprint_edge_offset(r_right, REAL(0), r, r_left, jump_rel);
+    REAL a2 = a != REAL(0) ? a : -b;
+    REAL b2 = b != REAL(0) ? b : -a;
+    return vec2(footprint_lo(a2, b2), footprint_hi(a2, b2));
+}
+
 // sinh(y) / y, without 0/0 at y = 0 or cancellation near it (series below |y| = 0.5: error < 1e-9).
 VKS_FN REAL sinhc_of(REAL y) {
     if (abs(y) < REAL(0.5)) {

@@ -118,6 +118,11 @@ VKS_CONST uint kRangeKernelTent = 1u;
 // coarse row grid leaves on a grazing seabed (without it the fan shows bright/dark stripes there).
 VKS_CONST uint kRangeKernelFootprint = 2u;
 VKS_CONST float kMaxFootprintBins = 256.0f; // caps the per-pixel loop; wider footprints are truncated to it
+// The narrowest footprint the kernel spreads (bins): a pixel's range extent from its neighbours can be far
+// below a bin (a surface facing the sonar, the seabed at the nadir) and is kept (a box of a sixteenth of
+// a bin puts its energy into the right bin but for 1/32 of a bin either side); a pixel without any
+// neighbour on its surface (an isolated hit: no extent known) gets a bin, the tent.
+VKS_CONST float kMinFootprintBins = 0.0625f;
 
 // Normal methods.
 VKS_CONST uint kNormalsSobel3 = 0u;

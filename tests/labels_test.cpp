@@ -360,9 +360,25 @@ TEST_P(LabelBackendTest, FlowOfAForwardMove) {
             continue;
         }
         ++labelled;
-        if (std::isnan(flow[2 * i])) continue;
-        ++finite;
         const Point3 p{f.point[3 * i], f.point[3 * i + 1], f.point[3 * i + 2]};
+        if (std::isnan(flow[2 * i])) {
+            // Hidden in the next frame: only the sphere's limb may be. Closer, the sonar sees less of the
+            // sphere, so points within a few degrees of grazing from where it arrives turn away (or behind
+            // the nearer surface within a pixel): the cosine between the sphere's normal there and the
+            // direction to the sonar's new position is near 0 (measured: -0.09 .. 0.27).
+            const bool sphere = f.instance[i] == kSphereId;
+            EXPECT_TRUE(sphere) << "a cell of the quad lost from the next frame: bin " << i / f.beams;
+            if (sphere) {
+                const double n[3] = {p.x - objects.sphere.x, p.y - objects.sphere.y, p.z - objects.sphere.z};
+                const double s[3] = {ahead.x_m - p.x, -p.y, -p.z};
+                const double facing =
+                    (n[0] * s[0] + n[1] * s[1] + n[2] * s[2]) /
+                    std::sqrt((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]));
+                EXPECT_LT(facing, 0.35) << "bin " << i / f.beams << " beam " << i % f.beams << ": not at the limb";
+            }
+            continue;
+        }
+        ++finite;
         const Point3 q{p.x - ahead.x_m, p.y, p.z};
         const double r0 = std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z),
                      r1 = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
@@ -373,7 +389,8 @@ TEST_P(LabelBackendTest, FlowOfAForwardMove) {
     }
     std::printf("[labels] flow: %zu labelled cells, %zu with flow, worst error %.2e bins, %.2e beams\n", labelled,
                 finite, worst_bin, worst_beam);
-    EXPECT_GT(finite, labelled * 9 / 10); // nothing hides anything here; a few edge points fall off a surface
+    // Nothing else hides anything here; the sphere's limb is a tenth of its cells (149 of 166 have a flow).
+    EXPECT_GT(finite, labelled * 4 / 5);
     EXPECT_LT(worst_bin, 1e-3);
     EXPECT_LT(worst_beam, 1e-3);
 }

@@ -115,7 +115,8 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, f
 // The five-row windows of four pixels for footprint_spread4, lane by lane: each pixel's (energy, range)
 // and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
 struct SpreadLanes {
-    alignas(16) float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+    alignas(16) float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4],
+        left_r[4], right_r[4];
 };
 
 // range_spread with the footprint kernel (float) for four pixels as SSE lanes: the same operations in the
@@ -166,8 +167,19 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
     }
     const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
     const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
-    const __m128 centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
-    const __m128 width = min(max(_mm_sub_ps(xh, xl), one), _mm_set1_ps(shared::kMaxFootprintBins));
+    // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
+    const __m128 left_r = _mm_load_ps(in.left_r), right_r = _mm_load_ps(in.right_r);
+    const __m128 al = edge_offset(left_r, zero, right_r), ar = edge_offset(right_r, zero, left_r);
+    const __m128 al2 = select(_mm_cmpneq_ps(al, zero), al, neg(ar)), ar2 = select(_mm_cmpneq_ps(ar, zero), ar, neg(al));
+    const __m128 cl = _mm_mul_ps(min(min(al2, ar2), zero), vibw), ch = _mm_mul_ps(max(max(al2, ar2), zero), vibw);
+    const __m128 column_centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
+    const __m128 centre = _mm_add_ps(column_centre, _mm_mul_ps(half, _mm_add_ps(cl, ch)));
+    const __m128 w_down_column = _mm_sub_ps(xh, xl), w_across = _mm_sub_ps(ch, cl);
+    const __m128 extent =
+        _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(w_down_column, w_down_column), _mm_mul_ps(w_across, w_across)));
+    const __m128 width =
+        min(select(_mm_cmpgt_ps(extent, zero), max(extent, _mm_set1_ps(shared::kMinFootprintBins)), one),
+            _mm_set1_ps(shared::kMaxFootprintBins));
     const __m128 lo = _mm_sub_ps(centre, _mm_mul_ps(half, width)), hi = _mm_add_ps(centre, _mm_mul_ps(half, width));
     // the density's slope (footprint_log_slope) where both neighbours' footprints are on this surface
     const __m128 w_up = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(up2_r, r))), vibw);
@@ -186,7 +198,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
     const __m128 span_q = _mm_sub_ps(
         _mm_mul_ps(_mm_sub_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(r, _mm_mul_ps(two, r_q)), r_q2), _mm_set1_ps(0.25f)), r),
                    vibw),
-        _mm_sub_ps(centre, x));
+        _mm_sub_ps(column_centre, x));
     const __m128 e_self = _mm_load_ps(in.e), w_self = _mm_sub_ps(xh, xl);
     const __m128 e1 = select(both, e_up, e_q), w1 = select(both, w_up, w_q);
     const __m128 e2 = select(both, e_down, e_self), w2 = select(both, w_down, w_self);
@@ -263,7 +275,8 @@ bool exp4_matches_expf() {
 }
 #else
 struct SpreadLanes {
-    float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4];
+    float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4], left_r[4],
+        right_r[4];
 };
 bool footprint_spread4(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
     return false;
@@ -318,6 +331,9 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 row(jj - 1, in.up_e, in.up_r);
                 row(jj + 1, in.down_e, in.down_r);
                 row(jj + 2, in.down2_e, in.down2_r);
+                const RowNeighbours across = row_neighbours(plan, echo2, j, col);
+                in.left_r[l] = across.left_r;
+                in.right_r[l] = across.right_r;
             }
             if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
                                   static_cast<int>(plan.bins), out))
@@ -690,7 +706,7 @@ void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, 
             const Real e = static_cast<Real>(r.energy);
             const typename M::RangeSpread spread =
                 M::range_spread(shared::kRangeKernelTent, none, none, typename M::vec2(e, static_cast<Real>(r.range_m)),
-                                none, none, range_min, inv_bin_width, Real(0), plan.bins);
+                                none, none, Real(0), Real(0), range_min, inv_bin_width, Real(0), plan.bins);
             for (int k = spread.k_first; k <= spread.k_last; ++k)
                 acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
         }

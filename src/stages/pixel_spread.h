@@ -11,8 +11,22 @@
 
 namespace vksonar::cpu {
 
-// The range spread of pixel (row j, column c) of energy e, from the five-row window of its column (as
-// profile.comp's pixel_spread; range 0 = no hit or outside the image). Inlined into both profile loops.
+// The ranges of pixel (row j, column c)'s row neighbours left and right, 0 where there is none in its
+// view (a view is slice_columns columns wide; across its edge lies another camera's image), as
+// profile.comp's row_neighbour_ranges.
+struct RowNeighbours {
+    float left_r, right_r;
+};
+[[gnu::always_inline]] inline RowNeighbours row_neighbours(const Plan& plan, const float* echo2, std::uint32_t j,
+                                                           std::uint32_t c) {
+    const std::uint32_t in_view = c % plan.slice_columns;
+    const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * plan.columns + c);
+    return {in_view > 0 ? p[-1] : 0.0f, in_view + 1 < plan.slice_columns ? p[3] : 0.0f};
+}
+
+// The range spread of pixel (row j, column c) of energy e, from the five-row window of its column and its
+// row neighbours (as profile.comp's pixel_spread; range 0 = no hit or outside the image). Inlined into
+// both profile loops.
 template <class Real>
 [[gnu::always_inline]] inline typename Math<Real>::RangeSpread pixel_spread(const Plan& plan, const float* echo2,
                                                                             std::uint32_t j, std::uint32_t c, Real e,
@@ -25,9 +39,12 @@ template <class Real>
         return vec2(static_cast<Real>(q[0]), static_cast<Real>(q[1]));
     };
     const std::int64_t jj = j;
-    const Real range = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * C + c) + 1]);
+    const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * C + c);
+    const Real range = static_cast<Real>(p[1]);
+    const RowNeighbours across = row_neighbours(plan, echo2, j, c);
     return Math<Real>::range_spread(plan.params.range_kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, range),
-                                    row_echo(jj + 1), row_echo(jj + 2), range_min, inv_bin_width,
+                                    row_echo(jj + 1), row_echo(jj + 2), static_cast<Real>(across.left_r),
+                                    static_cast<Real>(across.right_r), range_min, inv_bin_width,
                                     static_cast<Real>(plan.params.edge_relative_jump), plan.bins);
 }
 
