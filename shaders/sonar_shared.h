@@ -113,9 +113,11 @@ VKS_CONST uint kScatterRough = 2u;
 // Range kernels K_r.
 VKS_CONST uint kRangeKernelNearest = 0u;
 VKS_CONST uint kRangeKernelTent = 1u;
-// Box over the pixel's own range extent (from its edges half way to its row neighbours on the same
-// surface), at least one bin wide. At one bin it is the tent; wider, it fills the range gaps that a
-// coarse row grid leaves on a grazing seabed (without it the fan shows bright/dark stripes there).
+// Box over the pixel's own range extent (from its edges half way to its neighbours on the same surface,
+// down its column and along its row; range_spread), at least kMinFootprintBins wide, a bin (the tent)
+// where no neighbour is on its surface. Wide, it fills the range gaps that a coarse row grid leaves on a
+// grazing seabed (without it the fan shows bright/dark stripes there); narrow, it keeps a sharp onset
+// (the seabed at the altitude) in its bin.
 VKS_CONST uint kRangeKernelFootprint = 2u;
 VKS_CONST float kMaxFootprintBins = 256.0f; // caps the per-pixel loop; wider footprints are truncated to it
 // The narrowest footprint the kernel spreads (bins): a pixel's range extent from its neighbours can be far
