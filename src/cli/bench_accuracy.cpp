@@ -38,12 +38,13 @@ constexpr const char* kUsage =
     "Sweeps the accuracy knobs one at a time around the config (default: the bundled scene and preset):\n"
     "accuracy.pixels_per_beam 1,2,4,8; accuracy.rows_per_vfov 16,32,64,128; accuracy.max_slice 15,30,60,120;\n"
     "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6;\n"
-    "accuracy.far_sidelobe_cell 0 (no far side lobes), 1;\n"
+    "accuracy.far_sidelobe_cell 0 (no far side lobes), 1; accuracy.tier_pixel_ratio 2, 4;\n"
     "accuracy.normal_method sobel3,sobel5,geometric; accuracy.intermediates fp32,fp16; and the --quality presets\n"
     "fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
-    "range_kernel footprint, the side-lobe kernel over the whole fan, and a second one with each row's own\n"
-    "side-lobe kernel width (isolates the other knobs). Speckle, ambient noise and TVG are off everywhere.\n"
+    "range_kernel footprint, tier_pixel_ratio 1 (the finest tier views), the side-lobe kernel over the whole fan,\n"
+    "and a second one with each row's own side-lobe kernel width (isolates the other knobs). Speckle, ambient\n"
+    "noise and TVG are off everywhere.\n"
     "The reference is shown converged: each of its grid knobs is refined once more (pixels_per_beam 16,\n"
     "rows_per_vfov 512, the narrowest slices allowed) and the change is printed.\n"
     "Per setting: median ms per frame on Vulkan (N timed frames, default 10, after 2 warm-up frames) and on\n"
@@ -250,7 +251,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
     // Reference.
     std::vector<std::string> ref_sets = base_sets;
     for (const char* s : {"accuracy.pixels_per_beam=8", "accuracy.rows_per_vfov=256", "accuracy.max_slice=15",
-                          "accuracy.range_kernel=footprint", "cpu.precision=double"})
+                          "accuracy.range_kernel=footprint", "accuracy.tier_pixel_ratio=1", "cpu.precision=double"})
         ref_sets.emplace_back(s);
     auto render_reference = [&](const std::string& sidelobe_width) {
         std::vector<std::string> sets = ref_sets;
@@ -326,6 +327,8 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         {"sidelobe_kernel_beamwidths", "6"},
         {"far_sidelobe_cell", "0"},
         {"far_sidelobe_cell", "1"},
+        {"tier_pixel_ratio", "2"},
+        {"tier_pixel_ratio", "4"},
         {"normal_method", "sobel5"},
         {"normal_method", "geometric"},
         {"intermediates", "fp16"},

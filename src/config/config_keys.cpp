@@ -334,13 +334,16 @@ std::vector<ConfigKey> make_table() {
                  "image)"),
         VKS_ENUM("accuracy.range_kernel", RangeKernel, range_kernel, "nearest|tent|footprint",
                  "Range kernel K_r: nearest bin, split between the two nearest bins, or spread over the "
-                 "pixel's own range extent (at least one bin)"),
+                 "pixel's own range extent (down its column and along its row)"),
         VKS_NUMBER("accuracy.sidelobe_kernel_beamwidths", sidelobe_kernel_beamwidths, "",
                    "Side-lobe kernel reaches +- this many beamwidths, >= 0",
                    closed(0, 1000, "0: main lobe only; 1000 beamwidths is past any fan")),
         VKS_NUMBER("accuracy.far_sidelobe_cell", far_sidelobe_cell, "",
                    "Far side lobes beyond the kernel's reach, on a grid of cells this fraction of the reach wide",
                    closed(0, 1, "0: no far side lobes (the kernel stops at its reach)")),
+        VKS_NUMBER("accuracy.tier_pixel_ratio", tier_pixel_ratio, "",
+                   "Vertical side lobes: the tier views' pixels at most this many times a slice's (in angle)",
+                   closed(1, 4, "as fine as the slices' to the coarsest that holds the side lobes (4x)")),
         VKS_ENUM("accuracy.intermediates", IntermediatePrecision, intermediates, "fp32|fp16",
                  "Storage of the per-pixel echo buffer (energy scaled by a power of 2, slant range); fp16 "
                  "halves its memory traffic and rounds both to 11 significant bits"),

@@ -11,7 +11,7 @@ namespace {
 
 struct Quality {
     std::string_view name;
-    std::array<std::string_view, 5> settings;
+    std::array<std::string_view, 6> settings;
 };
 
 // Chosen from `vksonar bench accuracy` on the bundled scenes (README, docs/benchmarks.md): rows per
@@ -23,15 +23,15 @@ constexpr std::array<Quality, 3> kQualities{{
     // stay (cutting them costs 9-23 dB RMSE on a grazing seabed).
     {"fast",
      {"accuracy.pixels_per_beam=1", "accuracy.rows_per_vfov=64", "accuracy.range_kernel=footprint",
-      "accuracy.sidelobe_kernel_beamwidths=2", "accuracy.max_slice=60"}},
+      "accuracy.sidelobe_kernel_beamwidths=2", "accuracy.max_slice=60", "accuracy.tier_pixel_ratio=4"}},
     // The defaults.
     {"balanced",
      {"accuracy.pixels_per_beam=2", "accuracy.rows_per_vfov=64", "accuracy.range_kernel=footprint",
-      "accuracy.sidelobe_kernel_beamwidths=3", "accuracy.max_slice=60"}},
+      "accuracy.sidelobe_kernel_beamwidths=3", "accuracy.max_slice=60", "accuracy.tier_pixel_ratio=3"}},
     // Four columns per beam, twice the rows, 15-degree slices, a 6-beamwidth side-lobe kernel.
     {"accurate",
      {"accuracy.pixels_per_beam=4", "accuracy.rows_per_vfov=128", "accuracy.range_kernel=footprint",
-      "accuracy.sidelobe_kernel_beamwidths=6", "accuracy.max_slice=15"}},
+      "accuracy.sidelobe_kernel_beamwidths=6", "accuracy.max_slice=15", "accuracy.tier_pixel_ratio=2"}},
 }};
 
 } // namespace

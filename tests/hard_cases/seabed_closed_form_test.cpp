@@ -341,24 +341,9 @@ TEST_P(SeabedClosedForm, TheSliceLayoutDoesNotMoveTheFirstReturns) {
     EXPECT_LE(worst, 3.0);
 }
 
-// The vertical side lobes (effects.vertical_sidelobes, the tier views of the depth pass): a level sonar
-// 3 m above the seabed sees it first at the nadir, through the side lobes, at r = h; out to where the
-// main lobe reaches the seabed (7.6 m: its first null at 23.1 degrees of depression) every return
-// comes from the side lobes. Reference: the same ground integral as above over every direction of the
-// fan (line_array: its cone, in front of the array) with the full sinc^2 pattern, nothing gated.
-TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
-    SonarConfig config = seabed_config();
-    config.effects.vertical_sidelobes = EffectMode::on;
-    const double h = 3.0;
-    Scene scene;
-    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
-                  translation(0, 0, -h), AcousticMaterial{});
-    auto rendered = render_checked(GetParam(), config, scene, Pose{});
-    ASSERT_TRUE(rendered);
-    const Plan& plan = renderer_plan(rendered->renderer);
-    ASSERT_GT(plan.views, plan.slices) << "tier views for the side lobes";
-    const std::vector<double> got = bin_totals(rendered->frame);
-
+// The seabed h below a level sonar over every direction of the fan (line_array: its cone, in front of the
+// array) with the full sinc^2 pattern, nothing gated: per bin, out to 10 m (the side lobes' test).
+std::vector<double> altitude_reference(const SonarConfig& config, const Plan& plan, double h) {
     const double mu = std::pow(10.0, config.default_backscatter_db / 10.0);
     const double k_v = sinc_half_power_x() / std::sin(0.5 * config.vfov_deg * kDeg);
     const double sin_half_fan = std::sin(0.5 * config.hfov_deg * kDeg), w = plan.bin_width_m;
@@ -382,6 +367,29 @@ TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
             }
         }
     }
+    return ref;
+}
+
+// The vertical side lobes (effects.vertical_sidelobes, the tier views of the depth pass): a level sonar
+// 3 m above the seabed sees it first at the nadir, through the side lobes, at r = h; out to where the
+// main lobe reaches the seabed (7.6 m: its first null at 23.1 degrees of depression) every return
+// comes from the side lobes. Reference: the same ground integral as above over every direction of the
+// fan (line_array: its cone, in front of the array) with the full sinc^2 pattern, nothing gated.
+TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
+    SonarConfig config = seabed_config();
+    config.effects.vertical_sidelobes = EffectMode::on;
+    const double h = 3.0;
+    Scene scene;
+    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
+                  translation(0, 0, -h), AcousticMaterial{});
+    auto rendered = render_checked(GetParam(), config, scene, Pose{});
+    ASSERT_TRUE(rendered);
+    const Plan& plan = renderer_plan(rendered->renderer);
+    ASSERT_GT(plan.views, plan.slices) << "tier views for the side lobes";
+    const std::vector<double> got = bin_totals(rendered->frame);
+
+    const std::vector<double> ref = altitude_reference(config, plan, h);
+    const double k_v = sinc_half_power_x() / std::sin(0.5 * config.vfov_deg * kDeg), w = plan.bin_width_m;
     // Bins from the one holding the altitude to 9 m: within 0.5 dB (the bound). Kept apart: the bins at
     // the pattern's nulls (first at 7.64 m, where the main band meets the tier views: depression 23.1
     // degrees; second at 3.9 m), whose reference lies more than 10 dB below its neighbourhood's (the
@@ -440,6 +448,46 @@ TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
     for (std::uint32_t k = 0; k + 1 < at(h / std::sin(first_null)); ++k)
         near += main_only[k];
     EXPECT_EQ(near, 0.0) << "the main band alone sees the seabed only from " << h / std::sin(first_null) << " m";
+}
+
+// accuracy.tier_pixel_ratio trades the tier views' pixels, not the side lobes' accuracy: from 1.5x the
+// slices' pixels to the coarsest (4x), the bins of the test above (altitude to 9 m, the nulls apart) stay
+// within 0.25 dB of the same reference, and a coarser bound never takes more views.
+TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
+    SonarConfig config = seabed_config();
+    config.effects.vertical_sidelobes = EffectMode::on;
+    const double h = 3.0;
+    Scene scene;
+    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
+                  translation(0, 0, -h), AcousticMaterial{});
+    std::vector<double> ref;
+    std::uint32_t previous_views = 0;
+    for (double ratio : {1.5, 2.0, 3.0, 4.0}) {
+        config.tier_pixel_ratio = ratio;
+        auto rendered = render_checked(GetParam(), config, scene, Pose{});
+        ASSERT_TRUE(rendered);
+        const Plan& plan = renderer_plan(rendered->renderer);
+        ASSERT_GT(plan.views, plan.slices);
+        if (ref.empty()) ref = altitude_reference(config, plan, h);
+        if (previous_views > 0) {
+            EXPECT_LE(plan.views, previous_views) << "ratio " << ratio;
+        }
+        previous_views = plan.views;
+        const std::vector<double> got = bin_totals(rendered->frame);
+        const double w = plan.bin_width_m;
+        double worst = 0, worst_tiers = 0;
+        for (std::uint32_t k = 4; k + 4 < plan.bins; ++k) {
+            const double lo = config.range_min_m + k * w;
+            if (lo + w <= h || lo + w > 9.0 || ref[k] < 0.1 * 0.5 * (ref[k - 4] + ref[k + 4])) continue;
+            const double err = 10 * std::log10(std::max(got[k], 1e-300) / ref[k]);
+            if (std::abs(err) > std::abs(worst)) worst = err;
+            // before 7.5 m only the tier views see the seabed (the main band from 7.64 m)
+            if (lo + w < 7.5 && std::abs(err) > std::abs(worst_tiers)) worst_tiers = err;
+        }
+        std::printf("[tier ratio] %.1f: %u tier views, worst %+.3f dB (%+.3f dB before 7.5 m, the tier views' alone)\n",
+                    ratio, plan.views - plan.slices, worst, worst_tiers);
+        EXPECT_LE(std::abs(worst), 0.25) << "tier_pixel_ratio " << ratio;
+    }
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, SeabedClosedForm, ::testing::Values(Backend::vulkan, Backend::cpu), backend_name);
