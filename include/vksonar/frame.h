@@ -49,7 +49,7 @@ constexpr bool any(SaveFlags flags) {
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ObjectVisibility {
     std::uint32_t instance = 0; // SceneInstance::id
-    std::uint32_t pixels = 0;   // covered when drawn alone
+    std::uint32_t pixels = 0;   // covered when drawn alone (an object below the pixel size: its returns)
     std::uint32_t hidden = 0;   // of those, where the depth pass's nearest surface is another object's
     std::uint32_t outside = 0;  // of the rest, slant range outside [range_min, range_max)
 };

@@ -200,7 +200,7 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     if (!r) return r;
     if (impl.labels) {
         const auto start = std::chrono::steady_clock::now();
-        impl.labels->run(frame, pose);
+        impl.labels->run(frame, pose, impl.backend->subpixel_returns());
         frame.times.push_back(
             {"labels", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()});
         frame.stages_run.push_back("labels");

@@ -410,6 +410,8 @@ void SubpixelReturns::prepare(const Plan& plan) {
     column_begin_.assign(std::size_t(plan.profile_columns) + 1, 0u);
     returns_.assign(capacity_, shared::SubpixelReturn{});
     unsorted_.assign(capacity_, shared::SubpixelReturn{});
+    labels_.assign(capacity_, SubpixelLabel{});
+    unsorted_labels_.assign(capacity_, SubpixelLabel{});
     unsorted_column_.assign(capacity_, 0u);
 }
 
@@ -429,6 +431,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
     const int cone_count = static_cast<int>(plan.profile_columns);
     const std::size_t cluster_count = clusters.size();
+    std::uint32_t instance = 0; // the object's whose pieces are being listed
     // One piece: its centroid q (sonar frame), area and unit normal n (counter-clockwise), into the list.
     auto add_piece = [&](const Vec3& q, double area, const Vec3& n, std::int32_t facing,
                          const shared::MaterialGpu& mat) -> bool {
@@ -465,6 +468,8 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
                 if (count_ >= capacity_) return false;
                 ret.energy = static_cast<float>(e);
                 unsorted_[count_] = ret;
+                unsorted_labels_[count_] = {static_cast<float>(q[0]), static_cast<float>(q[1]),
+                                            static_cast<float>(q[2]), instance};
                 unsorted_column_[count_] = profile_column;
                 ++count_;
                 return true;
@@ -486,6 +491,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     for (const SubpixelCandidate& candidate : plan.subpixel_candidates) {
         const std::uint32_t draw_index = clusters[candidate.cluster_begin].draw;
         const SceneDraw& draw = scene.draws[draw_index];
+        instance = draw.instance;
         const Vec3 centre =
             transform_point(sonar_world, {candidate.centre[0], candidate.centre[1], candidate.centre[2]});
         const double distance = norm(centre), nearest = distance - candidate.radius;
@@ -574,7 +580,9 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
         column_begin_[c] += column_begin_[c - 1];
     for (std::uint32_t i = 0; i < count_; ++i) {
         // column_begin_[c] runs ahead as c's returns are placed, then is moved back below
-        returns_[column_begin_[unsorted_column_[i]]++] = unsorted_[i];
+        const std::uint32_t at = column_begin_[unsorted_column_[i]]++;
+        returns_[at] = unsorted_[i];
+        labels_[at] = unsorted_labels_[i];
     }
     for (std::size_t c = column_begin_.size() - 1; c > 0; --c)
         column_begin_[c] = column_begin_[c - 1];

@@ -35,6 +35,13 @@ struct DepthCluster;
 void plan_subpixel(Plan& plan, const SceneData& scene);
 constexpr std::uint32_t kMaxSubpixelReturns = 1u << 18; // 4 MiB of returns
 
+// What the labels stage (stages/labels.h) needs of a return beside its echo: its centroid (sonar frame)
+// and the instance id of its object (SceneDraw::instance).
+struct SubpixelLabel {
+    float x, y, z;
+    std::uint32_t instance;
+};
+
 class SubpixelReturns {
 public:
     // Sizes everything once for the plan (plan.subpixel_capacity).
@@ -53,6 +60,7 @@ public:
     // column c's returns: returns()[column_begin()[c] .. column_begin()[c + 1])
     const std::uint32_t* column_begin() const { return column_begin_.data(); }
     const shared::SubpixelReturn* returns() const { return returns_.data(); }
+    const SubpixelLabel* labels() const { return labels_.data(); } // returns()[i]'s centroid and instance
 
     // The device buffer (binding kBindingSubpixel): column_begin, the silent material, then the returns
     // from the next multiple of 4 uints (sonar_shared.h). buffer_bytes: its size for the plan (>= 16).
@@ -63,6 +71,7 @@ public:
 private:
     std::vector<std::uint32_t> column_begin_;
     std::vector<shared::SubpixelReturn> returns_, unsorted_;
+    std::vector<SubpixelLabel> labels_, unsorted_labels_;
     std::vector<std::uint32_t> unsorted_column_;
     std::uint32_t capacity_ = 0, count_ = 0, clusters_taken_ = 0, draws_silent_ = 0;
 };

@@ -224,6 +224,7 @@ public:
     }
 
     const char* name() const override { return "cpu"; }
+    const SubpixelReturns* subpixel_returns() const override { return &stage_.subpixel; }
 
 private:
     void save_buffer(StageBuffers buffer, bool ran, Frame& frame) const {

@@ -105,6 +105,7 @@ struct Job {
     std::vector<std::unique_ptr<LabelsStage::Scratch>>* scratch;
     std::vector<PixelLabel>* pixels;
     Frame* frame;
+    const SubpixelReturns* subpixel; // null or empty: no sub-pixel returns this frame
 };
 
 // The instance a pixel of the depth pass's id image shows (material | instance << 16; 0 where nothing
@@ -201,9 +202,40 @@ void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, st
     }
 }
 
+// The sub-pixel returns of profile column q (core/subpixel.h) that the frame's depth image does not hide,
+// into the beam's cells with the beam's share `weight` of the column: each at its centroid, with the
+// tent's range shares, as the profile stage adds its echo (profile.comp add_subpixel).
+void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelReturns& subpixel, std::uint32_t q,
+                          double weight, std::vector<Cell>& cells, int& k_low, int& k_high) {
+    const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
+    const shared::SubpixelReturn* returns = subpixel.returns();
+    const SubpixelLabel* labels = subpixel.labels();
+    for (std::uint32_t i = subpixel.column_begin()[q]; i < subpixel.column_begin()[q + 1]; ++i) {
+        const shared::SubpixelReturn& r = returns[i];
+        if (!M::subpixel_visible(frame.depth[r.pixel], frame.material[r.pixel], plan.subpixel_silent_material, r.view_z,
+                                 plan.depth_a, plan.depth_b))
+            continue;
+        const double e = double(r.energy) * weight;
+        const M::vec2 none(0.0);
+        const M::RangeSpread spread = M::range_spread(shared::kRangeKernelTent, none, none, M::vec2(e, r.range_m), none,
+                                                      none, 0.0, 0.0, range_min, inv_bin_width, 0.0, plan.bins);
+        const SubpixelLabel& label = labels[i];
+        const double point[3] = {label.x, label.y, label.z};
+        const double elevation = std::asin(std::clamp(point[2] / double(r.range_m), -1.0, 1.0));
+        for (int k = spread.k_first; k <= spread.k_last; ++k) {
+            const double w = M::range_share(spread, k) * e;
+            if (!(w > 0.0)) continue;
+            add(cells[static_cast<std::size_t>(k)], label.instance, w, elevation, point);
+            k_low = std::min(k_low, k);
+            k_high = std::max(k_high, k);
+        }
+    }
+}
+
 // Labels beam j into the frame's label arrays.
 void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
-                const std::vector<PixelLabel>& pixels, std::vector<Cell>& cells, Frame& frame, std::uint32_t j) {
+                const std::vector<PixelLabel>& pixels, const SubpixelReturns* subpixel, std::vector<Cell>& cells,
+                Frame& frame, std::uint32_t j) {
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
     int k_low = static_cast<int>(plan.bins), k_high = -1;
     const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
@@ -250,6 +282,14 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
         }
     }
 
+    // then each profile column's sub-pixel returns, after its pixels (as the profile stage adds them)
+    if (subpixel != nullptr && subpixel->count() > 0) {
+        for (std::uint32_t q = q_begin; q < q_end; ++q) {
+            const double weight = beam_weight(q);
+            if (weight > 0.0) add_subpixel_returns(plan, frame, *subpixel, q, weight, cells, k_low, k_high);
+        }
+    }
+
     // (cells without energy keep the values run() filled in)
     for (int k = k_low; k <= k_high; ++k) {
         Cell& cell = cells[static_cast<std::size_t>(k)];
@@ -278,8 +318,8 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
 
 } // namespace
 
-void LabelsStage::run(Frame& frame, const Pose& pose) {
-    Job job{&plan_, &class_of_instance_, &scratch_, &pixels_->pixels, &frame};
+void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
+    Job job{&plan_, &class_of_instance_, &scratch_, &pixels_->pixels, &frame, subpixel};
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
     std::fill(frame.instance_fraction.begin(), frame.instance_fraction.end(), 0.0f);
@@ -301,7 +341,7 @@ void LabelsStage::run(Frame& frame, const Pose& pose) {
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
             for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
-                label_beam(*t.plan, *t.class_of_instance, *t.pixels, cells, *t.frame, j);
+                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, cells, *t.frame, j);
     };
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
@@ -311,13 +351,13 @@ void LabelsStage::run(Frame& frame, const Pose& pose) {
         task(&job, 0, 1);
     }
     frame.visibility.clear();
-    if (alone_) visibility(frame, pose);
+    if (alone_) visibility(frame, pose, subpixel);
     // The material image as without labels: the material id alone.
     for (std::uint32_t& m : frame.material)
         if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;
 }
 
-void LabelsStage::visibility(Frame& frame, const Pose& pose) {
+void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
     Alone& a = *alone_;
     const SceneData& scene = *a.scene;
     for (std::uint16_t id : frame.instance)
@@ -338,6 +378,7 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose) {
             a.drawn_alone[i] = mine ? a.drawn[i] : 0;
             any = any || a.drawn_alone[i];
         }
+        std::uint32_t own = 0; // its pixels in the frame's own depth image
         if (any) {
             const DepthClusters only{a.clusters, a.drawn_alone};
             depth_pass(plan_, scene, a.draws, a.depth.data(), a.material.data(), nullptr, &only);
@@ -349,10 +390,31 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose) {
                     ++v.hidden;
                     continue;
                 }
+                ++own;
                 const double range = pixel_slant_range(plan_, static_cast<std::uint32_t>(p / plan_.columns),
                                                        static_cast<std::uint32_t>(p % plan_.columns), d);
                 if (range < plan_.config.range_min_m || range >= plan_.config.range_max_m) ++v.outside;
             }
+        }
+        // An object taken out of the depth pass this frame (below the pixel grid's size, core/subpixel.h) has
+        // no pixel of its own there, and drawn alone it looks hidden by whatever lies behind it: its returns
+        // say instead (each a piece of it in one profile column), hidden as the profile stage hides them.
+        if (own == 0 && subpixel != nullptr && subpixel->count() > 0) {
+            ObjectVisibility from_returns;
+            from_returns.instance = id;
+            const shared::SubpixelReturn* returns = subpixel->returns();
+            const SubpixelLabel* labels = subpixel->labels();
+            for (std::uint32_t i = 0; i < subpixel->count(); ++i) {
+                if (labels[i].instance != id) continue;
+                const shared::SubpixelReturn& r = returns[i];
+                ++from_returns.pixels;
+                if (!M::subpixel_visible(frame.depth[r.pixel], frame.material[r.pixel], plan_.subpixel_silent_material,
+                                         r.view_z, plan_.depth_a, plan_.depth_b))
+                    ++from_returns.hidden;
+                else if (r.range_m < plan_.config.range_min_m || r.range_m >= plan_.config.range_max_m)
+                    ++from_returns.outside;
+            }
+            if (from_returns.pixels > 0) v = from_returns;
         }
         frame.visibility.push_back(v); // capacity reserved by make_frame (one per instance of the scene)
     }

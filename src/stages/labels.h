@@ -2,7 +2,8 @@
 // energy into it, its share, its class, the energy-weighted elevation and its spread, and the 3-D point
 // of the object's strongest return there. It runs on the host after either backend, on that backend's material/instance
 // image and echo, and follows each pixel's energy along the main lobe exactly as the beamform stage spreads it
-// (pixel_spread's range shares, the cone or pixel columns, the beam table), in double. Side lobes,
+// (pixel_spread's range shares, the cone or pixel columns, the beam table), in double, and the returns
+// of objects below the pixel grid's size (core/subpixel.h) as the profile stage adds them. Side lobes,
 // speckle and noise are left out: a label says what the beam looks at, not what leaks into it.
 //
 // Made only when labels are asked for (effects on demand): its scratch is allocated here, once.
@@ -22,7 +23,8 @@ class Workers;
 
 namespace vksonar {
 struct SceneData;
-}
+class SubpixelReturns;
+} // namespace vksonar
 
 namespace vksonar::cpu {
 
@@ -46,14 +48,16 @@ public:
     // frame.echo, fills frame.instance ... frame.point, then leaves frame.material as material ids
     // (kNoMaterial where nothing was hit), as without labels. The result does not depend on the threads.
     // pose: the frame's, for Frame::visibility (each labelled object drawn alone on the CPU rasterizer).
-    void run(Frame& frame, const Pose& pose);
+    // subpixel: the backend's sub-pixel returns of this frame (null: none): objects too small or thin for
+    // the pixel grid (a cable) label the cells their returns reach, as their echo does.
+    void run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel = nullptr);
 
     struct Scratch; // per thread: one beam's bins
     struct Pixels;  // per pixel: what the beams read of it
     struct Alone;   // each labelled object drawn alone (Frame::visibility)
 
 private:
-    void visibility(Frame& frame, const Pose& pose);
+    void visibility(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel);
 
     const Plan& plan_; // the Renderer's, which owns this stage
     std::vector<std::uint16_t> class_of_instance_;

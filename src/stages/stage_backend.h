@@ -12,6 +12,7 @@ namespace vksonar {
 
 struct Plan;
 struct SceneData;
+class SubpixelReturns;
 
 class StageBackend {
 public:
@@ -21,6 +22,8 @@ public:
     // Must not allocate once the frame is sized (Renderer::make_frame).
     [[nodiscard]] virtual Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) = 0;
     virtual const char* name() const = 0;
+    // The last render's sub-pixel returns (core/subpixel.h), for the labels stage; null: none listed.
+    virtual const SubpixelReturns* subpixel_returns() const = 0;
 };
 
 } // namespace vksonar

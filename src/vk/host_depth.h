@@ -48,6 +48,7 @@ public:
     void arm_read_back();
     [[nodiscard]] Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
     const char* name() const override { return "vulkan (host depth)"; }
+    const SubpixelReturns* subpixel_returns() const override { return nullptr; } // no scene, no objects
 
     struct Objects; // internal
 

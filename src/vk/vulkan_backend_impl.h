@@ -73,6 +73,7 @@ public:
     Result<void> init();
     Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
     const char* name() const override { return "vulkan"; }
+    const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_; }
 
 private:
     Result<void> create_scene_buffers();
