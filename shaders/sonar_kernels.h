@@ -360,10 +360,12 @@ VKS_FN REAL depth_slant_range(EchoConstants k, REAL d, REAL u, REAL v) {
 
 // (energy relative to SL, r) of a hit at slant range r with material `mat`, given the pixel's solid
 // angle omega (pixel_solid_angle) and vertical power (pixel_vertical_power); (0, r) outside the range
-// gate. cos_incidence is read only with terms.incidence.
+// gate and where the vertical power is 0. cos_incidence is read only with terms.incidence.
 VKS_FN vec2 echo_at_range(EchoConstants k, EchoTerms terms, REAL r, MaterialGpu mat, REAL cos_incidence, REAL omega,
                           REAL vertical) {
-    if (r < k.gate_min_m || r >= k.gate_max_m) {
+    // Outside the range gate, or outside the pixel's view's cell (a tier view's corner beyond its wedge: no
+    // vertical power): nothing, at no cost (the product below would be exactly 0).
+    if (r < k.gate_min_m || r >= k.gate_max_m || !(vertical > REAL(0))) {
         return vec2(REAL(0), r);
     }
     REAL scatter = REAL(1);

@@ -238,7 +238,7 @@ VKS_FN REAL footprint_hi(REAL a, REAL b) {
 // Where the range changes along a row as well as down a column (near the nadir, where the seabed's range
 // has its minimum; a wall at a slant in azimuth) a pixel's echo spans both, and without this term the
 // range kernel had to widen every footprint narrower than a bin to a bin, which smeared the seabed's
-// sharp onset at the altitude over the bins either side (+0.6 to +1 dB in its bin at h = 1-2 m).
+// sharp onset at the altitude over the bins either side (+0.33 to +0.41 dB in its bin at h = 1-3 m).
 VKS_FN vec2 footprint_across(REAL r_left, REAL r, REAL r_right, REAL jump_rel) {
     REAL a = footprint_edge_offset(r_left, REAL(0), r, r_right, jump_rel);
     REAL b = footprint_edge_offset(r_right, REAL(0), r, r_left, jump_rel);

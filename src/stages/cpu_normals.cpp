@@ -243,6 +243,14 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
                 x += W - 1;
                 continue;
             }
+            // Four pixels without a hit (water above the seabed, a tier view's empty corner): no normals, and
+            // no window to load (a third to a half of the default grid).
+            if (x % 4 == 0 && x + 4 <= C && !(mid[4 * x + 3] > Real(0)) && !(mid[4 * x + 7] > Real(0)) &&
+                !(mid[4 * x + 11] > Real(0)) && !(mid[4 * x + 15] > Real(0))) {
+                std::fill(out_row + 4 * x, out_row + 4 * (x + 4), 0.0f);
+                x += 3;
+                continue;
+            }
             if constexpr (std::is_same_v<Real, float>) {
                 // Four pixels at a time where their windows are smooth (sobel3_smooth4), the others by the
                 // scalar kernel; the windows of the last four columns reach into the zero columns.
