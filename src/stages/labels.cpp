@@ -54,6 +54,12 @@ struct LabelsStage::Scratch {
     // bins of the beam being labelled: value-initialised here, and label_beam resets every cell it
     // touched, so each beam starts from zeros without a per-frame clear
     std::vector<Cell> cells;
+    // line_array: per (row, view), the first pixel of the last beam's cone columns, and that beam's lower
+    // cone bound (infinity: none yet this frame). A thread labels its beams in increasing order, whose
+    // cone columns move towards starboard, so the next beam's first pixel is found by a few steps from
+    // there instead of a binary search per row and view.
+    std::vector<std::uint32_t> first;
+    float first_lo = std::numeric_limits<float>::infinity();
 };
 
 struct LabelsStage::Pixels {
@@ -79,6 +85,7 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     for (std::uint32_t i = 0; i < parts; ++i) {
         scratch_.push_back(std::make_unique<Scratch>());
         scratch_.back()->cells.resize(plan_.bins);
+        scratch_.back()->first.resize(static_cast<std::size_t>(plan_.rows) * plan_.views);
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
@@ -234,8 +241,9 @@ void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelRe
 
 // Labels beam j into the frame's label arrays.
 void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
-                const std::vector<PixelLabel>& pixels, const SubpixelReturns* subpixel, std::vector<Cell>& cells,
+                const std::vector<PixelLabel>& pixels, const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch,
                 Frame& frame, std::uint32_t j) {
+    std::vector<Cell>& cells = scratch.cells;
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
     int k_low = static_cast<int>(plan.bins), k_high = -1;
     const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
@@ -264,8 +272,16 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             const float* view_x = cone_x + std::size_t(view) * plan.slice_columns;
             const std::uint32_t view_end = (view + 1) * plan.slice_columns;
-            std::uint32_t c =
-                static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + plan.slice_columns, lo) - cone_x);
+            // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not decreased
+            std::uint32_t& first_pixel = scratch.first[std::size_t(row) * plan.views + view];
+            std::uint32_t c;
+            if (lo >= scratch.first_lo) {
+                for (c = first_pixel; c < view_end && cone_x[c] < lo; ++c) {
+                }
+            } else {
+                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + plan.slice_columns, lo) - cone_x);
+            }
+            first_pixel = c;
             for (; c < view_end && cone_x[c] < hi; ++c) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
                 // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
@@ -281,6 +297,8 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
             }
         }
     }
+
+    if (plan.line_array) scratch.first_lo = static_cast<float>(q_begin) - 1.0f;
 
     // then each profile column's sub-pixel returns, after its pixels (as the profile stage adds them)
     if (subpixel != nullptr && subpixel->count() > 0) {
@@ -312,7 +330,9 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
             frame.point[3 * out + 1] = best->y;
             frame.point[3 * out + 2] = best->z;
         }
-        cell = Cell{};
+        // what add() reads of an unused cell (a slot is read only below `used`, and written whole)
+        cell.used = 0;
+        cell.energy = cell.psi = cell.psi_sq = 0.0;
     }
 }
 
@@ -337,11 +357,12 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     };
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
-        std::vector<Cell>& cells = (*t.scratch)[part]->cells;
+        LabelsStage::Scratch& scratch = *(*t.scratch)[part];
+        scratch.first_lo = std::numeric_limits<float>::infinity(); // a new frame: no last beam
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
             for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
-                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, cells, *t.frame, j);
+                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, j);
     };
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
