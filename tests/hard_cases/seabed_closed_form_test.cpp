@@ -173,6 +173,14 @@ SonarConfig seabed_config() {
     return c;
 }
 
+// A 400 m square of the default material, facing up, h below the sonar: it fills the fan out past range_max.
+Scene flat_seabed(double h) {
+    Scene scene;
+    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
+                  translation(0, 0, -h), AcousticMaterial{});
+    return scene;
+}
+
 class SeabedClosedForm : public HardCase {};
 
 TEST_P(SeabedClosedForm, EveryBinFromTheFirstReturnToRangeMaxFollowsTheGroundIntegral) {
@@ -379,9 +387,7 @@ TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
     SonarConfig config = seabed_config();
     config.effects.vertical_sidelobes = EffectMode::on;
     const double h = 3.0;
-    Scene scene;
-    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
-                  translation(0, 0, -h), AcousticMaterial{});
+    const Scene scene = flat_seabed(h);
     auto rendered = render_checked(GetParam(), config, scene, Pose{});
     ASSERT_TRUE(rendered);
     const Plan& plan = renderer_plan(rendered->renderer);
@@ -457,9 +463,7 @@ TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
     SonarConfig config = seabed_config();
     config.effects.vertical_sidelobes = EffectMode::on;
     const double h = 3.0;
-    Scene scene;
-    add_mesh_draw(scene, {-200, -200, 0, 200, -200, 0, 200, 200, 0, -200, 200, 0}, {0, 1, 2, 0, 2, 3},
-                  translation(0, 0, -h), AcousticMaterial{});
+    const Scene scene = flat_seabed(h);
     std::vector<double> ref;
     std::uint32_t previous_views = 0;
     for (double ratio : {1.5, 2.0, 3.0, 4.0}) {
