@@ -98,9 +98,11 @@ inline std::unique_ptr<Rendered> render_checked(Backend backend, const SonarConf
     return r;
 }
 
-// Adds a mesh drawn with a column-major world matrix and a material of the given strength.
+// Adds a mesh drawn with a column-major world matrix and a material of the given strength; its draw carries
+// `instance` (SceneDraw::instance, for labels).
 inline void add_mesh_draw(Scene& scene, const std::vector<float>& positions, const std::vector<std::uint32_t>& indices,
-                          const std::array<double, 16>& world_from_local, const AcousticMaterial& material) {
+                          const std::array<double, 16>& world_from_local, const AcousticMaterial& material,
+                          std::uint32_t instance = 0) {
     auto mesh = scene.add_mesh(positions.data(), static_cast<std::uint32_t>(positions.size() / 3), indices.data(),
                                static_cast<std::uint32_t>(indices.size()));
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
@@ -108,6 +110,7 @@ inline void add_mesh_draw(Scene& scene, const std::vector<float>& positions, con
     draw.mesh = mesh.value();
     draw.material = scene.add_material(material);
     draw.world_from_local = world_from_local;
+    draw.instance = instance;
     auto added = scene.add_draw(draw);
     ASSERT_TRUE(added.ok()) << added.error().message;
 }

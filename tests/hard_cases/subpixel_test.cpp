@@ -105,15 +105,7 @@ void add_cable(Scene& scene, double r, double half, const std::array<double, 3>&
         idx.insert(idx.end(), {cap0, at(0, k), at(0, k + 1)});
         idx.insert(idx.end(), {cap0 + 1, at(segments, k + 1), at(segments, k)});
     }
-    auto mesh = scene.add_mesh(p.data(), static_cast<std::uint32_t>(p.size() / 3), idx.data(),
-                               static_cast<std::uint32_t>(idx.size()));
-    ASSERT_TRUE(mesh.ok()) << mesh.error().message;
-    SceneDraw draw;
-    draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
-    draw.world_from_local = translation(c[0], c[1], c[2]);
-    draw.instance = instance;
-    ASSERT_TRUE(scene.add_draw(draw).ok());
+    add_mesh_draw(scene, p, idx, translation(c[0], c[1], c[2]), material, instance);
 }
 
 double db(double x) {
