@@ -76,6 +76,9 @@ struct LabelsStage::Alone {
     std::vector<float> depth;
     std::vector<std::uint32_t> material;
     std::vector<std::uint8_t> labelled; // 65536: the ids with a labelled cell this frame
+    // With sub-pixel objects possible (Plan::subpixel_capacity > 0), per instance id up to the scene's
+    // largest: the tally of its sub-pixel returns this frame (one pass over the list), zeroed once read.
+    std::vector<ObjectVisibility> from_returns;
 };
 
 LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
@@ -99,6 +102,12 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         alone_->depth.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
         alone_->material.resize(alone_->depth.size());
         alone_->labelled.assign(65536, 0);
+        if (plan_.subpixel_capacity > 0) {
+            std::uint32_t largest = 0;
+            for (const SceneDraw& draw : scene->draws)
+                largest = std::max(largest, draw.instance);
+            alone_->from_returns.assign(std::size_t(largest) + 1, ObjectVisibility{});
+        }
     }
 }
 
@@ -387,6 +396,26 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     compose_depth_draws(plan_, scene, pose, a.draws);
     cull_depth_clusters(a.clusters, scene.draws.size(), a.draws, a.drawn);
     const std::size_t runs = a.clusters.size();
+    // Objects taken out of the depth pass this frame (below the pixel grid's size, core/subpixel.h) have no
+    // pixel of their own there, and drawn alone they look hidden by whatever lies behind them: their
+    // returns say instead (each a piece of it in one profile column), hidden as the profile stage hides
+    // them. One pass over the list tallies every labelled object's.
+    if (subpixel != nullptr && !a.from_returns.empty()) {
+        const shared::SubpixelReturn* returns = subpixel->returns();
+        const SubpixelLabel* labels = subpixel->labels();
+        for (std::uint32_t i = 0; i < subpixel->count(); ++i) {
+            const std::uint32_t id = labels[i].instance;
+            if (id >= a.from_returns.size() || !a.labelled[id]) continue;
+            ObjectVisibility& tally = a.from_returns[id];
+            const shared::SubpixelReturn& r = returns[i];
+            ++tally.pixels;
+            if (!M::subpixel_visible(frame.depth[r.pixel], frame.material[r.pixel], plan_.subpixel_silent_material,
+                                     r.view_z, plan_.depth_a, plan_.depth_b))
+                ++tally.hidden;
+            else if (r.range_m < plan_.config.range_min_m || r.range_m >= plan_.config.range_max_m)
+                ++tally.outside;
+        }
+    }
     for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
         if (!a.labelled[id]) continue;
         a.labelled[id] = 0;
@@ -417,25 +446,13 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
                 if (range < plan_.config.range_min_m || range >= plan_.config.range_max_m) ++v.outside;
             }
         }
-        // An object taken out of the depth pass this frame (below the pixel grid's size, core/subpixel.h) has
-        // no pixel of its own there, and drawn alone it looks hidden by whatever lies behind it: its returns
-        // say instead (each a piece of it in one profile column), hidden as the profile stage hides them.
-        if (own == 0 && subpixel != nullptr && subpixel->count() > 0) {
-            ObjectVisibility from_returns;
-            from_returns.instance = id;
-            const shared::SubpixelReturn* returns = subpixel->returns();
-            const SubpixelLabel* labels = subpixel->labels();
-            for (std::uint32_t i = 0; i < subpixel->count(); ++i) {
-                if (labels[i].instance != id) continue;
-                const shared::SubpixelReturn& r = returns[i];
-                ++from_returns.pixels;
-                if (!M::subpixel_visible(frame.depth[r.pixel], frame.material[r.pixel], plan_.subpixel_silent_material,
-                                         r.view_z, plan_.depth_a, plan_.depth_b))
-                    ++from_returns.hidden;
-                else if (r.range_m < plan_.config.range_min_m || r.range_m >= plan_.config.range_max_m)
-                    ++from_returns.outside;
+        if (id < a.from_returns.size()) { // its returns' tally, when it has no pixel of its own
+            ObjectVisibility& tally = a.from_returns[id];
+            if (own == 0 && tally.pixels > 0) {
+                v = tally;
+                v.instance = id;
             }
-            if (from_returns.pixels > 0) v = from_returns;
+            tally = ObjectVisibility{};
         }
         frame.visibility.push_back(v); // capacity reserved by make_frame (one per instance of the scene)
     }
