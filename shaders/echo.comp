@@ -72,12 +72,12 @@ MaterialGpu material(uint m) {
 // The views of the depth pass (sonar_shared.h): each pixel's half extents, ray and cell.
 layout(std140, binding = kBindingSliceInfo) uniform SliceBlock { SliceInfo slice_info[kMaxViews]; };
 
-// The echo constants of a view: its half extents and pixel size.
-EchoConstants echo_constants(PixelView view) {
+// The echo constants of a view `width` columns wide: its half extents and pixel size.
+EchoConstants echo_constants(PixelView view, uint width) {
     EchoConstants k;
     k.tan_half_h = view.tan_half_h;
     k.tan_half_v = view.tan_half_v;
-    k.pixel_du = 2.0 * view.tan_half_h / float(params.slice_columns);
+    k.pixel_du = 2.0 * view.tan_half_h / float(width);
     k.pixel_dv = 2.0 * view.tan_half_v / float(params.rows);
     k.depth_a = params.depth_a;
     k.depth_b = params.depth_b;
@@ -110,17 +110,23 @@ vec2 echo_pixel(uint row, uint column) {
     if (!(d > 0.0)) {
         return vec2(0.0);
     }
-    uint slice = slice_of_column(column, 1.0 / float(params.slice_columns)); // no integer divide per pixel
+    // no integer divide per pixel
+    uint slice = kTierViews == 0u ? slice_of_column(column, 1.0 / float(params.slice_columns))
+                                  : view_of_pixel_column(column, params.slices, params.slice_columns,
+                                                         1.0 / float(params.slice_columns),
+                                                         1.0 / float(max(params.tier_columns, 1u)));
     // a slice from two table reads (level_slice_view), a tier view whole
     PixelView view = kTierViews == 0u || slice < params.slices
                          ? level_slice_view(slice_info[slice].forward_x, slice_info[slice].forward_y, params.tan_half_h,
                                             params.tan_half_v, params.elevation_gate_sin)
                          : view_of_slice(slice_info[slice]);
-    float u = pixel_coord(column - slice * params.slice_columns, params.slice_columns, view.tan_half_h);
+    uint width = columns_of_view(slice, params.slices, params.slice_columns, params.tier_columns);
+    uint first = first_column_of_view(slice, params.slices, params.slice_columns, params.tier_columns);
+    float u = pixel_coord(column - first, width, view.tan_half_h);
     float v = pixel_coord(row, params.rows, view.tan_half_v);
     MaterialGpu mat = material(material_index(material_id[p], material_count()));
     float cos_incidence = kIncidence ? normals4[p].w : 0.0;
-    return echo_of_pixel(echo_constants(view), echo_terms(), d, u, v, view, mat, cos_incidence);
+    return echo_of_pixel(echo_constants(view, width), echo_terms(), d, u, v, view, mat, cos_incidence);
 }
 
 // x: runs of kPixelsPerInvocation columns of one row, y: the row (a 2-D grid: no divide by columns).

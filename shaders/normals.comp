@@ -40,8 +40,12 @@ PixelView pixel_view(uint view) {
     return view_of_slice(slice_info[view]);
 }
 
-uint view_of_column(uint c) {
-    return slice_of_column(c, 1.0 / float(params.slice_columns)); // no integer divide per pixel
+uint view_of_column(uint c) { // no integer divide per pixel
+    if (kTierViews == 0u) {
+        return slice_of_column(c, 1.0 / float(params.slice_columns));
+    }
+    return view_of_pixel_column(c, params.slices, params.slice_columns, 1.0 / float(params.slice_columns),
+                                1.0 / float(max(params.tier_columns, 1u)));
 }
 
 // Whether the pixel columns a and b (a neighbour, in the image) see one surface side by side: the same
@@ -71,7 +75,9 @@ Sample load(int column, int row) {
     }
     uint index = view_of_column(c);
     PixelView view = pixel_view(index);
-    float u = pixel_coord(c - index * params.slice_columns, params.slice_columns, view.tan_half_h);
+    float u = pixel_coord(c - first_column_of_view(index, params.slices, params.slice_columns, params.tier_columns),
+                          columns_of_view(index, params.slices, params.slice_columns, params.tier_columns),
+                          view.tan_half_h);
     float v = pixel_coord(j, params.rows, view.tan_half_v);
     float z = view_z_from_depth(d, params.depth_a, params.depth_b);
     return sample_at(z, pixel_ray(u, v, view));
@@ -165,7 +171,7 @@ void run_geometric(uint row, uint first, uint last) {
             normals4[i] = vec4(0.0);
             continue;
         }
-        normals4[i] = geometric_normal(p, normals4[i].xyz, pixel_view(column / params.slice_columns));
+        normals4[i] = geometric_normal(p, normals4[i].xyz, pixel_view(view_of_column(column)));
     }
 }
 

@@ -57,18 +57,22 @@ int first_lane_bin(int k_first) {
 }
 
 // The ranges of pixel (row, column)'s row neighbours left and right (x, y), 0 where there is none in its
-// view (slice_columns columns from view_begin; across a view's edge lies another camera's image): what
+// view (its columns [view.x, view.y); across a view's edge lies another camera's image): what
 // range_spread's extent across the column reads (src/stages/pixel_spread.h row_neighbours).
-vec2 row_neighbour_ranges(uint row, uint column, uint view_begin) {
+vec2 row_neighbour_ranges(uint row, uint column, uvec2 view) {
     uint p = row * params.columns + column;
-    float left = column > view_begin ? load_echo(p - 1u).y : 0.0;
-    float right = column + 1u < view_begin + params.slice_columns ? load_echo(p + 1u).y : 0.0;
+    float left = column > view.x ? load_echo(p - 1u).y : 0.0;
+    float right = column + 1u < view.y ? load_echo(p + 1u).y : 0.0;
     return vec2(left, right);
 }
 
-// The first column of column c's view (no integer divide per pixel: sonar_math.h slice_of_column).
-uint view_begin_of(uint c) {
-    return slice_of_column(c, 1.0 / float(params.slice_columns)) * params.slice_columns;
+// The columns [first, end) of column c's view (no integer divide per pixel: sonar_math.h
+// view_of_pixel_column).
+uvec2 view_columns_of(uint c) {
+    uint view = view_of_pixel_column(c, params.slices, params.slice_columns, 1.0 / float(params.slice_columns),
+                                     1.0 / float(max(params.tier_columns, 1u)));
+    uint first = first_column_of_view(view, params.slices, params.slice_columns, params.tier_columns);
+    return uvec2(first, first + columns_of_view(view, params.slices, params.slice_columns, params.tier_columns));
 }
 
 // The range spread of pixel (row, column) with echo er, over the five-row window of its column and its
@@ -80,7 +84,7 @@ RangeSpread pixel_spread(uint row, uint column, vec2 er) {
     vec2 up = row >= 1u ? load_echo((row - 1u) * columns + column) : vec2(0.0);
     vec2 down = row + 1u < params.rows ? load_echo((row + 1u) * columns + column) : vec2(0.0);
     vec2 down2 = row + 2u < params.rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
-    vec2 across = row_neighbour_ranges(row, column, view_begin_of(column));
+    vec2 across = row_neighbour_ranges(row, column, view_columns_of(column));
     return range_spread(kRangeKernel, up2, up, er, down, down2, across.x, across.y, params.range_min_m,
                         params.inv_bin_width_m, params.edge_relative_jump, params.bins);
 }
@@ -159,9 +163,9 @@ uint first_above(uint begin, uint end, float lo) {
 // The slices of the main band are one run of columns along which the cone coordinate increases (they
 // join at their seams); each tier view of the vertical side lobes is a run of its own.
 void gather_cone_columns(uint first_cone, uint end_cone) {
-    uint width = params.slice_columns;
-    uint slices_end = params.slices * width;
-    uint tiers = kTierViews != 0u ? params.columns / width - params.slices : 0u;
+    uint slices_end = params.slices * params.slice_columns;
+    uint width = params.tier_columns; // each tier view's
+    uint tiers = kTierViews != 0u && width > 0u ? (params.columns - slices_end) / width : 0u;
     float lo = float(first_cone) - 1.0;
     uint first_slices = first_above(0u, slices_end, lo);
     uint first_tier[kMaxViews];
@@ -238,14 +242,14 @@ void main() {
     vec2 up = vec2(0.0);
     vec2 er = load_echo(column);
     vec2 next = rows > 1u ? load_echo(columns + column) : vec2(0.0);
-    uint view_begin = view_begin_of(column);
+    uvec2 view = view_columns_of(column);
     for (uint row = 0u; row < rows; ++row) {
         // the echo two rows down, loaded once: down2 here, down on the next row, er after that
         vec2 next2 = row + 2u < rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
         float e = er.x;
         if (e > 0.0) {
             // `precise` inside range_spread: the bin coordinates and shares round exactly as the CPU's.
-            vec2 across = row_neighbour_ranges(row, column, view_begin);
+            vec2 across = row_neighbour_ranges(row, column, view);
             RangeSpread spread = range_spread(kRangeKernel, up2, up, er, next, next2, across.x, across.y,
                                               params.range_min_m, params.inv_bin_width_m, params.edge_relative_jump,
                                               params.bins);

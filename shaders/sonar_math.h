@@ -35,6 +35,23 @@ VKS_FN uint slice_of_column(uint c, REAL inv_slice_columns) {
     return uint((REAL(c) + REAL(0.5)) * inv_slice_columns);
 }
 
+// The view of pixel column c: the `slices` views slice_columns wide, then the tier views tier_columns
+// wide (Plan::tier_columns; inv_*: the widths' reciprocals, as slice_of_column takes them).
+VKS_FN uint view_of_pixel_column(uint c, uint slices, uint slice_columns, REAL inv_slice_columns,
+                                 REAL inv_tier_columns) {
+    uint main_columns = slices * slice_columns;
+    return c < main_columns ? slice_of_column(c, inv_slice_columns)
+                            : slices + slice_of_column(c - main_columns, inv_tier_columns);
+}
+
+// The first pixel column of view `view` and its width, in the same layout.
+VKS_FN uint first_column_of_view(uint view, uint slices, uint slice_columns, uint tier_columns) {
+    return view < slices ? view * slice_columns : slices * slice_columns + (view - slices) * tier_columns;
+}
+VKS_FN uint columns_of_view(uint view, uint slices, uint slice_columns, uint tier_columns) {
+    return view < slices ? slice_columns : tier_columns;
+}
+
 // Exact solid angle of a pixel of size du x dv (focal-normalized) centred at (u, v).
 VKS_FN REAL pixel_solid_angle(REAL u, REAL v, REAL du, REAL dv) {
     REAL q = REAL(1) + u * u + v * v;

@@ -135,7 +135,8 @@ VKS_CONST uint kNormalsSobel5 = 1u;
 VKS_CONST uint kNormalsGeometric = 2u;
 
 // Per-frame-constant parameters of the compute stages (uniform buffer, std140; scalars only).
-// Pixel grid: `columns` = slices * slice_columns pixel columns (left to right = port to starboard),
+// Pixel grid: `columns` = slices * slice_columns + tier views * tier_columns pixel columns (left to right
+// = port to starboard for the slices),
 // `rows` rows (top to bottom = up to down). Buffers are row-major: index = row * columns + column.
 struct SonarParams {
     uint columns;
@@ -195,7 +196,7 @@ struct SonarParams {
     // The elevation gate (Plan::elevation_gate_sin): a pixel ray whose |sin elevation| is above it gets
     // no vertical power, so that every azimuth sees the same elevations; 2 (no gate) where none applies.
     float elevation_gate_sin;
-    uint pad_gate0;
+    uint tier_columns; // pixel columns of each tier view (Plan::tier_columns; 0: none), after the slices
     uint pad_gate1;
     uint pad_gate2;
 };
@@ -204,8 +205,8 @@ static_assert(sizeof(SonarParams) == 40 * 4, "SonarParams must match the GLSL st
 #endif
 
 // Per-view table (uniform block of kMaxViews, std140): one entry per view of the depth pass, which
-// lie side by side in the pixel grid, slice_columns columns each (Plan::views). A view is a camera
-// (forward, right, down: an orthonormal basis in the sonar frame, so that pixel (u, v) looks along
+// lie side by side in the pixel grid, slice_columns columns each, the tier views tier_columns each (Plan::views). A
+// view is a camera (forward, right, down: an orthonormal basis in the sonar frame, so that pixel (u, v) looks along
 // forward + u right + v down) with its own focal-normalized half extents, and the cell of directions
 // it is the one to see: elevations whose sine lies in [sin_elevation_min, sin_elevation_max] and, for
 // a tier view, azimuths in its wedge. The slices of the main band (views 0 .. slices - 1) are level

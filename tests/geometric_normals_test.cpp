@@ -47,9 +47,9 @@ SonarConfig geometric_config(NormalMethod method = NormalMethod::geometric) {
 // Exact unit ray of pixel (column, row) in the sonar frame, from the plan in double.
 void pixel_ray(const Plan& plan, std::uint32_t column, std::uint32_t row, double ray[3]) {
     // the view's camera (a slice, or a tier view of the vertical side lobes): forward + u right + v down
-    const std::uint32_t s = column / plan.slice_columns;
+    const std::uint32_t s = view_of_column(plan, column), width = view_columns(plan, s);
     const ViewGeometry& view = plan.view_geometry[s];
-    const double u = (2.0 * (column - s * plan.slice_columns + 0.5) / plan.slice_columns - 1.0) * view.tan_half_h;
+    const double u = (2.0 * (column - view_first_column(plan, s) + 0.5) / width - 1.0) * view.tan_half_h;
     const double v = (2.0 * (row + 0.5) / plan.rows - 1.0) * view.tan_half_v;
     double d[3];
     for (int k = 0; k < 3; ++k)

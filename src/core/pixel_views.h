@@ -35,7 +35,7 @@ template <class Real> typename Math<Real>::PixelView pixel_view(const Plan& plan
 // the view's index for a tier view (whose edges are the image's edges). Sobel reads a neighbour column
 // only within the centre's group (normals.comp's joined() is the shader's twin).
 inline std::uint32_t view_group(const Plan& plan, std::uint32_t c) {
-    const std::uint32_t view = c / plan.slice_columns;
+    const std::uint32_t view = view_of_column(plan, c);
     return view < plan.slices ? 0u : view;
 }
 
@@ -72,7 +72,7 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              plan.vpattern_halfwidth_rad,
              plan.vpattern_chebyshev_a};
     }
-    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(plan.slice_columns);
+    k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(view_columns(plan, view));
     k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);
     return k;
 }

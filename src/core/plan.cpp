@@ -442,9 +442,10 @@ Result<void> plan_pixel_grid(Plan& p) {
 }
 
 // A tier view's pixel size relative to a slice's: the square root of the ratio of their solid angles
-// (the views share the grid's rows and columns, so their half extents' products).
-double tier_pixel_ratio(const Plan& p, double tan_h, double tan_v) {
-    return std::sqrt((tan_h / p.tan_half_h) * (tan_v / p.tan_half_v));
+// (the views share the grid's rows: their half extents' products, the horizontal ones per column), for
+// a tier view `columns` wide.
+double tier_pixel_ratio(const Plan& p, double tan_h, double tan_v, std::uint32_t columns) {
+    return std::sqrt((tan_h / columns) / (p.tan_half_h / p.slice_columns) * (tan_v / p.tan_half_v));
 }
 
 // The most the tier views' pixels may be coarser than the slices' before the side lobes are left out.
@@ -452,12 +453,12 @@ constexpr double kMaxTierPixelRatio = 4.0;
 
 // Whether the line array's cone coordinate increases along every row of the view (its axis cosine, the
 // ray's y over its length, decreases with u), sampled at every pixel centre in double, with a margin.
-bool cone_increases_along_rows(const Plan& p, const ViewGeometry& v) {
+bool cone_increases_along_rows(const Plan& p, const ViewGeometry& v, std::uint32_t columns) {
     for (std::uint32_t row = 0; row < p.rows; ++row) {
         const double vv = math_f64::pixel_coord(row, p.rows, v.tan_half_v);
         double previous = 2.0;
-        for (std::uint32_t col = 0; col < p.slice_columns; ++col) {
-            const double u = math_f64::pixel_coord(col, p.slice_columns, v.tan_half_h);
+        for (std::uint32_t col = 0; col < columns; ++col) {
+            const double u = math_f64::pixel_coord(col, columns, v.tan_half_h);
             const double y = v.forward[1] + u * v.right[1] + vv * v.down[1];
             const double axis = y / std::sqrt(1.0 + u * u + vv * vv);
             if (!(axis < previous - 1e-6)) return false;
@@ -512,7 +513,8 @@ bool cell_extents(const ViewGeometry& v, double a0, double a1, double e0, double
 // square root of their solid angles' ratio; at most 8 wedges, the finest they allow if none does). The
 // side lobes are 13 dB and more below the main lobe: their returns need the range footprint more than
 // fine azimuths (a flat seabed's closed form holds within 0.07 dB at 2.85x, tests/hard_cases). Each
-// camera is pitched to need the smallest pixels and widened by two pixels past its cell.
+// camera is pitched to need the smallest pixels; its half extents are its cell's, judged at a slice's
+// width (plan_tier_views then narrows the views and widens each by two pixels past its cell).
 std::vector<ViewGeometry> tier_band(const Plan& p, double e0, double e1, bool down) {
     std::vector<ViewGeometry> best;
     double best_ratio = std::numeric_limits<double>::infinity();
@@ -528,11 +530,11 @@ std::vector<ViewGeometry> tier_band(const Plan& p, double e0, double e1, bool do
                 ViewGeometry v = tier_camera(centre, down ? pitch : -pitch);
                 double tan_h = 0.0, tan_v = 0.0;
                 if (!cell_extents(v, a0, a1, e0, e1, tan_h, tan_v)) continue;
-                const double ratio = tier_pixel_ratio(p, tan_h, tan_v);
+                const double ratio = tier_pixel_ratio(p, tan_h, tan_v, p.slice_columns);
                 if (ratio < chosen_ratio) {
                     chosen_ratio = ratio;
-                    v.tan_half_h = tan_h * (1.0 + 4.0 / p.slice_columns);
-                    v.tan_half_v = tan_v * (1.0 + 4.0 / p.rows);
+                    v.tan_half_h = tan_h;
+                    v.tan_half_v = tan_v;
                     v.wedge = true;
                     v.wedge_start[0] = std::cos(a0);
                     v.wedge_start[1] = std::sin(a0);
@@ -589,14 +591,41 @@ Result<void> plan_tier_views(Plan& p) {
     const std::size_t below = tiers.size();
     for (const ViewGeometry& v : tier_band(p, gate, 0.5 * kPi, false))
         tiers.push_back(v);
+    // The tier views' width: the fewest columns (at most a slice's) that keep their pixels within
+    // accuracy.tier_pixel_ratio of the slices'; the side lobes' share of the frame's time follows it.
+    // Each camera is then widened by two pixels past its cell.
+    const auto widened = [&](ViewGeometry v, std::uint32_t columns) {
+        v.tan_half_h *= 1.0 + 4.0 / columns;
+        v.tan_half_v *= 1.0 + 4.0 / p.rows;
+        return v;
+    };
+    const auto worst_ratio_at = [&](std::uint32_t columns) {
+        double worst = 0.0;
+        for (const ViewGeometry& cell : tiers) {
+            const ViewGeometry v = widened(cell, columns);
+            worst = std::max(worst, tier_pixel_ratio(p, v.tan_half_h, v.tan_half_v, columns));
+        }
+        return worst;
+    };
+    constexpr std::uint32_t kMinTierColumns = 8;
+    const std::uint32_t full = p.slice_columns;
+    std::uint32_t tier_columns = full;
+    if (const double at_full = worst_ratio_at(full); at_full < c.tier_pixel_ratio) {
+        const double scale = at_full / c.tier_pixel_ratio; // the ratio grows as 1 / sqrt(columns)
+        tier_columns = std::clamp(static_cast<std::uint32_t>(std::ceil(full * scale * scale)), kMinTierColumns, full);
+        while (tier_columns < full && worst_ratio_at(tier_columns) > c.tier_pixel_ratio)
+            ++tier_columns;
+    }
+    for (ViewGeometry& v : tiers)
+        v = widened(v, tier_columns);
     // What the tier views can hold: pixels at most kMaxTierPixelRatio times the slices' (a fan of a few
     // degrees has slices of a few columns; its tier views would be as many columns over 90 degrees), and
     // a cone coordinate that increases along each of their rows (the profile stage's gather needs it).
     double worst_ratio = 0.0;
     bool monotonic = true;
     for (const ViewGeometry& v : tiers) {
-        worst_ratio = std::max(worst_ratio, tier_pixel_ratio(p, v.tan_half_h, v.tan_half_v));
-        monotonic = monotonic && cone_increases_along_rows(p, v);
+        worst_ratio = std::max(worst_ratio, tier_pixel_ratio(p, v.tan_half_h, v.tan_half_v, tier_columns));
+        monotonic = monotonic && cone_increases_along_rows(p, v, tier_columns);
     }
     if (worst_ratio > kMaxTierPixelRatio || !monotonic) {
         const std::string why = !monotonic
@@ -647,7 +676,8 @@ Result<void> plan_tier_views(Plan& p) {
         p.slice_info.push_back(info);
     }
     p.views = static_cast<std::uint32_t>(p.view_geometry.size());
-    p.columns = p.slice_columns * p.views;
+    p.tier_columns = tier_columns;
+    p.columns = p.slice_columns * p.slices + tier_columns * (p.views - p.slices);
     p.vertical_sidelobes_why =
         (mode == EffectMode::on ? std::string("on in config") : std::string("auto")) +
         ": the vertical pattern's side lobes beyond +-" + fmt(std::round(gate / kDegToRad * 10.0) / 10.0) +
@@ -713,15 +743,16 @@ void plan_cone_table(Plan& p) {
     p.pixel_cone_coord.resize(static_cast<std::size_t>(p.rows) * p.columns);
     for (std::uint32_t row = 0; row < p.rows; ++row) {
         for (std::uint32_t col = 0; col < p.columns; ++col) {
-            const math_f32::PixelView view = math_f32::view_of_slice(p.slice_info[col / p.slice_columns]);
+            const std::uint32_t index = view_of_column(p, col), first = view_first_column(p, index);
+            const math_f32::PixelView view = math_f32::view_of_slice(p.slice_info[index]);
             const float v = math_f32::pixel_coord(row, p.rows, view.tan_half_v);
-            const float u = math_f32::pixel_coord(col % p.slice_columns, p.slice_columns, view.tan_half_h);
+            const float u = math_f32::pixel_coord(col - first, view_columns(p, index), view.tan_half_h);
             const float axis = math_f32::array_axis_cosine(u, v, view);
             p.pixel_cone_coord[std::size_t(row) * p.columns + col] = math_f32::cone_coord(axis, half_fov, inv_step);
             // A tier view's (plan_tier_views checked its rows in double, with a margin): held non-decreasing
             // against float rounding, the same table for both backends. The slices' as before.
             float& x = p.pixel_cone_coord[std::size_t(row) * p.columns + col];
-            if (col % p.slice_columns != 0 && col >= p.slices * p.slice_columns) x = std::max(x, (&x)[-1]);
+            if (col != first && index >= p.slices) x = std::max(x, (&x)[-1]);
         }
     }
 }
@@ -1080,6 +1111,7 @@ void plan_gpu_params(Plan& p) {
     g.columns = p.columns;
     g.rows = p.rows;
     g.slice_columns = p.slice_columns;
+    g.tier_columns = p.tier_columns;
     g.slices = p.slices;
     g.beams = p.beams;
     g.bins = p.bins;

@@ -51,14 +51,17 @@ struct ViewGeometry {
 struct Plan {
     SonarConfig config; // the validated config this plan was made from
 
-    // Pixel grid of the depth pass: `views` frusta side by side, each slice_columns wide: first the
-    // `slices` of the main band, port to starboard (level cameras rotated about z, seeing elevations
-    // within the elevation gate), then the tier views that see the elevations beyond it where the
-    // vertical side lobes are simulated (docs/pipeline.md, "Vertical side lobes").
+    // Pixel grid of the depth pass: `views` frusta side by side: first the `slices` of the main band,
+    // port to starboard, slice_columns wide each (level cameras rotated about z, seeing elevations
+    // within the elevation gate), then the tier views, tier_columns wide each, that see the elevations
+    // beyond it where the vertical side lobes are simulated (docs/pipeline.md, "Vertical side lobes").
+    // A tier view has its own width: its pixels are as coarse as accuracy.tier_pixel_ratio allows,
+    // not as many as a slice's (view_first_column, view_columns, view_of_column below).
     std::uint32_t slices = 1;
     std::uint32_t views = 1;
-    std::uint32_t slice_columns = 0; // pixel columns per view
-    std::uint32_t columns = 0;       // views * slice_columns
+    std::uint32_t slice_columns = 0; // pixel columns per slice
+    std::uint32_t tier_columns = 0;  // pixel columns per tier view (0: none)
+    std::uint32_t columns = 0;       // slices * slice_columns + (views - slices) * tier_columns
     std::uint32_t rows = 0;
     double slice_width_rad = 0; // horizontal angle covered by one slice
     double vertical_coverage_rad = 0;
@@ -164,6 +167,19 @@ struct Plan {
     std::uint32_t subpixel_silent_material = 0;
     shared::SonarParams params{}; // the uniform block of the compute stages
 };
+
+// The first pixel column of a view, its width, and the view of pixel column c (the slices' widths, then
+// the tier views'; sonar_math.h's view_first_column and view_of_column are the shaders' twins).
+inline std::uint32_t view_first_column(const Plan& p, std::uint32_t view) {
+    return view < p.slices ? view * p.slice_columns : p.slices * p.slice_columns + (view - p.slices) * p.tier_columns;
+}
+inline std::uint32_t view_columns(const Plan& p, std::uint32_t view) {
+    return view < p.slices ? p.slice_columns : p.tier_columns;
+}
+inline std::uint32_t view_of_column(const Plan& p, std::uint32_t c) {
+    const std::uint32_t main = p.slices * p.slice_columns;
+    return c < main ? c / p.slice_columns : p.slices + (c - main) / p.tier_columns;
+}
 
 // A pixel grid given from outside instead of vksonar's own (a host engine's depth image, host_plan.h):
 // one slice of columns x rows pixels whose centre rays span +-tan_half_h, +-tan_half_v (focal-normalized).

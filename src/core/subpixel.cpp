@@ -427,7 +427,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
     // (facet_echo and ray_vertical_power read the constants every view shares: view 0's will do)
     const M::EchoConstants k = echo_constants<double>(plan, 0);
     const M::EchoTerms terms = echo_terms<double>(plan, true);
-    const std::uint32_t W = plan.slice_columns, H = plan.rows;
+    const std::uint32_t H = plan.rows;
     const double half_fov = plan.params.cone_half_fov_rad, inv_cone_step = plan.params.inv_cone_step;
     const int cone_count = static_cast<int>(plan.profile_columns);
     const std::size_t cluster_count = clusters.size();
@@ -460,10 +460,11 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
                                     q[1] * view.wedge_end[0] - q[0] * view.wedge_end[1] < 0))
                     continue;
             }
+            const std::uint32_t W = view_columns(plan, s);
             const auto column = std::min(static_cast<std::uint32_t>((u / view.tan_half_h + 1.0) * 0.5 * W), W - 1);
             const auto row = std::min(static_cast<std::uint32_t>((v / view.tan_half_v + 1.0) * 0.5 * H), H - 1);
-            shared::SubpixelReturn ret{row * plan.columns + s * W + column, static_cast<float>(r), 0.0f,
-                                       static_cast<float>(view_z)};
+            shared::SubpixelReturn ret{row * plan.columns + view_first_column(plan, s) + column, static_cast<float>(r),
+                                       0.0f, static_cast<float>(view_z)};
             auto push = [&](std::uint32_t profile_column, double e) {
                 if (count_ >= capacity_) return false;
                 ret.energy = static_cast<float>(e);

@@ -256,18 +256,23 @@ void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized)
 // Same formulas as shaders/sonar_math.h (pixel_coord, view_z_from_depth, slant_range), in double.
 void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range) {
     range.assign(frame.depth.size(), 0.0f);
-    const std::uint32_t width = plan.slice_columns ? plan.slice_columns : 1;
+    if (plan.slice_columns == 0) return;
     auto pixel_coord = [](std::uint32_t i, std::uint32_t n, double tan_half) {
         return (2.0 * (i + 0.5) / n - 1.0) * tan_half;
     };
     for (std::uint32_t row = 0; row < frame.rows; ++row) {
-        const double v = pixel_coord(row, frame.rows, plan.tan_half_v);
         for (std::uint32_t column = 0; column < frame.columns; ++column) {
             const std::size_t p = static_cast<std::size_t>(row) * frame.columns + column;
             if (p >= frame.depth.size()) return;
             const double d = frame.depth[p];
             if (!(d > 0.0) || d <= plan.depth_b) continue;
-            const double u = pixel_coord(column % width, width, plan.tan_half_h);
+            // each view its own half extents and width (a tier view's differ from a slice's)
+            const std::uint32_t view = std::min(view_of_column(plan, column), plan.views - 1);
+            const bool own = view < plan.view_geometry.size();
+            const double tan_h = own ? plan.view_geometry[view].tan_half_h : plan.tan_half_h;
+            const double tan_v = own ? plan.view_geometry[view].tan_half_v : plan.tan_half_v;
+            const double u = pixel_coord(column - view_first_column(plan, view), view_columns(plan, view), tan_h);
+            const double v = pixel_coord(row, frame.rows, tan_v);
             const double view_z = plan.depth_a / (d - plan.depth_b);
             const double r = view_z * std::sqrt(1.0 + u * u + v * v);
             range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;

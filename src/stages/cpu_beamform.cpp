@@ -388,7 +388,6 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const std::size_t S = accumulator_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
     const bool exp4 = exp4_matches_expf();
-    const std::uint32_t W = plan.slice_columns;
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end), in each
@@ -397,7 +396,8 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             if (view_drawn != nullptr && view_drawn[view] == 0) continue; // nothing drawn there
-            const float* first = cone_x + view * W;
+            const float* first = cone_x + view_first_column(plan, view);
+            const std::uint32_t W = view_columns(plan, view);
             const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
             const std::uint32_t c_end = static_cast<std::uint32_t>(
                 std::find_if(cone_x + c_begin, first + W, [hi](float x) { return !(x < hi); }) - cone_x);

@@ -305,7 +305,7 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
                 std::uint32_t* material, float* face_normal, const DepthClusters* clusters, std::uint32_t row_begin,
                 std::uint32_t row_end) {
-    const std::uint32_t columns = plan.columns, rows = plan.rows, W = plan.slice_columns;
+    const std::uint32_t columns = plan.columns, rows = plan.rows;
     row_end = std::min(row_end, rows);
     if (row_begin >= row_end) return;
     const std::size_t first = static_cast<std::size_t>(row_begin) * columns;
@@ -315,16 +315,17 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
     if (face_normal) std::fill(face_normal + 4 * first, face_normal + 4 * last, 0.0f);
 
     const std::size_t draw_count = scene.draws.size();
-    const double half_w = 0.5 * W, half_h = 0.5 * rows;
+    const double half_h = 0.5 * rows;
     for (std::uint32_t s = 0; s < plan.views; ++s) {
-        Target target{
-            depth,     material, columns, static_cast<std::int64_t>(s) * W, static_cast<std::int64_t>(s + 1) * W,
-            row_begin, row_end,  0};
+        // the view's viewport: its columns [view_first_column, + view_columns)
+        const std::int64_t view_first = view_first_column(plan, s), width = view_columns(plan, s);
+        const double half_w = 0.5 * static_cast<double>(width);
+        Target target{depth, material, columns, view_first, view_first + width, row_begin, row_end, 0};
         target.face_normal = face_normal;
         target.band = row_begin > 0 || row_end < rows;
         target.band_top_ndc = 2.0 * row_begin / rows - 1.0;
         target.band_bottom_ndc = 2.0 * row_end / rows - 1.0;
-        const double x_offset = static_cast<double>(s) * W;
+        const double x_offset = static_cast<double>(view_first);
         if (clusters) {
             const std::size_t count = clusters->runs.size();
             for (std::size_t c = 0; c < count; ++c) {

@@ -17,21 +17,28 @@
 
 namespace vksonar::cpu {
 
-// Per view: u per column (W), then (solid angle, vertical power) per pixel (R x W).
+// Per view of W columns: u per column (W), then (solid angle, vertical power) per pixel (R x W); view s's
+// table starts at its first column times (1 + 2 R).
 std::size_t echo_table_count(const Plan& plan) {
-    return static_cast<std::size_t>(plan.views) * plan.slice_columns * (1 + 2 * static_cast<std::size_t>(plan.rows));
+    return static_cast<std::size_t>(plan.columns) * (1 + 2 * static_cast<std::size_t>(plan.rows));
 }
+
+namespace {
+std::size_t echo_table_offset(const Plan& plan, std::uint32_t view) {
+    return static_cast<std::size_t>(view_first_column(plan, view)) * (1 + 2 * static_cast<std::size_t>(plan.rows));
+}
+} // namespace
 
 template <class Real> void echo_table(const Plan& plan, Real* table) {
     using M = Math<Real>;
     // the terms without incidence: the table does not depend on it
     const typename M::EchoTerms terms = echo_terms<Real>(plan, false);
-    const std::uint32_t R = plan.rows, W = plan.slice_columns;
-    const std::size_t view_table = echo_table_count(plan) / plan.views;
+    const std::uint32_t R = plan.rows;
     for (std::uint32_t s = 0; s < plan.views; ++s) {
+        const std::uint32_t W = view_columns(plan, s);
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);
         const typename M::PixelView view = pixel_view<Real>(plan, s);
-        Real* u = table + s * view_table;
+        Real* u = table + echo_table_offset(plan, s);
         Real* pixel = u + W;
         for (std::uint32_t x = 0; x < W; ++x)
             u[x] = M::pixel_coord(x, W, k.tan_half_h);
@@ -53,14 +60,13 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
     using M = Math<Real>;
     const shared::SonarParams& g = plan.params;
     const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4 != nullptr);
-    const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
+    const std::uint32_t C = plan.columns, R = plan.rows;
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
-    const std::size_t view_table = echo_table_count(plan) / plan.views;
 
     for (std::uint32_t s = 0; s < plan.views; ++s) {
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);
-        const Real* u = table + s * view_table;
-        const std::uint32_t c0 = s * W;
+        const Real* u = table + echo_table_offset(plan, s);
+        const std::uint32_t c0 = view_first_column(plan, s), W = view_columns(plan, s);
         if (view_drawn != nullptr && view_drawn[s] == 0) { // nothing drawn there: no hits
             for (std::uint32_t j = row_begin; j < row_end; ++j)
                 std::fill(echo2 + 2 * (static_cast<std::size_t>(j) * C + c0),

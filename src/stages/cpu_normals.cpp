@@ -134,7 +134,6 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
     const Real jump_rel = static_cast<Real>(plan.params.edge_relative_jump);
     const std::int64_t C = plan.columns, R = plan.rows;
-    const std::uint32_t W = plan.slice_columns;
     const std::int64_t stride = (C + 4) * 4; // a ring row: columns -2 .. C + 1
 
     // pixel_ray per column at v = 0; a row adds v times its view's down axis (a slice's: (0, 0, -1), so
@@ -146,9 +145,10 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     Real* zero_row = ring + kRingRows * stride;
     std::fill(zero_row, zero_row + stride, Real(0));
     for (std::int64_t c = 0; c < C; ++c) {
-        const std::uint32_t col = static_cast<std::uint32_t>(c), s = col / W;
+        const std::uint32_t col = static_cast<std::uint32_t>(c), s = view_of_column(plan, col);
         const typename M::PixelView view = pixel_view<Real>(plan, s);
-        const auto ray = M::pixel_ray(M::pixel_coord(col - s * W, W, view.tan_half_h), Real(0), view);
+        const auto ray = M::pixel_ray(
+            M::pixel_coord(col - view_first_column(plan, s), view_columns(plan, s), view.tan_half_h), Real(0), view);
         ray_x[c] = ray.x;
         ray_y[c] = ray.y;
         ray_z[c] = ray.z;
@@ -160,15 +160,16 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
         row += 8; // column 0
         const float* d = depth + j * C;
         for (std::uint32_t s = 0; s < plan.views; ++s) {
+            const std::int64_t first = view_first_column(plan, s), end = first + view_columns(plan, s);
             if (view_drawn != nullptr && view_drawn[s] == 0) { // nothing drawn there: no hits
-                std::fill(row + 4 * std::int64_t(s) * W, row + 4 * std::int64_t(s + 1) * W, Real(0));
+                std::fill(row + 4 * first, row + 4 * end, Real(0));
                 continue;
             }
             const typename M::PixelView view = pixel_view<Real>(plan, s);
             const Real v =
                 M::pixel_coord(static_cast<std::uint32_t>(j), static_cast<std::uint32_t>(R), view.tan_half_v);
             const typename M::vec3 step = v * view.down;
-            for (std::int64_t c = std::int64_t(s) * W; c < std::int64_t(s + 1) * W; ++c) {
+            for (std::int64_t c = first; c < end; ++c) {
                 Real* q = row + 4 * c;
                 if (d[c] > 0.0f) {
                     const Real z = M::view_z_from_depth(static_cast<Real>(d[c]), geometry.depth_a, geometry.depth_b);
@@ -237,10 +238,17 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
             }
         };
         std::int64_t x = 0;
+        std::uint32_t view_at = 0; // the view of column x
+        auto first_of = [&](std::uint32_t view) -> std::int64_t {
+            return view < plan.views ? view_first_column(plan, view) : C;
+        };
         for (; x < C; ++x) {
-            if (view_drawn != nullptr && x % W == 0 && view_drawn[x / W] == 0) { // an empty view: no normals
-                std::fill(out_row + 4 * x, out_row + 4 * (x + W), 0.0f);
-                x += W - 1;
+            while (first_of(view_at + 1) <= x)
+                ++view_at;
+            if (view_drawn != nullptr && x == first_of(view_at) && view_drawn[view_at] == 0) { // an empty view
+                const std::int64_t end = first_of(view_at + 1);
+                std::fill(out_row + 4 * x, out_row + 4 * end, 0.0f);
+                x = end - 1;
                 continue;
             }
             // Four pixels without a hit (water above the seabed, a tier view's empty corner): no normals, and
@@ -283,7 +291,7 @@ void geometric_normals_rows(const Plan& plan, const float* depth, const float* f
                             std::uint32_t row_begin, std::uint32_t row_end) {
     using M = Math<Real>;
     const PixelGeometry<Real> geometry = pixel_geometry<Real>(plan);
-    const std::uint32_t C = plan.columns, R = plan.rows, W = plan.slice_columns;
+    const std::uint32_t C = plan.columns, R = plan.rows;
     for (std::uint32_t j = row_begin; j < row_end; ++j) {
         for (std::uint32_t c = 0; c < C; ++c) {
             const std::size_t i = static_cast<std::size_t>(j) * C + c;
@@ -292,9 +300,9 @@ void geometric_normals_rows(const Plan& plan, const float* depth, const float* f
                 out[0] = out[1] = out[2] = out[3] = 0.0f;
                 continue;
             }
-            const std::uint32_t s = c / W;
+            const std::uint32_t s = view_of_column(plan, c);
             const typename M::PixelView view = pixel_view<Real>(plan, s);
-            const Real u = M::pixel_coord(c - s * W, W, view.tan_half_h);
+            const Real u = M::pixel_coord(c - view_first_column(plan, s), view_columns(plan, s), view.tan_half_h);
             const Real v = M::pixel_coord(j, R, view.tan_half_v);
             const Real z = M::view_z_from_depth(static_cast<Real>(depth[i]), geometry.depth_a, geometry.depth_b);
             const auto p = M::sample_at(z, M::pixel_ray(u, v, view));

@@ -132,9 +132,10 @@ inline std::uint32_t instance_of(std::uint32_t material_id) {
 
 // The slant range of pixel (row, column) at reversed-Z depth d > 0 (as the echo stage reconstructs it).
 inline double pixel_slant_range(const Plan& plan, std::uint32_t row, std::uint32_t column, double d) {
-    const std::uint32_t W = plan.slice_columns;
-    const ViewGeometry& view = plan.view_geometry[column / W];
-    const double u = M::pixel_coord(column % W, W, view.tan_half_h);
+    const std::uint32_t index = view_of_column(plan, column);
+    const ViewGeometry& view = plan.view_geometry[index];
+    const double u =
+        M::pixel_coord(column - view_first_column(plan, index), view_columns(plan, index), view.tan_half_h);
     const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
     return M::slant_range(M::view_z_from_depth(d, plan.depth_a, plan.depth_b), u, v);
 }
@@ -165,7 +166,6 @@ inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const 
 // direction, elevation and instance.
 void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& pixels, std::uint32_t row_begin,
                 std::uint32_t row_end) {
-    const std::uint32_t W = plan.slice_columns;
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
     for (std::uint32_t row = row_begin; row < row_end; ++row) {
         for (std::uint32_t column = 0; column < plan.columns; ++column) {
@@ -179,8 +179,10 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
             if (out.spread.k_last - out.spread.k_first < kCachedShares)
                 for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
                     out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
-            const M::PixelView view = pixel_view<double>(plan, column / W);
-            const double u = M::pixel_coord(column % W, W, view.tan_half_h);
+            const std::uint32_t index = view_of_column(plan, column);
+            const M::PixelView view = pixel_view<double>(plan, index);
+            const double u =
+                M::pixel_coord(column - view_first_column(plan, index), view_columns(plan, index), view.tan_half_h);
             const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
             const M::vec3 ray = M::pixel_ray(u, v, view);
             const double inv_length = 1.0 / std::sqrt(1.0 + u * u + v * v);
@@ -279,8 +281,8 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
-            const float* view_x = cone_x + std::size_t(view) * plan.slice_columns;
-            const std::uint32_t view_end = (view + 1) * plan.slice_columns;
+            const float* view_x = cone_x + view_first_column(plan, view);
+            const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
             // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not decreased
             std::uint32_t& first_pixel = scratch.first[std::size_t(row) * plan.views + view];
             std::uint32_t c;
@@ -288,7 +290,8 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
                 for (c = first_pixel; c < view_end && cone_x[c] < lo; ++c) {
                 }
             } else {
-                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + plan.slice_columns, lo) - cone_x);
+                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) -
+                                               cone_x);
             }
             first_pixel = c;
             for (; c < view_end && cone_x[c] < hi; ++c) {
@@ -493,7 +496,6 @@ void polar_coordinates(const Plan& plan, const double p[3], double& bin, double&
 // occluder; the neighbours absorb the pixel grid's own range steps at grazing incidence). False outside
 // the depth pass's coverage.
 bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) {
-    const std::uint32_t W = plan.slice_columns;
     const double direction[3] = {p[0] / r, p[1] / r, p[2] / r};
     const double sin_elevation = direction[2];
     for (std::uint32_t s = 0; s < plan.views; ++s) {
@@ -512,6 +514,7 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
         } else if (!(std::abs(u) <= g.tan_half_h + 1e-12)) {
             continue;
         }
+        const std::uint32_t W = view_columns(plan, s), first = view_first_column(plan, s);
         const double cx = (u / g.tan_half_h + 1.0) * 0.5 * W, cy = (v / g.tan_half_v + 1.0) * 0.5 * plan.rows;
         if (!(cx >= 0.0 && cx < W && cy >= 0.0 && cy < plan.rows)) return false;
         const auto column = static_cast<std::int64_t>(cx), row = static_cast<std::int64_t>(cy);
@@ -520,10 +523,10 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
             for (std::int64_t dx = -1; dx <= 1; ++dx) {
                 const std::int64_t y = row + dy, x = column + dx;
                 if (y < 0 || y >= plan.rows || x < 0 || x >= W) continue;
-                const std::size_t q = static_cast<std::size_t>(y) * plan.columns + s * W + static_cast<std::size_t>(x);
+                const std::size_t q = static_cast<std::size_t>(y) * plan.columns + first + static_cast<std::size_t>(x);
                 const double d = to.depth[q];
                 if (!(d > 0.0)) continue;
-                const std::uint32_t column_in_image = s * W + static_cast<std::uint32_t>(x);
+                const std::uint32_t column_in_image = first + static_cast<std::uint32_t>(x);
                 if (pixel_slant_range(plan, static_cast<std::uint32_t>(y), column_in_image, d) >= r - tolerance)
                     return true;
             }

@@ -12,16 +12,17 @@
 namespace vksonar::cpu {
 
 // The ranges of pixel (row j, column c)'s row neighbours left and right, 0 where there is none in its
-// view (a view is slice_columns columns wide; across its edge lies another camera's image), as
-// profile.comp's row_neighbour_ranges.
+// view (view_first_column, view_columns; across its edge lies another camera's image), as profile.comp's
+// row_neighbour_ranges.
 struct RowNeighbours {
     float left_r, right_r;
 };
 [[gnu::always_inline]] inline RowNeighbours row_neighbours(const Plan& plan, const float* echo2, std::uint32_t j,
                                                            std::uint32_t c) {
-    const std::uint32_t in_view = c % plan.slice_columns;
+    const std::uint32_t view = view_of_column(plan, c);
+    const std::uint32_t in_view = c - view_first_column(plan, view);
     const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * plan.columns + c);
-    return {in_view > 0 ? p[-1] : 0.0f, in_view + 1 < plan.slice_columns ? p[3] : 0.0f};
+    return {in_view > 0 ? p[-1] : 0.0f, in_view + 1 < view_columns(plan, view) ? p[3] : 0.0f};
 }
 
 // The range spread of pixel (row j, column c) of energy e, from the five-row window of its column and its

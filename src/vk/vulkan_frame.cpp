@@ -51,10 +51,9 @@ void record_depth(RecordContext& record) {
         fn.vkCmdBindVertexBuffers(commands, 0, 1, &vertex_buffer, &zero);
         fn.vkCmdBindIndexBuffer(commands, b.indices_.get(), 0, VK_INDEX_TYPE_UINT32);
         for (std::uint32_t s = 0; s < b.plan_.views; ++s) {
-            const float x = static_cast<float>(s * b.plan_.slice_columns);
-            VkViewport viewport{x, 0.0f, float(b.plan_.slice_columns), float(b.plan_.rows), 0.0f, 1.0f};
-            VkRect2D scissor{{static_cast<std::int32_t>(s * b.plan_.slice_columns), 0},
-                             {b.plan_.slice_columns, b.plan_.rows}};
+            const std::uint32_t first = view_first_column(b.plan_, s), width = view_columns(b.plan_, s);
+            VkViewport viewport{float(first), 0.0f, float(width), float(b.plan_.rows), 0.0f, 1.0f};
+            VkRect2D scissor{{static_cast<std::int32_t>(first), 0}, {width, b.plan_.rows}};
             fn.vkCmdSetViewport(commands, 0, 1, &viewport);
             fn.vkCmdSetScissor(commands, 0, 1, &scissor);
             std::uint32_t pushed_draw = ~0u; // clusters of one draw are consecutive: one push for them all

@@ -461,8 +461,10 @@ TEST_P(DepthGpuCpu, DepthDiffersOnlyOnTriangleEdges) {
                 // (a tier view's extents are not the slices'), over the pixels the range window records:
                 // the depth pass also covers the corners beyond range_max, where the bound below would
                 // scale with their range instead.
-                const math_f64::PixelView view = pixel_view<double>(plan, col / plan.slice_columns);
-                const double u = math_f64::pixel_coord(col % plan.slice_columns, plan.slice_columns, view.tan_half_h);
+                const std::uint32_t index = view_of_column(plan, col);
+                const math_f64::PixelView view = pixel_view<double>(plan, index);
+                const double u = math_f64::pixel_coord(col - view_first_column(plan, index), view_columns(plan, index),
+                                                       view.tan_half_h);
                 const double v = math_f64::pixel_coord(row, plan.rows, view.tan_half_v);
                 const double stretch = std::sqrt(1 + u * u + v * v);
                 if (zc * stretch < plan.config.range_max_m)
