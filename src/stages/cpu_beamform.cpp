@@ -309,10 +309,19 @@ template <class Real>
 
 // The spreads of up to four hit pixels (row j, columns c[0 .. n)) into out: four at a time through
 // footprint_spread4 where the kernel is the footprint in float and exp4 matches expf (a batch of fewer
-// than four repeats its last pixel), else pixel_spread one by one. The same spreads either way.
+// than four repeats its last pixel), else pixel_spread one by one. The same spreads either way. The pixels
+// lie in one view, columns [view.first, view.end), where the caller knows it (view.end > 0); else each
+// pixel's view is looked up.
+struct ViewColumns {
+    std::uint32_t first = 0, end = 0;
+};
 template <class Real>
 void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const std::uint32_t* c, int n, bool exp4,
-                   Real range_min, Real inv_bin_width, typename Math<Real>::RangeSpread* out) {
+                   Real range_min, Real inv_bin_width, ViewColumns view, typename Math<Real>::RangeSpread* out) {
+    auto across_of = [&](std::uint32_t col) {
+        return view.end > 0 ? row_neighbours_within(plan, echo2, j, col, view.first, view.end)
+                            : row_neighbours(plan, echo2, j, col);
+    };
     if constexpr (std::is_same_v<Real, float>) {
         if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
             const std::uint32_t C = plan.columns, R = plan.rows;
@@ -331,7 +340,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 row(jj - 1, in.up_e, in.up_r);
                 row(jj + 1, in.down_e, in.down_r);
                 row(jj + 2, in.down2_e, in.down2_r);
-                const RowNeighbours across = row_neighbours(plan, echo2, j, col);
+                const RowNeighbours across = across_of(col);
                 in.left_r[l] = across.left_r;
                 in.right_r[l] = across.right_r;
             }
@@ -342,23 +351,24 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
     }
     for (int l = 0; l < n; ++l) {
         const Real e = static_cast<Real>(echo2[2 * (static_cast<std::size_t>(j) * plan.columns + c[l])]);
-        out[l] = pixel_spread<Real>(plan, echo2, j, c[l], e, range_min, inv_bin_width);
+        out[l] = pixel_spread<Real>(plan, echo2, j, c[l], e, across_of(c[l]), range_min, inv_bin_width);
     }
 }
 
 // Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
 // range shares: sink(c, e, k_first, spread_bins, shares), the spreads made four pixels at a time
 // (pixel_spreads) and their shares by range_shares. Both profile layouts (planar and cone columns) add
-// through it.
+// through it; `view`: the one view the columns lie in, if known (pixel_spreads).
 template <class Real, class Sink>
 void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j, std::uint32_t column_begin,
-                           std::uint32_t column_end, bool exp4, Real range_min, Real inv_bin_width, const Sink& sink) {
+                           std::uint32_t column_end, bool exp4, Real range_min, Real inv_bin_width, ViewColumns view,
+                           const Sink& sink) {
     const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * plan.columns;
     std::uint32_t batch[4];
     int batched = 0;
     auto flush = [&] {
         typename Math<Real>::RangeSpread spreads[4];
-        pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, spreads);
+        pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, view, spreads);
         for (int b = 0; b < batched; ++b) {
             const typename Math<Real>::RangeSpread& spread = spreads[b];
             Real shares[kMaxSpreadBins + 3];
@@ -396,13 +406,15 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             if (view_drawn != nullptr && view_drawn[view] == 0) continue; // nothing drawn there
-            const float* first = cone_x + view_first_column(plan, view);
-            const std::uint32_t W = view_columns(plan, view);
+            const ViewColumns columns{view_first_column(plan, view),
+                                      view_first_column(plan, view) + view_columns(plan, view)};
+            const float* first = cone_x + columns.first;
+            const std::uint32_t W = columns.end - columns.first;
             const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
             const std::uint32_t c_end = static_cast<std::uint32_t>(
                 std::find_if(cone_x + c_begin, first + W, [hi](float x) { return !(x < hi); }) - cone_x);
             for_each_spread_pixel<Real>(
-                plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width,
+                plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
                 [&](std::uint32_t pc, Real e, int k_first, int spread_bins, const Real* shares) {
                     const Real x = static_cast<Real>(cone_x[pc]);
                     const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
@@ -741,6 +753,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     } else {
         for (std::uint32_t j = 0; j < R && bins > 0; ++j)
             for_each_spread_pixel<Real>(plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width,
+                                        ViewColumns{},
                                         [&](std::uint32_t c, Real e, int k_first, int spread_bins, const Real* shares) {
                                             for (int i = 0; i < spread_bins; ++i)
                                                 acc[static_cast<std::size_t>(k_first + i) * S + c] += shares[i] * e;
