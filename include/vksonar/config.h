@@ -127,8 +127,9 @@ struct SonarConfig {
     // fraction of the reach wide (0: none, the kernel stops at the reach).
     double far_sidelobe_cell = 0.5;
     // Vertical side lobes (effects.vertical_sidelobes): the tier views' pixels at most this many times a
-    // slice's in angle; the fewest views per band that hold it (up to 8), the finest those allow below it.
-    double tier_pixel_ratio = 3.0;
+    // slice's in angle; the fewest views per band that hold it (up to 8), and the fewest columns (at most a
+    // slice's) that hold it with those views.
+    double tier_pixel_ratio = 4.0;
     IntermediatePrecision intermediates = IntermediatePrecision::fp32; // echo buffer storage
     Precision cpu_precision = Precision::f32;
 

@@ -38,7 +38,7 @@ constexpr const char* kUsage =
     "Sweeps the accuracy knobs one at a time around the config (default: the bundled scene and preset):\n"
     "accuracy.pixels_per_beam 1,2,4,8; accuracy.rows_per_vfov 16,32,64,128; accuracy.max_slice 15,30,60,120;\n"
     "accuracy.range_kernel nearest,tent,footprint; accuracy.sidelobe_kernel_beamwidths 1,2,3,6;\n"
-    "accuracy.far_sidelobe_cell 0 (no far side lobes), 1; accuracy.tier_pixel_ratio 2, 4;\n"
+    "accuracy.far_sidelobe_cell 0 (no far side lobes), 1; accuracy.tier_pixel_ratio 2, 3;\n"
     "accuracy.normal_method sobel3,sobel5,geometric; accuracy.intermediates fp32,fp16; and the --quality presets\n"
     "fast, balanced, accurate.\n"
     "Reference: the CPU backend with cpu.precision=double, pixels_per_beam 8, rows_per_vfov 256, max_slice 15,\n"
@@ -328,7 +328,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         {"far_sidelobe_cell", "0"},
         {"far_sidelobe_cell", "1"},
         {"tier_pixel_ratio", "2"},
-        {"tier_pixel_ratio", "4"},
+        {"tier_pixel_ratio", "3"},
         {"normal_method", "sobel5"},
         {"normal_method", "geometric"},
         {"intermediates", "fp16"},

@@ -27,7 +27,7 @@ constexpr std::array<Quality, 3> kQualities{{
     // The defaults.
     {"balanced",
      {"accuracy.pixels_per_beam=2", "accuracy.rows_per_vfov=64", "accuracy.range_kernel=footprint",
-      "accuracy.sidelobe_kernel_beamwidths=3", "accuracy.max_slice=60", "accuracy.tier_pixel_ratio=3"}},
+      "accuracy.sidelobe_kernel_beamwidths=3", "accuracy.max_slice=60", "accuracy.tier_pixel_ratio=4"}},
     // Four columns per beam, twice the rows, 15-degree slices, a 6-beamwidth side-lobe kernel.
     {"accurate",
      {"accuracy.pixels_per_beam=4", "accuracy.rows_per_vfov=128", "accuracy.range_kernel=footprint",

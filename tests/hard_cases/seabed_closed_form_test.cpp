@@ -458,14 +458,15 @@ TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
 
 // accuracy.tier_pixel_ratio trades the tier views' pixels, not the side lobes' accuracy: from 1.5x the
 // slices' pixels to the coarsest (4x), the bins of the test above (altitude to 9 m, the nulls apart) stay
-// within 0.25 dB of the same reference, and a coarser bound never takes more views.
+// within 0.25 dB of the same reference, and a coarser bound never takes more views or pixel columns
+// (the tier views' width follows the bound: Plan::tier_columns).
 TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
     SonarConfig config = seabed_config();
     config.effects.vertical_sidelobes = EffectMode::on;
     const double h = 3.0;
     const Scene scene = flat_seabed(h);
     std::vector<double> ref;
-    std::uint32_t previous_views = 0;
+    std::uint32_t previous_views = 0, previous_columns = 0;
     for (double ratio : {1.5, 2.0, 3.0, 4.0}) {
         config.tier_pixel_ratio = ratio;
         auto rendered = render_checked(GetParam(), config, scene, Pose{});
@@ -475,8 +476,10 @@ TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
         if (ref.empty()) ref = altitude_reference(config, plan, h);
         if (previous_views > 0) {
             EXPECT_LE(plan.views, previous_views) << "ratio " << ratio;
+            EXPECT_LT(plan.columns, previous_columns) << "ratio " << ratio;
         }
         previous_views = plan.views;
+        previous_columns = plan.columns;
         const std::vector<double> got = bin_totals(rendered->frame);
         const double w = plan.bin_width_m;
         double worst = 0, worst_tiers = 0;
@@ -488,8 +491,9 @@ TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
             // before 7.5 m only the tier views see the seabed (the main band from 7.64 m)
             if (lo + w < 7.5 && std::abs(err) > std::abs(worst_tiers)) worst_tiers = err;
         }
-        std::printf("[tier ratio] %.1f: %u tier views, worst %+.3f dB (%+.3f dB before 7.5 m, the tier views' alone)\n",
-                    ratio, plan.views - plan.slices, worst, worst_tiers);
+        std::printf("[tier ratio] %.1f: %u tier views of %u columns, worst %+.3f dB (%+.3f dB before 7.5 m, the tier "
+                    "views' alone)\n",
+                    ratio, plan.views - plan.slices, plan.tier_columns, worst, worst_tiers);
         EXPECT_LE(std::abs(worst), 0.25) << "tier_pixel_ratio " << ratio;
     }
 }
