@@ -169,7 +169,8 @@ struct Plan {
 };
 
 // The first pixel column of a view, its width, and the view of pixel column c (the slices' widths, then
-// the tier views'; sonar_math.h's view_first_column and view_of_column are the shaders' twins).
+// the tier views'; sonar_math.h's first_column_of_view, columns_of_view and view_of_pixel_column are the
+// shaders' twins, the last without an integer divide).
 inline std::uint32_t view_first_column(const Plan& p, std::uint32_t view) {
     return view < p.slices ? view * p.slice_columns : p.slices * p.slice_columns + (view - p.slices) * p.tier_columns;
 }

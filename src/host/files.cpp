@@ -266,13 +266,13 @@ void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float
             if (p >= frame.depth.size()) return;
             const double d = frame.depth[p];
             if (!(d > 0.0) || d <= plan.depth_b) continue;
-            // each view its own half extents and width (a tier view's differ from a slice's)
+            // each view its own half extents and width (a tier view's differ from a slice's); every plan
+            // carries its views' geometry (plan_pixel_grid, use_host_grid)
             const std::uint32_t view = std::min(view_of_column(plan, column), plan.views - 1);
-            const bool own = view < plan.view_geometry.size();
-            const double tan_h = own ? plan.view_geometry[view].tan_half_h : plan.tan_half_h;
-            const double tan_v = own ? plan.view_geometry[view].tan_half_v : plan.tan_half_v;
-            const double u = pixel_coord(column - view_first_column(plan, view), view_columns(plan, view), tan_h);
-            const double v = pixel_coord(row, frame.rows, tan_v);
+            const ViewGeometry& g = plan.view_geometry[view];
+            const double u =
+                pixel_coord(column - view_first_column(plan, view), view_columns(plan, view), g.tan_half_h);
+            const double v = pixel_coord(row, frame.rows, g.tan_half_v);
             const double view_z = plan.depth_a / (d - plan.depth_b);
             const double r = view_z * std::sqrt(1.0 + u * u + v * v);
             range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;
