@@ -406,8 +406,8 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             if (view_drawn != nullptr && view_drawn[view] == 0) continue; // nothing drawn there
-            const std::uint32_t W = view_columns(plan, view);
-            const ViewColumns columns{view_first_column(plan, view), view_first_column(plan, view) + W};
+            const std::uint32_t view_first = view_first_column(plan, view), W = view_columns(plan, view);
+            const ViewColumns columns{view_first, view_first + W};
             const float* first = cone_x + columns.first;
             const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
             const std::uint32_t c_end = static_cast<std::uint32_t>(
