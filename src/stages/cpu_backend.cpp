@@ -123,14 +123,23 @@ template <class Real> void run_depth(StageContext<Real>& s) {
             std::find(first, first + std::ptrdiff_t(count), std::uint8_t(1)) != first + std::ptrdiff_t(count);
     }
     const DepthClusters clusters{s.clusters, s.clusters_drawn};
-    // Bands of rows, two per thread: the pixel fill is most of the pass, and the seabed's rows hold
-    // most of it, so one band per thread would leave a thread waiting; every band sets up each
-    // triangle again, so not many more.
+    // Blocks of one view's rows, about two per thread: a view's triangles are set up for its blocks only
+    // (splitting rows instead set up every view's triangles once per band: most of the pass's time
+    // went there, as the default scene's triangles cover a few pixels each). A view is cut into bands of
+    // rows only where there are fewer views than blocks wanted: the seabed's rows hold most of the
+    // pixels, so one block per thread would leave a thread waiting. The larger views (the slices) come
+    // first, and the threads take blocks as they come.
     const std::uint32_t threads = s.workers ? s.workers->count() : 1u;
-    const std::uint32_t band = (s.plan.rows + 2 * threads - 1) / (2 * threads);
-    split_blocks(s.workers, s.plan.rows, band, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-        depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
-                   s.plan.face_normals ? s.face.data() : nullptr, &clusters, begin, end);
+    const std::uint32_t views = s.plan.views;
+    const std::uint32_t bands = static_cast<std::uint32_t>(ceil_div(2 * threads, views));
+    const std::uint32_t band_rows = static_cast<std::uint32_t>(ceil_div(s.plan.rows, bands));
+    split_blocks(s.workers, views * bands, 1, [&](std::uint32_t block, std::uint32_t block_end, std::uint32_t) {
+        for (; block < block_end; ++block) {
+            const std::uint32_t view = block / bands, band = block % bands;
+            depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
+                       s.plan.face_normals ? s.face.data() : nullptr, &clusters, band * band_rows,
+                       (band + 1) * band_rows, view, view + 1);
+        }
     });
 }
 

@@ -805,29 +805,38 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                    f[kFarS1] * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
         return M::far_sidelobe_level(typename M::vec4(f[kFarCos], f[kFarSin], Real(0), Real(0)), l[0], l[1], l[2]);
     };
-    for (std::uint32_t k = bin_begin; k < bin_end; ++k) {
+    auto empty_row = [&](const float* row) { return std::all_of(row, row + beams, [](float b) { return b == 0.0f; }); };
+    using V = typename Lanes<Real>::type;
+    float padded[2][kMaxPaddedRow]; // padded[r][i]: beam i - K of the r-th row of a pair
+    for (std::uint32_t k = bin_begin; k < bin_end;) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;
             far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
         }
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
-        float* out = polar + static_cast<std::size_t>(k) * beams;
         // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
-        if (std::all_of(B, B + beams, [](float b) { return b == 0.0f; })) {
-            std::fill(out, out + beams, 0.0f);
+        if (empty_row(B)) {
+            std::fill(polar + static_cast<std::size_t>(k) * beams, polar + static_cast<std::size_t>(k + 1) * beams,
+                      0.0f);
+            ++k;
             continue;
         }
         if (groups > 0) {
-            // Every beam, four groups (16 beams) at a time: each beam's sum is one lane, still in
-            // increasing t, over the taps where any beam of the groups has a weight, from the padded row
-            // (a zero weight, or a zero beyond the fan's edge, adds exactly +0: the same sums as the
-            // scalar loop below, which leaves those terms out).
-            float padded[kMaxPaddedRow]; // padded[i]: beam i - K
-            for (std::int64_t i = 0; i < nb + 2 * K + 4; ++i) {
-                const std::int64_t b = i - K;
-                padded[i] = b >= 0 && b < nb ? B[b] : (plan.circular ? B[(b + nb) % nb] : 0.0f);
-            }
-            using V = typename Lanes<Real>::type;
+            // Two bin rows at a time where the next one has energy too (and its far side lobes are in the
+            // same batch): each weight is read once for both rows, and the eight sums in flight hide the
+            // adds' latency. Every beam, four groups (16 beams) at a time: each beam's sum is one lane,
+            // still in increasing t, over the taps where any beam of the groups has a weight, from the
+            // padded row (a zero weight, or a zero beyond the fan's edge, adds exactly +0: the same sums
+            // as the scalar loop below, which leaves those terms out). Rows never mix: the same sums as
+            // one row at a time.
+            const bool pair = k + 1 < bin_end && (cells == 0 || k + 1 - far_first < kFarRows) && !empty_row(B + beams);
+            const std::uint32_t rows = pair ? 2 : 1;
+            for (std::uint32_t r = 0; r < rows; ++r)
+                for (std::int64_t i = 0; i < nb + 2 * K + 4; ++i) {
+                    const std::int64_t b = i - K;
+                    const float* row = B + std::size_t(r) * beams;
+                    padded[r][i] = b >= 0 && b < nb ? row[b] : (plan.circular ? row[(b + nb) % nb] : 0.0f);
+                }
             for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
                 const std::size_t n = std::min<std::size_t>(4, groups - q0);
                 const std::size_t j0 = 4 * q0, j_end = std::min<std::size_t>(j0 + 4 * n, beams);
@@ -837,71 +846,91 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     t_end = std::max(t_end, tap_end[i]);
                 }
                 const Real* wq = group_weights + q0 * 4 * taps;
-                const float* src = padded + j0; // beam j0 + l takes src[t + l]
-                V s[4] = {};
-                // s[g] += w(g, t) * src[t + 4 g .. + 3] (out parameters: a double V is an AVX-sized value)
-                auto mac = [&](V& sum, std::size_t g, std::uint32_t t) {
-                    V w, x;
-                    std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
+                V s[2][4] = {};
+                // s[r][g] += w(g, t) * row r's beams j0 + 4 g + t - K .. + 3 (out parameters: a double V is
+                // an AVX-sized value)
+                auto load = [&](V& x, std::uint32_t r, std::size_t g, std::uint32_t t) {
+                    const float* src = padded[r] + j0 + t + 4 * g; // beam j0 + 4 g + l takes src[l]
                     if constexpr (std::is_same_v<Real, float>) {
-                        std::memcpy(&x, src + t + 4 * g, sizeof x);
+                        std::memcpy(&x, src, sizeof x);
                     } else {
                         for (std::uint32_t l = 0; l < 4; ++l)
-                            x[l] = static_cast<Real>(src[t + 4 * g + l]);
+                            x[l] = static_cast<Real>(src[l]);
                     }
-                    sum += w * x;
                 };
-                if (n == 4) {
+                auto mac = [&](std::uint32_t rows_used, std::size_t g, std::uint32_t t) {
+                    V w, x;
+                    std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
+                    load(x, 0, g, t);
+                    s[0][g] += w * x;
+                    if (rows_used == 2) {
+                        load(x, 1, g, t);
+                        s[1][g] += w * x;
+                    }
+                };
+                if (n == 4 && rows == 2) {
                     for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                        mac(s[0], 0, t);
-                        mac(s[1], 1, t);
-                        mac(s[2], 2, t);
-                        mac(s[3], 3, t);
+                        mac(2, 0, t);
+                        mac(2, 1, t);
+                        mac(2, 2, t);
+                        mac(2, 3, t);
+                    }
+                } else if (n == 4) {
+                    for (std::uint32_t t = t_begin; t < t_end; ++t) {
+                        mac(1, 0, t);
+                        mac(1, 1, t);
+                        mac(1, 2, t);
+                        mac(1, 3, t);
                     }
                 } else {
                     for (std::uint32_t t = t_begin; t < t_end; ++t)
                         for (std::size_t g = 0; g < n; ++g)
-                            mac(s[g], g, t);
+                            mac(rows, g, t);
                 }
-                if constexpr (std::is_same_v<Real, float>) {
-                    if (cells > 0) { // far_at's values as lanes, from far_group's table
-                        const std::uint32_t r = k - far_first;
-                        for (std::size_t g = 0; g < n; ++g) {
-                            const float* fg = far_group + (q0 + g) * kFarGroupValues * 4;
-                            const float* level = far.level.data() + r;
-                            V l[3] = {};
-                            for (std::uint32_t m = 0; m < channels; ++m) {
-                                const float* lm = level + std::size_t(m) * cells * kFarRows;
-                                V v0, v1;
-                                for (std::uint32_t i = 0; i < 4; ++i) {
-                                    v0[i] = lm[static_cast<std::uint32_t>(fg[i])];
-                                    v1[i] = lm[static_cast<std::uint32_t>(fg[4 + i])];
+                for (std::uint32_t r = 0; r < rows; ++r) {
+                    float* out = polar + static_cast<std::size_t>(k + r) * beams;
+                    if constexpr (std::is_same_v<Real, float>) {
+                        if (cells > 0) { // far_at's values as lanes, from far_group's table
+                            const std::uint32_t fr = k + r - far_first;
+                            for (std::size_t g = 0; g < n; ++g) {
+                                const float* fg = far_group + (q0 + g) * kFarGroupValues * 4;
+                                const float* level = far.level.data() + fr;
+                                V l[3] = {};
+                                for (std::uint32_t m = 0; m < channels; ++m) {
+                                    const float* lm = level + std::size_t(m) * cells * kFarRows;
+                                    V v0, v1;
+                                    for (std::uint32_t i = 0; i < 4; ++i) {
+                                        v0[i] = lm[static_cast<std::uint32_t>(fg[i])];
+                                        v1[i] = lm[static_cast<std::uint32_t>(fg[4 + i])];
+                                    }
+                                    V s0, s1;
+                                    std::memcpy(&s0, fg + 8, sizeof s0);
+                                    std::memcpy(&s1, fg + 12, sizeof s1);
+                                    l[m] = s0 * v0 + s1 * v1;
                                 }
-                                V s0, s1;
-                                std::memcpy(&s0, fg + 8, sizeof s0);
-                                std::memcpy(&s1, fg + 12, sizeof s1);
-                                l[m] = s0 * v0 + s1 * v1;
+                                V cs, sn;
+                                std::memcpy(&cs, fg + 16, sizeof cs);
+                                std::memcpy(&sn, fg + 20, sizeof sn);
+                                const V level_far = l[0] - cs * l[1] - sn * l[2];
+                                // far_sidelobe_level: std::max(x, 0) = (x < 0) ? 0 : x
+                                const V far_value = level_far < V{} ? V{} : level_far;
+                                const V sum = s[r][g] + far_value;
+                                for (std::size_t jj = j0 + 4 * g, i = 0; i < 4 && jj < j_end; ++i, ++jj)
+                                    out[jj] = sum[i];
                             }
-                            V cs, sn;
-                            std::memcpy(&cs, fg + 16, sizeof cs);
-                            std::memcpy(&sn, fg + 20, sizeof sn);
-                            const V level_far = l[0] - cs * l[1] - sn * l[2];
-                            // far_sidelobe_level: std::max(x, 0) = (x < 0) ? 0 : x
-                            const V far_value = level_far < V{} ? V{} : level_far;
-                            const V sum = s[g] + far_value;
-                            for (std::size_t jj = j0 + 4 * g, i = 0; i < 4 && jj < j_end; ++i, ++jj)
-                                out[jj] = sum[i];
+                            continue;
                         }
-                        continue;
+                    }
+                    for (std::size_t jj = j0; jj < j_end; ++jj) {
+                        const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
+                        out[jj] = static_cast<float>(s[r][g][l] + far_at(static_cast<std::int64_t>(jj), k + r));
                     }
                 }
-                for (std::size_t jj = j0; jj < j_end; ++jj) {
-                    const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
-                    out[jj] = static_cast<float>(s[g][l] + far_at(static_cast<std::int64_t>(jj), k));
-                }
             }
+            k += rows;
             continue;
         }
+        float* out = polar + static_cast<std::size_t>(k) * beams;
         std::int64_t j = 0;
         while (j < nb) {
             const float* w = weights + static_cast<std::size_t>(j) * taps;
@@ -923,6 +952,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             out[j] = static_cast<float>(sum + far_at(j, k));
             ++j;
         }
+        ++k;
     }
 }
 

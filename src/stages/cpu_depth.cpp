@@ -80,6 +80,7 @@ struct Edge {
     double ax, ay, dx, dy; // canonical start point and direction
     double sign;           // +1: oriented edge runs a -> b; -1: reversed
     bool top_left;         // include samples exactly on the edge
+    double dx_per_dy;      // dx / dy (0 for a horizontal edge): row_span's crossings without a division per row
 
     double eval(double px, double py) const { return sign * (dx * (py - ay) - dy * (px - ax)); }
     bool covers(double e) const { return e > 0.0 || (e == 0.0 && top_left); }
@@ -89,7 +90,8 @@ Edge make_edge(const ScreenVertex& from, const ScreenVertex& to) {
     const bool swap = to.x < from.x || (to.x == from.x && to.y < from.y);
     const ScreenVertex& a = swap ? to : from;
     const ScreenVertex& b = swap ? from : to;
-    Edge e{a.x, a.y, b.x - a.x, b.y - a.y, swap ? -1.0 : 1.0, false};
+    Edge e{a.x, a.y, b.x - a.x, b.y - a.y, swap ? -1.0 : 1.0, false, 0.0};
+    if (e.dy != 0.0) e.dx_per_dy = e.dx / e.dy;
     // Interior on the positive side, framebuffer y down. A top edge is horizontal with the interior
     // below it (larger y): direction +x. A left edge has the interior to its right: direction -y.
     const double odx = to.x - from.x, ody = to.y - from.y;
@@ -134,9 +136,10 @@ std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
 // longer tests its box's empty corners. Horizontal edges leave it, and so do huge ones (below).
 void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
     if (e.dy == 0.0) return;
-    const double run = e.dx * (cy - e.ay) / e.dy;
-    // Below 2^40 in magnitude the crossing's rounding error is under 2^-11 pixel, far inside the
-    // widening; beyond (a vertex near w = 0, a nearly horizontal edge) the row keeps its box.
+    const double run = (cy - e.ay) * e.dx_per_dy;
+    // Below 2^40 in magnitude the crossing's rounding error (a few ulps: the slope is rounded once,
+    // then the product) is under 2^-10 pixel, far inside the widening; beyond (a vertex near w = 0, a
+    // nearly horizontal edge) the row keeps its box.
     if (!(std::abs(run) < 0x1p40 && std::abs(e.ax) < 0x1p40)) return;
     const double cross = e.ax + run;
     // e(cx) = sign (dx (cy - ay) - dy (cx - ax)) grows with cx where -sign dy > 0: covered to the right.
@@ -304,19 +307,24 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
                 std::uint32_t* material, float* face_normal, const DepthClusters* clusters, std::uint32_t row_begin,
-                std::uint32_t row_end) {
+                std::uint32_t row_end, std::uint32_t view_begin, std::uint32_t view_end) {
     const std::uint32_t columns = plan.columns, rows = plan.rows;
     row_end = std::min(row_end, rows);
-    if (row_begin >= row_end) return;
-    const std::size_t first = static_cast<std::size_t>(row_begin) * columns;
-    const std::size_t last = static_cast<std::size_t>(row_end) * columns;
-    std::fill(depth + first, depth + last, 0.0f);
-    std::fill(material + first, material + last, shared::kNoMaterial);
-    if (face_normal) std::fill(face_normal + 4 * first, face_normal + 4 * last, 0.0f);
+    view_end = std::min(view_end, plan.views);
+    if (row_begin >= row_end || view_begin >= view_end) return;
+    // the region's pixels: rows [row_begin, row_end) of the views' columns (the views are contiguous)
+    const std::size_t column_first = view_first_column(plan, view_begin);
+    const std::size_t column_end = view_first_column(plan, view_end - 1) + view_columns(plan, view_end - 1);
+    for (std::size_t row = row_begin; row < row_end; ++row) {
+        const std::size_t first = row * columns + column_first, last = row * columns + column_end;
+        std::fill(depth + first, depth + last, 0.0f);
+        std::fill(material + first, material + last, shared::kNoMaterial);
+        if (face_normal) std::fill(face_normal + 4 * first, face_normal + 4 * last, 0.0f);
+    }
 
     const std::size_t draw_count = scene.draws.size();
     const double half_h = 0.5 * rows;
-    for (std::uint32_t s = 0; s < plan.views; ++s) {
+    for (std::uint32_t s = view_begin; s < view_end; ++s) {
         // the view's viewport: its columns [view_first_column, + view_columns)
         const std::int64_t view_first = view_first_column(plan, s), width = view_columns(plan, s);
         const double half_w = 0.5 * static_cast<double>(width);

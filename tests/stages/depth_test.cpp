@@ -234,8 +234,8 @@ TEST(CpuDepth, TopLeftRuleCoversSharedEdgesThroughPixelCentresExactlyOnce) {
     }
 }
 
-TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
-    // The CPU backend runs the pass as bands of rows on its threads (cpu_backend.cpp): every pixel must
+TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
+    // The CPU backend runs the pass as bands of rows of one view on its threads (cpu_backend.cpp): every pixel must
     // see the same triangles in the same order as in one pass over the image, ties (the strict GREATER
     // test keeps the first draw) and clipped triangles crossing band edges included. A room around the
     // sonar (every slice, near-plane clipping), two crossing planes at equal depth in the middle, and
@@ -305,7 +305,38 @@ TEST(CpuDepth, BandsOfRowsGiveTheWholeImagesBytes) {
             EXPECT_EQ(band_depth, depth) << bands << " bands, " << how;
             EXPECT_EQ(band_material, material) << bands << " bands, " << how;
             EXPECT_EQ(band_face, face) << bands << " bands, " << how;
+            // the same bands, one view at a time
+            std::fill(band_depth.begin(), band_depth.end(), -1.0f);
+            std::fill(band_face.begin(), band_face.end(), -1.0f);
+            std::fill(band_material.begin(), band_material.end(), 12345u);
+            for (std::uint32_t view = 0; view < plan.views; ++view)
+                for (std::uint32_t begin = 0; begin < plan.rows; begin += step)
+                    cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), by,
+                                    begin, begin + step, view, view + 1);
+            EXPECT_EQ(band_depth, depth) << bands << " bands per view, " << how;
+            EXPECT_EQ(band_material, material) << bands << " bands per view, " << how;
+            EXPECT_EQ(band_face, face) << bands << " bands per view, " << how;
         }
+    }
+    ASSERT_GT(plan.views, 2u); // the room is seen by several slices
+    // A region (a view's band) leaves every other pixel as it was (threads write theirs at the same time).
+    {
+        const std::uint32_t view = 1, begin = plan.rows / 4, end = 3 * plan.rows / 4;
+        const std::size_t first = view_first_column(plan, view), last = first + view_columns(plan, view);
+        std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
+        std::vector<std::uint32_t> band_material(pixels, 12345u);
+        cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), &clusters,
+                        begin, end, view, view + 1);
+        std::size_t written = 0;
+        for (std::size_t p = 0; p < pixels; ++p) {
+            const std::size_t row = p / plan.columns, column = p % plan.columns;
+            const bool inside = row >= begin && row < end && column >= first && column < last;
+            written += inside && band_material[p] != shared::kNoMaterial;
+            ASSERT_EQ(band_depth[p], inside ? depth[p] : -1.0f) << "pixel " << p;
+            ASSERT_EQ(band_material[p], inside ? material[p] : 12345u) << "pixel " << p;
+            ASSERT_EQ(band_face[4 * p], inside ? face[4 * p] : -1.0f) << "pixel " << p;
+        }
+        EXPECT_GT(written, 0u);
     }
     // And a band leaves every other row as it was (threads write their bands at the same time).
     const std::uint32_t begin = plan.rows / 3, end = 2 * plan.rows / 3;
