@@ -137,8 +137,8 @@ template <class Real> void run_depth(StageContext<Real>& s) {
         for (; block < block_end; ++block) {
             const std::uint32_t view = block / bands, band = block % bands;
             depth_pass(s.plan, s.scene, s.draws, s.depth.data(), s.material.data(),
-                       s.plan.face_normals ? s.face.data() : nullptr, &clusters, band * band_rows,
-                       (band + 1) * band_rows, view, view + 1);
+                       s.plan.face_normals ? s.face.data() : nullptr, &clusters,
+                       {band * band_rows, (band + 1) * band_rows, view, view + 1});
         }
     });
 }

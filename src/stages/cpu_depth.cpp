@@ -17,6 +17,9 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "stages/cpu_stages.h"
 
@@ -106,6 +109,7 @@ struct Target {
     std::int64_t x_begin, x_end;     // scissor columns [x_begin, x_end)
     std::int64_t row_begin, row_end; // the band of rows this pass writes (depth_pass)
     std::uint32_t material_id;
+    bool simd = true;              // DepthRegion::simd
     float* face_normal = nullptr;  // rows * columns * 4 or null (normal_method = geometric)
     float triangle_normal[3] = {}; // the current triangle's unit plane normal, clip-linear coordinates
     // The band's edges in y_ndc, and whether it is less than the whole image (then triangles and
@@ -150,6 +154,75 @@ void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
     }
 }
 
+// The depth test and write of pixel p at interpolated depth z (clamped already): strict GREATER,
+// reversed-Z.
+[[gnu::always_inline]] inline void depth_write(const Target& t, std::size_t p, double z) {
+    const float d = static_cast<float>(z);
+    if (d > t.depth[p]) {
+        t.depth[p] = d;
+        t.material[p] = t.material_id;
+        if (t.face_normal) {
+            float* n = t.face_normal + 4 * p;
+            n[0] = t.triangle_normal[0];
+            n[1] = t.triangle_normal[1];
+            n[2] = t.triangle_normal[2];
+            n[3] = 0.0f;
+        }
+    }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+// The pixels [x0, x1) of row centre cy, four at a time as AVX lanes of doubles: each lane the same
+// operations in the same order as the scalar loop of raster_triangle (the edge functions as Edge::eval,
+// Edge::covers, the sum and the interpolated z, std::max / std::min's choices), so the same bytes. No
+// FMA in this target: nothing is fused.
+__attribute__((target("avx2"))) void raster_row4(const Edge (&e)[3], const double (&vz)[3], double cy, std::int64_t x0,
+                                                 std::int64_t x1, std::size_t row_base, const Target& t) {
+    const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
+    const __m256d lane = _mm256_setr_pd(0.0, 1.0, 2.0, 3.0);
+    __m256d row_term[3], sign[3], dy[3], ax[3], top_left[3];
+    for (int k = 0; k < 3; ++k) {
+        row_term[k] = _mm256_set1_pd(e[k].dx * (cy - e[k].ay)); // eval's dx (py - ay)
+        sign[k] = _mm256_set1_pd(e[k].sign);
+        dy[k] = _mm256_set1_pd(e[k].dy);
+        ax[k] = _mm256_set1_pd(e[k].ax);
+        top_left[k] = _mm256_castsi256_pd(_mm256_set1_epi64x(e[k].top_left ? -1 : 0));
+    }
+    const __m256d z0 = _mm256_set1_pd(vz[0]), z1 = _mm256_set1_pd(vz[1]), z2 = _mm256_set1_pd(vz[2]);
+    const __m256d end = _mm256_set1_pd(static_cast<double>(x1));
+    for (std::int64_t x = x0; x < x1; x += 4) {
+        const __m256d px = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(x)), lane); // exact integers
+        const __m256d cx = _mm256_add_pd(px, half);
+        __m256d w[3];
+        __m256d inside = _mm256_cmp_pd(px, end, _CMP_LT_OQ);
+        for (int k = 0; k < 3; ++k) {
+            w[k] = _mm256_mul_pd(sign[k], _mm256_sub_pd(row_term[k], _mm256_mul_pd(dy[k], _mm256_sub_pd(cx, ax[k]))));
+            const __m256d covered = _mm256_or_pd(_mm256_cmp_pd(w[k], zero, _CMP_GT_OQ),
+                                                 _mm256_and_pd(_mm256_cmp_pd(w[k], zero, _CMP_EQ_OQ), top_left[k]));
+            inside = _mm256_and_pd(inside, covered);
+        }
+        if (_mm256_movemask_pd(inside) == 0) continue;
+        const __m256d sum = _mm256_add_pd(_mm256_add_pd(w[0], w[1]), w[2]);
+        inside = _mm256_and_pd(inside, _mm256_cmp_pd(sum, zero, _CMP_GT_OQ));
+        const int mask = _mm256_movemask_pd(inside);
+        if (mask == 0) continue;
+        const __m256d weighted =
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w[0], z0), _mm256_mul_pd(w[1], z1)), _mm256_mul_pd(w[2], z2));
+        // std::min(1.0, std::max(0.0, z)): max_pd(z, 0) is (z > 0 ? z : 0), min_pd(m, 1) is (m < 1 ? m : 1)
+        const __m256d z = _mm256_min_pd(_mm256_max_pd(_mm256_div_pd(weighted, sum), zero), one);
+        alignas(32) double zs[4];
+        _mm256_store_pd(zs, z);
+        for (int l = 0; l < 4; ++l)
+            if (mask & (1 << l)) depth_write(t, row_base + static_cast<std::size_t>(x + l), zs[l]);
+    }
+}
+
+bool has_avx2() {
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    return avx2;
+}
+#endif
+
 void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {
     // Orientation from the same canonical edge function the coverage test uses.
     double area = make_edge(v0, v1).eval(v2.x, v2.y);
@@ -166,10 +239,27 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
     const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
     const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
 
+#if defined(__x86_64__) && defined(__GNUC__)
+    const bool avx2 = t.simd && has_avx2();
+    const Edge edges[3] = {e0, e1, e2};
+    const double vertex_z[3] = {v0.z, v1.z, v2.z};
+#endif
     for (std::int64_t py = y0; py < y1; ++py) {
         const double cy = static_cast<double>(py) + 0.5;
         const std::size_t row_base = static_cast<std::size_t>(py) * t.columns;
         std::int64_t row_x0 = x0, row_x1 = x1;
+#if defined(__x86_64__) && defined(__GNUC__)
+        if (avx2) {
+            // a box two vectors wide or less tests every pixel sooner than row_span narrows it
+            if (x1 - x0 > 8) {
+                row_span(e0, cy, row_x0, row_x1);
+                row_span(e1, cy, row_x0, row_x1);
+                row_span(e2, cy, row_x0, row_x1);
+            }
+            raster_row4(edges, vertex_z, cy, row_x0, row_x1, row_base, t);
+            continue;
+        }
+#endif
         row_span(e0, cy, row_x0, row_x1);
         row_span(e1, cy, row_x0, row_x1);
         row_span(e2, cy, row_x0, row_x1);
@@ -185,21 +275,8 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
             if (!(sum > 0.0)) continue;
             // Screen-space linear interpolation of z_ndc (no perspective correction, as Vulkan does
             // for gl_FragCoord.z); clamped to the depth range against rounding.
-            double z = (w0 * v0.z + w1 * v1.z + w2 * v2.z) / sum;
-            z = std::min(1.0, std::max(0.0, z));
-            const float d = static_cast<float>(z);
-            const std::size_t p = row_base + static_cast<std::size_t>(px);
-            if (d > t.depth[p]) { // strict GREATER, reversed-Z
-                t.depth[p] = d;
-                t.material[p] = t.material_id;
-                if (t.face_normal) {
-                    float* n = t.face_normal + 4 * p;
-                    n[0] = t.triangle_normal[0];
-                    n[1] = t.triangle_normal[1];
-                    n[2] = t.triangle_normal[2];
-                    n[3] = 0.0f;
-                }
-            }
+            const double z = (w0 * v0.z + w1 * v1.z + w2 * v2.z) / sum;
+            depth_write(t, row_base + static_cast<std::size_t>(px), std::min(1.0, std::max(0.0, z)));
         }
     }
 }
@@ -306,11 +383,10 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
 } // namespace
 
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
-                std::uint32_t* material, float* face_normal, const DepthClusters* clusters, std::uint32_t row_begin,
-                std::uint32_t row_end, std::uint32_t view_begin, std::uint32_t view_end) {
+                std::uint32_t* material, float* face_normal, const DepthClusters* clusters, const DepthRegion& region) {
     const std::uint32_t columns = plan.columns, rows = plan.rows;
-    row_end = std::min(row_end, rows);
-    view_end = std::min(view_end, plan.views);
+    const std::uint32_t row_begin = region.row_begin, row_end = std::min(region.row_end, rows);
+    const std::uint32_t view_begin = region.view_begin, view_end = std::min(region.view_end, plan.views);
     if (row_begin >= row_end || view_begin >= view_end) return;
     // the region's pixels: rows [row_begin, row_end) of the views' columns (the views are contiguous)
     const std::size_t column_first = view_first_column(plan, view_begin);
@@ -329,6 +405,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
         const std::int64_t view_first = view_first_column(plan, s), width = view_columns(plan, s);
         const double half_w = 0.5 * static_cast<double>(width);
         Target target{depth, material, columns, view_first, view_first + width, row_begin, row_end, 0};
+        target.simd = region.simd;
         target.face_normal = face_normal;
         target.band = row_begin > 0 || row_end < rows;
         target.band_top_ndc = 2.0 * row_begin / rows - 1.0;

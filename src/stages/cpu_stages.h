@@ -32,14 +32,19 @@ struct DepthClusters {
     const std::vector<DepthCluster>& runs;
     const std::vector<std::uint8_t>& drawn; // slices * runs
 };
-// row_begin, row_end, view_begin, view_end: only the rows [row_begin, row_end) of views [view_begin,
-// view_end) are cleared and written, each pixel by the same triangles in the same order as a pass over
-// the whole image, so regions run on different threads give the same bytes (each region transforms and
-// sets up its views' triangles again: a few bands per view, not many).
+// region: only the rows [row_begin, row_end) of views [view_begin, view_end) are cleared and written,
+// each pixel by the same triangles in the same order as a pass over the whole image, so regions run on
+// different threads give the same bytes (each region transforms and sets up its views' triangles
+// again: a few bands per view, not many). simd: the pixels four at a time where the CPU has AVX2
+// (false: one at a time; the same bytes, tested).
+struct DepthRegion {
+    std::uint32_t row_begin = 0, row_end = ~0u;
+    std::uint32_t view_begin = 0, view_end = ~0u;
+    bool simd = true;
+};
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
                 std::uint32_t* material, float* face_normal = nullptr, const DepthClusters* clusters = nullptr,
-                std::uint32_t row_begin = 0, std::uint32_t row_end = ~0u, std::uint32_t view_begin = 0,
-                std::uint32_t view_end = ~0u);
+                const DepthRegion& region = {});
 
 // Stage 2: normals4 = rows * columns * 4 (nx, ny, nz in the sonar frame, cos incidence).
 template <class Real> void normals(const Plan& plan, const float* depth, float* normals4);

@@ -161,7 +161,7 @@ TEST(CpuDepth, EqualDepthKeepsTheFirstDrawBecauseTheTestIsStrict) {
 
 // Renders each draw alone (identity matrices in `pushes`) and returns per-pixel coverage counts.
 std::vector<int> coverage_counts(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& pushes,
-                                 std::vector<std::vector<bool>>* masks = nullptr) {
+                                 std::vector<std::vector<bool>>* masks = nullptr, bool simd = true) {
     std::vector<int> count(std::size_t(plan.rows) * plan.columns, 0);
     for (std::size_t i = 0; i < scene.draws.size(); ++i) {
         SceneData one = scene;
@@ -171,7 +171,9 @@ std::vector<int> coverage_counts(const Plan& plan, const SceneData& scene, const
             p.push_back(pushes[s * scene.draws.size() + i]);
         std::vector<float> depth(count.size());
         std::vector<std::uint32_t> material(count.size());
-        cpu::depth_pass(plan, one, p, depth.data(), material.data());
+        cpu::DepthRegion region;
+        region.simd = simd;
+        cpu::depth_pass(plan, one, p, depth.data(), material.data(), nullptr, nullptr, region);
         std::vector<bool> mask(count.size());
         for (std::size_t k = 0; k < count.size(); ++k) {
             mask[k] = depth[k] > 0.0f;
@@ -223,12 +225,14 @@ TEST(CpuDepth, TopLeftRuleCoversSharedEdgesThroughPixelCentresExactlyOnce) {
             sb.draw(sb.mesh(p, {0, 1, 2}), 0);
             pushes.push_back(identity_push(0));
         }
-        const std::vector<int> count = coverage_counts(plan, sb.scene, pushes);
-        for (std::uint32_t j = 0; j < plan.rows; ++j) {
-            for (std::uint32_t c = 0; c < plan.columns; ++c) {
-                const bool inside = c >= 2 && c <= 9 && j >= 1 && j <= 8;
-                EXPECT_EQ(count[std::size_t(j) * plan.columns + c], inside ? 1 : 0)
-                    << "split " << k << " pixel " << c << "," << j;
+        for (const bool simd : {true, false}) { // four pixels at a time (AVX2, where the CPU has it), one at a time
+            const std::vector<int> count = coverage_counts(plan, sb.scene, pushes, nullptr, simd);
+            for (std::uint32_t j = 0; j < plan.rows; ++j) {
+                for (std::uint32_t c = 0; c < plan.columns; ++c) {
+                    const bool inside = c >= 2 && c <= 9 && j >= 1 && j <= 8;
+                    EXPECT_EQ(count[std::size_t(j) * plan.columns + c], inside ? 1 : 0)
+                        << "split " << k << " pixel " << c << "," << j << (simd ? " simd" : " scalar");
+                }
             }
         }
     }
@@ -286,6 +290,19 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
     ASSERT_GT(std::count(material.begin(), material.end(), m0), 0);
     ASSERT_GT(std::count(material.begin(), material.end(), m1), 0);
     ASSERT_GT(std::count(material.begin(), material.end(), m2), 0);
+    // The pixels four at a time (AVX2, where this CPU has it: the pass above) against one at a time: the
+    // same bytes, ties, shared edges and clipped triangles included.
+    {
+        std::vector<float> scalar_depth(pixels, -1.0f), scalar_face(4 * pixels, -1.0f);
+        std::vector<std::uint32_t> scalar_material(pixels, 12345u);
+        cpu::DepthRegion one_at_a_time;
+        one_at_a_time.simd = false;
+        cpu::depth_pass(plan, b.scene, draws, scalar_depth.data(), scalar_material.data(), scalar_face.data(), nullptr,
+                        one_at_a_time);
+        EXPECT_EQ(scalar_depth, depth);
+        EXPECT_EQ(scalar_material, material);
+        EXPECT_EQ(scalar_face, face);
+    }
     // By whole meshes, and by clusters as the CPU backend draws them.
     std::vector<DepthCluster> runs;
     std::vector<std::uint8_t> drawn;
@@ -300,7 +317,7 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
             const std::uint32_t step = (plan.rows + bands - 1) / bands;
             for (std::uint32_t begin = 0; begin < plan.rows; begin += step) // each clears only its own rows
                 cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), by,
-                                begin, begin + step);
+                                {begin, begin + step});
             const char* how = by ? "clusters" : "meshes";
             EXPECT_EQ(band_depth, depth) << bands << " bands, " << how;
             EXPECT_EQ(band_material, material) << bands << " bands, " << how;
@@ -312,7 +329,7 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
             for (std::uint32_t view = 0; view < plan.views; ++view)
                 for (std::uint32_t begin = 0; begin < plan.rows; begin += step)
                     cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), by,
-                                    begin, begin + step, view, view + 1);
+                                    {begin, begin + step, view, view + 1});
             EXPECT_EQ(band_depth, depth) << bands << " bands per view, " << how;
             EXPECT_EQ(band_material, material) << bands << " bands per view, " << how;
             EXPECT_EQ(band_face, face) << bands << " bands per view, " << how;
@@ -326,7 +343,7 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
         std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
         std::vector<std::uint32_t> band_material(pixels, 12345u);
         cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), &clusters,
-                        begin, end, view, view + 1);
+                        {begin, end, view, view + 1});
         std::size_t written = 0;
         for (std::size_t p = 0; p < pixels; ++p) {
             const std::size_t row = p / plan.columns, column = p % plan.columns;
@@ -342,8 +359,8 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
     const std::uint32_t begin = plan.rows / 3, end = 2 * plan.rows / 3;
     std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
     std::vector<std::uint32_t> band_material(pixels, 12345u);
-    cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), nullptr, begin,
-                    end);
+    cpu::depth_pass(plan, b.scene, draws, band_depth.data(), band_material.data(), band_face.data(), nullptr,
+                    {begin, end});
     for (std::size_t p = 0; p < pixels; ++p) {
         const bool inside = p >= std::size_t(begin) * plan.columns && p < std::size_t(end) * plan.columns;
         ASSERT_EQ(band_depth[p], inside ? depth[p] : -1.0f) << "pixel " << p;
