@@ -2,6 +2,7 @@
 // next to the buffers they share, allocated once at construction). Arithmetic precision follows
 // plan.config.cpu_precision (f64 -> double, else float).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
@@ -143,28 +144,23 @@ template <class Real> void run_depth(StageContext<Real>& s) {
     });
 }
 
-template <class Real> void run_normals(StageContext<Real>& s) {
+template <class Real>
+void rows_normals(StageContext<Real>& s, std::uint32_t begin, std::uint32_t end, std::uint32_t thread) {
     if (s.plan.face_normals) {
-        split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-            geometric_normals_rows<Real>(s.plan, s.depth.data(), s.face.data(), s.normals.data(), begin, end);
-        });
+        geometric_normals_rows<Real>(s.plan, s.depth.data(), s.face.data(), s.normals.data(), begin, end);
         return;
     }
-    // each part slides its own ring of rows: part i's scratch starts at i * per_part
-    const std::size_t per_part = std::max<std::size_t>(normals_scratch_count(s.plan), 1);
-    split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t part) {
-        normals_rows<Real>(s.plan, s.depth.data(), s.normals.data(), s.normals_scratch.data() + part * per_part, begin,
-                           end, s.view_drawn.data());
-    });
+    // each thread slides its own ring of rows: thread i's scratch starts at i * per_thread
+    const std::size_t per_thread = std::max<std::size_t>(normals_scratch_count(s.plan), 1);
+    normals_rows<Real>(s.plan, s.depth.data(), s.normals.data(), s.normals_scratch.data() + thread * per_thread, begin,
+                       end, s.view_drawn.data());
 }
 
-template <class Real> void run_echo(StageContext<Real>& s) {
-    // normals only where the normals stage ran (incidence on)
+template <class Real> void rows_echo(StageContext<Real>& s, std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+    // normals only where the normals stage ran (incidence on): a pixel reads its own
     const float* normals = s.plan.effects.incidence ? s.normals.data() : nullptr;
-    split_blocks(s.workers, s.plan.rows, kRowBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-        echo_rows<Real>(s.plan, s.depth.data(), s.material.data(), normals, s.echo.data(), s.echo_table.data(), begin,
-                        end, s.view_drawn.data());
-    });
+    echo_rows<Real>(s.plan, s.depth.data(), s.material.data(), normals, s.echo.data(), s.echo_table.data(), begin, end,
+                    s.view_drawn.data());
 }
 
 template <class Real> void run_beamform(StageContext<Real>& s) {
@@ -186,10 +182,10 @@ template <class Real> void run_beamform(StageContext<Real>& s) {
 // The table's pointers name these; they are defined here, next to the buffers they touch.
 template void run_depth<float>(StageContext<float>&);
 template void run_depth<double>(StageContext<double>&);
-template void run_normals<float>(StageContext<float>&);
-template void run_normals<double>(StageContext<double>&);
-template void run_echo<float>(StageContext<float>&);
-template void run_echo<double>(StageContext<double>&);
+template void rows_normals<float>(StageContext<float>&, std::uint32_t, std::uint32_t, std::uint32_t);
+template void rows_normals<double>(StageContext<double>&, std::uint32_t, std::uint32_t, std::uint32_t);
+template void rows_echo<float>(StageContext<float>&, std::uint32_t, std::uint32_t, std::uint32_t);
+template void rows_echo<double>(StageContext<double>&, std::uint32_t, std::uint32_t, std::uint32_t);
 template void run_beamform<float>(StageContext<float>&);
 template void run_beamform<double>(StageContext<double>&);
 
@@ -217,7 +213,13 @@ public:
         stage_.pose = pose;
         stage_.save_mask = save_mask;
         stage_.polar = frame.clean.data();
-        for (const StageInfo& stage : kStageTable) {
+        for (std::size_t i = 0; i < kStageCount;) {
+            const StageInfo& stage = kStageTable[i];
+            if (cpu_rows_function<Real>(stage.cpu) != nullptr) {
+                i = run_row_stages(i, frame);
+                continue;
+            }
+            ++i;
             if (!stage.runs(stage_.plan)) continue;
             const auto start = Clock::now();
             cpu_function<Real>(stage.cpu)(stage_);
@@ -236,6 +238,47 @@ public:
     const SubpixelReturns* subpixel_returns() const override { return &stage_.subpixel; }
 
 private:
+    // The row stages from kStageTable[first] on (up to the next whole stage) that run with this plan, fused:
+    // blocks of kRowBlock rows, each through all of them in table order, taken by the threads as they
+    // come. Each stage's time is the pass's wall time shared by its summed block time. Returns the index
+    // of the next whole stage.
+    std::size_t run_row_stages(std::size_t first, Frame& frame) {
+        std::array<std::size_t, kStageCount> run{};
+        std::size_t n = 0, end = first;
+        for (; end < kStageCount && cpu_rows_function<Real>(kStageTable[end].cpu) != nullptr; ++end)
+            if (kStageTable[end].runs(stage_.plan)) run[n++] = end;
+        if (n == 0) return end;
+        // busy[thread][k]: ms that thread spent in run[k]'s rows (no allocation: fixed arrays)
+        std::array<std::array<double, kStageCount>, host::Workers::kMaxThreads> busy{};
+        const auto start = Clock::now();
+        split_blocks(stage_.workers, stage_.plan.rows, kRowBlock,
+                     [&](std::uint32_t begin, std::uint32_t block_end, std::uint32_t thread) {
+                         // on one thread this is every row at once: still a block at a time
+                         for (std::uint32_t row = begin; row < block_end; row += kRowBlock) {
+                             const std::uint32_t rows_end = std::min(row + kRowBlock, block_end);
+                             for (std::size_t k = 0; k < n; ++k) {
+                                 const auto stage_start = Clock::now();
+                                 cpu_rows_function<Real>(kStageTable[run[k]].cpu)(stage_, row, rows_end, thread);
+                                 busy[thread][k] += ms_since(stage_start);
+                             }
+                         }
+                     });
+        const double wall = ms_since(start);
+        std::array<double, kStageCount> stage_busy{};
+        double total = 0.0;
+        for (const auto& thread : busy)
+            for (std::size_t k = 0; k < n; ++k) {
+                stage_busy[k] += thread[k];
+                total += thread[k];
+            }
+        for (std::size_t k = 0; k < n; ++k) {
+            const double share = total > 0.0 ? stage_busy[k] / total : 1.0 / static_cast<double>(n);
+            frame.times.push_back({kStageTable[run[k]].name, wall * share});
+            frame.stages_run.emplace_back(kStageTable[run[k]].name);
+        }
+        return end;
+    }
+
     void save_buffer(StageBuffers buffer, bool ran, Frame& frame) const {
         switch (buffer) {
         case StageBuffers::depth:

@@ -28,8 +28,11 @@ namespace vksonar {
 namespace cpu {
 template <class Real> struct StageContext; // cpu_backend.cpp: the CPU backend's buffers and the frame's pose
 template <class Real> void run_depth(StageContext<Real>& stage);
-template <class Real> void run_normals(StageContext<Real>& stage);
-template <class Real> void run_echo(StageContext<Real>& stage);
+// row stages (CpuStage::rows): rows [row_begin, row_end) on worker thread `thread`
+template <class Real>
+void rows_normals(StageContext<Real>& stage, std::uint32_t row_begin, std::uint32_t row_end, std::uint32_t thread);
+template <class Real>
+void rows_echo(StageContext<Real>& stage, std::uint32_t row_begin, std::uint32_t row_end, std::uint32_t thread);
 template <class Real> void run_beamform(StageContext<Real>& stage);
 } // namespace cpu
 
@@ -130,10 +133,16 @@ struct VulkanStage {
     Dispatches (*dispatches)(const Plan&, const DeviceShape&);
 };
 
-// In both of the CPU backend's precisions (SonarConfig::cpu_precision), picked at compile time.
+// In both of the CPU backend's precisions (SonarConfig::cpu_precision), picked at compile time: the
+// whole stage (f32, f64), or a row stage (rows_f32, rows_f64), whose row j of output reads no row but j
+// of the row stages before it. The CPU backend runs consecutive row stages fused: each block of rows
+// through all of them while it is in cache (normals then echo: the normals of a block are read back
+// from cache, not from memory), and shares the pass's wall time among them by their summed block times.
 struct CpuStage {
-    void (*f32)(cpu::StageContext<float>&);
-    void (*f64)(cpu::StageContext<double>&);
+    void (*f32)(cpu::StageContext<float>&) = nullptr;
+    void (*f64)(cpu::StageContext<double>&) = nullptr;
+    void (*rows_f32)(cpu::StageContext<float>&, std::uint32_t, std::uint32_t, std::uint32_t) = nullptr;
+    void (*rows_f64)(cpu::StageContext<double>&, std::uint32_t, std::uint32_t, std::uint32_t) = nullptr;
 };
 
 struct StageInfo {
@@ -258,7 +267,7 @@ inline constexpr std::array<StageInfo, 4> kStageTable{{
      .runs = stage_table::incidence,
      .reads = stage_table::normals_reads,
      .writes = stage_table::normals_writes,
-     .cpu = {cpu::run_normals<float>, cpu::run_normals<double>},
+     .cpu = {.rows_f32 = cpu::rows_normals<float>, .rows_f64 = cpu::rows_normals<double>},
      .vulkan = stage_table::kNormals,
      .host_depth_name = "normals",
      .host_depth = stage_table::kNormals,
@@ -269,7 +278,7 @@ inline constexpr std::array<StageInfo, 4> kStageTable{{
      .runs = stage_table::always,
      .reads = stage_table::echo_reads,
      .writes = stage_table::echo_writes,
-     .cpu = {cpu::run_echo<float>, cpu::run_echo<double>},
+     .cpu = {.rows_f32 = cpu::rows_echo<float>, .rows_f64 = cpu::rows_echo<double>},
      .vulkan = stage_table::kEcho,
      .host_depth_name = "echo",
      .host_depth = stage_table::kEcho,
@@ -296,12 +305,19 @@ constexpr bool stage_table_in_order() {
 }
 static_assert(stage_table_in_order(), "kStageTable[i].id == i: backends index their per-stage arrays by StageId");
 
-// The CPU backend's function for its precision.
+// The CPU backend's functions for its precision: the whole stage, or its rows (null for the other kind).
 template <class Real> constexpr auto cpu_function(const CpuStage& stage) {
     if constexpr (std::is_same_v<Real, double>) {
         return stage.f64;
     } else {
         return stage.f32;
+    }
+}
+template <class Real> constexpr auto cpu_rows_function(const CpuStage& stage) {
+    if constexpr (std::is_same_v<Real, double>) {
+        return stage.rows_f64;
+    } else {
+        return stage.rows_f32;
     }
 }
 

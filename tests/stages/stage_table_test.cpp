@@ -97,8 +97,10 @@ TEST(StageTable, EveryStageHasCodeOnEveryBackend) {
         EXPECT_NE(stage.runs, nullptr);
         EXPECT_NE(stage.reads, nullptr);
         EXPECT_NE(stage.writes, nullptr);
-        EXPECT_NE(stage.cpu.f32, nullptr);
-        EXPECT_NE(stage.cpu.f64, nullptr);
+        // the whole stage or its rows, in both precisions
+        EXPECT_NE(stage.cpu.f32 != nullptr, stage.cpu.rows_f32 != nullptr);
+        EXPECT_EQ(stage.cpu.f32 != nullptr, stage.cpu.f64 != nullptr);
+        EXPECT_EQ(stage.cpu.rows_f32 != nullptr, stage.cpu.rows_f64 != nullptr);
         for (const VulkanStage* side : {&stage.vulkan, &stage.host_depth}) {
             EXPECT_NE(side->record, nullptr);
             EXPECT_NE(side->dispatches, nullptr);
