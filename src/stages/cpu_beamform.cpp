@@ -766,6 +766,52 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
             profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
 }
 
+namespace {
+
+#if defined(__x86_64__) && defined(__GNUC__)
+bool has_avx2() {
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    return avx2;
+}
+
+// The side-lobe sums of one run of four groups (16 beams) for one or two bin rows (row1 null: one), as
+// beamform_beams's float loop makes them, two groups per AVX register: lanes 0-3 group g, 4-7 group
+// g + 1, each lane the same products added in the same (increasing t) order, no FMA in this target, so
+// the same floats. sums[r][4 g + l]: row r, beam j0 + 4 g + l; row0, row1 at the run's first beam
+// (padded rows: beam j0 + 4 g + l takes row[t + 4 g + l]).
+__attribute__((target("avx2"))) void sidelobe_run8(const float* wq, std::uint32_t taps, const float* row0,
+                                                   const float* row1, std::uint32_t t_begin, std::uint32_t t_end,
+                                                   float (&sums)[2][16]) {
+    __m256 s0a = _mm256_setzero_ps(), s0b = s0a, s1a = s0a, s1b = s0a; // row r, groups 0-1 (a) and 2-3 (b)
+    // group g's weights at tap t: w[g][t]; groups g and g + 1 side by side in one register
+    const float* w0 = wq + std::size_t(t_begin) * 4;
+    const std::size_t group = std::size_t(taps) * 4;
+    for (std::uint32_t t = t_begin; t < t_end; ++t, w0 += 4) {
+        const __m256 wa = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(w0)), _mm_loadu_ps(w0 + group), 1);
+        const __m256 wb =
+            _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(w0 + 2 * group)), _mm_loadu_ps(w0 + 3 * group), 1);
+        s0a = _mm256_add_ps(s0a, _mm256_mul_ps(wa, _mm256_loadu_ps(row0 + t)));
+        s0b = _mm256_add_ps(s0b, _mm256_mul_ps(wb, _mm256_loadu_ps(row0 + t + 8)));
+        if (row1 != nullptr) { // the same in every iteration: the compiler unswitches the loop
+            s1a = _mm256_add_ps(s1a, _mm256_mul_ps(wa, _mm256_loadu_ps(row1 + t)));
+            s1b = _mm256_add_ps(s1b, _mm256_mul_ps(wb, _mm256_loadu_ps(row1 + t + 8)));
+        }
+    }
+    _mm256_storeu_ps(sums[0], s0a);
+    _mm256_storeu_ps(sums[0] + 8, s0b);
+    _mm256_storeu_ps(sums[1], s1a);
+    _mm256_storeu_ps(sums[1] + 8, s1b);
+}
+#else
+bool has_avx2() {
+    return false;
+}
+void sidelobe_run8(const float*, std::uint32_t, const float*, const float*, std::uint32_t, std::uint32_t,
+                   float (&)[2][16]) {}
+#endif
+
+} // namespace
+
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
@@ -808,6 +854,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     auto empty_row = [&](const float* row) { return std::all_of(row, row + beams, [](float b) { return b == 0.0f; }); };
     using V = typename Lanes<Real>::type;
     float padded[2][kMaxPaddedRow]; // padded[r][i]: beam i - K of the r-th row of a pair
+    const bool avx2 = has_avx2();
     for (std::uint32_t k = bin_begin; k < bin_end;) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;
@@ -868,7 +915,18 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                         s[1][g] += w * x;
                     }
                 };
-                if (n == 4 && rows == 2) {
+                bool summed = false;
+                if constexpr (std::is_same_v<Real, float>) {
+                    if (n == 4 && avx2) {
+                        float sums[2][16];
+                        sidelobe_run8(wq, taps, padded[0] + j0, rows == 2 ? padded[1] + j0 : nullptr, t_begin, t_end,
+                                      sums);
+                        std::memcpy(s, sums, sizeof sums);
+                        summed = true;
+                    }
+                }
+                if (summed) {
+                } else if (n == 4 && rows == 2) {
                     for (std::uint32_t t = t_begin; t < t_end; ++t) {
                         mac(2, 0, t);
                         mac(2, 1, t);
