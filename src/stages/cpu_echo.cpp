@@ -10,10 +10,15 @@
 #include <type_traits>
 #include <vector>
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
+
 #include "core/half.h"
 #include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
 #include "stages/cpu_stages.h"
+#include "stages/exp4.h"
 
 namespace vksonar::cpu {
 
@@ -52,6 +57,80 @@ template <class Real> void echo_table(const Plan& plan, Real* table) {
     }
 }
 
+namespace {
+
+#if defined(__x86_64__) && defined(__GNUC__)
+// echo_rows's float loop for the four pixels x .. x + 3 of one view row, as SSE lanes: the operations of
+// depth_slant_range, the gate and echo_at_range with echo_energy lane by lane, in the same order (no
+// FMA but exp4's own, which gives expf's floats: call only where exp4_matches_expf), out = echo2 at
+// the first pixel. Returns false, having written nothing, where a lane needs what only the scalar
+// kernel does: a rough material's facet term, or an absorption exponent beyond exp4's range.
+// material_count > 0; normals4: at the first pixel, or null without incidence.
+__attribute__((target("avx2,fma"))) bool echo4(const Math<float>::EchoConstants& k, const Math<float>::EchoTerms& terms,
+                                               const float* depth, const std::uint32_t* material, const float* normals4,
+                                               const float* u, float v, const float* row_terms,
+                                               const shared::MaterialGpu* materials, std::uint32_t material_count,
+                                               float* out) {
+    const __m128 zero = _mm_setzero_ps();
+    const __m128 d = _mm_loadu_ps(depth);
+    const __m128 hit = _mm_cmpgt_ps(d, zero);
+    if (_mm_movemask_ps(hit) == 0) {
+        _mm_storeu_ps(out, zero);
+        _mm_storeu_ps(out + 4, zero);
+        return true;
+    }
+    // depth_slant_range: (a / (d - b)) sqrt((1 + u u) + v v)
+    const __m128 view_z = _mm_div_ps(_mm_set1_ps(k.depth_a), _mm_sub_ps(d, _mm_set1_ps(k.depth_b)));
+    const __m128 uu = _mm_loadu_ps(u);
+    const __m128 root = _mm_sqrt_ps(_mm_add_ps(_mm_add_ps(_mm_set1_ps(1.0f), _mm_mul_ps(uu, uu)), _mm_set1_ps(v * v)));
+    const __m128 r = _mm_and_ps(hit, _mm_mul_ps(view_z, root));
+    // the gate (r < min || r >= max: out), then a vertical power > 0; (solid angle, vertical) pairs
+    const __m128 gated =
+        _mm_or_ps(_mm_cmplt_ps(r, _mm_set1_ps(k.gate_min_m)), _mm_cmpge_ps(r, _mm_set1_ps(k.gate_max_m)));
+    const __m128 pair0 = _mm_loadu_ps(row_terms), pair1 = _mm_loadu_ps(row_terms + 4);
+    const __m128 omega = _mm_shuffle_ps(pair0, pair1, _MM_SHUFFLE(2, 0, 2, 0));
+    const __m128 vertical = _mm_shuffle_ps(pair0, pair1, _MM_SHUFFLE(3, 1, 3, 1));
+    const __m128 live = _mm_and_ps(_mm_andnot_ps(gated, hit), _mm_cmpgt_ps(vertical, zero));
+    const int live_mask = _mm_movemask_ps(live);
+    __m128 e = zero;
+    if (live_mask != 0) {
+        // per lane: the material's backscatter and the scattering factor echo_at_range picks
+        alignas(16) float backscatter[4], scatter[4];
+        for (int l = 0; l < 4; ++l) {
+            backscatter[l] = 0.0f;
+            scatter[l] = 1.0f;
+            if (!(live_mask & (1 << l))) continue;
+            const std::uint32_t id = material[l] & shared::kMaterialIdMask;
+            const shared::MaterialGpu& mat = materials[id < material_count ? id : 0u];
+            backscatter[l] = mat.backscatter_linear;
+            if (terms.incidence && terms.rough_materials && mat.model == shared::kScatterRough) return false;
+            if (terms.incidence && mat.model == shared::kScatterLambert) scatter[l] = normals4[4 * l + 3];
+        }
+        e = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_load_ps(backscatter), _mm_load_ps(scatter)), omega), vertical);
+        const __m128 r2 = _mm_mul_ps(r, r);
+        e = terms.spreading ? _mm_div_ps(e, r2) : _mm_mul_ps(_mm_mul_ps(e, r), r);
+        if (terms.absorption) {
+            const float rate = -0.2302585092994046f * k.alpha_db_per_m; // echo_energy's first product
+            const __m128 exponent = _mm_mul_ps(_mm_mul_ps(_mm_set1_ps(rate), r), _mm_set1_ps(2.0f));
+            const __m128 abs_exponent = _mm_andnot_ps(_mm_set1_ps(-0.0f), exponent);
+            if ((_mm_movemask_ps(_mm_and_ps(live, _mm_cmpnlt_ps(abs_exponent, _mm_set1_ps(80.0f)))) != 0)) return false;
+            e = _mm_mul_ps(e, exp4(_mm256_cvtps_pd(_mm_and_ps(live, exponent))));
+        }
+        e = _mm_and_ps(live, e);
+    }
+    _mm_storeu_ps(out, _mm_unpacklo_ps(e, r));
+    _mm_storeu_ps(out + 4, _mm_unpackhi_ps(e, r));
+    return true;
+}
+#else
+bool echo4(const Math<float>::EchoConstants&, const Math<float>::EchoTerms&, const float*, const std::uint32_t*,
+           const float*, const float*, float, const float*, const shared::MaterialGpu*, std::uint32_t, float*) {
+    return false;
+}
+#endif
+
+} // namespace
+
 // echo_of_pixel (shaders/sonar_kernels.h, as echo.comp calls it) with its per-pixel-place factors, the
 // solid angle and the vertical power, read from echo_table: the same functions of the same values.
 template <class Real>
@@ -62,6 +141,7 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
     const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4 != nullptr);
     const std::uint32_t C = plan.columns, R = plan.rows;
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
+    const bool simd = exp4_matches_expf();
 
     for (std::uint32_t s = 0; s < plan.views; ++s) {
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);
@@ -76,7 +156,19 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
         for (std::uint32_t j = row_begin; j < row_end; ++j) {
             const Real v = M::pixel_coord(j, R, k.tan_half_v);
             const Real* row_terms = u + W + 2 * static_cast<std::size_t>(j) * W;
-            for (std::uint32_t x = 0; x < W; ++x) {
+            std::uint32_t x = 0;
+            if constexpr (std::is_same_v<Real, float>) {
+                // four pixels at a time where echo4 can (the same floats), the others one by one below
+                if (simd && material_count > 0) {
+                    for (; x + 4 <= W; x += 4) {
+                        const std::size_t p = static_cast<std::size_t>(j) * C + c0 + x;
+                        if (!echo4(k, terms, depth + p, material + p, terms.incidence ? normals4 + 4 * p : nullptr,
+                                   u + x, v, row_terms + 2 * x, plan.materials.data(), material_count, echo2 + 2 * p))
+                            break;
+                    }
+                }
+            }
+            for (; x < W; ++x) {
                 const std::size_t p = static_cast<std::size_t>(j) * C + c0 + x;
                 float* out = echo2 + 2 * p;
                 const float d = depth[p];
