@@ -119,7 +119,7 @@ struct Target {
 };
 
 // First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
-std::int64_t first_pixel(double lo, std::int64_t begin, std::int64_t end) {
+[[gnu::always_inline]] inline std::int64_t first_pixel(double lo, std::int64_t begin, std::int64_t end) {
     const double f = std::ceil(lo - 0.5);
     if (!(f > static_cast<double>(begin))) return begin; // also NaN
     if (f > static_cast<double>(end)) return end;
@@ -127,7 +127,7 @@ std::int64_t first_pixel(double lo, std::int64_t begin, std::int64_t end) {
 }
 
 // One past the last pixel index whose centre is <= hi, clamped into [begin, end].
-std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
+[[gnu::always_inline]] inline std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
     const double f = std::floor(hi - 0.5) + 1.0;
     if (!(f < static_cast<double>(end))) return end;
     if (f < static_cast<double>(begin)) return begin;
@@ -138,7 +138,7 @@ std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
 // crosses the row, solved for x and widened by a pixel each way, so the exact test in the loop still
 // decides every pixel (the same bytes as testing the whole box) and a thin or slanted triangle no
 // longer tests its box's empty corners. Horizontal edges leave it, and so do huge ones (below).
-void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
+[[gnu::always_inline]] inline void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
     if (e.dy == 0.0) return;
     const double run = (cy - e.ay) * e.dx_per_dy;
     // Below 2^40 in magnitude the crossing's rounding error (a few ulps: the slope is rounded once,
@@ -176,8 +176,9 @@ void row_span(const Edge& e, double cy, std::int64_t& x0, std::int64_t& x1) {
 // operations in the same order as the scalar loop of raster_triangle (the edge functions as Edge::eval,
 // Edge::covers, the sum and the interpolated z, std::max / std::min's choices), so the same bytes. No
 // FMA in this target: nothing is fused.
-__attribute__((target("avx2"))) void raster_row4(const Edge (&e)[3], const double (&vz)[3], double cy, std::int64_t x0,
-                                                 std::int64_t x1, std::size_t row_base, const Target& t) {
+__attribute__((target("avx2"), always_inline)) inline void raster_row4(const Edge (&e)[3], const double (&vz)[3],
+                                                                       double cy, std::int64_t x0, std::int64_t x1,
+                                                                       std::size_t row_base, const Target& t) {
     const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), half = _mm256_set1_pd(0.5);
     const __m256d lane = _mm256_setr_pd(0.0, 1.0, 2.0, 3.0);
     __m256d row_term[3], sign[3], dy[3], ax[3], top_left[3];
@@ -217,6 +218,23 @@ __attribute__((target("avx2"))) void raster_row4(const Edge (&e)[3], const doubl
     }
 }
 
+// The rows [y0, y1) of a triangle's box [x0, x1), each through raster_row4; built for AVX2 as a whole,
+// so that row_span's rounding (ceil, floor) is one instruction here, not a call.
+__attribute__((target("avx2"))) void raster_rows4(const Edge (&e)[3], const double (&vz)[3], std::int64_t x0,
+                                                  std::int64_t x1, std::int64_t y0, std::int64_t y1, const Target& t) {
+    for (std::int64_t py = y0; py < y1; ++py) {
+        const double cy = static_cast<double>(py) + 0.5;
+        std::int64_t row_x0 = x0, row_x1 = x1;
+        // a box two vectors wide or less tests every pixel sooner than row_span narrows it
+        if (x1 - x0 > 8) {
+            row_span(e[0], cy, row_x0, row_x1);
+            row_span(e[1], cy, row_x0, row_x1);
+            row_span(e[2], cy, row_x0, row_x1);
+        }
+        raster_row4(e, vz, cy, row_x0, row_x1, static_cast<std::size_t>(py) * t.columns, t);
+    }
+}
+
 bool has_avx2() {
     static const bool avx2 = __builtin_cpu_supports("avx2");
     return avx2;
@@ -240,26 +258,17 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
     const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
 
 #if defined(__x86_64__) && defined(__GNUC__)
-    const bool avx2 = t.simd && has_avx2();
-    const Edge edges[3] = {e0, e1, e2};
-    const double vertex_z[3] = {v0.z, v1.z, v2.z};
+    if (t.simd && has_avx2()) {
+        const Edge edges[3] = {e0, e1, e2};
+        const double vertex_z[3] = {v0.z, v1.z, v2.z};
+        raster_rows4(edges, vertex_z, x0, x1, y0, y1, t);
+        return;
+    }
 #endif
     for (std::int64_t py = y0; py < y1; ++py) {
         const double cy = static_cast<double>(py) + 0.5;
         const std::size_t row_base = static_cast<std::size_t>(py) * t.columns;
         std::int64_t row_x0 = x0, row_x1 = x1;
-#if defined(__x86_64__) && defined(__GNUC__)
-        if (avx2) {
-            // a box two vectors wide or less tests every pixel sooner than row_span narrows it
-            if (x1 - x0 > 8) {
-                row_span(e0, cy, row_x0, row_x1);
-                row_span(e1, cy, row_x0, row_x1);
-                row_span(e2, cy, row_x0, row_x1);
-            }
-            raster_row4(edges, vertex_z, cy, row_x0, row_x1, row_base, t);
-            continue;
-        }
-#endif
         row_span(e0, cy, row_x0, row_x1);
         row_span(e1, cy, row_x0, row_x1);
         row_span(e2, cy, row_x0, row_x1);
