@@ -258,6 +258,37 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
         if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
             const std::uint32_t C = plan.columns, R = plan.rows;
             SpreadLanes in;
+            if (n == 4 && c[3] == c[0] + 3 && view.end > 0) {
+                // Four neighbouring pixels (most batches): each row's (e, r) pairs by two vector loads,
+                // and the row neighbours from the centre row's ranges; the same values as the loop below.
+                const std::int64_t jj = j;
+                auto row4 = [&](std::int64_t row, float* e, float* r) {
+                    if (row < 0 || row >= static_cast<std::int64_t>(R)) {
+                        _mm_store_ps(e, _mm_setzero_ps());
+                        _mm_store_ps(r, _mm_setzero_ps());
+                        return;
+                    }
+                    const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c[0]);
+                    const __m128 a = _mm_loadu_ps(q), b = _mm_loadu_ps(q + 4);
+                    _mm_store_ps(e, _mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0)));
+                    _mm_store_ps(r, _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)));
+                };
+                row4(jj, in.e, in.r);
+                row4(jj - 2, in.up2_e, in.up2_r);
+                row4(jj - 1, in.up_e, in.up_r);
+                row4(jj + 1, in.down_e, in.down_r);
+                row4(jj + 2, in.down2_e, in.down2_r);
+                const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * C + c[0]);
+                in.left_r[0] = c[0] > view.first ? p[-1] : 0.0f;
+                in.right_r[3] = c[3] + 1 < view.end ? p[9] : 0.0f;
+                for (int l = 0; l < 3; ++l) {
+                    in.left_r[l + 1] = in.r[l];
+                    in.right_r[l] = in.r[l + 1];
+                }
+                if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
+                                      static_cast<int>(plan.bins), out))
+                    return;
+            }
             for (int l = 0; l < 4; ++l) {
                 const std::uint32_t col = c[std::min(l, n - 1)];
                 auto row = [&](std::int64_t jj, float* e, float* r) {
