@@ -96,15 +96,30 @@ __attribute__((target("avx2,fma"))) bool echo4(const Math<float>::EchoConstants&
     if (live_mask != 0) {
         // per lane: the material's backscatter and the scattering factor echo_at_range picks
         alignas(16) float backscatter[4], scatter[4];
-        for (int l = 0; l < 4; ++l) {
-            backscatter[l] = 0.0f;
-            scatter[l] = 1.0f;
-            if (!(live_mask & (1 << l))) continue;
-            const std::uint32_t id = material[l] & shared::kMaterialIdMask;
+        const __m128i ids = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(material)),
+                                          _mm_set1_epi32(static_cast<int>(shared::kMaterialIdMask)));
+        if (_mm_movemask_epi8(_mm_cmpeq_epi32(ids, _mm_shuffle_epi32(ids, 0))) == 0xffff) {
+            // one material under all four pixels (a seabed): one lookup
+            const std::uint32_t id = material[0] & shared::kMaterialIdMask;
             const shared::MaterialGpu& mat = materials[id < material_count ? id : 0u];
-            backscatter[l] = mat.backscatter_linear;
             if (terms.incidence && terms.rough_materials && mat.model == shared::kScatterRough) return false;
-            if (terms.incidence && mat.model == shared::kScatterLambert) scatter[l] = normals4[4 * l + 3];
+            const bool lambert = terms.incidence && mat.model == shared::kScatterLambert;
+            for (int l = 0; l < 4; ++l) {
+                const bool lane_live = (live_mask & (1 << l)) != 0;
+                backscatter[l] = lane_live ? mat.backscatter_linear : 0.0f;
+                scatter[l] = lane_live && lambert ? normals4[4 * l + 3] : 1.0f;
+            }
+        } else {
+            for (int l = 0; l < 4; ++l) {
+                backscatter[l] = 0.0f;
+                scatter[l] = 1.0f;
+                if (!(live_mask & (1 << l))) continue;
+                const std::uint32_t id = material[l] & shared::kMaterialIdMask;
+                const shared::MaterialGpu& mat = materials[id < material_count ? id : 0u];
+                backscatter[l] = mat.backscatter_linear;
+                if (terms.incidence && terms.rough_materials && mat.model == shared::kScatterRough) return false;
+                if (terms.incidence && mat.model == shared::kScatterLambert) scatter[l] = normals4[4 * l + 3];
+            }
         }
         e = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_load_ps(backscatter), _mm_load_ps(scatter)), omega), vertical);
         const __m128 r2 = _mm_mul_ps(r, r);
