@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "core/sonar_math.hpp"
+#include "stages/cpu_simd.h"
 #include "stages/cpu_stages.h"
-#include "stages/exp4.h"
 #include "stages/pixel_spread.h"
 
 namespace vksonar::cpu {
@@ -258,6 +258,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
         if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
             const std::uint32_t C = plan.columns, R = plan.rows;
             SpreadLanes in;
+#if defined(__x86_64__) && defined(__GNUC__)
             if (n == 4 && c[3] == c[0] + 3 && view.end > 0) {
                 // Four neighbouring pixels (most batches): each row's (e, r) pairs by two vector loads,
                 // and the row neighbours from the centre row's ranges; the same values as the loop below.
@@ -289,6 +290,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                                       static_cast<int>(plan.bins), out))
                     return;
             }
+#endif
             for (int l = 0; l < 4; ++l) {
                 const std::uint32_t col = c[std::min(l, n - 1)];
                 auto row = [&](std::int64_t jj, float* e, float* r) {
@@ -732,11 +734,6 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
 namespace {
 
 #if defined(__x86_64__) && defined(__GNUC__)
-bool has_avx2() {
-    static const bool avx2 = __builtin_cpu_supports("avx2");
-    return avx2;
-}
-
 // The side-lobe sums of one run of four groups (16 beams) for one or two bin rows (row1 null: one), as
 // beamform_beams's float loop makes them, two groups per AVX register: lanes 0-3 group g, 4-7 group
 // g + 1, each lane the same products added in the same (increasing t) order, no FMA in this target, so
@@ -766,9 +763,6 @@ __attribute__((target("avx2"))) void sidelobe_run8(const float* wq, std::uint32_
     _mm256_storeu_ps(sums[1] + 8, s1b);
 }
 #else
-bool has_avx2() {
-    return false;
-}
 void sidelobe_run8(const float*, std::uint32_t, const float*, const float*, std::uint32_t, std::uint32_t,
                    float (&)[2][16]) {}
 #endif
@@ -878,17 +872,13 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                         s[1][g] += w * x;
                     }
                 };
-                bool summed = false;
-                if constexpr (std::is_same_v<Real, float>) {
-                    if (n == 4 && avx2) {
+                if (std::is_same_v<Real, float> && n == 4 && avx2) {
+                    if constexpr (std::is_same_v<Real, float>) {
                         float sums[2][16];
                         sidelobe_run8(wq, taps, padded[0] + j0, rows == 2 ? padded[1] + j0 : nullptr, t_begin, t_end,
                                       sums);
                         std::memcpy(s, sums, sizeof sums);
-                        summed = true;
                     }
-                }
-                if (summed) {
                 } else if (n == 4 && rows == 2) {
                     for (std::uint32_t t = t_begin; t < t_end; ++t) {
                         mac(2, 0, t);

@@ -21,6 +21,7 @@
 #include <immintrin.h>
 #endif
 
+#include "stages/cpu_simd.h"
 #include "stages/cpu_stages.h"
 
 namespace vksonar::cpu {
@@ -235,10 +236,6 @@ __attribute__((target("avx2"))) void raster_rows4(const Edge (&e)[3], const doub
     }
 }
 
-bool has_avx2() {
-    static const bool avx2 = __builtin_cpu_supports("avx2");
-    return avx2;
-}
 #endif
 
 void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {

@@ -17,8 +17,8 @@
 #include "core/half.h"
 #include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
+#include "stages/cpu_simd.h"
 #include "stages/cpu_stages.h"
-#include "stages/exp4.h"
 
 namespace vksonar::cpu {
 

@@ -458,8 +458,8 @@ TEST_P(SeabedClosedForm, TheSideLobesBringTheSeabedFromTheAltitudeOn) {
 
 // accuracy.tier_pixel_ratio trades the tier views' pixels, not the side lobes' accuracy: from 1.5x the
 // slices' pixels to the coarsest (4x), the bins of the test above (altitude to 9 m, the nulls apart) stay
-// within 0.25 dB of the same reference, and a coarser bound never takes more views or pixel columns
-// (the tier views' width follows the bound: Plan::tier_columns).
+// within 0.25 dB of the same reference, and a coarser bound never takes more views and always fewer pixel
+// columns (the tier views' width follows the bound: Plan::tier_columns).
 TEST_P(SeabedClosedForm, TheTierPixelRatioKeepsTheSideLobesReturn) {
     SonarConfig config = seabed_config();
     config.effects.vertical_sidelobes = EffectMode::on;

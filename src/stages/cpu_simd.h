@@ -1,6 +1,6 @@
-// expf of four floats at a time, bit-identical to glibc's, for the CPU stages' vector loops (the
-// footprint kernel of beamform, the absorption of echo): exp4, and exp4_matches_expf, whether this
-// machine's expf is the one exp4 reproduces.
+// What the CPU stages' vector loops share: has_avx2, whether this CPU runs their AVX2 paths, and expf
+// of four floats at a time, bit-identical to glibc's (the footprint kernel of beamform, the absorption
+// of echo): exp4, and exp4_matches_expf, whether this machine's expf is the one exp4 reproduces.
 #pragma once
 
 #include <cmath>
@@ -13,6 +13,12 @@
 namespace vksonar::cpu {
 
 #if defined(__x86_64__) && defined(__GNUC__)
+// A property of the machine, fixed once known.
+inline bool has_avx2() {
+    static const bool avx2 = __builtin_cpu_supports("avx2");
+    return avx2;
+}
+
 // exp of four floats, bit-identical to glibc's expf where its ifunc picks __expf_fma (a CPU with FMA
 // and AVX2): the same steps in double precision, fused where that build fuses them, with its table of
 // 2^(i/32) and its polynomial (glibc 2.36, sysdeps/ieee754/flt-32/e_expf.c). Checked against expf on
@@ -79,6 +85,9 @@ inline bool exp4_matches_expf() {
     return matches;
 }
 #else
+inline bool has_avx2() {
+    return false;
+}
 inline bool exp4_matches_expf() {
     return false;
 }
