@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "stages/cpu_simd.h"
 #include "test_support.h"
 
 namespace vksonar::testing {
@@ -249,6 +250,58 @@ TEST(CpuThreads, AnyThreadCountGivesTheSameBytes) {
             EXPECT_EQ(a.profiles, b.profiles) << threads << " threads";
             EXPECT_EQ(a.beam_profiles, b.beam_profiles) << threads << " threads";
             EXPECT_EQ(a.clean, b.clean) << threads << " threads";
+        }
+    }
+}
+
+// cpu.vector_loops off runs the CPU backend's portable loops where this CPU would take its AVX2 ones
+// (depth rows four pixels at a time, echo and footprint spreads four at a time with expf as exp4, the
+// side-lobe runs of 16 beams): every output byte is the same. The configurations reach each vector loop
+// and its ways out: the planar and cone profiles, a circular fan, a beam count that leaves a short last
+// run, double precision, and an absorption whose exponent lies outside exp4's range beyond 35 m.
+TEST(CpuVectorLoops, OffGivesTheSameBytes) {
+    if (!cpu::use_exp4(SonarConfig{})) GTEST_SKIP() << "this CPU has no AVX2 and FMA: both settings run the same loops";
+    auto harbour = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
+    auto seabed = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(harbour && seabed);
+    Pose pose;
+    pose.pitch_deg = 15.0;
+    std::vector<std::pair<const char*, SonarConfig>> configs;
+    configs.emplace_back("default", quiet_config());
+    configs.emplace_back("planar", quiet_config());
+    configs.back().second.beam_geometry = BeamGeometry::planar;
+    configs.emplace_back("hfov 360", quiet_config());
+    configs.back().second.hfov_deg = 360.0;
+    configs.emplace_back("37 beams", quiet_config());
+    configs.back().second.beams = 37;
+    configs.emplace_back("double", quiet_config());
+    configs.back().second.cpu_precision = Precision::f64;
+    configs.emplace_back("absorption 5 dB/m", quiet_config());
+    configs.back().second.absorption_db_per_m = 5.0; // exp4 out of range past 35 m
+    for (const Scene* scene : {&harbour.value(), &seabed.value()}) {
+        for (const auto& [name, config] : configs) {
+            Frame frames[2];
+            for (int off = 0; off < 2; ++off) {
+                SonarConfig c = config;
+                c.cpu_vector_loops = off ? CpuVectorLoops::off : CpuVectorLoops::automatic;
+                RendererOptions options;
+                options.backend = Backend::cpu;
+                options.save_mask = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
+                auto r = Renderer::create(cpu_context(), c, *scene, options);
+                ASSERT_TRUE(r) << name << ": " << r.error().message;
+                frames[off] = r.value().make_frame();
+                ASSERT_TRUE(r.value().render(pose, 0, frames[off])) << name;
+            }
+            const Frame& a = frames[0];
+            const Frame& b = frames[1];
+            EXPECT_GT(sum(a.clean), 0.0) << name;
+            EXPECT_EQ(a.depth, b.depth) << name;
+            EXPECT_EQ(a.material, b.material) << name;
+            EXPECT_EQ(a.normals, b.normals) << name;
+            EXPECT_EQ(a.echo, b.echo) << name;
+            EXPECT_EQ(a.profiles, b.profiles) << name;
+            EXPECT_EQ(a.beam_profiles, b.beam_profiles) << name;
+            EXPECT_EQ(a.clean, b.clean) << name;
         }
     }
 }

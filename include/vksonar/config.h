@@ -57,6 +57,10 @@ enum class NormalMethod : std::uint8_t { sobel3, sobel5, geometric };
 enum class Colormap : std::uint8_t { gray, viridis, sonar, jet };
 // Arithmetic of the CPU backend's stages (the Vulkan backend is always f32).
 enum class Precision : std::uint8_t { f32, f64 };
+// The CPU backend's vector loops (AVX2, and expf four at a time): automatic where this CPU runs them, off:
+// the portable one-at-a-time loops everywhere. Both give the same bytes (tested); off is for that test and
+// for tracing a suspected difference on a new CPU.
+enum class CpuVectorLoops : std::uint8_t { automatic, off };
 // Storage of the per-pixel echo buffer (energy, slant range) between the echo and profile passes.
 enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
 // What the renderer reproduces: the physical model (README "The model"), or one of the two legacy Gazebo plugins
@@ -132,6 +136,7 @@ struct SonarConfig {
     double tier_pixel_ratio = 4.0;
     IntermediatePrecision intermediates = IntermediatePrecision::fp32; // echo buffer storage
     Precision cpu_precision = Precision::f32;
+    CpuVectorLoops cpu_vector_loops = CpuVectorLoops::automatic;
 
     EffectsConfig effects;
 

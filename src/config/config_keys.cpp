@@ -50,6 +50,7 @@ template <> struct EnumNames<IntermediatePrecision> {
     static constexpr std::array<const char*, 2> names{"fp32", "fp16"};
 };
 template <> struct EnumNames<Precision> { static constexpr std::array<const char*, 2> names{"float", "double"}; };
+template <> struct EnumNames<CpuVectorLoops> { static constexpr std::array<const char*, 2> names{"auto", "off"}; };
 template <> struct EnumNames<SonarMode> {
     static constexpr std::array<const char*, 3> names{"physical", "uuv-legacy", "gtri-legacy"};
 };
@@ -348,6 +349,9 @@ std::vector<ConfigKey> make_table() {
                  "Storage of the per-pixel echo buffer (energy scaled by a power of 2, slant range); fp16 "
                  "halves its memory traffic and rounds both to 11 significant bits"),
         VKS_ENUM("cpu.precision", Precision, cpu_precision, "float|double", "Arithmetic of the CPU backend"),
+        VKS_ENUM("cpu.vector_loops", CpuVectorLoops, cpu_vector_loops, "auto|off",
+                 "The CPU backend's vector loops (AVX2): auto where the CPU has them, off: the portable loops "
+                 "(the same bytes; for tests)"),
 
         VKS_EFFECT(incidence, "cos(theta) terms, the normals pass (auto: on if a drawn material is lambert or rough)"),
         VKS_EFFECT(vertical_pattern, "Vertical beam pattern b_v^2 (auto: on)"),

@@ -362,7 +362,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     const std::size_t S = accumulator_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
-    const bool exp4 = exp4_matches_expf();
+    const bool exp4 = use_exp4(plan.config);
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
         // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end), in each
@@ -581,11 +581,11 @@ std::size_t far_beam_count(const Plan& plan) {
 // or the wrapped beams with plan.circular) so that every tap reads inside it. Their weights, made once
 // per plan, are stored per group tap by tap, the four beams' weights of tap t side by side:
 // [q][t][lane] (0 for the lanes past the last beam). Not made for a row of more than kMaxPaddedRow beams
-// with its padding, which takes the scalar loop.
+// with its padding, nor with cpu.vector_loops off: those take the scalar loop.
 constexpr std::size_t kMaxPaddedRow = 8192;
 
 std::size_t sidelobe_group_count(const Plan& plan) {
-    if (!plan.effects.horizontal_pattern) return 0;
+    if (!plan.effects.horizontal_pattern || plan.config.cpu_vector_loops == CpuVectorLoops::off) return 0;
     const std::size_t K = (plan.sidelobe_taps - 1) / 2;
     if (plan.beams + 2 * K + 4 > kMaxPaddedRow) return 0;
     return (plan.beams + 3) / 4;
@@ -711,7 +711,7 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
     for (std::size_t k = 0; k < bins; ++k)
         std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
-    const bool exp4 = exp4_matches_expf();
+    const bool exp4 = use_exp4(plan.config);
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width, view_drawn);
     } else {
@@ -811,7 +811,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     auto empty_row = [&](const float* row) { return std::all_of(row, row + beams, [](float b) { return b == 0.0f; }); };
     using V = typename Lanes<Real>::type;
     float padded[2][kMaxPaddedRow]; // padded[r][i]: beam i - K of the r-th row of a pair
-    const bool avx2 = has_avx2();
+    const bool avx2 = use_avx2(plan.config);
     for (std::uint32_t k = bin_begin; k < bin_end;) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;

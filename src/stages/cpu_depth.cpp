@@ -411,7 +411,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
         const std::int64_t view_first = view_first_column(plan, s), width = view_columns(plan, s);
         const double half_w = 0.5 * static_cast<double>(width);
         Target target{depth, material, columns, view_first, view_first + width, row_begin, row_end, 0};
-        target.simd = region.simd;
+        target.simd = region.simd && plan.config.cpu_vector_loops != CpuVectorLoops::off;
         target.face_normal = face_normal;
         target.band = row_begin > 0 || row_end < rows;
         target.band_top_ndc = 2.0 * row_begin / rows - 1.0;

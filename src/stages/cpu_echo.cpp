@@ -156,7 +156,7 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
     const typename M::EchoTerms terms = echo_terms<Real>(plan, normals4 != nullptr);
     const std::uint32_t C = plan.columns, R = plan.rows;
     const auto material_count = static_cast<std::uint32_t>(plan.materials.size());
-    const bool simd = exp4_matches_expf();
+    const bool simd = use_exp4(plan.config);
 
     for (std::uint32_t s = 0; s < plan.views; ++s) {
         const typename M::EchoConstants k = echo_constants<Real>(plan, s);

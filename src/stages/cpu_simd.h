@@ -1,6 +1,7 @@
 // What the CPU stages' vector loops share: has_avx2, whether this CPU runs their AVX2 paths, and expf
 // of four floats at a time, bit-identical to glibc's (the footprint kernel of beamform, the absorption
-// of echo): exp4, and exp4_matches_expf, whether this machine's expf is the one exp4 reproduces.
+// of echo): exp4, and exp4_matches_expf, whether this machine's expf is the one exp4 reproduces; use_avx2
+// and use_exp4, those with the configuration's cpu.vector_loops.
 #pragma once
 
 #include <cmath>
@@ -9,6 +10,8 @@
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
 #endif
+
+#include "vksonar/config.h"
 
 namespace vksonar::cpu {
 
@@ -92,5 +95,14 @@ inline bool exp4_matches_expf() {
     return false;
 }
 #endif
+
+// The configuration's choice (SonarConfig::cpu_vector_loops: off forces the portable loops) and the
+// machine's: whether a CPU stage takes its AVX2 loops, and expf four at a time.
+inline bool use_avx2(const SonarConfig& config) {
+    return config.cpu_vector_loops != CpuVectorLoops::off && has_avx2();
+}
+inline bool use_exp4(const SonarConfig& config) {
+    return config.cpu_vector_loops != CpuVectorLoops::off && exp4_matches_expf();
+}
 
 } // namespace vksonar::cpu

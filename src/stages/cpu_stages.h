@@ -35,8 +35,8 @@ struct DepthClusters {
 // region: only the rows [row_begin, row_end) of views [view_begin, view_end) are cleared and written,
 // each pixel by the same triangles in the same order as a pass over the whole image, so regions run on
 // different threads give the same bytes (each region transforms and sets up its views' triangles
-// again: a few bands per view, not many). simd: the pixels four at a time where the CPU has AVX2
-// (false: one at a time; the same bytes, tested).
+// again: a few bands per view, not many). simd: the pixels four at a time where the CPU has AVX2 and
+// cpu.vector_loops is not off (false: one at a time; the same bytes, tested).
 struct DepthRegion {
     std::uint32_t row_begin = 0, row_end = ~0u;
     std::uint32_t view_begin = 0, view_end = ~0u;
