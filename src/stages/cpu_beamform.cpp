@@ -65,134 +65,159 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, f
     return _mm_movemask_ps(bad) == 0;
 }
 
-// The five-row windows of four pixels for footprint_spread4, lane by lane: each pixel's (energy, range)
+// The five-row windows of eight pixels for footprint_spread8, lane by lane: each pixel's (energy, range)
 // and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
+constexpr int kSpreadLanes = 8;
 struct SpreadLanes {
-    alignas(16) float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4],
-        left_r[4], right_r[4];
+    alignas(32) float e[8], r[8], up2_e[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_e[8], down2_r[8],
+        left_r[8], right_r[8];
 };
 
-// range_spread with the footprint kernel (float) for four pixels as SSE lanes: the same operations in the
-// same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which matches
-// expf here), into out[0..3]. False where a pixel's bin coordinate is NaN (the caller then uses the
-// scalar kernel).
-__attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in, float range_min, float ibw,
+// Built for AVX2 and FMA as a whole, lambdas included (a target attribute would not reach them); called
+// only where exp4_matches_expf (which implies both).
+#pragma GCC push_options
+#pragma GCC target("avx2,fma")
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi" // the lambdas' __m256 values stay inside this file's AVX2 code
+
+// expf of eight floats: exp4 on either half.
+__attribute__((target("avx2,fma"), always_inline)) inline __m256 exp8(__m256 x) {
+    return _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(x, 1))),
+                           exp4(_mm256_cvtps_pd(_mm256_castps256_ps128(x))));
+}
+
+// range_spread with the footprint kernel (float) for eight pixels as AVX lanes: the same operations in
+// the same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which
+// matches expf here), into out[0..7]. False where a pixel's bin coordinate is NaN (the caller then uses
+// the scalar kernel).
+__attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in, float range_min, float ibw,
                                                            float jump_rel, int bins, Math<float>::RangeSpread* out) {
-    const __m128 zero = _mm_setzero_ps(), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f), two = _mm_set1_ps(2.0f);
-    const __m128 sign = _mm_set1_ps(-0.0f), vibw = _mm_set1_ps(ibw);
-    auto abs = [&](__m128 v) { return _mm_andnot_ps(sign, v); };
-    auto neg = [&](__m128 v) { return _mm_xor_ps(v, sign); };
-    auto select = [](__m128 mask, __m128 a, __m128 b) {
-        return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+    const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f),
+                 two = _mm256_set1_ps(2.0f);
+    const __m256 sign = _mm256_set1_ps(-0.0f), vibw = _mm256_set1_ps(ibw);
+    auto abs = [&](__m256 v) { return _mm256_andnot_ps(sign, v); };
+    auto neg = [&](__m256 v) { return _mm256_xor_ps(v, sign); };
+    auto select = [](__m256 mask, __m256 a, __m256 b) {
+        return _mm256_or_ps(_mm256_and_ps(mask, a), _mm256_andnot_ps(mask, b));
     };
-    // std::min(p, q) = (q < p) ? q : p = _mm_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm_max_ps(q, p)
-    auto min = [](__m128 p, __m128 q) { return _mm_min_ps(q, p); };
-    auto max = [](__m128 p, __m128 q) { return _mm_max_ps(q, p); };
-    const __m128 r = _mm_load_ps(in.r), up2_r = _mm_load_ps(in.up2_r), up_r = _mm_load_ps(in.up_r),
-                 down_r = _mm_load_ps(in.down_r), down2_r = _mm_load_ps(in.down2_r);
-    const __m128 x = _mm_mul_ps(_mm_sub_ps(r, _mm_set1_ps(range_min)), vibw); // range_bin_coord
-    if (_mm_movemask_ps(_mm_cmpunord_ps(x, x)) != 0) return false;
-    auto steps_agree = [&](__m128 s, __m128 t) {
-        const __m128 as = abs(s), at = abs(t);
-        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(_mm_mul_ps(s, t), zero), _mm_cmple_ps(as, _mm_mul_ps(two, at))),
-                          _mm_cmple_ps(at, _mm_mul_ps(two, as)));
+    // std::min(p, q) = (q < p) ? q : p = _mm256_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm256_max_ps(q, p)
+    auto min = [](__m256 p, __m256 q) { return _mm256_min_ps(q, p); };
+    auto max = [](__m256 p, __m256 q) { return _mm256_max_ps(q, p); };
+    const __m256 r = _mm256_load_ps(in.r), up2_r = _mm256_load_ps(in.up2_r), up_r = _mm256_load_ps(in.up_r),
+                 down_r = _mm256_load_ps(in.down_r), down2_r = _mm256_load_ps(in.down2_r);
+    const __m256 x = _mm256_mul_ps(_mm256_sub_ps(r, _mm256_set1_ps(range_min)), vibw); // range_bin_coord
+    if (_mm256_movemask_ps(_mm256_cmp_ps(x, x, _CMP_UNORD_Q)) != 0) return false;
+    auto steps_agree = [&](__m256 s, __m256 t) {
+        const __m256 as = abs(s), at = abs(t);
+        return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_mul_ps(s, t), zero, _CMP_GT_OQ),
+                                           _mm256_cmp_ps(as, _mm256_mul_ps(two, at), _CMP_LE_OQ)),
+                             _mm256_cmp_ps(at, _mm256_mul_ps(two, as), _CMP_LE_OQ));
     };
-    auto edge_offset = [&](__m128 r_q, __m128 r_beyond, __m128 r_opposite) { // footprint_edge_offset
-        const __m128 s = _mm_sub_ps(r_q, r);
-        const __m128 same =
-            _mm_or_ps(_mm_or_ps(_mm_cmple_ps(abs(s), _mm_mul_ps(_mm_set1_ps(jump_rel), r)),
-                                _mm_and_ps(_mm_cmpgt_ps(r_beyond, zero), steps_agree(s, _mm_sub_ps(r_beyond, r_q)))),
-                      _mm_and_ps(_mm_cmpgt_ps(r_opposite, zero), steps_agree(s, _mm_sub_ps(r, r_opposite))));
-        return _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(r_q, zero), same), _mm_mul_ps(half, s));
+    auto edge_offset = [&](__m256 r_q, __m256 r_beyond, __m256 r_opposite) { // footprint_edge_offset
+        const __m256 s = _mm256_sub_ps(r_q, r);
+        const __m256 same = _mm256_or_ps(
+            _mm256_or_ps(
+                _mm256_cmp_ps(abs(s), _mm256_mul_ps(_mm256_set1_ps(jump_rel), r), _CMP_LE_OQ),
+                _mm256_and_ps(_mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ), steps_agree(s, _mm256_sub_ps(r_beyond, r_q)))),
+            _mm256_and_ps(_mm256_cmp_ps(r_opposite, zero, _CMP_GT_OQ), steps_agree(s, _mm256_sub_ps(r, r_opposite))));
+        return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(r_q, zero, _CMP_GT_OQ), same), _mm256_mul_ps(half, s));
     };
-    const __m128 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
-    auto missing_edge = [&](__m128 other, __m128 r_near, __m128 r_beyond) { // footprint_missing_edge
-        const __m128 s = _mm_sub_ps(r_near, r), t = _mm_sub_ps(r_beyond, r_near);
-        const __m128 scaled =
-            _mm_and_ps(_mm_and_ps(_mm_cmpneq_ps(other, zero), _mm_cmpgt_ps(r_beyond, zero)), steps_agree(s, t));
-        return select(scaled, _mm_mul_ps(neg(other), _mm_div_ps(s, t)), neg(other));
+    const __m256 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
+    auto missing_edge = [&](__m256 other, __m256 r_near, __m256 r_beyond) { // footprint_missing_edge
+        const __m256 s = _mm256_sub_ps(r_near, r), t = _mm256_sub_ps(r_beyond, r_near);
+        const __m256 scaled = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps(other, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ)),
+            steps_agree(s, t));
+        return select(scaled, _mm256_mul_ps(neg(other), _mm256_div_ps(s, t)), neg(other));
     };
     // (only where a lane lacks a side: inside a surface every pixel has both, and the division is not free)
-    __m128 a2 = a, b2 = b;
-    if (_mm_movemask_ps(_mm_or_ps(_mm_cmpeq_ps(a, zero), _mm_cmpeq_ps(b, zero))) != 0) {
-        a2 = select(_mm_cmpneq_ps(a, zero), a, missing_edge(b, down_r, down2_r));
-        b2 = select(_mm_cmpneq_ps(b, zero), b, missing_edge(a, up_r, up2_r));
+    __m256 a2 = a, b2 = b;
+    if (_mm256_movemask_ps(_mm256_or_ps(_mm256_cmp_ps(a, zero, _CMP_EQ_OQ), _mm256_cmp_ps(b, zero, _CMP_EQ_OQ))) != 0) {
+        a2 = select(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), a, missing_edge(b, down_r, down2_r));
+        b2 = select(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), b, missing_edge(a, up_r, up2_r));
     }
-    const __m128 xl = _mm_add_ps(x, _mm_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
-    const __m128 xh = _mm_add_ps(x, _mm_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
+    const __m256 xl = _mm256_add_ps(x, _mm256_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
+    const __m256 xh = _mm256_add_ps(x, _mm256_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
     // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
-    const __m128 left_r = _mm_load_ps(in.left_r), right_r = _mm_load_ps(in.right_r);
-    const __m128 al = edge_offset(left_r, zero, right_r), ar = edge_offset(right_r, zero, left_r);
-    const __m128 al2 = select(_mm_cmpneq_ps(al, zero), al, neg(ar)), ar2 = select(_mm_cmpneq_ps(ar, zero), ar, neg(al));
-    const __m128 cl = _mm_mul_ps(min(min(al2, ar2), zero), vibw), ch = _mm_mul_ps(max(max(al2, ar2), zero), vibw);
-    const __m128 column_centre = _mm_mul_ps(half, _mm_add_ps(xl, xh));
-    const __m128 centre = _mm_add_ps(column_centre, _mm_mul_ps(half, _mm_add_ps(cl, ch)));
-    const __m128 w_down_column = _mm_sub_ps(xh, xl), w_across = _mm_sub_ps(ch, cl);
-    const __m128 extent =
-        _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(w_down_column, w_down_column), _mm_mul_ps(w_across, w_across)));
-    const __m128 width =
-        min(select(_mm_cmpgt_ps(extent, zero), max(extent, _mm_set1_ps(shared::kMinFootprintBins)), one),
-            _mm_set1_ps(shared::kMaxFootprintBins));
-    const __m128 lo = _mm_sub_ps(centre, _mm_mul_ps(half, width)), hi = _mm_add_ps(centre, _mm_mul_ps(half, width));
+    const __m256 left_r = _mm256_load_ps(in.left_r), right_r = _mm256_load_ps(in.right_r);
+    const __m256 al = edge_offset(left_r, zero, right_r), ar = edge_offset(right_r, zero, left_r);
+    const __m256 al2 = select(_mm256_cmp_ps(al, zero, _CMP_NEQ_UQ), al, neg(ar)),
+                 ar2 = select(_mm256_cmp_ps(ar, zero, _CMP_NEQ_UQ), ar, neg(al));
+    const __m256 cl = _mm256_mul_ps(min(min(al2, ar2), zero), vibw), ch = _mm256_mul_ps(max(max(al2, ar2), zero), vibw);
+    const __m256 column_centre = _mm256_mul_ps(half, _mm256_add_ps(xl, xh));
+    const __m256 centre = _mm256_add_ps(column_centre, _mm256_mul_ps(half, _mm256_add_ps(cl, ch)));
+    const __m256 w_down_column = _mm256_sub_ps(xh, xl), w_across = _mm256_sub_ps(ch, cl);
+    const __m256 extent =
+        _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(w_down_column, w_down_column), _mm256_mul_ps(w_across, w_across)));
+    const __m256 width = min(
+        select(_mm256_cmp_ps(extent, zero, _CMP_GT_OQ), max(extent, _mm256_set1_ps(shared::kMinFootprintBins)), one),
+        _mm256_set1_ps(shared::kMaxFootprintBins));
+    const __m256 lo = _mm256_sub_ps(centre, _mm256_mul_ps(half, width)),
+                 hi = _mm256_add_ps(centre, _mm256_mul_ps(half, width));
     // the density's slope (footprint_log_slope) where both neighbours' footprints are on this surface
-    const __m128 w_up = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(up2_r, r))), vibw);
-    const __m128 w_down = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(r, down2_r))), vibw);
-    const __m128 span = _mm_mul_ps(_mm_add_ps(_mm_mul_ps(two, _mm_sub_ps(up_r, down_r)), _mm_sub_ps(up2_r, down2_r)),
-                                   _mm_set1_ps(0.25f * ibw));
-    const __m128 e_up = _mm_load_ps(in.up_e), e_down = _mm_load_ps(in.down_e);
+    const __m256 w_up = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(up2_r, r))), vibw);
+    const __m256 w_down = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(r, down2_r))), vibw);
+    const __m256 span =
+        _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(two, _mm256_sub_ps(up_r, down_r)), _mm256_sub_ps(up2_r, down2_r)),
+                      _mm256_set1_ps(0.25f * ibw));
+    const __m256 e_up = _mm256_load_ps(in.up_e), e_down = _mm256_load_ps(in.down_e);
     // footprint_log_slope's arguments: both sides (up against down), or with one side only that side's
     // neighbour q against this pixel's own footprint
-    const __m128 up_side = _mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpgt_ps(up2_r, zero));
-    const __m128 down_side = _mm_and_ps(_mm_cmpneq_ps(b, zero), _mm_cmpgt_ps(down2_r, zero));
-    const __m128 both = _mm_and_ps(up_side, down_side);
-    const __m128 r_q = select(up_side, up_r, down_r), r_q2 = select(up_side, up2_r, down2_r);
-    const __m128 e_q = select(up_side, e_up, e_down);
-    const __m128 w_q = _mm_mul_ps(_mm_mul_ps(half, abs(_mm_sub_ps(r_q2, r))), vibw);
-    const __m128 span_q = _mm_sub_ps(
-        _mm_mul_ps(_mm_sub_ps(_mm_mul_ps(_mm_add_ps(_mm_add_ps(r, _mm_mul_ps(two, r_q)), r_q2), _mm_set1_ps(0.25f)), r),
-                   vibw),
-        _mm_sub_ps(column_centre, x));
-    const __m128 e_self = _mm_load_ps(in.e), w_self = _mm_sub_ps(xh, xl);
-    const __m128 e1 = select(both, e_up, e_q), w1 = select(both, w_up, w_q);
-    const __m128 e2 = select(both, e_down, e_self), w2 = select(both, w_down, w_self);
-    const __m128 slope_span = select(both, span, span_q);
-    __m128 has_g = _mm_or_ps(up_side, down_side);
-    has_g = _mm_and_ps(has_g, _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(e1, zero), _mm_cmpgt_ps(e2, zero)),
-                                         _mm_and_ps(_mm_cmpgt_ps(w1, zero), _mm_cmpgt_ps(w2, zero))));
-    has_g = _mm_and_ps(has_g, _mm_cmpgt_ps(abs(slope_span), zero));
-    const int g_mask = _mm_movemask_ps(has_g);
-    __m128 g = zero;
+    const __m256 up_side = _mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(up2_r, zero, _CMP_GT_OQ));
+    const __m256 down_side =
+        _mm256_and_ps(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(down2_r, zero, _CMP_GT_OQ));
+    const __m256 both = _mm256_and_ps(up_side, down_side);
+    const __m256 r_q = select(up_side, up_r, down_r), r_q2 = select(up_side, up2_r, down2_r);
+    const __m256 e_q = select(up_side, e_up, e_down);
+    const __m256 w_q = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(r_q2, r))), vibw);
+    const __m256 span_q = _mm256_sub_ps(
+        _mm256_mul_ps(_mm256_sub_ps(_mm256_mul_ps(_mm256_add_ps(_mm256_add_ps(r, _mm256_mul_ps(two, r_q)), r_q2),
+                                                  _mm256_set1_ps(0.25f)),
+                                    r),
+                      vibw),
+        _mm256_sub_ps(column_centre, x));
+    const __m256 e_self = _mm256_load_ps(in.e), w_self = _mm256_sub_ps(xh, xl);
+    const __m256 e1 = select(both, e_up, e_q), w1 = select(both, w_up, w_q);
+    const __m256 e2 = select(both, e_down, e_self), w2 = select(both, w_down, w_self);
+    const __m256 slope_span = select(both, span, span_q);
+    __m256 has_g = _mm256_or_ps(up_side, down_side);
+    has_g = _mm256_and_ps(
+        has_g, _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(e1, zero, _CMP_GT_OQ), _mm256_cmp_ps(e2, zero, _CMP_GT_OQ)),
+                             _mm256_and_ps(_mm256_cmp_ps(w1, zero, _CMP_GT_OQ), _mm256_cmp_ps(w2, zero, _CMP_GT_OQ))));
+    has_g = _mm256_and_ps(has_g, _mm256_cmp_ps(abs(slope_span), zero, _CMP_GT_OQ));
+    const int g_mask = _mm256_movemask_ps(has_g);
+    __m256 g = zero;
     if (g_mask != 0) {
-        alignas(16) float ratio[4];
-        _mm_store_ps(ratio, _mm_div_ps(_mm_mul_ps(e1, w2), _mm_mul_ps(e2, w1)));
-        for (int l = 0; l < 4; ++l)
+        alignas(32) float ratio[8];
+        _mm256_store_ps(ratio, _mm256_div_ps(_mm256_mul_ps(e1, w2), _mm256_mul_ps(e2, w1)));
+        for (int l = 0; l < 8; ++l)
             ratio[l] = (g_mask & (1 << l)) ? std::log(ratio[l]) : 0.0f;
-        const __m128 slope = _mm_div_ps(_mm_load_ps(ratio), slope_span);
-        const __m128 cap = min(one, _mm_div_ps(_mm_set1_ps(8.0f), width));
-        g = _mm_and_ps(has_g, min(max(slope, neg(cap)), cap));
+        const __m256 slope = _mm256_div_ps(_mm256_load_ps(ratio), slope_span);
+        const __m256 cap = min(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
+        g = _mm256_and_ps(has_g, min(max(slope, neg(cap)), cap));
     }
     // inv_norm = 1 / (width sinhc_of(0.5 g width))
-    const __m128 y = _mm_mul_ps(_mm_mul_ps(half, g), width);
-    const __m128 y2 = _mm_mul_ps(y, y);
-    const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
-    const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
-    __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
-    const __m128 wide = _mm_cmpge_ps(abs(y), half); // NaN-free: g and width are finite
-    if (_mm_movemask_ps(wide) != 0) {
-        const __m128 ey = exp4(_mm256_cvtps_pd(y)), e_minus = exp4(_mm256_cvtps_pd(neg(y)));
-        sinhc = select(wide, _mm_div_ps(_mm_sub_ps(ey, e_minus), _mm_mul_ps(two, y)), sinhc);
+    const __m256 y = _mm256_mul_ps(_mm256_mul_ps(half, g), width);
+    const __m256 y2 = _mm256_mul_ps(y, y);
+    const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
+    const __m256 middle = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(20.0f)), inner));
+    __m256 sinhc = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(6.0f)), middle));
+    const __m256 wide = _mm256_cmp_ps(abs(y), half, _CMP_GE_OQ); // NaN-free: g and width are finite
+    if (_mm256_movemask_ps(wide) != 0) {
+        const __m256 ey = exp8(y), e_minus = exp8(neg(y));
+        sinhc = select(wide, _mm256_div_ps(_mm256_sub_ps(ey, e_minus), _mm256_mul_ps(two, y)), sinhc);
     }
-    const __m128 inv_norm = _mm_div_ps(one, _mm_mul_ps(width, sinhc));
-    alignas(16) float lo_l[4], hi_l[4], centre_l[4], g_l[4], inv_l[4];
-    alignas(16) std::int32_t first_l[4], last_l[4];
-    _mm_store_ps(lo_l, lo);
-    _mm_store_ps(hi_l, hi);
-    _mm_store_ps(centre_l, centre);
-    _mm_store_ps(g_l, g);
-    _mm_store_ps(inv_l, inv_norm);
-    _mm_store_si128(reinterpret_cast<__m128i*>(first_l), _mm_cvttps_epi32(_mm_floor_ps(lo)));
-    _mm_store_si128(reinterpret_cast<__m128i*>(last_l), _mm_cvttps_epi32(_mm_floor_ps(hi)));
-    for (int l = 0; l < 4; ++l) {
+    const __m256 inv_norm = _mm256_div_ps(one, _mm256_mul_ps(width, sinhc));
+    alignas(32) float lo_l[8], hi_l[8], centre_l[8], g_l[8], inv_l[8];
+    alignas(32) std::int32_t first_l[8], last_l[8];
+    _mm256_store_ps(lo_l, lo);
+    _mm256_store_ps(hi_l, hi);
+    _mm256_store_ps(centre_l, centre);
+    _mm256_store_ps(g_l, g);
+    _mm256_store_ps(inv_l, inv_norm);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(first_l), _mm256_cvttps_epi32(_mm256_floor_ps(lo)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(last_l), _mm256_cvttps_epi32(_mm256_floor_ps(hi)));
+    for (int l = 0; l < 8; ++l) {
         Math<float>::RangeSpread& o = out[l];
         o.kernel = shared::kRangeKernelFootprint;
         o.k_first = std::max(first_l[l], 0);
@@ -207,13 +232,16 @@ __attribute__((target("avx2,fma"))) bool footprint_spread4(const SpreadLanes& in
     }
     return true;
 }
+#pragma GCC diagnostic pop
+#pragma GCC pop_options
 
 #else
+constexpr int kSpreadLanes = 8;
 struct SpreadLanes {
-    float e[4], r[4], up2_e[4], up2_r[4], up_e[4], up_r[4], down_e[4], down_r[4], down2_e[4], down2_r[4], left_r[4],
-        right_r[4];
+    float e[8], r[8], up2_e[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_e[8], down2_r[8], left_r[8],
+        right_r[8];
 };
-bool footprint_spread4(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
+bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
     return false;
 }
 bool footprint_shares4(float, float, float, float, float, int, int, float*) {
@@ -239,9 +267,9 @@ template <class Real>
         shares[i] = M::range_share(s, s.k_first + i);
 }
 
-// The spreads of up to four hit pixels (row j, columns c[0 .. n)) into out: four at a time through
-// footprint_spread4 where the kernel is the footprint in float and exp4 matches expf (a batch of fewer
-// than four repeats its last pixel), else pixel_spread one by one. The same spreads either way. The pixels
+// The spreads of up to kSpreadLanes (8) hit pixels (row j, columns c[0 .. n)) into out: eight at a time
+// through footprint_spread8 where the kernel is the footprint in float and exp4 matches expf (a batch of
+// fewer than eight repeats its last pixel), else pixel_spread one by one. The same spreads either way. The pixels
 // lie in one view, columns [view.first, view.end), where the caller knows it (view.end > 0); else each
 // pixel's view is looked up.
 struct ViewColumns {
@@ -259,20 +287,22 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
             const std::uint32_t C = plan.columns, R = plan.rows;
             SpreadLanes in;
 #if defined(__x86_64__) && defined(__GNUC__)
-            if (n == 4 && c[3] == c[0] + 3 && view.end > 0) {
-                // Four neighbouring pixels (most batches): each row's (e, r) pairs by two vector loads,
+            if (n == kSpreadLanes && c[7] == c[0] + 7 && view.end > 0) {
+                // Eight neighbouring pixels (most batches): each row's (e, r) pairs by four vector loads,
                 // and the row neighbours from the centre row's ranges; the same values as the loop below.
                 const std::int64_t jj = j;
                 auto row4 = [&](std::int64_t row, float* e, float* r) {
                     if (row < 0 || row >= static_cast<std::int64_t>(R)) {
-                        _mm_store_ps(e, _mm_setzero_ps());
-                        _mm_store_ps(r, _mm_setzero_ps());
+                        std::fill(e, e + kSpreadLanes, 0.0f);
+                        std::fill(r, r + kSpreadLanes, 0.0f);
                         return;
                     }
                     const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c[0]);
-                    const __m128 a = _mm_loadu_ps(q), b = _mm_loadu_ps(q + 4);
-                    _mm_store_ps(e, _mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0)));
-                    _mm_store_ps(r, _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)));
+                    for (int half = 0; half < 2; ++half, q += 8) {
+                        const __m128 a = _mm_loadu_ps(q), b = _mm_loadu_ps(q + 4);
+                        _mm_store_ps(e + 4 * half, _mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0)));
+                        _mm_store_ps(r + 4 * half, _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)));
+                    }
                 };
                 row4(jj, in.e, in.r);
                 row4(jj - 2, in.up2_e, in.up2_r);
@@ -281,17 +311,17 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 row4(jj + 2, in.down2_e, in.down2_r);
                 const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * C + c[0]);
                 in.left_r[0] = c[0] > view.first ? p[-1] : 0.0f;
-                in.right_r[3] = c[3] + 1 < view.end ? p[9] : 0.0f;
-                for (int l = 0; l < 3; ++l) {
+                in.right_r[7] = c[7] + 1 < view.end ? p[17] : 0.0f;
+                for (int l = 0; l < 7; ++l) {
                     in.left_r[l + 1] = in.r[l];
                     in.right_r[l] = in.r[l + 1];
                 }
-                if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
+                if (footprint_spread8(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
                                       static_cast<int>(plan.bins), out))
                     return;
             }
 #endif
-            for (int l = 0; l < 4; ++l) {
+            for (int l = 0; l < kSpreadLanes; ++l) {
                 const std::uint32_t col = c[std::min(l, n - 1)];
                 auto row = [&](std::int64_t jj, float* e, float* r) {
                     const bool inside = jj >= 0 && jj < static_cast<std::int64_t>(R);
@@ -309,7 +339,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 in.left_r[l] = across.left_r;
                 in.right_r[l] = across.right_r;
             }
-            if (footprint_spread4(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
+            if (footprint_spread8(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
                                   static_cast<int>(plan.bins), out))
                 return;
         }
@@ -321,7 +351,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
 }
 
 // Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
-// range shares: sink(c, e, k_first, spread_bins, shares), the spreads made four pixels at a time
+// range shares: sink(c, e, k_first, spread_bins, shares), the spreads made eight pixels at a time
 // (pixel_spreads) and their shares by range_shares. Both profile layouts (planar and cone columns) add
 // through it; `view`: the one view the columns lie in, if known (pixel_spreads).
 template <class Real, class Sink>
@@ -329,10 +359,10 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
                            std::uint32_t column_end, bool exp4, Real range_min, Real inv_bin_width, ViewColumns view,
                            const Sink& sink) {
     const float* e2 = echo2 + 2 * static_cast<std::size_t>(j) * plan.columns;
-    std::uint32_t batch[4];
+    std::uint32_t batch[kSpreadLanes];
     int batched = 0;
     auto flush = [&] {
-        typename Math<Real>::RangeSpread spreads[4];
+        typename Math<Real>::RangeSpread spreads[kSpreadLanes];
         pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, view, spreads);
         for (int b = 0; b < batched; ++b) {
             const typename Math<Real>::RangeSpread& spread = spreads[b];
@@ -346,7 +376,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     for (std::uint32_t c = column_begin; c < column_end; ++c) {
         if (!(static_cast<Real>(e2[2 * c]) > Real(0))) continue;
         batch[batched++] = c;
-        if (batched == 4) flush();
+        if (batched == kSpreadLanes) flush();
     }
     if (batched > 0) flush();
 }
