@@ -188,11 +188,22 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const int g_mask = _mm256_movemask_ps(has_g);
     __m256 g = zero;
     if (g_mask != 0) {
-        alignas(32) float ratio[8];
-        _mm256_store_ps(ratio, _mm256_div_ps(_mm256_mul_ps(e1, w2), _mm256_mul_ps(e2, w1)));
-        for (int l = 0; l < 8; ++l)
-            ratio[l] = (g_mask & (1 << l)) ? std::log(ratio[l]) : 0.0f;
-        const __m256 slope = _mm256_div_ps(_mm256_load_ps(ratio), slope_span);
+        // logf of the density ratio where there is a slope (of 1 elsewhere: 0, where the scalar kernel
+        // leaves g 0): log4 where every lane is in its domain and this libm's logf is log4's, else per lane
+        const __m256 ratio = select(has_g, _mm256_div_ps(_mm256_mul_ps(e1, w2), _mm256_mul_ps(e2, w1)), one);
+        const __m128 ratio_lo = _mm256_castps256_ps128(ratio), ratio_hi = _mm256_extractf128_ps(ratio, 1);
+        __m256 log_ratio;
+        if (_mm_movemask_ps(_mm_and_ps(positive_normal4(ratio_lo), positive_normal4(ratio_hi))) == 15 &&
+            log4_matches_logf()) {
+            log_ratio = _mm256_set_m128(log4(ratio_hi), log4(ratio_lo));
+        } else {
+            alignas(32) float lanes[8];
+            _mm256_store_ps(lanes, ratio);
+            for (int l = 0; l < 8; ++l)
+                lanes[l] = (g_mask & (1 << l)) ? std::log(lanes[l]) : 0.0f;
+            log_ratio = _mm256_load_ps(lanes);
+        }
+        const __m256 slope = _mm256_div_ps(_mm256_and_ps(has_g, log_ratio), slope_span);
         const __m256 cap = min(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
         g = _mm256_and_ps(has_g, min(max(slope, neg(cap)), cap));
     }
