@@ -24,10 +24,37 @@ namespace vksonar::cpu {
 
 namespace {
 
-// Accumulators of bin k start at k * accumulator_stride: the profile columns and 64 bytes more, so that
-// the bins of one column do not all fall into the same cache set (1024 columns of floats are 4 KiB).
-std::size_t accumulator_stride(const Plan& plan) {
-    return plan.profile_columns + 16u;
+// The accumulators of profile column c start at c * column_stride: its bins, then 16 values of padding,
+// so that neighbouring columns' bins do not fall into the same cache sets (512 bins of floats are 2 KiB)
+// and add_shares's four lanes past a column's last bin stay inside the column.
+std::size_t column_stride(const Plan& plan) {
+    return plan.bins + 16u;
+}
+
+// Four values of Real side by side (GCC's vector extension: one SSE register for float).
+template <class Real> struct Lanes;
+template <> struct Lanes<float> { typedef float type __attribute__((vector_size(16))); };
+template <> struct Lanes<double> { typedef double type __attribute__((vector_size(32))); };
+
+// column[i] += shares[i] * weighted for i < n, each the scalar loop's product and sum: four at a time
+// where `weighted` is finite, the lanes past n adding +0 (for_each_spread_pixel pads shares with zeros;
+// +0 leaves an accumulator as it is, since accumulators are sums of terms >= 0 and never -0; the
+// column's padding takes what runs past its last bin), else one at a time.
+template <class Real> inline void add_shares(Real* column, const Real* shares, int n, Real weighted) {
+    if (std::isfinite(weighted)) {
+        using V = typename Lanes<Real>::type;
+        const V w = V{} + weighted;
+        for (int i = 0; i < n; i += 4) {
+            V share, sum;
+            std::memcpy(&share, shares + i, sizeof share);
+            std::memcpy(&sum, column + i, sizeof sum);
+            sum += share * w;
+            std::memcpy(column + i, &sum, sizeof sum);
+        }
+        return;
+    }
+    for (int i = 0; i < n; ++i)
+        column[i] += shares[i] * weighted;
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
@@ -362,7 +389,8 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
 }
 
 // Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
-// range shares: sink(c, e, k_first, spread_bins, shares), the spreads made eight pixels at a time
+// range shares: sink(c, e, k_first, spread_bins, shares; zeros past spread_bins up to a multiple of 4),
+// the spreads made eight pixels at a time
 // (pixel_spreads) and their shares by range_shares. Both profile layouts (planar and cone columns) add
 // through it; `view`: the one view the columns lie in, if known (pixel_spreads).
 template <class Real, class Sink>
@@ -380,6 +408,8 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
             Real shares[kMaxSpreadBins + 3];
             const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
             range_shares<Real>(spread, spread_bins, exp4, shares);
+            for (int i = std::max(spread_bins, 0); i % 4 != 0; ++i) // zeros up to a multiple of 4 (add_shares)
+                shares[i] = Real(0);
             sink(batch[b], static_cast<Real>(e2[2 * batch[b]]), spread.k_first, spread_bins, shares);
         }
         batched = 0;
@@ -392,7 +422,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     if (batched > 0) flush();
 }
 
-// line_array: the profiles of cone columns [cone_begin, cone_end) (acc: bins x accumulator_stride).
+// line_array: the profiles of cone columns [cone_begin, cone_end) (acc: column_stride per column).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
 // first, then by increasing pixel column, then bin: the order of profile.comp's gather.
@@ -401,7 +431,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                    Real range_min, Real inv_bin_width, const std::uint8_t* view_drawn) {
     using M = Math<Real>;
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
-    const std::size_t S = accumulator_stride(plan);
+    const std::size_t T = column_stride(plan);
     const int count = static_cast<int>(plan.profile_columns);
     const bool exp4 = use_exp4(plan.config);
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
@@ -428,10 +458,7 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                     for (int cone = first_cone; cone <= last_cone; ++cone) {
                         const Real weight = M::cone_share(x, cone, count);
                         if (!(weight > Real(0))) continue;
-                        const Real weighted = weight * e;
-                        Real* column = acc + static_cast<std::size_t>(k_first) * S + cone;
-                        for (int i = 0; i < spread_bins; ++i)
-                            column[static_cast<std::size_t>(i) * S] += shares[i] * weighted;
+                        add_shares(acc + static_cast<std::size_t>(cone) * T + k_first, shares, spread_bins, weight * e);
                     }
                 });
         }
@@ -454,7 +481,7 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
                    std::uint32_t bin_begin, std::uint32_t bin_end) {
     constexpr std::uint32_t kBlock = 8;
     const std::uint32_t beams = plan.beams;
-    const std::size_t S = accumulator_stride(plan);
+    const std::size_t T = column_stride(plan);
     std::uint32_t k0 = bin_begin;
     auto block = [&](auto n_constant) {
         constexpr std::uint32_t n = decltype(n_constant)::value;
@@ -466,9 +493,9 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
             const std::uint32_t c_begin = plan.beam_column_begin[j], c_end = plan.beam_column_end[j];
             for (std::uint32_t c = c_begin; c < c_end; ++c) {
                 const Real wc = w[c - c_begin];
-                const Real* column = acc + static_cast<std::size_t>(k0) * S + c;
+                const Real* column = acc + static_cast<std::size_t>(c) * T + k0;
                 for (std::uint32_t l = 0; l < n; ++l)
-                    sum[l] += wc * static_cast<Real>(static_cast<float>(column[static_cast<std::size_t>(l) * S]));
+                    sum[l] += wc * static_cast<Real>(static_cast<float>(column[l]));
             }
             w += c_end - c_begin;
             for (std::uint32_t l = 0; l < n; ++l)
@@ -632,11 +659,6 @@ std::size_t sidelobe_group_count(const Plan& plan) {
     return (plan.beams + 3) / 4;
 }
 
-// Four values of Real side by side (GCC's vector extension: one SSE register for float).
-template <class Real> struct Lanes;
-template <> struct Lanes<float> { typedef float type __attribute__((vector_size(16))); };
-template <> struct Lanes<double> { typedef double type __attribute__((vector_size(32))); };
-
 } // namespace
 
 // With far side lobes, each group's far read-back values as lanes (FarBeam's c0 and c1 as offsets into
@@ -702,7 +724,7 @@ template <class Real>
 void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, std::uint32_t column_begin,
                           std::uint32_t column_end, Real range_min, Real inv_bin_width) {
     using M = Math<Real>;
-    const std::size_t S = accumulator_stride(plan);
+    const std::size_t T = column_stride(plan);
     Real depth_a, depth_b;
     if constexpr (std::is_same_v<Real, float>) {
         depth_a = plan.params.depth_a;
@@ -725,7 +747,7 @@ void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, 
                 M::range_spread(shared::kRangeKernelTent, none, none, typename M::vec2(e, static_cast<Real>(r.range_m)),
                                 none, none, Real(0), Real(0), range_min, inv_bin_width, Real(0), plan.bins);
             for (int k = spread.k_first; k <= spread.k_last; ++k)
-                acc[static_cast<std::size_t>(k) * S + c] += M::range_share(spread, k) * e;
+                acc[static_cast<std::size_t>(c) * T + k] += M::range_share(spread, k) * e;
         }
     }
 }
@@ -736,7 +758,7 @@ template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end, const SubpixelInput* subpixel, const std::uint8_t* view_drawn) {
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
-    const std::size_t S = accumulator_stride(plan);
+    const std::size_t T = column_stride(plan);
     Real range_min, inv_bin_width;
     if constexpr (std::is_same_v<Real, float>) {
         range_min = plan.params.range_min_m;
@@ -750,26 +772,24 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     // (shaders/sonar_kernels.h, as profile.comp). The loops run row-major for locality; every
     // accumulator (bin k, column c) still receives its additions in increasing row order (and, within
     // a row, in increasing bin order), so the sums are the per-column sums of the contract.
-    for (std::size_t k = 0; k < bins; ++k)
-        std::fill(acc + k * S + column_begin, acc + k * S + column_end, Real(0));
+    std::fill(acc + column_begin * T, acc + column_end * T, Real(0));
     const bool exp4 = use_exp4(plan.config);
     if (plan.line_array) {
         cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width, view_drawn);
     } else {
         for (std::uint32_t j = 0; j < R && bins > 0; ++j)
-            for_each_spread_pixel<Real>(plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width,
-                                        ViewColumns{},
-                                        [&](std::uint32_t c, Real e, int k_first, int spread_bins, const Real* shares) {
-                                            for (int i = 0; i < spread_bins; ++i)
-                                                acc[static_cast<std::size_t>(k_first + i) * S + c] += shares[i] * e;
-                                        });
+            for_each_spread_pixel<Real>(
+                plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width, ViewColumns{},
+                [&](std::uint32_t c, Real e, int k_first, int spread_bins, const Real* shares) {
+                    add_shares(acc + static_cast<std::size_t>(c) * T + k_first, shares, spread_bins, e);
+                });
     }
     if (subpixel != nullptr && subpixel->returns.count() > 0)
         add_subpixel_returns<Real>(plan, *subpixel, acc, column_begin, column_end, range_min, inv_bin_width);
     if (profiles == nullptr) return;
-    for (std::size_t k = 0; k < bins; ++k)
-        for (std::uint32_t c = column_begin; c < column_end; ++c)
-            profiles[std::size_t(k) * C + c] = static_cast<float>(acc[k * S + c]);
+    for (std::uint32_t c = column_begin; c < column_end; ++c)
+        for (std::size_t k = 0; k < bins; ++k)
+            profiles[k * C + c] = static_cast<float>(acc[c * T + k]);
 }
 
 namespace {
@@ -1018,7 +1038,7 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
 }
 
 std::size_t beamform_accumulator_count(const Plan& plan) {
-    return plan.bins * accumulator_stride(plan); // one accumulator per profile cell, and the padding
+    return plan.profile_columns * column_stride(plan); // one accumulator per profile cell, and the padding
 }
 
 std::size_t beamform_scratch_count(const Plan& plan) {
