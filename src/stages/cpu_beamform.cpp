@@ -390,9 +390,9 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
 
 // Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
 // range shares: sink(c, e, k_first, spread_bins, shares; zeros past spread_bins up to a multiple of 4),
-// the spreads made eight pixels at a time
-// (pixel_spreads) and their shares by range_shares. Both profile layouts (planar and cone columns) add
-// through it; `view`: the one view the columns lie in, if known (pixel_spreads).
+// the spreads made eight pixels at a time (pixel_spreads) and their shares by range_shares. Both profile
+// layouts (planar and cone columns) add through it; `view`: the one view the columns lie in, if known
+// (pixel_spreads).
 template <class Real, class Sink>
 void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j, std::uint32_t column_begin,
                            std::uint32_t column_end, bool exp4, Real range_min, Real inv_bin_width, ViewColumns view,
