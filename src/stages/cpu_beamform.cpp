@@ -530,57 +530,106 @@ template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan,
 constexpr std::size_t kFarBeamValues = 12;
 enum FarBeam : std::size_t { kFarC0, kFarC1, kFarS0, kFarS1, kFarCos, kFarSin, kFarDeposit };
 
+// kFarRows values of Real side by side, one per bin row of a batch (GCC's vector extension).
+template <class Real> struct FarLanes { typedef Real type __attribute__((vector_size(kFarRows * sizeof(Real)))); };
+
+// One channel's cells convolved with the far weights (w[a - b]: cell b into cell a), four cells a at a
+// time, the batch's rows side by side: 4 x kFarRows independent sums, each over the live cells b
+// (live[0, n), offset by `base` in energy's channel order) in increasing order. level: the channel's cells.
+template <class Real>
+[[gnu::always_inline]] inline void far_convolve_cells(const float* w, const Real* energy, const std::uint16_t* live,
+                                                      std::size_t n, std::uint32_t base, std::uint32_t cells,
+                                                      float* level) {
+    using V = typename FarLanes<Real>::type;
+    for (std::uint32_t a = 0; a < cells; a += 4) {
+        V sum[4] = {};
+        for (std::size_t i = 0; i < n; ++i) {
+            const std::uint32_t b = live[i] - base;
+            V e;
+            std::memcpy(&e, energy + std::size_t(live[i]) * kFarRows, sizeof e);
+            for (std::uint32_t q = 0; q < 4; ++q)
+                sum[q] += static_cast<Real>(*(w + std::min(a + q, cells - 1) - b)) * e;
+        }
+        for (std::uint32_t q = 0; q < 4 && a + q < cells; ++q)
+            for (std::uint32_t r = 0; r < kFarRows; ++r)
+                level[(a + q) * kFarRows + r] = static_cast<float>(sum[q][r]);
+    }
+}
+// In float also as an AVX2 build (a batch's eight rows in one register): the same operations.
+__attribute__((target_clones("avx2", "default"))) void far_convolve(const float* w, const float* energy,
+                                                                    const std::uint16_t* live, std::size_t n,
+                                                                    std::uint32_t base, std::uint32_t cells,
+                                                                    float* level) {
+    far_convolve_cells<float>(w, energy, live, n, base, cells, level);
+}
+void far_convolve(const float* w, const double* energy, const std::uint16_t* live, std::size_t n, std::uint32_t base,
+                  std::uint32_t cells, float* level) {
+    far_convolve_cells<double>(w, energy, live, n, base, cells, level);
+}
+
 template <class Real>
 void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
                        std::uint32_t rows, FarRows<Real>& far) {
+    using V = typename FarLanes<Real>::type; // the batch's rows, lane r: bin k0 + r
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
     const std::size_t used = std::size_t(channels) * cells * kFarRows;
     std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
-    // Scattered per beam: each cell still takes its beams in increasing order (the shader gathers per
-    // cell); a beam of zero energy would add exactly +-0. The sums of the two cells the last beam fed
-    // are held in registers (per channel) and written back when a beam feeds another cell: the same
-    // additions in the same order, without a load and store per addition (consecutive beams share cells).
-    // The channel count as a constant, so that the held sums stay in registers.
+    // Scattered per beam, the batch's rows side by side: each cell still takes its beams in increasing
+    // order in every row (the shader gathers per cell). A beam of zero energy in a row adds exactly +-0
+    // there, which leaves the sum as it is (a sum that starts at +0 is never -0). The sums of the two
+    // cells the last beam fed are held in registers (per channel) and written back when a beam feeds
+    // another cell: the same additions in the same order, without a load and store per addition
+    // (consecutive beams share cells). The channel count as a constant, so that they stay in registers.
     constexpr std::uint32_t kNone = ~0u;
+    auto cell_at = [&](std::uint32_t m, std::uint32_t c) { return far.energy.data() + (m * cells + c) * kFarRows; };
+    // (out parameters: a V is a value wider than this build's registers, which a lambda must not return)
+    auto load = [](V& v, const Real* p) { std::memcpy(&v, p, sizeof v); };
+    auto store = [](Real* p, const V& v) { std::memcpy(p, &v, sizeof v); };
     auto deposit = [&](auto channel_count) {
         constexpr std::uint32_t kChannels = decltype(channel_count)::value;
-        for (std::uint32_t r = 0; r < rows; ++r) {
-            const float* B = beam_profiles + static_cast<std::size_t>(k0 + r) * beams;
-            Real* E = far.energy.data() + r;
-            auto at = [&](std::uint32_t m, std::uint32_t c) -> Real& { return E[(m * cells + c) * kFarRows]; };
-            std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
-            Real sa[kChannels] = {}, sb[kChannels] = {};
-            for (std::uint32_t i = 0; i < beams; ++i) {
-                if (B[i] == 0.0f) continue;
-                const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
-                const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
-                if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
-                    Real na[kChannels], nb[kChannels];
-                    for (std::uint32_t m = 0; m < kChannels; ++m) {
-                        if (ca != kNone && ca != c0 && ca != c1) at(m, ca) = sa[m];
-                        if (cb != kNone && cb != c0 && cb != c1) at(m, cb) = sb[m];
-                    }
-                    for (std::uint32_t m = 0; m < kChannels; ++m) {
-                        na[m] = c0 == ca ? sa[m] : (c0 == cb ? sb[m] : at(m, c0));
-                        nb[m] = c1 == ca ? sa[m] : (c1 == cb ? sb[m] : at(m, c1));
-                    }
-                    for (std::uint32_t m = 0; m < kChannels; ++m) {
-                        sa[m] = na[m];
-                        sb[m] = nb[m];
-                    }
-                    ca = c0;
-                    cb = c1;
-                }
-                const Real energy = static_cast<Real>(B[i]);
+        std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
+        V sa[kChannels] = {}, sb[kChannels] = {};
+        for (std::uint32_t i = 0; i < beams; ++i) {
+            V energy = {};
+            bool any = false;
+            for (std::uint32_t r = 0; r < rows; ++r) {
+                energy[r] = static_cast<Real>(beam_profiles[static_cast<std::size_t>(k0 + r) * beams + i]);
+                any = any || energy[r] != Real(0);
+            }
+            if (!any) continue;
+            const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+            const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+            if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
+                V na[kChannels], nb[kChannels];
                 for (std::uint32_t m = 0; m < kChannels; ++m) {
-                    sa[m] += f[kFarDeposit + 2 * m] * energy;
-                    sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
+                    if (ca != kNone && ca != c0 && ca != c1) store(cell_at(m, ca), sa[m]);
+                    if (cb != kNone && cb != c0 && cb != c1) store(cell_at(m, cb), sb[m]);
                 }
+                for (std::uint32_t m = 0; m < kChannels; ++m) {
+                    if (c0 == ca || c0 == cb)
+                        na[m] = c0 == ca ? sa[m] : sb[m];
+                    else
+                        load(na[m], cell_at(m, c0));
+                    if (c1 == ca || c1 == cb)
+                        nb[m] = c1 == ca ? sa[m] : sb[m];
+                    else
+                        load(nb[m], cell_at(m, c1));
+                }
+                for (std::uint32_t m = 0; m < kChannels; ++m) {
+                    sa[m] = na[m];
+                    sb[m] = nb[m];
+                }
+                ca = c0;
+                cb = c1;
             }
-            for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
-                at(m, ca) = sa[m];
-                at(m, cb) = sb[m];
+            for (std::uint32_t m = 0; m < kChannels; ++m) {
+                sa[m] += f[kFarDeposit + 2 * m] * energy;
+                sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
             }
+        }
+        for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
+            store(cell_at(m, ca), sa[m]);
+            store(cell_at(m, cb), sb[m]);
         }
     };
     if (channels == 3)
@@ -600,7 +649,6 @@ void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam
         }
         if (any) live[live_count++] = static_cast<std::uint16_t>(mb);
     }
-    // Four cells a at a time: 4 x kFarRows independent sums, each over its live cells b in increasing order.
     const float* w = plan.far_weight.data() + (cells - 1); // w[a - b]: cell b into cell a
     for (std::uint32_t m = 0; m < channels; ++m) {
         std::size_t first = 0, end = 0; // the live cells of channel m: live[first, end)
@@ -609,24 +657,8 @@ void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam
         end = first;
         while (end < live_count && live[end] < (m + 1) * cells)
             ++end;
-        for (std::uint32_t a = 0; a < cells; a += 4) {
-            const std::uint32_t n = std::min(4u, cells - a);
-            Real sum[4][kFarRows] = {};
-            for (std::size_t i = first; i < end; ++i) {
-                const std::uint32_t b = live[i] - m * cells;
-                const Real* e = far.energy.data() + std::size_t(live[i]) * kFarRows;
-                for (std::uint32_t q = 0; q < 4; ++q) {
-                    const Real wb = static_cast<Real>(*(w + std::min(a + q, cells - 1) - b));
-                    for (std::uint32_t r = 0; r < kFarRows; ++r)
-                        sum[q][r] += wb * e[r];
-                }
-            }
-            for (std::uint32_t q = 0; q < n; ++q) {
-                float* level = far.level.data() + (std::size_t(m) * cells + a + q) * kFarRows;
-                for (std::uint32_t r = 0; r < kFarRows; ++r)
-                    level[r] = static_cast<float>(sum[q][r]);
-            }
-        }
+        far_convolve(w, far.energy.data(), live.data() + first, end - first, m * cells, cells,
+                     far.level.data() + std::size_t(m) * cells * kFarRows);
     }
 }
 } // namespace
