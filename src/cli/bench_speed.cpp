@@ -22,6 +22,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: vksonar bench speed [--backend vulkan|cpu] [--frames N] [--scene FILE] [--sonar PRESET|FILE]\n"
     "                           [--set key=value ...] [--pose x,y,z,roll,pitch,yaw] [--memory-frames M]\n"
+    "                           [--labels]\n"
     "\n"
     "Renders N timed frames (default 300) of the scene (default: the bundled scene, pose 0,0,0,0,10,0)\n"
     "and prints the median time of each stage (Frame.times; the CPU backend runs normals and echo fused,\n"
@@ -32,7 +33,9 @@ constexpr const char* kUsage =
     "ones).\n"
     "Targets (README \"Speed\"): >= 150 frames/s (goal 200) and the post-depth stages (full frame - depth)\n"
     "<= 1.5x the depth pass, on the faster backend of a machine without a GPU; RSS growth <= 1 MiB,\n"
-    "0 allocations per frame. full frame / depth is printed too (the retired target, for comparison).\n";
+    "0 allocations per frame. full frame / depth is printed too (the retired target, for comparison).\n"
+    "--labels: every frame also runs the labels stage (as `render --save labels` does; Frame.times\n"
+    "'labels', part of the full frame): what a dataset run with ground truth pays per frame.\n";
 
 struct SpeedSamples {
     std::vector<double> full_ms, depth_ms, ratio, stage_sum_ms;
@@ -52,6 +55,7 @@ int run_bench_speed(const std::vector<std::string>& argv) {
                                   {"--sonar", true, false},
                                   {"--set", true, true},
                                   {"--pose", true, false},
+                                  {"--labels", false, false},
                                   {"--help", false, false}},
                                  "bench speed");
     if (args.has("--help")) {
@@ -67,7 +71,8 @@ int run_bench_speed(const std::vector<std::string>& argv) {
 
     Setup setup = load_setup(args);
     Context context = make_context(backend);
-    Renderer renderer = make_renderer(context, setup.config, setup.scene, backend);
+    Renderer renderer = make_renderer(context, setup.config, setup.scene, backend, 1,
+                                      args.has("--labels") ? SaveFlags::labels : SaveFlags::none);
     Frame frame = renderer.make_frame();
     const std::string device = backend == Backend::vulkan ? context.device_description() : "CPU backend";
     const SceneStats& stats = setup.scene.stats();
