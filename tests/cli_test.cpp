@@ -337,6 +337,12 @@ TEST_F(Cli, BenchDispatch) {
         EXPECT_EQ(typo.exit_code, 2);
         EXPECT_NE(typo.err.find("did you mean '--frames'"), std::string::npos) << typo.err;
     }
+    // --labels: the labels stage in every frame, with its own row
+    const CliRun labels =
+        run({"bench", "speed", "--backend", "cpu", "--frames", "3", "--memory-frames", "12", "--labels", "--scene",
+             (dir_ / "quad.gltf").string(), "--set", "bins=64", "--set", "beams=48"});
+    EXPECT_EQ(labels.exit_code, 0) << labels.err;
+    EXPECT_NE(labels.out.find("| labels |"), std::string::npos) << labels.out;
     const CliRun extra = run({"bench", "accuracy", "extra"});
     EXPECT_EQ(extra.exit_code, 2);
     EXPECT_EQ(extra.err_lines().size(), 1u);
