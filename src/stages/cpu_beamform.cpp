@@ -100,12 +100,54 @@ struct SpreadLanes {
         left_r[8], right_r[8];
 };
 
-// Built for AVX2 and FMA as a whole, lambdas included (a target attribute would not reach them); called
-// only where exp4_matches_expf (which implies both).
-#pragma GCC push_options
-#pragma GCC target("avx2,fma")
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi" // the lambdas' __m256 values stay inside this file's AVX2 code
+// footprint_spread8's lane-wise helpers (functions, not lambdas: a target attribute does not reach a
+// lambda).
+#define VKS_AVX2_INLINE __attribute__((target("avx2,fma"), always_inline)) inline
+VKS_AVX2_INLINE __m256 abs8(__m256 v) {
+    return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), v);
+}
+VKS_AVX2_INLINE __m256 neg8(__m256 v) {
+    return _mm256_xor_ps(v, _mm256_set1_ps(-0.0f));
+}
+VKS_AVX2_INLINE __m256 select8(__m256 mask, __m256 a, __m256 b) {
+    return _mm256_or_ps(_mm256_and_ps(mask, a), _mm256_andnot_ps(mask, b));
+}
+// std::min(p, q) = (q < p) ? q : p = _mm256_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm256_max_ps(q, p)
+VKS_AVX2_INLINE __m256 min8(__m256 p, __m256 q) {
+    return _mm256_min_ps(q, p);
+}
+VKS_AVX2_INLINE __m256 max8(__m256 p, __m256 q) {
+    return _mm256_max_ps(q, p);
+}
+VKS_AVX2_INLINE __m256 steps_agree8(__m256 s, __m256 t) {
+    const __m256 zero = _mm256_setzero_ps(), two = _mm256_set1_ps(2.0f);
+    const __m256 as = abs8(s), at = abs8(t);
+    return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_mul_ps(s, t), zero, _CMP_GT_OQ),
+                                       _mm256_cmp_ps(as, _mm256_mul_ps(two, at), _CMP_LE_OQ)),
+                         _mm256_cmp_ps(at, _mm256_mul_ps(two, as), _CMP_LE_OQ));
+}
+// footprint_edge_offset of the pixels at ranges r
+VKS_AVX2_INLINE __m256 edge_offset8(__m256 r, float jump_rel, __m256 r_q, __m256 r_beyond, __m256 r_opposite) {
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 s = _mm256_sub_ps(r_q, r);
+    const __m256 same = _mm256_or_ps(
+        _mm256_or_ps(
+            _mm256_cmp_ps(abs8(s), _mm256_mul_ps(_mm256_set1_ps(jump_rel), r), _CMP_LE_OQ),
+            _mm256_and_ps(_mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ), steps_agree8(s, _mm256_sub_ps(r_beyond, r_q)))),
+        _mm256_and_ps(_mm256_cmp_ps(r_opposite, zero, _CMP_GT_OQ), steps_agree8(s, _mm256_sub_ps(r, r_opposite))));
+    return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(r_q, zero, _CMP_GT_OQ), same),
+                         _mm256_mul_ps(_mm256_set1_ps(0.5f), s));
+}
+// footprint_missing_edge of the pixels at ranges r
+VKS_AVX2_INLINE __m256 missing_edge8(__m256 r, __m256 other, __m256 r_near, __m256 r_beyond) {
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 s = _mm256_sub_ps(r_near, r), t = _mm256_sub_ps(r_beyond, r_near);
+    const __m256 scaled =
+        _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(other, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ)),
+                      steps_agree8(s, t));
+    return select8(scaled, _mm256_mul_ps(neg8(other), _mm256_div_ps(s, t)), neg8(other));
+}
+
 
 // expf of eight floats: exp4 on either half.
 __attribute__((target("avx2,fma"), always_inline)) inline __m256 exp8(__m256 x) {
@@ -121,69 +163,39 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
                                                            float jump_rel, int bins, Math<float>::RangeSpread* out) {
     const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f),
                  two = _mm256_set1_ps(2.0f);
-    const __m256 sign = _mm256_set1_ps(-0.0f), vibw = _mm256_set1_ps(ibw);
-    auto abs = [&](__m256 v) { return _mm256_andnot_ps(sign, v); };
-    auto neg = [&](__m256 v) { return _mm256_xor_ps(v, sign); };
-    auto select = [](__m256 mask, __m256 a, __m256 b) {
-        return _mm256_or_ps(_mm256_and_ps(mask, a), _mm256_andnot_ps(mask, b));
-    };
-    // std::min(p, q) = (q < p) ? q : p = _mm256_min_ps(q, p); std::max(p, q) = (p < q) ? q : p = _mm256_max_ps(q, p)
-    auto min = [](__m256 p, __m256 q) { return _mm256_min_ps(q, p); };
-    auto max = [](__m256 p, __m256 q) { return _mm256_max_ps(q, p); };
+    const __m256 vibw = _mm256_set1_ps(ibw);
     const __m256 r = _mm256_load_ps(in.r), up2_r = _mm256_load_ps(in.up2_r), up_r = _mm256_load_ps(in.up_r),
                  down_r = _mm256_load_ps(in.down_r), down2_r = _mm256_load_ps(in.down2_r);
     const __m256 x = _mm256_mul_ps(_mm256_sub_ps(r, _mm256_set1_ps(range_min)), vibw); // range_bin_coord
     if (_mm256_movemask_ps(_mm256_cmp_ps(x, x, _CMP_UNORD_Q)) != 0) return false;
-    auto steps_agree = [&](__m256 s, __m256 t) {
-        const __m256 as = abs(s), at = abs(t);
-        return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_mul_ps(s, t), zero, _CMP_GT_OQ),
-                                           _mm256_cmp_ps(as, _mm256_mul_ps(two, at), _CMP_LE_OQ)),
-                             _mm256_cmp_ps(at, _mm256_mul_ps(two, as), _CMP_LE_OQ));
-    };
-    auto edge_offset = [&](__m256 r_q, __m256 r_beyond, __m256 r_opposite) { // footprint_edge_offset
-        const __m256 s = _mm256_sub_ps(r_q, r);
-        const __m256 same = _mm256_or_ps(
-            _mm256_or_ps(
-                _mm256_cmp_ps(abs(s), _mm256_mul_ps(_mm256_set1_ps(jump_rel), r), _CMP_LE_OQ),
-                _mm256_and_ps(_mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ), steps_agree(s, _mm256_sub_ps(r_beyond, r_q)))),
-            _mm256_and_ps(_mm256_cmp_ps(r_opposite, zero, _CMP_GT_OQ), steps_agree(s, _mm256_sub_ps(r, r_opposite))));
-        return _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(r_q, zero, _CMP_GT_OQ), same), _mm256_mul_ps(half, s));
-    };
-    const __m256 a = edge_offset(up_r, up2_r, down_r), b = edge_offset(down_r, down2_r, up_r);
-    auto missing_edge = [&](__m256 other, __m256 r_near, __m256 r_beyond) { // footprint_missing_edge
-        const __m256 s = _mm256_sub_ps(r_near, r), t = _mm256_sub_ps(r_beyond, r_near);
-        const __m256 scaled = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps(other, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ)),
-            steps_agree(s, t));
-        return select(scaled, _mm256_mul_ps(neg(other), _mm256_div_ps(s, t)), neg(other));
-    };
+    const __m256 a = edge_offset8(r, jump_rel, up_r, up2_r, down_r), b = edge_offset8(r, jump_rel, down_r, down2_r, up_r);
     // (only where a lane lacks a side: inside a surface every pixel has both, and the division is not free)
     __m256 a2 = a, b2 = b;
     if (_mm256_movemask_ps(_mm256_or_ps(_mm256_cmp_ps(a, zero, _CMP_EQ_OQ), _mm256_cmp_ps(b, zero, _CMP_EQ_OQ))) != 0) {
-        a2 = select(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), a, missing_edge(b, down_r, down2_r));
-        b2 = select(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), b, missing_edge(a, up_r, up2_r));
+        a2 = select8(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), a, missing_edge8(r, b, down_r, down2_r));
+        b2 = select8(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), b, missing_edge8(r, a, up_r, up2_r));
     }
-    const __m256 xl = _mm256_add_ps(x, _mm256_mul_ps(min(min(a2, b2), zero), vibw)); // footprint_lo
-    const __m256 xh = _mm256_add_ps(x, _mm256_mul_ps(max(max(a2, b2), zero), vibw)); // footprint_hi
+    const __m256 xl = _mm256_add_ps(x, _mm256_mul_ps(min8(min8(a2, b2), zero), vibw)); // footprint_lo
+    const __m256 xh = _mm256_add_ps(x, _mm256_mul_ps(max8(max8(a2, b2), zero), vibw)); // footprint_hi
     // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
     const __m256 left_r = _mm256_load_ps(in.left_r), right_r = _mm256_load_ps(in.right_r);
-    const __m256 al = edge_offset(left_r, zero, right_r), ar = edge_offset(right_r, zero, left_r);
-    const __m256 al2 = select(_mm256_cmp_ps(al, zero, _CMP_NEQ_UQ), al, neg(ar)),
-                 ar2 = select(_mm256_cmp_ps(ar, zero, _CMP_NEQ_UQ), ar, neg(al));
-    const __m256 cl = _mm256_mul_ps(min(min(al2, ar2), zero), vibw), ch = _mm256_mul_ps(max(max(al2, ar2), zero), vibw);
+    const __m256 al = edge_offset8(r, jump_rel, left_r, zero, right_r), ar = edge_offset8(r, jump_rel, right_r, zero, left_r);
+    const __m256 al2 = select8(_mm256_cmp_ps(al, zero, _CMP_NEQ_UQ), al, neg8(ar)),
+                 ar2 = select8(_mm256_cmp_ps(ar, zero, _CMP_NEQ_UQ), ar, neg8(al));
+    const __m256 cl = _mm256_mul_ps(min8(min8(al2, ar2), zero), vibw), ch = _mm256_mul_ps(max8(max8(al2, ar2), zero), vibw);
     const __m256 column_centre = _mm256_mul_ps(half, _mm256_add_ps(xl, xh));
     const __m256 centre = _mm256_add_ps(column_centre, _mm256_mul_ps(half, _mm256_add_ps(cl, ch)));
     const __m256 w_down_column = _mm256_sub_ps(xh, xl), w_across = _mm256_sub_ps(ch, cl);
     const __m256 extent =
         _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(w_down_column, w_down_column), _mm256_mul_ps(w_across, w_across)));
-    const __m256 width = min(
-        select(_mm256_cmp_ps(extent, zero, _CMP_GT_OQ), max(extent, _mm256_set1_ps(shared::kMinFootprintBins)), one),
+    const __m256 width = min8(
+        select8(_mm256_cmp_ps(extent, zero, _CMP_GT_OQ), max8(extent, _mm256_set1_ps(shared::kMinFootprintBins)), one),
         _mm256_set1_ps(shared::kMaxFootprintBins));
     const __m256 lo = _mm256_sub_ps(centre, _mm256_mul_ps(half, width)),
                  hi = _mm256_add_ps(centre, _mm256_mul_ps(half, width));
     // the density's slope (footprint_log_slope) where both neighbours' footprints are on this surface
-    const __m256 w_up = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(up2_r, r))), vibw);
-    const __m256 w_down = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(r, down2_r))), vibw);
+    const __m256 w_up = _mm256_mul_ps(_mm256_mul_ps(half, abs8(_mm256_sub_ps(up2_r, r))), vibw);
+    const __m256 w_down = _mm256_mul_ps(_mm256_mul_ps(half, abs8(_mm256_sub_ps(r, down2_r))), vibw);
     const __m256 span =
         _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(two, _mm256_sub_ps(up_r, down_r)), _mm256_sub_ps(up2_r, down2_r)),
                       _mm256_set1_ps(0.25f * ibw));
@@ -194,9 +206,9 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const __m256 down_side =
         _mm256_and_ps(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(down2_r, zero, _CMP_GT_OQ));
     const __m256 both = _mm256_and_ps(up_side, down_side);
-    const __m256 r_q = select(up_side, up_r, down_r), r_q2 = select(up_side, up2_r, down2_r);
-    const __m256 e_q = select(up_side, e_up, e_down);
-    const __m256 w_q = _mm256_mul_ps(_mm256_mul_ps(half, abs(_mm256_sub_ps(r_q2, r))), vibw);
+    const __m256 r_q = select8(up_side, up_r, down_r), r_q2 = select8(up_side, up2_r, down2_r);
+    const __m256 e_q = select8(up_side, e_up, e_down);
+    const __m256 w_q = _mm256_mul_ps(_mm256_mul_ps(half, abs8(_mm256_sub_ps(r_q2, r))), vibw);
     const __m256 span_q = _mm256_sub_ps(
         _mm256_mul_ps(_mm256_sub_ps(_mm256_mul_ps(_mm256_add_ps(_mm256_add_ps(r, _mm256_mul_ps(two, r_q)), r_q2),
                                                   _mm256_set1_ps(0.25f)),
@@ -204,20 +216,20 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
                       vibw),
         _mm256_sub_ps(column_centre, x));
     const __m256 e_self = _mm256_load_ps(in.e), w_self = _mm256_sub_ps(xh, xl);
-    const __m256 e1 = select(both, e_up, e_q), w1 = select(both, w_up, w_q);
-    const __m256 e2 = select(both, e_down, e_self), w2 = select(both, w_down, w_self);
-    const __m256 slope_span = select(both, span, span_q);
+    const __m256 e1 = select8(both, e_up, e_q), w1 = select8(both, w_up, w_q);
+    const __m256 e2 = select8(both, e_down, e_self), w2 = select8(both, w_down, w_self);
+    const __m256 slope_span = select8(both, span, span_q);
     __m256 has_g = _mm256_or_ps(up_side, down_side);
     has_g = _mm256_and_ps(
         has_g, _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(e1, zero, _CMP_GT_OQ), _mm256_cmp_ps(e2, zero, _CMP_GT_OQ)),
                              _mm256_and_ps(_mm256_cmp_ps(w1, zero, _CMP_GT_OQ), _mm256_cmp_ps(w2, zero, _CMP_GT_OQ))));
-    has_g = _mm256_and_ps(has_g, _mm256_cmp_ps(abs(slope_span), zero, _CMP_GT_OQ));
+    has_g = _mm256_and_ps(has_g, _mm256_cmp_ps(abs8(slope_span), zero, _CMP_GT_OQ));
     const int g_mask = _mm256_movemask_ps(has_g);
     __m256 g = zero;
     if (g_mask != 0) {
         // logf of the density ratio where there is a slope (of 1 elsewhere: 0, where the scalar kernel
         // leaves g 0): log4 where every lane is in its domain and this libm's logf is log4's, else per lane
-        const __m256 ratio = select(has_g, _mm256_div_ps(_mm256_mul_ps(e1, w2), _mm256_mul_ps(e2, w1)), one);
+        const __m256 ratio = select8(has_g, _mm256_div_ps(_mm256_mul_ps(e1, w2), _mm256_mul_ps(e2, w1)), one);
         const __m128 ratio_lo = _mm256_castps256_ps128(ratio), ratio_hi = _mm256_extractf128_ps(ratio, 1);
         __m256 log_ratio;
         if (_mm_movemask_ps(_mm_and_ps(positive_normal4(ratio_lo), positive_normal4(ratio_hi))) == 15 &&
@@ -231,8 +243,8 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
             log_ratio = _mm256_load_ps(lanes);
         }
         const __m256 slope = _mm256_div_ps(_mm256_and_ps(has_g, log_ratio), slope_span);
-        const __m256 cap = min(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
-        g = _mm256_and_ps(has_g, min(max(slope, neg(cap)), cap));
+        const __m256 cap = min8(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
+        g = _mm256_and_ps(has_g, min8(max8(slope, neg8(cap)), cap));
     }
     // inv_norm = 1 / (width sinhc_of(0.5 g width))
     const __m256 y = _mm256_mul_ps(_mm256_mul_ps(half, g), width);
@@ -240,10 +252,10 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
     const __m256 middle = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(20.0f)), inner));
     __m256 sinhc = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(6.0f)), middle));
-    const __m256 wide = _mm256_cmp_ps(abs(y), half, _CMP_GE_OQ); // NaN-free: g and width are finite
+    const __m256 wide = _mm256_cmp_ps(abs8(y), half, _CMP_GE_OQ); // NaN-free: g and width are finite
     if (_mm256_movemask_ps(wide) != 0) {
-        const __m256 ey = exp8(y), e_minus = exp8(neg(y));
-        sinhc = select(wide, _mm256_div_ps(_mm256_sub_ps(ey, e_minus), _mm256_mul_ps(two, y)), sinhc);
+        const __m256 ey = exp8(y), e_minus = exp8(neg8(y));
+        sinhc = select8(wide, _mm256_div_ps(_mm256_sub_ps(ey, e_minus), _mm256_mul_ps(two, y)), sinhc);
     }
     const __m256 inv_norm = _mm256_div_ps(one, _mm256_mul_ps(width, sinhc));
     alignas(32) float lo_l[8], hi_l[8], centre_l[8], g_l[8], inv_l[8];
@@ -270,8 +282,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     }
     return true;
 }
-#pragma GCC diagnostic pop
-#pragma GCC pop_options
+#undef VKS_AVX2_INLINE
 
 #else
 constexpr int kSpreadLanes = 8;
