@@ -148,7 +148,6 @@ VKS_AVX2_INLINE __m256 missing_edge8(__m256 r, __m256 other, __m256 r_near, __m2
     return select8(scaled, _mm256_mul_ps(neg8(other), _mm256_div_ps(s, t)), neg8(other));
 }
 
-
 // expf of eight floats: exp4 on either half.
 __attribute__((target("avx2,fma"), always_inline)) inline __m256 exp8(__m256 x) {
     return _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(x, 1))),
@@ -168,7 +167,8 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
                  down_r = _mm256_load_ps(in.down_r), down2_r = _mm256_load_ps(in.down2_r);
     const __m256 x = _mm256_mul_ps(_mm256_sub_ps(r, _mm256_set1_ps(range_min)), vibw); // range_bin_coord
     if (_mm256_movemask_ps(_mm256_cmp_ps(x, x, _CMP_UNORD_Q)) != 0) return false;
-    const __m256 a = edge_offset8(r, jump_rel, up_r, up2_r, down_r), b = edge_offset8(r, jump_rel, down_r, down2_r, up_r);
+    const __m256 a = edge_offset8(r, jump_rel, up_r, up2_r, down_r),
+                 b = edge_offset8(r, jump_rel, down_r, down2_r, up_r);
     // (only where a lane lacks a side: inside a surface every pixel has both, and the division is not free)
     __m256 a2 = a, b2 = b;
     if (_mm256_movemask_ps(_mm256_or_ps(_mm256_cmp_ps(a, zero, _CMP_EQ_OQ), _mm256_cmp_ps(b, zero, _CMP_EQ_OQ))) != 0) {
@@ -179,10 +179,12 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const __m256 xh = _mm256_add_ps(x, _mm256_mul_ps(max8(max8(a2, b2), zero), vibw)); // footprint_hi
     // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
     const __m256 left_r = _mm256_load_ps(in.left_r), right_r = _mm256_load_ps(in.right_r);
-    const __m256 al = edge_offset8(r, jump_rel, left_r, zero, right_r), ar = edge_offset8(r, jump_rel, right_r, zero, left_r);
+    const __m256 al = edge_offset8(r, jump_rel, left_r, zero, right_r),
+                 ar = edge_offset8(r, jump_rel, right_r, zero, left_r);
     const __m256 al2 = select8(_mm256_cmp_ps(al, zero, _CMP_NEQ_UQ), al, neg8(ar)),
                  ar2 = select8(_mm256_cmp_ps(ar, zero, _CMP_NEQ_UQ), ar, neg8(al));
-    const __m256 cl = _mm256_mul_ps(min8(min8(al2, ar2), zero), vibw), ch = _mm256_mul_ps(max8(max8(al2, ar2), zero), vibw);
+    const __m256 cl = _mm256_mul_ps(min8(min8(al2, ar2), zero), vibw),
+                 ch = _mm256_mul_ps(max8(max8(al2, ar2), zero), vibw);
     const __m256 column_centre = _mm256_mul_ps(half, _mm256_add_ps(xl, xh));
     const __m256 centre = _mm256_add_ps(column_centre, _mm256_mul_ps(half, _mm256_add_ps(cl, ch)));
     const __m256 w_down_column = _mm256_sub_ps(xh, xl), w_across = _mm256_sub_ps(ch, cl);
