@@ -39,7 +39,11 @@ struct Cell {
 } // namespace
 
 // What the beams need of a pixel, worked out once per frame (a pixel feeds up to four beams).
-constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider footprints recompute theirs
+constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider footprints keep theirs apart
+// Wider spreads keep their shares in double in Pixels::wide_shares, up to kWideSharesPerPixel per pixel
+// of a row on average (a row that needs more recomputes the rest where the beams read them).
+constexpr std::size_t kWideSharesPerPixel = 2;
+constexpr std::uint32_t kNoWideShares = ~0u;
 
 struct PixelLabel {
     M::RangeSpread spread;       // k_last < k_first: no energy in the window
@@ -48,6 +52,8 @@ struct PixelLabel {
     float elevation;             // rad, up positive
     float range;                 // slant range, m
     std::uint32_t instance;
+    std::uint32_t wide_shares; // spreads wider than kCachedShares: range_share's values (double) start here
+                               // in Pixels::wide_shares (kNoWideShares: computed where they are read)
 };
 
 struct LabelsStage::Scratch {
@@ -62,8 +68,21 @@ struct LabelsStage::Scratch {
     float first_lo = std::numeric_limits<float>::infinity();
 };
 
+// A pixel's direction, a function of the grid alone (made once with the stage).
+struct PixelRay {
+    float dir[3];    // unit direction, sonar frame (x forward, y port, z up)
+    float elevation; // rad, up positive
+};
+
 struct LabelsStage::Pixels {
     std::vector<PixelLabel> pixels; // rows * columns
+    std::vector<PixelRay> rays;     // rows * columns
+    // per (row, view): the columns [first, end) between the view's first and last hit pixel in that row
+    // (first == end: none), which are all that the beams need to visit there
+    std::vector<std::uint32_t> hit_columns; // rows * views * 2
+    // rows * columns * kWideSharesPerPixel: the shares of the wide spreads of rows [r0, r1) are written
+    // within [r0, r1) * columns * kWideSharesPerPixel (each part of cache_rows its own)
+    std::vector<double> wide_shares;
 };
 
 // Frame::visibility: the scene's depth clusters, culled per frame, and a depth image for one object
@@ -81,6 +100,23 @@ struct LabelsStage::Alone {
     std::vector<ObjectVisibility> from_returns;
 };
 
+namespace {
+PixelRay pixel_ray_of(const Plan& plan, std::uint32_t row, std::uint32_t column) {
+    const std::uint32_t index = view_of_column(plan, column);
+    const M::PixelView view = pixel_view<double>(plan, index);
+    const double u =
+        M::pixel_coord(column - view_first_column(plan, index), view_columns(plan, index), view.tan_half_h);
+    const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
+    const M::vec3 ray = M::pixel_ray(u, v, view);
+    const double inv_length = 1.0 / std::sqrt(1.0 + u * u + v * v);
+    PixelRay out;
+    for (int i = 0; i < 3; ++i)
+        out.dir[i] = static_cast<float>(ray[i] * inv_length);
+    out.elevation = static_cast<float>(std::asin(std::clamp(ray.z * inv_length, -1.0, 1.0)));
+    return out;
+}
+} // namespace
+
 LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
                          const SceneData* scene)
     : plan_(plan), class_of_instance_(std::move(class_of_instance)), workers_(workers) {
@@ -92,6 +128,12 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
+    pixels_->rays.resize(pixels_->pixels.size());
+    pixels_->hit_columns.resize(std::size_t(plan_.rows) * plan_.views * 2);
+    for (std::uint32_t row = 0; row < plan_.rows; ++row)
+        for (std::uint32_t column = 0; column < plan_.columns; ++column)
+            pixels_->rays[std::size_t(row) * plan_.columns + column] = pixel_ray_of(plan_, row, column);
+    pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
     if (scene != nullptr) {
         alone_ = std::make_unique<Alone>();
         alone_->scene = scene;
@@ -120,6 +162,9 @@ struct Job {
     const std::vector<std::uint16_t>* class_of_instance;
     std::vector<std::unique_ptr<LabelsStage::Scratch>>* scratch;
     std::vector<PixelLabel>* pixels;
+    const std::vector<PixelRay>* rays;
+    std::vector<double>* wide_shares;
+    std::vector<std::uint32_t>* hit_columns;
     Frame* frame;
     const SubpixelReturns* subpixel; // null or empty: no sub-pixel returns this frame
 };
@@ -164,33 +209,45 @@ inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const 
 
 // Rows [row_begin, row_end) of the pixel cache: each pixel's range spread (as the beamform stage's),
 // direction, elevation and instance.
-void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& pixels, std::uint32_t row_begin,
-                std::uint32_t row_end) {
+void cache_rows(const Plan& plan, const Frame& frame, const std::vector<PixelRay>& rays,
+                std::vector<PixelLabel>& pixels, std::vector<double>& wide_shares,
+                std::vector<std::uint32_t>& hit_columns, std::uint32_t row_begin, std::uint32_t row_end) {
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
+    // this part's room for the wide spreads' shares (Pixels::wide_shares)
+    std::size_t wide_next = std::size_t(row_begin) * plan.columns * kWideSharesPerPixel;
+    const std::size_t wide_end = std::size_t(row_end) * plan.columns * kWideSharesPerPixel;
     for (std::uint32_t row = row_begin; row < row_end; ++row) {
-        for (std::uint32_t column = 0; column < plan.columns; ++column) {
-            const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
-            PixelLabel& out = pixels[p];
-            out.spread.k_first = 0;
-            out.spread.k_last = -1;
-            const double e = frame.echo[2 * p];
-            if (!(e > 0.0)) continue;
-            out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
-            if (out.spread.k_last - out.spread.k_first < kCachedShares)
-                for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
-                    out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
-            const std::uint32_t index = view_of_column(plan, column);
-            const M::PixelView view = pixel_view<double>(plan, index);
-            const double u =
-                M::pixel_coord(column - view_first_column(plan, index), view_columns(plan, index), view.tan_half_h);
-            const double v = M::pixel_coord(row, plan.rows, view.tan_half_v);
-            const M::vec3 ray = M::pixel_ray(u, v, view);
-            const double inv_length = 1.0 / std::sqrt(1.0 + u * u + v * v);
-            for (int i = 0; i < 3; ++i)
-                out.dir[i] = static_cast<float>(ray[i] * inv_length);
-            out.elevation = static_cast<float>(std::asin(std::clamp(ray.z * inv_length, -1.0, 1.0)));
-            out.range = frame.echo[2 * p + 1];
-            out.instance = instance_of(frame.material[p]);
+        std::uint32_t* hits = hit_columns.data() + std::size_t(row) * plan.views * 2;
+        for (std::uint32_t view = 0, column = 0; view < plan.views; ++view) {
+            hits[2 * view] = hits[2 * view + 1] = column; // none yet
+            for (const std::uint32_t view_end = column + view_columns(plan, view); column < view_end; ++column) {
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
+                PixelLabel& out = pixels[p];
+                out.spread.k_first = 0;
+                out.spread.k_last = -1;
+                const double e = frame.echo[2 * p];
+                if (!(e > 0.0)) continue;
+                if (hits[2 * view] == hits[2 * view + 1]) hits[2 * view] = column;
+                hits[2 * view + 1] = column + 1;
+                out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
+                const int spread_bins = out.spread.k_last - out.spread.k_first + 1;
+                out.wide_shares = kNoWideShares;
+                if (spread_bins <= kCachedShares) {
+                    for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
+                        out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
+                } else if (wide_end - wide_next >= std::size_t(spread_bins)) {
+                    // once here instead of in every beam the pixel feeds (three or four)
+                    out.wide_shares = static_cast<std::uint32_t>(wide_next);
+                    for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
+                        wide_shares[wide_next++] = M::range_share(out.spread, k);
+                }
+                const PixelRay& ray = rays[p];
+                for (int i = 0; i < 3; ++i)
+                    out.dir[i] = ray.dir[i];
+                out.elevation = ray.elevation;
+                out.range = frame.echo[2 * p + 1];
+                out.instance = instance_of(frame.material[p]);
+            }
         }
     }
 }
@@ -198,15 +255,19 @@ void cache_rows(const Plan& plan, const Frame& frame, std::vector<PixelLabel>& p
 // One pixel's energy into the beam's cells along its range shares. Its point in a cell lies along its
 // direction at the range of the part of its footprint inside the cell's bin (the footprint kernel
 // spreads one pixel over many bins at grazing incidence; the tent and nearest kernels keep its range).
-void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, std::size_t p, std::vector<Cell>& cells,
-               double weight, int& k_low, int& k_high) {
+void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, const double* wide_shares, std::size_t p,
+               std::vector<Cell>& cells, double weight, int& k_low, int& k_high) {
     const M::RangeSpread& spread = pixel.spread;
     if (spread.k_last < spread.k_first) return;
     const double e = frame.echo[2 * p] * weight;
     const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
     const bool cached = spread.k_last - spread.k_first < kCachedShares;
+    const double* wide =
+        pixel.wide_shares != kNoWideShares ? wide_shares + pixel.wide_shares - spread.k_first : nullptr;
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
-        const double w = (cached ? double(pixel.shares[k - spread.k_first]) : M::range_share(spread, k)) * e;
+        const double share =
+            cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : M::range_share(spread, k));
+        const double w = share * e;
         if (!(w > 0.0)) continue;
         double range = pixel.range;
         if (footprint) {
@@ -252,8 +313,8 @@ void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelRe
 
 // Labels beam j into the frame's label arrays.
 void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
-                const std::vector<PixelLabel>& pixels, const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch,
-                Frame& frame, std::uint32_t j) {
+                const std::vector<PixelLabel>& pixels, const double* wide_shares, const std::uint32_t* hit_columns,
+                const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch, Frame& frame, std::uint32_t j) {
     std::vector<Cell>& cells = scratch.cells;
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
     int k_low = static_cast<int>(plan.bins), k_high = -1;
@@ -270,7 +331,8 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
             if (!(weight > 0.0)) continue;
             for (std::uint32_t row = 0; row < plan.rows; ++row) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+                if (frame.echo[2 * p] > 0.0f)
+                    add_pixel(plan, frame, pixels[p], wide_shares, p, cells, weight, k_low, k_high);
             }
         }
     }
@@ -281,6 +343,10 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
+            // No hit in this row of the view: nothing to visit. (Its first_pixel below is then never set
+            // or read this frame, the same for every beam.)
+            const std::uint32_t* hits = hit_columns + (std::size_t(row) * plan.views + view) * 2;
+            if (hits[0] == hits[1]) continue;
             const float* view_x = cone_x + view_first_column(plan, view);
             const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
             // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not decreased
@@ -294,7 +360,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
                                                cone_x);
             }
             first_pixel = c;
-            for (; c < view_end && cone_x[c] < hi; ++c) {
+            for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < hi; ++c) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
                 // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
                 if (!(frame.echo[2 * p] > 0.0f)) continue;
@@ -305,7 +371,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
                     if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
                         weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
                                   beam_weight(static_cast<std::uint32_t>(q));
-                if (weight > 0.0) add_pixel(plan, frame, pixels[p], p, cells, weight, k_low, k_high);
+                if (weight > 0.0) add_pixel(plan, frame, pixels[p], wide_shares, p, cells, weight, k_low, k_high);
             }
         }
     }
@@ -351,7 +417,15 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
 } // namespace
 
 void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
-    Job job{&plan_, &class_of_instance_, &scratch_, &pixels_->pixels, &frame, subpixel};
+    Job job{&plan_,
+            &class_of_instance_,
+            &scratch_,
+            &pixels_->pixels,
+            &pixels_->rays,
+            &pixels_->wide_shares,
+            &pixels_->hit_columns,
+            &frame,
+            subpixel};
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
     std::fill(frame.instance_fraction.begin(), frame.instance_fraction.end(), 0.0f);
@@ -364,7 +438,8 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         const std::uint32_t rows = t.plan->rows;
-        cache_rows(*t.plan, *t.frame, *t.pixels, static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
+        cache_rows(*t.plan, *t.frame, *t.rays, *t.pixels, *t.wide_shares, *t.hit_columns,
+                   static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
                    static_cast<std::uint32_t>(std::uint64_t(rows) * (part + 1) / parts));
     };
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
@@ -374,7 +449,8 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
             for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
-                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, j);
+                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.wide_shares->data(), t.hit_columns->data(),
+                           t.subpixel, scratch, *t.frame, j);
     };
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
