@@ -20,9 +20,13 @@
 
 #include <emmintrin.h>
 #include <xmmintrin.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
+#include "stages/cpu_simd.h"
 #include "stages/cpu_stages.h"
 
 namespace vksonar::cpu {
@@ -110,6 +114,100 @@ int sobel3_smooth4(const float* up, const float* mid, const float* down, std::in
     _mm_storeu_ps(out + 12, o3);
     return mask;
 }
+
+#if defined(__x86_64__) && defined(__GNUC__)
+// sobel3_smooth4 for the eight pixels x .. x + 7 in AVX lanes: the same operations lane by lane (helpers
+// as functions: a target attribute does not reach a lambda).
+#define VKS_AVX2_INLINE __attribute__((target("avx2"), always_inline)) inline
+struct Lanes8 {
+    __m256 x, y, z, r;
+};
+// The (x, y, z, range) of columns x + o .. x + o + 7 of a row (lanes in column order).
+VKS_AVX2_INLINE Lanes8 load8(const float* row, std::int64_t c) {
+    const float* p = row + 4 * c;
+    // columns i and i + 4 in the two halves, then the 4 x 4 transpose within each half
+    __m256 a = _mm256_loadu2_m128(p + 16, p), b = _mm256_loadu2_m128(p + 20, p + 4),
+           e = _mm256_loadu2_m128(p + 24, p + 8), d = _mm256_loadu2_m128(p + 28, p + 12);
+    const __m256 t0 = _mm256_unpacklo_ps(a, b), t1 = _mm256_unpackhi_ps(a, b), t2 = _mm256_unpacklo_ps(e, d),
+                 t3 = _mm256_unpackhi_ps(e, d);
+    a = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0));
+    b = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2));
+    e = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0));
+    d = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+    return Lanes8{a, b, e, d};
+}
+// same_surface(q, p.range, jump)
+VKS_AVX2_INLINE __m256 same8(const Lanes8& q, __m256 centre_r, __m256 jump) {
+    const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    return _mm256_and_ps(_mm256_cmp_ps(q.r, _mm256_setzero_ps(), _CMP_GT_OQ),
+                         _mm256_cmp_ps(_mm256_and_ps(_mm256_sub_ps(q.r, centre_r), abs_mask), jump, _CMP_LE_OQ));
+}
+// (a - b) + 2 (c - d) + (e - f), left to right
+VKS_AVX2_INLINE __m256 tangent8(__m256 a, __m256 b, __m256 c, __m256 d, __m256 e, __m256 f) {
+    return _mm256_add_ps(_mm256_add_ps(_mm256_sub_ps(a, b), _mm256_mul_ps(_mm256_set1_ps(2.0f), _mm256_sub_ps(c, d))),
+                         _mm256_sub_ps(e, f));
+}
+VKS_AVX2_INLINE __m256 dot8(__m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by, __m256 bz) {
+    return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)), _mm256_mul_ps(az, bz));
+}
+
+__attribute__((target("avx2"))) int sobel3_smooth8(const float* up, const float* mid, const float* down, std::int64_t x,
+                                                   float jump_rel, float* out) {
+    const Lanes8 lu = load8(up, x - 1), cu = load8(up, x), ru = load8(up, x + 1);
+    const Lanes8 lm = load8(mid, x - 1), cm = load8(mid, x), rm = load8(mid, x + 1);
+    const Lanes8 ld = load8(down, x - 1), cd = load8(down, x), rd = load8(down, x + 1);
+    const __m256 zero = _mm256_setzero_ps();
+    const __m256 jump = _mm256_mul_ps(_mm256_set1_ps(jump_rel), cm.r);
+    __m256 ok = _mm256_cmp_ps(cm.r, zero, _CMP_GT_OQ);
+    ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_and_ps(same8(lu, cm.r, jump), same8(lm, cm.r, jump)),
+                                         _mm256_and_ps(same8(ld, cm.r, jump), same8(cu, cm.r, jump))));
+    ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_and_ps(same8(cd, cm.r, jump), same8(ru, cm.r, jump)),
+                                         _mm256_and_ps(same8(rm, cm.r, jump), same8(rd, cm.r, jump))));
+    if (_mm256_movemask_ps(ok) == 0) return 0;
+    const __m256 txx = tangent8(ru.x, lu.x, rm.x, lm.x, rd.x, ld.x), txy = tangent8(ru.y, lu.y, rm.y, lm.y, rd.y, ld.y),
+                 txz = tangent8(ru.z, lu.z, rm.z, lm.z, rd.z, ld.z);
+    const __m256 tyx = tangent8(ld.x, lu.x, cd.x, cu.x, rd.x, ru.x), tyy = tangent8(ld.y, lu.y, cd.y, cu.y, rd.y, ru.y),
+                 tyz = tangent8(ld.z, lu.z, cd.z, cu.z, rd.z, ru.z);
+    // cross(tx, ty)
+    __m256 nx = _mm256_sub_ps(_mm256_mul_ps(txy, tyz), _mm256_mul_ps(tyy, txz));
+    __m256 ny = _mm256_sub_ps(_mm256_mul_ps(txz, tyx), _mm256_mul_ps(tyz, txx));
+    __m256 nz = _mm256_sub_ps(_mm256_mul_ps(txx, tyy), _mm256_mul_ps(tyx, txy));
+    const __m256 len = _mm256_sqrt_ps(dot8(nx, ny, nz, nx, ny, nz));
+    ok = _mm256_and_ps(
+        ok, _mm256_and_ps(_mm256_cmp_ps(len, zero, _CMP_GT_OQ), _mm256_cmp_ps(len, _mm256_set1_ps(1e30f), _CMP_LT_OQ)));
+    const int mask = _mm256_movemask_ps(ok);
+    if (mask == 0) return 0;
+    nx = _mm256_div_ps(nx, len);
+    ny = _mm256_div_ps(ny, len);
+    nz = _mm256_div_ps(nz, len);
+    const __m256 flip =
+        _mm256_and_ps(_mm256_cmp_ps(dot8(nx, ny, nz, cm.x, cm.y, cm.z), zero, _CMP_GT_OQ), _mm256_set1_ps(-0.0f));
+    nx = _mm256_xor_ps(nx, flip);
+    ny = _mm256_xor_ps(ny, flip);
+    nz = _mm256_xor_ps(nz, flip);
+    // incidence_cos: std::min(std::max(-d / r, 0), 1); std::max(a, b) is _mm256_max_ps(b, a), min alike
+    const __m256 d = dot8(nx, ny, nz, cm.x, cm.y, cm.z);
+    const __m256 cosine = _mm256_min_ps(
+        _mm256_set1_ps(1.0f), _mm256_max_ps(zero, _mm256_div_ps(_mm256_xor_ps(d, _mm256_set1_ps(-0.0f)), cm.r)));
+    // back to (nx, ny, nz, cos) per pixel: the 4 x 4 transpose within each half, then the halves apart
+    const __m256 t0 = _mm256_unpacklo_ps(nx, ny), t1 = _mm256_unpackhi_ps(nx, ny), t2 = _mm256_unpacklo_ps(nz, cosine),
+                 t3 = _mm256_unpackhi_ps(nz, cosine);
+    const __m256 p0 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(1, 0, 1, 0)),
+                 p1 = _mm256_shuffle_ps(t0, t2, _MM_SHUFFLE(3, 2, 3, 2)),
+                 p2 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(1, 0, 1, 0)),
+                 p3 = _mm256_shuffle_ps(t1, t3, _MM_SHUFFLE(3, 2, 3, 2));
+    _mm256_storeu2_m128(out + 16, out, p0);
+    _mm256_storeu2_m128(out + 20, out + 4, p1);
+    _mm256_storeu2_m128(out + 24, out + 8, p2);
+    _mm256_storeu2_m128(out + 28, out + 12, p3);
+    return mask;
+}
+#undef VKS_AVX2_INLINE
+#else
+int sobel3_smooth8(const float*, const float*, const float*, std::int64_t, float, float*) {
+    return 0;
+}
+#endif
 
 } // namespace
 
@@ -231,6 +329,7 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     // With tier views, a window must not reach across a seam that does not join: only columns of the
     // centre's view_group (columns outside the image are zero columns anyway).
     const bool tiers = plan.views > plan.slices;
+    const bool avx2 = use_avx2(plan.config); // sobel3_smooth8
     auto group = [&](std::int64_t c) {
         return view_group(plan, static_cast<std::uint32_t>(std::clamp<std::int64_t>(c, 0, C - 1)));
     };
@@ -288,8 +387,27 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
                 continue;
             }
             if constexpr (std::is_same_v<Real, float>) {
-                // Four pixels at a time where their windows are smooth (sobel3_smooth4), the others by the
-                // scalar kernel; the windows of the last four columns reach into the zero columns.
+                // Eight pixels at a time where the CPU has AVX2 and their windows are smooth
+                // (sobel3_smooth8), else four (sobel3_smooth4), the others by the scalar kernel; the windows
+                // of the last columns reach into the zero columns.
+                if (avx2 && !sobel5 && x % 8 == 0 && x + 8 <= C && (!tiers || group(x - 1) == group(x + 8))) {
+                    alignas(32) float fast[32];
+                    const int done = sobel3_smooth8(up, mid, down, x, jump_rel, fast);
+                    if (done == 0xff) {
+                        std::memcpy(out_row + 4 * x, fast, sizeof fast);
+                        x += 7;
+                        continue;
+                    }
+                    for (int i = 0; i < 8; ++i, ++x) {
+                        if (done & (1 << i)) {
+                            std::memcpy(out_row + 4 * x, fast + 4 * i, 4 * sizeof(float));
+                            continue;
+                        }
+                        pixel(x);
+                    }
+                    --x;
+                    continue;
+                }
                 if (!sobel5 && x % 4 == 0 && x + 4 <= C && (!tiers || group(x - 1) == group(x + 4))) {
                     alignas(16) float fast[16];
                     const int done = sobel3_smooth4(up, mid, down, x, jump_rel, fast);
