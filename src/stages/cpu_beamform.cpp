@@ -92,6 +92,50 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, f
     return _mm_movemask_ps(bad) == 0;
 }
 
+// (low, low, low, low, high, high, high, high)
+__attribute__((target("avx2"), always_inline)) inline __m256 halves8(float low, float high) {
+    return _mm256_set_m128(_mm_set1_ps(high), _mm_set1_ps(low));
+}
+
+// footprint_shares4 for two spreads of at most four bins each (most pixels): spread a's in the low four
+// AVX lanes, b's in the high four, one pass for both; the same operations lane by lane. shares_a and
+// shares_b receive four values each (zeros past n_a, n_b); false as footprint_shares4 (nothing usable).
+__attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa, int n_a,
+                                                             const Math<float>::RangeSpread& sb, int n_b,
+                                                             float* shares_a, float* shares_b) {
+    const __m256 vlo = halves8(sa.lo, sb.lo), vhi = halves8(sa.hi, sb.hi), vcentre = halves8(sa.centre, sb.centre),
+                 vg = halves8(sa.g, sb.g), vinv = halves8(sa.inv_norm, sb.inv_norm);
+    const __m256 half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f);
+    const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    const __m256i k = _mm256_add_epi32(_mm256_set_m128i(_mm_set1_epi32(sb.k_first), _mm_set1_epi32(sa.k_first)),
+                                       _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
+    // lanes past a spread's last bin: k + 1 > hi there, so b <= a and the lane is not live (as in
+    // footprint_shares4's rounded-up last group)
+    const __m256 a = _mm256_max_ps(vlo, _mm256_cvtepi32_ps(k));
+    const __m256 b = _mm256_min_ps(vhi, _mm256_cvtepi32_ps(_mm256_add_epi32(k, _mm256_set1_epi32(1))));
+    const __m256 live = _mm256_cmp_ps(b, a, _CMP_GT_OQ);
+    const __m256 len = _mm256_sub_ps(b, a);
+    const __m256 half_len = _mm256_mul_ps(half, len);
+    const __m256 arg = _mm256_and_ps(live, _mm256_mul_ps(vg, _mm256_sub_ps(_mm256_add_ps(a, half_len), vcentre)));
+    const __m256 y = _mm256_mul_ps(vg, half_len);
+    __m256 bad = _mm256_and_ps(live, _mm256_cmp_ps(_mm256_and_ps(y, abs_mask), half, _CMP_GE_OQ));
+    bad = _mm256_or_ps(bad, _mm256_cmp_ps(_mm256_and_ps(arg, abs_mask), _mm256_set1_ps(80.0f), _CMP_GE_OQ));
+    if (_mm256_movemask_ps(bad) != 0) return false;
+    const __m256 e = _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(arg, 1))),
+                                     exp4(_mm256_cvtps_pd(_mm256_castps256_ps128(arg))));
+    const __m256 y2 = _mm256_mul_ps(y, y);
+    // 1 + y2 / 6 * (1 + y2 / 20 * (1 + y2 / 42)), as sinhc_of
+    const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
+    const __m256 middle = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(20.0f)), inner));
+    const __m256 sinhc = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(6.0f)), middle));
+    const __m256 share = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(len, e), sinhc), vinv));
+    _mm_storeu_ps(shares_a, _mm256_castps256_ps128(share));
+    _mm_storeu_ps(shares_b, _mm256_extractf128_ps(share, 1));
+    (void)n_a;
+    (void)n_b;
+    return true;
+}
+
 // The five-row windows of eight pixels for footprint_spread8, lane by lane: each pixel's (energy, range)
 // and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
 constexpr int kSpreadLanes = 8;
@@ -298,6 +342,9 @@ bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>
 bool footprint_shares4(float, float, float, float, float, int, int, float*) {
     return false;
 }
+bool footprint_shares4x2(const Math<float>::RangeSpread&, int, const Math<float>::RangeSpread&, int, float*, float*) {
+    return false;
+}
 #endif
 
 // The shares of bins k_first + i, i < n (<= kMaxSpreadBins), as range_share gives them; shares has room
@@ -416,10 +463,25 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     auto flush = [&] {
         typename Math<Real>::RangeSpread spreads[kSpreadLanes];
         pixel_spreads<Real>(plan, echo2, j, batch, batched, exp4, range_min, inv_bin_width, view, spreads);
+        auto bins_of = [&](int b) { return std::min(spreads[b].k_last - spreads[b].k_first + 1, kMaxSpreadBins); };
         for (int b = 0; b < batched; ++b) {
             const typename Math<Real>::RangeSpread& spread = spreads[b];
+            const int spread_bins = bins_of(b);
+            if constexpr (std::is_same_v<Real, float>) {
+                // two neighbours of one to four footprint bins each (most pixels): their shares in one pass
+                if (exp4 && b + 1 < batched && spread.kernel == shared::kRangeKernelFootprint &&
+                    spreads[b + 1].kernel == shared::kRangeKernelFootprint && spread_bins >= 1 && spread_bins <= 4 &&
+                    bins_of(b + 1) >= 1 && bins_of(b + 1) <= 4) {
+                    float shares_a[4], shares_b[4];
+                    if (footprint_shares4x2(spread, spread_bins, spreads[b + 1], bins_of(b + 1), shares_a, shares_b)) {
+                        sink(batch[b], e2[2 * batch[b]], spread.k_first, spread_bins, shares_a);
+                        sink(batch[b + 1], e2[2 * batch[b + 1]], spreads[b + 1].k_first, bins_of(b + 1), shares_b);
+                        ++b;
+                        continue;
+                    }
+                }
+            }
             Real shares[kMaxSpreadBins + 3];
-            const int spread_bins = std::min(spread.k_last - spread.k_first + 1, kMaxSpreadBins);
             range_shares<Real>(spread, spread_bins, exp4, shares);
             for (int i = std::max(spread_bins, 0); i % 4 != 0; ++i) // zeros up to a multiple of 4 (add_shares)
                 shares[i] = Real(0);
