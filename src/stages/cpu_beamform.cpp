@@ -99,10 +99,10 @@ __attribute__((target("avx2"), always_inline)) inline __m256 halves8(float low, 
 
 // footprint_shares4 for two spreads of at most four bins each (most pixels): spread a's in the low four
 // AVX lanes, b's in the high four, one pass for both; the same operations lane by lane. shares_a and
-// shares_b receive four values each (zeros past n_a, n_b); false as footprint_shares4 (nothing usable).
-__attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa, int n_a,
-                                                             const Math<float>::RangeSpread& sb, int n_b,
-                                                             float* shares_a, float* shares_b) {
+// shares_b receive four values each (zeros past a spread's bins); false as footprint_shares4.
+__attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa,
+                                                             const Math<float>::RangeSpread& sb, float* shares_a,
+                                                             float* shares_b) {
     const __m256 vlo = halves8(sa.lo, sb.lo), vhi = halves8(sa.hi, sb.hi), vcentre = halves8(sa.centre, sb.centre),
                  vg = halves8(sa.g, sb.g), vinv = halves8(sa.inv_norm, sb.inv_norm);
     const __m256 half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f);
@@ -131,8 +131,6 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::
     const __m256 share = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(len, e), sinhc), vinv));
     _mm_storeu_ps(shares_a, _mm256_castps256_ps128(share));
     _mm_storeu_ps(shares_b, _mm256_extractf128_ps(share, 1));
-    (void)n_a;
-    (void)n_b;
     return true;
 }
 
@@ -342,7 +340,7 @@ bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>
 bool footprint_shares4(float, float, float, float, float, int, int, float*) {
     return false;
 }
-bool footprint_shares4x2(const Math<float>::RangeSpread&, int, const Math<float>::RangeSpread&, int, float*, float*) {
+bool footprint_shares4x2(const Math<float>::RangeSpread&, const Math<float>::RangeSpread&, float*, float*) {
     return false;
 }
 #endif
@@ -473,7 +471,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
                     spreads[b + 1].kernel == shared::kRangeKernelFootprint && spread_bins >= 1 && spread_bins <= 4 &&
                     bins_of(b + 1) >= 1 && bins_of(b + 1) <= 4) {
                     float shares_a[4], shares_b[4];
-                    if (footprint_shares4x2(spread, spread_bins, spreads[b + 1], bins_of(b + 1), shares_a, shares_b)) {
+                    if (footprint_shares4x2(spread, spreads[b + 1], shares_a, shares_b)) {
                         sink(batch[b], e2[2 * batch[b]], spread.k_first, spread_bins, shares_a);
                         sink(batch[b + 1], e2[2 * batch[b + 1]], spreads[b + 1].k_first, bins_of(b + 1), shares_b);
                         ++b;
