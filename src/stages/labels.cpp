@@ -235,7 +235,8 @@ void cache_rows(const Plan& plan, const Frame& frame, const std::vector<PixelRay
                 if (spread_bins <= kCachedShares) {
                     for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
                         out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
-                } else if (wide_end - wide_next >= std::size_t(spread_bins)) {
+                } else if (wide_end - wide_next >= std::size_t(spread_bins) &&
+                           wide_next + std::size_t(spread_bins) < kNoWideShares) { // (offsets fit 32 bits)
                     // once here instead of in every beam the pixel feeds (three or four)
                     out.wide_shares = static_cast<std::uint32_t>(wide_next);
                     for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
