@@ -48,8 +48,6 @@ constexpr std::uint32_t kNoWideShares = ~0u;
 struct PixelLabel {
     M::RangeSpread spread;       // k_last < k_first: no energy in the window
     float shares[kCachedShares]; // range_share(spread, k_first + i), when the spread spans <= kCachedShares bins
-    float dir[3];                // unit direction, sonar frame (x forward, y port, z up)
-    float elevation;             // rad, up positive
     float range;                 // slant range, m
     std::uint32_t instance;
     std::uint32_t wide_shares; // spreads wider than kCachedShares: range_share's values (double) start here
@@ -161,10 +159,7 @@ struct Job {
     const Plan* plan;
     const std::vector<std::uint16_t>* class_of_instance;
     std::vector<std::unique_ptr<LabelsStage::Scratch>>* scratch;
-    std::vector<PixelLabel>* pixels;
-    const std::vector<PixelRay>* rays;
-    std::vector<double>* wide_shares;
-    std::vector<std::uint32_t>* hit_columns;
+    LabelsStage::Pixels* pixels;
     Frame* frame;
     const SubpixelReturns* subpixel; // null or empty: no sub-pixel returns this frame
 };
@@ -207,17 +202,18 @@ inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const 
                                instance};
 }
 
-// Rows [row_begin, row_end) of the pixel cache: each pixel's range spread (as the beamform stage's),
-// direction, elevation and instance.
-void cache_rows(const Plan& plan, const Frame& frame, const std::vector<PixelRay>& rays,
-                std::vector<PixelLabel>& pixels, std::vector<double>& wide_shares,
-                std::vector<std::uint32_t>& hit_columns, std::uint32_t row_begin, std::uint32_t row_end) {
+// Rows [row_begin, row_end) of the pixel cache: each hit pixel's range spread (as the beamform stage's),
+// shares, range and instance, and each view's hit columns (its direction is in Pixels::rays).
+void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache, std::uint32_t row_begin,
+                std::uint32_t row_end) {
+    std::vector<PixelLabel>& pixels = cache.pixels;
+    std::vector<double>& wide_shares = cache.wide_shares;
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
     // this part's room for the wide spreads' shares (Pixels::wide_shares)
     std::size_t wide_next = std::size_t(row_begin) * plan.columns * kWideSharesPerPixel;
     const std::size_t wide_end = std::size_t(row_end) * plan.columns * kWideSharesPerPixel;
     for (std::uint32_t row = row_begin; row < row_end; ++row) {
-        std::uint32_t* hits = hit_columns.data() + std::size_t(row) * plan.views * 2;
+        std::uint32_t* hits = cache.hit_columns.data() + std::size_t(row) * plan.views * 2;
         for (std::uint32_t view = 0, column = 0; view < plan.views; ++view) {
             hits[2 * view] = hits[2 * view + 1] = column; // none yet
             for (const std::uint32_t view_end = column + view_columns(plan, view); column < view_end; ++column) {
@@ -242,10 +238,6 @@ void cache_rows(const Plan& plan, const Frame& frame, const std::vector<PixelRay
                     for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
                         wide_shares[wide_next++] = M::range_share(out.spread, k);
                 }
-                const PixelRay& ray = rays[p];
-                for (int i = 0; i < 3; ++i)
-                    out.dir[i] = ray.dir[i];
-                out.elevation = ray.elevation;
                 out.range = frame.echo[2 * p + 1];
                 out.instance = instance_of(frame.material[p]);
             }
@@ -256,15 +248,17 @@ void cache_rows(const Plan& plan, const Frame& frame, const std::vector<PixelRay
 // One pixel's energy into the beam's cells along its range shares. Its point in a cell lies along its
 // direction at the range of the part of its footprint inside the cell's bin (the footprint kernel
 // spreads one pixel over many bins at grazing incidence; the tent and nearest kernels keep its range).
-void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, const double* wide_shares, std::size_t p,
+void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& cache, std::size_t p,
                std::vector<Cell>& cells, double weight, int& k_low, int& k_high) {
+    const PixelLabel& pixel = cache.pixels[p];
+    const PixelRay& ray = cache.rays[p];
     const M::RangeSpread& spread = pixel.spread;
     if (spread.k_last < spread.k_first) return;
     const double e = frame.echo[2 * p] * weight;
     const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
     const bool cached = spread.k_last - spread.k_first < kCachedShares;
     const double* wide =
-        pixel.wide_shares != kNoWideShares ? wide_shares + pixel.wide_shares - spread.k_first : nullptr;
+        pixel.wide_shares != kNoWideShares ? cache.wide_shares.data() + pixel.wide_shares - spread.k_first : nullptr;
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
         const double share =
             cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : M::range_share(spread, k));
@@ -275,8 +269,8 @@ void add_pixel(const Plan& plan, const Frame& frame, const PixelLabel& pixel, co
             const double x = 0.5 * (std::max(spread.lo, double(k)) + std::min(spread.hi, double(k + 1)));
             range = plan.config.range_min_m + x * plan.bin_width_m;
         }
-        const double point[3] = {pixel.dir[0] * range, pixel.dir[1] * range, pixel.dir[2] * range};
-        add(cells[static_cast<std::size_t>(k)], pixel.instance, w, pixel.elevation, point);
+        const double point[3] = {ray.dir[0] * range, ray.dir[1] * range, ray.dir[2] * range};
+        add(cells[static_cast<std::size_t>(k)], pixel.instance, w, ray.elevation, point);
         k_low = std::min(k_low, k);
         k_high = std::max(k_high, k);
     }
@@ -313,8 +307,7 @@ void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelRe
 }
 
 // Labels beam j into the frame's label arrays.
-void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
-                const std::vector<PixelLabel>& pixels, const double* wide_shares, const std::uint32_t* hit_columns,
+void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance, const LabelsStage::Pixels& cache,
                 const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch, Frame& frame, std::uint32_t j) {
     std::vector<Cell>& cells = scratch.cells;
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
@@ -332,8 +325,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
             if (!(weight > 0.0)) continue;
             for (std::uint32_t row = 0; row < plan.rows; ++row) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                if (frame.echo[2 * p] > 0.0f)
-                    add_pixel(plan, frame, pixels[p], wide_shares, p, cells, weight, k_low, k_high);
+                if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, cache, p, cells, weight, k_low, k_high);
             }
         }
     }
@@ -346,7 +338,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             // No hit in this row of the view: nothing to visit. (Its first_pixel below is then never set
             // or read this frame, the same for every beam.)
-            const std::uint32_t* hits = hit_columns + (std::size_t(row) * plan.views + view) * 2;
+            const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
             if (hits[0] == hits[1]) continue;
             const float* view_x = cone_x + view_first_column(plan, view);
             const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
@@ -372,7 +364,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
                     if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
                         weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
                                   beam_weight(static_cast<std::uint32_t>(q));
-                if (weight > 0.0) add_pixel(plan, frame, pixels[p], wide_shares, p, cells, weight, k_low, k_high);
+                if (weight > 0.0) add_pixel(plan, frame, cache, p, cells, weight, k_low, k_high);
             }
         }
     }
@@ -418,15 +410,7 @@ void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_ins
 } // namespace
 
 void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
-    Job job{&plan_,
-            &class_of_instance_,
-            &scratch_,
-            &pixels_->pixels,
-            &pixels_->rays,
-            &pixels_->wide_shares,
-            &pixels_->hit_columns,
-            &frame,
-            subpixel};
+    Job job{&plan_, &class_of_instance_, &scratch_, pixels_.get(), &frame, subpixel};
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
     std::fill(frame.instance_fraction.begin(), frame.instance_fraction.end(), 0.0f);
@@ -439,8 +423,7 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         const std::uint32_t rows = t.plan->rows;
-        cache_rows(*t.plan, *t.frame, *t.rays, *t.pixels, *t.wide_shares, *t.hit_columns,
-                   static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
+        cache_rows(*t.plan, *t.frame, *t.pixels, static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
                    static_cast<std::uint32_t>(std::uint64_t(rows) * (part + 1) / parts));
     };
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
@@ -450,8 +433,7 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
             for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
-                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.wide_shares->data(), t.hit_columns->data(),
-                           t.subpixel, scratch, *t.frame, j);
+                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, j);
     };
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
