@@ -58,77 +58,76 @@ template <class Real> inline void add_shares(Real* column, const Real* shares, i
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
-// footprint_share(lo, hi, centre, g, inv_norm, k) for k = k_first + i, i < n, four bins at a time: the
-// same operations lane by lane (no fused multiply-add), sinhc_of's series where |g half_len| < 0.5. Returns
-// false where a lane needs sinhc_of's other branch or an exponent outside exp4's range; the caller then
-// computes the shares one by one. shares has room for n rounded up to 4.
-__attribute__((target("avx2,fma"))) bool footprint_shares4(float lo, float hi, float centre, float g, float inv_norm,
-                                                           int k_first, int n, float* shares) {
-    const __m128 vlo = _mm_set1_ps(lo), vhi = _mm_set1_ps(hi), vcentre = _mm_set1_ps(centre), vg = _mm_set1_ps(g);
-    const __m128 vinv = _mm_set1_ps(inv_norm), half = _mm_set1_ps(0.5f), one = _mm_set1_ps(1.0f);
-    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    __m128 bad = _mm_setzero_ps();
-    for (int i = 0; i < n; i += 4) {
-        const __m128i k = _mm_add_epi32(_mm_set1_epi32(k_first + i), _mm_setr_epi32(0, 1, 2, 3));
-        // max(lo, k), min(hi, k + 1): lo, hi are not NaN (range_spread); a signed zero changes no share
-        const __m128 a = _mm_max_ps(vlo, _mm_cvtepi32_ps(k));
-        const __m128 b = _mm_min_ps(vhi, _mm_cvtepi32_ps(_mm_add_epi32(k, _mm_set1_epi32(1))));
-        const __m128 live = _mm_cmpgt_ps(b, a);
-        const __m128 len = _mm_sub_ps(b, a);
-        const __m128 half_len = _mm_mul_ps(half, len);
-        const __m128 arg = _mm_and_ps(live, _mm_mul_ps(vg, _mm_sub_ps(_mm_add_ps(a, half_len), vcentre)));
-        const __m128 y = _mm_mul_ps(vg, half_len);
-        bad = _mm_or_ps(bad, _mm_and_ps(live, _mm_cmpge_ps(_mm_and_ps(y, abs_mask), half)));
-        bad = _mm_or_ps(bad, _mm_cmpge_ps(_mm_and_ps(arg, abs_mask), _mm_set1_ps(80.0f)));
-        const __m128 e = exp4(_mm256_cvtps_pd(arg));
-        const __m128 y2 = _mm_mul_ps(y, y);
-        // 1 + y2 / 6 * (1 + y2 / 20 * (1 + y2 / 42)), as sinhc_of
-        const __m128 inner = _mm_add_ps(one, _mm_div_ps(y2, _mm_set1_ps(42.0f)));
-        const __m128 middle = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(20.0f)), inner));
-        const __m128 sinhc = _mm_add_ps(one, _mm_mul_ps(_mm_div_ps(y2, _mm_set1_ps(6.0f)), middle));
-        const __m128 share = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(len, e), sinhc), vinv);
-        _mm_storeu_ps(shares + i, _mm_and_ps(live, share));
-    }
-    return _mm_movemask_ps(bad) == 0;
+// The AVX2 helpers of this file's vector loops (functions, not lambdas: a target attribute does not reach
+// a lambda).
+#define VKS_AVX2_INLINE __attribute__((target("avx2,fma"), always_inline)) inline
+
+// expf of eight floats: exp4 on either half.
+VKS_AVX2_INLINE __m256 exp8(__m256 x) {
+    return _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(x, 1))),
+                           exp4(_mm256_cvtps_pd(_mm256_castps256_ps128(x))));
 }
 
 // (low, low, low, low, high, high, high, high)
-__attribute__((target("avx2"), always_inline)) inline __m256 halves8(float low, float high) {
+VKS_AVX2_INLINE __m256 halves8(float low, float high) {
     return _mm256_set_m128(_mm_set1_ps(high), _mm_set1_ps(low));
 }
 
-// footprint_shares4 for two spreads of at most four bins each (most pixels): spread a's in the low four
-// AVX lanes, b's in the high four, one pass for both; the same operations lane by lane. shares_a and
-// shares_b receive four values each (zeros past a spread's bins); false as footprint_shares4.
-__attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa,
-                                                             const Math<float>::RangeSpread& sb, float* shares_a,
-                                                             float* shares_b) {
-    const __m256 vlo = halves8(sa.lo, sb.lo), vhi = halves8(sa.hi, sb.hi), vcentre = halves8(sa.centre, sb.centre),
-                 vg = halves8(sa.g, sb.g), vinv = halves8(sa.inv_norm, sb.inv_norm);
+// footprint_share(lo, hi, centre, g, inv_norm, k) of eight lanes: the same operations lane by lane (no
+// fused multiply-add), sinhc_of's series where |g half_len| < 0.5; 0 where bin k lies outside [lo, hi].
+// False where a lane needs sinhc_of's other branch or an exponent outside exp4's range (share unset; the
+// caller then computes the shares one by one).
+VKS_AVX2_INLINE bool footprint_share8(__m256 lo, __m256 hi, __m256 centre, __m256 g, __m256 inv_norm, __m256i k,
+                                      __m256& share) {
     const __m256 half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f);
     const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
-    const __m256i k = _mm256_add_epi32(_mm256_set_m128i(_mm_set1_epi32(sb.k_first), _mm_set1_epi32(sa.k_first)),
-                                       _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
-    // lanes past a spread's last bin: k + 1 > hi there, so b <= a and the lane is not live (as in
-    // footprint_shares4's rounded-up last group)
-    const __m256 a = _mm256_max_ps(vlo, _mm256_cvtepi32_ps(k));
-    const __m256 b = _mm256_min_ps(vhi, _mm256_cvtepi32_ps(_mm256_add_epi32(k, _mm256_set1_epi32(1))));
+    // max(lo, k), min(hi, k + 1): lo, hi are not NaN (range_spread); a signed zero changes no share
+    const __m256 a = _mm256_max_ps(lo, _mm256_cvtepi32_ps(k));
+    const __m256 b = _mm256_min_ps(hi, _mm256_cvtepi32_ps(_mm256_add_epi32(k, _mm256_set1_epi32(1))));
     const __m256 live = _mm256_cmp_ps(b, a, _CMP_GT_OQ);
     const __m256 len = _mm256_sub_ps(b, a);
     const __m256 half_len = _mm256_mul_ps(half, len);
-    const __m256 arg = _mm256_and_ps(live, _mm256_mul_ps(vg, _mm256_sub_ps(_mm256_add_ps(a, half_len), vcentre)));
-    const __m256 y = _mm256_mul_ps(vg, half_len);
+    const __m256 arg = _mm256_and_ps(live, _mm256_mul_ps(g, _mm256_sub_ps(_mm256_add_ps(a, half_len), centre)));
+    const __m256 y = _mm256_mul_ps(g, half_len);
     __m256 bad = _mm256_and_ps(live, _mm256_cmp_ps(_mm256_and_ps(y, abs_mask), half, _CMP_GE_OQ));
     bad = _mm256_or_ps(bad, _mm256_cmp_ps(_mm256_and_ps(arg, abs_mask), _mm256_set1_ps(80.0f), _CMP_GE_OQ));
     if (_mm256_movemask_ps(bad) != 0) return false;
-    const __m256 e = _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(arg, 1))),
-                                     exp4(_mm256_cvtps_pd(_mm256_castps256_ps128(arg))));
+    const __m256 e = exp8(arg);
     const __m256 y2 = _mm256_mul_ps(y, y);
     // 1 + y2 / 6 * (1 + y2 / 20 * (1 + y2 / 42)), as sinhc_of
     const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
     const __m256 middle = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(20.0f)), inner));
     const __m256 sinhc = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(6.0f)), middle));
-    const __m256 share = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(len, e), sinhc), vinv));
+    share = _mm256_and_ps(live, _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(len, e), sinhc), inv_norm));
+    return true;
+}
+
+// The footprint shares of one spread's bins k_first + i, i < n, eight at a time (footprint_share8);
+// shares has room for n rounded up to 8. False as footprint_share8.
+__attribute__((target("avx2,fma"))) bool footprint_shares8(const Math<float>::RangeSpread& s, int n, float* shares) {
+    const __m256 lo = halves8(s.lo, s.lo), hi = halves8(s.hi, s.hi), centre = halves8(s.centre, s.centre),
+                 g = halves8(s.g, s.g), inv_norm = halves8(s.inv_norm, s.inv_norm);
+    for (int i = 0; i < n; i += 8) {
+        const __m256i k = _mm256_add_epi32(_mm256_set1_epi32(s.k_first + i), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+        __m256 share;
+        if (!footprint_share8(lo, hi, centre, g, inv_norm, k, share)) return false;
+        _mm256_storeu_ps(shares + i, share);
+    }
+    return true;
+}
+
+// The footprint shares of two spreads of at most four bins each (most pixels) in one pass: a's in the low
+// four lanes, b's in the high four. shares_a and shares_b receive four values each (zeros past a
+// spread's bins: there k + 1 > hi, so the lane is not live). False as footprint_share8.
+__attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa,
+                                                             const Math<float>::RangeSpread& sb, float* shares_a,
+                                                             float* shares_b) {
+    const __m256i k = _mm256_add_epi32(_mm256_set_m128i(_mm_set1_epi32(sb.k_first), _mm_set1_epi32(sa.k_first)),
+                                       _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
+    __m256 share;
+    if (!footprint_share8(halves8(sa.lo, sb.lo), halves8(sa.hi, sb.hi), halves8(sa.centre, sb.centre),
+                          halves8(sa.g, sb.g), halves8(sa.inv_norm, sb.inv_norm), k, share))
+        return false;
     _mm_storeu_ps(shares_a, _mm256_castps256_ps128(share));
     _mm_storeu_ps(shares_b, _mm256_extractf128_ps(share, 1));
     return true;
@@ -142,9 +141,7 @@ struct SpreadLanes {
         left_r[8], right_r[8];
 };
 
-// footprint_spread8's lane-wise helpers (functions, not lambdas: a target attribute does not reach a
-// lambda).
-#define VKS_AVX2_INLINE __attribute__((target("avx2,fma"), always_inline)) inline
+// footprint_spread8's lane-wise helpers
 VKS_AVX2_INLINE __m256 abs8(__m256 v) {
     return _mm256_andnot_ps(_mm256_set1_ps(-0.0f), v);
 }
@@ -188,12 +185,6 @@ VKS_AVX2_INLINE __m256 missing_edge8(__m256 r, __m256 other, __m256 r_near, __m2
         _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(other, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(r_beyond, zero, _CMP_GT_OQ)),
                       steps_agree8(s, t));
     return select8(scaled, _mm256_mul_ps(neg8(other), _mm256_div_ps(s, t)), neg8(other));
-}
-
-// expf of eight floats: exp4 on either half.
-__attribute__((target("avx2,fma"), always_inline)) inline __m256 exp8(__m256 x) {
-    return _mm256_set_m128(exp4(_mm256_cvtps_pd(_mm256_extractf128_ps(x, 1))),
-                           exp4(_mm256_cvtps_pd(_mm256_castps256_ps128(x))));
 }
 
 // range_spread with the footprint kernel (float) for eight pixels as AVX lanes: the same operations in
@@ -337,7 +328,7 @@ struct SpreadLanes {
 bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
     return false;
 }
-bool footprint_shares4(float, float, float, float, float, int, int, float*) {
+bool footprint_shares8(const Math<float>::RangeSpread&, int, float*) {
     return false;
 }
 bool footprint_shares4x2(const Math<float>::RangeSpread&, const Math<float>::RangeSpread&, float*, float*) {
@@ -346,18 +337,17 @@ bool footprint_shares4x2(const Math<float>::RangeSpread&, const Math<float>::Ran
 #endif
 
 // The shares of bins k_first + i, i < n (<= kMaxSpreadBins), as range_share gives them; shares has room
-// for kMaxSpreadBins rounded up to 4. The footprint kernel's in float go four at a time through
-// footprint_shares4 where exp4 matches expf: the same values, computed as footprint_share does.
+// for kMaxSpreadBins rounded up to 8 (kSharesRoom). The footprint kernel's in float go eight at a time
+// through footprint_shares8 where exp4 matches expf: the same values, computed as footprint_share does.
 constexpr int kMaxSpreadBins = static_cast<int>(shared::kMaxFootprintBins) + 2;
+constexpr int kSharesRoom = (kMaxSpreadBins + 7) / 8 * 8;
 
 template <class Real>
 [[gnu::always_inline]] inline void range_shares(const typename Math<Real>::RangeSpread& s, int n, bool exp4,
                                                 Real* shares) {
     using M = Math<Real>;
     if constexpr (std::is_same_v<Real, float>) {
-        if (exp4 && s.kernel == shared::kRangeKernelFootprint &&
-            footprint_shares4(s.lo, s.hi, s.centre, s.g, s.inv_norm, s.k_first, n, shares))
-            return;
+        if (exp4 && s.kernel == shared::kRangeKernelFootprint && footprint_shares8(s, n, shares)) return;
     }
     for (int i = 0; i < n; ++i)
         shares[i] = M::range_share(s, s.k_first + i);
@@ -479,7 +469,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
                     }
                 }
             }
-            Real shares[kMaxSpreadBins + 3];
+            Real shares[kSharesRoom];
             range_shares<Real>(spread, spread_bins, exp4, shares);
             for (int i = std::max(spread_bins, 0); i % 4 != 0; ++i) // zeros up to a multiple of 4 (add_shares)
                 shares[i] = Real(0);
