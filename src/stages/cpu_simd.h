@@ -70,6 +70,15 @@ __attribute__((target("avx2,fma"))) inline void exp4_blocks(const float* x, floa
         _mm_storeu_ps(y + i, exp4(_mm256_cvtps_pd(_mm_loadu_ps(x + i))));
 }
 
+// Whether y[i] is libm(x[i]) bit for bit for every i < n (the checks below).
+template <class Libm> bool same_floats(const float* x, const float* y, int n, Libm libm) {
+    for (int i = 0; i < n; ++i) {
+        const float expected = libm(x[i]);
+        if (std::memcmp(&y[i], &expected, sizeof expected) != 0) return false;
+    }
+    return true;
+}
+
 // Whether exp4_blocks gives std::exp's floats here: glibc's ifunc condition, and a check on a spread of
 // arguments in case this glibc's expf is another one. A property of the machine, fixed once known.
 inline bool exp4_matches_expf() {
@@ -80,11 +89,7 @@ inline bool exp4_matches_expf() {
         for (int i = 0; i < kChecks; ++i)
             x[i] = -9.0f + 18.0f * static_cast<float>(i) / kChecks + 1e-4f * static_cast<float>(i % 7);
         exp4_blocks(x, y, kChecks);
-        for (int i = 0; i < kChecks; ++i) {
-            const float expected = std::exp(x[i]);
-            if (std::memcmp(&y[i], &expected, sizeof expected) != 0) return false;
-        }
-        return true;
+        return same_floats(x, y, kChecks, [](float v) { return std::exp(v); });
     }();
     return matches;
 }
@@ -152,11 +157,7 @@ inline bool log4_matches_logf() {
             std::memcpy(&x[i], &bits, sizeof bits);
         }
         log4_blocks(x, y, kChecks);
-        for (int i = 0; i < kChecks; ++i) {
-            const float expected = std::log(x[i]);
-            if (std::memcmp(&y[i], &expected, sizeof expected) != 0) return false;
-        }
-        return true;
+        return same_floats(x, y, kChecks, [](float v) { return std::log(v); });
     }();
     return matches;
 }

@@ -29,6 +29,23 @@ float float_from_bits(std::uint32_t bits) {
     return f;
 }
 
+// blocks(x) against libm(x) bit for bit, x padded to a multiple of 4 with 1: the number of floats that
+// differ (the first five reported by name).
+template <class Blocks, class Libm>
+std::size_t differences(std::vector<float> x, Blocks blocks, Libm libm, const char* name) {
+    while (x.size() % 4 != 0)
+        x.push_back(1.0f);
+    std::vector<float> y(x.size());
+    blocks(x.data(), y.data(), static_cast<int>(x.size()));
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        const float expected = libm(x[i]);
+        if (std::memcmp(&y[i], &expected, sizeof expected) != 0 && ++differ <= 5)
+            ADD_FAILURE() << name << "(" << x[i] << ") = " << y[i] << ", libm gives " << expected;
+    }
+    return differ;
+}
+
 // Every 61st float of |x| < 80 (the range the footprint shares and the echo's absorption feed exp4).
 TEST(CpuSimd, Exp4GivesExpfsFloats) {
     if (!libm_reproduced()) GTEST_SKIP() << "not glibc 2.36 on a CPU with FMA and AVX2: exp4 may not apply";
@@ -38,17 +55,10 @@ TEST(CpuSimd, Exp4GivesExpfsFloats) {
         x.push_back(float_from_bits(bits));
         x.push_back(-float_from_bits(bits));
     }
-    while (x.size() % 4 != 0)
-        x.push_back(1.0f);
-    std::vector<float> y(x.size());
-    cpu::exp4_blocks(x.data(), y.data(), static_cast<int>(x.size()));
-    std::size_t differ = 0;
-    for (std::size_t i = 0; i < x.size(); ++i) {
-        const float expected = std::exp(x[i]);
-        if (std::memcmp(&y[i], &expected, sizeof expected) != 0 && ++differ <= 5)
-            ADD_FAILURE() << "exp4(" << x[i] << ") = " << y[i] << ", expf gives " << expected;
-    }
-    EXPECT_EQ(differ, 0u) << "of " << x.size();
+    EXPECT_EQ(differences(
+                  x, cpu::exp4_blocks, [](float v) { return std::exp(v); }, "exp4"),
+              0u)
+        << "of " << x.size();
 }
 
 // Every 61st positive normal float, and the edges of its domain; positive_normal4 says which lanes those are.
@@ -60,17 +70,10 @@ TEST(CpuSimd, Log4GivesLogfsFloatsOnPositiveNormals) {
         x.push_back(float_from_bits(bits));
     for (std::uint32_t bits : {0x00800000u, 0x00800001u, 0x3f7fffffu, 0x3f800000u, 0x3f800001u, 0x7f7fffffu})
         x.push_back(float_from_bits(bits));
-    while (x.size() % 4 != 0)
-        x.push_back(1.0f);
-    std::vector<float> y(x.size());
-    cpu::log4_blocks(x.data(), y.data(), static_cast<int>(x.size()));
-    std::size_t differ = 0;
-    for (std::size_t i = 0; i < x.size(); ++i) {
-        const float expected = std::log(x[i]);
-        if (std::memcmp(&y[i], &expected, sizeof expected) != 0 && ++differ <= 5)
-            ADD_FAILURE() << "log4(" << x[i] << ") = " << y[i] << ", logf gives " << expected;
-    }
-    EXPECT_EQ(differ, 0u) << "of " << x.size();
+    EXPECT_EQ(differences(
+                  x, cpu::log4_blocks, [](float v) { return std::log(v); }, "log4"),
+              0u)
+        << "of " << x.size();
 
     const float lanes[4] = {1.0f, float_from_bits(0x00800000u), float_from_bits(0x7f7fffffu), 3.5f};
     EXPECT_EQ(_mm_movemask_ps(cpu::positive_normal4(_mm_loadu_ps(lanes))), 15);
