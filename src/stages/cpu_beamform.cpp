@@ -377,7 +377,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 // Eight neighbouring pixels (most batches): each row's (e, r) pairs by four vector loads,
                 // and the row neighbours from the centre row's ranges; the same values as the loop below.
                 const std::int64_t jj = j;
-                auto row4 = [&](std::int64_t row, float* e, float* r) {
+                auto row_lanes = [&](std::int64_t row, float* e, float* r) {
                     if (row < 0 || row >= static_cast<std::int64_t>(R)) {
                         std::fill(e, e + kSpreadLanes, 0.0f);
                         std::fill(r, r + kSpreadLanes, 0.0f);
@@ -390,11 +390,11 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                         _mm_store_ps(r + 4 * half, _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)));
                     }
                 };
-                row4(jj, in.e, in.r);
-                row4(jj - 2, in.up2_e, in.up2_r);
-                row4(jj - 1, in.up_e, in.up_r);
-                row4(jj + 1, in.down_e, in.down_r);
-                row4(jj + 2, in.down2_e, in.down2_r);
+                row_lanes(jj, in.e, in.r);
+                row_lanes(jj - 2, in.up2_e, in.up2_r);
+                row_lanes(jj - 1, in.up_e, in.up_r);
+                row_lanes(jj + 1, in.down_e, in.down_r);
+                row_lanes(jj + 2, in.down2_e, in.down2_r);
                 const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * C + c[0]);
                 in.left_r[0] = c[0] > view.first ? p[-1] : 0.0f;
                 in.right_r[7] = c[7] + 1 < view.end ? p[17] : 0.0f;
