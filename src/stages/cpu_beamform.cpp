@@ -535,6 +535,71 @@ template <class Real> Real resample_weight(const Plan& plan, std::uint32_t j, st
     return share == 1 ? cw : (share == 2 ? Real(1) - cw : Real(0));
 }
 
+#if defined(__x86_64__) && defined(__GNUC__)
+// Eight registers of eight lanes, s[b] lane l, as eight rows of eight: out[l * stride + b] = s[b][l].
+__attribute__((target("avx2"), always_inline)) inline void store_transposed8(const __m256 (&s)[8], float* out,
+                                                                             std::size_t stride) {
+    const __m256 a0 = _mm256_unpacklo_ps(s[0], s[1]), a1 = _mm256_unpackhi_ps(s[0], s[1]);
+    const __m256 a2 = _mm256_unpacklo_ps(s[2], s[3]), a3 = _mm256_unpackhi_ps(s[2], s[3]);
+    const __m256 a4 = _mm256_unpacklo_ps(s[4], s[5]), a5 = _mm256_unpackhi_ps(s[4], s[5]);
+    const __m256 a6 = _mm256_unpacklo_ps(s[6], s[7]), a7 = _mm256_unpackhi_ps(s[6], s[7]);
+    const __m256 b0 = _mm256_shuffle_ps(a0, a2, _MM_SHUFFLE(1, 0, 1, 0));
+    const __m256 b1 = _mm256_shuffle_ps(a0, a2, _MM_SHUFFLE(3, 2, 3, 2));
+    const __m256 b2 = _mm256_shuffle_ps(a1, a3, _MM_SHUFFLE(1, 0, 1, 0));
+    const __m256 b3 = _mm256_shuffle_ps(a1, a3, _MM_SHUFFLE(3, 2, 3, 2));
+    const __m256 b4 = _mm256_shuffle_ps(a4, a6, _MM_SHUFFLE(1, 0, 1, 0));
+    const __m256 b5 = _mm256_shuffle_ps(a4, a6, _MM_SHUFFLE(3, 2, 3, 2));
+    const __m256 b6 = _mm256_shuffle_ps(a5, a7, _MM_SHUFFLE(1, 0, 1, 0));
+    const __m256 b7 = _mm256_shuffle_ps(a5, a7, _MM_SHUFFLE(3, 2, 3, 2));
+    _mm256_storeu_ps(out, _mm256_permute2f128_ps(b0, b4, 0x20));
+    _mm256_storeu_ps(out + stride, _mm256_permute2f128_ps(b1, b5, 0x20));
+    _mm256_storeu_ps(out + 2 * stride, _mm256_permute2f128_ps(b2, b6, 0x20));
+    _mm256_storeu_ps(out + 3 * stride, _mm256_permute2f128_ps(b3, b7, 0x20));
+    _mm256_storeu_ps(out + 4 * stride, _mm256_permute2f128_ps(b0, b4, 0x31));
+    _mm256_storeu_ps(out + 5 * stride, _mm256_permute2f128_ps(b1, b5, 0x31));
+    _mm256_storeu_ps(out + 6 * stride, _mm256_permute2f128_ps(b2, b6, 0x31));
+    _mm256_storeu_ps(out + 7 * stride, _mm256_permute2f128_ps(b3, b7, 0x31));
+}
+
+// Beam j's eight sums: its columns' weights from w on (w then moves past them).
+__attribute__((target("avx2"), always_inline)) inline __m256
+resample_sum8(const Plan& plan, const float* acc_k0, std::size_t T, std::uint32_t j, const float*& w) {
+    __m256 sum = _mm256_setzero_ps();
+    const std::uint32_t c_begin = plan.beam_column_begin[j], c_end = plan.beam_column_end[j];
+    for (std::uint32_t c = c_begin; c < c_end; ++c)
+        sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_set1_ps(w[c - c_begin]),
+                                               _mm256_loadu_ps(acc_k0 + static_cast<std::size_t>(c) * T)));
+    w += c_end - c_begin;
+    return sum;
+}
+// resample_bins's block of eight bins k0 .. k0 + 7 in float, eight beams at a time: each beam's eight sums
+// as the lanes of one AVX register (the same products added in the same order; no FMA, -ffp-contract=off:
+// the same floats), the eight beams' registers transposed so that each bin row takes eight beams in
+// one store. Beams past the last multiple of eight are stored lane by lane.
+__attribute__((target("avx2"))) void resample_block8(const Plan& plan, const float* acc, const float* weights,
+                                                     float* beam_profiles, std::uint32_t k0) {
+    const std::uint32_t beams = plan.beams;
+    const std::size_t T = column_stride(plan);
+    const float* w = weights;
+    const float* acc_k0 = acc + k0;
+    std::uint32_t j = 0;
+    for (; j + 8 <= beams; j += 8) {
+        __m256 s[8];
+        for (std::uint32_t b = 0; b < 8; ++b)
+            s[b] = resample_sum8(plan, acc_k0, T, j + b, w);
+        store_transposed8(s, beam_profiles + static_cast<std::size_t>(k0) * beams + j, beams);
+    }
+    for (; j < beams; ++j) {
+        float lanes[8];
+        _mm256_storeu_ps(lanes, resample_sum8(plan, acc_k0, T, j, w));
+        for (std::uint32_t l = 0; l < 8; ++l)
+            beam_profiles[static_cast<std::size_t>(k0 + l) * beams + j] = lanes[l];
+    }
+}
+#else
+void resample_block8(const Plan&, const float*, const float*, float*, std::uint32_t) {}
+#endif
+
 // resample: one cell per (beam j, bin k), columns in increasing order, from the accumulators (rounded
 // to float first: the values the profiles hold). Beam j's weights are weights[offset_j + c -
 // beam_column_begin[j]], offset_j the sum of the earlier beams' column counts (resample_weights). Eight
@@ -565,8 +630,16 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
                 beam_profiles[static_cast<std::size_t>(k0 + l) * beams + j] = static_cast<float>(sum[l]);
         }
     };
-    for (; k0 + kBlock <= bin_end; k0 += kBlock)
+    const bool avx2 = std::is_same_v<Real, float> && use_avx2(plan.config);
+    for (; k0 + kBlock <= bin_end; k0 += kBlock) {
+        if constexpr (std::is_same_v<Real, float>) {
+            if (avx2) {
+                resample_block8(plan, acc, weights, beam_profiles, k0);
+                continue;
+            }
+        }
         block(std::integral_constant<std::uint32_t, kBlock>());
+    }
     for (; k0 < bin_end; ++k0)
         block(std::integral_constant<std::uint32_t, 1>());
 }
@@ -724,6 +797,34 @@ void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam
                      far.level.data() + std::size_t(m) * cells * kFarRows);
     }
 }
+// The far side lobes of a batch's rows k0 + r, r < rows, for beamform_beams's float group loop:
+// far_sidelobe_level of every beam written into polar's rows (polar_k0: row k0), to which the loop then
+// adds the convolution's sums. A beam's batch rows lie side by side in FarRows::level, so a beam is one
+// vector of kFarRows lanes, and each lane takes far_at's operations in its order (per channel s0 level(c0)
+// + s1 level(c1), then l0 - cos l1 - sin l2, then max(x, 0) as (x < 0) ? 0 : x): the same floats. Also
+// as an AVX2 build (a beam's eight rows in one register).
+__attribute__((target_clones("avx2", "default"))) void far_values_into_rows(const float* far_beam, const float* level,
+                                                                            std::uint32_t channels, std::uint32_t cells,
+                                                                            std::uint32_t beams, std::uint32_t rows,
+                                                                            float* polar_k0) {
+    using V = FarLanes<float>::type;
+    for (std::uint32_t j = 0; j < beams; ++j) {
+        const float* f = far_beam + std::size_t(j) * kFarBeamValues;
+        const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+        V l[3] = {};
+        for (std::uint32_t m = 0; m < channels; ++m) {
+            V v0, v1;
+            std::memcpy(&v0, level + (std::size_t(m) * cells + c0) * kFarRows, sizeof v0);
+            std::memcpy(&v1, level + (std::size_t(m) * cells + c1) * kFarRows, sizeof v1);
+            l[m] = f[kFarS0] * v0 + f[kFarS1] * v1;
+        }
+        const V x = l[0] - f[kFarCos] * l[1] - f[kFarSin] * l[2];
+        const V value = x < V{} ? V{} : x;
+        for (std::uint32_t r = 0; r < rows; ++r)
+            polar_k0[std::size_t(r) * beams + j] = value[r];
+    }
+}
+
 } // namespace
 
 namespace {
@@ -756,17 +857,8 @@ std::size_t sidelobe_group_count(const Plan& plan) {
 
 } // namespace
 
-// With far side lobes, each group's far read-back values as lanes (FarBeam's c0 and c1 as offsets into
-// FarRows::level, s0, s1, cos, sin): [q][value][lane], after the group weights.
-constexpr std::size_t kFarGroupValues = 6;
-
-std::size_t far_group_count(const Plan& plan) {
-    return plan.far_cells > 0 ? sidelobe_group_count(plan) : 0;
-}
-
 std::size_t resample_weight_count(const Plan& plan) {
-    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps +
-           far_group_count(plan) * kFarGroupValues * 4;
+    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps;
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -797,17 +889,6 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
                 const std::size_t j = 4 * q + l;
                 *weights++ = j < plan.beams ? static_cast<Real>(plan.sidelobe_weight[j * taps + t]) : Real(0);
             }
-    const Real* far_beam = weights - sidelobe_group_count(plan) * 4 * taps - far_beam_count(plan);
-    for (std::size_t q = 0; q < far_group_count(plan); ++q, weights += kFarGroupValues * 4)
-        for (std::uint32_t l = 0; l < 4; ++l) { // the lanes past the last beam repeat it
-            const Real* f = far_beam + std::min<std::size_t>(4 * q + l, plan.beams - 1) * kFarBeamValues;
-            weights[0 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC0]) * kFarRows);
-            weights[1 * 4 + l] = static_cast<Real>(static_cast<std::uint32_t>(f[kFarC1]) * kFarRows);
-            weights[2 * 4 + l] = f[kFarS0];
-            weights[3 * 4 + l] = f[kFarS1];
-            weights[4 * 4 + l] = f[kFarCos];
-            weights[5 * 4 + l] = f[kFarSin];
-        }
 }
 
 namespace {
@@ -952,7 +1033,6 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
     const Real* group_weights = far_beam + far_beam_count(plan);   // sidelobe_group_count's weights
     const std::size_t groups = sidelobe_group_count(plan);
-    const Real* far_group = group_weights + groups * 4 * taps; // far_group_count's read-back lanes
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
         const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
@@ -971,7 +1051,13 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     for (std::uint32_t k = bin_begin; k < bin_end;) {
         if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
             far_first = k;
-            far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, std::min(kFarRows, bin_end - k), far);
+            const std::uint32_t rows = std::min(kFarRows, bin_end - k);
+            far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, rows, far);
+            if constexpr (std::is_same_v<Real, float>) {
+                if (groups > 0) // the group loop below adds its sums to these
+                    far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows,
+                                         polar + std::size_t(k) * beams);
+            }
         }
         const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
         // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
@@ -1057,34 +1143,9 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                 for (std::uint32_t r = 0; r < rows; ++r) {
                     float* out = polar + static_cast<std::size_t>(k + r) * beams;
                     if constexpr (std::is_same_v<Real, float>) {
-                        if (cells > 0) { // far_at's values as lanes, from far_group's table
-                            const std::uint32_t fr = k + r - far_first;
-                            for (std::size_t g = 0; g < n; ++g) {
-                                const float* fg = far_group + (q0 + g) * kFarGroupValues * 4;
-                                const float* level = far.level.data() + fr;
-                                V l[3] = {};
-                                for (std::uint32_t m = 0; m < channels; ++m) {
-                                    const float* lm = level + std::size_t(m) * cells * kFarRows;
-                                    V v0, v1;
-                                    for (std::uint32_t i = 0; i < 4; ++i) {
-                                        v0[i] = lm[static_cast<std::uint32_t>(fg[i])];
-                                        v1[i] = lm[static_cast<std::uint32_t>(fg[4 + i])];
-                                    }
-                                    V s0, s1;
-                                    std::memcpy(&s0, fg + 8, sizeof s0);
-                                    std::memcpy(&s1, fg + 12, sizeof s1);
-                                    l[m] = s0 * v0 + s1 * v1;
-                                }
-                                V cs, sn;
-                                std::memcpy(&cs, fg + 16, sizeof cs);
-                                std::memcpy(&sn, fg + 20, sizeof sn);
-                                const V level_far = l[0] - cs * l[1] - sn * l[2];
-                                // far_sidelobe_level: std::max(x, 0) = (x < 0) ? 0 : x
-                                const V far_value = level_far < V{} ? V{} : level_far;
-                                const V sum = s[r][g] + far_value;
-                                for (std::size_t jj = j0 + 4 * g, i = 0; i < 4 && jj < j_end; ++i, ++jj)
-                                    out[jj] = sum[i];
-                            }
+                        if (cells > 0) { // the far side lobes are in out already (far_values_into_rows)
+                            for (std::size_t jj = j0; jj < j_end; ++jj)
+                                out[jj] = s[r][(jj - j0) / 4][(jj - j0) % 4] + out[jj];
                             continue;
                         }
                     }
