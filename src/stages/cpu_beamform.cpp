@@ -703,75 +703,95 @@ void far_convolve(const float* w, const double* energy, const std::uint16_t* liv
     far_convolve_cells<double>(w, energy, live, n, base, cells, level);
 }
 
+// far_sidelobe_rows's deposit: each beam's energy in the batch's rows (bins k0 + r, r < rows) into its two
+// cells per channel, scattered per beam with the rows side by side: each cell still takes its beams in
+// increasing order in every row (the shader gathers per cell). A beam of zero energy in a row adds exactly
+// +-0 there, which leaves the sum as it is (a sum that starts at +0 is never -0). The sums of the two
+// cells the last beam fed are held in registers (per channel) and written back when a beam feeds another
+// cell: the same additions in the same order, without a load and store per addition (consecutive beams
+// share cells). The channel count is a constant, so that they stay in registers. energy: FarRows::energy,
+// zeroed.
+template <class Real, std::uint32_t kChannels>
+[[gnu::always_inline]] inline void far_deposit_rows(const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
+                                                    std::uint32_t rows, std::uint32_t beams, std::uint32_t cells,
+                                                    Real* energy_cells) {
+    using V = typename FarLanes<Real>::type; // the batch's rows, lane r: bin k0 + r
+    constexpr std::uint32_t kNone = ~0u;
+    auto cell_at = [&](std::uint32_t m, std::uint32_t c) { return energy_cells + (m * cells + c) * kFarRows; };
+    // (out parameters: a V is a value wider than the default build's registers, which a lambda must not return)
+    auto load = [](V& v, const Real* p) { std::memcpy(&v, p, sizeof v); };
+    auto store = [](Real* p, const V& v) { std::memcpy(p, &v, sizeof v); };
+    std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
+    V sa[kChannels] = {}, sb[kChannels] = {};
+    for (std::uint32_t i = 0; i < beams; ++i) {
+        V energy = {};
+        bool any = false;
+        for (std::uint32_t r = 0; r < rows; ++r) {
+            energy[r] = static_cast<Real>(beam_profiles[static_cast<std::size_t>(k0 + r) * beams + i]);
+            any = any || energy[r] != Real(0);
+        }
+        if (!any) continue;
+        const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+        const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+        if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
+            V na[kChannels], nb[kChannels];
+            for (std::uint32_t m = 0; m < kChannels; ++m) {
+                if (ca != kNone && ca != c0 && ca != c1) store(cell_at(m, ca), sa[m]);
+                if (cb != kNone && cb != c0 && cb != c1) store(cell_at(m, cb), sb[m]);
+            }
+            for (std::uint32_t m = 0; m < kChannels; ++m) {
+                if (c0 == ca || c0 == cb)
+                    na[m] = c0 == ca ? sa[m] : sb[m];
+                else
+                    load(na[m], cell_at(m, c0));
+                if (c1 == ca || c1 == cb)
+                    nb[m] = c1 == ca ? sa[m] : sb[m];
+                else
+                    load(nb[m], cell_at(m, c1));
+            }
+            for (std::uint32_t m = 0; m < kChannels; ++m) {
+                sa[m] = na[m];
+                sb[m] = nb[m];
+            }
+            ca = c0;
+            cb = c1;
+        }
+        for (std::uint32_t m = 0; m < kChannels; ++m) {
+            sa[m] += f[kFarDeposit + 2 * m] * energy;
+            sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
+        }
+    }
+    for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
+        store(cell_at(m, ca), sa[m]);
+        store(cell_at(m, cb), sb[m]);
+    }
+}
+// In float also as an AVX2 build, where a batch's eight rows are one register and the six sums held
+// (three channels) no longer spill: the same operations.
+__attribute__((target_clones("avx2", "default"))) void far_deposit(const float* far_beam, const float* beam_profiles,
+                                                                   std::uint32_t k0, std::uint32_t rows,
+                                                                   std::uint32_t beams, std::uint32_t cells,
+                                                                   std::uint32_t channels, float* energy_cells) {
+    if (channels == 3)
+        far_deposit_rows<float, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+    else
+        far_deposit_rows<float, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+}
+void far_deposit(const double* far_beam, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
+                 std::uint32_t beams, std::uint32_t cells, std::uint32_t channels, double* energy_cells) {
+    if (channels == 3)
+        far_deposit_rows<double, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+    else
+        far_deposit_rows<double, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+}
+
 template <class Real>
 void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
                        std::uint32_t rows, FarRows<Real>& far) {
-    using V = typename FarLanes<Real>::type; // the batch's rows, lane r: bin k0 + r
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
     const std::size_t used = std::size_t(channels) * cells * kFarRows;
     std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
-    // Scattered per beam, the batch's rows side by side: each cell still takes its beams in increasing
-    // order in every row (the shader gathers per cell). A beam of zero energy in a row adds exactly +-0
-    // there, which leaves the sum as it is (a sum that starts at +0 is never -0). The sums of the two
-    // cells the last beam fed are held in registers (per channel) and written back when a beam feeds
-    // another cell: the same additions in the same order, without a load and store per addition
-    // (consecutive beams share cells). The channel count as a constant, so that they stay in registers.
-    constexpr std::uint32_t kNone = ~0u;
-    auto cell_at = [&](std::uint32_t m, std::uint32_t c) { return far.energy.data() + (m * cells + c) * kFarRows; };
-    // (out parameters: a V is a value wider than this build's registers, which a lambda must not return)
-    auto load = [](V& v, const Real* p) { std::memcpy(&v, p, sizeof v); };
-    auto store = [](Real* p, const V& v) { std::memcpy(p, &v, sizeof v); };
-    auto deposit = [&](auto channel_count) {
-        constexpr std::uint32_t kChannels = decltype(channel_count)::value;
-        std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
-        V sa[kChannels] = {}, sb[kChannels] = {};
-        for (std::uint32_t i = 0; i < beams; ++i) {
-            V energy = {};
-            bool any = false;
-            for (std::uint32_t r = 0; r < rows; ++r) {
-                energy[r] = static_cast<Real>(beam_profiles[static_cast<std::size_t>(k0 + r) * beams + i]);
-                any = any || energy[r] != Real(0);
-            }
-            if (!any) continue;
-            const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
-            const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
-            if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
-                V na[kChannels], nb[kChannels];
-                for (std::uint32_t m = 0; m < kChannels; ++m) {
-                    if (ca != kNone && ca != c0 && ca != c1) store(cell_at(m, ca), sa[m]);
-                    if (cb != kNone && cb != c0 && cb != c1) store(cell_at(m, cb), sb[m]);
-                }
-                for (std::uint32_t m = 0; m < kChannels; ++m) {
-                    if (c0 == ca || c0 == cb)
-                        na[m] = c0 == ca ? sa[m] : sb[m];
-                    else
-                        load(na[m], cell_at(m, c0));
-                    if (c1 == ca || c1 == cb)
-                        nb[m] = c1 == ca ? sa[m] : sb[m];
-                    else
-                        load(nb[m], cell_at(m, c1));
-                }
-                for (std::uint32_t m = 0; m < kChannels; ++m) {
-                    sa[m] = na[m];
-                    sb[m] = nb[m];
-                }
-                ca = c0;
-                cb = c1;
-            }
-            for (std::uint32_t m = 0; m < kChannels; ++m) {
-                sa[m] += f[kFarDeposit + 2 * m] * energy;
-                sb[m] += f[kFarDeposit + 2 * m + 1] * energy;
-            }
-        }
-        for (std::uint32_t m = 0; m < kChannels && ca != kNone; ++m) {
-            store(cell_at(m, ca), sa[m]);
-            store(cell_at(m, cb), sb[m]);
-        }
-    };
-    if (channels == 3)
-        deposit(std::integral_constant<std::uint32_t, 3>());
-    else
-        deposit(std::integral_constant<std::uint32_t, 1>());
+    far_deposit(far_beam, beam_profiles, k0, rows, beams, cells, channels, far.energy.data());
     // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
     // +-0 to sums that start at +0 (the weights are finite).
     std::array<std::uint16_t, 3 * shared::kMaxFarCells> live;
@@ -1077,12 +1097,17 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             // one row at a time.
             const bool pair = k + 1 < bin_end && (cells == 0 || k + 1 - far_first < kFarRows) && !empty_row(B + beams);
             const std::uint32_t rows = pair ? 2 : 1;
-            for (std::uint32_t r = 0; r < rows; ++r)
-                for (std::int64_t i = 0; i < nb + 2 * K + 4; ++i) {
-                    const std::int64_t b = i - K;
-                    const float* row = B + std::size_t(r) * beams;
-                    padded[r][i] = b >= 0 && b < nb ? row[b] : (plan.circular ? row[(b + nb) % nb] : 0.0f);
-                }
+            for (std::uint32_t r = 0; r < rows; ++r) {
+                // padded[r][K + b] = beam b for b in [-K, nb + K + 4): the beams themselves, then the
+                // padding either side (the wrapped beams with plan.circular, where K < nb / 2, else zeros)
+                const float* row = B + std::size_t(r) * beams;
+                float* out = padded[r] + K;
+                std::memcpy(out, row, sizeof(float) * beams);
+                for (std::int64_t b = -K; b < 0; ++b)
+                    out[b] = plan.circular ? row[b + nb] : 0.0f;
+                for (std::int64_t b = nb; b < nb + K + 4; ++b)
+                    out[b] = plan.circular ? row[(b + nb) % nb] : 0.0f;
+            }
             for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
                 const std::size_t n = std::min<std::size_t>(4, groups - q0);
                 const std::size_t j0 = 4 * q0, j_end = std::min<std::size_t>(j0 + 4 * n, beams);
