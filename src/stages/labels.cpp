@@ -3,6 +3,7 @@
 #include "stages/labels.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -449,6 +450,51 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
         if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;
 }
 
+namespace {
+
+// One labelled object drawn alone, in bands of rows (visibility): part `part` of `parts` draws rows
+// [rows part / parts, rows (part + 1) / parts) and counts them into tally[part] (instance: its own pixels,
+// those the frame's depth image also shows it in).
+struct AloneBands {
+    const Plan* plan;
+    const SceneData* scene;
+    LabelsStage::Alone* alone;
+    const Frame* frame;
+    std::uint32_t id;
+    std::array<ObjectVisibility, host::Workers::kMaxThreads> tally;
+};
+
+void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
+    AloneBands& b = *static_cast<AloneBands*>(context);
+    const Plan& plan = *b.plan;
+    LabelsStage::Alone& a = *b.alone;
+    const auto row_begin = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * part / parts);
+    const auto row_end = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * (part + 1) / parts);
+    ObjectVisibility& tally = b.tally[part];
+    tally = ObjectVisibility{};
+    if (row_begin == row_end) return;
+    const DepthClusters only{a.clusters, a.drawn_alone};
+    DepthRegion band;
+    band.row_begin = row_begin;
+    band.row_end = row_end;
+    depth_pass(plan, *b.scene, a.draws, a.depth.data(), a.material.data(), nullptr, &only, band);
+    for (std::size_t p = std::size_t(row_begin) * plan.columns; p < std::size_t(row_end) * plan.columns; ++p) {
+        const float d = a.depth[p];
+        if (!(d > 0.0f)) continue;
+        ++tally.pixels;
+        if (instance_of(b.frame->material[p]) != b.id) {
+            ++tally.hidden;
+            continue;
+        }
+        ++tally.instance;
+        const double range = pixel_slant_range(plan, static_cast<std::uint32_t>(p / plan.columns),
+                                               static_cast<std::uint32_t>(p % plan.columns), d);
+        if (range < plan.config.range_min_m || range >= plan.config.range_max_m) ++tally.outside;
+    }
+}
+
+} // namespace
+
 void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
     Alone& a = *alone_;
     const SceneData& scene = *a.scene;
@@ -492,20 +538,18 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
         }
         std::uint32_t own = 0; // its pixels in the frame's own depth image
         if (any) {
-            const DepthClusters only{a.clusters, a.drawn_alone};
-            depth_pass(plan_, scene, a.draws, a.depth.data(), a.material.data(), nullptr, &only);
-            for (std::size_t p = 0; p < a.depth.size(); ++p) {
-                const float d = a.depth[p];
-                if (!(d > 0.0f)) continue;
-                ++v.pixels;
-                if (instance_of(frame.material[p]) != id) {
-                    ++v.hidden;
-                    continue;
-                }
-                ++own;
-                const double range = pixel_slant_range(plan_, static_cast<std::uint32_t>(p / plan_.columns),
-                                                       static_cast<std::uint32_t>(p % plan_.columns), d);
-                if (range < plan_.config.range_min_m || range >= plan_.config.range_max_m) ++v.outside;
+            // In bands of rows, one per thread: each draws the object into its rows and tallies them
+            // (counts, so the sum does not depend on the split).
+            AloneBands bands{&plan_, &scene, &a, &frame, id, {}};
+            if (workers_ != nullptr && workers_->count() > 1)
+                workers_->run(draw_alone_band, &bands);
+            else
+                draw_alone_band(&bands, 0, 1);
+            for (std::uint32_t part = 0; part < bands.tally.size(); ++part) {
+                v.pixels += bands.tally[part].pixels;
+                v.hidden += bands.tally[part].hidden;
+                v.outside += bands.tally[part].outside;
+                own += bands.tally[part].instance; // (the band's own pixels)
             }
         }
         if (id < a.from_returns.size()) { // its returns' tally, when it has no pixel of its own
