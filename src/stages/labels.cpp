@@ -39,6 +39,10 @@ struct Cell {
 
 } // namespace
 
+// A thread labels kBeamBlock neighbouring beams at a time (label_beams): with a line array they share
+// most of their pixels.
+constexpr std::uint32_t kBeamBlock = 8;
+
 // What the beams need of a pixel, worked out once per frame (a pixel feeds up to four beams).
 constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider footprints keep theirs apart
 // Wider spreads keep their shares in double in Pixels::wide_shares, up to kWideSharesPerPixel per pixel
@@ -56,8 +60,8 @@ struct PixelLabel {
 };
 
 struct LabelsStage::Scratch {
-    // bins of the beam being labelled: value-initialised here, and label_beam resets every cell it
-    // touched, so each beam starts from zeros without a per-frame clear
+    // bins of the beams being labelled (kBeamBlock * bins, beam after beam): value-initialised here, and
+    // label_beams resets every cell it touched, so each beam starts from zeros without a per-frame clear
     std::vector<Cell> cells;
     // line_array: per (row, view), the first pixel of the last beam's cone columns, and that beam's lower
     // cone bound (infinity: none yet this frame). A thread labels its beams in increasing order, whose
@@ -122,7 +126,7 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
     for (std::uint32_t i = 0; i < parts; ++i) {
         scratch_.push_back(std::make_unique<Scratch>());
-        scratch_.back()->cells.resize(plan_.bins);
+        scratch_.back()->cells.resize(std::size_t(kBeamBlock) * plan_.bins);
         scratch_.back()->first.resize(static_cast<std::size_t>(plan_.rows) * plan_.views);
     }
     pixels_ = std::make_unique<Pixels>();
@@ -249,8 +253,8 @@ void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache
 // One pixel's energy into the beam's cells along its range shares. Its point in a cell lies along its
 // direction at the range of the part of its footprint inside the cell's bin (the footprint kernel
 // spreads one pixel over many bins at grazing incidence; the tent and nearest kernels keep its range).
-void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& cache, std::size_t p,
-               std::vector<Cell>& cells, double weight, int& k_low, int& k_high) {
+void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& cache, std::size_t p, Cell* cells,
+               double weight, int& k_low, int& k_high) {
     const PixelLabel& pixel = cache.pixels[p];
     const PixelRay& ray = cache.rays[p];
     const M::RangeSpread& spread = pixel.spread;
@@ -281,7 +285,7 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
 // into the beam's cells with the beam's share `weight` of the column: each at its centroid, with the
 // tent's range shares, as the profile stage adds its echo (profile.comp add_subpixel).
 void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelReturns& subpixel, std::uint32_t q,
-                          double weight, std::vector<Cell>& cells, int& k_low, int& k_high) {
+                          double weight, Cell* cells, int& k_low, int& k_high) {
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
     const shared::SubpixelReturn* returns = subpixel.returns();
     const SubpixelLabel* labels = subpixel.labels();
@@ -307,104 +311,129 @@ void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelRe
     }
 }
 
-// Labels beam j into the frame's label arrays.
-void label_beam(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance, const LabelsStage::Pixels& cache,
-                const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch, Frame& frame, std::uint32_t j) {
-    std::vector<Cell>& cells = scratch.cells;
-    const std::uint32_t beams = plan.beams, PC = plan.profile_columns;
-    int k_low = static_cast<int>(plan.bins), k_high = -1;
-    const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
-    // The share of profile column q that beam j takes (the resample's tent on the beam table).
-    const auto beam_weight = [&](std::uint32_t q) {
-        const std::uint32_t share = M::resample_share(plan.column_beam[q], j, beams, plan.circular);
-        const double cw = plan.column_weight[q];
-        return share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
-    };
+// The share of profile column q that beam j takes (the resample's tent on the beam table).
+inline double beam_weight(const Plan& plan, std::uint32_t j, std::uint32_t q) {
+    const std::uint32_t share = M::resample_share(plan.column_beam[q], j, plan.beams, plan.circular);
+    const double cw = plan.column_weight[q];
+    return share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
+}
+
+// Labels beams [j_begin, j_end) (at most kBeamBlock) into the frame's label arrays. Each beam has its
+// own cells (scratch.cells from (j - j_begin) * bins) and receives its pixels in the order of one beam
+// labelled alone: rows, then views, then columns, then bins; with a line array the block's beams take
+// each row of each view in turn, so that the pixels they share are read once from memory, not once per
+// beam (each beam's own order, and so every cell's sums and ties, unchanged).
+void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
+                 const LabelsStage::Pixels& cache, const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch,
+                 Frame& frame, std::uint32_t j_begin, std::uint32_t j_end) {
+    const std::uint32_t beams = plan.beams, PC = plan.profile_columns, bins = plan.bins;
+    int k_low[kBeamBlock], k_high[kBeamBlock];
+    for (std::uint32_t j = j_begin; j < j_end; ++j) {
+        k_low[j - j_begin] = static_cast<int>(bins);
+        k_high[j - j_begin] = -1;
+    }
+    auto cells_of = [&](std::uint32_t j) { return scratch.cells.data() + std::size_t(j - j_begin) * bins; };
     if (!plan.line_array) {
-        for (std::uint32_t q = q_begin; q < q_end; ++q) {
-            const double weight = beam_weight(q);
-            if (!(weight > 0.0)) continue;
-            for (std::uint32_t row = 0; row < plan.rows; ++row) {
-                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, cache, p, cells, weight, k_low, k_high);
+        for (std::uint32_t j = j_begin; j < j_end; ++j) {
+            const std::uint32_t b = j - j_begin;
+            for (std::uint32_t q = plan.beam_column_begin[j]; q < plan.beam_column_end[j]; ++q) {
+                const double weight = beam_weight(plan, j, q);
+                if (!(weight > 0.0)) continue;
+                for (std::uint32_t row = 0; row < plan.rows; ++row) {
+                    const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
+                    if (frame.echo[2 * p] > 0.0f)
+                        add_pixel(plan, frame, cache, p, cells_of(j), weight, k_low[b], k_high[b]);
+                }
             }
         }
     }
     for (std::uint32_t row = 0; row < plan.rows && plan.line_array; ++row) {
-        // The pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1, q_end),
-        // each visited once with the sum of its two cone columns' shares of this beam.
+        // Each beam's pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1,
+        // q_end), each visited once with the sum of its two cone columns' shares of the beam.
         // Per view: along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
-        const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
         for (std::uint32_t view = 0; view < plan.views; ++view) {
-            // No hit in this row of the view: nothing to visit. (Its first_pixel below is then never set
+            // No hit in this row of the view: nothing to visit. (Its first pixel below is then never set
             // or read this frame, the same for every beam.)
             const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
             if (hits[0] == hits[1]) continue;
             const float* view_x = cone_x + view_first_column(plan, view);
             const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
-            // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not decreased
+            // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not
+            // decreased (this thread's beams come in increasing order, their cone columns towards starboard)
             std::uint32_t& first_pixel = scratch.first[std::size_t(row) * plan.views + view];
-            std::uint32_t c;
-            if (lo >= scratch.first_lo) {
-                for (c = first_pixel; c < view_end && cone_x[c] < lo; ++c) {
+            float last_lo = scratch.first_lo;
+            for (std::uint32_t j = j_begin; j < j_end; ++j) {
+                const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
+                const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
+                std::uint32_t c;
+                if (lo >= last_lo) {
+                    for (c = first_pixel; c < view_end && cone_x[c] < lo; ++c) {
+                    }
+                } else {
+                    c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) -
+                                                   cone_x);
                 }
-            } else {
-                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) -
-                                               cone_x);
-            }
-            first_pixel = c;
-            for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < hi; ++c) {
-                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
-                // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching their cache entry
-                if (!(frame.echo[2 * p] > 0.0f)) continue;
-                const double x = cone_x[c];
-                const auto first = static_cast<std::int64_t>(std::floor(x));
-                double weight = 0.0;
-                for (std::int64_t q = first; q <= first + 1; ++q)
-                    if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
-                        weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
-                                  beam_weight(static_cast<std::uint32_t>(q));
-                if (weight > 0.0) add_pixel(plan, frame, cache, p, cells, weight, k_low, k_high);
+                first_pixel = c;
+                last_lo = lo;
+                const std::uint32_t b = j - j_begin;
+                Cell* cells = cells_of(j);
+                for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < hi; ++c) {
+                    const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+                    // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching
+                    // their cache entry
+                    if (!(frame.echo[2 * p] > 0.0f)) continue;
+                    const double x = cone_x[c];
+                    const auto first = static_cast<std::int64_t>(std::floor(x));
+                    double weight = 0.0;
+                    for (std::int64_t q = first; q <= first + 1; ++q)
+                        if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
+                            weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
+                                      beam_weight(plan, j, static_cast<std::uint32_t>(q));
+                    if (weight > 0.0) add_pixel(plan, frame, cache, p, cells, weight, k_low[b], k_high[b]);
+                }
             }
         }
     }
+    if (plan.line_array && j_end > j_begin)
+        scratch.first_lo = static_cast<float>(plan.beam_column_begin[j_end - 1]) - 1.0f;
 
-    if (plan.line_array) scratch.first_lo = static_cast<float>(q_begin) - 1.0f;
-
-    // then each profile column's sub-pixel returns, after its pixels (as the profile stage adds them)
-    if (subpixel != nullptr && subpixel->count() > 0) {
-        for (std::uint32_t q = q_begin; q < q_end; ++q) {
-            const double weight = beam_weight(q);
-            if (weight > 0.0) add_subpixel_returns(plan, frame, *subpixel, q, weight, cells, k_low, k_high);
-        }
-    }
-
-    // (cells without energy keep the values run() filled in)
-    for (int k = k_low; k <= k_high; ++k) {
-        Cell& cell = cells[static_cast<std::size_t>(k)];
-        if (cell.energy > 0.0 && cell.used > 0) {
-            // The most energy wins; an exact tie goes to the lower id.
-            const Slot* best = &cell.slots[0];
-            for (std::uint32_t s = 1; s < cell.used; ++s) {
-                const Slot& slot = cell.slots[s];
-                if (slot.energy > best->energy || (slot.energy == best->energy && slot.id < best->id)) best = &slot;
+    for (std::uint32_t j = j_begin; j < j_end; ++j) {
+        const std::uint32_t b = j - j_begin;
+        Cell* cells = cells_of(j);
+        // then each profile column's sub-pixel returns, after the beam's pixels (as the profile stage adds them)
+        if (subpixel != nullptr && subpixel->count() > 0) {
+            for (std::uint32_t q = plan.beam_column_begin[j]; q < plan.beam_column_end[j]; ++q) {
+                const double weight = beam_weight(plan, j, q);
+                if (weight > 0.0) add_subpixel_returns(plan, frame, *subpixel, q, weight, cells, k_low[b], k_high[b]);
             }
-            const std::size_t out = static_cast<std::size_t>(k) * beams + j;
-            frame.instance[out] = static_cast<std::uint16_t>(best->id);
-            frame.instance_fraction[out] = static_cast<float>(best->energy / cell.energy);
-            frame.object_class[out] = best->id < class_of_instance.size() ? class_of_instance[best->id] : 0;
-            const double mean = cell.psi / cell.energy;
-            frame.elevation[out] = static_cast<float>(mean);
-            frame.elevation_spread[out] =
-                static_cast<float>(std::sqrt(std::max(0.0, cell.psi_sq / cell.energy - mean * mean)));
-            frame.point[3 * out] = best->x;
-            frame.point[3 * out + 1] = best->y;
-            frame.point[3 * out + 2] = best->z;
         }
-        // what add() reads of an unused cell (a slot is read only below `used`, and written whole)
-        cell.used = 0;
-        cell.energy = cell.psi = cell.psi_sq = 0.0;
+        // (cells without energy keep the values run() filled in)
+        for (int k = k_low[b]; k <= k_high[b]; ++k) {
+            Cell& cell = cells[static_cast<std::size_t>(k)];
+            if (cell.energy > 0.0 && cell.used > 0) {
+                // The most energy wins; an exact tie goes to the lower id.
+                const Slot* best = &cell.slots[0];
+                for (std::uint32_t s = 1; s < cell.used; ++s) {
+                    const Slot& slot = cell.slots[s];
+                    if (slot.energy > best->energy || (slot.energy == best->energy && slot.id < best->id)) best = &slot;
+                }
+                const std::size_t out = static_cast<std::size_t>(k) * beams + j;
+                frame.instance[out] = static_cast<std::uint16_t>(best->id);
+                frame.instance_fraction[out] = static_cast<float>(best->energy / cell.energy);
+                frame.object_class[out] = best->id < class_of_instance.size() ? class_of_instance[best->id] : 0;
+                const double mean = cell.psi / cell.energy;
+                frame.elevation[out] = static_cast<float>(mean);
+                frame.elevation_spread[out] =
+                    static_cast<float>(std::sqrt(std::max(0.0, cell.psi_sq / cell.energy - mean * mean)));
+                frame.point[3 * out] = best->x;
+                frame.point[3 * out + 1] = best->y;
+                frame.point[3 * out + 2] = best->z;
+            }
+            // what add() reads of an unused cell (a slot is read only below `used`, and written whole)
+            cell.used = 0;
+            cell.energy = cell.psi = cell.psi_sq = 0.0;
+        }
     }
 }
 
@@ -419,8 +448,7 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     std::fill(frame.elevation.begin(), frame.elevation.end(), nan);
     std::fill(frame.elevation_spread.begin(), frame.elevation_spread.end(), nan);
     std::fill(frame.point.begin(), frame.point.end(), nan);
-    // Beams dealt out in blocks of 8 in turn: a line array's edge beams gather from more columns.
-    constexpr std::uint32_t kBeamBlock = 8;
+    // Beams dealt out in blocks of kBeamBlock in turn: a line array's edge beams gather from more columns.
     const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         const std::uint32_t rows = t.plan->rows;
@@ -433,8 +461,8 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
         scratch.first_lo = std::numeric_limits<float>::infinity(); // a new frame: no last beam
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
-            for (std::uint32_t j = begin; j < std::min(begin + kBeamBlock, beams); ++j)
-                label_beam(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, j);
+            label_beams(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, begin,
+                        std::min(begin + kBeamBlock, beams));
     };
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
