@@ -213,6 +213,27 @@ TEST_P(RenderTest, DrawTransformIsHonoured) {
 
 INSTANTIATE_TEST_SUITE_P(Backends, RenderTest, ::testing::Values(Backend::vulkan, Backend::cpu), backend_name);
 
+// One frame on the CPU backend with `threads` host threads (null, and a test failure, if it cannot render).
+std::unique_ptr<Rendered> render_on_threads(const SonarConfig& config, const Scene& scene, const Pose& pose,
+                                            std::uint32_t threads, SaveFlags save_mask) {
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    options.host_threads = threads;
+    options.save_mask = save_mask;
+    auto r = Renderer::create(cpu_context(), config, scene, options);
+    if (!r) {
+        ADD_FAILURE() << r.error().message;
+        return nullptr;
+    }
+    auto rendered = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});
+    rendered->frame = rendered->renderer.make_frame();
+    if (auto ok = rendered->renderer.render(pose, 0, rendered->frame); !ok) {
+        ADD_FAILURE() << ok.error().message;
+        return nullptr;
+    }
+    return rendered;
+}
+
 // The CPU backend splits its stages between the Renderer's threads: the depth pass by views and bands
 // of rows (more bands per view with more threads), normals and echo by blocks of rows (fused), beamform
 // by pixel columns and bins. Every value is computed by one thread in the order of the single-threaded
@@ -228,15 +249,10 @@ TEST(CpuThreads, AnyThreadCountGivesTheSameBytes) {
         config.normal_method = method;
         std::unique_ptr<Rendered> one;
         for (std::uint32_t threads : {1u, 2u, 3u, 5u}) {
-            RendererOptions options;
-            options.backend = Backend::cpu;
-            options.host_threads = threads;
-            options.save_mask = SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles;
-            auto r = Renderer::create(cpu_context(), config, scene.value(), options);
-            ASSERT_TRUE(r) << r.error().message;
-            auto rendered = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});
-            rendered->frame = rendered->renderer.make_frame();
-            ASSERT_TRUE(rendered->renderer.render(pose, 0, rendered->frame));
+            auto rendered =
+                render_on_threads(config, scene.value(), pose, threads,
+                                  SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles);
+            ASSERT_TRUE(rendered);
             if (!one) {
                 EXPECT_GT(sum(rendered->frame.clean), 0.0);
                 one = std::move(rendered);
@@ -274,15 +290,8 @@ TEST(CpuThreads, LabelsDoNotDependOnTheThreadCount) {
         config.beam_geometry = geometry;
         std::unique_ptr<Rendered> one;
         for (std::uint32_t threads : {1u, 2u, 3u, 5u}) {
-            RendererOptions options;
-            options.backend = Backend::cpu;
-            options.host_threads = threads;
-            options.save_mask = SaveFlags::labels;
-            auto r = Renderer::create(cpu_context(), config, scene.value(), options);
-            ASSERT_TRUE(r) << r.error().message;
-            auto rendered = std::make_unique<Rendered>(Rendered{std::move(r.value()), {}});
-            rendered->frame = rendered->renderer.make_frame();
-            ASSERT_TRUE(rendered->renderer.render(pose, 0, rendered->frame));
+            auto rendered = render_on_threads(config, scene.value(), pose, threads, SaveFlags::labels);
+            ASSERT_TRUE(rendered);
             if (!one) {
                 ASSERT_GE(rendered->frame.visibility.size(), 5u); // seabed, pilings, pipe, crate, sphere
                 ASSERT_GT(std::count_if(rendered->frame.instance.begin(), rendered->frame.instance.end(),
