@@ -437,7 +437,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
 }
 
 // Every hit pixel of row j in columns [column_begin, column_end), in increasing column order, with its
-// range shares: sink(c, e, k_first, spread_bins, shares; zeros past spread_bins up to a multiple of 4),
+// range shares: sink(c, e, spread, spread_bins, shares; zeros past spread_bins up to a multiple of 4),
 // the spreads made eight pixels at a time (pixel_spreads) and their shares by range_shares. Both profile
 // layouts (planar and cone columns) add through it; `view`: the one view the columns lie in, if known
 // (pixel_spreads).
@@ -462,8 +462,8 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
                     bins_of(b + 1) >= 1 && bins_of(b + 1) <= 4) {
                     float shares_a[4], shares_b[4];
                     if (footprint_shares4x2(spread, spreads[b + 1], shares_a, shares_b)) {
-                        sink(batch[b], e2[2 * batch[b]], spread.k_first, spread_bins, shares_a);
-                        sink(batch[b + 1], e2[2 * batch[b + 1]], spreads[b + 1].k_first, bins_of(b + 1), shares_b);
+                        sink(batch[b], e2[2 * batch[b]], spread, spread_bins, shares_a);
+                        sink(batch[b + 1], e2[2 * batch[b + 1]], spreads[b + 1], bins_of(b + 1), shares_b);
                         ++b;
                         continue;
                     }
@@ -473,7 +473,7 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
             range_shares<Real>(spread, spread_bins, exp4, shares);
             for (int i = std::max(spread_bins, 0); i % 4 != 0; ++i) // zeros up to a multiple of 4 (add_shares)
                 shares[i] = Real(0);
-            sink(batch[b], static_cast<Real>(e2[2 * batch[b]]), spread.k_first, spread_bins, shares);
+            sink(batch[b], static_cast<Real>(e2[2 * batch[b]]), spread, spread_bins, shares);
         }
         batched = 0;
     };
@@ -513,7 +513,9 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                 std::find_if(cone_x + c_begin, first + W, [hi](float x) { return !(x < hi); }) - cone_x);
             for_each_spread_pixel<Real>(
                 plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
-                [&](std::uint32_t pc, Real e, int k_first, int spread_bins, const Real* shares) {
+                [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread, int spread_bins,
+                    const Real* shares) {
+                    const int k_first = spread.k_first;
                     const Real x = static_cast<Real>(cone_x[pc]);
                     const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
                     const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
@@ -527,6 +529,21 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
         }
     }
 }
+
+} // namespace
+
+void spread_row_pixels(const Plan& plan, const float* echo2, std::uint32_t row, std::uint32_t column_begin,
+                       std::uint32_t column_end, std::uint32_t view_first, std::uint32_t view_end, SpreadPixelFn fn,
+                       void* context) {
+    if (plan.bins == 0) return;
+    for_each_spread_pixel<float>(plan, echo2, row, column_begin, column_end, use_exp4(plan.config),
+                                 plan.params.range_min_m, plan.params.inv_bin_width_m,
+                                 ViewColumns{view_first, view_end},
+                                 [&](std::uint32_t c, float, const Math<float>::RangeSpread& spread, int spread_bins,
+                                     const float* shares) { fn(context, c, spread, spread_bins, shares); });
+}
+
+namespace {
 
 // The weight beam j gives column c in the resample (resample_share of shaders/sonar_math.h).
 template <class Real> Real resample_weight(const Plan& plan, std::uint32_t j, std::uint32_t c) {
@@ -976,8 +993,9 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
         for (std::uint32_t j = 0; j < R && bins > 0; ++j)
             for_each_spread_pixel<Real>(
                 plan, echo2, j, column_begin, column_end, exp4, range_min, inv_bin_width, ViewColumns{},
-                [&](std::uint32_t c, Real e, int k_first, int spread_bins, const Real* shares) {
-                    add_shares(acc + static_cast<std::size_t>(c) * T + k_first, shares, spread_bins, e);
+                [&](std::uint32_t c, Real e, const typename Math<Real>::RangeSpread& spread, int spread_bins,
+                    const Real* shares) {
+                    add_shares(acc + static_cast<std::size_t>(c) * T + spread.k_first, shares, spread_bins, e);
                 });
     }
     if (subpixel != nullptr && subpixel->returns.count() > 0)

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/plan.h"
+#include "core/sonar_math.hpp"
 #include "core/subpixel.h"
 #include "scene/scene_data.h"
 #include "sonar_shared.h"
@@ -113,6 +114,16 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end);
+
+// The range spreads and shares of the hit pixels of row `row`, columns [column_begin, column_end) of the
+// view whose columns are [view_first, view_end), as the float profile loop makes them (the same values:
+// the same code): fn(context, column, spread, spread_bins, shares) in increasing column order, shares[i]
+// the share of bin spread.k_first + i, i < spread_bins. The labels stage spreads pixels with it.
+using SpreadPixelFn = void (*)(void* context, std::uint32_t column, const Math<float>::RangeSpread& spread,
+                               int spread_bins, const float* shares);
+void spread_row_pixels(const Plan& plan, const float* echo2, std::uint32_t row, std::uint32_t column_begin,
+                       std::uint32_t column_end, std::uint32_t view_first, std::uint32_t view_end, SpreadPixelFn fn,
+                       void* context);
 
 // workers: the Renderer's threads (borrowed; null or one thread: everything on the caller). The
 // normals, echo and beamform stages are split between them; the depth pass runs on the caller.

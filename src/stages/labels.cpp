@@ -78,6 +78,9 @@ struct PixelRay {
 };
 
 struct LabelsStage::Pixels {
+    // The spreads and shares as the float profile loop makes them, else in double (LabelsStage's
+    // float_spreads).
+    bool float_spreads = true;
     std::vector<PixelLabel> pixels; // rows * columns
     std::vector<PixelRay> rays;     // rows * columns
     // per (row, view): the columns [first, end) between the view's first and last hit pixel in that row
@@ -121,7 +124,7 @@ PixelRay pixel_ray_of(const Plan& plan, std::uint32_t row, std::uint32_t column)
 } // namespace
 
 LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
-                         const SceneData* scene)
+                         const SceneData* scene, bool float_spreads)
     : plan_(plan), class_of_instance_(std::move(class_of_instance)), workers_(workers) {
     const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
     for (std::uint32_t i = 0; i < parts; ++i) {
@@ -130,6 +133,7 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         scratch_.back()->first.resize(static_cast<std::size_t>(plan_.rows) * plan_.views);
     }
     pixels_ = std::make_unique<Pixels>();
+    pixels_->float_spreads = float_spreads;
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
     pixels_->rays.resize(pixels_->pixels.size());
     pixels_->hit_columns.resize(std::size_t(plan_.rows) * plan_.views * 2);
@@ -207,21 +211,68 @@ inline void add(Cell& cell, std::uint32_t instance, double w, double psi, const 
                                instance};
 }
 
-// Rows [row_begin, row_end) of the pixel cache: each hit pixel's range spread (as the beamform stage's),
-// shares, range and instance, and each view's hit columns (its direction is in Pixels::rays).
+// Where a pixel's shares go in the cache: its entry's (kCachedShares or fewer), else the room of its part of
+// cache_rows in Pixels::wide_shares while there is some (else add_pixel computes them where it reads them).
+struct ShareRoom {
+    std::vector<double>& wide_shares;
+    std::size_t next, end;
+};
+template <class Share> void cache_shares(PixelLabel& out, int spread_bins, ShareRoom& room, const Share& share) {
+    out.wide_shares = kNoWideShares;
+    if (spread_bins <= kCachedShares) {
+        for (int i = 0; i < spread_bins; ++i)
+            out.shares[i] = static_cast<float>(share(i));
+    } else if (room.end - room.next >= std::size_t(spread_bins) &&
+               room.next + std::size_t(spread_bins) < kNoWideShares) { // (offsets fit 32 bits)
+        // once here instead of in every beam the pixel feeds (three or four)
+        out.wide_shares = static_cast<std::uint32_t>(room.next);
+        for (int i = 0; i < spread_bins; ++i)
+            room.wide_shares[room.next++] = share(i);
+    }
+}
+
+// spread_row_pixels's callback (float spreads): the spread's fields into the pixel's entry (in double,
+// from which add_pixel gets the same floats back where it computes a share), and its shares.
+struct FloatRow {
+    PixelLabel* pixels; // the row's entries
+    ShareRoom* room;
+};
+void cache_float_spread(void* context, std::uint32_t column, const Math<float>::RangeSpread& s, int spread_bins,
+                        const float* shares) {
+    const FloatRow& row = *static_cast<const FloatRow*>(context);
+    PixelLabel& out = row.pixels[column];
+    M::RangeSpread& d = out.spread;
+    d.kernel = s.kernel;
+    d.k_first = s.k_first;
+    d.k_last = spread_bins > 0 ? s.k_first + spread_bins - 1 : s.k_first - 1;
+    d.tent_k0 = s.tent_k0;
+    d.tent_w1 = s.tent_w1;
+    d.lo = s.lo;
+    d.hi = s.hi;
+    d.centre = s.centre;
+    d.g = s.g;
+    d.inv_norm = s.inv_norm;
+    cache_shares(out, spread_bins, *row.room, [&](int i) { return double(shares[i]); });
+}
+
+// Rows [row_begin, row_end) of the pixel cache: each hit pixel's range spread and shares as the beamform
+// stage makes them (Pixels::float_spreads: the float profile loop's own code; else in double, as the
+// CPU backend's double precision), range and instance, and each view's hit columns (its direction is in
+// Pixels::rays).
 void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache, std::uint32_t row_begin,
                 std::uint32_t row_end) {
     std::vector<PixelLabel>& pixels = cache.pixels;
-    std::vector<double>& wide_shares = cache.wide_shares;
     const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
     // this part's room for the wide spreads' shares (Pixels::wide_shares)
-    std::size_t wide_next = std::size_t(row_begin) * plan.columns * kWideSharesPerPixel;
-    const std::size_t wide_end = std::size_t(row_end) * plan.columns * kWideSharesPerPixel;
+    ShareRoom room{cache.wide_shares, std::size_t(row_begin) * plan.columns * kWideSharesPerPixel,
+                   std::size_t(row_end) * plan.columns * kWideSharesPerPixel};
     for (std::uint32_t row = row_begin; row < row_end; ++row) {
         std::uint32_t* hits = cache.hit_columns.data() + std::size_t(row) * plan.views * 2;
+        PixelLabel* row_pixels = pixels.data() + std::size_t(row) * plan.columns;
         for (std::uint32_t view = 0, column = 0; view < plan.views; ++view) {
+            const std::uint32_t view_first = column, view_end = column + view_columns(plan, view);
             hits[2 * view] = hits[2 * view + 1] = column; // none yet
-            for (const std::uint32_t view_end = column + view_columns(plan, view); column < view_end; ++column) {
+            for (; column < view_end; ++column) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
                 PixelLabel& out = pixels[p];
                 out.spread.k_first = 0;
@@ -230,21 +281,18 @@ void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache
                 if (!(e > 0.0)) continue;
                 if (hits[2 * view] == hits[2 * view + 1]) hits[2 * view] = column;
                 hits[2 * view + 1] = column + 1;
-                out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
-                const int spread_bins = out.spread.k_last - out.spread.k_first + 1;
-                out.wide_shares = kNoWideShares;
-                if (spread_bins <= kCachedShares) {
-                    for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
-                        out.shares[k - out.spread.k_first] = static_cast<float>(M::range_share(out.spread, k));
-                } else if (wide_end - wide_next >= std::size_t(spread_bins) &&
-                           wide_next + std::size_t(spread_bins) < kNoWideShares) { // (offsets fit 32 bits)
-                    // once here instead of in every beam the pixel feeds (three or four)
-                    out.wide_shares = static_cast<std::uint32_t>(wide_next);
-                    for (int k = out.spread.k_first; k <= out.spread.k_last; ++k)
-                        wide_shares[wide_next++] = M::range_share(out.spread, k);
-                }
                 out.range = frame.echo[2 * p + 1];
                 out.instance = instance_of(frame.material[p]);
+                if (cache.float_spreads) continue; // spread below, a view's pixels at a time
+                out.spread = pixel_spread<double>(plan, frame.echo.data(), row, column, e, range_min, inv_bin_width);
+                const M::RangeSpread& spread = out.spread;
+                cache_shares(out, spread.k_last - spread.k_first + 1, room,
+                             [&](int i) { return M::range_share(spread, spread.k_first + i); });
+            }
+            if (cache.float_spreads && hits[2 * view] < hits[2 * view + 1]) {
+                FloatRow context{row_pixels, &room};
+                spread_row_pixels(plan, frame.echo.data(), row, hits[2 * view], hits[2 * view + 1], view_first,
+                                  view_end, cache_float_spread, &context);
             }
         }
     }
@@ -264,9 +312,24 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
     const bool cached = spread.k_last - spread.k_first < kCachedShares;
     const double* wide =
         pixel.wide_shares != kNoWideShares ? cache.wide_shares.data() + pixel.wide_shares - spread.k_first : nullptr;
+    // float spreads: the float kernel's share from the spread's fields (float -> double -> float is exact)
+    const auto computed_share = [&](int k) {
+        if (!cache.float_spreads) return M::range_share(spread, k);
+        Math<float>::RangeSpread s;
+        s.kernel = spread.kernel;
+        s.k_first = spread.k_first;
+        s.k_last = spread.k_last;
+        s.tent_k0 = spread.tent_k0;
+        s.tent_w1 = static_cast<float>(spread.tent_w1);
+        s.lo = static_cast<float>(spread.lo);
+        s.hi = static_cast<float>(spread.hi);
+        s.centre = static_cast<float>(spread.centre);
+        s.g = static_cast<float>(spread.g);
+        s.inv_norm = static_cast<float>(spread.inv_norm);
+        return double(Math<float>::range_share(s, k));
+    };
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
-        const double share =
-            cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : M::range_share(spread, k));
+        const double share = cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : computed_share(k));
         const double w = share * e;
         if (!(w > 0.0)) continue;
         double range = pixel.range;

@@ -2,7 +2,8 @@
 // energy into it, its share, its class, the energy-weighted elevation and its spread, and the 3-D point
 // of the object's strongest return there. It runs on the host after either backend, on that backend's material/instance
 // image and echo, and follows each pixel's energy along the main lobe exactly as the beamform stage spreads it
-// (pixel_spread's range shares, the cone or pixel columns, the beam table), in double, and the returns
+// (pixel_spread's range shares in the backend's precision, the cone or pixel columns, the beam table;
+// the sums in double), and the returns
 // of objects below the pixel grid's size (core/subpixel.h) as the profile stage adds them. Side lobes,
 // speckle and noise are left out: a label says what the beam looks at, not what leaks into it.
 //
@@ -37,9 +38,11 @@ class LabelsStage {
 public:
     // class_of_instance[id] = the class id of instance id (0 for 0 and any id past the table).
     // workers: the Renderer's threads, borrowed (null: all on the caller). scene: borrowed, for
-    // Frame::visibility (null: a host depth image, no visibility).
+    // Frame::visibility (null: a host depth image, no visibility). float_spreads: each pixel's range
+    // spread and shares as the float profile loop makes them (the GPU's profile pass, the CPU backend in
+    // float), else in double (the CPU backend with cpu.precision = double).
     LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
-                const SceneData* scene);
+                const SceneData* scene, bool float_spreads = true);
     ~LabelsStage();
     LabelsStage(const LabelsStage&) = delete;
     LabelsStage& operator=(const LabelsStage&) = delete;
