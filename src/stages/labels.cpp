@@ -231,6 +231,22 @@ template <class Share> void cache_shares(PixelLabel& out, int spread_bins, Share
     }
 }
 
+// A range spread in the other precision, field by field (float -> double -> float gives the same floats).
+template <class To, class From> typename Math<To>::RangeSpread spread_in(const From& s) {
+    typename Math<To>::RangeSpread out;
+    out.kernel = s.kernel;
+    out.k_first = s.k_first;
+    out.k_last = s.k_last;
+    out.tent_k0 = s.tent_k0;
+    out.tent_w1 = static_cast<To>(s.tent_w1);
+    out.lo = static_cast<To>(s.lo);
+    out.hi = static_cast<To>(s.hi);
+    out.centre = static_cast<To>(s.centre);
+    out.g = static_cast<To>(s.g);
+    out.inv_norm = static_cast<To>(s.inv_norm);
+    return out;
+}
+
 // spread_row_pixels's callback (float spreads): the spread's fields into the pixel's entry (in double,
 // from which add_pixel gets the same floats back where it computes a share), and its shares.
 struct FloatRow {
@@ -241,17 +257,8 @@ void cache_float_spread(void* context, std::uint32_t column, const Math<float>::
                         const float* shares) {
     const FloatRow& row = *static_cast<const FloatRow*>(context);
     PixelLabel& out = row.pixels[column];
-    M::RangeSpread& d = out.spread;
-    d.kernel = s.kernel;
-    d.k_first = s.k_first;
-    d.k_last = spread_bins > 0 ? s.k_first + spread_bins - 1 : s.k_first - 1;
-    d.tent_k0 = s.tent_k0;
-    d.tent_w1 = s.tent_w1;
-    d.lo = s.lo;
-    d.hi = s.hi;
-    d.centre = s.centre;
-    d.g = s.g;
-    d.inv_norm = s.inv_norm;
+    out.spread = spread_in<double>(s);
+    out.spread.k_last = spread_bins > 0 ? s.k_first + spread_bins - 1 : s.k_first - 1;
     cache_shares(out, spread_bins, *row.room, [&](int i) { return double(shares[i]); });
 }
 
@@ -314,19 +321,8 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
         pixel.wide_shares != kNoWideShares ? cache.wide_shares.data() + pixel.wide_shares - spread.k_first : nullptr;
     // float spreads: the float kernel's share from the spread's fields (float -> double -> float is exact)
     const auto computed_share = [&](int k) {
-        if (!cache.float_spreads) return M::range_share(spread, k);
-        Math<float>::RangeSpread s;
-        s.kernel = spread.kernel;
-        s.k_first = spread.k_first;
-        s.k_last = spread.k_last;
-        s.tent_k0 = spread.tent_k0;
-        s.tent_w1 = static_cast<float>(spread.tent_w1);
-        s.lo = static_cast<float>(spread.lo);
-        s.hi = static_cast<float>(spread.hi);
-        s.centre = static_cast<float>(spread.centre);
-        s.g = static_cast<float>(spread.g);
-        s.inv_norm = static_cast<float>(spread.inv_norm);
-        return double(Math<float>::range_share(s, k));
+        return cache.float_spreads ? double(Math<float>::range_share(spread_in<float>(spread), k))
+                                   : M::range_share(spread, k);
     };
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
         const double share = cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : computed_share(k));
