@@ -348,32 +348,30 @@ public:
                         const float* flow, const std::string* boxes_json) override {
         const double pose_row[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
         const std::uint64_t index = frame.frame_index;
-        if (labels_.instance.id.ok() && (frame.instance.size() == std::size_t(frame.bins) * frame.beams &&
-                                         frame.point.size() == 3 * frame.instance.size())) {
-            deflate_rows({{&labels_.instance, frame.instance.data()},
-                          {&labels_.instance_fraction, frame.instance_fraction.data()},
-                          {&labels_.object_class, frame.object_class.data()},
-                          {&labels_.elevation, frame.elevation.data()},
-                          {&labels_.elevation_spread, frame.elevation_spread.data()},
-                          {&labels_.point, frame.point.data()},
-                          {&polar_, frame.intensity.data()},
-                          {&polar_u16_, display_u16},
-                          {&flow_, flow}});
-        } else {
-            deflate_rows({{&polar_, frame.intensity.data()}, {&polar_u16_, display_u16}, {&flow_, flow}});
-        }
+        // A Renderer made without SaveFlags::labels leaves the label arrays empty (refused below).
+        const std::size_t cells = std::size_t(frame.bins) * frame.beams;
+        const bool has_labels = frame.instance.size() == cells && frame.point.size() == 3 * cells;
+        const auto label = [&](const auto& array) -> const void* { return has_labels ? array.data() : nullptr; };
+        LabelRows& l = labels_;
+        deflate_rows({{&polar_, frame.intensity.data()},
+                      {&polar_u16_, display_u16},
+                      {&flow_, flow},
+                      {&l.instance, label(frame.instance)},
+                      {&l.instance_fraction, label(frame.instance_fraction)},
+                      {&l.object_class, label(frame.object_class)},
+                      {&l.elevation, label(frame.elevation)},
+                      {&l.elevation_spread, label(frame.elevation_spread)},
+                      {&l.point, label(frame.point)}});
         bool ok = append_row(polar_, frame.intensity.data()) && append_row(pose_, pose_row) &&
                   append_row(frame_index_, &index) && append_row(time_, &time_s);
         if (ok && polar_u16_.id.ok()) ok = append_row(polar_u16_, display_u16);
         if (ok && labels_.instance.id.ok()) {
-            // A Renderer made without SaveFlags::labels leaves these empty: refuse rather than read past them.
-            const std::size_t cells = std::size_t(frame.bins) * frame.beams;
-            if (frame.instance.size() != cells || frame.point.size() != 3 * cells)
+            // refused rather than read past the empty arrays
+            if (!has_labels)
                 return fail("frame " + std::to_string(frames_) + " has no labels (render with SaveFlags::labels)");
             if (boxes_json == nullptr) return fail("frame " + std::to_string(frames_) + " has no boxes");
             // The variable-length string type takes a pointer to the text; HDF5 copies it out.
             const char* boxes_text = boxes_json->c_str();
-            LabelRows& l = labels_;
             ok = append_row(l.instance, frame.instance.data()) &&
                  append_row(l.instance_fraction, frame.instance_fraction.data()) &&
                  append_row(l.object_class, frame.object_class.data()) &&

@@ -48,10 +48,9 @@ SaveFlags backend_save_mask(const RendererOptions& options) {
 }
 
 // Labels: the plan's flag, and the stage with each instance's class. Instance ids ride in 16 bits of
-// the depth pass's id image.
-// float_spreads: the labels spread pixels as the float profile loop does (the GPU's profile pass and the
-// CPU backend in float), else in double (the CPU backend with cpu.precision = double).
-Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene, bool float_spreads) {
+// the depth pass's id image. The stage spreads pixels as the backend's profile does: in float (the GPU's
+// profile pass, the CPU backend in float), else in double (the CPU backend with cpu.precision = double).
+Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
     if (!any(impl.options.save_mask & SaveFlags::labels)) return {};
     impl.plan.labels = true;
     std::vector<std::uint16_t> class_of_instance(1, 0);
@@ -73,6 +72,8 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene, bool floa
     // Frame::visibility holds at most one entry per distinct instance id of the draws.
     impl.visibility_capacity = 1;
     if (scene != nullptr) impl.visibility_capacity += scene->draws.size();
+    const bool float_spreads =
+        impl.options.backend == Backend::vulkan || impl.plan.config.cpu_precision != Precision::f64;
     impl.labels = std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get(), scene,
                                                      float_spreads);
     return {};
@@ -101,8 +102,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
     impl->plan = std::move(plan.value());
     impl->options = options;
     impl->workers = std::make_unique<host::Workers>(options.host_threads);
-    const bool float_spreads = options.backend == Backend::vulkan || config.cpu_precision != Precision::f64;
-    if (auto labels = set_up_labels(*impl, &scene_data(scene), float_spreads); !labels) return labels.error();
+    if (auto labels = set_up_labels(*impl, &scene_data(scene)); !labels) return labels.error();
     if (options.backend == Backend::vulkan) {
         if (!context.has_vulkan()) {
             return make_error(ErrorCode::no_device, "no Vulkan device in this context; use --backend cpu");
@@ -241,7 +241,7 @@ Result<HostDepthRenderer> HostDepthRenderer::create(Context& context, const Sona
     r.impl_->plan = std::move(plan.value());
     r.impl_->options = options;
     r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
-    if (auto labels = set_up_labels(*r.impl_, nullptr, true); !labels) return labels.error();
+    if (auto labels = set_up_labels(*r.impl_, nullptr); !labels) return labels.error();
     auto pass = vk::HostDepthPass::create(*context_vulkan(context), r.impl_->plan, desc, options);
     if (!pass) return pass.error();
     r.impl_->host_depth = pass.value().get();

@@ -783,23 +783,27 @@ template <class Real, std::uint32_t kChannels>
         store(cell_at(m, cb), sb[m]);
     }
 }
+// far_deposit_rows with the plan's channel count (3 or 1) as the constant.
+template <class Real>
+[[gnu::always_inline]] inline void
+far_deposit_channels(const Real* far_beam, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
+                     std::uint32_t beams, std::uint32_t cells, std::uint32_t channels, Real* energy_cells) {
+    if (channels == 3)
+        far_deposit_rows<Real, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+    else
+        far_deposit_rows<Real, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+}
 // In float also as an AVX2 build, where a batch's eight rows are one register and the six sums held
 // (three channels) no longer spill: the same operations.
 __attribute__((target_clones("avx2", "default"))) void far_deposit(const float* far_beam, const float* beam_profiles,
                                                                    std::uint32_t k0, std::uint32_t rows,
                                                                    std::uint32_t beams, std::uint32_t cells,
                                                                    std::uint32_t channels, float* energy_cells) {
-    if (channels == 3)
-        far_deposit_rows<float, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
-    else
-        far_deposit_rows<float, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+    far_deposit_channels<float>(far_beam, beam_profiles, k0, rows, beams, cells, channels, energy_cells);
 }
 void far_deposit(const double* far_beam, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
                  std::uint32_t beams, std::uint32_t cells, std::uint32_t channels, double* energy_cells) {
-    if (channels == 3)
-        far_deposit_rows<double, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
-    else
-        far_deposit_rows<double, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+    far_deposit_channels<double>(far_beam, beam_profiles, k0, rows, beams, cells, channels, energy_cells);
 }
 
 template <class Real>

@@ -539,16 +539,21 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
 
 namespace {
 
+// One band's counts of an object drawn alone (ObjectVisibility's, and `own`: its pixels that the frame's
+// depth image also shows it in).
+struct BandTally {
+    std::uint32_t pixels = 0, hidden = 0, outside = 0, own = 0;
+};
+
 // One labelled object drawn alone, in bands of rows (visibility): part `part` of `parts` draws rows
-// [rows part / parts, rows (part + 1) / parts) and counts them into tally[part] (instance: its own pixels,
-// those the frame's depth image also shows it in).
+// [rows part / parts, rows (part + 1) / parts) and counts them into tally[part].
 struct AloneBands {
     const Plan* plan;
     const SceneData* scene;
     LabelsStage::Alone* alone;
     const Frame* frame;
     std::uint32_t id;
-    std::array<ObjectVisibility, host::Workers::kMaxThreads> tally;
+    std::array<BandTally, host::Workers::kMaxThreads> tally;
 };
 
 void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
@@ -557,8 +562,8 @@ void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
     LabelsStage::Alone& a = *b.alone;
     const auto row_begin = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * part / parts);
     const auto row_end = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * (part + 1) / parts);
-    ObjectVisibility& tally = b.tally[part];
-    tally = ObjectVisibility{};
+    BandTally& tally = b.tally[part];
+    tally = BandTally{};
     if (row_begin == row_end) return;
     const DepthClusters only{a.clusters, a.drawn_alone};
     DepthRegion band;
@@ -573,7 +578,7 @@ void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
             ++tally.hidden;
             continue;
         }
-        ++tally.instance;
+        ++tally.own;
         const double range = pixel_slant_range(plan, static_cast<std::uint32_t>(p / plan.columns),
                                                static_cast<std::uint32_t>(p % plan.columns), d);
         if (range < plan.config.range_min_m || range >= plan.config.range_max_m) ++tally.outside;
@@ -632,11 +637,11 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
                 workers_->run(draw_alone_band, &bands);
             else
                 draw_alone_band(&bands, 0, 1);
-            for (std::uint32_t part = 0; part < bands.tally.size(); ++part) {
-                v.pixels += bands.tally[part].pixels;
-                v.hidden += bands.tally[part].hidden;
-                v.outside += bands.tally[part].outside;
-                own += bands.tally[part].instance; // (the band's own pixels)
+            for (const BandTally& band : bands.tally) {
+                v.pixels += band.pixels;
+                v.hidden += band.hidden;
+                v.outside += band.outside;
+                own += band.own;
             }
         }
         if (id < a.from_returns.size()) { // its returns' tally, when it has no pixel of its own
