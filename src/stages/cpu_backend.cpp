@@ -48,6 +48,13 @@ void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, 
 }
 constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32;
 
+// The profile stage's blocks of profile columns: about four blocks per thread, 32 to 128 columns each. A
+// block also spreads the pixels that straddle its first column (the previous block's too), so fewer,
+// wider blocks repeat less (64 -> 128 on two threads: beamform -1.5 %).
+std::uint32_t profile_column_block(const Plan& plan, std::uint32_t threads) {
+    return static_cast<std::uint32_t>(std::clamp<std::uint64_t>(ceil_div(plan.profile_columns, 4 * threads), 32, 128));
+}
+
 // A saved image: the stage's buffer when it ran, none when it did not (normals with incidence off).
 template <class T> void save(std::vector<T>& dst, const std::vector<T>& src, bool ran) {
     if (ran) {
@@ -85,6 +92,18 @@ template <class Real> struct StageContext {
         clusters_drawn.resize(std::size_t(plan.views) * clusters.size());
         view_drawn.assign(plan.views, 1);
         subpixel.prepare(plan);
+        // Each profile block's cone spans, where they take fewer words than the depth image has pixels
+        // (else each frame searches for them): searching took 4-8 % of the beamform stage.
+        const std::uint32_t block = profile_column_block(plan, parts);
+        const std::size_t blocks = ceil_div(plan.profile_columns, block);
+        if (cone_span_count(plan) * blocks <= pixels) {
+            cone_spans.resize(cone_span_count(plan) * blocks);
+            for (std::size_t b = 0; b < blocks && !cone_spans.empty(); ++b) {
+                const auto begin = static_cast<std::uint32_t>(b * block);
+                cone_column_spans(plan, begin, std::min(begin + block, plan.profile_columns),
+                                  cone_spans.data() + b * cone_span_count(plan));
+            }
+        }
     }
 
     Plan plan;              // copied: the backend may outlive the caller's Plan object
@@ -107,6 +126,7 @@ template <class Real> struct StageContext {
     std::vector<Real> scratch, normals_scratch; // scratch: the profile accumulators (beamform_accumulator_count)
     std::vector<Real> echo_table;               // echo_table, filled once
     std::vector<Real> resample_w;               // resample_weights, filled once
+    std::vector<std::uint32_t> cone_spans;      // cone_column_spans of each profile block, or empty
 };
 
 template <class Real> void run_depth(StageContext<Real>& s) {
@@ -168,16 +188,15 @@ template <class Real> void run_beamform(StageContext<Real>& s) {
     float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
     const SubpixelInput subpixel{s.subpixel, s.depth.data(), s.material.data()};
     const SubpixelInput* with_subpixel = s.plan.subpixel_capacity > 0 ? &subpixel : nullptr;
-    // Profile columns in about four blocks per thread, 32 to 128 columns each: a block also spreads the
-    // pixels that straddle its first column (the previous block's too), so fewer, wider blocks repeat
-    // less (64 -> 128 on two threads: beamform -1.5 %).
-    const std::uint32_t threads = s.workers ? s.workers->count() : 1u;
-    const auto column_block =
-        static_cast<std::uint32_t>(std::clamp<std::uint64_t>(ceil_div(s.plan.profile_columns, 4 * threads), 32, 128));
+    const std::uint32_t column_block = profile_column_block(s.plan, s.workers ? s.workers->count() : 1u);
     split_blocks(s.workers, s.plan.profile_columns, column_block,
                  [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+                     // split_blocks runs one block of column_block at a time, or all columns at once
+                     const bool one_block = end - begin <= column_block && !s.cone_spans.empty();
+                     const std::uint32_t* spans =
+                         one_block ? s.cone_spans.data() + begin / column_block * cone_span_count(s.plan) : nullptr;
                      beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end,
-                                             with_subpixel, s.view_drawn.data());
+                                             with_subpixel, s.view_drawn.data(), spans);
                  });
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,

@@ -485,13 +485,29 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     if (batched > 0) flush();
 }
 
+// line_array: the pixel columns [first, second) of row j and view `view` that feed cone columns
+// [cone_begin, cone_end): those within one column of them, x in (cone_begin - 1, cone_end). Along a
+// view's row the cone coordinate increases with the column (plan_cone_table).
+std::pair<std::uint32_t, std::uint32_t> cone_span(const Plan& plan, std::uint32_t j, std::uint32_t view,
+                                                  std::uint32_t cone_begin, std::uint32_t cone_end) {
+    const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * plan.columns;
+    const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
+    const float* first = cone_x + view_first_column(plan, view);
+    const float* last = first + view_columns(plan, view);
+    const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, last, lo) - cone_x);
+    const std::uint32_t c_end =
+        static_cast<std::uint32_t>(std::find_if(cone_x + c_begin, last, [hi](float x) { return !(x < hi); }) - cone_x);
+    return {c_begin, c_end};
+}
+
 // line_array: the profiles of cone columns [cone_begin, cone_end) (acc: column_stride per column).
 // Each pixel goes to the cone columns its cone coordinate falls between (plan.pixel_cone_coord), by
 // cone_share, its range spread as in the planar profile. Every accumulator receives its additions rows
-// first, then by increasing pixel column, then bin: the order of profile.comp's gather.
+// first, then by increasing pixel column, then bin: the order of profile.comp's gather. spans: the
+// block's cone_spans (cone_column_spans), or null to search each row for them.
 template <class Real>
 void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_t cone_begin, std::uint32_t cone_end,
-                   Real range_min, Real inv_bin_width, const std::uint8_t* view_drawn) {
+                   Real range_min, Real inv_bin_width, const std::uint8_t* view_drawn, const std::uint32_t* spans) {
     using M = Math<Real>;
     const std::uint32_t C = plan.columns, R = plan.rows, bins = plan.bins;
     const std::size_t T = column_stride(plan);
@@ -499,18 +515,15 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
     const bool exp4 = use_exp4(plan.config);
     for (std::uint32_t j = 0; j < R && bins > 0; ++j) {
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * C;
-        // the pixels within one column of [cone_begin, cone_end): x in (cone_begin - 1, cone_end), in each
-        // view (along a view's row the cone coordinate increases with the column; the views follow
-        // each other in column order, as profile.comp gathers them)
-        const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
+        // each view's pixels that feed these cone columns (the views follow each other in column order,
+        // as profile.comp gathers them)
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             if (view_drawn != nullptr && view_drawn[view] == 0) continue; // nothing drawn there
-            const std::uint32_t view_first = view_first_column(plan, view), W = view_columns(plan, view);
-            const ViewColumns columns{view_first, view_first + W};
-            const float* first = cone_x + columns.first;
-            const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, first + W, lo) - cone_x);
-            const std::uint32_t c_end = static_cast<std::uint32_t>(
-                std::find_if(cone_x + c_begin, first + W, [hi](float x) { return !(x < hi); }) - cone_x);
+            const std::uint32_t view_first = view_first_column(plan, view);
+            const ViewColumns columns{view_first, view_first + view_columns(plan, view)};
+            const std::size_t at = 2 * (static_cast<std::size_t>(j) * plan.views + view);
+            const auto [c_begin, c_end] =
+                spans != nullptr ? std::pair{spans[at], spans[at + 1]} : cone_span(plan, j, view, cone_begin, cone_end);
             for_each_spread_pixel<Real>(
                 plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
                 [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread, int spread_bins,
@@ -973,7 +986,8 @@ void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, 
 
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
-                       std::uint32_t column_end, const SubpixelInput* subpixel, const std::uint8_t* view_drawn) {
+                       std::uint32_t column_end, const SubpixelInput* subpixel, const std::uint8_t* view_drawn,
+                       const std::uint32_t* cone_spans) {
     const std::uint32_t C = plan.profile_columns, R = plan.rows, bins = plan.bins;
     const std::size_t T = column_stride(plan);
     Real range_min, inv_bin_width;
@@ -992,7 +1006,8 @@ void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Re
     std::fill(acc + column_begin * T, acc + column_end * T, Real(0));
     const bool exp4 = use_exp4(plan.config);
     if (plan.line_array) {
-        cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width, view_drawn);
+        cone_profiles<Real>(plan, echo2, acc, column_begin, column_end, range_min, inv_bin_width, view_drawn,
+                            cone_spans);
     } else {
         for (std::uint32_t j = 0; j < R && bins > 0; ++j)
             for_each_spread_pixel<Real>(
@@ -1244,6 +1259,20 @@ std::size_t beamform_accumulator_count(const Plan& plan) {
     return plan.profile_columns * column_stride(plan); // one accumulator per profile cell, and the padding
 }
 
+std::size_t cone_span_count(const Plan& plan) {
+    return plan.line_array ? 2 * static_cast<std::size_t>(plan.rows) * plan.views : 0;
+}
+
+void cone_column_spans(const Plan& plan, std::uint32_t cone_begin, std::uint32_t cone_end, std::uint32_t* spans) {
+    for (std::uint32_t j = 0; j < plan.rows && plan.line_array; ++j) {
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const auto [c_begin, c_end] = cone_span(plan, j, view, cone_begin, cone_end);
+            spans[2 * (static_cast<std::size_t>(j) * plan.views + view)] = c_begin;
+            spans[2 * (static_cast<std::size_t>(j) * plan.views + view) + 1] = c_end;
+        }
+    }
+}
+
 std::size_t beamform_scratch_count(const Plan& plan) {
     return beamform_accumulator_count(plan) + resample_weight_count(plan);
 }
@@ -1257,9 +1286,9 @@ void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam
 template void resample_weights<float>(const Plan&, float*);
 template void resample_weights<double>(const Plan&, double*);
 template void beamform_profiles<float>(const Plan&, const float*, float*, float*, std::uint32_t, std::uint32_t,
-                                       const SubpixelInput*, const std::uint8_t*);
+                                       const SubpixelInput*, const std::uint8_t*, const std::uint32_t*);
 template void beamform_profiles<double>(const Plan&, const float*, float*, double*, std::uint32_t, std::uint32_t,
-                                        const SubpixelInput*, const std::uint8_t*);
+                                        const SubpixelInput*, const std::uint8_t*, const std::uint32_t*);
 template void beamform_beams<float>(const Plan&, const float*, const float*, float*, float*, std::uint32_t,
                                     std::uint32_t);
 template void beamform_beams<double>(const Plan&, const double*, const double*, float*, float*, std::uint32_t,

@@ -106,11 +106,18 @@ struct SubpixelInput {
     const float* depth;
     const std::uint32_t* material;
 };
-// subpixel: null, or the returns each column adds after its pixels (as profile.comp does).
+// line_array: which pixel columns of each row and view feed a block of cone columns [cone_begin,
+// cone_end). They depend on the plan alone, so the CPU backend finds them once per block of its own
+// (cone_span_count values a block: a [first, end) pair per row and view) instead of searching every row
+// of every frame.
+std::size_t cone_span_count(const Plan& plan);
+void cone_column_spans(const Plan& plan, std::uint32_t cone_begin, std::uint32_t cone_end, std::uint32_t* spans);
+// subpixel: null, or the returns each column adds after its pixels (as profile.comp does). cone_spans:
+// null, or cone_column_spans of exactly [column_begin, column_end).
 template <class Real>
 void beamform_profiles(const Plan& plan, const float* echo2, float* profiles, Real* acc, std::uint32_t column_begin,
                        std::uint32_t column_end, const SubpixelInput* subpixel = nullptr,
-                       const std::uint8_t* view_drawn = nullptr);
+                       const std::uint8_t* view_drawn = nullptr, const std::uint32_t* cone_spans = nullptr);
 template <class Real>
 void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, float* beam_profiles, float* polar,
                     std::uint32_t bin_begin, std::uint32_t bin_end);
