@@ -63,10 +63,10 @@ struct LabelsStage::Scratch {
     // bins of the beams being labelled (kBeamBlock * bins, beam after beam): value-initialised here, and
     // label_beams resets every cell it touched, so each beam starts from zeros without a per-frame clear
     std::vector<Cell> cells;
-    // line_array: per (row, view), the first pixel of the last beam's cone columns, and that beam's lower
-    // cone bound (infinity: none yet this frame). A thread labels its beams in increasing order, whose
-    // cone columns move towards starboard, so the next beam's first pixel is found by a few steps from
-    // there instead of a binary search per row and view.
+    // line_array: per (row, view), the first pixel of the last block's cone columns, and that block's
+    // lower cone bound (infinity: none yet this frame). A thread labels its blocks of beams in increasing
+    // order, whose cone columns move towards starboard, so the next block's first pixel is found by a few
+    // steps from there instead of a binary search per row and view.
     std::vector<std::uint32_t> first;
     float first_lo = std::numeric_limits<float>::infinity();
 };
@@ -305,16 +305,21 @@ void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache
     }
 }
 
-// One pixel's energy into the beam's cells along its range shares. Its point in a cell lies along its
-// direction at the range of the part of its footprint inside the cell's bin (the footprint kernel
-// spreads one pixel over many bins at grazing incidence; the tent and nearest kernels keep its range).
-void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& cache, std::size_t p, Cell* cells,
-               double weight, int& k_low, int& k_high) {
+// One pixel's energy into the cells of up to kBeamBlock beams along its range shares: beam b (< beams) takes
+// weight[b] > 0 of it into cells[b], and widens its touched bins [*k_low[b], *k_high[b]]. Its point in a cell lies
+// along its direction at the range of the part of its footprint inside the cell's bin (the footprint kernel spreads one
+// pixel over many bins at grazing incidence; the tent and nearest kernels keep its range). Each beam's cells receive
+// what add_pixel gave them when it took one beam at a time: the same values in the same order; the share, range and
+// point of a bin are worked out once for all the beams.
+void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& cache, std::size_t p,
+               Cell* const* cells, const double* weight, std::uint32_t beams, int* const* k_low, int* const* k_high) {
     const PixelLabel& pixel = cache.pixels[p];
     const PixelRay& ray = cache.rays[p];
     const M::RangeSpread& spread = pixel.spread;
     if (spread.k_last < spread.k_first) return;
-    const double e = frame.echo[2 * p] * weight;
+    double e[kBeamBlock];
+    for (std::uint32_t b = 0; b < beams; ++b)
+        e[b] = frame.echo[2 * p] * weight[b];
     const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
     const bool cached = spread.k_last - spread.k_first < kCachedShares;
     const double* wide =
@@ -326,17 +331,19 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
     };
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
         const double share = cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : computed_share(k));
-        const double w = share * e;
-        if (!(w > 0.0)) continue;
         double range = pixel.range;
         if (footprint) {
             const double x = 0.5 * (std::max(spread.lo, double(k)) + std::min(spread.hi, double(k + 1)));
             range = plan.config.range_min_m + x * plan.bin_width_m;
         }
         const double point[3] = {ray.dir[0] * range, ray.dir[1] * range, ray.dir[2] * range};
-        add(cells[static_cast<std::size_t>(k)], pixel.instance, w, ray.elevation, point);
-        k_low = std::min(k_low, k);
-        k_high = std::max(k_high, k);
+        for (std::uint32_t b = 0; b < beams; ++b) {
+            const double w = share * e[b];
+            if (!(w > 0.0)) continue;
+            add(cells[b][static_cast<std::size_t>(k)], pixel.instance, w, ray.elevation, point);
+            *k_low[b] = std::min(*k_low[b], k);
+            *k_high[b] = std::max(*k_high[b], k);
+        }
     }
 }
 
@@ -379,9 +386,9 @@ inline double beam_weight(const Plan& plan, std::uint32_t j, std::uint32_t q) {
 
 // Labels beams [j_begin, j_end) (at most kBeamBlock) into the frame's label arrays. Each beam has its
 // own cells (scratch.cells from (j - j_begin) * bins) and receives its pixels in the order of one beam
-// labelled alone: rows, then views, then columns, then bins; with a line array the block's beams take
-// each row of each view in turn, so that the pixels they share are read once from memory, not once per
-// beam (each beam's own order, and so every cell's sums and ties, unchanged).
+// labelled alone: rows, then views, then columns, then bins. With a line array the block walks each row
+// of each view once and gives each pixel to all the beams it feeds, so that the pixels they share are
+// read once, not once per beam (each beam's own order, and so every cell's sums and ties, unchanged).
 void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
                  const LabelsStage::Pixels& cache, const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch,
                  Frame& frame, std::uint32_t j_begin, std::uint32_t j_end) {
@@ -400,62 +407,85 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
                 if (!(weight > 0.0)) continue;
                 for (std::uint32_t row = 0; row < plan.rows; ++row) {
                     const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                    if (frame.echo[2 * p] > 0.0f)
-                        add_pixel(plan, frame, cache, p, cells_of(j), weight, k_low[b], k_high[b]);
+                    Cell* cells = cells_of(j);
+                    int* low = &k_low[b];
+                    int* high = &k_high[b];
+                    if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, cache, p, &cells, &weight, 1, &low, &high);
                 }
             }
         }
     }
-    for (std::uint32_t row = 0; row < plan.rows && plan.line_array; ++row) {
-        // Each beam's pixels of this row within one cone column of [q_begin, q_end): x in [q_begin - 1,
-        // q_end), each visited once with the sum of its two cone columns' shares of the beam.
-        // Per view: along a view's row the cone coordinate increases with the column (not across views).
+    // line_array: the block's pixels of each row, each visited once for all the beams it feeds.
+    const std::uint32_t block = j_end - j_begin;
+    Cell* block_cells[kBeamBlock];
+    float block_hi = -std::numeric_limits<float>::infinity();
+    for (std::uint32_t j = j_begin; j < j_end; ++j) {
+        block_cells[j - j_begin] = cells_of(j);
+        block_hi = std::max(block_hi, static_cast<float>(plan.beam_column_end[j]));
+    }
+    const float block_lo = block > 0 ? static_cast<float>(plan.beam_column_begin[j_begin]) - 1.0f : 0.0f;
+    for (std::uint32_t row = 0; row < plan.rows && plan.line_array && block > 0; ++row) {
+        // The pixels of this row within one cone column of a beam's [q_begin, q_end): x in [q_begin - 1,
+        // q_end), each visited once with the sum of its two cone columns' shares of each beam. Per view:
+        // along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             // No hit in this row of the view: nothing to visit. (Its first pixel below is then never set
-            // or read this frame, the same for every beam.)
+            // or read this frame, the same for every block.)
             const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
             if (hits[0] == hits[1]) continue;
             const float* view_x = cone_x + view_first_column(plan, view);
             const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
-            // the first pixel with x >= lo (std::lower_bound), from the last beam's where lo has not
-            // decreased (this thread's beams come in increasing order, their cone columns towards starboard)
+            // the first pixel with x >= the block's lo (std::lower_bound), from the last block's where lo has
+            // not decreased (this thread's blocks come in increasing order, their cone columns towards starboard)
             std::uint32_t& first_pixel = scratch.first[std::size_t(row) * plan.views + view];
-            float last_lo = scratch.first_lo;
-            for (std::uint32_t j = j_begin; j < j_end; ++j) {
-                const std::uint32_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
-                const float lo = static_cast<float>(q_begin) - 1.0f, hi = static_cast<float>(q_end);
-                std::uint32_t c;
-                if (lo >= last_lo) {
-                    for (c = first_pixel; c < view_end && cone_x[c] < lo; ++c) {
-                    }
-                } else {
-                    c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) -
-                                                   cone_x);
+            std::uint32_t c;
+            if (block_lo >= scratch.first_lo) {
+                for (c = first_pixel; c < view_end && cone_x[c] < block_lo; ++c) {
                 }
-                first_pixel = c;
-                last_lo = lo;
-                const std::uint32_t b = j - j_begin;
-                Cell* cells = cells_of(j);
-                for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < hi; ++c) {
-                    const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
-                    // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching
-                    // their cache entry
-                    if (!(frame.echo[2 * p] > 0.0f)) continue;
-                    const double x = cone_x[c];
-                    const auto first = static_cast<std::int64_t>(std::floor(x));
-                    double weight = 0.0;
+            } else {
+                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), block_lo) -
+                                               cone_x);
+            }
+            first_pixel = c;
+            std::uint32_t b_low = 0;
+            for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < block_hi; ++c) {
+                const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
+                // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching
+                // their cache entry
+                if (!(frame.echo[2 * p] > 0.0f)) continue;
+                const double x = cone_x[c];
+                const auto first = static_cast<std::int64_t>(std::floor(x));
+                // the beams whose cone columns hold floor(x) or the next: from the first that does not end
+                // at or before floor(x) (x grows along the view's row, as do the beams' columns)
+                while (b_low < block && std::int64_t(plan.beam_column_end[j_begin + b_low]) <= first)
+                    ++b_low;
+                Cell* cells[kBeamBlock];
+                double weight[kBeamBlock];
+                int* low[kBeamBlock];
+                int* high[kBeamBlock];
+                std::uint32_t fed = 0;
+                for (std::uint32_t b = b_low; b < block; ++b) {
+                    const std::uint32_t j = j_begin + b;
+                    const std::int64_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
+                    if (q_begin > first + 1) break;
+                    double w = 0.0;
                     for (std::int64_t q = first; q <= first + 1; ++q)
-                        if (q >= std::int64_t(q_begin) && q < std::int64_t(q_end))
-                            weight += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
-                                      beam_weight(plan, j, static_cast<std::uint32_t>(q));
-                    if (weight > 0.0) add_pixel(plan, frame, cache, p, cells, weight, k_low[b], k_high[b]);
+                        if (q >= q_begin && q < q_end)
+                            w += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
+                                 beam_weight(plan, j, static_cast<std::uint32_t>(q));
+                    if (!(w > 0.0)) continue;
+                    cells[fed] = block_cells[b];
+                    weight[fed] = w;
+                    low[fed] = &k_low[b];
+                    high[fed] = &k_high[b];
+                    ++fed;
                 }
+                if (fed > 0) add_pixel(plan, frame, cache, p, cells, weight, fed, low, high);
             }
         }
     }
-    if (plan.line_array && j_end > j_begin)
-        scratch.first_lo = static_cast<float>(plan.beam_column_begin[j_end - 1]) - 1.0f;
+    if (plan.line_array && block > 0) scratch.first_lo = block_lo;
 
     for (std::uint32_t j = j_begin; j < j_end; ++j) {
         const std::uint32_t b = j - j_begin;
