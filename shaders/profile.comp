@@ -99,7 +99,7 @@ layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { fl
 // pixel whose cone coordinate lies within one column of them; each such pixel's window is loaded and
 // its range spread computed once, then added to the (at most two) of its cone columns this invocation
 // owns. So every profile cell receives its additions in the order of the CPU backend's scatter
-// (src/stages/cpu_beamform.cpp): rows, then pixel columns, then bins. Along a row of one view the cone
+// (src/stages/cpu_beamform_profile.cpp): rows, then pixel columns, then bins. Along a row of one view the cone
 // coordinate increases with the pixel column (the plan checks it), so in each view the first such
 // pixel is found by a binary search on the first row and then moves by a few columns from row to row.
 void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone) {

@@ -16,6 +16,12 @@
 
 namespace vksonar::cpu {
 
+// Four values of Real side by side (GCC's vector extension: one SSE register for float, one AVX register
+// for double), for the portable loops that work four lanes at a time.
+template <class Real> struct Lanes4;
+template <> struct Lanes4<float> { typedef float type __attribute__((vector_size(16))); };
+template <> struct Lanes4<double> { typedef double type __attribute__((vector_size(32))); };
+
 #if defined(__x86_64__) && defined(__GNUC__)
 // A property of the machine, fixed once known.
 inline bool has_avx2() {

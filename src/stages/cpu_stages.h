@@ -71,6 +71,12 @@ template <class Real>
 void beamform(const Plan& plan, const float* echo2, float* profiles, float* beam_profiles, float* polar, Real* scratch);
 std::size_t beamform_scratch_count(const Plan& plan);
 std::size_t beamform_accumulator_count(const Plan& plan); // bins x (profile_columns + padding)
+// The accumulators of profile column c start at c * profile_column_stride: its bins, then 16 values of
+// padding, so that neighbouring columns' bins do not fall into the same cache sets (512 bins of floats
+// are 2 KiB) and the profile's four-lane adds past a column's last bin stay inside the column.
+inline std::size_t profile_column_stride(const Plan& plan) {
+    return plan.bins + 16u;
+}
 // The resample's weights, beam after beam, each beam's columns in increasing order, then (with far side
 // lobes) each beam's far side-lobe cells, shares and deposit weights (a function of the plan alone: filled once).
 std::size_t resample_weight_count(const Plan& plan);

@@ -1,4 +1,4 @@
-// The range spread of one pixel, shared by the beamform stage's profiles (cpu_beamform.cpp) and the
+// The range spread of one pixel, shared by the beamform stage's profiles (cpu_beamform_profile.cpp) and the
 // labels stage (labels.cpp), which must spread each pixel's energy over the same bins with the same
 // shares.
 #pragma once

@@ -7,7 +7,7 @@
 //
 // The functions are declared here and defined next to the buffers they touch (the contexts stay
 // opaque, so this header needs no Vulkan and no CPU-stage headers):
-//   cpu::run_*       src/stages/cpu_backend.cpp  (the loops: src/stages/cpu_<stage>.cpp)
+//   cpu::run_*       src/stages/cpu_backend.cpp  (the loops: src/stages/cpu_<stage>*.cpp)
 //   vk::record_*     src/vk/vulkan_frame.cpp, vk::record_import src/vk/host_depth.cpp
 // The per-pixel kernels of normals, echo and the range kernel of beamform are written once, in
 // shaders/sonar_kernels.h, for both backends. The host stages (noise, gain, images) follow in

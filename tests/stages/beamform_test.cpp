@@ -1,6 +1,5 @@
-// Tests of the CPU beamform stage (src/stages/cpu_beamform.cpp) against docs/pipeline.md §4: energy
-// conservation, resampling weights, side lobes, float vs double.
-// Every tolerance is justified next to it.
+// Tests of the CPU beamform stage (src/stages/cpu_beamform_profile.cpp and cpu_beamform.cpp) against docs/pipeline.md
+// §4: energy conservation, resampling weights, side lobes, float vs double. Every tolerance is justified next to it.
 #include <gtest/gtest.h>
 
 #include <algorithm>
