@@ -63,7 +63,7 @@ VKS_FN PixelView view_of_slice(SliceInfo s) {
 
 // A slice of the main band as a view: a level camera at azimuth (cos, sin) = (cs, sn), its elevation
 // band |sin e| <= gate_sin (2: none), no wedge. The same values view_of_slice reads from its SliceInfo
-// entry (plan.cpp fills both from the same floats): the shaders build it from two table reads instead of
+// entry (plan_grid.cpp fills both from the same floats): the shaders build it from two table reads instead of
 // seventeen.
 VKS_FN PixelView level_slice_view(REAL cs, REAL sn, REAL tan_half_h, REAL tan_half_v, REAL gate_sin) {
     PixelView view;
@@ -532,7 +532,7 @@ VKS_FN REAL cone_coord(REAL axis_cosine, REAL half_fov_rad, REAL inv_cone_step) 
 
 // The share of a pixel at cone coordinate x that cone column c (of `count`) receives: the tent between
 // the two nearest column centres, the edge columns keeping what lies between their centre and the fan's
-// edge (as the edge beams do, plan.cpp); 0 outside the fan. The shares of a pixel inside sum to 1.
+// edge (as the edge beams do, plan_beams.cpp); 0 outside the fan. The shares of a pixel inside sum to 1.
 VKS_FN REAL cone_share(REAL x, int c, int count) {
     if (!(x >= REAL(-0.5) && x < REAL(count) - REAL(0.5))) {
         return REAL(0);

@@ -58,7 +58,7 @@ constexpr double kEchoRelTol = 1e-4;
 constexpr double kEchoRelFloor = 1e-6;
 // The vertical pattern's power b (1 on its axis) from identical inputs, absolute, as a share of the
 // pixel's echo without the pattern (E0 = E / b). The depth pass covers the pattern out to its first null
-// (src/core/plan.cpp), where b -> 0 and no relative tolerance holds: b is a function of
+// (src/core/plan_grid.cpp), where b -> 0 and no relative tolerance holds: b is a function of
 // x = k sin(psi), psi from atan2, and the driver's sin/atan2 put ~2e-6 relative error into x, so b
 // carries an absolute error |db/dx| x 2e-6, which falls only as sqrt(b) towards a null (up to ~2e-6 on
 // the main lobe's flank, where b ~ 0.5 keeps it inside kEchoRelTol). Largest measured on lavapipe where the relative

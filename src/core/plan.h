@@ -110,7 +110,7 @@ struct Plan {
     // Beamform tables over the profile columns. Column c (azimuth, or steering angle with line_array,
     // column_azimuth_rad[c]) gives weight column_weight[c] to beam column_beam[c] and
     // 1 - column_weight[c] to column_beam[c] + 1 (tent on the beam table; columns outside the beam fan
-    // give their energy only to the nearest edge beam... see plan.cpp).
+    // give their energy only to the nearest edge beam... see plan_beams.cpp).
     std::vector<double> column_azimuth_rad; // profile_columns
     std::vector<std::uint32_t> column_beam; // profile_columns
     std::vector<float> column_weight;       // profile_columns
@@ -189,8 +189,8 @@ struct HostPixelGrid {
     double tan_half_h = 0, tan_half_v = 0;
 };
 
-// Validates the config and derives the plan, in named steps (plan.cpp): beams and bins, the pixel grid
-// (vksonar's own, or host_grid), the range window and clip planes, patterns, materials, effects, the
+// Validates the config and derives the plan, in named steps (plan.cpp, plan_grid.cpp, plan_beams.cpp): beams and bins,
+// the pixel grid (vksonar's own, or host_grid), the range window and clip planes, patterns, materials, effects, the
 // beamform tables, and the GPU parameters last. Errors name the config field and value.
 [[nodiscard]] Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene,
                                      const HostPixelGrid* host_grid = nullptr);

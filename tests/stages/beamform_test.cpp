@@ -337,7 +337,7 @@ TEST(CpuBackend, DoubleAndFloatPrecisionAgree) {
     EXPECT_NEAR(total32 / total64, 1.0, 1e-5);
     EXPECT_LT(max_rel_peak, 1e-5);
     // Per pixel: relative, except near the vertical pattern's first null, which the depth pass covers
-    // (src/core/plan.cpp). There the pattern b -> 0 while its float error, from x = k sin(psi) rounded
+    // (src/core/plan_grid.cpp). There the pattern b -> 0 while its float error, from x = k sin(psi) rounded
     // to float (~1e-7 relative), falls only as sqrt(b) (|db| = |2 a a'| x 1e-7, a the amplitude, at most
     // ~1e-7 on the main lobe's flank): each pixel is measured against max(E, 1e-3 x E0), E0 its f64 echo
     // without the pattern, so near the null its error must stay below 1e-7 of E0 (measured: the worst

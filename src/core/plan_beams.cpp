@@ -1,0 +1,253 @@
+// make_plan's steps for the beams (plan_steps.h): which beams each profile column feeds (the resample's
+// tent on the beam table), and the side-lobe kernel along beams: its taps out to the kernel's reach and
+// the far side lobes' cells beyond it.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "core/angles.h"
+#include "core/plan_steps.h"
+#include "core/sonar_math.hpp"
+
+namespace vksonar {
+
+void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
+    const std::vector<double>& b = p.beam_angle_rad;
+    const std::uint32_t columns = static_cast<std::uint32_t>(p.column_azimuth_rad.size()); // profile columns
+    p.column_beam.resize(columns);
+    p.column_weight.resize(columns);
+    for (std::uint32_t col = 0; col < columns; ++col) {
+        const double a = p.column_azimuth_rad[col];
+        if (std::abs(a) > exclude_beyond_rad) {
+            p.column_beam[col] = p.beams; // no beam: the resample tables skip it
+            p.column_weight[col] = 0.0f;
+        } else if (p.circular && (a > b.front() || a < b.back())) {
+            // The seam between beam 0 and beam beams-1 (at b.back() + 2 pi): a tent across it, so a
+            // target at 180 deg is beamformed like one anywhere else.
+            const double two_pi = 2.0 * 3.14159265358979323846;
+            const double beyond_beam0 = a > b.front() ? a - b.front() : a + two_pi - b.front();
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = static_cast<float>(beyond_beam0 / (b.back() + two_pi - b.front()));
+        } else if (a >= b.front()) {
+            p.column_beam[col] = 0;
+            p.column_weight[col] = 1.0f;
+        } else if (a <= b.back()) {
+            p.column_beam[col] = p.beams - 1;
+            p.column_weight[col] = 1.0f;
+        } else {
+            // first beam j+1 with b[j+1] < a (b decreasing), so b[j] >= a > b[j+1]
+            const auto it = std::upper_bound(b.begin(), b.end(), a, [](double x, double y) { return x > y; });
+            const std::uint32_t j = static_cast<std::uint32_t>(it - b.begin()) - 1;
+            p.column_beam[col] = j;
+            p.column_weight[col] = static_cast<float>((a - b[j + 1]) / (b[j] - b[j + 1]));
+        }
+    }
+    p.beam_column_begin.assign(p.beams, columns);
+    p.beam_column_end.assign(p.beams, 0);
+    for (std::uint32_t col = 0; col < columns; ++col) {
+        for (std::uint32_t j : {p.column_beam[col], p.column_beam[col] + 1}) {
+            if (j >= p.beams) continue;
+            p.beam_column_begin[j] = std::min(p.beam_column_begin[j], col);
+            p.beam_column_end[j] = std::max(p.beam_column_end[j], col + 1);
+        }
+    }
+    if (p.circular) { // the edge beams gather seam columns at both ends of the pixel grid
+        for (std::uint32_t j : {0u, p.beams - 1}) {
+            p.beam_column_begin[j] = 0;
+            p.beam_column_end[j] = columns;
+        }
+    }
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        if (p.beam_column_begin[j] > p.beam_column_end[j]) p.beam_column_begin[j] = p.beam_column_end[j] = 0;
+    }
+}
+
+namespace plan_steps {
+
+// The side-lobe kernel's reach `reach` (an angle from the beam's axis) in the unit the beams are
+// separated in: the angle (planar), or its sine (line_array: the pattern is a function of
+// sin(theta') - sin(theta)).
+double sidelobe_reach(const Plan& p, double reach) {
+    if (!p.line_array) return reach;
+    // Two beams' sines differ by up to 2 (a fan's two edges): past a quarter turn the reach goes on
+    // growing, continuously, to 2 at half a turn.
+    return reach <= 0.5 * kPi ? std::sin(reach) : 1.0 + std::sin(std::min(reach - 0.5 * kPi, 0.5 * kPi));
+}
+
+// Step: which beams each pixel column feeds (tent on the beam table). Columns at |azimuth| beyond
+// exclude_beyond_rad feed none.
+void plan_column_tables(Plan& p, double exclude_beyond_rad) {
+    p.column_azimuth_rad.resize(p.profile_columns);
+    if (p.line_array) { // the cone columns' steering angles
+        const double half_fov = 0.5 * p.config.hfov_deg * kDegToRad;
+        for (std::uint32_t col = 0; col < p.profile_columns; ++col)
+            p.column_azimuth_rad[col] = half_fov - (col + 0.5) * p.cone_step_rad;
+        assign_columns_to_beams(p, exclude_beyond_rad);
+        return;
+    }
+    for (std::uint32_t col = 0; col < p.columns; ++col) {
+        const std::uint32_t s = col / p.slice_columns;
+        const double u = math_f64::pixel_coord(col % p.slice_columns, p.slice_columns, p.tan_half_h);
+        p.column_azimuth_rad[col] = math_f64::pixel_azimuth(p.slice_info[s].center_azimuth_rad, u);
+    }
+    assign_columns_to_beams(p, exclude_beyond_rad);
+}
+
+namespace {
+
+// The horizontal power pattern at separation `sep` of two beams in the side-lobe kernel's unit: the
+// angle, or with line_array its sine. A line array's aperture patterns are functions of
+// sin(theta') - sin(theta) over its whole range [-2, 2]; the others (box, gaussian) are read at the
+// angle whose sine it is (at most 90 degrees).
+double pattern_at_separation(const Plan& p, double sep) {
+    const std::uint32_t hshape = shader_id(p.config.horizontal_pattern);
+    if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
+    if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)
+        return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
+    const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+    return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle);
+}
+
+// The share of the pattern at |sep| that the far grid carries: 0 up to half the reach, 1 from the
+// reach on, a smoothstep between (smooth, so the coarse grid sees no edge).
+double far_ramp(double abs_sep, double reach_units) {
+    const double x = std::clamp((abs_sep - 0.5 * reach_units) / (0.5 * reach_units), 0.0, 1.0);
+    return x * x * (3.0 - 2.0 * x);
+}
+
+// The separation variable of beam j: its angle, or with line_array its sine.
+double beam_position(const Plan& p, std::uint32_t j) {
+    return p.line_array ? std::sin(p.beam_angle_rad[j]) : p.beam_angle_rad[j];
+}
+
+// Step: the far side lobes' grid (Plan::far_cells), when the kernel stops short of the fan. The cells
+// are as narrow as far_sidelobe_cell * reach, and at most kMaxFarCells.
+void plan_far_sidelobes(Plan& p, double reach_units) {
+    p.far_cells = 0;
+    p.far_channels = 1;
+    p.far_beam_cell.clear();
+    p.far_cell_beams.clear();
+    p.far_weight.clear();
+    const double cell_fraction = p.config.far_sidelobe_cell;
+    if (!(cell_fraction > 0.0) || p.beams < 2 || !(reach_units > 0.0)) return;
+    const double span = p.circular ? 2.0 * kPi : beam_position(p, 0) - beam_position(p, p.beams - 1);
+    if (0.5 * reach_units >= span) return; // every pair of beams is within the kernel's exact part
+    const double wanted = cell_fraction * reach_units;
+    std::uint32_t cells = 0;
+    double step = 0.0;
+    if (p.circular) {
+        cells = static_cast<std::uint32_t>(std::clamp(std::ceil(span / wanted), 3.0, double(shared::kMaxFarCells)));
+        step = span / cells;
+    } else {
+        cells =
+            static_cast<std::uint32_t>(std::clamp(std::ceil(span / wanted) + 1.0, 2.0, double(shared::kMaxFarCells)));
+        step = span / (cells - 1);
+    }
+    p.far_cells = cells;
+    // A line array's sinc^2 pattern is sin^2(k du) / (k du)^2, and sin^2(k (u_s - u_j)) =
+    // (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2: the crests and nulls factor into a phase of
+    // each beam, and only the smooth 1 / (k du)^2 goes on the grid (three channels: the energy, and the
+    // energy times each beam's cos 2k u and sin 2k u). Other patterns keep the lobes' mean (one channel).
+    const bool phased = p.line_array && shader_id(p.config.horizontal_pattern) == shared::kPatternSinc;
+    p.far_channels = phased ? 3u : 1u;
+    // Each beam's two cells and the share of the second: position x = (first beam's position - its own) / step.
+    p.far_beam_cell.assign(std::size_t(p.beams) * 8, 0.0f);
+    std::vector<std::uint32_t> first(cells, p.beams), last(cells, 0);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        double x = (beam_position(p, 0) - beam_position(p, j)) / step;
+        if (p.circular) x = std::fmod(std::fmod(x, double(cells)) + cells, double(cells));
+        auto c0 = static_cast<std::uint32_t>(std::floor(x));
+        if (p.circular)
+            c0 %= cells;
+        else
+            c0 = std::min(c0, cells - 2);
+        const std::uint32_t c1 = p.circular ? (c0 + 1) % cells : c0 + 1;
+        const float share = static_cast<float>(std::clamp(x - c0, 0.0, 1.0)); // c0 = floor(x) but at the last cell
+        p.far_beam_cell[8 * j + 0] = static_cast<float>(c0);
+        p.far_beam_cell[8 * j + 1] = static_cast<float>(c1);
+        p.far_beam_cell[8 * j + 2] = share;
+        if (phased) {
+            const double phase = 2.0 * p.hpattern_k * beam_position(p, j);
+            p.far_beam_cell[8 * j + 4] = static_cast<float>(std::cos(phase));
+            p.far_beam_cell[8 * j + 5] = static_cast<float>(std::sin(phase));
+        }
+        for (std::uint32_t c : {c0, c1}) {
+            first[c] = std::min(first[c], j);
+            last[c] = std::max(last[c], j);
+        }
+    }
+    p.far_cell_beams.assign(std::size_t(cells) * 2, 0);
+    for (std::uint32_t c = 0; c < cells; ++c) {
+        if (first[c] > last[c]) continue; // no beam feeds it
+        p.far_cell_beams[2 * c] = first[c];
+        p.far_cell_beams[2 * c + 1] = last[c] + 1;
+    }
+    // far_weight: cell b into cell a depends on a - b only; the pattern (phased: its smooth part
+    // 1 / (2 (k du)^2)) times the ramp, averaged over one cell by the midpoint rule.
+    constexpr int kSamples = 64;
+    p.far_weight.assign(2 * std::size_t(cells) - 1, 0.0f);
+    for (std::int64_t d = -std::int64_t(cells) + 1; d < std::int64_t(cells); ++d) {
+        double sum = 0.0;
+        for (int i = 0; i < kSamples; ++i) {
+            const double sep = (double(d) + (i + 0.5) / kSamples - 0.5) * step;
+            const double folded = p.circular ? std::remainder(sep, 2.0 * kPi) : sep;
+            const double ramp = far_ramp(std::abs(folded), reach_units);
+            if (ramp == 0.0) continue; // also keeps 1 / du^2 away from du = 0
+            const double x = p.hpattern_k * sep;
+            sum += (phased ? 0.5 / (x * x) : pattern_at_separation(p, sep)) * ramp;
+        }
+        p.far_weight[std::size_t(d + cells - 1)] = static_cast<float>(sum / kSamples);
+    }
+}
+
+} // namespace
+
+// Step: the side-lobe kernel along beams (its taps out to the reach; the far side lobes beyond).
+void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes) {
+    // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their separation.
+    p.sidelobe_taps = 2 * half_taps + 1;
+    const double reach_units = sidelobe_reach(p, reach);
+    // A kernel asked to reach across the fan (bench accuracy's reference) is exact everywhere it reaches.
+    const bool stops_short = reach < p.config.hfov_deg * kDegToRad;
+    if (half_taps > 0 && far_sidelobes && stops_short) plan_far_sidelobes(p, reach_units);
+    if (p.far_cells > 0) // meta.json and Frame::effects say how the pattern reaches past the kernel
+        for (EffectState& state : p.effects.states)
+            if (state.name == "horizontal_pattern")
+                state.why += "; far side lobes over the fan on " + std::to_string(p.far_cells) + " cells" +
+                             (p.far_channels == 3 ? " (sinc^2 crests and nulls exact)" : " (the lobes' mean level)");
+    p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
+            std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
+            if (p.circular) src = (src + p.beams) % p.beams; // half_taps < beams / 2: one wrap at most
+            if (src < 0 || src >= p.beams) continue;
+            double sep = beam_position(p, static_cast<std::uint32_t>(src)) - beam_position(p, j);
+            float w = 1.0f;
+            if (half_taps > 0) {
+                const double folded = p.circular ? std::abs(std::remainder(sep, 2.0 * kPi)) : std::abs(sep);
+                const double near_share = p.far_cells > 0 ? 1.0 - far_ramp(folded, reach_units) : 1.0;
+                w = folded <= reach_units + 1e-12 ? static_cast<float>(pattern_at_separation(p, sep) * near_share)
+                                                  : 0.0f;
+            }
+            p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
+        }
+    }
+    p.sidelobe_tap_begin.assign(p.beams, 0);
+    p.sidelobe_tap_end.assign(p.beams, 0);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        const float* w = p.sidelobe_weight.data() + std::size_t(j) * p.sidelobe_taps;
+        std::uint32_t begin = 0, end = p.sidelobe_taps;
+        while (begin < end && w[begin] == 0.0f)
+            ++begin;
+        while (end > begin && w[end - 1] == 0.0f)
+            --end;
+        p.sidelobe_tap_begin[j] = begin;
+        p.sidelobe_tap_end[j] = end;
+    }
+}
+
+} // namespace plan_steps
+} // namespace vksonar
