@@ -1,0 +1,500 @@
+// `vksonar render`'s inputs, read and checked before any output exists: the command line (parse_job:
+// options, --save, the output's kind, the scene file, the poses, the shard), then the config layers
+// and the scene (load_scene_and_config). render_cmd.cpp runs the job.
+#include "cli/render_job.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "cli/dataset_h5.h"
+#include "cli/inputs.h"
+#include "vksonar/vksonar.h"
+
+namespace fs = std::filesystem;
+
+namespace vksonar::cli {
+namespace {
+
+const std::vector<std::string> kSaveItems = {"default",  "fan",     "polar", "polar_png", "polar_u16",
+                                             "depth",    "normals", "echo",  "cloud",     "multibeam",
+                                             "raw_scan", "labels",  "flow"};
+
+// A trajectory whose header's first column is t, time or time_s has a time (s) before each pose.
+bool header_names_time(const std::string& header) {
+    std::string first = header.substr(0, header.find(','));
+    first.erase(0, first.find_first_not_of(" \t"));
+    first.erase(first.find_last_not_of(" \t") + 1);
+    std::transform(first.begin(), first.end(), first.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return first == "t" || first == "time" || first == "time_s";
+}
+
+// ---- inputs ------------------------------------------------------------------------------------
+
+SaveSet parse_save(const std::vector<std::string>& values) {
+    SaveSet save;
+    if (values.empty()) return save;
+    save.fan = save.polar = save.polar_png = save.polar_u16 = false; // exactly what is listed
+    for (const auto& value : values) {
+        for (const auto& item : split(value, ',')) {
+            if (item.empty()) continue;
+            if (item == "default")
+                save.fan = save.polar = save.polar_png = save.polar_u16 = true;
+            else if (item == "fan")
+                save.fan = true;
+            else if (item == "polar")
+                save.polar = true;
+            else if (item == "polar_png")
+                save.polar_png = true;
+            else if (item == "polar_u16")
+                save.polar_u16 = true;
+            else if (item == "depth")
+                save.depth = true;
+            else if (item == "normals")
+                save.normals = true;
+            else if (item == "echo")
+                save.echo = true;
+            else if (item == "cloud")
+                save.cloud = true;
+            else if (item == "multibeam")
+                save.multibeam = true;
+            else if (item == "raw_scan")
+                save.raw_scan = true;
+            else if (item == "labels")
+                save.labels = true;
+            else if (item == "flow")
+                save.flow = true;
+            else
+                throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
+                               closest_word(item, kSaveItems) +
+                               "'? valid: default,fan,polar,polar_png,polar_u16,depth,normals,echo,cloud,multibeam,"
+                               "raw_scan,labels,flow)");
+        }
+    }
+    return save;
+}
+
+// The poses of a trajectory file, and whether it has a time column (header `t,x,y,z,roll,pitch,yaw`).
+std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed) {
+    std::ifstream file(path);
+    if (!file) throw BadInput("--trajectory " + path + ": cannot open");
+    std::vector<TrajectoryPose> poses;
+    std::string line;
+    std::uint64_t number = 0;
+    bool seen_data = false;
+    timed = false;
+    while (std::getline(file, line)) {
+        ++number;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        const auto first = line.find_first_not_of(" \t");
+        if (first == std::string::npos || line[first] == '#') continue;
+        const std::string where = path + ":" + std::to_string(number);
+        // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw").
+        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos) {
+            seen_data = true;
+            timed = header_names_time(line);
+            continue;
+        }
+        seen_data = true;
+        TrajectoryPose item;
+        item.line = number;
+        std::string pose_text = line;
+        if (timed) {
+            const std::size_t comma = line.find(',');
+            item.time_s = parse_double(line.substr(0, comma), where + ": time");
+            if (!poses.empty() && item.time_s < poses.back().time_s)
+                throw BadInput(where + ": time " + line.substr(0, comma) + " is before the previous line's");
+            pose_text = comma == std::string::npos ? std::string() : line.substr(comma + 1);
+        }
+        item.pose = parse_pose(pose_text, where);
+        poses.push_back(item);
+    }
+    if (file.bad()) throw BadInput("--trajectory " + path + ": read error");
+    if (poses.empty()) throw BadInput("--trajectory " + path + ": no poses in the file");
+    return poses;
+}
+
+// ---- seeing your own scene -----------------------------------------------------------------------
+
+// A scene far out of proportion with the range window is most often in other units: one warning
+// naming the likely mistake and the key that fixes it.
+void warn_if_unit_mistake(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
+    const double size = scene.bounds().diagonal_m(), window = config.range_max_m;
+    if (size <= 0.0 || !(window > 0.0)) return;
+    char line[400];
+    if (size > 200.0 * window && size > 5000.0)
+        std::snprintf(line, sizeof line,
+                      "%s is %.0f m across, %.0f times range_max (%.0f m): if it was modelled in millimetres "
+                      "(centimetres), --set scene.scale=0.001 (0.01) brings it to metres",
+                      scene_path.c_str(), size, size / window, window);
+    else if (size < window / 1000.0)
+        std::snprintf(line, sizeof line,
+                      "%s is %.3g m across, a %.0fth of range_max (%.0f m): if it was modelled in kilometres, "
+                      "--set scene.scale=1000 brings it to metres",
+                      scene_path.c_str(), size, window / size, window);
+    else
+        return;
+    std::fprintf(stderr, "warning: %s\n", line);
+}
+
+// --pose frame: the sonar looks along +x at the bounding box's centre from the distance where the
+// box's width fills the horizontal field of view (not nearer than range_min, not farther than the
+// middle of the range window, so a box larger than the window shows its middle), pitched down by half
+// the vertical beamwidth (as sonars are usually mounted) and raised so that this pitch hits the centre.
+Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
+    const SceneBounds b = scene.bounds();
+    if (b.empty) throw BadInput("--pose frame: " + scene_path + " has nothing to frame");
+    constexpr double kPi = 3.14159265358979323846;
+    const double cx = 0.5 * (b.min_m[0] + b.max_m[0]), cy = 0.5 * (b.min_m[1] + b.max_m[1]);
+    const double cz = 0.5 * (b.min_m[2] + b.max_m[2]);
+    const double half_width = 0.5 * std::max(b.max_m[1] - b.min_m[1], 1e-3);
+    const double half_depth = 0.5 * (b.max_m[0] - b.min_m[0]);
+    const double half_fov = 0.5 * std::min(config.hfov_deg, 170.0) * kPi / 180.0;
+    const double fit = std::max(half_width / std::tan(half_fov), config.range_min_m * 1.05) + half_depth;
+    const double distance = std::min(fit, 0.5 * (config.range_min_m + config.range_max_m));
+    const double pitch = 0.5 * std::min(config.vfov_deg, 60.0) * kPi / 180.0;
+    Pose pose;
+    pose.x_m = cx - distance;
+    pose.y_m = cy;
+    pose.z_m = cz + distance * std::tan(pitch);
+    pose.pitch_deg = pitch * 180.0 / kPi;
+    const double far = std::hypot(distance + half_depth, pose.z_m - b.min_m[2]);
+    std::fprintf(stderr, "vksonar: --pose frame: %.3f,%.3f,%.3f,0,%.2f,0 (%s)\n", pose.x_m, pose.y_m, pose.z_m,
+                 pose.pitch_deg,
+                 far > config.range_max_m ? "the box reaches beyond range_max: its middle is framed"
+                                          : "the whole box lies inside the range window");
+    return pose;
+}
+
+// ---- one dataset file ---------------------------------------------------------------------------
+
+// The first problem SonarConfig::validate names, or empty for a usable config.
+std::string config_problem(const SonarConfig& config) {
+    const auto valid = config.validate();
+    return valid ? std::string() : valid.error().message;
+}
+
+std::string lower_extension(const std::string& path) {
+    std::string ext = fs::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+bool is_dataset_path(const std::string& path) {
+    const std::string ext = lower_extension(path);
+    return ext == ".h5" || ext == ".hdf5";
+}
+bool is_mcap_path(const std::string& path) {
+    return lower_extension(path) == ".mcap";
+}
+
+// A bag holds the sonar image, the fan, the polar display, the cloud and the instance ids; the rest
+// needs folders.
+McapOptions check_mcap_save(SaveSet& save, bool listed, const std::string& path) {
+    if (!listed) save = SaveSet{true, true, false, true};
+    const char* other = save.depth       ? "depth"
+                        : save.normals   ? "normals"
+                        : save.echo      ? "echo"
+                        : save.multibeam ? "multibeam"
+                        : save.raw_scan  ? "raw_scan"
+                        : save.flow      ? "flow"
+                                         : nullptr;
+    if (other)
+        throw BadInput(std::string("--save ") + other + ": a ROS 2 bag (" + path +
+                       ") holds polar, fan, polar_u16 (or polar_png), cloud and labels; write per-frame folders "
+                       "(--out DIR) for the rest");
+    McapOptions options;
+    options.sonar_image = save.polar;
+    options.fan = save.fan;
+    options.polar = save.polar_u16 || save.polar_png;
+    options.cloud = save.cloud;
+    options.instance = save.labels;
+    if (!options.sonar_image && !options.fan && !options.polar && !options.cloud && !options.instance)
+        throw BadInput("--save: nothing for the bag " + path + " (polar, fan, polar_u16, cloud, labels)");
+    return options;
+}
+
+// A dataset holds the polar arrays and the labels beside them; images and per-pixel intermediates go
+// to per-frame folders.
+void check_dataset_save(SaveSet& save, bool listed, const std::string& path) {
+    if (!listed) save = SaveSet{false, true, false, false};
+    const char* other = save.fan         ? "fan"
+                        : save.polar_png ? "polar_png"
+                        : save.depth     ? "depth"
+                        : save.normals   ? "normals"
+                        : save.echo      ? "echo"
+                        : save.cloud     ? "cloud"
+                        : save.multibeam ? "multibeam"
+                        : save.raw_scan  ? "raw_scan"
+                                         : nullptr;
+    if (other)
+        throw BadInput(std::string("--save ") + other + ": a dataset file (" + path +
+                       ") holds polar, polar_u16, labels and flow only; write per-frame folders (--out DIR) for the "
+                       "rest");
+    if (!save.polar && !save.polar_u16)
+        throw BadInput("--save: nothing for the dataset file " + path +
+                       " (polar, polar_u16; labels and flow go beside them)");
+    if (!hdf5_available())
+        throw BadInput("--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
+}
+
+// --out FILE.mcap: the topics (--save), names (--ros-prefix, --ros-frame) and dtype of the bag.
+McapOptions mcap_options(const Args& args, SaveSet& save, const std::string& path) {
+    McapOptions options = check_mcap_save(save, !args.values("--save").empty(), path);
+    options.prefix = args.value("--ros-prefix", options.prefix);
+    while (options.prefix.size() > 1 && options.prefix.back() == '/')
+        options.prefix.pop_back();
+    auto valid_name = [](const std::string& name, bool slashes) {
+        if (name.empty()) return false;
+        for (unsigned char c : name)
+            if (!(std::isalnum(c) || c == '_' || (slashes && c == '/'))) return false;
+        return true;
+    };
+    if (options.prefix == "/") options.prefix.clear();
+    if (!options.prefix.empty() && (options.prefix[0] != '/' || !valid_name(options.prefix, true) ||
+                                    options.prefix.find("//") != std::string::npos))
+        throw BadInput("--ros-prefix: '" + options.prefix +
+                       "' is not a ROS topic namespace (/name/..., letters, digits, _)");
+    options.frame = args.value("--ros-frame", options.frame);
+    if (!valid_name(options.frame, false) || std::isdigit(static_cast<unsigned char>(options.frame[0])))
+        throw BadInput("--ros-frame: '" + options.frame + "' is not a frame id (letters, digits, _)");
+    const std::string dtype = args.value("--ros-sonar-dtype", "float32");
+    if (dtype != "float32" && dtype != "uint16")
+        throw BadInput("--ros-sonar-dtype: '" + dtype + "' (float32 or uint16)");
+    options.sonar_u16 = dtype == "uint16";
+    if (args.has("--rate")) {
+        const double rate = parse_double(args.value("--rate"), "--rate");
+        if (!(rate > 0.0)) throw BadInput("--rate: " + args.value("--rate") + " is not a positive rate (frames/s)");
+    }
+    if (args.has("--compress") && !mcap_zstd_available())
+        throw BadInput("--compress: this build has no zstd for " + path + " (install libzstd-dev and rebuild)");
+    return options;
+}
+
+// ROS time stamps (builtin_interfaces/Time: int32 s) hold 0 .. 2^31 - 1 s; --rate needs no time column.
+void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const Args& args) {
+    const std::string& path = args.value("--trajectory");
+    if (timed && args.has("--rate"))
+        throw BadInput("--rate: " + path + " has a time column, which sets the time stamps");
+    if (!timed) return;
+    for (const TrajectoryPose& p : poses)
+        if (!(p.time_s >= 0.0 && p.time_s <= 2147483647.0)) {
+            char value[64];
+            std::snprintf(value, sizeof value, "%.17g", p.time_s);
+            throw BadInput(path + ":" + std::to_string(p.line) + ": time " + value +
+                           " is outside a ROS time stamp's 0 .. 2147483647 s");
+        }
+}
+
+} // namespace
+
+// The --save set as a canonical list (a shard's identity).
+std::string save_list(const SaveSet& s) {
+    std::string list;
+    const std::pair<bool, const char*> items[] = {{s.fan, "fan"},
+                                                  {s.polar, "polar"},
+                                                  {s.polar_png, "polar_png"},
+                                                  {s.polar_u16, "polar_u16"},
+                                                  {s.depth, "depth"},
+                                                  {s.normals, "normals"},
+                                                  {s.echo, "echo"},
+                                                  {s.cloud, "cloud"},
+                                                  {s.multibeam, "multibeam"},
+                                                  {s.raw_scan, "raw_scan"},
+                                                  {s.labels, "labels"},
+                                                  {s.flow, "flow"}};
+    for (const auto& [on, name] : items)
+        if (on) list += (list.empty() ? "" : ",") + std::string(name);
+    return list;
+}
+
+// ---- the command line, in the order its errors are reported ------------------------------------------
+
+Args parse_render_args(const std::vector<std::string>& argv) {
+    return parse_args(argv,
+                      {{"--scene", true, false},
+                       {"--sonar", true, false},
+                       {"--config", true, false},
+                       {"--pose", true, false},
+                       {"--trajectory", true, false},
+                       {"--set", true, true},
+                       {"--quality", true, false},
+                       {"--seed", true, false},
+                       {"--backend", true, false},
+                       {"--save", true, true},
+                       {"--out", true, false},
+                       {"--asset-root", true, false},
+                       {"--compress", false, false},
+                       {"--ros-prefix", true, false},
+                       {"--ros-frame", true, false},
+                       {"--rate", true, false},
+                       {"--ros-sonar-dtype", true, false},
+                       {"--shard", true, false},
+                       {"--shard-count", true, false},
+                       {"--help", false, false}},
+                      "render");
+}
+
+namespace {
+
+// Options that need no files: the backend, seed, --save and the output format's own options.
+void parse_options(const Args& args, RenderJob& job) {
+    job.backend_name = args.value("--backend", "auto");
+    if (job.backend_name == "cpu")
+        job.backend = Backend::cpu;
+    else if (job.backend_name != "vulkan" && job.backend_name != "auto")
+        throw BadInput("--backend: '" + job.backend_name + "' is not a backend (auto, vulkan or cpu)");
+    job.seed = args.has("--seed") ? parse_u64(args.value("--seed"), "--seed") : 1;
+    job.save = parse_save(args.values("--save"));
+    if (job.save.flow && !args.has("--trajectory"))
+        throw BadInput("--save flow: flow goes from each frame of a trajectory to the next; give --trajectory");
+    job.out_path = args.value("--out");
+    job.dataset = is_dataset_path(job.out_path);
+    job.bag = is_mcap_path(job.out_path);
+    if (job.dataset) check_dataset_save(job.save, !args.values("--save").empty(), job.out_path);
+    if (job.bag) job.bag_options = mcap_options(args, job.save, job.out_path);
+    for (const char* option : {"--ros-prefix", "--ros-frame", "--rate", "--ros-sonar-dtype"})
+        if (args.has(option) && !job.bag)
+            throw BadInput(std::string(option) + ": only for a ROS 2 bag (--out FILE.mcap)");
+    if (args.has("--compress") && !job.dataset && !job.bag)
+        throw BadInput("--compress: only a .h5 dataset or a .mcap bag is compressed (--out FILE.h5|FILE.mcap)");
+}
+
+// The poses: the trajectory's lines, one --pose, or the default pose. --pose frame is a placeholder
+// here: load_scene_and_config computes it once the scene is loaded.
+void read_poses(const Args& args, RenderJob& job) {
+    job.trajectory = args.has("--trajectory");
+    if (job.trajectory) {
+        job.poses = read_trajectory(args.value("--trajectory"), job.timed);
+        if (job.bag) check_bag_times(job.poses, job.timed, args);
+    } else if (args.has("--pose") && args.value("--pose") == "frame") {
+        job.frame_pose = true;
+        job.poses.push_back({Pose{}, 0});
+    } else if (args.has("--pose")) {
+        job.poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
+    } else {
+        Pose pose;
+        if (job.default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
+        job.poses.push_back({pose, 0});
+    }
+}
+
+// The shard: a block of the trajectory's frames (shard.h), from --shard or the engine's environment.
+void pick_shard(const Args& args, RenderJob& job) {
+    if (job.trajectory) {
+        auto flag = [&](const char* name) { return args.has(name) ? std::optional(args.value(name)) : std::nullopt; };
+        job.shard = resolve_shard(flag("--shard"), flag("--shard-count"), job.poses.size(), process_env());
+        if (job.shard) {
+            job.shard->trajectory = args.value("--trajectory");
+            job.shard->trajectory_hash = file_fnv1a64(job.shard->trajectory);
+        }
+    } else if (args.has("--shard") || args.has("--shard-count")) {
+        throw BadInput(std::string(args.has("--shard") ? "--shard" : "--shard-count") +
+                       ": shards split a trajectory; give --trajectory POSES.csv");
+    }
+    job.first = job.shard ? job.shard->first : 0;
+    job.end = job.shard ? job.shard->end : job.poses.size();
+}
+
+} // namespace
+
+// Everything the command line says, checked in the order the errors are reported: options, scene
+// file, poses, shard. The config layers and the scene itself come next (load_scene_and_config).
+RenderJob parse_job(const Args& args) {
+    if (!args.positional.empty())
+        throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
+    if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
+    if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
+    RenderJob job;
+    parse_options(args, job);
+    job.default_scene = !args.has("--scene");
+    job.scene_path = job.default_scene ? find_default_scene().string() : args.value("--scene");
+    if (!job.default_scene) {
+        std::error_code ec;
+        if (!fs::is_regular_file(job.scene_path, ec)) throw BadInput("--scene " + job.scene_path + ": no such file");
+    }
+    read_poses(args, job);
+    pick_shard(args, job);
+    return job;
+}
+
+namespace {
+
+// The user's config layers on top of `config`: --config < --quality < --set, then the checks of the
+// result. Run twice (load_scene_and_config): once on the preset, before the (possibly slow) scene
+// load, and again above the scene's effects.
+SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig config) {
+    // A value the config file made invalid (and no later layer changed) is reported with the file.
+    std::string file_problem, file_path;
+    if (args.has("--config")) {
+        std::error_code ec;
+        const std::string path = args.value("--config");
+        if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
+        const std::string before = config_problem(config);
+        auto layered = apply_config_file(config, path);
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+        if (std::string after = config_problem(config); after != before) {
+            file_problem = std::move(after);
+            file_path = path;
+        }
+    }
+    if (args.has("--quality")) {
+        auto layered = apply_quality(config, args.value("--quality"));
+        if (!layered) throw BadInput("--quality: " + layered.error().message);
+        config = layered.value();
+    }
+    for (const auto& item : args.values("--set")) {
+        auto layered = apply_config_override(config, item);
+        if (!layered) throw BadInput(layered.error().message);
+        config = layered.value();
+    }
+    if (std::string problem = config_problem(config); !problem.empty()) {
+        const bool from_file = !file_problem.empty() && problem == file_problem;
+        throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
+    }
+    if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
+        throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
+                       ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
+    return config;
+}
+
+} // namespace
+
+// The config layers (preset < scene effects < --config < --quality < --set) and the scene; fills in
+// a --pose frame pose. Still nothing on disk.
+SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
+    const SonarConfig preset = sonar_base_config(args.value("--sonar", "default"));
+    SonarConfig config = apply_user_layers(args, job.save, preset);
+    const std::string asset_root = args.value("--asset-root", config.scene_asset_root);
+    auto scene = Scene::load_gltf(job.scene_path, SceneLoadOptions{asset_root, config.scene_scale});
+    if (!scene) {
+        if (job.default_scene) throw Failure(scene.error().message);
+        throw BadInput(scene.error().message);
+    }
+    // What the loader skipped or ignored (points and lines, unknown material keys, skins) is the
+    // user's to know: one line each, before any frame.
+    for (const std::string& warning : scene->stats().warnings)
+        std::fprintf(stderr, "warning: %s\n", warning.c_str());
+    const std::string& scene_effects = scene->effects_json();
+    if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
+        auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}",
+                                         job.scene_path + " (scene extras vksonar.effects)");
+        if (!layered) throw BadInput(layered.error().message);
+        config = apply_user_layers(args, job.save, layered.value());
+    }
+    config.scene_asset_root = asset_root; // meta.json's config says which folder the scene's files came from
+    if (job.bag && config.mode != SonarMode::physical)
+        throw BadInput("--out " + job.out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
+                       (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
+    warn_if_unit_mistake(scene.value(), config, job.scene_path);
+    if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), 0, 0.0}};
+    return {std::move(scene.value()), std::move(config)};
+}
+
+} // namespace vksonar::cli
