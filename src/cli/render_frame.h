@@ -1,6 +1,6 @@
 // `vksonar render`'s per-frame outputs: one rendered frame -> the files of its folder (PNG, NPY, PLY,
 // boxes.json, meta.json), each written under a temporary name and renamed, so a reader never sees
-// half a file. render_cmd.cpp parses, validates and loops over the poses; this file writes.
+// half a file. render_job.cpp parses and validates, render_cmd.cpp loops over the poses; this file writes.
 #pragma once
 
 #include <cstdint>
