@@ -457,7 +457,8 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
                 const double x = cone_x[c];
                 const auto first = static_cast<std::int64_t>(std::floor(x));
                 // the beams whose cone columns hold floor(x) or the next: from the first that does not end
-                // at or before floor(x) (x grows along the view's row, as do the beams' columns)
+                // at or before floor(x) (x grows along the view's row, as do the beams' columns; a beam
+                // without columns, [0, 0) in assign_columns_to_beams, is passed over or gets no weight)
                 while (b_low < block && std::int64_t(plan.beam_column_end[j_begin + b_low]) <= first)
                     ++b_low;
                 Cell* cells[kBeamBlock];
