@@ -48,10 +48,12 @@ void split_blocks(host::Workers* workers, std::uint32_t n, std::uint32_t block, 
 }
 constexpr std::uint32_t kRowBlock = 16, kBinBlock = 32;
 
-// The profile stage's blocks of profile columns: about four blocks per thread, 32 to 128 columns each. A
-// block also spreads the pixels that straddle its first column (the previous block's too), so fewer,
-// wider blocks repeat less (64 -> 128 on two threads: beamform -1.5 %).
+// The profile stage's blocks of profile columns, as split_blocks hands them out: on several threads about
+// four blocks per thread, 32 to 128 columns each (a block also spreads the pixels that straddle its first
+// column, the previous block's too, so fewer, wider blocks repeat less: 64 -> 128 on two threads,
+// beamform -1.5 %); on one thread all of them at once.
 std::uint32_t profile_column_block(const Plan& plan, std::uint32_t threads) {
+    if (threads <= 1) return std::max(plan.profile_columns, 1u);
     return static_cast<std::uint32_t>(std::clamp<std::uint64_t>(ceil_div(plan.profile_columns, 4 * threads), 32, 128));
 }
 
@@ -97,7 +99,7 @@ template <class Real> struct StageContext {
         const std::uint32_t block = profile_column_block(plan, parts);
         const std::size_t blocks = ceil_div(plan.profile_columns, block);
         if (cone_span_count(plan) * blocks <= pixels) {
-            cone_spans.resize(cone_span_count(plan) * blocks);
+            cone_spans.resize(cone_span_count(plan) * blocks); // none for planar (cone_span_count 0)
             for (std::size_t b = 0; b < blocks && !cone_spans.empty(); ++b) {
                 const auto begin = static_cast<std::uint32_t>(b * block);
                 cone_column_spans(plan, begin, std::min(begin + block, plan.profile_columns),
@@ -189,15 +191,14 @@ template <class Real> void run_beamform(StageContext<Real>& s) {
     const SubpixelInput subpixel{s.subpixel, s.depth.data(), s.material.data()};
     const SubpixelInput* with_subpixel = s.plan.subpixel_capacity > 0 ? &subpixel : nullptr;
     const std::uint32_t column_block = profile_column_block(s.plan, s.workers ? s.workers->count() : 1u);
-    split_blocks(s.workers, s.plan.profile_columns, column_block,
-                 [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
-                     // split_blocks runs one block of column_block at a time, or all columns at once
-                     const bool one_block = end - begin <= column_block && !s.cone_spans.empty();
-                     const std::uint32_t* spans =
-                         one_block ? s.cone_spans.data() + begin / column_block * cone_span_count(s.plan) : nullptr;
-                     beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end,
-                                             with_subpixel, s.view_drawn.data(), spans);
-                 });
+    split_blocks(
+        s.workers, s.plan.profile_columns, column_block, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
+            // [begin, end) is block begin / column_block (profile_column_block)
+            const std::uint32_t* spans =
+                s.cone_spans.empty() ? nullptr : s.cone_spans.data() + begin / column_block * cone_span_count(s.plan);
+            beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end, with_subpixel,
+                                    s.view_drawn.data(), spans);
+        });
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
                              end);

@@ -401,15 +401,15 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
     auto cells_of = [&](std::uint32_t j) { return scratch.cells.data() + std::size_t(j - j_begin) * bins; };
     if (!plan.line_array) {
         for (std::uint32_t j = j_begin; j < j_end; ++j) {
-            const std::uint32_t b = j - j_begin;
+            // one beam at a time: add_pixel's lists of one
+            Cell* cells = cells_of(j);
+            int* low = &k_low[j - j_begin];
+            int* high = &k_high[j - j_begin];
             for (std::uint32_t q = plan.beam_column_begin[j]; q < plan.beam_column_end[j]; ++q) {
                 const double weight = beam_weight(plan, j, q);
                 if (!(weight > 0.0)) continue;
                 for (std::uint32_t row = 0; row < plan.rows; ++row) {
                     const std::size_t p = static_cast<std::size_t>(row) * plan.columns + q;
-                    Cell* cells = cells_of(j);
-                    int* low = &k_low[b];
-                    int* high = &k_high[b];
                     if (frame.echo[2 * p] > 0.0f) add_pixel(plan, frame, cache, p, &cells, &weight, 1, &low, &high);
                 }
             }
