@@ -111,6 +111,7 @@ struct Target {
     std::int64_t row_begin, row_end; // the band of rows this pass writes (depth_pass)
     std::uint32_t material_id;
     bool simd = true;              // DepthRegion::simd
+    bool vertex_cache = true;      // DepthRegion::vertex_cache
     float* face_normal = nullptr;  // rows * columns * 4 or null (normal_method = geometric)
     float triangle_normal[3] = {}; // the current triangle's unit plane normal, clip-linear coordinates
     // The band's edges in y_ndc, and whether it is less than the whole image (then triangles and
@@ -239,6 +240,16 @@ __attribute__((target("avx2"))) void raster_rows4(const Edge (&e)[3], const doub
 #endif
 
 void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {
+    // The pixel box first: most triangles of a big mesh seen from afar hold no pixel centre, and then
+    // the edges' setup (four divisions) is skipped. The box does not depend on the winding.
+    const double min_x = std::min({v0.x, v1.x, v2.x}), max_x = std::max({v0.x, v1.x, v2.x});
+    const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
+    const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
+    const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
+    const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
+    const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
+    if (x0 >= x1 || y0 >= y1) return;
+
     // Orientation from the same canonical edge function the coverage test uses.
     double area = make_edge(v0, v1).eval(v2.x, v2.y);
     if (!(area != 0.0) || !std::isfinite(area)) return; // zero area, NaN or overflow
@@ -246,13 +257,6 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
     const Edge e0 = make_edge(v1, v2); // weight of v0
     const Edge e1 = make_edge(v2, v0); // weight of v1
     const Edge e2 = make_edge(v0, v1); // weight of v2
-
-    const double min_x = std::min({v0.x, v1.x, v2.x}), max_x = std::max({v0.x, v1.x, v2.x});
-    const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
-    const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
-    const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
-    const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
-    const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
 
 #if defined(__x86_64__) && defined(__GNUC__)
     if (t.simd && has_avx2()) {
@@ -331,6 +335,80 @@ bool finite(const ClipVertex& v) {
     return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z) && std::isfinite(v.w);
 }
 
+// A clip-space vertex's place in the view: framebuffer x, y and z_ndc (w > 0 checked by the caller).
+ScreenVertex project(const ClipVertex& c, double x_offset, double half_w, double half_h) {
+    const double xn = c.x / c.w, yn = c.y / c.w, zn = c.z / c.w;
+    return {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
+}
+
+// Whether the triangle is wholly above or below the target's band of rows.
+bool outside_band(const ClipVertex& a, const ClipVertex& b, const ClipVertex& c, const Target& t) {
+    unsigned every = 3u;
+    for (const ClipVertex* v : {&a, &b, &c})
+        every &= band_outcode(v->y, v->w, std::abs(v->y) + std::abs(v->w), t);
+    return every != 0u;
+}
+
+// Clips the triangle poly[0..2] against the near and far planes where it crosses them, projects the
+// pieces and rasterizes them as a fan.
+void clip_and_raster(ClipVertex (&poly)[8], unsigned codes_or, double x_offset, double half_w, double half_h,
+                     const Target& target) {
+    ClipVertex tmp[8];
+    int n = 3;
+    if (codes_or & (kOutNear | kOutFar)) {
+        n = clip_against(poly, n, tmp, 0);
+        if (n < 3) return;
+        n = clip_against(tmp, n, poly, 1);
+        if (n < 3) return;
+    }
+    ScreenVertex sv[8];
+    for (int k = 0; k < n; ++k) {
+        if (!(poly[k].w > 0.0)) return;
+        sv[k] = project(poly[k], x_offset, half_w, half_h);
+    }
+    for (int k = 1; k + 1 < n; ++k)
+        raster_triangle(sv[0], sv[k], sv[k + 1], target);
+}
+
+// The per-vertex work of one run (transform, outcode, projection) done once per vertex, not once per
+// corner of every triangle: a run of a grid's 512 triangles indexes 289 vertices, each a corner of up
+// to six triangles. Same values as the per-corner path (same functions, same inputs): same bytes.
+struct RunVertices {
+    static constexpr std::uint32_t kCapacity = 1024; // 56 KiB of stack; a wider run takes the per-corner path
+    static constexpr unsigned kNotFinite = 0x100u;   // above the outcode bits
+    ClipVertex clip[kCapacity];
+    ScreenVertex screen[kCapacity]; // valid where clip.w > 0
+    unsigned code[kCapacity];       // outcode, or kNotFinite
+};
+
+void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::uint32_t first_vertex,
+                          const std::uint32_t* idx, std::uint32_t index_count, std::uint32_t lowest,
+                          std::uint32_t vertex_count, double x_offset, double half_w, double half_h, Target& target) {
+    RunVertices cache; // not value-initialised: every entry below [0, vertex_count) is written first
+    const float* positions = scene.positions.data() + 3 * (std::size_t(first_vertex) + lowest);
+    for (std::uint32_t v = 0; v < vertex_count; ++v) {
+        const ClipVertex c = transform(m, positions + 3 * std::size_t(v));
+        cache.clip[v] = c;
+        cache.code[v] = finite(c) ? outcode(c) : RunVertices::kNotFinite;
+        if (c.w > 0.0) cache.screen[v] = project(c, x_offset, half_w, half_h);
+    }
+    for (std::uint32_t tri = 0; tri + 3 <= index_count; tri += 3) {
+        const std::uint32_t a = idx[tri] - lowest, b = idx[tri + 1] - lowest, c = idx[tri + 2] - lowest;
+        const unsigned c0 = cache.code[a], c1 = cache.code[b], c2 = cache.code[c];
+        if ((c0 | c1 | c2) & RunVertices::kNotFinite) continue;
+        if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
+        if (target.band && outside_band(cache.clip[a], cache.clip[b], cache.clip[c], target)) continue;
+        ClipVertex poly[8] = {cache.clip[a], cache.clip[b], cache.clip[c]};
+        if (target.face_normal) plane_normal(poly, target.triangle_normal);
+        if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
+            clip_and_raster(poly, c0 | c1 | c2, x_offset, half_w, half_h, target);
+            continue;
+        }
+        if (!(poly[0].w > 0.0 && poly[1].w > 0.0 && poly[2].w > 0.0)) continue;
+        raster_triangle(cache.screen[a], cache.screen[b], cache.screen[c], target);
+    }
+}
+
 // One run of triangles of one draw (a whole mesh, or one cluster of it) into one slice.
 void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::uint32_t first_vertex,
                    const std::uint32_t* idx, std::uint32_t index_count, double x_offset, double half_w, double half_h,
@@ -340,8 +418,21 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
     for (int k = 0; k < 16; ++k)
         m[k] = push.clip_from_local[k];
     const std::size_t vertex_limit = scene.positions.size() / 3;
-    for (std::uint32_t tri = 0; tri + 3 <= index_count; tri += 3) {
-        ClipVertex poly[8], tmp[8];
+    index_count -= index_count % 3;
+    if (index_count == 0) return;
+    std::uint32_t lowest = idx[0], highest = idx[0];
+    for (std::uint32_t k = 1; k < index_count; ++k) {
+        lowest = std::min(lowest, idx[k]);
+        highest = std::max(highest, idx[k]);
+    }
+    if (target.vertex_cache && highest - lowest < RunVertices::kCapacity &&
+        std::size_t(first_vertex) + highest < vertex_limit) {
+        rasterize_run_cached(scene, m, first_vertex, idx, index_count, lowest, highest - lowest + 1, x_offset, half_w,
+                             half_h, target);
+        return;
+    }
+    for (std::uint32_t tri = 0; tri < index_count; tri += 3) {
+        ClipVertex poly[8];
         bool ok = true;
         for (int k = 0; k < 3 && ok; ++k) {
             const std::size_t v = static_cast<std::size_t>(first_vertex) + idx[tri + k];
@@ -355,34 +446,9 @@ void rasterize_run(const SceneData& scene, const shared::DepthPush& push, std::u
         if (!ok) continue;
         const unsigned c0 = outcode(poly[0]), c1 = outcode(poly[1]), c2 = outcode(poly[2]);
         if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
-        if (target.band) {          // entirely above or below this band of rows
-            unsigned every = 3u;
-            for (int k = 0; k < 3; ++k)
-                every &= band_outcode(poly[k].y, poly[k].w, std::abs(poly[k].y) + std::abs(poly[k].w), target);
-            if (every) continue;
-        }
+        if (target.band && outside_band(poly[0], poly[1], poly[2], target)) continue;
         if (target.face_normal) plane_normal(poly, target.triangle_normal);
-        int n = 3;
-        if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
-            n = clip_against(poly, n, tmp, 0);
-            if (n < 3) continue;
-            n = clip_against(tmp, n, poly, 1);
-            if (n < 3) continue;
-        }
-        ScreenVertex sv[8];
-        bool valid = true;
-        for (int k = 0; k < n; ++k) {
-            const ClipVertex& c = poly[k];
-            if (!(c.w > 0.0)) {
-                valid = false;
-                break;
-            }
-            const double xn = c.x / c.w, yn = c.y / c.w, zn = c.z / c.w;
-            sv[k] = {x_offset + (xn + 1.0) * half_w, (yn + 1.0) * half_h, zn};
-        }
-        if (!valid) continue;
-        for (int k = 1; k + 1 < n; ++k)
-            raster_triangle(sv[0], sv[k], sv[k + 1], target);
+        clip_and_raster(poly, c0 | c1 | c2, x_offset, half_w, half_h, target);
     }
 }
 
@@ -412,6 +478,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
         const double half_w = 0.5 * static_cast<double>(width);
         Target target{depth, material, columns, view_first, view_first + width, row_begin, row_end, 0};
         target.simd = region.simd && plan.config.cpu_vector_loops != CpuVectorLoops::off;
+        target.vertex_cache = region.vertex_cache;
         target.face_normal = face_normal;
         target.band = row_begin > 0 || row_end < rows;
         target.band_top_ndc = 2.0 * row_begin / rows - 1.0;

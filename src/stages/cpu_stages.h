@@ -37,11 +37,14 @@ struct DepthClusters {
 // each pixel by the same triangles in the same order as a pass over the whole image, so regions run on
 // different threads give the same bytes (each region transforms and sets up its views' triangles
 // again: a few bands per view, not many). simd: the pixels four at a time where the CPU has AVX2 and
-// cpu.vector_loops is not off (false: one at a time; the same bytes, tested).
+// cpu.vector_loops is not off (false: one at a time; the same bytes, tested). vertex_cache: a run's
+// vertices transformed and projected once each where its indices span few enough (false: once per
+// corner of every triangle; the same bytes, tested).
 struct DepthRegion {
     std::uint32_t row_begin = 0, row_end = ~0u;
     std::uint32_t view_begin = 0, view_end = ~0u;
     bool simd = true;
+    bool vertex_cache = true;
 };
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
                 std::uint32_t* material, float* face_normal = nullptr, const DepthClusters* clusters = nullptr,

@@ -310,6 +310,30 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
     cull_depth_clusters(runs, b.scene.draws.size(), draws, drawn);
     ASSERT_GT(runs.size(), 4u);
     const cpu::DepthClusters clusters{runs, drawn};
+    // Each vertex transformed and projected once per run (the vertex cache: the room, the planes, the
+    // soup and each cluster of the grid; the whole grid spans too many vertices for it) against once per
+    // corner of every triangle: the same bytes, near-plane clipping and ties included.
+    for (const cpu::DepthClusters* by : {static_cast<const cpu::DepthClusters*>(nullptr), &clusters}) {
+        for (bool simd : {true, false}) {
+            std::vector<float> cached_depth(pixels, -1.0f), cached_face(4 * pixels, -1.0f);
+            std::vector<float> corner_depth(pixels, -1.0f), corner_face(4 * pixels, -1.0f);
+            std::vector<std::uint32_t> cached_material(pixels, 12345u), corner_material(pixels, 12345u);
+            cpu::DepthRegion cached, per_corner;
+            cached.simd = per_corner.simd = simd;
+            per_corner.vertex_cache = false;
+            cpu::depth_pass(plan, b.scene, draws, cached_depth.data(), cached_material.data(), cached_face.data(), by,
+                            cached);
+            cpu::depth_pass(plan, b.scene, draws, corner_depth.data(), corner_material.data(), corner_face.data(), by,
+                            per_corner);
+            const char* how = by ? "clusters" : "meshes";
+            EXPECT_EQ(cached_depth, depth) << how << ", simd " << simd;
+            EXPECT_EQ(corner_depth, depth) << how << ", simd " << simd;
+            EXPECT_EQ(corner_material, material) << how << ", simd " << simd;
+            EXPECT_EQ(cached_material, material) << how << ", simd " << simd;
+            EXPECT_EQ(corner_face, face) << how << ", simd " << simd;
+            EXPECT_EQ(cached_face, face) << how << ", simd " << simd;
+        }
+    }
     for (const cpu::DepthClusters* by : {static_cast<const cpu::DepthClusters*>(nullptr), &clusters}) {
         for (std::uint32_t bands : {2u, 3u, 7u, plan.rows}) {
             std::vector<float> band_depth(pixels, -1.0f), band_face(4 * pixels, -1.0f);
