@@ -121,19 +121,25 @@ struct Target {
 };
 
 // First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
+// ceil(x) > k exactly when x > k for an integer k, so the clamps test x itself, and inside them x is
+// small enough to truncate: ceil without a call to libm (a baseline x86-64 build has no round
+// instruction, and every triangle takes this twice).
 [[gnu::always_inline]] inline std::int64_t first_pixel(double lo, std::int64_t begin, std::int64_t end) {
-    const double f = std::ceil(lo - 0.5);
-    if (!(f > static_cast<double>(begin))) return begin; // also NaN
-    if (f > static_cast<double>(end)) return end;
-    return static_cast<std::int64_t>(f);
+    const double x = lo - 0.5;
+    if (!(x > static_cast<double>(begin))) return begin; // also NaN
+    if (x > static_cast<double>(end)) return end;
+    const auto t = static_cast<std::int64_t>(x); // toward zero
+    return static_cast<double>(t) < x ? t + 1 : t;
 }
 
-// One past the last pixel index whose centre is <= hi, clamped into [begin, end].
+// One past the last pixel index whose centre is <= hi, clamped into [begin, end]: floor(y) + 1 with
+// y = hi - 0.5, and floor(y) + 1 < k exactly when y < k - 1 for an integer k.
 [[gnu::always_inline]] inline std::int64_t last_pixel_end(double hi, std::int64_t begin, std::int64_t end) {
-    const double f = std::floor(hi - 0.5) + 1.0;
-    if (!(f < static_cast<double>(end))) return end;
-    if (f < static_cast<double>(begin)) return begin;
-    return static_cast<std::int64_t>(f);
+    const double y = hi - 0.5;
+    if (!(y < static_cast<double>(end - 1))) return end; // also NaN
+    if (y < static_cast<double>(begin - 1)) return begin;
+    const auto t = static_cast<std::int64_t>(y); // toward zero
+    return (static_cast<double>(t) > y ? t - 1 : t) + 1;
 }
 
 // Narrows [x0, x1) to the pixels of row centre cy that could be on e's covered side: where the edge
@@ -374,11 +380,16 @@ void clip_and_raster(ClipVertex (&poly)[8], unsigned codes_or, double x_offset, 
 // corner of every triangle: a run of a grid's 512 triangles indexes 289 vertices, each a corner of up
 // to six triangles. Same values as the per-corner path (same functions, same inputs): same bytes.
 struct RunVertices {
-    static constexpr std::uint32_t kCapacity = 1024; // 56 KiB of stack; a wider run takes the per-corner path
+    static constexpr std::uint32_t kCapacity = 1024; // 76 KiB of stack; a wider run takes the per-corner path
     static constexpr unsigned kNotFinite = 0x100u;   // above the outcode bits
     ClipVertex clip[kCapacity];
     ScreenVertex screen[kCapacity]; // valid where clip.w > 0
     unsigned code[kCapacity];       // outcode, or kNotFinite
+    // Where clip.w > 0: first_pixel and last_pixel_end of the vertex's own x and y in the target. Both
+    // are monotone, so a triangle's pixel box is the least and greatest of its vertices' (raster_triangle's
+    // box exactly): a triangle holding no pixel centre, most of a big mesh seen from afar, is dropped here
+    // with integer compares instead of in a call.
+    std::int32_t x_first[kCapacity], x_end[kCapacity], y_first[kCapacity], y_end[kCapacity];
 };
 
 void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::uint32_t first_vertex,
@@ -390,7 +401,14 @@ void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::ui
         const ClipVertex c = transform(m, positions + 3 * std::size_t(v));
         cache.clip[v] = c;
         cache.code[v] = finite(c) ? outcode(c) : RunVertices::kNotFinite;
-        if (c.w > 0.0) cache.screen[v] = project(c, x_offset, half_w, half_h);
+        if (c.w > 0.0) {
+            const ScreenVertex sv = project(c, x_offset, half_w, half_h);
+            cache.screen[v] = sv;
+            cache.x_first[v] = static_cast<std::int32_t>(first_pixel(sv.x, target.x_begin, target.x_end));
+            cache.x_end[v] = static_cast<std::int32_t>(last_pixel_end(sv.x, target.x_begin, target.x_end));
+            cache.y_first[v] = static_cast<std::int32_t>(first_pixel(sv.y, target.row_begin, target.row_end));
+            cache.y_end[v] = static_cast<std::int32_t>(last_pixel_end(sv.y, target.row_begin, target.row_end));
+        }
     }
     for (std::uint32_t tri = 0; tri + 3 <= index_count; tri += 3) {
         const std::uint32_t a = idx[tri] - lowest, b = idx[tri + 1] - lowest, c = idx[tri + 2] - lowest;
@@ -398,13 +416,23 @@ void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::ui
         if ((c0 | c1 | c2) & RunVertices::kNotFinite) continue;
         if (c0 & c1 & c2) continue; // entirely outside one plane of the clip volume
         if (target.band && outside_band(cache.clip[a], cache.clip[b], cache.clip[c], target)) continue;
-        ClipVertex poly[8] = {cache.clip[a], cache.clip[b], cache.clip[c]};
-        if (target.face_normal) plane_normal(poly, target.triangle_normal);
-        if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
-            clip_and_raster(poly, c0 | c1 | c2, x_offset, half_w, half_h, target);
-            continue;
+        if (target.face_normal || ((c0 | c1 | c2) & (kOutNear | kOutFar))) {
+            ClipVertex poly[8]; // not value-initialised: clip_against writes what it reads past the first three
+            poly[0] = cache.clip[a];
+            poly[1] = cache.clip[b];
+            poly[2] = cache.clip[c];
+            if (target.face_normal) plane_normal(poly, target.triangle_normal);
+            if ((c0 | c1 | c2) & (kOutNear | kOutFar)) {
+                clip_and_raster(poly, c0 | c1 | c2, x_offset, half_w, half_h, target);
+                continue;
+            }
         }
-        if (!(poly[0].w > 0.0 && poly[1].w > 0.0 && poly[2].w > 0.0)) continue;
+        if (!(cache.clip[a].w > 0.0 && cache.clip[b].w > 0.0 && cache.clip[c].w > 0.0)) continue;
+        const std::int32_t x0 = std::min({cache.x_first[a], cache.x_first[b], cache.x_first[c]});
+        const std::int32_t x1 = std::max({cache.x_end[a], cache.x_end[b], cache.x_end[c]});
+        const std::int32_t y0 = std::min({cache.y_first[a], cache.y_first[b], cache.y_first[c]});
+        const std::int32_t y1 = std::max({cache.y_end[a], cache.y_end[b], cache.y_end[c]});
+        if (x0 >= x1 || y0 >= y1) continue;
         raster_triangle(cache.screen[a], cache.screen[b], cache.screen[c], target);
     }
 }
