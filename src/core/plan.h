@@ -248,6 +248,39 @@ struct DepthCluster {
 // Draws whose mesh or index range is out of bounds, and indices past the vertex data, get no cluster.
 void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out);
 
+// One indexed draw call of the depth pass in one view: a run of consecutive clusters drawn in the view,
+// of one draw, each starting where the one before ends in the index buffer (for_each_depth_draw_call).
+// The same triangles in the same order as one call per cluster, in fewer calls: a GPU's host records
+// every call, and a terrain in spatial order (scene.cpp) is drawn in long runs of neighbouring clusters.
+struct DepthDrawCall {
+    std::uint32_t cluster = 0; // the run's first cluster (its draw's DepthPush)
+    std::uint32_t first_index = 0;
+    std::uint32_t index_count = 0;
+    std::uint32_t first_vertex = 0;
+};
+// fn(const DepthDrawCall&) for each call of a view, in cluster order; drawn: the view's clusters.size()
+// flags of cull_depth_clusters.
+template <class Fn>
+void for_each_depth_draw_call(const std::vector<DepthCluster>& clusters, const std::uint8_t* drawn, Fn&& fn) {
+    const std::size_t count = clusters.size();
+    for (std::size_t c = 0; c < count;) {
+        if (!drawn[c]) {
+            ++c;
+            continue;
+        }
+        const DepthCluster& first = clusters[c];
+        DepthDrawCall call{static_cast<std::uint32_t>(c), first.first_index, first.index_count, first.first_vertex};
+        for (++c; c < count && drawn[c]; ++c) {
+            const DepthCluster& next = clusters[c];
+            if (next.draw != first.draw || next.first_vertex != first.first_vertex ||
+                next.first_index != call.first_index + call.index_count)
+                break;
+            call.index_count += next.index_count;
+        }
+        fn(call);
+    }
+}
+
 // Clip coordinates (x, y, z, w) of corner `corner` (bit 0: max x, bit 1: max y, bit 2: max z) of the
 // cluster's bounding box through clip_from_local (column-major float, as DepthPush), summed in double,
 // and for each the sum of its terms' magnitudes: the scale of the float rounding a GPU adds to it.

@@ -57,18 +57,18 @@ void record_depth(RecordContext& record) {
             fn.vkCmdSetViewport(commands, 0, 1, &viewport);
             fn.vkCmdSetScissor(commands, 0, 1, &scissor);
             std::uint32_t pushed_draw = ~0u; // clusters of one draw are consecutive: one push for them all
-            for (std::size_t c = 0; c < clusters; ++c) {
-                const DepthCluster& cluster = b.clusters_[c];
-                if (!b.clusters_drawn_[s * clusters + c]) continue;
-                if (cluster.draw != pushed_draw) {
-                    fn.vkCmdPushConstants(commands, b.depth_layout_.get(),
-                                          VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
-                                          sizeof(shared::DepthPush), &b.draw_pushes_[s * draws + cluster.draw]);
-                    pushed_draw = cluster.draw;
-                }
-                fn.vkCmdDrawIndexed(commands, cluster.index_count, 1, cluster.first_index,
-                                    static_cast<std::int32_t>(cluster.first_vertex), 0);
-            }
+            for_each_depth_draw_call(
+                b.clusters_, b.clusters_drawn_.data() + s * clusters, [&](const DepthDrawCall& call) {
+                    const std::uint32_t draw = b.clusters_[call.cluster].draw;
+                    if (draw != pushed_draw) {
+                        fn.vkCmdPushConstants(commands, b.depth_layout_.get(),
+                                              VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0,
+                                              sizeof(shared::DepthPush), &b.draw_pushes_[s * draws + draw]);
+                        pushed_draw = draw;
+                    }
+                    fn.vkCmdDrawIndexed(commands, call.index_count, 1, call.first_index,
+                                        static_cast<std::int32_t>(call.first_vertex), 0);
+                });
         }
     }
     fn.vkCmdEndRenderPass(commands); // leaves both images in TRANSFER_SRC_OPTIMAL (render pass dependency 1)

@@ -260,7 +260,66 @@ TEST(DepthClusters, SpatialOrderKeepsTheTrianglesAndTheFrameAndCullsMore) {
         // measured 0.086-0.089 against 0.50-0.60 (a run of the row order is a strip across the terrain
         // that most slices' frusta cross; a run of the spatial order is a 7.5 m patch)
         EXPECT_LT(spatial_share, 0.3 * row_share) << "yaw " << yaw;
+
+        // The calls the Vulkan backend records (for_each_depth_draw_call): the drawn clusters' triangles,
+        // every one and in order, in fewer calls where neighbouring clusters are drawn together.
+        std::size_t calls = 0, clusters_drawn = 0;
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const std::uint8_t* drawn = spatial_drawn.data() + std::size_t(view) * spatial_clusters.size();
+            std::vector<std::uint32_t> by_cluster, by_call; // the first index of each triangle drawn
+            for (std::size_t c = 0; c < spatial_clusters.size(); ++c) {
+                if (!drawn[c]) continue;
+                ++clusters_drawn;
+                for (std::uint32_t i = 0; i < spatial_clusters[c].index_count; i += 3)
+                    by_cluster.push_back(spatial_clusters[c].first_index + i);
+            }
+            for_each_depth_draw_call(spatial_clusters, drawn, [&](const DepthDrawCall& call) {
+                ++calls;
+                EXPECT_TRUE(drawn[call.cluster]);
+                EXPECT_EQ(call.first_index, spatial_clusters[call.cluster].first_index);
+                EXPECT_EQ(call.first_vertex, spatial_clusters[call.cluster].first_vertex);
+                for (std::uint32_t i = 0; i < call.index_count; i += 3)
+                    by_call.push_back(call.first_index + i);
+            });
+            EXPECT_EQ(by_call, by_cluster) << "yaw " << yaw << ", view " << view;
+        }
+        std::printf("[spatial order] yaw %5.1f: %zu clusters drawn in %zu calls\n", yaw, clusters_drawn, calls);
+        EXPECT_GT(clusters_drawn, 0u);
+        EXPECT_LT(calls, clusters_drawn);
     }
+}
+
+// for_each_depth_draw_call merges a run of drawn clusters only where one draw call can draw it: the
+// same draw (its push constants), the same vertex offset, and each cluster's indices following the last.
+TEST(DepthClusters, DrawCallsMergeOnlyClustersOneCallCanDraw) {
+    auto cluster = [](std::uint32_t draw, std::uint32_t first_index, std::uint32_t count, std::uint32_t vertex) {
+        DepthCluster c;
+        c.draw = draw;
+        c.first_index = first_index;
+        c.index_count = count;
+        c.first_vertex = vertex;
+        return c;
+    };
+    const std::vector<DepthCluster> clusters = {
+        cluster(0, 0, 30, 0),   // 0: a call of 0-2
+        cluster(0, 30, 30, 0),  // 1
+        cluster(0, 60, 9, 0),   // 2
+        cluster(1, 69, 30, 0),  // 3: another draw, though its indices follow
+        cluster(1, 99, 30, 7),  // 4: another vertex offset
+        cluster(1, 129, 30, 7), // 5: merged with 4
+        cluster(1, 300, 30, 7), // 6: a gap in the indices
+        cluster(1, 330, 30, 7), // 7: culled
+        cluster(1, 360, 30, 7), // 8: after a culled cluster
+        cluster(2, 390, 3, 7),  // 9: culled, last
+    };
+    const std::vector<std::uint8_t> drawn = {1, 1, 1, 1, 1, 1, 1, 0, 1, 0};
+    std::vector<std::array<std::uint32_t, 4>> calls;
+    for_each_depth_draw_call(clusters, drawn.data(), [&](const DepthDrawCall& call) {
+        calls.push_back({call.cluster, call.first_index, call.index_count, call.first_vertex});
+    });
+    const std::vector<std::array<std::uint32_t, 4>> expected = {
+        {0, 0, 69, 0}, {3, 69, 30, 0}, {4, 99, 60, 7}, {6, 300, 30, 7}, {8, 360, 30, 7}};
+    EXPECT_EQ(calls, expected);
 }
 
 // The bundled scenes seen from random poses (seeded), 130 and 360 degrees: culled frames equal the
