@@ -137,6 +137,43 @@ void cluster_corner_clip(const DepthCluster& cluster, const float* m, int corner
     }
 }
 
+namespace {
+
+// cluster_corner_clip's products, made once for the eight corners: term[k][side][r] is
+// m[k * 4 + r] times the box's min (side 0) or max (side 1) along axis k. corner_clip then sums them
+// as cluster_corner_clip does, in the same order: the same values, with 24 products instead of 96 for
+// a cluster whose corners are all tested (most of a big terrain, culled).
+struct ClusterTerms {
+    double base[4];
+    double term[3][2][4];
+};
+
+ClusterTerms cluster_terms(const DepthCluster& cluster, const float* m) {
+    ClusterTerms t;
+    for (int r = 0; r < 4; ++r) {
+        t.base[r] = double(m[12 + r]);
+        for (int k = 0; k < 3; ++k) {
+            t.term[k][0][r] = double(m[k * 4 + r]) * double(cluster.bounds_min[k]);
+            t.term[k][1][r] = double(m[k * 4 + r]) * double(cluster.bounds_max[k]);
+        }
+    }
+    return t;
+}
+
+void corner_clip(const ClusterTerms& t, int corner, double clip[4], double magnitude[4]) {
+    for (int r = 0; r < 4; ++r) {
+        clip[r] = t.base[r];
+        magnitude[r] = std::abs(clip[r]);
+        for (int k = 0; k < 3; ++k) {
+            const double term = t.term[k][(corner >> k) & 1][r];
+            clip[r] += term;
+            magnitude[r] += std::abs(term);
+        }
+    }
+}
+
+} // namespace
+
 void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
                          const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn) {
     const std::size_t slices = draws ? pushes.size() / draws : 0;
@@ -144,11 +181,11 @@ void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t 
     for (std::size_t s = 0; s < slices; ++s) {
         for (std::size_t c = 0; c < clusters.size(); ++c) {
             const DepthCluster& cluster = clusters[c];
-            const float* m = pushes[s * draws + cluster.draw].clip_from_local;
+            const ClusterTerms terms = cluster_terms(cluster, pushes[s * draws + cluster.draw].clip_from_local);
             unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
             for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
                 double clip[4], magnitude[4];
-                cluster_corner_clip(cluster, m, corner, clip, magnitude);
+                corner_clip(terms, corner, clip, magnitude);
                 // The GPU sums these terms in float: its clip coordinates may differ from these by a few
                 // ulp of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
                 const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);
