@@ -271,6 +271,54 @@ TEST(CpuThreads, AnyThreadCountGivesTheSameBytes) {
     }
 }
 
+// A terrain of many clusters (300 x 300 quads: 352 clusters in 5 views) is culled on the threads, a
+// view each (cpu_backend.cpp, kParallelCullClusterViews), and drawn from its per-run vertex cache
+// (cpu_depth.cpp): any thread count gives the same bytes as one thread, which culls it alone.
+TEST(CpuThreads, ABigTerrainGivesTheSameBytesOnAnyThreadCount) {
+    const std::uint32_t n = 300;
+    std::vector<float> positions;
+    std::vector<std::uint32_t> indices;
+    for (std::uint32_t j = 0; j <= n; ++j) {
+        for (std::uint32_t i = 0; i <= n; ++i) {
+            const float x = -10.0f + 60.0f * float(i) / n, y = -30.0f + 60.0f * float(j) / n;
+            positions.insert(positions.end(), {x, y, -3.0f + 0.2f * std::sin(0.3f * x) * std::cos(0.21f * y)});
+        }
+    }
+    for (std::uint32_t j = 0; j < n; ++j) {
+        for (std::uint32_t i = 0; i < n; ++i) {
+            const std::uint32_t a = j * (n + 1) + i;
+            indices.insert(indices.end(), {a, a + 1, a + n + 2, a, a + n + 2, a + n + 1});
+        }
+    }
+    Scene scene;
+    auto mesh = scene.add_mesh(positions.data(), std::uint32_t(positions.size() / 3), indices.data(),
+                               std::uint32_t(indices.size()));
+    ASSERT_TRUE(mesh) << mesh.error().message;
+    SceneDraw draw;
+    draw.mesh = mesh.value();
+    draw.material = scene.add_material(AcousticMaterial{});
+    ASSERT_TRUE(scene.add_draw(draw));
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    const SonarConfig config = quiet_config();
+    std::unique_ptr<Rendered> one;
+    for (std::uint32_t threads : {1u, 2u, 3u}) {
+        auto rendered = render_on_threads(config, scene, pose, threads, SaveFlags::depth | SaveFlags::echo);
+        ASSERT_TRUE(rendered);
+        if (!one) {
+            ASSERT_GT(std::count_if(rendered->frame.depth.begin(), rendered->frame.depth.end(),
+                                    [](float d) { return d > 0.0f; }),
+                      10000);
+            one = std::move(rendered);
+            continue;
+        }
+        EXPECT_EQ(one->frame.depth, rendered->frame.depth) << threads << " threads";
+        EXPECT_EQ(one->frame.material, rendered->frame.material) << threads << " threads";
+        EXPECT_EQ(one->frame.echo, rendered->frame.echo) << threads << " threads";
+        EXPECT_EQ(one->frame.clean, rendered->frame.clean) << threads << " threads";
+    }
+}
+
 // The labels stage splits its work between the Renderer's threads too: the pixel cache by rows, the
 // beams in blocks of kBeamBlock dealt out in turn (a block's beams interleaved row by row), each
 // labelled object's visibility pass by bands of rows. Every cell is still filled by one thread from its

@@ -139,70 +139,76 @@ void cluster_corner_clip(const DepthCluster& cluster, const float* m, int corner
 
 namespace {
 
-// cluster_corner_clip's products, made once for the eight corners: term[k][side][r] is
-// m[k * 4 + r] times the box's min (side 0) or max (side 1) along axis k. corner_clip then sums them
-// as cluster_corner_clip does, in the same order: the same values, with 24 products instead of 96 for
-// a cluster whose corners are all tested (most of a big terrain, culled).
-struct ClusterTerms {
-    double base[4];
-    double term[3][2][4];
-};
-
-ClusterTerms cluster_terms(const DepthCluster& cluster, const float* m) {
-    ClusterTerms t;
-    for (int r = 0; r < 4; ++r) {
-        t.base[r] = double(m[12 + r]);
-        for (int k = 0; k < 3; ++k) {
-            t.term[k][0][r] = double(m[k * 4 + r]) * double(cluster.bounds_min[k]);
-            t.term[k][1][r] = double(m[k * 4 + r]) * double(cluster.bounds_max[k]);
+// Whether the cluster's box, through clip_from_local m, lies clearly outside one plane of the clip
+// volume: each of its eight corners as cluster_corner_clip gives it (the same products, summed in the
+// same order), every corner outside that plane by more than its own tolerance. The products are made
+// once for the eight corners (24 instead of 96) and the corners are the lanes of each loop, which the
+// compiler makes vector code. Every corner is tested (cluster_corner_clip's callers may stop at the
+// first corner inside every plane: the same answer, as an AND that is 0 stays 0); most of a big
+// terrain's clusters lie outside a view, and those test all eight either way.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target_clones("avx2", "default")))
+#endif
+bool box_outside_clip_volume(const DepthCluster& cluster, const float* m) {
+    double term[3][2][4]; // term[k][side][r] = m[k * 4 + r] * (side ? max : min)[k]
+    for (int k = 0; k < 3; ++k) {
+        for (int r = 0; r < 4; ++r) {
+            term[k][0][r] = double(m[k * 4 + r]) * double(cluster.bounds_min[k]);
+            term[k][1][r] = double(m[k * 4 + r]) * double(cluster.bounds_max[k]);
         }
     }
-    return t;
-}
-
-void corner_clip(const ClusterTerms& t, int corner, double clip[4], double magnitude[4]) {
+    double clip[4][8], magnitude[4][8]; // [row][corner]; corner bit k: max along axis k
     for (int r = 0; r < 4; ++r) {
-        clip[r] = t.base[r];
-        magnitude[r] = std::abs(clip[r]);
-        for (int k = 0; k < 3; ++k) {
-            const double term = t.term[k][(corner >> k) & 1][r];
-            clip[r] += term;
-            magnitude[r] += std::abs(term);
+        const double base = double(m[12 + r]);
+        for (int c = 0; c < 8; ++c) {
+            const double t0 = term[0][c & 1][r], t1 = term[1][(c >> 1) & 1][r], t2 = term[2][(c >> 2) & 1][r];
+            double v = base, a = std::abs(base);
+            v += t0;
+            a += std::abs(t0);
+            v += t1;
+            a += std::abs(t1);
+            v += t2;
+            a += std::abs(t2);
+            clip[r][c] = v;
+            magnitude[r][c] = a;
         }
     }
+    // planes: -x, +x, -y, +y, near (z > w), far (z < 0); a plane stays set while every corner is outside it
+    int outside[6] = {1, 1, 1, 1, 1, 1};
+    for (int c = 0; c < 8; ++c) {
+        const double x = clip[0][c], y = clip[1][c], z = clip[2][c], w = clip[3][c];
+        // The GPU sums these terms in float: its clip coordinates may differ from these by a few ulp of
+        // the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
+        const double tol_x = 1e-5 * (magnitude[0][c] + magnitude[3][c]);
+        const double tol_y = 1e-5 * (magnitude[1][c] + magnitude[3][c]);
+        const double tol_z = 1e-5 * (magnitude[2][c] + magnitude[3][c]);
+        outside[0] &= x < -w - tol_x;
+        outside[1] &= x > w + tol_x;
+        outside[2] &= y < -w - tol_y;
+        outside[3] &= y > w + tol_y;
+        outside[4] &= z > w + tol_z;
+        outside[5] &= z < -tol_z;
+    }
+    return (outside[0] | outside[1] | outside[2] | outside[3] | outside[4] | outside[5]) != 0;
 }
 
 } // namespace
+
+void cull_depth_clusters_in_slice(const std::vector<DepthCluster>& clusters, std::size_t draws,
+                                  const std::vector<shared::DepthPush>& pushes, std::size_t slice,
+                                  std::uint8_t* drawn_row) {
+    for (std::size_t c = 0; c < clusters.size(); ++c) {
+        const DepthCluster& cluster = clusters[c];
+        drawn_row[c] = !box_outside_clip_volume(cluster, pushes[slice * draws + cluster.draw].clip_from_local);
+    }
+}
 
 void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
                          const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn) {
     const std::size_t slices = draws ? pushes.size() / draws : 0;
     drawn.resize(slices * clusters.size());
-    for (std::size_t s = 0; s < slices; ++s) {
-        for (std::size_t c = 0; c < clusters.size(); ++c) {
-            const DepthCluster& cluster = clusters[c];
-            const ClusterTerms terms = cluster_terms(cluster, pushes[s * draws + cluster.draw].clip_from_local);
-            unsigned outside_every_corner = 0x3fu; // planes: -x, +x, -y, +y, near (z > w), far (z < 0)
-            for (int corner = 0; corner < 8 && outside_every_corner; ++corner) {
-                double clip[4], magnitude[4];
-                corner_clip(terms, corner, clip, magnitude);
-                // The GPU sums these terms in float: its clip coordinates may differ from these by a few
-                // ulp of the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
-                const double tol_x = 1e-5 * (magnitude[0] + magnitude[3]);
-                const double tol_y = 1e-5 * (magnitude[1] + magnitude[3]);
-                const double tol_z = 1e-5 * (magnitude[2] + magnitude[3]);
-                unsigned outside = 0;
-                if (clip[0] < -clip[3] - tol_x) outside |= 0x01u;
-                if (clip[0] > clip[3] + tol_x) outside |= 0x02u;
-                if (clip[1] < -clip[3] - tol_y) outside |= 0x04u;
-                if (clip[1] > clip[3] + tol_y) outside |= 0x08u;
-                if (clip[2] > clip[3] + tol_z) outside |= 0x10u;
-                if (clip[2] < -tol_z) outside |= 0x20u;
-                outside_every_corner &= outside;
-            }
-            drawn[s * clusters.size() + c] = outside_every_corner == 0u;
-        }
-    }
+    for (std::size_t s = 0; s < slices; ++s)
+        cull_depth_clusters_in_slice(clusters, draws, pushes, s, drawn.data() + s * clusters.size());
 }
 
 } // namespace vksonar

@@ -296,5 +296,10 @@ void cluster_corner_clip(const DepthCluster& cluster, const float* clip_from_loc
 // resized to slices * clusters; no allocation once sized.
 void cull_depth_clusters(const std::vector<DepthCluster>& clusters, std::size_t draws,
                          const std::vector<shared::DepthPush>& pushes, std::vector<std::uint8_t>& drawn);
+// The same for slice `slice` alone, into drawn_row[0 .. clusters.size()) (threads may cull different
+// slices at once).
+void cull_depth_clusters_in_slice(const std::vector<DepthCluster>& clusters, std::size_t draws,
+                                  const std::vector<shared::DepthPush>& pushes, std::size_t slice,
+                                  std::uint8_t* drawn_row);
 
 } // namespace vksonar
