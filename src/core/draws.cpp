@@ -115,6 +115,9 @@ void build_depth_clusters(const SceneData& scene, std::vector<DepthCluster>& out
                     cluster.bounds_min[a] = any ? std::min(cluster.bounds_min[a], x) : x;
                     cluster.bounds_max[a] = any ? std::max(cluster.bounds_max[a], x) : x;
                 }
+                const std::uint32_t index = scene.indices[cluster.first_index + k];
+                cluster.index_min = any ? std::min(cluster.index_min, index) : index;
+                cluster.index_max = any ? std::max(cluster.index_max, index) : index;
                 any = true;
             }
             if (valid && any) out.push_back(cluster);

@@ -242,6 +242,8 @@ struct DepthCluster {
     std::uint32_t first_index = 0;  // into SceneData::indices
     std::uint32_t index_count = 0;  // a multiple of 3
     std::uint32_t first_vertex = 0; // the mesh's, added to every index
+    std::uint32_t index_min = 0;    // the least and the greatest of its indices (the vertices it spans)
+    std::uint32_t index_max = 0;
     float bounds_min[3] = {0.0f, 0.0f, 0.0f};
     float bounds_max[3] = {0.0f, 0.0f, 0.0f};
 };

@@ -84,7 +84,12 @@ TEST(DepthClusters, RunsKeepDrawAndTriangleOrderAndBoundTheirVertices) {
         EXPECT_EQ(run.bounds_min[1], 0.0f);
         EXPECT_EQ(run.bounds_max[1], 2.0f);
         EXPECT_EQ(run.bounds_max[2], 4.0f);
+        // triangle t indexes 3t, 3t + 1 and 3t + 2 (mesh-local)
+        EXPECT_EQ(run.index_min, 3 * r * kClusterTriangles);
+        EXPECT_EQ(run.index_max, 3 * std::min(triangles, (r + 1) * kClusterTriangles) - 1);
     }
+    EXPECT_EQ(clusters[0].index_min, 0u); // the box's 8 corners
+    EXPECT_EQ(clusters[0].index_max, 7u);
 }
 
 TEST(DepthClusters, CullingSkipsWhatCannotBeSeenAndChangesNoPixel) {
