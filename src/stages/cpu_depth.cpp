@@ -402,8 +402,8 @@ void clip_and_raster(ClipVertex (&poly)[8], unsigned codes_or, double x_offset, 
 // corner of every triangle: a run of a grid's 512 triangles indexes 289 vertices, each a corner of up
 // to six triangles. Same values as the per-corner path (same functions, same inputs): same bytes.
 struct RunVertices {
-    static constexpr std::uint32_t kCapacity = 1024; // 76 KiB of stack; a wider run takes the per-corner path
-    static constexpr unsigned kNotFinite = 0x100u;   // above the outcode bits
+    static constexpr std::uint32_t kCapacity = 640; // 48 KiB of stack; a wider run takes the per-corner path
+    static constexpr unsigned kNotFinite = 0x100u;  // above the outcode bits
     ClipVertex clip[kCapacity];
     ScreenVertex screen[kCapacity]; // valid where clip.w > 0
     unsigned code[kCapacity];       // outcode, or kNotFinite
