@@ -393,6 +393,98 @@ TEST(CpuDepth, BandsOfRowsAndViewsGiveTheWholeImagesBytes) {
     }
 }
 
+// The per-run vertex cache (DepthRegion::vertex_cache) against the per-corner path on triangles that
+// stress its per-vertex work: vertices from millimetres to 1e7 m away, behind the sonar, on the near
+// plane's side, far off to the sides (projected to huge or infinite pixel coordinates, which the
+// pixel bounds clamp), slivers and shared vertices, in several meshes with 2 to 600 vertices. Every
+// depth, material and face-normal byte must agree, with the pixels four at a time and one at a time.
+TEST(CpuDepth, VertexCacheGivesThePerCornerBytesOnExtremeTriangles) {
+    std::mt19937 rng(2026);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    std::uniform_int_distribution<int> decade(-3, 7);
+    SceneBuilder b;
+    const std::uint32_t m0 = b.material(-20.0), m1 = b.material(-10.0);
+    for (std::uint32_t mesh = 0; mesh < 12; ++mesh) {
+        const std::uint32_t vertices = mesh == 0 ? 2u : 3u + 50u * mesh; // up to 553 (+4), all in the cache
+        std::vector<float> positions;
+        for (std::uint32_t v = 0; v < vertices; ++v) {
+            const float scale = std::pow(10.0f, float(decade(rng)));
+            // mostly ahead (x > 0), some behind; y and z up to as large as x
+            positions.insert(positions.end(), {scale * (0.2f + unit(rng)), scale * unit(rng), scale * unit(rng)});
+        }
+        // and four far off the axis, 1 m ahead: their pixel coordinates pass 2^31, which the vertices'
+        // pixel bounds must clamp before they truncate to integers
+        positions.insert(positions.end(), {1.0f, 1e9f, 0.0f, 1.0f, -1e9f, 0.0f, 1.0f, 0.0f, 1e9f, 1.0f, 0.0f, -1e9f});
+        std::vector<std::uint32_t> indices;
+        std::uniform_int_distribution<std::uint32_t> pick(0, vertices - 1), far_off(vertices, vertices + 3);
+        for (std::uint32_t t = 0; t < 2 * vertices; ++t)
+            indices.insert(indices.end(), {pick(rng), pick(rng), t % 4 ? pick(rng) : far_off(rng)});
+        for (std::uint32_t t = 0; t < 4; ++t) // the fan between the four
+            indices.insert(indices.end(), {vertices + t, vertices + (t + 1) % 4, pick(rng)});
+        b.draw(b.mesh(positions, indices), mesh % 2 ? m1 : m0);
+    }
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0; // three slices
+    const Plan plan = plan_for(config, b.scene);
+    std::vector<shared::DepthPush> draws;
+    compose_depth_draws(plan, b.scene, Pose{}, draws);
+    const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
+    for (bool simd : {true, false}) {
+        for (bool with_face : {true, false}) { // the face normals take the vertices' own copy
+            std::vector<float> cached_depth(pixels), corner_depth(pixels);
+            std::vector<float> cached_face(4 * pixels), corner_face(4 * pixels);
+            std::vector<std::uint32_t> cached_material(pixels), corner_material(pixels);
+            cpu::DepthRegion cached, per_corner;
+            cached.simd = per_corner.simd = simd;
+            per_corner.vertex_cache = false;
+            cpu::depth_pass(plan, b.scene, draws, cached_depth.data(), cached_material.data(),
+                            with_face ? cached_face.data() : nullptr, nullptr, cached);
+            cpu::depth_pass(plan, b.scene, draws, corner_depth.data(), corner_material.data(),
+                            with_face ? corner_face.data() : nullptr, nullptr, per_corner);
+            const auto hit = std::count_if(cached_depth.begin(), cached_depth.end(), [](float d) { return d > 0.0f; });
+            const char* how = with_face ? "with face normals" : "depth only";
+            EXPECT_GT(hit, std::ptrdiff_t(pixels / 10)) << how << ", simd " << simd; // a good part is covered
+            EXPECT_EQ(cached_depth, corner_depth) << how << ", simd " << simd;
+            EXPECT_EQ(cached_material, corner_material) << how << ", simd " << simd;
+            EXPECT_EQ(cached_face, corner_face) << how << ", simd " << simd;
+        }
+    }
+}
+
+// Slivers across every view, from far to port to far to starboard: each triangle's pixel box spans the
+// view while its vertices' own pixel coordinates lie past 2^31 on either side (clamped before they are
+// truncated to integers). Both paths draw them, row after row.
+TEST(CpuDepth, VertexCacheDrawsTrianglesWhoseVerticesLieFarOutsideTheView) {
+    SceneBuilder b;
+    const std::uint32_t m = b.material(-20.0);
+    std::vector<float> positions;
+    std::vector<std::uint32_t> indices;
+    for (int i = 0; i < 8; ++i) { // bands of 0.1 m at 8 m, from 0.6 m below to 0.6 m above the axis
+        const float z = -0.6f + 0.15f * float(i), side = i % 2 ? 1.0f : -1.0f;
+        const auto first = std::uint32_t(positions.size() / 3);
+        positions.insert(positions.end(),
+                         {8.0f, side * 1e10f, z, 8.0f, side * 1e10f, z + 0.1f, 8.0f, -side * 1e10f, z + 0.05f});
+        indices.insert(indices.end(), {first, first + 1, first + 2});
+    }
+    b.draw(b.mesh(positions, indices), m);
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0;
+    const Plan plan = plan_for(config, b.scene);
+    std::vector<shared::DepthPush> draws;
+    compose_depth_draws(plan, b.scene, Pose{}, draws);
+    const std::size_t pixels = std::size_t(plan.rows) * plan.columns;
+    std::vector<float> cached_depth(pixels), corner_depth(pixels);
+    std::vector<std::uint32_t> cached_material(pixels), corner_material(pixels);
+    cpu::DepthRegion per_corner;
+    per_corner.vertex_cache = false;
+    cpu::depth_pass(plan, b.scene, draws, cached_depth.data(), cached_material.data());
+    cpu::depth_pass(plan, b.scene, draws, corner_depth.data(), corner_material.data(), nullptr, nullptr, per_corner);
+    const auto hit = std::count(corner_material.begin(), corner_material.end(), m);
+    EXPECT_GT(hit, std::ptrdiff_t(plan.columns)); // at least a row's worth
+    EXPECT_EQ(cached_depth, corner_depth);
+    EXPECT_EQ(cached_material, corner_material);
+}
+
 TEST(CpuDepth, ScissorConfinesEachSliceToItsOwnColumns) {
     SonarConfig config = small_config();
     config.hfov_deg = 100.0; // 2 slices
