@@ -195,14 +195,79 @@ bool box_outside_clip_volume(const DepthCluster& cluster, const float* m) {
     return (outside[0] | outside[1] | outside[2] | outside[3] | outside[4] | outside[5]) != 0;
 }
 
+// A box made of several clusters' boxes (their union), through m, clearly outside one plane of the clip
+// volume: every corner beyond it by 2e-5 of the largest magnitude any point of the box can have (the
+// per-axis larger of |m x min| and |m x max|, summed), where box_outside_clip_volume allows each corner
+// 1e-5 of its own. Each member's corners lie in the box, and an affine function's largest value over a
+// box is at one of its corners, so each member's corners are beyond the plane by more than their own
+// tolerance (rounding adds some 1e-16 of the magnitudes, far inside the factor of 2): every member is
+// culled by box_outside_clip_volume too, and the flags are the same as when each is tested.
+bool union_clearly_outside_clip_volume(const float* bounds_min, const float* bounds_max, const float* m) {
+    double term[3][2][4];
+    double largest[4]; // per row: |base| + sum over the axes of the larger |term|
+    for (int r = 0; r < 4; ++r)
+        largest[r] = std::abs(double(m[12 + r]));
+    for (int k = 0; k < 3; ++k) {
+        for (int r = 0; r < 4; ++r) {
+            term[k][0][r] = double(m[k * 4 + r]) * double(bounds_min[k]);
+            term[k][1][r] = double(m[k * 4 + r]) * double(bounds_max[k]);
+            largest[r] += std::max(std::abs(term[k][0][r]), std::abs(term[k][1][r]));
+        }
+    }
+    const double tol_x = 2e-5 * (largest[0] + largest[3]);
+    const double tol_y = 2e-5 * (largest[1] + largest[3]);
+    const double tol_z = 2e-5 * (largest[2] + largest[3]);
+    int outside[6] = {1, 1, 1, 1, 1, 1};
+    for (int c = 0; c < 8; ++c) {
+        double clip[4];
+        for (int r = 0; r < 4; ++r)
+            clip[r] = double(m[12 + r]) + term[0][c & 1][r] + term[1][(c >> 1) & 1][r] + term[2][(c >> 2) & 1][r];
+        const double x = clip[0], y = clip[1], z = clip[2], w = clip[3];
+        outside[0] &= x < -w - tol_x;
+        outside[1] &= x > w + tol_x;
+        outside[2] &= y < -w - tol_y;
+        outside[3] &= y > w + tol_y;
+        outside[4] &= z > w + tol_z;
+        outside[5] &= z < -tol_z;
+    }
+    return (outside[0] | outside[1] | outside[2] | outside[3] | outside[4] | outside[5]) != 0;
+}
+
+// Consecutive clusters of one draw tested together first (spatially ordered meshes make them
+// neighbours: a terrain's run of eight is a patch of 8 x 256 triangles).
+constexpr std::size_t kCullGroup = 8;
+
 } // namespace
 
 void cull_depth_clusters_in_slice(const std::vector<DepthCluster>& clusters, std::size_t draws,
                                   const std::vector<shared::DepthPush>& pushes, std::size_t slice,
                                   std::uint8_t* drawn_row) {
-    for (std::size_t c = 0; c < clusters.size(); ++c) {
-        const DepthCluster& cluster = clusters[c];
-        drawn_row[c] = !box_outside_clip_volume(cluster, pushes[slice * draws + cluster.draw].clip_from_local);
+    // A big terrain's clusters mostly lie outside a view: a group of them clearly outside is culled with
+    // one test of their union's box (union_clearly_outside_clip_volume: the same flags as testing each).
+    for (std::size_t c = 0; c < clusters.size();) {
+        const std::uint32_t draw = clusters[c].draw;
+        const float* m = pushes[slice * draws + draw].clip_from_local;
+        std::size_t end = c + 1;
+        while (end < clusters.size() && end - c < kCullGroup && clusters[end].draw == draw)
+            ++end;
+        if (end - c > 1) {
+            float lo[3], hi[3];
+            for (int k = 0; k < 3; ++k) {
+                lo[k] = clusters[c].bounds_min[k];
+                hi[k] = clusters[c].bounds_max[k];
+                for (std::size_t i = c + 1; i < end; ++i) {
+                    lo[k] = std::min(lo[k], clusters[i].bounds_min[k]);
+                    hi[k] = std::max(hi[k], clusters[i].bounds_max[k]);
+                }
+            }
+            if (union_clearly_outside_clip_volume(lo, hi, m)) {
+                std::fill(drawn_row + c, drawn_row + end, std::uint8_t(0));
+                c = end;
+                continue;
+            }
+        }
+        for (; c < end; ++c)
+            drawn_row[c] = !box_outside_clip_volume(clusters[c], m);
     }
 }
 

@@ -294,6 +294,96 @@ TEST(DepthClusters, SpatialOrderKeepsTheTrianglesAndTheFrameAndCullsMore) {
     }
 }
 
+// cull_depth_clusters tests groups of neighbouring clusters by their union first and culls a group
+// clearly outside a view at once: the flags must be exactly those of testing every cluster by the
+// definition (each corner of its box through the draw's float matrix, in double; culled where every
+// corner lies beyond one plane by more than 1e-5 of its terms' magnitudes), written out here on its own.
+// A terrain in spatial order seen from poses that put the frustum's planes through groups, and a row of
+// small boxes (another draw) right at the edges of the views.
+TEST(DepthClusters, GroupCullingGivesTheFlagsOfEachClusterAlone) {
+    SceneBuilder b;
+    b.material(-20.0);
+    std::vector<float> positions;
+    std::vector<std::uint32_t> indices;
+    const std::uint32_t n = 200;
+    for (std::uint32_t j = 0; j <= n; ++j)
+        for (std::uint32_t i = 0; i <= n; ++i) {
+            const float x = -50.0f + 100.0f * float(i) / n, y = -50.0f + 100.0f * float(j) / n;
+            positions.insert(positions.end(), {x, y, -3.0f + 0.4f * std::sin(0.17f * x + 0.1f * y)});
+        }
+    for (std::uint32_t j = 0; j < n; ++j)
+        for (std::uint32_t i = 0; i < n; ++i) {
+            const std::uint32_t a = j * (n + 1) + i;
+            indices.insert(indices.end(), {a, a + 1, a + n + 2, a, a + n + 2, a + n + 1});
+        }
+    b.draw(b.mesh(positions, indices), 0);
+    order_triangles_spatially(b.scene, b.scene.meshes[0]);
+    std::vector<float> boxes;
+    std::vector<std::uint32_t> box_indices;
+    for (std::uint32_t t = 0; t < 40 * kClusterTriangles; ++t) { // 40 clusters of slivers along y = 0.8 x
+        const float x = 0.05f * float(t % 2000), z = -1.0f + 0.001f * float(t / 2000);
+        const auto first = std::uint32_t(boxes.size() / 3);
+        boxes.insert(boxes.end(), {x, 0.8f * x, z, x + 0.05f, 0.8f * x, z, x, 0.8f * x + 0.01f, z + 0.01f});
+        box_indices.insert(box_indices.end(), {first, first + 1, first + 2});
+    }
+    b.draw(b.mesh(boxes, box_indices), 0);
+    SonarConfig config = small_config();
+    config.hfov_deg = 130.0;
+    const Plan plan = plan_for(config, b.scene);
+    std::vector<DepthCluster> clusters;
+    build_depth_clusters(b.scene, clusters);
+    ASSERT_GT(clusters.size(), 150u); // 157 of the terrain, 40 of the slivers
+    std::size_t culled = 0, total = 0;
+    for (int pose_index = 0; pose_index < 12; ++pose_index) {
+        Pose pose;
+        pose.z_m = 0.5 * pose_index;
+        pose.pitch_deg = 3.0 * pose_index;
+        pose.yaw_deg = 31.0 * pose_index;
+        std::vector<shared::DepthPush> pushes;
+        std::vector<std::uint8_t> drawn;
+        compose_depth_draws(plan, b.scene, pose, pushes);
+        cull_depth_clusters(clusters, b.scene.draws.size(), pushes, drawn);
+        ASSERT_EQ(drawn.size(), std::size_t(plan.views) * clusters.size());
+        for (std::uint32_t s = 0; s < plan.views; ++s) {
+            for (std::size_t c = 0; c < clusters.size(); ++c) {
+                const DepthCluster& cluster = clusters[c];
+                const float* m = pushes[s * b.scene.draws.size() + cluster.draw].clip_from_local;
+                bool beyond[6] = {true, true, true, true, true, true};
+                for (int corner = 0; corner < 8; ++corner) {
+                    const double p[3] = {corner & 1 ? cluster.bounds_max[0] : cluster.bounds_min[0],
+                                         corner & 2 ? cluster.bounds_max[1] : cluster.bounds_min[1],
+                                         corner & 4 ? cluster.bounds_max[2] : cluster.bounds_min[2]};
+                    double clip[4], size[4];
+                    for (int r = 0; r < 4; ++r) {
+                        clip[r] = double(m[12 + r]);
+                        size[r] = std::abs(clip[r]);
+                        for (int k = 0; k < 3; ++k) {
+                            clip[r] += double(m[k * 4 + r]) * p[k];
+                            size[r] += std::abs(double(m[k * 4 + r]) * p[k]);
+                        }
+                    }
+                    const double tx = 1e-5 * (size[0] + size[3]), ty = 1e-5 * (size[1] + size[3]);
+                    const double tz = 1e-5 * (size[2] + size[3]);
+                    beyond[0] = beyond[0] && clip[0] < -clip[3] - tx;
+                    beyond[1] = beyond[1] && clip[0] > clip[3] + tx;
+                    beyond[2] = beyond[2] && clip[1] < -clip[3] - ty;
+                    beyond[3] = beyond[3] && clip[1] > clip[3] + ty;
+                    beyond[4] = beyond[4] && clip[2] > clip[3] + tz;
+                    beyond[5] = beyond[5] && clip[2] < -tz;
+                }
+                const bool expected_culled = std::find(beyond, beyond + 6, true) != beyond + 6;
+                ASSERT_EQ(drawn[s * clusters.size() + c], expected_culled ? 0 : 1)
+                    << "pose " << pose_index << ", view " << s << ", cluster " << c;
+                culled += expected_culled;
+                ++total;
+            }
+        }
+    }
+    std::printf("[group culling] %zu of %zu cluster-views culled\n", culled, total);
+    EXPECT_GT(culled, total / 4);
+    EXPECT_LT(culled, total);
+}
+
 // for_each_depth_draw_call merges a run of drawn clusters only where one draw call can draw it: the
 // same draw (its push constants), the same vertex offset, and each cluster's indices following the last.
 TEST(DepthClusters, DrawCallsMergeOnlyClustersOneCallCanDraw) {
