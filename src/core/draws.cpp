@@ -142,6 +142,15 @@ void cluster_corner_clip(const DepthCluster& cluster, const float* m, int corner
 
 namespace {
 
+// The planes of the clip volume that clip point (x, y, z, w) lies beyond by more than its tolerance along
+// x, y and z, as bits: -x, +x, -y, +y, near (z > w), far (z < 0).
+constexpr unsigned kAllPlanes = 0x3fu;
+[[gnu::always_inline]] inline unsigned planes_beyond(double x, double y, double z, double w, double tol_x, double tol_y,
+                                                     double tol_z) {
+    return unsigned(x < -w - tol_x) | unsigned(x > w + tol_x) << 1 | unsigned(y < -w - tol_y) << 2 |
+           unsigned(y > w + tol_y) << 3 | unsigned(z > w + tol_z) << 4 | unsigned(z < -tol_z) << 5;
+}
+
 // Whether the cluster's box, through clip_from_local m, lies clearly outside one plane of the clip
 // volume: each of its eight corners as cluster_corner_clip gives it (the same products, summed in the
 // same order), every corner outside that plane by more than its own tolerance. The products are made
@@ -176,23 +185,16 @@ bool box_outside_clip_volume(const DepthCluster& cluster, const float* m) {
             magnitude[r][c] = a;
         }
     }
-    // planes: -x, +x, -y, +y, near (z > w), far (z < 0); a plane stays set while every corner is outside it
-    int outside[6] = {1, 1, 1, 1, 1, 1};
+    // a plane's bit stays set while every corner is beyond it
+    unsigned beyond_every_corner = kAllPlanes;
     for (int c = 0; c < 8; ++c) {
-        const double x = clip[0][c], y = clip[1][c], z = clip[2][c], w = clip[3][c];
         // The GPU sums these terms in float: its clip coordinates may differ from these by a few ulp of
         // the terms' magnitudes. 1e-5 of them is far beyond that and far below a pixel.
-        const double tol_x = 1e-5 * (magnitude[0][c] + magnitude[3][c]);
-        const double tol_y = 1e-5 * (magnitude[1][c] + magnitude[3][c]);
-        const double tol_z = 1e-5 * (magnitude[2][c] + magnitude[3][c]);
-        outside[0] &= x < -w - tol_x;
-        outside[1] &= x > w + tol_x;
-        outside[2] &= y < -w - tol_y;
-        outside[3] &= y > w + tol_y;
-        outside[4] &= z > w + tol_z;
-        outside[5] &= z < -tol_z;
+        beyond_every_corner &=
+            planes_beyond(clip[0][c], clip[1][c], clip[2][c], clip[3][c], 1e-5 * (magnitude[0][c] + magnitude[3][c]),
+                          1e-5 * (magnitude[1][c] + magnitude[3][c]), 1e-5 * (magnitude[2][c] + magnitude[3][c]));
     }
-    return (outside[0] | outside[1] | outside[2] | outside[3] | outside[4] | outside[5]) != 0;
+    return beyond_every_corner != 0u;
 }
 
 // A box made of several clusters' boxes (their union), through m, clearly outside one plane of the clip
@@ -217,20 +219,14 @@ bool union_clearly_outside_clip_volume(const float* bounds_min, const float* bou
     const double tol_x = 2e-5 * (largest[0] + largest[3]);
     const double tol_y = 2e-5 * (largest[1] + largest[3]);
     const double tol_z = 2e-5 * (largest[2] + largest[3]);
-    int outside[6] = {1, 1, 1, 1, 1, 1};
+    unsigned beyond_every_corner = kAllPlanes;
     for (int c = 0; c < 8; ++c) {
         double clip[4];
         for (int r = 0; r < 4; ++r)
             clip[r] = double(m[12 + r]) + term[0][c & 1][r] + term[1][(c >> 1) & 1][r] + term[2][(c >> 2) & 1][r];
-        const double x = clip[0], y = clip[1], z = clip[2], w = clip[3];
-        outside[0] &= x < -w - tol_x;
-        outside[1] &= x > w + tol_x;
-        outside[2] &= y < -w - tol_y;
-        outside[3] &= y > w + tol_y;
-        outside[4] &= z > w + tol_z;
-        outside[5] &= z < -tol_z;
+        beyond_every_corner &= planes_beyond(clip[0], clip[1], clip[2], clip[3], tol_x, tol_y, tol_z);
     }
-    return (outside[0] | outside[1] | outside[2] | outside[3] | outside[4] | outside[5]) != 0;
+    return beyond_every_corner != 0u;
 }
 
 // Consecutive clusters of one draw tested together first (spatially ordered meshes make them

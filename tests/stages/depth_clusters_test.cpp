@@ -48,6 +48,24 @@ std::vector<std::uint8_t> culled_and_checked(const Plan& plan, const SceneData& 
     return drawn;
 }
 
+// An n x n-quad heightfield over a size x size m square centred on the origin, its quads in rows (two
+// triangles each), height(x, y) at each vertex; returns the mesh.
+template <class Height> std::uint32_t grid_mesh(SceneBuilder& b, std::uint32_t n, float size, const Height& height) {
+    std::vector<float> positions;
+    std::vector<std::uint32_t> indices;
+    for (std::uint32_t j = 0; j <= n; ++j)
+        for (std::uint32_t i = 0; i <= n; ++i) {
+            const float x = -0.5f * size + size * float(i) / float(n), y = -0.5f * size + size * float(j) / float(n);
+            positions.insert(positions.end(), {x, y, height(x, y)});
+        }
+    for (std::uint32_t j = 0; j < n; ++j)
+        for (std::uint32_t i = 0; i < n; ++i) {
+            const std::uint32_t a = j * (n + 1) + i;
+            indices.insert(indices.end(), {a, a + 1, a + n + 2, a, a + n + 2, a + n + 1});
+        }
+    return b.mesh(positions, indices);
+}
+
 TEST(DepthClusters, RunsKeepDrawAndTriangleOrderAndBoundTheirVertices) {
     SceneBuilder b;
     b.material(-20.0);
@@ -181,20 +199,9 @@ TEST(DepthClusters, SpatialOrderKeepsTheTrianglesAndTheFrameAndCullsMore) {
     SceneBuilder b;
     b.material(-20.0);
     // A 120 x 120 m terrain 3 m below the sonar: 256 x 256 quads in rows, 131072 triangles, gently rolling.
-    std::vector<float> positions;
-    std::vector<std::uint32_t> indices;
-    const std::uint32_t n = 256;
-    for (std::uint32_t j = 0; j <= n; ++j)
-        for (std::uint32_t i = 0; i <= n; ++i) {
-            const float x = -60.0f + 120.0f * float(i) / n, y = -60.0f + 120.0f * float(j) / n;
-            positions.insert(positions.end(), {x, y, -3.0f + 0.3f * std::sin(0.2f * x) * std::cos(0.13f * y)});
-        }
-    for (std::uint32_t j = 0; j < n; ++j)
-        for (std::uint32_t i = 0; i < n; ++i) {
-            const std::uint32_t a = j * (n + 1) + i;
-            indices.insert(indices.end(), {a, a + 1, a + n + 2, a, a + n + 2, a + n + 1});
-        }
-    b.draw(b.mesh(positions, indices), 0);
+    b.draw(grid_mesh(b, 256, 120.0f,
+                     [](float x, float y) { return -3.0f + 0.3f * std::sin(0.2f * x) * std::cos(0.13f * y); }),
+           0);
     const SceneData& rows = b.scene;
     SceneData spatial = b.scene;
     order_triangles_spatially(spatial, spatial.meshes[0]);
@@ -298,25 +305,13 @@ TEST(DepthClusters, SpatialOrderKeepsTheTrianglesAndTheFrameAndCullsMore) {
 // clearly outside a view at once: the flags must be exactly those of testing every cluster by the
 // definition (each corner of its box through the draw's float matrix, in double; culled where every
 // corner lies beyond one plane by more than 1e-5 of its terms' magnitudes), written out here on its own.
-// A terrain in spatial order seen from poses that put the frustum's planes through groups, and a row of
-// small boxes (another draw) right at the edges of the views.
+// A terrain in spatial order seen from twelve poses that put the frustum's planes through its groups,
+// and a line of slivers 39 degrees to port (another draw).
 TEST(DepthClusters, GroupCullingGivesTheFlagsOfEachClusterAlone) {
     SceneBuilder b;
     b.material(-20.0);
-    std::vector<float> positions;
-    std::vector<std::uint32_t> indices;
-    const std::uint32_t n = 200;
-    for (std::uint32_t j = 0; j <= n; ++j)
-        for (std::uint32_t i = 0; i <= n; ++i) {
-            const float x = -50.0f + 100.0f * float(i) / n, y = -50.0f + 100.0f * float(j) / n;
-            positions.insert(positions.end(), {x, y, -3.0f + 0.4f * std::sin(0.17f * x + 0.1f * y)});
-        }
-    for (std::uint32_t j = 0; j < n; ++j)
-        for (std::uint32_t i = 0; i < n; ++i) {
-            const std::uint32_t a = j * (n + 1) + i;
-            indices.insert(indices.end(), {a, a + 1, a + n + 2, a, a + n + 2, a + n + 1});
-        }
-    b.draw(b.mesh(positions, indices), 0);
+    b.draw(grid_mesh(b, 200, 100.0f, [](float x, float y) { return -3.0f + 0.4f * std::sin(0.17f * x + 0.1f * y); }),
+           0);
     order_triangles_spatially(b.scene, b.scene.meshes[0]);
     std::vector<float> boxes;
     std::vector<std::uint32_t> box_indices;
