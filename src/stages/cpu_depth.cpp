@@ -417,7 +417,7 @@ struct RunVertices {
 void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::uint32_t first_vertex,
                           const std::uint32_t* idx, std::uint32_t index_count, std::uint32_t lowest,
                           std::uint32_t vertex_count, double x_offset, double half_w, double half_h, Target& target) {
-    RunVertices cache; // not value-initialised: every entry below [0, vertex_count) is written first
+    RunVertices cache; // not value-initialised: entries [0, vertex_count) are written before they are read
     const double x_lo = static_cast<double>(target.x_begin), x_hi = static_cast<double>(target.x_end);
     const double y_lo = static_cast<double>(target.row_begin), y_hi = static_cast<double>(target.row_end);
     const float* positions = scene.positions.data() + 3 * (std::size_t(first_vertex) + lowest);
