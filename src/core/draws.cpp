@@ -151,6 +151,18 @@ constexpr unsigned kAllPlanes = 0x3fu;
            unsigned(y > w + tol_y) << 3 | unsigned(z > w + tol_z) << 4 | unsigned(z < -tol_z) << 5;
 }
 
+// The products of a box's corners through clip_from_local m: term[k][side][r] = m[k * 4 + r] times the
+// box's min (side 0) or max (side 1) along axis k, in double (cluster_corner_clip's terms).
+[[gnu::always_inline]] inline void box_terms(const float* bounds_min, const float* bounds_max, const float* m,
+                                             double (&term)[3][2][4]) {
+    for (int k = 0; k < 3; ++k) {
+        for (int r = 0; r < 4; ++r) {
+            term[k][0][r] = double(m[k * 4 + r]) * double(bounds_min[k]);
+            term[k][1][r] = double(m[k * 4 + r]) * double(bounds_max[k]);
+        }
+    }
+}
+
 // Whether the cluster's box, through clip_from_local m, lies clearly outside one plane of the clip
 // volume: each of its eight corners as cluster_corner_clip gives it (the same products, summed in the
 // same order), every corner outside that plane by more than its own tolerance. The products are made
@@ -162,13 +174,8 @@ constexpr unsigned kAllPlanes = 0x3fu;
 __attribute__((target_clones("avx2", "default")))
 #endif
 bool box_outside_clip_volume(const DepthCluster& cluster, const float* m) {
-    double term[3][2][4]; // term[k][side][r] = m[k * 4 + r] * (side ? max : min)[k]
-    for (int k = 0; k < 3; ++k) {
-        for (int r = 0; r < 4; ++r) {
-            term[k][0][r] = double(m[k * 4 + r]) * double(cluster.bounds_min[k]);
-            term[k][1][r] = double(m[k * 4 + r]) * double(cluster.bounds_max[k]);
-        }
-    }
+    double term[3][2][4];
+    box_terms(cluster.bounds_min, cluster.bounds_max, m, term);
     double clip[4][8], magnitude[4][8]; // [row][corner]; corner bit k: max along axis k
     for (int r = 0; r < 4; ++r) {
         const double base = double(m[12 + r]);
@@ -206,15 +213,12 @@ bool box_outside_clip_volume(const DepthCluster& cluster, const float* m) {
 // culled by box_outside_clip_volume too, and the flags are the same as when each is tested.
 bool union_clearly_outside_clip_volume(const float* bounds_min, const float* bounds_max, const float* m) {
     double term[3][2][4];
+    box_terms(bounds_min, bounds_max, m, term);
     double largest[4]; // per row: |base| + sum over the axes of the larger |term|
-    for (int r = 0; r < 4; ++r)
+    for (int r = 0; r < 4; ++r) {
         largest[r] = std::abs(double(m[12 + r]));
-    for (int k = 0; k < 3; ++k) {
-        for (int r = 0; r < 4; ++r) {
-            term[k][0][r] = double(m[k * 4 + r]) * double(bounds_min[k]);
-            term[k][1][r] = double(m[k * 4 + r]) * double(bounds_max[k]);
+        for (int k = 0; k < 3; ++k)
             largest[r] += std::max(std::abs(term[k][0][r]), std::abs(term[k][1][r]));
-        }
     }
     const double tol_x = 2e-5 * (largest[0] + largest[3]);
     const double tol_y = 2e-5 * (largest[1] + largest[3]);

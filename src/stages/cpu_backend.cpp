@@ -139,18 +139,15 @@ template <class Real> void run_depth(StageContext<Real>& s) {
     // Culling tests every cluster in every view: on one thread, the 4k clusters of a 2M-triangle
     // terrain took a tenth of its depth pass. With many clusters the threads take the views (the same
     // flags: each is a function of its cluster and view).
-    const std::size_t cluster_views = s.clusters.size() * s.plan.views;
-    if (s.workers && s.workers->count() > 1 && cluster_views >= kParallelCullClusterViews) {
-        s.clusters_drawn.resize(cluster_views); // sized at creation: no allocation
-        const std::size_t draw_count = s.scene.draws.size();
-        split_blocks(s.workers, s.plan.views, 1, [&](std::uint32_t view, std::uint32_t view_end, std::uint32_t) {
-            for (; view < view_end; ++view)
-                cull_depth_clusters_in_slice(s.clusters, draw_count, s.draws, view,
-                                             s.clusters_drawn.data() + std::size_t(view) * s.clusters.size());
-        });
-    } else {
-        cull_depth_clusters(s.clusters, s.scene.draws.size(), s.draws, s.clusters_drawn);
-    }
+    // (clusters_drawn is sized views * clusters at creation; split_blocks without workers runs every view
+    // on this thread.)
+    const bool many = s.clusters.size() * s.plan.views >= kParallelCullClusterViews;
+    split_blocks(many ? s.workers : nullptr, s.plan.views, 1,
+                 [&](std::uint32_t view, std::uint32_t view_end, std::uint32_t) {
+                     for (; view < view_end; ++view)
+                         cull_depth_clusters_in_slice(s.clusters, s.scene.draws.size(), s.draws, view,
+                                                      s.clusters_drawn.data() + std::size_t(view) * s.clusters.size());
+                 });
     // the objects a few pixels across or less: their returns (added by the profile step) instead of their
     // pixels' echo
     s.subpixel.build(s.plan, s.scene, s.pose, s.clusters, s.draws, s.clusters_drawn);

@@ -247,17 +247,10 @@ __attribute__((target("avx2"))) void raster_rows4(const Edge (&e)[3], const doub
 
 #endif
 
-void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Target& t) {
-    // The pixel box first: most triangles of a big mesh seen from afar hold no pixel centre, and then
-    // the edges' setup (four divisions) is skipped. The box does not depend on the winding.
-    const double min_x = std::min({v0.x, v1.x, v2.x}), max_x = std::max({v0.x, v1.x, v2.x});
-    const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
-    const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
-    const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
-    const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
-    const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
-    if (x0 >= x1 || y0 >= y1) return;
-
+// A triangle's pixels in its pixel box [x0, x1) x [y0, y1) (not empty; raster_triangle's box, within the
+// target).
+void raster_triangle_in_box(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, std::int64_t x0, std::int64_t x1,
+                            std::int64_t y0, std::int64_t y1, const Target& t) {
     // Orientation from the same canonical edge function the coverage test uses.
     double area = make_edge(v0, v1).eval(v2.x, v2.y);
     if (!(area != 0.0) || !std::isfinite(area)) return; // zero area, NaN or overflow
@@ -297,6 +290,19 @@ void raster_triangle(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, const Ta
             depth_write(t, row_base + static_cast<std::size_t>(px), std::min(1.0, std::max(0.0, z)));
         }
     }
+}
+
+void raster_triangle(const ScreenVertex& v0, const ScreenVertex& v1, const ScreenVertex& v2, const Target& t) {
+    // The pixel box first: most triangles of a big mesh seen from afar hold no pixel centre, and then
+    // the edges' setup (four divisions) is skipped. The box does not depend on the winding.
+    const double min_x = std::min({v0.x, v1.x, v2.x}), max_x = std::max({v0.x, v1.x, v2.x});
+    const double min_y = std::min({v0.y, v1.y, v2.y}), max_y = std::max({v0.y, v1.y, v2.y});
+    const std::int64_t x0 = first_pixel(min_x, t.x_begin, t.x_end);
+    const std::int64_t x1 = last_pixel_end(max_x, t.x_begin, t.x_end);
+    const std::int64_t y0 = first_pixel(min_y, t.row_begin, t.row_end);
+    const std::int64_t y1 = last_pixel_end(max_y, t.row_begin, t.row_end);
+    if (x0 >= x1 || y0 >= y1) return;
+    raster_triangle_in_box(v0, v1, v2, x0, x1, y0, y1, t);
 }
 
 ClipVertex transform(const double m[16], const float* pos) {
@@ -410,7 +416,7 @@ struct RunVertices {
     // Where clip.w > 0: first_pixel and last_pixel_end of the vertex's own x and y in the target. Both
     // are monotone, so a triangle's pixel box is the least and greatest of its vertices' (raster_triangle's
     // box exactly): a triangle holding no pixel centre, most of a big mesh seen from afar, is dropped here
-    // with integer compares instead of in a call.
+    // with integer compares, and the others hand their box to raster_triangle_in_box.
     std::int32_t x_first[kCapacity], x_end[kCapacity], y_first[kCapacity], y_end[kCapacity];
 };
 
@@ -458,7 +464,7 @@ void rasterize_run_cached(const SceneData& scene, const double (&m)[16], std::ui
         const std::int32_t y0 = std::min({cache.y_first[a], cache.y_first[b], cache.y_first[c]});
         const std::int32_t y1 = std::max({cache.y_end[a], cache.y_end[b], cache.y_end[c]});
         if (x0 >= x1 || y0 >= y1) continue;
-        raster_triangle(cache.screen[a], cache.screen[b], cache.screen[c], target);
+        raster_triangle_in_box(cache.screen[a], cache.screen[b], cache.screen[c], x0, x1, y0, y1, target);
     }
 }
 
