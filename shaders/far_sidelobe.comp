@@ -48,7 +48,7 @@ void main() {
     }
     uint spans = 8u * params.beams;
     uint channel_base = m * cells;
-    vec4 sum = vec4(0.0);
+    precise vec4 sum = vec4(0.0); // no fused multiply-add: the CPU rounds each product
     if (kFarPass == 0u) {
         uint end = uint(table(spans + 2u * c + 1u));
         for (uint j = uint(table(spans + 2u * c)); j < end; ++j) {
@@ -69,7 +69,7 @@ void main() {
     }
     uint weights = spans + 2u * cells;
     for (uint a = 0u; a < cells; ++a) {
-        vec4 level = vec4(0.0);
+        precise vec4 level = vec4(0.0);
         for (uint b = 0u; b < cells; ++b) {
             level += table(weights + cells - 1u + a - b) * energy[b];
         }

@@ -84,7 +84,7 @@ void gather(uint q, uint first_beam, uint last_beam) {
     uint columns = params.profile_columns;
     uint quads = params.bins_padded / 4u;
     for (uint j = first_beam; j < last_beam; ++j) {
-        vec4 sum = vec4(0.0);
+        precise vec4 sum = vec4(0.0); // no fused multiply-add: the CPU rounds each product
         uvec2 span = beam_at(j);
         uint end = min(span.y, columns);
         for (uint c = span.x; c < end; ++c) {
@@ -101,9 +101,9 @@ void walk(uint q, uint first_beam, uint last_beam) {
     uint columns = params.profile_columns;
     uint quads = params.bins_padded / 4u;
     uint c = beam_at(first_beam).x;
-    vec4 carry = vec4(0.0);
+    precise vec4 carry = vec4(0.0);
     for (uint j = first_beam; j < last_beam; ++j) {
-        vec4 sum = carry;
+        precise vec4 sum = carry;
         carry = vec4(0.0);
         uint end = min(beam_at(j).y, columns);
         for (; c < end; ++c) {

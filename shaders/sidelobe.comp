@@ -61,7 +61,7 @@ void main() {
     if (q >= quads || first_beam >= beams) {
         return;
     }
-    vec4 sums[kBeamsPerInvocation];
+    precise vec4 sums[kBeamsPerInvocation]; // no fused multiply-add: the CPU rounds each product
     for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
         sums[r] = vec4(0.0);
     }
@@ -98,7 +98,7 @@ void main() {
                 uint c0 = uint(cell.x), c1 = uint(cell.y);
                 float s0 = far_cell_share(cell, c0), s1 = far_cell_share(cell, c1);
                 uint cells = params.far_cells;
-                vec4 l[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
+                precise vec4 l[3] = vec4[3](vec4(0.0), vec4(0.0), vec4(0.0));
                 for (uint m = 0u; m < params.far_channels; ++m) {
                     l[m] = s0 * far_cells4[(m * cells + c0) * quads + q] + s1 * far_cells4[(m * cells + c1) * quads + q];
                 }

@@ -620,7 +620,10 @@ VKS_FN REAL far_deposit_weight(vec4 beam_cell, vec4 beam_phase, uint c, uint cha
 // times the convolved cells): sin^2 = (1 - cos 2k u_s cos 2k u_j - sin 2k u_s sin 2k u_j) / 2 (the 1/2
 // is in the weights), so l0 - cos l1 - sin l2, never below 0 (rounding); one channel: l0.
 VKS_FN REAL far_sidelobe_level(vec4 beam_phase, REAL l0, REAL l1, REAL l2) {
-    return max(l0 - beam_phase.x * l1 - beam_phase.y * l2, REAL(0));
+    // A small difference of larger terms where the two phases agree: a fused multiply-add here would
+    // round differently from the CPU, and the cancellation magnifies it.
+    VKS_PRECISE REAL level = l0 - beam_phase.x * l1 - beam_phase.y * l2;
+    return max(level, REAL(0));
 }
 
 #undef VKS_FN

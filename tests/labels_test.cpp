@@ -14,6 +14,7 @@
 
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "stages/pixel_spread.h"
 #include "test_support.h"
 
 namespace vksonar::testing {
@@ -295,6 +296,17 @@ TEST_P(LabelBackendTest, BundledSceneTableAndNoChangeToIntensities) {
 // tolerance, tests/tolerances.h, is far below the 0.2 % margin); one edge pixel more or less can move
 // it. Measured: 0 clear cells differ on lavapipe (required there), 4 of 202832 on an H200; a GPU may
 // differ in 1e-4 of them.
+// Elevations: a cell's is the energy-weighted mean over its pixels, so it moves past 1e-3 rad where its
+// pixels' shares differ by more than float rounding. Two causes:
+// - narrow footprints (a face towards the sonar, range steps of millimetres between rows) whose place
+//   in the bins moves with the depth's float rounding (kDepthInteriorRelTol): on lavapipe, with no edge
+//   pixel at all, 8 cells over, their clean values 1-8 % apart between the backends. Budget: 1e-4 of
+//   the cells (19.6 here);
+// - edge pixels (hit on one backend only, or by another object) and the pixels whose footprint reads
+//   one (two rows up and down, one column either side): each reaches the bins of its footprint in the
+//   2 cone columns it feeds, each resampled into at most 2 beams. Budget: 4 cells per footprint bin of
+//   those pixels, counted here on both backends' echoes.
+// Measured on an NVIDIA H100: 24 cells over, which failed the first budget alone.
 TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;
@@ -303,10 +315,41 @@ TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     const SonarConfig config = quiet_config();
     Pose pose;
     pose.pitch_deg = 10.0;
-    auto gpu = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::labels);
-    auto cpu = render_once(Backend::cpu, config, scene.value(), pose, SaveFlags::labels);
+    const SaveFlags saves = SaveFlags::labels | SaveFlags::depth | SaveFlags::echo;
+    auto gpu = render_once(Backend::vulkan, config, scene.value(), pose, saves);
+    auto cpu = render_once(Backend::cpu, config, scene.value(), pose, saves);
     ASSERT_TRUE(gpu && cpu);
     const Frame &g = gpu->frame, &c = cpu->frame;
+    ASSERT_EQ(g.depth.size(), c.depth.size());
+    // The edge pixels, the pixels whose footprint reads one (reached), and their footprints' bins.
+    const Plan& plan = renderer_plan(cpu->renderer);
+    const std::uint32_t rows = plan.rows, columns = plan.columns;
+    std::size_t edge_pixels = 0;
+    std::vector<bool> reached(c.depth.size(), false);
+    for (std::uint32_t j = 0; j < rows; ++j)
+        for (std::uint32_t x = 0; x < columns; ++x) {
+            const std::size_t p = std::size_t(j) * columns + x;
+            if ((g.depth[p] > 0.0f) == (c.depth[p] > 0.0f) && g.material[p] == c.material[p]) continue;
+            ++edge_pixels;
+            for (int d = -2; d <= 2; ++d)
+                if (int(j) + d >= 0 && int(j) + d < int(rows)) reached[p + std::ptrdiff_t(d) * columns] = true;
+            if (x > 0) reached[p - 1] = true;
+            if (x + 1 < columns) reached[p + 1] = true;
+        }
+    std::size_t footprint_bins = 0;
+    for (std::uint32_t j = 0; j < rows; ++j)
+        for (std::uint32_t x = 0; x < columns; ++x) {
+            const std::size_t p = std::size_t(j) * columns + x;
+            if (!reached[p]) continue;
+            int bins = 0;
+            for (const Frame* f : {&g, &c}) {
+                if (!(f->echo[2 * p] > 0.0f)) continue;
+                const auto s = cpu::pixel_spread<float>(plan, f->echo.data(), j, x, f->echo[2 * p],
+                                                        plan.params.range_min_m, plan.params.inv_bin_width_m);
+                bins = std::max(bins, s.k_last - s.k_first + 1);
+            }
+            footprint_bins += std::size_t(bins);
+        }
     std::size_t labelled = 0, clear = 0, differ_clear = 0, differ_any = 0;
     double worst_elevation = 0;
     std::size_t elevation_off = 0;
@@ -324,14 +367,13 @@ TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
         }
     }
     std::printf("[labels] gpu vs cpu: %zu labelled, %zu clear, %zu differ (%zu of them clear), elevation worst "
-                "%.2e rad, %zu cells over 1e-3\n",
-                labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off);
+                "%.2e rad, %zu cells over 1e-3, %zu edge pixels (their reach: %zu footprint bins)\n",
+                labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off, edge_pixels,
+                footprint_bins);
     EXPECT_GT(clear, labelled / 2);
     EXPECT_LE(double(differ_clear), vulkan_device_is_cpu() ? 0.0 : 1e-4 * double(clear));
-    // A cell's elevation is a mean over the same pixels with weights 1e-5 apart (< 1e-3 rad), except
-    // where a depth-edge pixel is hit on one backend only (tolerances.h, kFrameCellBudget): there one
-    // pixel more or less moves a cell's mean. At most 1e-4 of the cells may be over.
-    EXPECT_LE(double(elevation_off), 1e-4 * double(clear));
+    // The two budgets above.
+    EXPECT_LE(double(elevation_off), 1e-4 * double(clear) + 4.0 * double(footprint_bins));
 }
 
 // The labels follow each pixel's energy over the same bins as the image: on the CPU backend their spreads
