@@ -368,8 +368,7 @@ TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     }
     std::printf("[labels] gpu vs cpu: %zu labelled, %zu clear, %zu differ (%zu of them clear), elevation worst "
                 "%.2e rad, %zu cells over 1e-3, %zu edge pixels (their reach: %zu footprint bins)\n",
-                labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off, edge_pixels,
-                footprint_bins);
+                labelled, clear, differ_any, differ_clear, worst_elevation, elevation_off, edge_pixels, footprint_bins);
     EXPECT_GT(clear, labelled / 2);
     EXPECT_LE(double(differ_clear), vulkan_device_is_cpu() ? 0.0 : 1e-4 * double(clear));
     // The two budgets above.
