@@ -390,6 +390,40 @@ TEST(VkBackend, HostTimedAndTimestampedPathsGiveTheSameFrame) {
         EXPECT_GE(t.ms, 0.0) << t.stage;
 }
 
+// StageTiming::passes adds the beamform stage's passes and the host's steps to Frame::times, after the
+// stages, and changes nothing else: the same frame and the same stages as with timestamps alone.
+TEST(VkBackend, PassTimingAddsThePassesAndHostStepsAfterTheStages) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard guard;
+    RendererOptions timestamps, passes;
+    timestamps.stage_timing = StageTiming::timestamps;
+    passes.stage_timing = StageTiming::passes;
+    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0), timestamps);
+    auto by_pass = make_harness(small_config(), facing_plate(9.0, 20.0), passes);
+    ASSERT_TRUE(timestamped && by_pass);
+    ASSERT_TRUE(timestamped->render().ok());
+    ASSERT_TRUE(by_pass->render().ok());
+    EXPECT_EQ(by_pass->frame.clean, timestamped->frame.clean);
+    EXPECT_EQ(by_pass->frame.stages_run, timestamped->frame.stages_run);
+    const std::vector<StageTime>& times = by_pass->frame.times;
+    const std::size_t stages = timestamped->frame.times.size();
+    if (timestamped->frame.times.empty() || times.size() == stages) GTEST_SKIP() << "no timestamp queries here";
+    for (std::size_t i = 0; i < stages; ++i)
+        EXPECT_EQ(times[i].stage, timestamped->frame.times[i].stage);
+    std::vector<std::string> extra;
+    for (std::size_t i = stages; i < times.size(); ++i) {
+        extra.push_back(times[i].stage);
+        EXPECT_GE(times[i].ms, 0.0) << times[i].stage;
+    }
+    // small_config: horizontal pattern on (the side-lobe pass), far side lobes as the plan has them
+    ASSERT_GE(extra.size(), 6u);
+    EXPECT_EQ(extra.front(), "bf:profile");
+    EXPECT_EQ(extra[1], "bf:resample");
+    const std::vector<std::string> host_steps{"host:prepare", "host:record", "host:gpu_wait", "host:copy"};
+    EXPECT_EQ(std::vector<std::string>(extra.end() - 4, extra.end()), host_steps);
+    EXPECT_EQ(extra[extra.size() - 5], "bf:sidelobe");
+}
+
 TEST(VkBackend, RejectsDrawOfMissingMesh) {
     VKSONAR_REQUIRE_VULKAN();
     SceneData scene = facing_plate(10.0, 20.0);

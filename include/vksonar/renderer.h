@@ -40,8 +40,15 @@ enum class ResampleMethod : std::uint8_t { automatic, gather };
 enum class WorkLayout : std::uint8_t { automatic, cpu_device, gpu };
 // How the Vulkan backend measures Frame::times. automatic: timestamp queries where the queue has
 // them, except on CPU devices (lavapipe), else host clocks around one submission per stage; host:
-// always host clocks; timestamps: timestamp queries where the queue has them, else host clocks.
-enum class StageTiming : std::uint8_t { automatic, host, timestamps };
+// always host clocks; timestamps: timestamp queries where the queue has them, else host clocks;
+// passes: as timestamps, and where there are timestamps Frame::times also lists the beamform stage's
+// passes ("bf:profile", "bf:resample", "bf:far_deposit", "bf:far_convolve", "bf:sidelobe": GPU time from
+// the pass before to this one's end) and the host's own steps around the GPU work ("host:prepare":
+// draw matrices, culling, sub-pixel returns; "host:record"; "host:gpu_wait": submit to fence; "host:copy":
+// the readback out). Those entries (names with a ':') lie inside or beside the stages and are not stages:
+// a sum over Frame::times skips them. A timestamp between passes can cost a little GPU time: for finding
+// where a frame goes, not for the frame rate.
+enum class StageTiming : std::uint8_t { automatic, host, timestamps, passes };
 
 // How a renderer runs, fixed at create (copied there).
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
@@ -49,7 +56,7 @@ struct RendererOptions {
     Backend backend = Backend::vulkan;
     std::uint64_t seed = 1;
     SaveFlags save_mask = SaveFlags::none; // the intermediates make_frame sizes and render fills
-    // Threads for the host stages (noise, gain): 0 = one per hardware thread (at most 8), 1 = the
+    // Threads for the host stages (noise, gain): 0 = one per hardware thread (at most 16), 1 = the
     // calling thread only. Created once with the Renderer. Output does not depend on it.
     std::uint32_t host_threads = 0;
     // Vulkan backend paths (ignored by the CPU backend); the defaults are the fast paths.
@@ -62,7 +69,7 @@ struct RendererOptions {
 // The options `base` with what the environment asks for, for tools and tests; vksonar itself never
 // reads the environment. VKSONAR_HOST_THREADS=N sets host_threads (when base.host_threads is 0),
 // VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather, VKSONAR_LAYOUT=cpu_device|gpu and
-// VKSONAR_STAGE_TIMING=host|timestamps set the paths above; other values are ignored. Thread-safety: reads the
+// VKSONAR_STAGE_TIMING=host|timestamps|passes set the paths above; other values are ignored. Thread-safety: reads the
 // environment (std::getenv).
 [[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});
 

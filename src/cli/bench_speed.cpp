@@ -149,7 +149,9 @@ int run_bench_speed(const std::vector<std::string>& argv) {
                                                      samples.stages[t.stage].reserve(frames);
                                                  }
                                                  samples.stages[t.stage].push_back(t.ms);
-                                                 sum += t.ms;
+                                                 // a pass or host step (VKSONAR_STAGE_TIMING=passes) is
+                                                 // not a stage: inside or beside one
+                                                 if (t.stage.find(':') == std::string::npos) sum += t.ms;
                                              }
                                              const double depth = stage_ms(frame, "depth");
                                              samples.full_ms.push_back(full);

@@ -181,7 +181,7 @@ Frame make_frame_for(const RendererImpl& impl) {
         f.point.assign(cells * 3, 0.0f);
         f.visibility.reserve(impl.visibility_capacity);
     }
-    f.times.reserve(8);
+    f.times.reserve(16); // the stages, and with StageTiming::passes the passes and host steps
     f.stages_run.reserve(8);
     f.effects = p.effects.states;
     return f;
@@ -326,6 +326,7 @@ RendererOptions renderer_options_from_env(RendererOptions base) {
     if (is("VKSONAR_LAYOUT", "gpu")) base.layout = WorkLayout::gpu;
     if (is("VKSONAR_STAGE_TIMING", "host")) base.stage_timing = StageTiming::host;
     if (is("VKSONAR_STAGE_TIMING", "timestamps")) base.stage_timing = StageTiming::timestamps;
+    if (is("VKSONAR_STAGE_TIMING", "passes")) base.stage_timing = StageTiming::passes;
     return base;
 }
 

@@ -36,7 +36,7 @@ public:
     using BlockTask = void (*)(void* context, std::uint32_t block, std::uint32_t thread);
     void run_blocks(BlockTask task, void* context, std::uint32_t blocks);
 
-    static constexpr std::uint32_t kMaxThreads = 8;
+    static constexpr std::uint32_t kMaxThreads = 16;
 
 private:
     void helper_loop(std::uint32_t part);

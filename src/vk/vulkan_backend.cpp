@@ -580,12 +580,14 @@ Result<void> VulkanBackend::create_commands() {
     const bool can_timestamp = context_.timestamp_valid_bits > 0 && context_.properties.limits.timestampPeriod > 0.0f;
     timestamps_ = can_timestamp && context_.properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU;
     if (options_.stage_timing == StageTiming::host) timestamps_ = false;
-    if (options_.stage_timing == StageTiming::timestamps) timestamps_ = can_timestamp;
+    if (options_.stage_timing == StageTiming::timestamps || options_.stage_timing == StageTiming::passes)
+        timestamps_ = can_timestamp;
+    pass_timestamps_ = timestamps_ && options_.stage_timing == StageTiming::passes;
     if (timestamps_) {
         VkQueryPoolCreateInfo query_info{};
         query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
         query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
-        query_info.queryCount = kCommandBufferCount + 1;
+        query_info.queryCount = kQueryCount;
         VkQueryPool query_pool = VK_NULL_HANDLE;
         VKS_VK_TRY(context_.fn.vkCreateQueryPool(device, &query_info, allocator, &query_pool));
         query_pool_ = OwnedQueryPool(context_, query_pool);

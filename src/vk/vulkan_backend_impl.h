@@ -27,6 +27,10 @@ namespace vksonar::vk {
 // timestamp queries, they can be submitted and timed one by one.
 // One command buffer per stage of kStageTable, and one for the readback.
 constexpr std::uint32_t kCommandBufferCount = static_cast<std::uint32_t>(kStageCount) + 1;
+// Timestamps: one before the first command buffer and one after each, then (StageTiming::passes) one
+// after each pass of the beamform stage.
+constexpr std::uint32_t kPassQueryBase = kCommandBufferCount + 1;
+constexpr std::uint32_t kQueryCount = kPassQueryBase + static_cast<std::uint32_t>(kMaxDispatches);
 
 constexpr VkPipelineStageFlags kComputeOrTransfer =
     VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
@@ -120,6 +124,12 @@ private:
     bool far_sidelobes_ = false; // plan_.far_cells > 0: far_sidelobe.comp runs before sidelobe.comp
     bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
+    // StageTiming::passes: a timestamp after each beamform pass (pass_timestamp), host clocks around the
+    // host's steps; Frame::times gets both as extra entries.
+    bool pass_timestamps_ = false;
+    std::uint32_t passes_recorded_ = 0;
+    std::array<const char*, kMaxDispatches> pass_names_{};
+    void pass_timestamp(VkCommandBuffer commands, const char* name);
 
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame

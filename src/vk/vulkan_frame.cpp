@@ -124,23 +124,36 @@ void record_beamform(RecordContext& record) {
     b.bind_compute(commands, b.profile_pipeline_.get());
     b.dispatch(commands, record.dispatches[profile]);
     b.compute_barrier(commands, b.profiles_);
+    b.pass_timestamp(commands, "bf:profile");
 
     fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.resample_pipeline_.get());
     b.dispatch(commands, record.dispatches[resample]);
     b.compute_barrier(commands, b.beam_profiles_);
+    b.pass_timestamp(commands, "bf:resample");
     if (b.far_sidelobes_) { // sidelobe.comp reads the result
         fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.far_deposit_pipeline_.get());
         b.dispatch(commands, record.dispatches[far_deposit]);
         b.compute_barrier(commands, b.far_energy_);
+        b.pass_timestamp(commands, "bf:far_deposit");
         fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.far_convolve_pipeline_.get());
         b.dispatch(commands, record.dispatches[far_convolve]);
         b.compute_barrier(commands, b.far_cells_);
+        b.pass_timestamp(commands, "bf:far_convolve");
     }
     if (b.sidelobes_) {
         fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.sidelobe_pipeline_.get());
         b.dispatch(commands, record.dispatches[sidelobe]);
         b.compute_barrier(commands, b.polar_);
+        b.pass_timestamp(commands, "bf:sidelobe");
     }
+}
+
+void VulkanBackend::pass_timestamp(VkCommandBuffer commands, const char* name) {
+    if (!pass_timestamps_ || passes_recorded_ >= kMaxDispatches) return;
+    pass_names_[passes_recorded_] = name;
+    context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(),
+                                    kPassQueryBase + passes_recorded_);
+    ++passes_recorded_;
 }
 
 void VulkanBackend::dispatch(VkCommandBuffer commands, const Dispatch& groups) {
@@ -220,9 +233,22 @@ template <class T> T* sized(std::vector<T>& v, std::size_t n) {
 
 } // namespace
 
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point& start) {
+    const auto now = std::chrono::steady_clock::now();
+    const double ms = std::chrono::duration<double, std::milli>(now - start).count();
+    start = now;
+    return ms;
+}
+
+} // namespace
+
 Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame& frame) {
     frame.times.clear();
     frame.stages_run.clear();
+    auto host_clock = std::chrono::steady_clock::now(); // StageTiming::passes: the host's own steps
+    std::array<double, 4> host_ms{};                    // prepare, record, gpu_wait, copy
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
     // the objects a few pixels across or less: their returns (profile.comp adds them) instead of their
@@ -237,6 +263,8 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         if (stage.runs(plan_)) stages[stage_total++] = &stage;
     const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
+    host_ms[0] = ms_since(host_clock);
+    passes_recorded_ = 0;
     VKS_VK_TRY(context_.fn.vkResetCommandPool(context_.device, command_pool_.get(), 0));
     std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
@@ -247,7 +275,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(context_.fn.vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
-            context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kCommandBufferCount + 1);
+            context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
         if (i < stage_total) {
@@ -264,19 +292,39 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
 
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
     std::array<double, kCommandBufferCount> stage_ms{};
+    std::array<double, kMaxDispatches> pass_ms{};
+    host_ms[1] = ms_since(host_clock);
     if (timestamps_) {
         if (auto r = submit_and_wait(recorded.data(), buffer_total); !r) return r;
-        std::array<std::uint64_t, kCommandBufferCount + 1> ticks{};
+        host_ms[2] = ms_since(host_clock);
+        std::array<std::uint64_t, kQueryCount> ticks{};
         VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
             context_.device, query_pool_.get(), 0, buffer_total + 1, sizeof(std::uint64_t) * ticks.size(), ticks.data(),
             sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+        if (passes_recorded_ > 0) {
+            VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(context_.device, query_pool_.get(), kPassQueryBase,
+                                                         passes_recorded_, sizeof(std::uint64_t) * passes_recorded_,
+                                                         ticks.data() + kPassQueryBase, sizeof(std::uint64_t),
+                                                         VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+        }
         const std::uint64_t mask = context_.timestamp_valid_bits >= 64
                                        ? ~std::uint64_t(0)
                                        : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
         const double ns_per_tick = context_.properties.limits.timestampPeriod;
-        for (std::uint32_t i = 0; i < buffer_total; ++i) {
-            const std::uint64_t elapsed = ((ticks[i + 1] & mask) - (ticks[i] & mask)) & mask;
-            stage_ms[i] = double(elapsed) * ns_per_tick * 1e-6;
+        auto interval_ms = [&](std::uint64_t from, std::uint64_t to) {
+            return double(((to & mask) - (from & mask)) & mask) * ns_per_tick * 1e-6;
+        };
+        for (std::uint32_t i = 0; i < buffer_total; ++i)
+            stage_ms[i] = interval_ms(ticks[i], ticks[i + 1]);
+        // The passes of the beamform stage, each from the end of the one before (the first from the end
+        // of the command buffer before the stage's).
+        for (std::uint32_t i = 0; i < stage_total && passes_recorded_ > 0; ++i) {
+            if (std::strcmp(stages[i]->name, "beamform") != 0) continue;
+            std::uint64_t from = ticks[i];
+            for (std::uint32_t n = 0; n < passes_recorded_; ++n) {
+                pass_ms[n] = interval_ms(from, ticks[kPassQueryBase + n]);
+                from = ticks[kPassQueryBase + n];
+            }
         }
     } else {
         for (std::uint32_t i = 0; i < buffer_total; ++i) {
@@ -293,6 +341,14 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     }
 
     copy_frame_out(save_mask, frame);
+    if (pass_timestamps_) { // the names fit std::string's inline buffer: no allocation
+        for (std::uint32_t n = 0; n < passes_recorded_; ++n)
+            frame.times.push_back(StageTime{pass_names_[n], pass_ms[n]});
+        host_ms[3] = ms_since(host_clock);
+        const std::array<const char*, 4> host_steps{"host:prepare", "host:record", "host:gpu_wait", "host:copy"};
+        for (std::size_t s = 0; s < host_steps.size(); ++s)
+            frame.times.push_back(StageTime{host_steps[s], host_ms[s]});
+    }
     return {};
 }
 
