@@ -403,7 +403,13 @@ struct RangeSpread {
     int k_last;
     int tent_k0;  // tent: the lower of its two bins (may lie outside the window)
     REAL tent_w1; // tent: the share of bin tent_k0 + 1
-    REAL lo;      // footprint: [lo, hi] in bin coordinates, its centre, log-density slope g, 1 / integral
+    // footprint: [lo, hi] in bin coordinates from bin `origin` (the pixel's own bin), its centre, log-density
+    // slope g, 1 / integral. Measured from bin 0, a far pixel's edges would round to 6e-5 of a bin (a float
+    // near 500), and a narrow footprint's share of the bin its edge falls in would move by 1e-4 of itself
+    // with a last-bit change of its width (the GPU's square root and division are a few ulps from the
+    // CPU's): the H100 put the profiles 1.4e-4 apart. From its own bin they round to 1e-7 of a bin.
+    int origin;
+    REAL lo;
     REAL hi;
     REAL centre;
     REAL g;
@@ -422,6 +428,7 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
     s.k_last = -1;
     s.tent_k0 = 0;
     s.tent_w1 = REAL(0);
+    s.origin = 0;
     s.lo = REAL(0);
     s.hi = REAL(0);
     s.centre = REAL(0);
@@ -438,8 +445,12 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         REAL b = footprint_edge_offset(down.y, down2.y, r, up.y, jump_rel);
         REAL a2 = a != REAL(0) ? a : footprint_missing_edge(b, down.y, down2.y, r);
         REAL b2 = b != REAL(0) ? b : footprint_missing_edge(a, up.y, up2.y, r);
-        VKS_PRECISE REAL xl = x + footprint_lo(a2, b2) * inv_bin_width_m;
-        VKS_PRECISE REAL xh = x + footprint_hi(a2, b2) * inv_bin_width_m;
+        // From here on bin coordinates count from the pixel's own bin: f = x - floor(x) is exact.
+        REAL base = floor(x);
+        s.origin = int(base);
+        VKS_PRECISE REAL f = x - base;
+        VKS_PRECISE REAL xl = f + footprint_lo(a2, b2) * inv_bin_width_m;
+        VKS_PRECISE REAL xh = f + footprint_hi(a2, b2) * inv_bin_width_m;
         // Down the column [xl, xh], across it [cl, ch] (bins from r): their sum spans [xl + cl, xh + ch]; a
         // box of the same variance (of a footprint that is the two boxes convolved) is
         // sqrt(w_column^2 + w_across^2) wide, centred where theirs add.
@@ -472,7 +483,7 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
             REAL r_q2 = up_side ? up2.y : down2.y;
             VKS_PRECISE REAL w_q = REAL(0.5) * abs(r_q2 - r) * inv_bin_width_m;
             VKS_PRECISE REAL span =
-                ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (column_centre - x);
+                ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (column_centre - f);
             g = footprint_log_slope(q.x, w_q, er.x, xh - xl, span, width);
         }
         s.lo = lo;
@@ -480,8 +491,8 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         s.centre = centre;
         s.g = g;
         s.inv_norm = REAL(1) / (width * sinhc_of(REAL(0.5) * g * width));
-        s.k_first = max(int(floor(lo)), 0);
-        s.k_last = min(int(floor(hi)), nb - 1);
+        s.k_first = max(s.origin + int(floor(lo)), 0);
+        s.k_last = min(s.origin + int(floor(hi)), nb - 1);
     } else if (kernel == kRangeKernelTent) {
         // Far outside the window both shares are gated away anyway; the clamp keeps floor() in int range.
         VKS_PRECISE REAL t = min(max(x - REAL(0.5), REAL(-2)), REAL(bins) + REAL(1));
@@ -500,7 +511,7 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
 // The share of the pixel's energy that bin k (in [k_first, k_last]) receives.
 VKS_FN_INLINE REAL range_share(RangeSpread s, int k) {
     if (s.kernel == kRangeKernelFootprint) {
-        return footprint_share(s.lo, s.hi, s.centre, s.g, s.inv_norm, k);
+        return footprint_share(s.lo, s.hi, s.centre, s.g, s.inv_norm, k - s.origin);
     }
     if (s.kernel == kRangeKernelTent) {
         return k == s.tent_k0 ? REAL(1) - s.tent_w1 : s.tent_w1;

@@ -290,11 +290,12 @@ VKS_FN REAL footprint_log_slope(REAL e_up, REAL w_up, REAL e_down, REAL w_down, 
     return min(max(g, -cap), cap);
 }
 
-// Share of a pixel's footprint [lo, hi] (bin coordinates, centre c = (lo + hi) / 2) that falls into bin
-// k, with the energy density along range proportional to exp(g (x - c)); inv_norm =
-// 1 / ((hi - lo) sinhc(g (hi - lo) / 2)) normalizes its integral over the footprint to 1. With g = 0 this
-// is the box: (overlap length) / (hi - lo). The range window gates: what lies below bin 0 or above the
-// last bin is not recorded, so the shares of the bins add up to the part of the footprint inside.
+// Share of a pixel's footprint [lo, hi] (bin coordinates from the spread's origin, centre c = (lo + hi) /
+// 2) that falls into bin k (counted from the same origin), with the energy density along range
+// proportional to exp(g (x - c)); inv_norm = 1 / ((hi - lo) sinhc(g (hi - lo) / 2)) normalizes its
+// integral over the footprint to 1. With g = 0 this is the box: (overlap length) / (hi - lo). The range window gates:
+// what lies below bin 0 or above the last bin is not recorded, so the shares of the bins add up to the part of the
+// footprint inside.
 VKS_FN REAL footprint_share(REAL lo, REAL hi, REAL centre, REAL g, REAL inv_norm, int k) {
     REAL a = max(lo, REAL(k));
     REAL b = min(hi, REAL(k + 1));

@@ -95,8 +95,9 @@ VKS_AVX2_INLINE bool footprint_share8(__m256 lo, __m256 hi, __m256 centre, __m25
 __attribute__((target("avx2,fma"))) bool footprint_shares8(const Math<float>::RangeSpread& s, int n, float* shares) {
     const __m256 lo = halves8(s.lo, s.lo), hi = halves8(s.hi, s.hi), centre = halves8(s.centre, s.centre),
                  g = halves8(s.g, s.g), inv_norm = halves8(s.inv_norm, s.inv_norm);
-    for (int i = 0; i < n; i += 8) {
-        const __m256i k = _mm256_add_epi32(_mm256_set1_epi32(s.k_first + i), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    for (int i = 0; i < n; i += 8) { // bins from the spread's origin
+        const __m256i k =
+            _mm256_add_epi32(_mm256_set1_epi32(s.k_first - s.origin + i), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
         __m256 share;
         if (!footprint_share8(lo, hi, centre, g, inv_norm, k, share)) return false;
         _mm256_storeu_ps(shares + i, share);
@@ -110,8 +111,9 @@ __attribute__((target("avx2,fma"))) bool footprint_shares8(const Math<float>::Ra
 __attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::RangeSpread& sa,
                                                              const Math<float>::RangeSpread& sb, float* shares_a,
                                                              float* shares_b) {
-    const __m256i k = _mm256_add_epi32(_mm256_set_m128i(_mm_set1_epi32(sb.k_first), _mm_set1_epi32(sa.k_first)),
-                                       _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
+    const __m256i k = _mm256_add_epi32( // bins from each spread's origin
+        _mm256_set_m128i(_mm_set1_epi32(sb.k_first - sb.origin), _mm_set1_epi32(sa.k_first - sa.origin)),
+        _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
     __m256 share;
     if (!footprint_share8(halves8(sa.lo, sb.lo), halves8(sa.hi, sb.hi), halves8(sa.centre, sb.centre),
                           halves8(sa.g, sb.g), halves8(sa.inv_norm, sb.inv_norm), k, share))
@@ -196,8 +198,11 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
         a2 = select8(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), a, missing_edge8(r, b, down_r, down2_r));
         b2 = select8(_mm256_cmp_ps(b, zero, _CMP_NEQ_UQ), b, missing_edge8(r, a, up_r, up2_r));
     }
-    const __m256 xl = _mm256_add_ps(x, _mm256_mul_ps(min8(min8(a2, b2), zero), vibw)); // footprint_lo
-    const __m256 xh = _mm256_add_ps(x, _mm256_mul_ps(max8(max8(a2, b2), zero), vibw)); // footprint_hi
+    // bin coordinates from the pixel's own bin (range_spread): f = x - floor(x), exact
+    const __m256 base = _mm256_floor_ps(x);
+    const __m256 f = _mm256_sub_ps(x, base);
+    const __m256 xl = _mm256_add_ps(f, _mm256_mul_ps(min8(min8(a2, b2), zero), vibw)); // footprint_lo
+    const __m256 xh = _mm256_add_ps(f, _mm256_mul_ps(max8(max8(a2, b2), zero), vibw)); // footprint_hi
     // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
     const __m256 left_r = _mm256_load_ps(in.left_r), right_r = _mm256_load_ps(in.right_r);
     const __m256 al = edge_offset8(r, jump_rel, left_r, zero, right_r),
@@ -237,7 +242,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
                                                   _mm256_set1_ps(0.25f)),
                                     r),
                       vibw),
-        _mm256_sub_ps(column_centre, x));
+        _mm256_sub_ps(column_centre, f));
     const __m256 e_self = _mm256_load_ps(in.e), w_self = _mm256_sub_ps(xh, xl);
     const __m256 e1 = select8(both, e_up, e_q), w1 = select8(both, w_up, w_q);
     const __m256 e2 = select8(both, e_down, e_self), w2 = select8(both, w_down, w_self);
@@ -282,7 +287,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     }
     const __m256 inv_norm = _mm256_div_ps(one, _mm256_mul_ps(width, sinhc));
     alignas(32) float lo_l[8], hi_l[8], centre_l[8], g_l[8], inv_l[8];
-    alignas(32) std::int32_t first_l[8], last_l[8];
+    alignas(32) std::int32_t first_l[8], last_l[8], origin_l[8];
     _mm256_store_ps(lo_l, lo);
     _mm256_store_ps(hi_l, hi);
     _mm256_store_ps(centre_l, centre);
@@ -290,11 +295,13 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     _mm256_store_ps(inv_l, inv_norm);
     _mm256_store_si256(reinterpret_cast<__m256i*>(first_l), _mm256_cvttps_epi32(_mm256_floor_ps(lo)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(last_l), _mm256_cvttps_epi32(_mm256_floor_ps(hi)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(origin_l), _mm256_cvttps_epi32(base));
     for (int l = 0; l < 8; ++l) {
         Math<float>::RangeSpread& o = out[l];
         o.kernel = shared::kRangeKernelFootprint;
-        o.k_first = std::max(first_l[l], 0);
-        o.k_last = std::min(last_l[l], bins - 1);
+        o.origin = origin_l[l];
+        o.k_first = std::max(origin_l[l] + first_l[l], 0);
+        o.k_last = std::min(origin_l[l] + last_l[l], bins - 1);
         o.tent_k0 = 0;
         o.tent_w1 = 0.0f;
         o.lo = lo_l[l];

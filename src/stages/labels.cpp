@@ -239,6 +239,7 @@ template <class To, class From> typename Math<To>::RangeSpread spread_in(const F
     out.k_last = s.k_last;
     out.tent_k0 = s.tent_k0;
     out.tent_w1 = static_cast<To>(s.tent_w1);
+    out.origin = s.origin;
     out.lo = static_cast<To>(s.lo);
     out.hi = static_cast<To>(s.hi);
     out.centre = static_cast<To>(s.centre);
@@ -333,7 +334,8 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
         const double share = cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : computed_share(k));
         double range = pixel.range;
         if (footprint) {
-            const double x = 0.5 * (std::max(spread.lo, double(k)) + std::min(spread.hi, double(k + 1)));
+            const double x = spread.origin + 0.5 * (std::max(spread.lo, double(k - spread.origin)) +
+                                                    std::min(spread.hi, double(k - spread.origin + 1)));
             range = plan.config.range_min_m + x * plan.bin_width_m;
         }
         const double point[3] = {ray.dir[0] * range, ray.dir[1] * range, ray.dir[2] * range};
