@@ -5,7 +5,9 @@
 //   kFarPass 0 (deposit):  far_energy[m][c] = sum over the beams [first, end) of cell c, in increasing
 //                          order, of far_deposit_weight(beam j, c, m) * B(j);
 //   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
-// for each channel m < far_channels (sonar_kernels.h, Plan::far_channels).
+// for each channel m < far_channels (sonar_kernels.h, Plan::far_channels); kFarPass 2 the same sums, a
+// workgroup row per output cell (DeviceShape::far_cell_groups: a GPU, where one row per channel left
+// a few hundred lanes busy, each summing cells^2 terms: 0.10 ms on an H100).
 // An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
 // that resample.comp writes); a deposit workgroup one (channel, cell) (y = m * cells + c), a convolve
 // workgroup one channel (y = m). Every table load is the same for the whole workgroup: one scalar
@@ -41,8 +43,8 @@ void main() {
     uint quads = params.bins_padded / 4u;
     uint q = gl_GlobalInvocationID.x;
     uint cells = params.far_cells;
-    uint m = kFarPass == 0u ? gl_WorkGroupID.y / cells : gl_WorkGroupID.y;
-    uint c = kFarPass == 0u ? gl_WorkGroupID.y - m * cells : 0u;
+    uint m = kFarPass != 1u ? gl_WorkGroupID.y / cells : gl_WorkGroupID.y;
+    uint c = kFarPass != 1u ? gl_WorkGroupID.y - m * cells : 0u;
     if (q >= quads || m >= params.far_channels) {
         return;
     }
@@ -60,6 +62,17 @@ void main() {
         far_energy4[(channel_base + c) * quads + q] = sum;
         return;
     }
+    uint weights = spans + 2u * cells;
+    if (kFarPass == 2u) {
+        // Convolve, a GPU's way: a workgroup row per output cell a = c (y = m * cells + c), the same sum
+        // in the same order as below, each energy loaded from memory (coalesced over the lanes' quads).
+        precise vec4 level = vec4(0.0); // no fused multiply-add: the CPU rounds each product
+        for (uint b = 0u; b < cells; ++b) {
+            level += table(weights + cells - 1u + c - b) * far_energy4[(channel_base + b) * quads + q];
+        }
+        far_cells4[(channel_base + c) * quads + q] = level;
+        return;
+    }
     // Convolve: a workgroup per channel (y = m, c unused), each lane every cell of its quad, its
     // energies loaded once into registers (lavapipe runs each storage load as a loop over the lanes;
     // cells^2 of them per quad made this pass the far side lobes' main cost there).
@@ -67,7 +80,6 @@ void main() {
     for (uint b = 0u; b < cells; ++b) {
         energy[b] = far_energy4[(channel_base + b) * quads + q];
     }
-    uint weights = spans + 2u * cells;
     for (uint a = 0u; a < cells; ++a) {
         precise vec4 level = vec4(0.0);
         for (uint b = 0u; b < cells; ++b) {

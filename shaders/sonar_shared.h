@@ -80,7 +80,8 @@ VKS_CONST uint kSpecResampleWalk = 11u;  // resample: 1 = walk each run's column
 VKS_CONST uint kSpecVec4Out = 12u;       // sidelobe: 1 = store polar as vec4s (beams % 4 == 0)
 VKS_CONST uint kSpecLineArray = 13u;     // profile: 1 = gather pixels onto cone columns (SonarParams::line_array)
 VKS_CONST uint kSpecFarSidelobes = 14u;  // sidelobe: 1 = add the far side lobes' cells (far_sidelobe.comp)
-VKS_CONST uint kSpecFarPass = 15u;       // far_sidelobe: 0 = deposit beams into cells, 1 = convolve the cells
+VKS_CONST uint kSpecFarPass = 15u;       // far_sidelobe: 0 = deposit beams into cells, 1 = convolve the cells,
+                                         // 2 = convolve, a workgroup row per output cell (a GPU)
 VKS_CONST uint kSpecSubpixel = 16u;      // profile: 1 = add the frame's sub-pixel returns (Plan::subpixel_capacity > 0)
 VKS_CONST uint kSpecTierViews = 17u;     // normals, echo, profile: 1 = the grid has tier views (Plan::views > slices)
 VKS_CONST uint kSpecBinLanes = 18u;      // profile: invocations sharing one column's bins (a power of 2)

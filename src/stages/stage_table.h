@@ -108,9 +108,13 @@ struct DeviceShape {
     std::uint32_t cones_per_invocation = kConesPerInvocation; // profile, line_array
     std::uint32_t bin_lanes = 1;                              // profile: invocations per column (a power of 2)
     std::uint32_t beams_per_invocation = kBeamsPerInvocation; // resample, sidelobe
+    // far side lobes' convolution: a workgroup row per output cell (channels x cells rows, each cell's sum
+    // over the cells' energies loaded from memory), else per channel (each lane every cell of its bins,
+    // the energies in registers: a CPU device runs a storage load as a loop over the lanes)
+    bool far_cell_groups = false;
 };
-constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation};
-constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation};
+constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation, false};
+constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation, true};
 
 constexpr std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
     return (a + b - 1) / b;
@@ -176,7 +180,7 @@ constexpr Dispatches echo_dispatch(const Plan& plan, const DeviceShape&) {
 // profile: shape.bin_lanes invocations per pixel column (planar) or per shape.cones_per_invocation
 // cone columns (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of
 // shape.beams_per_invocation beams, or
-// channels x cells (far deposit), or channels (far convolve).
+// channels x cells (far deposit), or channels (far convolve; channels x cells with shape.far_cell_groups).
 enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convolve, sidelobe };
 constexpr bool far_sidelobes(const Plan& plan) {
     return plan.effects.horizontal_pattern && plan.far_cells > 0;
@@ -194,7 +198,8 @@ constexpr Dispatches beamform_dispatch(const Plan& plan, const DeviceShape& shap
     d[resample] = {"resample.comp", bin_groups, beam_runs};
     if (far_sidelobes(plan)) {
         d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};
-        d[far_convolve] = {"far_sidelobe.comp", bin_groups, plan.far_channels};
+        d[far_convolve] = {"far_sidelobe.comp", bin_groups,
+                           shape.far_cell_groups ? plan.far_cells * plan.far_channels : plan.far_channels};
     }
     if (plan.effects.horizontal_pattern) d[sidelobe] = {"sidelobe.comp", bin_groups, beam_runs};
     return d;

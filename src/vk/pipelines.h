@@ -160,7 +160,7 @@ struct SidelobeSpecialization {
     }
 };
 struct FarSidelobeSpecialization {
-    std::uint32_t pass = 0; // 0: deposit, 1: convolve
+    std::uint32_t pass = 0; // 0: deposit, 1: convolve, 2: convolve one cell per workgroup row
     std::uint32_t uniform_tables = 0;
     std::uint32_t far_table_vec4s = 1;
     std::array<SpecConstant, 3> constants() const {
