@@ -32,6 +32,9 @@ layout(constant_id = kSpecLineArray) const uint kLineArray = 0u;                
 layout(constant_id = kSpecPerInvocation) const uint kConesPerInvocation = 4u;       // line_array (see below)
 layout(constant_id = kSpecSubpixel) const uint kSubpixel = 0u;                     // Plan::subpixel_capacity > 0
 layout(constant_id = kSpecBinLanes) const uint kBinLanes = 1u;                      // a power of 2 (see above)
+layout(constant_id = kSpecGatherRows) const uint kGatherRows = 0u;     // gather_block_rows (below)
+layout(constant_id = kSpecRowCandidates) const uint kRowCandidates = 1u;
+layout(constant_id = kSpecSharedBins) const uint kSharedBins = 1u;
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
@@ -182,6 +185,152 @@ void gather_cone_columns(uint first_cone, uint end_cone) {
     }
 }
 
+// line_array on a GPU (kGatherRows): gather_cone_columns walks the rows one after another, every pixel a
+// chain of dependent loads and its spread computed by all kBinLanes lanes alike (0.53 ms of an H100's
+// 0.67 ms beamform). Here a workgroup's two cone columns (kBinLanes = 32 lanes each) take 32 rows at
+// once: each lane finds its own row's pixels (from where the block before left each view's first
+// column), then the lanes compute the block's spreads 32 at a time, and then add them in order (rows,
+// views, columns, as gather_view), each lane its own bins, into the column's profile in shared memory.
+// Every cell keeps its one writer and the order of its additions: the same bits as gather_cone_columns.
+// The host turns it on where a row gives a cone column at most kRowCandidates pixels and the
+// accumulators fit the device's shared memory (src/vk/vulkan_backend.cpp).
+const uint kBlockRows = 32u; // = kBinLanes where kGatherRows is on
+shared float block_profile[2u * kSharedBins];
+shared uint block_column[2u * kBlockRows * kRowCandidates]; // each row's pixels' columns, in gather order
+shared uint block_count[2u * kBlockRows];
+shared uint block_first[2u * (kMaxViews + 1u)];      // each view's first column on the block's first row
+shared uint block_next_first[2u * (kMaxViews + 1u)]; // ... on its last row
+shared RangeSpread round_spread[2u * kBlockRows];
+shared float round_energy[2u * kBlockRows]; // cone share x energy
+
+// Row `row`'s pixels in view [view_begin, view_end) that feed cone column `cone` (as gather_view finds
+// them, from the column `first` the block before left), appended to this lane's list; returns the view's
+// first column for this row.
+uint list_view(uint row, uint view_begin, uint view_end, uint first, uint cone, uint list, inout uint n) {
+    uint row_start = row * params.columns;
+    float lo = float(cone) - 1.0;
+    float hi = float(cone) + 1.0;
+    int count = int(params.profile_columns);
+    while (first > view_begin && cone_coords[row_start + first - 1u] > lo) {
+        --first;
+    }
+    while (first < view_end && !(cone_coords[row_start + first] > lo)) {
+        ++first;
+    }
+    for (uint c = first; c < view_end; ++c) {
+        float x = cone_coords[row_start + c];
+        if (!(x < hi)) {
+            break;
+        }
+        if (load_echo(row_start + c).x > 0.0 && cone_share(x, int(cone), count) > 0.0 && n < kRowCandidates) {
+            block_column[list + n] = c;
+            ++n;
+        }
+    }
+    return first;
+}
+
+void gather_block_rows(uint cone, bool owned) {
+    uint side = gl_LocalInvocationID.x / kBlockRows; // which of the workgroup's two cone columns
+    uint lane = gl_LocalInvocationID.x % kBlockRows;
+    uint slices_end = params.slices * params.slice_columns;
+    uint width = params.tier_columns; // each tier view's
+    uint tiers = kTierViews != 0u && width > 0u ? (params.columns - slices_end) / width : 0u;
+    uint firsts = side * (kMaxViews + 1u);
+    float lo = float(cone) - 1.0;
+    for (uint k = lane; k < kSharedBins; k += kBlockRows) {
+        block_profile[side * kSharedBins + k] = 0.0;
+    }
+    if (lane == 0u) {
+        block_first[firsts] = first_above(0u, slices_end, lo);
+        for (uint t = 0u; t < tiers; ++t) {
+            uint begin = slices_end + t * width;
+            block_first[firsts + 1u + t] = first_above(begin, begin + width, lo);
+        }
+    }
+    barrier();
+    int count = int(params.profile_columns);
+    for (uint row0 = 0u; row0 < params.rows; row0 += kBlockRows) {
+        // This lane's row: its pixels, in gather order.
+        uint row = row0 + lane;
+        uint list = (side * kBlockRows + lane) * kRowCandidates;
+        uint n = 0u;
+        uint last_row = min(row0 + kBlockRows, params.rows) - 1u;
+        if (owned && row < params.rows) {
+            // the last row leaves each view's first column for the next block (block_next_first: the
+            // other lanes are still reading block_first)
+            bool last = row == last_row;
+            uint f = list_view(row, 0u, slices_end, block_first[firsts], cone, list, n);
+            if (last) {
+                block_next_first[firsts] = f;
+            }
+            for (uint t = 0u; t < tiers; ++t) {
+                uint begin = slices_end + t * width;
+                f = list_view(row, begin, begin + width, block_first[firsts + 1u + t], cone, list, n);
+                if (last) {
+                    block_next_first[firsts + 1u + t] = f;
+                }
+            }
+        }
+        block_count[side * kBlockRows + lane] = n;
+        barrier();
+        if (lane == 0u) {
+            for (uint v = 0u; v <= tiers; ++v) {
+                block_first[firsts + v] = block_next_first[firsts + v];
+            }
+        }
+        // The block's pixels, 32 at a time: spreads in parallel, then added in order.
+        uint total = 0u;
+        uint most = 0u;
+        for (uint h = 0u; h < 2u; ++h) {
+            uint sum = 0u;
+            for (uint r = 0u; r < kBlockRows; ++r) {
+                sum += block_count[h * kBlockRows + r];
+            }
+            if (h == side) {
+                total = sum;
+            }
+            most = max(most, sum);
+        }
+        for (uint done = 0u; done < most; done += kBlockRows) {
+            uint slot = side * kBlockRows + lane;
+            uint index = done + lane;
+            if (owned && index < total) {
+                uint r = 0u;
+                while (index >= block_count[side * kBlockRows + r]) {
+                    index -= block_count[side * kBlockRows + r];
+                    ++r;
+                }
+                uint c = block_column[(side * kBlockRows + r) * kRowCandidates + index];
+                uint pixel_row = row0 + r;
+                uint p = pixel_row * params.columns + c;
+                vec2 er = load_echo(p);
+                precise float weighted = cone_share(cone_coords[p], int(cone), count) * er.x;
+                round_spread[slot] = pixel_spread(pixel_row, c, er);
+                round_energy[slot] = weighted;
+            }
+            barrier();
+            uint entries = owned ? min(total - min(total, done), kBlockRows) : 0u;
+            for (uint i = 0u; i < entries; ++i) {
+                RangeSpread spread = round_spread[side * kBlockRows + i];
+                float weighted = round_energy[side * kBlockRows + i];
+                for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
+                    precise float add = range_share(spread, k) * weighted;
+                    block_profile[side * kSharedBins + uint(k)] += add;
+                }
+            }
+            barrier();
+        }
+        barrier(); // block_first is the next block's (where there was no round to pass a barrier)
+    }
+    if (owned) {
+        uint base = cone * params.bins_padded;
+        for (uint k = lane; k < params.bins_padded; k += kBlockRows) {
+            profiles[base + k] = block_profile[side * kSharedBins + k];
+        }
+    }
+}
+
 // The frame's sub-pixel returns (src/core/subpixel.h): uints, the profile columns' first returns
 // (profile_columns + 1), the silent material, then from the next multiple of 4 the returns, four words
 // each (SubpixelReturn). Each column adds its own after its pixels, so it stays the only writer of its
@@ -216,6 +365,14 @@ void add_subpixel(uint column) {
 
 void main() {
     uint unit = gl_GlobalInvocationID.x / kBinLanes; // a pixel column, or a run of cone columns
+    if (kLineArray != 0u && kGatherRows != 0u) { // one cone column per unit; every lane to the end (barriers)
+        bool owned = unit < params.profile_columns;
+        gather_block_rows(unit, owned);
+        if (kSubpixel != 0u && owned) {
+            add_subpixel(unit);
+        }
+        return;
+    }
     if (kLineArray != 0u) {
         uint first_cone = unit * kConesPerInvocation;
         if (first_cone < params.profile_columns) {

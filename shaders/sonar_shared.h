@@ -85,6 +85,9 @@ VKS_CONST uint kSpecFarPass = 15u;       // far_sidelobe: 0 = deposit beams into
 VKS_CONST uint kSpecSubpixel = 16u;      // profile: 1 = add the frame's sub-pixel returns (Plan::subpixel_capacity > 0)
 VKS_CONST uint kSpecTierViews = 17u;     // normals, echo, profile: 1 = the grid has tier views (Plan::views > slices)
 VKS_CONST uint kSpecBinLanes = 18u;      // profile: invocations sharing one column's bins (a power of 2)
+VKS_CONST uint kSpecGatherRows = 19u;    // profile, line_array on a GPU: 1 = a block of rows' pixels at once
+VKS_CONST uint kSpecRowCandidates = 20u; // profile: the most pixels one row gives one cone column (host-counted)
+VKS_CONST uint kSpecSharedBins = 21u;    // profile: bins_padded, the shared accumulators' length
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass

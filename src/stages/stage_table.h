@@ -112,9 +112,12 @@ struct DeviceShape {
     // over the cells' energies loaded from memory), else per channel (each lane every cell of its bins,
     // the energies in registers: a CPU device runs a storage load as a loop over the lanes)
     bool far_cell_groups = false;
+    // line_array profile: a block of kProfileBinLanes rows at once (profile.comp gather_block_rows; needs
+    // one cone column per unit and kProfileBinLanes lanes), where the plan allows it (VulkanBackend)
+    bool gather_rows = false;
 };
-constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation, false};
-constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation, true};
+constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation, false, false};
+constexpr DeviceShape kGpuDeviceShape{1, kProfileBinLanes, kGpuBeamsPerInvocation, true, true};
 
 constexpr std::uint64_t ceil_div(std::uint64_t a, std::uint64_t b) {
     return (a + b - 1) / b;

@@ -117,10 +117,16 @@ struct ProfileSpecialization {
     std::uint32_t cones_per_invocation = 4; // line_array
     std::uint32_t subpixel = 0;             // Plan::subpixel_capacity > 0
     std::uint32_t tier_views = 0;
-    std::uint32_t bin_lanes = 1; // invocations per column (DeviceShape)
-    std::array<SpecConstant, 7> constants() const {
+    std::uint32_t bin_lanes = 1;      // invocations per column (DeviceShape)
+    std::uint32_t gather_rows = 0;    // line_array: a block of rows at once (profile.comp gather_block_rows)
+    std::uint32_t row_candidates = 1; // its most pixels of one row for one cone column
+    std::uint32_t shared_bins = 1;    // its accumulators' length (bins_padded)
+    std::array<SpecConstant, 10> constants() const {
         return {{{shared::kSpecTierViews, tier_views},
                  {shared::kSpecBinLanes, bin_lanes},
+                 {shared::kSpecGatherRows, gather_rows},
+                 {shared::kSpecRowCandidates, row_candidates},
+                 {shared::kSpecSharedBins, shared_bins},
                  {shared::kSpecRangeKernel, range_kernel},
                  {shared::kSpecEchoHalf, echo_half},
                  {shared::kSpecLineArray, line_array},

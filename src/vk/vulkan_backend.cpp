@@ -3,6 +3,7 @@
 // work (record, submit, read back) is in vulkan_frame.cpp.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -30,6 +31,34 @@
 #include "sidelobe.comp.spv.h"
 
 namespace vksonar::vk {
+
+namespace {
+
+// profile.comp's gather_block_rows lists each row's pixels for a cone column in shared memory: at most
+// this many a row (the default grid gives 7).
+constexpr std::uint32_t kMaxRowCandidates = 16;
+
+// The most pixels one row gives one cone column c (line_array): those of every view whose cone coordinate
+// x has c - 1 < x < c + 1, compared in float as profile.comp compares them.
+std::uint32_t most_row_candidates(const Plan& plan) {
+    const std::uint32_t count = plan.profile_columns;
+    std::vector<std::uint32_t> per_cone(count);
+    std::uint32_t most = 0;
+    for (std::uint32_t row = 0; row < plan.rows && !plan.pixel_cone_coord.empty(); ++row) {
+        std::fill(per_cone.begin(), per_cone.end(), 0u);
+        const float* x = plan.pixel_cone_coord.data() + std::size_t(row) * plan.columns;
+        for (std::uint32_t column = 0; column < plan.columns; ++column) {
+            if (!(x[column] > -1.0f && x[column] < float(count))) continue; // NaN too
+            const auto below = static_cast<std::int64_t>(std::floor(x[column]));
+            for (std::int64_t c = std::max<std::int64_t>(below, 0); c <= below + 1 && c < count; ++c) {
+                if (x[column] > float(c) - 1.0f && x[column] < float(c) + 1.0f) most = std::max(most, ++per_cone[c]);
+            }
+        }
+    }
+    return most;
+}
+
+} // namespace
 
 VulkanBackend::~VulkanBackend() {
     // render() always waits for its submission; this only guards against a failed wait.
@@ -512,6 +541,20 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.bin_lanes = shape_.bin_lanes;
     profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
     profile.tier_views = plan_.views > plan_.slices ? 1u : 0u;
+    if (shape_.gather_rows && plan_.line_array && shape_.cones_per_invocation == 1 &&
+        shape_.bin_lanes == kProfileBinLanes) {
+        const std::uint32_t candidates = most_row_candidates(plan_);
+        const std::uint32_t bins_padded = gpu_params_.bins_padded;
+        // profile.comp's shared arrays: accumulators, pixel lists, counts, first columns, one round's spreads
+        const std::size_t shared_bytes = 4 * (2 * std::size_t(bins_padded) + 2 * 32 * std::size_t(candidates) + 64 +
+                                              4 * (shared::kMaxViews + 1) + 64 * 16 + 64);
+        if (candidates > 0 && candidates <= kMaxRowCandidates &&
+            shared_bytes <= context_.properties.limits.maxComputeSharedMemorySize) {
+            profile.gather_rows = 1;
+            profile.row_candidates = candidates;
+            profile.shared_bins = bins_padded;
+        }
+    }
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).

@@ -502,22 +502,33 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
 // column walking all its bins and 16 beams per resample/sidelobe invocation (lavapipe), for a GPU 32
 // per column, each adding to every 32nd bin, and 4 beams (kGpuDeviceShape). Each output keeps one
 // writer and the order of its additions, so the frames are the same bits; on lavapipe both run here.
-// Planar columns, the line array's cone gather with its tier views, and the tent kernel (two bins a
-// pixel: lanes meet at a pixel's edge bins).
+// Planar columns, the line array's cone gather with its tier views (in the GPU layout a block of 32 rows
+// at once, profile.comp gather_block_rows, over 164 rows: the blocks hand on their first columns and the
+// last one is short), the tent kernel (two bins a pixel: lanes meet at a pixel's edge bins), and 6
+// pixel columns a beam, where a row gives a cone column more pixels than the block's lists hold (the GPU
+// layout then walks the rows one by one).
 TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
     ASSERT_TRUE(scene) << scene.error().message;
-    const std::pair<BeamGeometry, RangeKernel> cases[] = {{BeamGeometry::line_array, RangeKernel::footprint},
-                                                          {BeamGeometry::planar, RangeKernel::footprint},
-                                                          {BeamGeometry::line_array, RangeKernel::tent}};
-    for (const auto& [geometry, kernel] : cases) {
+    struct Case {
+        BeamGeometry geometry;
+        RangeKernel kernel;
+        double pixels_per_beam;
+    };
+    const Case cases[] = {{BeamGeometry::line_array, RangeKernel::footprint, 2.0},
+                          {BeamGeometry::planar, RangeKernel::footprint, 2.0},
+                          {BeamGeometry::line_array, RangeKernel::tent, 2.0},
+                          {BeamGeometry::line_array, RangeKernel::footprint, 6.0}};
+    for (const auto& [geometry, kernel, pixels_per_beam] : cases) {
         SCOPED_TRACE(std::string(geometry == BeamGeometry::planar ? "planar" : "line array") +
-                     (kernel == RangeKernel::tent ? ", tent" : ", footprint"));
+                     (kernel == RangeKernel::tent ? ", tent" : ", footprint") + ", " + std::to_string(pixels_per_beam) +
+                     " pixels a beam");
         SonarConfig config = quiet_config();
         config.beam_geometry = geometry;
         config.range_kernel = kernel;
+        config.pixels_per_beam = pixels_per_beam;
         Pose pose;
         pose.pitch_deg = 10.0;
         RendererOptions columns, lanes;
