@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/plan.h"
+#include "core/renderer_access.h"
 #include "scene/scene_data.h"
 #include "sonar_shared.h"
 #include "stages/cpu_stages.h"
@@ -422,6 +423,30 @@ TEST(VkBackend, PassTimingAddsThePassesAndHostStepsAfterTheStages) {
     const std::vector<std::string> host_steps{"host:prepare", "host:record", "host:gpu_wait", "host:copy"};
     EXPECT_EQ(std::vector<std::string>(extra.end() - 4, extra.end()), host_steps);
     EXPECT_EQ(extra[extra.size() - 5], "bf:sidelobe");
+}
+
+// The Renderer leaves the scan in the Vulkan backend's readback for the noise stage to copy out on its
+// threads (StageBackend::defer_clean): its frame.clean must be the bytes the backend copies itself.
+TEST(VkBackend, RendererCopiesTheScanOutOnTheNoiseThreads) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard guard;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    RendererOptions threads;
+    threads.host_threads = 3;
+    auto rendered = render_once(Backend::vulkan, small_config(), scene.value(), pose, SaveFlags::none, 1, threads);
+    ASSERT_TRUE(rendered);
+    const Plan& plan = renderer_plan(rendered->renderer);
+    auto backend = vk::make_backend(*context_vulkan(*vulkan_context()), plan, scene_data(scene.value()));
+    ASSERT_TRUE(backend.ok()) << backend.error().message;
+    EXPECT_EQ(backend.value()->pending_clean(), nullptr); // not deferred: render fills frame.clean
+    Frame direct = rendered->renderer.make_frame();
+    ASSERT_TRUE(backend.value()->render(pose, SaveFlags::none, direct).ok());
+    ASSERT_EQ(direct.clean.size(), rendered->frame.clean.size());
+    EXPECT_EQ(direct.clean, rendered->frame.clean);
+    EXPECT_GT(std::count_if(direct.clean.begin(), direct.clean.end(), [](float v) { return v > 0.0f; }), 1000);
 }
 
 TEST(VkBackend, RejectsDrawOfMissingMesh) {

@@ -115,6 +115,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
         auto backend = vk::make_backend(*context_vulkan(context), impl->plan, scene_data(scene), options);
         if (!backend) return backend.error();
         impl->backend = std::move(backend.value());
+        impl->backend->defer_clean(true); // the noise stage copies the scan out on its threads
     } else {
         impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get());
     }
@@ -211,7 +212,7 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
-    host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get());
+    host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean());
     const auto t1 = std::chrono::steady_clock::now();
     frame.times.push_back({"noise", std::chrono::duration<double, std::milli>(t1 - t0).count()});
     frame.stages_run.push_back("noise");

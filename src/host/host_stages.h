@@ -27,10 +27,11 @@ double sample_gamma_unit_mean(double looks, std::uint64_t seed, std::uint64_t fr
                               std::uint32_t bin, std::uint32_t stream);
 
 // Stage 5: frame.clean -> frame.intensity (speckle, ambient noise, TVG; uPa^2) -> frame.display ([0,1]).
-// With `workers`, the bins are split across its threads (same output for any thread count).
+// With `workers`, the bins are split across its threads (same output for any thread count). With
+// `clean_source` (a backend's pending_clean()), each bin's row of it is first copied into frame.clean.
 class Workers;
 void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
-                    Workers* workers = nullptr);
+                    Workers* workers = nullptr, const float* clean_source = nullptr);
 
 struct Rgb8 {
     std::uint8_t r, g, b;

@@ -4,6 +4,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 
 #include "host/host_stages.h"
 #include "host/rng.h"
@@ -29,14 +30,27 @@ struct NoiseTask {
     const Plan* plan;
     std::uint64_t seed, frame_index;
     Frame* frame;
+    const float* clean_source;
 };
 
 void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, std::size_t bin_begin,
                 std::size_t bin_end);
 
+// noise_bins, each bin's row of the clean scan first copied from clean_source (when there is one).
+void copy_and_noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
+                         const float* clean_source, std::size_t bin_begin, std::size_t bin_end) {
+    if (clean_source != nullptr) {
+        const std::size_t beams = plan.beams;
+        std::memcpy(frame.clean.data() + bin_begin * beams, clean_source + bin_begin * beams,
+                    (bin_end - bin_begin) * beams * sizeof(float));
+    }
+    noise_bins(plan, seed, frame_index, frame, bin_begin, bin_end);
+}
+
 } // namespace
 
-void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, Workers* workers) {
+void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, Workers* workers,
+                    const float* clean_source) {
     const std::size_t n = std::size_t(plan.beams) * plan.bins;
     assert(frame.clean.size() == n);
     assert(plan.bin_range_m.size() >= plan.bins);
@@ -45,19 +59,19 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
     if (frame.intensity.size() != n) frame.intensity.resize(n);
     if (frame.display.size() != n) frame.display.resize(n);
     if (!workers || workers->count() == 1) {
-        noise_bins(plan, seed, frame_index, frame, 0, plan.bins);
+        copy_and_noise_bins(plan, seed, frame_index, frame, clean_source, 0, plan.bins);
         return;
     }
     // Every cell is a pure function of its key, so splitting the bins changes nothing in the output:
     // blocks of kBinBlock bins, taken by the threads as they come.
     constexpr std::uint32_t kBinBlock = 32;
-    NoiseTask task{&plan, seed, frame_index, &frame};
+    NoiseTask task{&plan, seed, frame_index, &frame, clean_source};
     workers->run_blocks(
         [](void* context, std::uint32_t block, std::uint32_t) {
             const auto& t = *static_cast<NoiseTask*>(context);
             const std::size_t begin = std::size_t(block) * kBinBlock;
-            noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, begin,
-                       std::min<std::size_t>(begin + kBinBlock, t.plan->bins));
+            copy_and_noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, t.clean_source, begin,
+                                std::min<std::size_t>(begin + kBinBlock, t.plan->bins));
         },
         &task, (plan.bins + kBinBlock - 1) / kBinBlock);
 }

@@ -24,6 +24,12 @@ public:
     virtual const char* name() const = 0;
     // The last render's sub-pixel returns (core/subpixel.h), for the labels stage; null: none listed.
     virtual const SubpixelReturns* subpixel_returns() const = 0;
+    // After defer_clean(true), render() may leave the clean scan where pending_clean() points (bins *
+    // beams floats, valid until the next render) instead of copying it into frame.clean: the noise stage
+    // copies it there on its threads as it reads it (a single-threaded 1 MiB copy out of the Vulkan
+    // backend's readback took 0.10 ms of an H100 frame). null: render() filled frame.clean.
+    virtual void defer_clean(bool) {}
+    virtual const float* pending_clean() const { return nullptr; }
 };
 
 } // namespace vksonar

@@ -78,6 +78,8 @@ public:
     Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
     const char* name() const override { return "vulkan"; }
     const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_; }
+    void defer_clean(bool defer) override { defer_clean_ = defer; }
+    const float* pending_clean() const override;
 
 private:
     Result<void> create_scene_buffers();
@@ -108,7 +110,8 @@ private:
 
     Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
     void copy_out(const Region& region, void* destination) const;
-    void copy_frame_out(SaveFlags save_mask, Frame& frame) const;
+    // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)
+    void copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean = true) const;
     // Copies an outer x inner float array (rows `stride` apart) out of the readback buffer as inner x outer.
     void transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, std::uint32_t stride,
                        float* destination) const;
@@ -124,6 +127,7 @@ private:
     bool far_sidelobes_ = false; // plan_.far_cells > 0: far_sidelobe.comp runs before sidelobe.comp
     bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
+    bool defer_clean_ = false;
     // StageTiming::passes: a timestamp after each beamform pass (pass_timestamp), host clocks around the
     // host's steps; Frame::times gets both as extra entries.
     bool pass_timestamps_ = false;

@@ -340,7 +340,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         frame.stages_run.emplace_back(name);
     }
 
-    copy_frame_out(save_mask, frame);
+    copy_frame_out(save_mask, frame, !defer_clean_);
     if (pass_timestamps_) { // the names fit std::string's inline buffer: no allocation
         for (std::uint32_t n = 0; n < passes_recorded_; ++n)
             frame.times.push_back(StageTime{pass_names_[n], pass_ms[n]});
@@ -354,7 +354,13 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
 
 // Copies what this frame saved out of the (coherent) readback buffer into `frame`, converting the GPU
 // layouts to the public ones. Also used by the host-depth pass (host_depth.cpp).
-void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
+const float* VulkanBackend::pending_clean() const {
+    return defer_clean_
+               ? reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + polar_region_.offset)
+               : nullptr;
+}
+
+void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean) const {
     const std::size_t pixels = std::size_t(plan_.columns) * plan_.rows;
     const std::size_t cells = std::size_t(plan_.bins) * plan_.beams;
     frame.beams = plan_.beams;
@@ -362,7 +368,11 @@ void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame) const {
     frame.columns = plan_.columns;
     frame.profile_columns = plan_.profile_columns;
     frame.rows = plan_.rows;
-    copy_out(polar_region_, sized(frame.clean, cells));
+    if (copy_clean) {
+        copy_out(polar_region_, sized(frame.clean, cells));
+    } else {
+        sized(frame.clean, cells); // filled by the noise stage from pending_clean()
+    }
     if (any(save_mask & SaveFlags::depth)) {
         copy_out(depth_region_, sized(frame.depth, pixels));
         copy_out(material_region_, sized(frame.material, pixels));
