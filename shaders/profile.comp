@@ -202,6 +202,10 @@ shared uint block_first[2u * (kMaxViews + 1u)];      // each view's first column
 shared uint block_next_first[2u * (kMaxViews + 1u)]; // ... on its last row
 shared RangeSpread round_spread[2u * kBlockRows];
 shared float round_energy[2u * kBlockRows]; // cone share x energy
+// the shares of each spread's first kRoundShares bins, computed with the spread (most footprints span
+// one to three bins), so that the adding loop, which runs one entry after another, mostly only adds
+const uint kRoundShares = 4u;
+shared float round_share[2u * kBlockRows * kRoundShares];
 
 // Row `row`'s pixels in view [view_begin, view_end) that feed cone column `cone` (as gather_view finds
 // them, from the column `first` the block before left), appended to this lane's list; returns the view's
@@ -306,16 +310,25 @@ void gather_block_rows(uint cone, bool owned) {
                 uint p = pixel_row * params.columns + c;
                 vec2 er = load_echo(p);
                 precise float weighted = cone_share(cone_coords[p], int(cone), count) * er.x;
-                round_spread[slot] = pixel_spread(pixel_row, c, er);
+                RangeSpread spread = pixel_spread(pixel_row, c, er);
+                round_spread[slot] = spread;
                 round_energy[slot] = weighted;
+                for (int i = 0; i < int(kRoundShares) && spread.k_first + i <= spread.k_last; ++i) {
+                    round_share[slot * kRoundShares + uint(i)] = range_share(spread, spread.k_first + i);
+                }
             }
             barrier();
             uint entries = owned ? min(total - min(total, done), kBlockRows) : 0u;
             for (uint i = 0u; i < entries; ++i) {
-                RangeSpread spread = round_spread[side * kBlockRows + i];
-                float weighted = round_energy[side * kBlockRows + i];
-                for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
-                    precise float add = range_share(spread, k) * weighted;
+                uint entry = side * kBlockRows + i;
+                int k_first = round_spread[entry].k_first;
+                int k_last = round_spread[entry].k_last;
+                float weighted = round_energy[entry];
+                for (int k = first_lane_bin(k_first); k <= k_last; k += int(kBinLanes)) {
+                    uint nth = uint(k - k_first);
+                    float share = nth < kRoundShares ? round_share[entry * kRoundShares + nth]
+                                                     : range_share(round_spread[entry], k);
+                    precise float add = share * weighted;
                     block_profile[side * kSharedBins + uint(k)] += add;
                 }
             }

@@ -545,9 +545,10 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         shape_.bin_lanes == kProfileBinLanes) {
         const std::uint32_t candidates = most_row_candidates(plan_);
         const std::uint32_t bins_padded = gpu_params_.bins_padded;
-        // profile.comp's shared arrays: accumulators, pixel lists, counts, first columns, one round's spreads
+        // profile.comp's shared arrays, in words: accumulators, pixel lists, counts, first columns, and one
+        // round's spreads (12 words), energies and first shares (4)
         const std::size_t shared_bytes = 4 * (2 * std::size_t(bins_padded) + 2 * 32 * std::size_t(candidates) + 64 +
-                                              4 * (shared::kMaxViews + 1) + 64 * 16 + 64);
+                                              4 * (shared::kMaxViews + 1) + 64 * (12 + 1 + 4));
         if (candidates > 0 && candidates <= kMaxRowCandidates &&
             shared_bytes <= context_.properties.limits.maxComputeSharedMemorySize) {
             profile.gather_rows = 1;
