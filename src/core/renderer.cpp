@@ -33,6 +33,11 @@ public:
     vk::HostDepthPass* host_depth = nullptr;  // HostDepthRenderer: `backend`, typed
     std::unique_ptr<cpu::LabelsStage> labels; // only with SaveFlags::labels
     std::size_t visibility_capacity = 0;      // Frame::visibility's reserve (labels)
+    // The noise stage's random draws, made on the host threads while the GPU renders
+    // (host::noise_draws_ahead, StageBackend::set_gpu_overlap): 2 floats a cell, made once here.
+    std::vector<float> speckle_draws, noise_draws;
+    std::uint64_t overlap_frame_index = 0;
+    bool draws_ready = false; // this frame's draws were made (the backend ran the overlap work)
 };
 
 namespace {
@@ -116,6 +121,19 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
         if (!backend) return backend.error();
         impl->backend = std::move(backend.value());
         impl->backend->defer_clean(true); // the noise stage copies the scan out on its threads
+        if (host::noise_draws_ahead(impl->plan)) {
+            const std::size_t cells = std::size_t(impl->plan.bins) * impl->plan.beams;
+            impl->speckle_draws.assign(cells, 0.0f);
+            impl->noise_draws.assign(cells, 0.0f);
+            impl->backend->set_gpu_overlap(
+                [](void* renderer) {
+                    auto& i = *static_cast<RendererImpl*>(renderer);
+                    host::noise_draws(i.plan, i.options.seed, i.overlap_frame_index,
+                                      {i.speckle_draws.data(), i.noise_draws.data()}, i.workers.get());
+                    i.draws_ready = true;
+                },
+                impl.get());
+        }
     } else {
         impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get());
     }
@@ -200,6 +218,8 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     // the capacity reserved by make_frame; no allocation).
     frame.times.clear();
     frame.stages_run.clear();
+    impl.overlap_frame_index = frame_index;
+    impl.draws_ready = false;
     auto r = impl.backend->render(pose, backend_save_mask(impl.options), frame);
     if (!r) return r;
     if (impl.labels) {
@@ -212,7 +232,9 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
-    host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean());
+    const host::NoiseDraws draws{impl.speckle_draws.data(), impl.noise_draws.data()};
+    host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean(),
+                         impl.draws_ready ? &draws : nullptr);
     const auto t1 = std::chrono::steady_clock::now();
     frame.times.push_back({"noise", std::chrono::duration<double, std::milli>(t1 - t0).count()});
     frame.stages_run.push_back("noise");

@@ -29,9 +29,20 @@ double sample_gamma_unit_mean(double looks, std::uint64_t seed, std::uint64_t fr
 // Stage 5: frame.clean -> frame.intensity (speckle, ambient noise, TVG; uPa^2) -> frame.display ([0,1]).
 // With `workers`, the bins are split across its threads (same output for any thread count). With
 // `clean_source` (a backend's pending_clean()), each bin's row of it is first copied into frame.clean.
+// With `draws` (from noise_draws, same seed and frame), the random draws are read instead of made.
 class Workers;
+struct NoiseDraws {
+    float* speckle = nullptr; // bins * beams, as frame.clean
+    float* noise = nullptr;
+};
 void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
-                    Workers* workers = nullptr, const float* clean_source = nullptr);
+                    Workers* workers = nullptr, const float* clean_source = nullptr, const NoiseDraws* draws = nullptr);
+// The random draws of a frame depend on its seed and index alone, not on its scan: where the defaults
+// hold (Rayleigh speckle and ambient noise; noise_draws_ahead), the renderer makes them while the GPU
+// renders (StageBackend::set_gpu_overlap), and noise_and_gain then only reads them.
+bool noise_draws_ahead(const Plan& plan);
+void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, const NoiseDraws& draws,
+                 Workers* workers);
 
 struct Rgb8 {
     std::uint8_t r, g, b;

@@ -31,26 +31,71 @@ struct NoiseTask {
     std::uint64_t seed, frame_index;
     Frame* frame;
     const float* clean_source;
+    const NoiseDraws* draws;
 };
 
-void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, std::size_t bin_begin,
-                std::size_t bin_end);
+void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, const NoiseDraws* draws,
+                std::size_t bin_begin, std::size_t bin_end);
 
 // noise_bins, each bin's row of the clean scan first copied from clean_source (when there is one).
-void copy_and_noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
-                         const float* clean_source, std::size_t bin_begin, std::size_t bin_end) {
-    if (clean_source != nullptr) {
-        const std::size_t beams = plan.beams;
-        std::memcpy(frame.clean.data() + bin_begin * beams, clean_source + bin_begin * beams,
+void copy_and_noise_bins(const NoiseTask& t, std::size_t bin_begin, std::size_t bin_end) {
+    if (t.clean_source != nullptr) {
+        const std::size_t beams = t.plan->beams;
+        std::memcpy(t.frame->clean.data() + bin_begin * beams, t.clean_source + bin_begin * beams,
                     (bin_end - bin_begin) * beams * sizeof(float));
     }
-    noise_bins(plan, seed, frame_index, frame, bin_begin, bin_end);
+    noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, t.draws, bin_begin, bin_end);
 }
+
+// Blocks of kBinBlock bins, taken by the threads as they come: every cell is a pure function of its key,
+// so the split changes nothing in the output.
+constexpr std::uint32_t kBinBlock = 32;
+
+// The Rayleigh speckle and ambient noise draws of one frame (the defaults; noise_draws_ahead), the same
+// values as noise_bins makes in its fast path.
+struct DrawsTask {
+    const Plan* plan;
+    rng::FrameKey key;
+    NoiseDraws draws;
+};
 
 } // namespace
 
+bool noise_draws_ahead(const Plan& plan) {
+    const SonarConfig& cfg = plan.config;
+    const double noise =
+        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
+    return plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh && noise > 0.0 &&
+           plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
+}
+
+void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, const NoiseDraws& draws,
+                 Workers* workers) {
+    DrawsTask task{&plan, rng::frame_key(seed, frame_index), draws};
+    const auto block = [](void* context, std::uint32_t b, std::uint32_t) {
+        const auto& t = *static_cast<DrawsTask*>(context);
+        const std::uint32_t beams = t.plan->beams;
+        const std::uint32_t end = std::min<std::uint32_t>((b + 1) * kBinBlock, t.plan->bins);
+        for (std::uint32_t bin = b * kBinBlock; bin < end; ++bin) {
+            float* speckle = t.draws.speckle + std::size_t(bin) * beams;
+            float* noise = t.draws.noise + std::size_t(bin) * beams;
+            for (std::uint32_t beam = 0; beam < beams; ++beam)
+                speckle[beam] = rng::exp1_cell32(t.key, beam, bin, kSpeckleStream);
+            for (std::uint32_t beam = 0; beam < beams; ++beam)
+                noise[beam] = rng::exp1_cell32(t.key, beam, bin, kNoiseStream);
+        }
+    };
+    const std::uint32_t blocks = (plan.bins + kBinBlock - 1) / kBinBlock;
+    if (workers == nullptr) {
+        for (std::uint32_t b = 0; b < blocks; ++b)
+            block(&task, b, 0);
+        return;
+    }
+    workers->run_blocks(block, &task, blocks);
+}
+
 void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, Workers* workers,
-                    const float* clean_source) {
+                    const float* clean_source, const NoiseDraws* draws) {
     const std::size_t n = std::size_t(plan.beams) * plan.bins;
     assert(frame.clean.size() == n);
     assert(plan.bin_range_m.size() >= plan.bins);
@@ -58,20 +103,16 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
     if (frame.clean.size() != n) frame.clean.resize(n, 0.0f);
     if (frame.intensity.size() != n) frame.intensity.resize(n);
     if (frame.display.size() != n) frame.display.resize(n);
+    NoiseTask task{&plan, seed, frame_index, &frame, clean_source, draws};
     if (!workers || workers->count() == 1) {
-        copy_and_noise_bins(plan, seed, frame_index, frame, clean_source, 0, plan.bins);
+        copy_and_noise_bins(task, 0, plan.bins);
         return;
     }
-    // Every cell is a pure function of its key, so splitting the bins changes nothing in the output:
-    // blocks of kBinBlock bins, taken by the threads as they come.
-    constexpr std::uint32_t kBinBlock = 32;
-    NoiseTask task{&plan, seed, frame_index, &frame, clean_source};
     workers->run_blocks(
         [](void* context, std::uint32_t block, std::uint32_t) {
-            const auto& t = *static_cast<NoiseTask*>(context);
+            const auto& t = *static_cast<const NoiseTask*>(context);
             const std::size_t begin = std::size_t(block) * kBinBlock;
-            copy_and_noise_bins(*t.plan, t.seed, t.frame_index, *t.frame, t.clean_source, begin,
-                                std::min<std::size_t>(begin + kBinBlock, t.plan->bins));
+            copy_and_noise_bins(t, begin, std::min<std::size_t>(begin + kBinBlock, t.plan->bins));
         },
         &task, (plan.bins + kBinBlock - 1) / kBinBlock);
 }
@@ -86,8 +127,8 @@ namespace {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target_clones("avx512f", "avx2", "default")))
 #endif
-void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, std::size_t bin_begin,
-                std::size_t bin_end) {
+void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame, const NoiseDraws* draws,
+                std::size_t bin_begin, std::size_t bin_end) {
     const SonarConfig& cfg = plan.config;
     const std::size_t beams = plan.beams;
 
@@ -124,11 +165,13 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
         for (std::size_t j0 = 0; j0 < beams; j0 += kChunk) {
             const std::size_t count = std::min(kChunk, beams - j0);
             const auto beam0 = static_cast<std::uint32_t>(j0);
-            if (row_speckle) {
+            // the draws made ahead (noise_draws: the same values), else made here
+            const bool ahead = fast_path && draws != nullptr;
+            if (row_speckle && !ahead) {
                 for (std::size_t c = 0; c < count; ++c)
                     speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
             }
-            if (noise > 0.0 && row_draws) {
+            if (noise > 0.0 && row_draws && !ahead) {
                 for (std::size_t c = 0; c < count; ++c)
                     noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);
             }
@@ -137,11 +180,13 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                 // compiler vectorizes it; within 2 ulps of the double path below.
                 const float* clean = frame.clean.data() + k * beams + j0;
                 float* intensity = frame.intensity.data() + k * beams + j0;
+                const float* speckle_row = ahead ? draws->speckle + k * beams + j0 : speckle_draw;
+                const float* noise_row = ahead ? draws->noise + k * beams + j0 : noise_draw;
                 const auto gain_f = static_cast<float>(gain);
                 for (std::size_t c = 0; c < count; ++c) {
                     // NaN or negative echo energy would poison the frame: treat it as no echo.
-                    const float signal = clean[c] > 0.0f ? source_f * clean[c] * speckle_draw[c] : 0.0f;
-                    const float value = (signal + noise_f * noise_draw[c]) * gain_f;
+                    const float signal = clean[c] > 0.0f ? source_f * clean[c] * speckle_row[c] : 0.0f;
+                    const float value = (signal + noise_f * noise_row[c]) * gain_f;
                     stored[c] = value <= FLT_MAX ? value : FLT_MAX; // +inf
                     intensity[c] = stored[c];
                 }

@@ -30,6 +30,10 @@ public:
     // backend's readback took 0.10 ms of an H100 frame). null: render() filled frame.clean.
     virtual void defer_clean(bool) {}
     virtual const float* pending_clean() const { return nullptr; }
+    // Host work that needs nothing of the frame's results (the noise stage's draws): a backend that waits
+    // for a device calls work(context) once per render() while the device runs; the Vulkan backend does,
+    // after its submission. Others never call it, and the caller then does that work itself.
+    virtual void set_gpu_overlap(void (*)(void*), void*) {}
 };
 
 } // namespace vksonar

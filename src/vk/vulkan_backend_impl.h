@@ -79,6 +79,10 @@ public:
     const char* name() const override { return "vulkan"; }
     const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_; }
     void defer_clean(bool defer) override { defer_clean_ = defer; }
+    void set_gpu_overlap(void (*work)(void*), void* context) override {
+        overlap_work_ = work;
+        overlap_context_ = context;
+    }
     const float* pending_clean() const override;
 
 private:
@@ -108,7 +112,8 @@ private:
     void compute_barrier(VkCommandBuffer commands, const Buffer& written);
     void dispatch(VkCommandBuffer commands, const Dispatch& groups);
 
-    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count);
+    // overlap: run overlap_work_ between the submission and the wait
+    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count, bool overlap = false);
     void copy_out(const Region& region, void* destination) const;
     // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)
     void copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean = true) const;
@@ -128,6 +133,8 @@ private:
     bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
     bool defer_clean_ = false;
+    void (*overlap_work_)(void*) = nullptr; // set_gpu_overlap: run between the submission and the wait
+    void* overlap_context_ = nullptr;
     // StageTiming::passes: a timestamp after each beamform pass (pass_timestamp), host clocks around the
     // host's steps; Frame::times gets both as extra entries.
     bool pass_timestamps_ = false;
