@@ -207,6 +207,37 @@ shared float round_energy[2u * kBlockRows]; // cone share x energy
 const uint kRoundShares = 4u;
 shared float round_share[2u * kBlockRows * kRoundShares];
 
+// The adding loop of a round: this lane's bins of the round's `entries` spreads, in order, into its side's
+// profile (the first kRoundShares shares of each made with its spread, the rest here); with `lit_only`
+// the slots whose block_count is 0 hold no spread.
+void add_round(uint side, uint entries, bool lit_only) {
+    for (uint i = 0u; i < entries; ++i) {
+        uint entry = side * kBlockRows + i;
+        if (lit_only && block_count[entry] == 0u) {
+            continue;
+        }
+        int k_first = round_spread[entry].k_first;
+        int k_last = round_spread[entry].k_last;
+        float weighted = round_energy[entry];
+        for (int k = first_lane_bin(k_first); k <= k_last; k += int(kBinLanes)) {
+            uint nth = uint(k - k_first);
+            float share =
+                nth < kRoundShares ? round_share[entry * kRoundShares + nth] : range_share(round_spread[entry], k);
+            precise float add = share * weighted;
+            block_profile[side * kSharedBins + uint(k)] += add;
+        }
+    }
+}
+
+// A spread and its first shares into this lane's round slot.
+void put_round(uint slot, RangeSpread spread, float weighted) {
+    round_spread[slot] = spread;
+    round_energy[slot] = weighted;
+    for (int i = 0; i < int(kRoundShares) && spread.k_first + i <= spread.k_last; ++i) {
+        round_share[slot * kRoundShares + uint(i)] = range_share(spread, spread.k_first + i);
+    }
+}
+
 // Row `row`'s pixels in view [view_begin, view_end) that feed cone column `cone` (as gather_view finds
 // them, from the column `first` the block before left), appended to this lane's list; returns the view's
 // first column for this row.
@@ -310,34 +341,49 @@ void gather_block_rows(uint cone, bool owned) {
                 uint p = pixel_row * params.columns + c;
                 vec2 er = load_echo(p);
                 precise float weighted = cone_share(cone_coords[p], int(cone), count) * er.x;
-                RangeSpread spread = pixel_spread(pixel_row, c, er);
-                round_spread[slot] = spread;
-                round_energy[slot] = weighted;
-                for (int i = 0; i < int(kRoundShares) && spread.k_first + i <= spread.k_last; ++i) {
-                    round_share[slot * kRoundShares + uint(i)] = range_share(spread, spread.k_first + i);
-                }
+                put_round(slot, pixel_spread(pixel_row, c, er), weighted);
             }
             barrier();
             uint entries = owned ? min(total - min(total, done), kBlockRows) : 0u;
-            for (uint i = 0u; i < entries; ++i) {
-                uint entry = side * kBlockRows + i;
-                int k_first = round_spread[entry].k_first;
-                int k_last = round_spread[entry].k_last;
-                float weighted = round_energy[entry];
-                for (int k = first_lane_bin(k_first); k <= k_last; k += int(kBinLanes)) {
-                    uint nth = uint(k - k_first);
-                    float share = nth < kRoundShares ? round_share[entry * kRoundShares + nth]
-                                                     : range_share(round_spread[entry], k);
-                    precise float add = share * weighted;
-                    block_profile[side * kSharedBins + uint(k)] += add;
-                }
-            }
+            add_round(side, entries, false);
             barrier();
         }
         barrier(); // block_first is the next block's (where there was no round to pass a barrier)
     }
     if (owned) {
         uint base = cone * params.bins_padded;
+        for (uint k = lane; k < params.bins_padded; k += kBlockRows) {
+            profiles[base + k] = block_profile[side * kSharedBins + k];
+        }
+    }
+}
+
+// The planar profile on a GPU (kGatherRows): as gather_block_rows, a workgroup's two pixel columns 32
+// rows at a time, each lane one row's spread, then added in row order; the same sums as main()'s walk.
+void column_block_rows(uint column, bool owned) {
+    uint side = gl_LocalInvocationID.x / kBlockRows;
+    uint lane = gl_LocalInvocationID.x % kBlockRows;
+    for (uint k = lane; k < kSharedBins; k += kBlockRows) {
+        block_profile[side * kSharedBins + k] = 0.0;
+    }
+    barrier();
+    for (uint row0 = 0u; row0 < params.rows; row0 += kBlockRows) {
+        uint row = row0 + lane;
+        uint lit = 0u; // this lane's row has a spread (an echo)
+        if (owned && row < params.rows) {
+            vec2 er = load_echo(row * params.columns + column);
+            if (er.x > 0.0) {
+                put_round(side * kBlockRows + lane, pixel_spread(row, column, er), er.x);
+                lit = 1u;
+            }
+        }
+        block_count[side * kBlockRows + lane] = lit;
+        barrier();
+        add_round(side, owned ? kBlockRows : 0u, true);
+        barrier();
+    }
+    if (owned) {
+        uint base = column * params.bins_padded;
         for (uint k = lane; k < params.bins_padded; k += kBlockRows) {
             profiles[base + k] = block_profile[side * kSharedBins + k];
         }
@@ -401,6 +447,14 @@ void main() {
     }
     uint column = unit;
     uint columns = params.columns;
+    if (kGatherRows != 0u) { // every lane to the end (barriers)
+        bool owned = column < columns;
+        column_block_rows(column, owned);
+        if (kSubpixel != 0u && owned) {
+            add_subpixel(column);
+        }
+        return;
+    }
     if (column >= columns) {
         return;
     }

@@ -112,8 +112,8 @@ struct DeviceShape {
     // over the cells' energies loaded from memory), else per channel (each lane every cell of its bins,
     // the energies in registers: a CPU device runs a storage load as a loop over the lanes)
     bool far_cell_groups = false;
-    // line_array profile: a block of kProfileBinLanes rows at once (profile.comp gather_block_rows; needs
-    // one cone column per unit and kProfileBinLanes lanes), where the plan allows it (VulkanBackend)
+    // profile: a block of kProfileBinLanes rows at once (profile.comp gather_block_rows, line_array, with
+    // one cone column per unit; column_block_rows, planar), where the plan allows it (VulkanBackend)
     bool gather_rows = false;
 };
 constexpr DeviceShape kCpuDeviceShape{kConesPerInvocation, 1, kBeamsPerInvocation, false, false};

@@ -541,9 +541,10 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     profile.bin_lanes = shape_.bin_lanes;
     profile.subpixel = plan_.subpixel_capacity > 0 ? 1u : 0u; // else its loop is compiled out
     profile.tier_views = plan_.views > plan_.slices ? 1u : 0u;
-    if (shape_.gather_rows && plan_.line_array && shape_.cones_per_invocation == 1 &&
+    if (shape_.gather_rows && (!plan_.line_array || shape_.cones_per_invocation == 1) &&
         shape_.bin_lanes == kProfileBinLanes) {
-        const std::uint32_t candidates = most_row_candidates(plan_);
+        // planar: one pixel a row (the lists are not used)
+        const std::uint32_t candidates = plan_.line_array ? most_row_candidates(plan_) : 1u;
         const std::uint32_t bins_padded = gpu_params_.bins_padded;
         // profile.comp's shared arrays, in words: accumulators, pixel lists, counts, first columns, and one
         // round's spreads (12 words), energies and first shares (4)

@@ -506,9 +506,9 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
 // column walking all its bins and 16 beams per resample/sidelobe invocation (lavapipe), for a GPU 32
 // per column, each adding to every 32nd bin, and 4 beams (kGpuDeviceShape). Each output keeps one
 // writer and the order of its additions, so the frames are the same bits; on lavapipe both run here.
-// Planar columns, the line array's cone gather with its tier views (in the GPU layout a block of 32 rows
-// at once, profile.comp gather_block_rows, over 164 rows: the blocks hand on their first columns and the
-// last one is short), the tent kernel (two bins a pixel: lanes meet at a pixel's edge bins), and 6
+// Planar columns and the line array's cone gather with its tier views (in the GPU layout both take a
+// block of 32 rows at once, profile.comp column_block_rows and gather_block_rows, over 164 rows: the
+// blocks hand on their first columns and the last one is short), the tent kernel (two bins a pixel: lanes meet at a pixel's edge bins), and 6
 // pixel columns a beam, where a row gives a cone column more pixels than the block's lists hold (the GPU
 // layout then walks the rows one by one).
 TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
