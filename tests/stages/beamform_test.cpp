@@ -508,9 +508,9 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
 // writer and the order of its additions, so the frames are the same bits; on lavapipe both run here.
 // Planar columns and the line array's cone gather with its tier views (in the GPU layout both take a
 // block of 32 rows at once, profile.comp column_block_rows and gather_block_rows, over 164 rows: the
-// blocks hand on their first columns and the last one is short), the tent kernel (two bins a pixel: lanes meet at a pixel's edge bins), and 6
-// pixel columns a beam, where a row gives a cone column more pixels than the block's lists hold (the GPU
-// layout then walks the rows one by one).
+// blocks hand on their first columns and the last one is short), the tent kernel (two bins a pixel: lanes meet at a
+// pixel's edge bins), and 6 pixel columns a beam, where a row gives a cone column more pixels than the block's lists
+// hold (the GPU layout then walks the rows one by one).
 TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;
