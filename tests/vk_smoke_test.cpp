@@ -449,6 +449,32 @@ TEST(VkBackend, RendererCopiesTheScanOutOnTheNoiseThreads) {
     EXPECT_GT(std::count_if(direct.clean.begin(), direct.clean.end(), [](float v) { return v > 0.0f; }), 1000);
 }
 
+// The backend records the stages' command buffers once and re-records only the depth pass's (its draws
+// follow the pose): a renderer that moves must give each pose the bytes a fresh renderer gives it.
+TEST(VkBackend, KeptCommandBuffersFollowThePose) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard guard;
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose a, b;
+    a.pitch_deg = 10.0;
+    b.pitch_deg = 20.0;
+    b.yaw_deg = 15.0;
+    b.x_m = 1.0;
+    const SaveFlags saves = SaveFlags::depth | SaveFlags::echo;
+    auto moving = render_once(Backend::vulkan, small_config(), scene.value(), a, saves);
+    auto fresh_b = render_once(Backend::vulkan, small_config(), scene.value(), b, saves);
+    ASSERT_TRUE(moving && fresh_b);
+    const std::vector<float> first_a = moving->frame.clean, first_a_depth = moving->frame.depth;
+    ASSERT_TRUE(moving->renderer.render(b, 1, moving->frame).ok());
+    EXPECT_EQ(moving->frame.clean, fresh_b->frame.clean) << "pose b after pose a";
+    EXPECT_EQ(moving->frame.depth, fresh_b->frame.depth) << "pose b after pose a";
+    ASSERT_TRUE(moving->renderer.render(a, 2, moving->frame).ok());
+    EXPECT_EQ(moving->frame.clean, first_a) << "back at pose a";
+    EXPECT_EQ(moving->frame.depth, first_a_depth) << "back at pose a";
+    EXPECT_NE(first_a, fresh_b->frame.clean); // the poses see different scans
+}
+
 TEST(VkBackend, RejectsDrawOfMissingMesh) {
     VKSONAR_REQUIRE_VULKAN();
     SceneData scene = facing_plate(10.0, 20.0);

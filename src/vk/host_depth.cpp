@@ -311,6 +311,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
     for (const StageInfo& stage : kStageTable)
         if (stage.runs(b.plan_)) stages[stage_total++] = &stage;
     VKS_VK_TRY(context.fn.vkResetCommandPool(context.device, b.command_pool_.get(), 0));
+    b.commands_kept_ = false; // render()'s kept buffers are gone
     for (std::uint32_t i = 0; i <= stage_total; ++i) {
         VkCommandBuffer commands = b.command_buffers_[i];
         VkCommandBufferBeginInfo begin{};

@@ -600,6 +600,7 @@ Result<void> VulkanBackend::create_commands() {
     VkCommandPoolCreateInfo pool_info{};
     pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
     pool_info.queueFamilyIndex = context_.queue_family;
+    pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT; // render() records the depth pass's alone
     VkCommandPool pool = VK_NULL_HANDLE;
     VKS_VK_TRY(context_.fn.vkCreateCommandPool(device, &pool_info, allocator, &pool));
     command_pool_ = OwnedCommandPool(context_, pool);

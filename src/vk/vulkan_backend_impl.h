@@ -133,6 +133,10 @@ private:
     bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
     bool defer_clean_ = false;
+    // render() keeps the stages' command buffers but the depth pass's from frame to frame (recorded
+    // with this save mask); the host-depth path, which records its own into the same buffers, clears it
+    bool commands_kept_ = false;
+    SaveFlags kept_save_mask_ = SaveFlags::none;
     void (*overlap_work_)(void*) = nullptr; // set_gpu_overlap: run between the submission and the wait
     void* overlap_context_ = nullptr;
     // StageTiming::passes: a timestamp after each beamform pass (pass_timestamp), host clocks around the

@@ -265,15 +265,20 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
     host_ms[0] = ms_since(host_clock);
-    passes_recorded_ = 0;
-    VKS_VK_TRY(context_.fn.vkResetCommandPool(context_.device, command_pool_.get(), 0));
+    // Only the depth pass's commands change from frame to frame (its draws follow the pose); the other
+    // stages' and the readback's are recorded once and submitted again, until the save mask changes.
+    const bool keep = commands_kept_ && kept_save_mask_ == save_mask;
+    if (!keep) passes_recorded_ = 0;
     std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
         VkCommandBuffer commands = command_buffers_[i];
         recorded[i] = commands;
-        VkCommandBufferBeginInfo begin{};
+        // the first buffer resets the queries; the depth pass draws this frame's clusters
+        const bool per_frame = i == 0 || (i < stage_total && stages[i]->vulkan.record == record_depth);
+        if (keep && !per_frame) continue;
+        VkCommandBufferBeginInfo begin{}; // resets the buffer (the pool lets each buffer reset alone)
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-        begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+        begin.flags = per_frame ? VkCommandBufferUsageFlags(VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT) : 0u;
         VKS_VK_TRY(context_.fn.vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
             context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
@@ -290,6 +295,8 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
         }
         VKS_VK_TRY(context_.fn.vkEndCommandBuffer(commands));
     }
+    commands_kept_ = true;
+    kept_save_mask_ = save_mask;
 
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
     std::array<double, kCommandBufferCount> stage_ms{};
