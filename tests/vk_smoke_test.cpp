@@ -369,43 +369,34 @@ TEST(VkBackend, WideFanCoversEverySlice) {
     EXPECT_TRUE(all_finite(h->frame.clean));
 }
 
-TEST(VkBackend, HostTimedAndTimestampedPathsGiveTheSameFrame) {
+// One submission for the whole frame (timestamps) or one per stage (host timing): the same frame.
+// StageTiming::passes adds the beamform stage's passes and the host's steps to Frame::times, after the
+// stages, and changes nothing else.
+TEST(VkBackend, TimingModesGiveTheSameFrame) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard guard;
-    // One submission for the whole frame (timestamps) or one per stage (host timing): same result.
-    RendererOptions timestamps, host;
+    RendererOptions timestamps, host, passes;
     timestamps.stage_timing = StageTiming::timestamps;
     host.stage_timing = StageTiming::host;
+    passes.stage_timing = StageTiming::passes;
     auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0), timestamps);
     auto host_timed = make_harness(small_config(), facing_plate(9.0, 20.0), host);
-    ASSERT_TRUE(timestamped && host_timed);
+    auto by_pass = make_harness(small_config(), facing_plate(9.0, 20.0), passes);
+    ASSERT_TRUE(timestamped && host_timed && by_pass);
     ASSERT_TRUE(timestamped->render().ok());
     ASSERT_TRUE(host_timed->render().ok());
+    ASSERT_TRUE(by_pass->render().ok());
     EXPECT_EQ(host_timed->frame.clean, timestamped->frame.clean);
     EXPECT_EQ(host_timed->frame.echo, timestamped->frame.echo);
     EXPECT_EQ(host_timed->frame.stages_run, timestamped->frame.stages_run);
+    EXPECT_EQ(by_pass->frame.clean, timestamped->frame.clean);
+    EXPECT_EQ(by_pass->frame.stages_run, timestamped->frame.stages_run);
     ASSERT_EQ(host_timed->frame.times.size(), 4u);
     for (const StageTime& t : host_timed->frame.times)
         EXPECT_GT(t.ms, 0.0) << t.stage;
     for (const StageTime& t : timestamped->frame.times)
         EXPECT_GE(t.ms, 0.0) << t.stage;
-}
 
-// StageTiming::passes adds the beamform stage's passes and the host's steps to Frame::times, after the
-// stages, and changes nothing else: the same frame and the same stages as with timestamps alone.
-TEST(VkBackend, PassTimingAddsThePassesAndHostStepsAfterTheStages) {
-    VKSONAR_REQUIRE_VULKAN();
-    ValidationGuard guard;
-    RendererOptions timestamps, passes;
-    timestamps.stage_timing = StageTiming::timestamps;
-    passes.stage_timing = StageTiming::passes;
-    auto timestamped = make_harness(small_config(), facing_plate(9.0, 20.0), timestamps);
-    auto by_pass = make_harness(small_config(), facing_plate(9.0, 20.0), passes);
-    ASSERT_TRUE(timestamped && by_pass);
-    ASSERT_TRUE(timestamped->render().ok());
-    ASSERT_TRUE(by_pass->render().ok());
-    EXPECT_EQ(by_pass->frame.clean, timestamped->frame.clean);
-    EXPECT_EQ(by_pass->frame.stages_run, timestamped->frame.stages_run);
     const std::vector<StageTime>& times = by_pass->frame.times;
     const std::size_t stages = timestamped->frame.times.size();
     if (timestamped->frame.times.empty() || times.size() == stages) GTEST_SKIP() << "no timestamp queries here";
