@@ -273,36 +273,48 @@ TEST(HostNoise, DefaultFloatPathEqualsTheModelInDouble) {
 
 // The renderer makes a frame's draws while the GPU renders (host::noise_draws) and the noise stage then
 // reads them, copying the clean scan in from the backend's buffer as it goes: the same bytes as the stage
-// making its own draws from frame.clean, on one thread or three.
+// making its own draws from frame.clean, on one thread or three, with the defaults and with either
+// draw alone (speckle off, ambient noise off, or a speckle model whose draws are not made in rows).
 TEST(HostNoise, DrawsMadeAheadAndTheCopiedScanGiveTheSameBytes) {
-    Plan p = test_plan(300, 64, 130, 0.5, 40);
-    p.effects.speckle = true;
-    p.effects.ambient_noise = true;
-    p.effects.tvg = true;
-    p.config.speckle = SpeckleModel::rayleigh;
-    p.config.noise_level_db = 60;
-    ASSERT_TRUE(host::noise_draws_ahead(p));
-    Frame made_here = test_frame(p);
-    for (std::size_t i = 0; i < made_here.clean.size(); ++i)
-        made_here.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17));
-    const std::vector<float> source = made_here.clean;
-    const std::uint64_t seed = 5, frame = 2;
-    host::noise_and_gain(p, seed, frame, made_here);
-    for (std::uint32_t threads : {1u, 3u}) {
-        host::Workers workers(threads);
-        std::vector<float> speckle(source.size()), noise(source.size());
-        const host::NoiseDraws draws{speckle.data(), noise.data()};
-        host::noise_draws(p, seed, frame, draws, &workers);
-        Frame ahead = test_frame(p); // clean all zero: the stage copies it from `source`
-        host::noise_and_gain(p, seed, frame, ahead, &workers, source.data(), &draws);
-        EXPECT_EQ(ahead.clean, source) << threads << " threads";
-        EXPECT_EQ(std::memcmp(ahead.intensity.data(), made_here.intensity.data(), source.size() * sizeof(float)), 0)
-            << threads << " threads";
-        EXPECT_EQ(std::memcmp(ahead.display.data(), made_here.display.data(), source.size() * sizeof(float)), 0)
-            << threads << " threads";
+    struct Case {
+        bool speckle, ambient_noise;
+        SpeckleModel model;
+    };
+    for (const Case& c : {Case{true, true, SpeckleModel::rayleigh}, Case{false, true, SpeckleModel::rayleigh},
+                          Case{true, false, SpeckleModel::rayleigh}, Case{true, true, SpeckleModel::gamma}}) {
+        SCOPED_TRACE(std::string("speckle ") + (c.speckle ? "on" : "off") + ", noise " +
+                     (c.ambient_noise ? "on" : "off") + (c.model == SpeckleModel::gamma ? ", gamma" : ""));
+        Plan p = test_plan(300, 64, 130, 0.5, 40);
+        p.effects.speckle = c.speckle;
+        p.effects.ambient_noise = c.ambient_noise;
+        p.effects.tvg = true;
+        p.config.speckle = c.model;
+        p.config.noise_level_db = 60;
+        ASSERT_TRUE(host::noise_draws_ahead(p));
+        Frame made_here = test_frame(p);
+        for (std::size_t i = 0; i < made_here.clean.size(); ++i)
+            made_here.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17));
+        const std::vector<float> source = made_here.clean;
+        const std::uint64_t seed = 5, frame = 2;
+        host::noise_and_gain(p, seed, frame, made_here);
+        for (std::uint32_t threads : {1u, 3u}) {
+            host::Workers workers(threads);
+            std::vector<float> speckle(source.size()), noise(source.size());
+            const host::NoiseDraws draws{speckle.data(), noise.data()};
+            host::noise_draws(p, seed, frame, draws, &workers);
+            Frame ahead = test_frame(p); // clean all zero: the stage copies it from `source`
+            host::noise_and_gain(p, seed, frame, ahead, &workers, source.data(), &draws);
+            EXPECT_EQ(ahead.clean, source) << threads << " threads";
+            EXPECT_EQ(std::memcmp(ahead.intensity.data(), made_here.intensity.data(), source.size() * sizeof(float)), 0)
+                << threads << " threads";
+            EXPECT_EQ(std::memcmp(ahead.display.data(), made_here.display.data(), source.size() * sizeof(float)), 0)
+                << threads << " threads";
+        }
     }
-    p.config.speckle = SpeckleModel::gamma; // only the defaults' draws are made ahead
-    EXPECT_FALSE(host::noise_draws_ahead(p));
+    Plan quiet = test_plan(300, 64, 130, 0.5, 40); // no draws at all: nothing to make ahead
+    quiet.effects.speckle = false;
+    quiet.effects.ambient_noise = false;
+    EXPECT_FALSE(host::noise_draws_ahead(quiet));
 }
 
 TEST(HostNoise, RayleighSpeckleHasUnitMeanAndVariance) {

@@ -53,25 +53,36 @@ constexpr std::uint32_t kBinBlock = 32;
 
 // The Rayleigh speckle and ambient noise draws of one frame (the defaults; noise_draws_ahead), the same
 // values as noise_bins makes in its fast path.
+// Which rows of draws noise_bins makes (and noise_draws makes ahead): Rayleigh speckle's and ambient
+// noise's, each where its effect is on, through the 32-bit row path.
+struct RowDraws {
+    bool speckle = false, noise = false;
+};
+RowDraws row_draws_of(const Plan& plan) {
+    const SonarConfig& cfg = plan.config;
+    const double noise =
+        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
+    const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
+    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && noise > 0.0};
+}
+
 struct DrawsTask {
     const Plan* plan;
     rng::FrameKey key;
     NoiseDraws draws;
+    RowDraws rows;
 };
 
 } // namespace
 
 bool noise_draws_ahead(const Plan& plan) {
-    const SonarConfig& cfg = plan.config;
-    const double noise =
-        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
-    return plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh && noise > 0.0 &&
-           plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
+    const RowDraws rows = row_draws_of(plan);
+    return rows.speckle || rows.noise;
 }
 
 void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, const NoiseDraws& draws,
                  Workers* workers) {
-    DrawsTask task{&plan, rng::frame_key(seed, frame_index), draws};
+    DrawsTask task{&plan, rng::frame_key(seed, frame_index), draws, row_draws_of(plan)};
     const auto block = [](void* context, std::uint32_t b, std::uint32_t) {
         const auto& t = *static_cast<DrawsTask*>(context);
         const std::uint32_t beams = t.plan->beams;
@@ -79,9 +90,9 @@ void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index
         for (std::uint32_t bin = b * kBinBlock; bin < end; ++bin) {
             float* speckle = t.draws.speckle + std::size_t(bin) * beams;
             float* noise = t.draws.noise + std::size_t(bin) * beams;
-            for (std::uint32_t beam = 0; beam < beams; ++beam)
+            for (std::uint32_t beam = 0; beam < beams && t.rows.speckle; ++beam)
                 speckle[beam] = rng::exp1_cell32(t.key, beam, bin, kSpeckleStream);
-            for (std::uint32_t beam = 0; beam < beams; ++beam)
+            for (std::uint32_t beam = 0; beam < beams && t.rows.noise; ++beam)
                 noise[beam] = rng::exp1_cell32(t.key, beam, bin, kNoiseStream);
         }
     };
@@ -181,27 +192,25 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             const std::size_t count = std::min(kChunk, beams - j0);
             const auto beam0 = static_cast<std::uint32_t>(j0);
             // the draws made ahead (noise_draws: the same values), else made here
-            const bool ahead = fast_path && draws != nullptr;
-            if (row_speckle && !ahead) {
+            const float* speckle_row = speckle_draw; // the row's draws: made ahead (noise_draws), else here
+            const float* noise_row = noise_draw;
+            if (row_speckle && draws != nullptr) {
+                speckle_row = draws->speckle + k * beams + j0;
+            } else if (row_speckle) {
                 for (std::size_t c = 0; c < count; ++c)
                     speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
             }
-            if (noise > 0.0 && row_draws && !ahead) {
+            if (noise > 0.0 && row_draws && draws != nullptr) {
+                noise_row = draws->noise + k * beams + j0;
+            } else if (noise > 0.0 && row_draws) {
                 for (std::size_t c = 0; c < count; ++c)
                     noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);
             }
             if (fast_path) {
                 // The defaults (Rayleigh speckle and ambient noise) in float and branch-free, so the
                 // compiler vectorizes it; within 2 ulps of the double path below.
-                const float* clean = frame.clean.data() + k * beams + j0;
-                float* intensity = frame.intensity.data() + k * beams + j0;
-                const auto gain_f = static_cast<float>(gain);
-                if (ahead) {
-                    combine_row(clean, draws->speckle + k * beams + j0, draws->noise + k * beams + j0, source_f,
-                                noise_f, gain_f, count, stored, intensity);
-                } else {
-                    combine_row(clean, speckle_draw, noise_draw, source_f, noise_f, gain_f, count, stored, intensity);
-                }
+                combine_row(frame.clean.data() + k * beams + j0, speckle_row, noise_row, source_f, noise_f,
+                            static_cast<float>(gain), count, stored, frame.intensity.data() + k * beams + j0);
             } else {
                 for (std::size_t c = 0; c < count; ++c) {
                     const std::size_t i = k * beams + j0 + c;
@@ -213,7 +222,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                         double s = 1.0;
                         switch (model) {
                         case SpeckleModel::rayleigh:
-                            s = row_speckle ? speckle_draw[c] : rng::exp1(key, beam, bin, kSpeckleStream);
+                            s = row_speckle ? speckle_row[c] : rng::exp1(key, beam, bin, kSpeckleStream);
                             break;
                         case SpeckleModel::gamma:
                             s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
@@ -227,7 +236,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                     double intensity = signal;
                     if (noise > 0.0)
                         intensity +=
-                            noise * (row_draws ? double(noise_draw[c]) : rng::exp1(key, beam, bin, kNoiseStream));
+                            noise * (row_draws ? double(noise_row[c]) : rng::exp1(key, beam, bin, kNoiseStream));
                     intensity *= gain;
                     if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
                     stored[c] = static_cast<float>(intensity);
