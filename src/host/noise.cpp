@@ -66,6 +66,25 @@ RowDraws row_draws_of(const Plan& plan) {
     return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && noise > 0.0};
 }
 
+// One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
+// FMA in either). The tests stay outside the loops: inside them (0c6d6d4) they kept the loops from being
+// vectorized, 2.0 -> 4.4 ms on one thread here, and on an H100's host the draws outlasted the GPU's
+// work: 904 instead of 1931 frames/s.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target_clones("avx512f", "avx2", "default")))
+#endif
+void draw_bin(const rng::FrameKey& key, RowDraws rows, std::uint32_t beams, std::uint32_t bin, float* speckle,
+              float* noise) {
+    if (rows.speckle) {
+        for (std::uint32_t beam = 0; beam < beams; ++beam)
+            speckle[beam] = rng::exp1_cell32(key, beam, bin, kSpeckleStream);
+    }
+    if (rows.noise) {
+        for (std::uint32_t beam = 0; beam < beams; ++beam)
+            noise[beam] = rng::exp1_cell32(key, beam, bin, kNoiseStream);
+    }
+}
+
 struct DrawsTask {
     const Plan* plan;
     rng::FrameKey key;
@@ -87,14 +106,9 @@ void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index
         const auto& t = *static_cast<DrawsTask*>(context);
         const std::uint32_t beams = t.plan->beams;
         const std::uint32_t end = std::min<std::uint32_t>((b + 1) * kBinBlock, t.plan->bins);
-        for (std::uint32_t bin = b * kBinBlock; bin < end; ++bin) {
-            float* speckle = t.draws.speckle + std::size_t(bin) * beams;
-            float* noise = t.draws.noise + std::size_t(bin) * beams;
-            for (std::uint32_t beam = 0; beam < beams && t.rows.speckle; ++beam)
-                speckle[beam] = rng::exp1_cell32(t.key, beam, bin, kSpeckleStream);
-            for (std::uint32_t beam = 0; beam < beams && t.rows.noise; ++beam)
-                noise[beam] = rng::exp1_cell32(t.key, beam, bin, kNoiseStream);
-        }
+        for (std::uint32_t bin = b * kBinBlock; bin < end; ++bin)
+            draw_bin(t.key, t.rows, beams, bin, t.draws.speckle + std::size_t(bin) * beams,
+                     t.draws.noise + std::size_t(bin) * beams);
     };
     const std::uint32_t blocks = (plan.bins + kBinBlock - 1) / kBinBlock;
     if (workers == nullptr) {
