@@ -73,6 +73,12 @@ struct RendererOptions {
 // environment (std::getenv).
 [[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});
 
+// The frame a caller will render next, for Renderer::render's look-ahead.
+struct NextFrame {
+    Pose pose;
+    std::uint64_t frame_index = 0;
+};
+
 class RendererImpl; // internal
 namespace detail {
 struct Access; // internal: src/core/access.h
@@ -116,6 +122,16 @@ public:
     // renderer, a non-finite pose or a frame of another size, ErrorCode::vulkan if a Vulkan call fails
     // (the frame's contents are then unspecified).
     [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame);
+    // As render(pose, frame_index, frame), and once this frame's device work is done, starts the next
+    // frame's (`next`) before this frame's host stages (noise, gain) run, so that the device renders the
+    // next frame while the host finishes this one; the noise draws of `next` are made then too. For a
+    // sequence of poses known one ahead (a trajectory, a dataset): on a GPU, frames/s then follows the
+    // GPU's time per frame instead of the GPU's plus the host's (docs/benchmarks.md). The next render()
+    // picks the started frame up when its pose is next.pose (its frame_index may differ: the noise is
+    // then drawn anew); for any other pose it waits for the started work, drops it and renders its own.
+    // Frames are bit-identical to render()'s. The CPU backend has no device to overlap: there this is
+    // render(pose, frame_index, frame). Fails as render() does, also for a non-finite next.pose.
+    [[nodiscard]] Result<void> render(const Pose& pose, std::uint64_t frame_index, Frame& frame, const NextFrame& next);
 
     // Flow between two frames this renderer made with SaveFlags::labels, in a static scene
     // (docs/labels.md): for each cell of `from` with a label, where its point lands in the polar grid

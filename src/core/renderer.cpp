@@ -37,13 +37,29 @@ public:
     // (host::noise_draws_ahead, StageBackend::set_gpu_overlap): 2 floats a cell, made once here.
     std::vector<float> speckle_draws, noise_draws;
     std::uint64_t overlap_frame_index = 0;
-    bool draws_ready = false; // this frame's draws were made (the backend ran the overlap work)
+    // The (seed, frame index) the draws were made for; draws_made false: none yet.
+    bool draws_made = false;
+    std::uint64_t draws_seed = 0, draws_frame_index = 0;
+    // Render-ahead (render with a NextFrame): the pose whose device work the backend started.
+    bool started = false;
+    Pose started_pose;
+
+    void make_draws(std::uint64_t frame_index) {
+        host::noise_draws(plan, options.seed, frame_index, {speckle_draws.data(), noise_draws.data()}, workers.get());
+        draws_made = true;
+        draws_seed = options.seed;
+        draws_frame_index = frame_index;
+    }
+    bool draws_for(std::uint64_t frame_index) const {
+        return draws_made && draws_seed == options.seed && draws_frame_index == frame_index;
+    }
 };
 
 namespace {
 
 Frame make_frame_for(const RendererImpl& impl);
-Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame);
+Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame,
+                       const NextFrame* next);
 
 // What the backend must fill: what was asked for, and with labels the material image and the echo
 // they are computed from.
@@ -128,9 +144,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
             impl->backend->set_gpu_overlap(
                 [](void* renderer) {
                     auto& i = *static_cast<RendererImpl*>(renderer);
-                    host::noise_draws(i.plan, i.options.seed, i.overlap_frame_index,
-                                      {i.speckle_draws.data(), i.noise_draws.data()}, i.workers.get());
-                    i.draws_ready = true;
+                    if (!i.draws_for(i.overlap_frame_index)) i.make_draws(i.overlap_frame_index);
                 },
                 impl.get());
         }
@@ -159,7 +173,15 @@ Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame
         return make_error(ErrorCode::invalid_argument,
                           "Renderer::render: an empty renderer (default-constructed or moved from; make one with "
                           "Renderer::create)");
-    return run_frame(*impl_, pose, frame_index, frame);
+    return run_frame(*impl_, pose, frame_index, frame, nullptr);
+}
+
+Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame& frame, const NextFrame& next) {
+    if (!impl_)
+        return make_error(ErrorCode::invalid_argument,
+                          "Renderer::render: an empty renderer (default-constructed or moved from; make one with "
+                          "Renderer::create)");
+    return run_frame(*impl_, pose, frame_index, frame, &next);
 }
 
 namespace {
@@ -206,10 +228,43 @@ Frame make_frame_for(const RendererImpl& impl) {
     return f;
 }
 
-Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame) {
-    for (double v : {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg}) {
-        if (!std::isfinite(v)) return make_error(ErrorCode::invalid_argument, "pose: non-finite value");
+bool finite_pose(const Pose& pose) {
+    for (double v : {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg})
+        if (!std::isfinite(v)) return false;
+    return true;
+}
+
+bool same_pose(const Pose& a, const Pose& b) {
+    return a.x_m == b.x_m && a.y_m == b.y_m && a.z_m == b.z_m && a.roll_deg == b.roll_deg &&
+           a.pitch_deg == b.pitch_deg && a.yaw_deg == b.yaw_deg;
+}
+
+// The backend's stages for `pose` into `frame`: picked up where render-ahead started them, else run
+// here (with the draws made while the device works, where the backend waits for one).
+Result<void> backend_frame(RendererImpl& impl, const Pose& pose, Frame& frame, bool ahead) {
+    StageBackend& backend = *impl.backend;
+    const SaveFlags mask = backend_save_mask(impl.options);
+    if (impl.started) {
+        impl.started = false;
+        if (same_pose(impl.started_pose, pose)) {
+            // the device has been rendering it since the last call; the draws were made then, unless
+            // this frame's index is not the one announced
+            if (!impl.speckle_draws.empty() && !impl.draws_for(impl.overlap_frame_index))
+                impl.make_draws(impl.overlap_frame_index);
+            return backend.finish(frame);
+        }
+        if (auto dropped = backend.finish(frame); !dropped) return dropped; // another pose: wait, drop it
     }
+    if (!ahead) return backend.render(pose, mask, frame);
+    if (auto r = backend.start(pose, mask, false, true); !r) return r;
+    return backend.finish(frame);
+}
+
+Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame,
+                       const NextFrame* next) {
+    if (!finite_pose(pose)) return make_error(ErrorCode::invalid_argument, "pose: non-finite value");
+    if (next != nullptr && !finite_pose(next->pose))
+        return make_error(ErrorCode::invalid_argument, "next pose: non-finite value");
     const Plan& p = impl.plan;
     if (frame.clean.size() != static_cast<std::size_t>(p.bins) * p.beams) {
         return make_error(ErrorCode::invalid_argument, "render: frame was not made by this renderer's make_frame()");
@@ -219,25 +274,30 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     frame.times.clear();
     frame.stages_run.clear();
     impl.overlap_frame_index = frame_index;
-    impl.draws_ready = false;
-    auto r = impl.backend->render(pose, backend_save_mask(impl.options), frame);
-    if (!r) return r;
-    if (impl.labels) {
+    const bool ahead = next != nullptr && impl.backend->renders_ahead();
+    if (auto r = backend_frame(impl, pose, frame, ahead); !r) return r;
+    if (impl.labels) { // before the next frame starts: it reads the backend's sub-pixel returns of this one
         const auto start = std::chrono::steady_clock::now();
         impl.labels->run(frame, pose, impl.backend->subpixel_returns());
         frame.times.push_back(
             {"labels", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()});
         frame.stages_run.push_back("labels");
     }
+    if (ahead) { // the device renders the next frame into the other readback while the host goes on
+        if (auto r = impl.backend->start(next->pose, backend_save_mask(impl.options), true, false); !r) return r;
+        impl.started = true;
+        impl.started_pose = next->pose;
+    }
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
     const host::NoiseDraws draws{impl.speckle_draws.data(), impl.noise_draws.data()};
     host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean(),
-                         impl.draws_ready ? &draws : nullptr);
+                         impl.draws_for(frame_index) ? &draws : nullptr);
     const auto t1 = std::chrono::steady_clock::now();
     frame.times.push_back({"noise", std::chrono::duration<double, std::milli>(t1 - t0).count()});
     frame.stages_run.push_back("noise");
+    if (ahead && !impl.speckle_draws.empty()) impl.make_draws(next->frame_index); // while the device works
     return {};
 }
 
@@ -286,7 +346,7 @@ std::uint64_t HostDepthRenderer::seed() const {
 
 Result<void> HostDepthRenderer::process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame) {
     impl_->host_depth->arm_process(depth);
-    return run_frame(*impl_, Pose{}, frame_index, frame);
+    return run_frame(*impl_, Pose{}, frame_index, frame, nullptr);
 }
 
 Result<void> HostDepthRenderer::record(VkCommandBuffer commands, const HostDepthImage& depth) {
@@ -295,7 +355,7 @@ Result<void> HostDepthRenderer::record(VkCommandBuffer commands, const HostDepth
 
 Result<void> HostDepthRenderer::read_back(std::uint64_t frame_index, Frame& frame) {
     impl_->host_depth->arm_read_back();
-    return run_frame(*impl_, Pose{}, frame_index, frame);
+    return run_frame(*impl_, Pose{}, frame_index, frame, nullptr);
 }
 
 GpuBufferView HostDepthRenderer::polar_buffer() const {

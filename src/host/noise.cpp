@@ -187,9 +187,10 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
 
     // Rayleigh speckle and ambient noise (the defaults) draw a row of cells at a time through the
     // vectorizable 32-bit path; the other speckle models and huge grids take the scalar 64-bit one.
-    const bool row_draws = beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
-    const bool row_speckle = speckle && model == SpeckleModel::rayleigh && row_draws;
-    const bool fast_path = row_speckle && noise > 0.0;
+    // (row_draws_of: the rule the draws made ahead follow too)
+    const RowDraws rows = row_draws_of(plan);
+    const bool row_speckle = rows.speckle, row_noise = rows.noise;
+    const bool fast_path = row_speckle && row_noise;
     const auto source_f = static_cast<float>(source);
     const auto noise_f = static_cast<float>(noise);
     constexpr std::size_t kChunk = 256; // beams per pass: the scratch stays on the stack (no allocation)
@@ -214,9 +215,9 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                 for (std::size_t c = 0; c < count; ++c)
                     speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
             }
-            if (noise > 0.0 && row_draws && draws != nullptr) {
+            if (row_noise && draws != nullptr) {
                 noise_row = draws->noise + k * beams + j0;
-            } else if (noise > 0.0 && row_draws) {
+            } else if (row_noise) {
                 for (std::size_t c = 0; c < count; ++c)
                     noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);
             }
@@ -250,7 +251,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                     double intensity = signal;
                     if (noise > 0.0)
                         intensity +=
-                            noise * (row_draws ? double(noise_row[c]) : rng::exp1(key, beam, bin, kNoiseStream));
+                            noise * (row_noise ? double(noise_row[c]) : rng::exp1(key, beam, bin, kNoiseStream));
                     intensity *= gain;
                     if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
                     stored[c] = static_cast<float>(intensity);

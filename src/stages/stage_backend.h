@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "vksonar/frame.h"
 #include "vksonar/result.h"
@@ -21,6 +22,18 @@ public:
     // save_mask, frame.times (one entry per GPU/CPU stage run) and frame.stages_run.
     // Must not allocate once the frame is sized (Renderer::make_frame).
     [[nodiscard]] virtual Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) = 0;
+    // render() in two halves, for a caller that knows its next pose (Renderer::render with a NextFrame):
+    // start() does the work up to the device's submission and returns while the device renders; finish()
+    // waits for it and fills `frame` as render() would. keep_last: what the frame finished last left
+    // readable (pending_clean()) stays so while this one renders. overlap: run the set_gpu_overlap work
+    // once the device has the frame. A backend without a device (renders_ahead() false) has neither.
+    virtual bool renders_ahead() const { return false; }
+    [[nodiscard]] virtual Result<void> start(const Pose&, SaveFlags, bool /*keep_last*/, bool /*overlap*/) {
+        return make_error(ErrorCode::unsupported, std::string(name()) + " backend: no start()");
+    }
+    [[nodiscard]] virtual Result<void> finish(Frame&) {
+        return make_error(ErrorCode::unsupported, std::string(name()) + " backend: no finish()");
+    }
     virtual const char* name() const = 0;
     // The last render's sub-pixel returns (core/subpixel.h), for the labels stage; null: none listed.
     virtual const SubpixelReturns* subpixel_returns() const = 0;

@@ -61,7 +61,7 @@ std::uint32_t most_row_candidates(const Plan& plan) {
 } // namespace
 
 VulkanBackend::~VulkanBackend() {
-    // render() always waits for its submission; this only guards against a failed wait.
+    // A frame started (start()) and never finished, or a failed wait.
     if (fence_) {
         VkFence fence = fence_.get();
         context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
@@ -426,9 +426,11 @@ Result<void> VulkanBackend::create_readback() {
     place(echo_region_, pixels * 2 * sizeof(float));
     place(profiles_region_, profile_cells * sizeof(float));
     place(beam_profiles_region_, (sidelobes_ ? padded_cells : cells) * sizeof(float));
-    auto readback = create_buffer(context_, readback_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
-    if (!readback) return readback.error();
-    readback_ = std::move(readback.value());
+    for (Buffer& slot : readbacks_) { // slot 1: for render-ahead (start() with keep_last)
+        auto readback = create_buffer(context_, readback_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
+        if (!readback) return readback.error();
+        slot = std::move(readback.value());
+    }
 
     return {};
 }
@@ -608,7 +610,7 @@ Result<void> VulkanBackend::create_commands() {
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
     allocate_info.commandPool = pool;
     allocate_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    allocate_info.commandBufferCount = kCommandBufferCount;
+    allocate_info.commandBufferCount = static_cast<std::uint32_t>(command_buffers_.size());
     VKS_VK_TRY(context_.fn.vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
 
     VkFenceCreateInfo fence_info{};

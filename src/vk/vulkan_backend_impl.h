@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <vector>
 
@@ -25,8 +26,10 @@ namespace vksonar::vk {
 
 // The timed stages, in order. Each is recorded into its own command buffer so that, without
 // timestamp queries, they can be submitted and timed one by one.
-// One command buffer per stage of kStageTable, and one for the readback.
+// One command buffer per stage of kStageTable, and one for the readback (into readback slot 0); the
+// readback into slot 1 has one more, after these (kSlotOneReadback).
 constexpr std::uint32_t kCommandBufferCount = static_cast<std::uint32_t>(kStageCount) + 1;
+constexpr std::uint32_t kSlotOneReadback = kCommandBufferCount;
 // Timestamps: one before the first command buffer and one after each, then (StageTiming::passes) one
 // after each pass of the beamform stage.
 constexpr std::uint32_t kPassQueryBase = kCommandBufferCount + 1;
@@ -76,6 +79,9 @@ public:
 
     Result<void> init();
     Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override;
+    bool renders_ahead() const override { return true; }
+    Result<void> start(const Pose& pose, SaveFlags save_mask, bool keep_last, bool overlap) override;
+    Result<void> finish(Frame& frame) override;
     const char* name() const override { return "vulkan"; }
     const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_; }
     void defer_clean(bool defer) override { defer_clean_ = defer; }
@@ -101,8 +107,8 @@ private:
     Result<void> create_commands();
 
     // (The stages' commands are kStageTable's record functions, the friends above.)
-    // The polar scan, then the buffers of the saved images (kStageTable's saved).
-    void record_readback(VkCommandBuffer commands, SaveFlags save_mask);
+    // The polar scan, then the buffers of the saved images (kStageTable's saved), into readbacks_[slot].
+    void record_readback(VkCommandBuffer commands, SaveFlags save_mask, std::uint32_t slot = 0);
     struct Saved {
         const Buffer* buffer = nullptr; // null: not one of the Frame's images
         const Region* region = nullptr;
@@ -164,7 +170,12 @@ private:
     Buffer cone_coord_;                         // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
     Buffer far_table_, far_energy_, far_cells_; // far side lobes (16-byte stand-ins without them)
     Buffer subpixel_; // host-visible: subpixel_returns_'s list, written every frame (16 bytes without any)
-    Buffer readback_;
+    // Host-visible: what a frame reads back (Region), twice: while the host still reads the frame
+    // finished last (read_slot_), the next one renders into the other (start() with keep_last). Slot 1
+    // is touched only then.
+    std::array<Buffer, 2> readbacks_;
+    std::uint32_t read_slot_ = 0; // the slot of the frame finished last: copy_out, pending_clean
+    const Buffer& readback() const { return readbacks_[read_slot_]; }
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
         beam_profiles_region_;
 
@@ -177,8 +188,20 @@ private:
     OwnedPipeline far_deposit_pipeline_, far_convolve_pipeline_;
 
     OwnedCommandPool command_pool_;
-    std::array<VkCommandBuffer, kCommandBufferCount> command_buffers_{}; // freed with the pool
+    std::array<VkCommandBuffer, kCommandBufferCount + 1> command_buffers_{}; // freed with the pool
+    std::array<bool, 2> readback_kept_{}; // the kept readback buffer of each slot is recorded
     OwnedFence fence_;
+    // Between start() and finish(): the frame on the device, and what finish() reports of it.
+    struct InFlight {
+        bool active = false;
+        std::uint32_t slot = 0;
+        std::uint32_t stage_total = 0;
+        std::array<const StageInfo*, kStageCount> stages{};
+        std::array<double, kCommandBufferCount> stage_ms{}; // host-timed: measured by start()
+        std::array<double, 4> host_ms{};                    // prepare, record, gpu_wait, copy
+        std::chrono::steady_clock::time_point host_clock{};
+    };
+    InFlight in_flight_;
     OwnedQueryPool query_pool_;
     std::uint32_t queries_written_ = 0;
 };

@@ -179,8 +179,8 @@ VulkanBackend::Saved VulkanBackend::saved_buffer(StageBuffers buffer) const {
     }
 }
 
-void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mask) {
-    VkBuffer target = readback_.get();
+void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mask, std::uint32_t slot) {
+    VkBuffer target = readbacks_[slot].get();
     auto copy = [&](const Buffer& source, const Region& region) {
         if (region.bytes == 0) return;
         VkBufferCopy copy_region{0, region.offset, region.bytes};
@@ -212,13 +212,13 @@ Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffe
 }
 
 void VulkanBackend::copy_out(const Region& region, void* destination) const {
-    std::memcpy(destination, static_cast<const char*>(readback_.mapped) + region.offset, region.bytes);
+    std::memcpy(destination, static_cast<const char*>(readback().mapped) + region.offset, region.bytes);
 }
 
 void VulkanBackend::transpose_out(const Region& region, std::uint32_t outer, std::uint32_t inner, std::uint32_t stride,
                                   float* destination) const {
     // source[o * stride + i] -> destination[i * outer + o], i < inner
-    const auto* source = reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + region.offset);
+    const auto* source = reinterpret_cast<const float*>(static_cast<const char*>(readback().mapped) + region.offset);
     for (std::size_t o = 0; o < outer; ++o)
         for (std::size_t i = 0; i < inner; ++i)
             destination[i * outer + o] = source[o * stride + i];
@@ -246,10 +246,22 @@ double ms_since(std::chrono::steady_clock::time_point& start) {
 } // namespace
 
 Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame& frame) {
-    frame.times.clear();
-    frame.stages_run.clear();
-    auto host_clock = std::chrono::steady_clock::now(); // StageTiming::passes: the host's own steps
-    std::array<double, 4> host_ms{};                    // prepare, record, gpu_wait, copy
+    if (auto r = start(pose, save_mask, false, true); !r) return r;
+    return finish(frame);
+}
+
+// Prepares, records and submits one frame's work into readback slot `keep_last ? the other one : 0`,
+// and returns without waiting (with host timing, the stages are submitted and waited one by one here).
+Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool keep_last, bool overlap) {
+    if (in_flight_.active) { // a frame started and never finished: wait for it, drop it
+        VkFence fence = fence_.get();
+        VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        in_flight_.active = false;
+    }
+    InFlight& flight = in_flight_;
+    flight.slot = keep_last ? 1u - read_slot_ : 0u;
+    // StageTiming::passes: the host's own steps; otherwise the clock is not read
+    if (pass_timestamps_) flight.host_clock = std::chrono::steady_clock::now();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
     // the objects a few pixels across or less: their returns (profile.comp adds them) instead of their
@@ -258,24 +270,30 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     if (plan_.subpixel_capacity > 0) subpixel_returns_.write_buffer(plan_, subpixel_.mapped);
 
     // Record: one command buffer per stage of kStageTable that this plan runs, then one for the readback.
-    std::array<const StageInfo*, kStageCount> stages{};
+    std::array<const StageInfo*, kStageCount>& stages = flight.stages;
     std::uint32_t stage_total = 0;
     for (const StageInfo& stage : kStageTable)
         if (stage.runs(plan_)) stages[stage_total++] = &stage;
+    flight.stage_total = stage_total;
     const std::uint32_t buffer_total = stage_total + 1; // the readback last
 
-    host_ms[0] = ms_since(host_clock);
+    if (pass_timestamps_) flight.host_ms[0] = ms_since(flight.host_clock);
     // Only the depth pass's commands change from frame to frame (its draws follow the pose); the other
-    // stages' and the readback's are recorded once and submitted again, until the save mask changes.
+    // stages' and the readbacks' are recorded once and submitted again, until the save mask changes.
     const bool keep = commands_kept_ && kept_save_mask_ == save_mask;
-    if (!keep) passes_recorded_ = 0;
+    if (!keep) {
+        passes_recorded_ = 0;
+        readback_kept_ = {};
+    }
     std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
-        VkCommandBuffer commands = command_buffers_[i];
+        const bool readback = i == stage_total;
+        VkCommandBuffer commands =
+            readback && flight.slot == 1 ? command_buffers_[kSlotOneReadback] : command_buffers_[i];
         recorded[i] = commands;
         // the first buffer resets the queries; the depth pass draws this frame's clusters
         const bool per_frame = i == 0 || (i < stage_total && stages[i]->vulkan.record == record_depth);
-        if (keep && !per_frame) continue;
+        if (keep && !per_frame && (!readback || readback_kept_[flight.slot])) continue;
         VkCommandBufferBeginInfo begin{}; // resets the buffer (the pool lets each buffer reset alone)
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = per_frame ? VkCommandBufferUsageFlags(VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT) : 0u;
@@ -284,11 +302,12 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
             context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
         }
-        if (i < stage_total) {
+        if (!readback) {
             RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_, shape_)};
             stages[i]->vulkan.record(record);
         } else {
-            record_readback(commands, save_mask);
+            record_readback(commands, save_mask, flight.slot);
+            readback_kept_[flight.slot] = true;
         }
         if (timestamps_) {
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
@@ -299,12 +318,42 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     kept_save_mask_ = save_mask;
 
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
-    std::array<double, kCommandBufferCount> stage_ms{};
-    std::array<double, kMaxDispatches> pass_ms{};
-    host_ms[1] = ms_since(host_clock);
+    if (pass_timestamps_) flight.host_ms[1] = ms_since(flight.host_clock);
     if (timestamps_) {
-        if (auto r = submit_and_wait(recorded.data(), buffer_total, true); !r) return r;
-        host_ms[2] = ms_since(host_clock);
+        VkSubmitInfo submit{};
+        submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+        submit.commandBufferCount = buffer_total;
+        submit.pCommandBuffers = recorded.data();
+        VkFence fence = fence_.get();
+        VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
+        VKS_VK_TRY(queue_submit(context_, submit, fence));
+        if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
+    } else {
+        for (std::uint32_t i = 0; i < buffer_total; ++i) {
+            const auto begin = std::chrono::steady_clock::now();
+            // the overlap work while the readback (last, not a reported stage) copies
+            if (auto r = submit_and_wait(&recorded[i], 1, overlap && i + 1 == buffer_total); !r) return r;
+            flight.stage_ms[i] =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - begin).count();
+        }
+    }
+    flight.active = true;
+    return {};
+}
+
+// Waits for the frame start() submitted and fills `frame` from its readback slot.
+Result<void> VulkanBackend::finish(Frame& frame) {
+    InFlight& flight = in_flight_;
+    if (!flight.active) return make_error(ErrorCode::invalid_argument, "VulkanBackend::finish: no frame started");
+    flight.active = false;
+    frame.times.clear();
+    frame.stages_run.clear();
+    const std::uint32_t stage_total = flight.stage_total, buffer_total = stage_total + 1;
+    std::array<double, kMaxDispatches> pass_ms{};
+    if (timestamps_) {
+        VkFence fence = fence_.get();
+        VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        if (pass_timestamps_) flight.host_ms[2] = ms_since(flight.host_clock);
         std::array<std::uint64_t, kQueryCount> ticks{};
         VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
             context_.device, query_pool_.get(), 0, buffer_total + 1, sizeof(std::uint64_t) * ticks.size(), ticks.data(),
@@ -323,40 +372,34 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
             return double(((to & mask) - (from & mask)) & mask) * ns_per_tick * 1e-6;
         };
         for (std::uint32_t i = 0; i < buffer_total; ++i)
-            stage_ms[i] = interval_ms(ticks[i], ticks[i + 1]);
+            flight.stage_ms[i] = interval_ms(ticks[i], ticks[i + 1]);
         // The passes of the beamform stage, each from the end of the one before (the first from the end
         // of the command buffer before the stage's).
         for (std::uint32_t i = 0; i < stage_total && passes_recorded_ > 0; ++i) {
-            if (std::strcmp(stages[i]->name, "beamform") != 0) continue;
+            if (std::strcmp(flight.stages[i]->name, "beamform") != 0) continue;
             std::uint64_t from = ticks[i];
             for (std::uint32_t n = 0; n < passes_recorded_; ++n) {
                 pass_ms[n] = interval_ms(from, ticks[kPassQueryBase + n]);
                 from = ticks[kPassQueryBase + n];
             }
         }
-    } else {
-        for (std::uint32_t i = 0; i < buffer_total; ++i) {
-            const auto start = std::chrono::steady_clock::now();
-            // the overlap work while the readback (last, not a reported stage) copies
-            if (auto r = submit_and_wait(&recorded[i], 1, i + 1 == buffer_total); !r) return r;
-            stage_ms[i] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-        }
     }
+    read_slot_ = flight.slot;
     // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
-        const char* name = stages[i]->name;
-        frame.times.push_back(StageTime{name, stage_ms[i]});
+        const char* name = flight.stages[i]->name;
+        frame.times.push_back(StageTime{name, flight.stage_ms[i]});
         frame.stages_run.emplace_back(name);
     }
 
-    copy_frame_out(save_mask, frame, !defer_clean_);
+    copy_frame_out(kept_save_mask_, frame, !defer_clean_);
     if (pass_timestamps_) { // the names fit std::string's inline buffer: no allocation
         for (std::uint32_t n = 0; n < passes_recorded_; ++n)
             frame.times.push_back(StageTime{pass_names_[n], pass_ms[n]});
-        host_ms[3] = ms_since(host_clock);
+        flight.host_ms[3] = ms_since(flight.host_clock);
         const std::array<const char*, 4> host_steps{"host:prepare", "host:record", "host:gpu_wait", "host:copy"};
         for (std::size_t s = 0; s < host_steps.size(); ++s)
-            frame.times.push_back(StageTime{host_steps[s], host_ms[s]});
+            frame.times.push_back(StageTime{host_steps[s], flight.host_ms[s]});
     }
     return {};
 }
@@ -365,7 +408,7 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
 // layouts to the public ones. Also used by the host-depth pass (host_depth.cpp).
 const float* VulkanBackend::pending_clean() const {
     return defer_clean_
-               ? reinterpret_cast<const float*>(static_cast<const char*>(readback_.mapped) + polar_region_.offset)
+               ? reinterpret_cast<const float*>(static_cast<const char*>(readback().mapped) + polar_region_.offset)
                : nullptr;
 }
 
@@ -397,7 +440,7 @@ void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_
     if (any(save_mask & SaveFlags::echo)) {
         float* echo = sized(frame.echo, pixels * 2);
         if (plan_.params.echo_half != 0u) { // two halves per pixel: (energy * echo_scale, range)
-            const auto* halves = reinterpret_cast<const std::uint16_t*>(static_cast<const char*>(readback_.mapped) +
+            const auto* halves = reinterpret_cast<const std::uint16_t*>(static_cast<const char*>(readback().mapped) +
                                                                         echo_region_.offset);
             for (std::size_t p = 0; p < pixels; ++p) {
                 echo[2 * p] = half_to_float(halves[2 * p]) / plan_.params.echo_scale;
