@@ -502,7 +502,7 @@ public:
         for (std::size_t i = job_.first; i < job_.end; ++i) {
             if (done[i] && !held_) continue;                          // a re-run shard: this frame is complete on disk
             WriteBehind::Slot& slot = writer_.acquire(held_ ? 1 : 0); // rethrows a write error: the run stops there
-            render_into(i, slot);
+            render_into(i, slot, next_rendered(i, done));
             if (held_) submit_held(&slot);
             if (done[i]) continue; // rendered for the previous frame's flow only; the slot is reused
             if (job_.save.flow) {
@@ -523,9 +523,20 @@ public:
     }
 
 private:
-    void render_into(std::size_t i, WriteBehind::Slot& slot) {
+    // The frame this loop renders after frame i, where it knows one: announced to render() so that a
+    // GPU renders it while the host finishes frame i (a wrong guess costs time, never bytes).
+    const TrajectoryPose* next_rendered(std::size_t i, const std::vector<char>& done) const {
+        const std::size_t next = i + 1;
+        if (next >= job_.poses.size()) return nullptr;
+        if (next < job_.end && (!done[next] || (job_.save.flow && !done[i]))) return &job_.poses[next];
+        if (next == job_.end && job_.save.flow) return &job_.poses[next]; // the next shard's first frame
+        return nullptr;
+    }
+
+    void render_into(std::size_t i, WriteBehind::Slot& slot, const TrajectoryPose* next = nullptr) {
         const TrajectoryPose& item = job_.poses[i];
-        auto rendered = renderer_.render(item.pose, item.line, slot.frame);
+        auto rendered = next ? renderer_.render(item.pose, item.line, slot.frame, NextFrame{next->pose, next->line})
+                             : renderer_.render(item.pose, item.line, slot.frame);
         if (!rendered) {
             const std::string where =
                 job_.trajectory ? args_.value("--trajectory") + ":" + std::to_string(item.line) + ": " : std::string();

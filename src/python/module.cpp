@@ -406,11 +406,16 @@ PYBIND11_MODULE(vksonar, m) {
         .def(
             "render",
             [](py::object self, const std::vector<double>& pose, std::uint64_t frame_index,
-               std::optional<std::uint64_t> seed, std::shared_ptr<FrameObject> out) {
+               std::optional<std::uint64_t> seed, std::shared_ptr<FrameObject> out,
+               std::optional<std::vector<double>> next_pose, std::optional<std::uint64_t> next_frame) {
                 auto& r = self.cast<RendererObject&>();
                 if (pose.size() != 6)
                     throw py::value_error("pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
                                           std::to_string(pose.size()));
+                if (next_pose && next_pose->size() != 6)
+                    throw py::value_error("next_pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
+                                          std::to_string(next_pose->size()));
+                if (next_frame && !next_pose) throw py::value_error("next_frame: given without next_pose");
                 if (seed) r.renderer.set_seed(*seed);
                 if (!out) {
                     out = std::make_shared<FrameObject>();
@@ -425,14 +430,24 @@ PYBIND11_MODULE(vksonar, m) {
                 Result<void> rendered;
                 {
                     py::gil_scoped_release unlocked; // other Python threads run while the sonar renders
-                    rendered = r.renderer.render(out->pose, frame_index, out->frame);
+                    if (next_pose) {
+                        const std::vector<double>& n = *next_pose;
+                        const NextFrame next{Pose{n[0], n[1], n[2], n[3], n[4], n[5]},
+                                             next_frame ? *next_frame : frame_index + 1};
+                        rendered = r.renderer.render(out->pose, frame_index, out->frame, next);
+                    } else {
+                        rendered = r.renderer.render(out->pose, frame_index, out->frame);
+                    }
                 }
                 check(rendered);
                 return out;
             },
             py::arg("pose"), py::arg("frame") = 0, py::arg("seed") = py::none(), py::arg("out") = nullptr,
+            py::arg("next_pose") = py::none(), py::arg("next_frame") = py::none(),
             "Renders one ping from pose (x, y, z, roll, pitch, yaw); frame keys the noise with the seed. "
-            "Returns a new Frame, or fills `out` (a Frame of this renderer) to reuse its memory.")
+            "Returns a new Frame, or fills `out` (a Frame of this renderer) to reuse its memory. "
+            "next_pose (and next_frame, default frame + 1): the ping rendered next, which a GPU then renders "
+            "while this one's host stages run (the same bytes; faster for a sequence of poses).")
         .def(
             "flow",
             [](py::object self, std::shared_ptr<FrameObject> from, std::shared_ptr<FrameObject> to) {

@@ -87,6 +87,26 @@ def test_seed_and_frame_index_key_the_noise(renderer):
     assert np.array_equal(a, b) and not np.array_equal(a, c) and not np.array_equal(a, d)
 
 
+@pytest.mark.parametrize("backend", ["cpu", "vulkan"])
+def test_rendering_ahead_gives_the_plain_frames(backend):
+    # next_pose starts the next ping on the device before this one's host stages: the same bytes,
+    # also when the next call asks for another pose than announced
+    config = small_config()
+    config.set("effects.speckle", "on")
+    ahead = vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend=backend, seed=9)
+    plain = vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend=backend, seed=9)
+    poses = [(0, 0, 0, 0, 10 + 3 * i, 4 * i) for i in range(4)]
+    order = [(0, 1), (1, 2), (3, 0), (0, None)]  # (pose, announced pose): the third breaks the announcement
+    for frame, (i, j) in enumerate(order):
+        if j is None:
+            got = ahead.render(poses[i], frame=frame).polar
+        else:
+            got = ahead.render(poses[i], frame=frame, next_pose=poses[j]).polar
+        assert np.array_equal(got, plain.render(poses[i], frame=frame).polar), (frame, i, j)
+    with pytest.raises(ValueError, match="next_pose"):
+        ahead.render(POSE, next_pose=(0, 0, 0))
+
+
 def test_errors_are_the_cli_messages(tmp_path):
     run = cli(tmp_path, "--set", "source_level=400")
     assert run.returncode == 2
