@@ -239,24 +239,37 @@ bool same_pose(const Pose& a, const Pose& b) {
            a.pitch_deg == b.pitch_deg && a.yaw_deg == b.yaw_deg;
 }
 
-// The backend's stages for `pose` into `frame`: picked up where render-ahead started them, else run
-// here (with the draws made while the device works, where the backend waits for one).
-Result<void> backend_frame(RendererImpl& impl, const Pose& pose, Frame& frame, bool ahead) {
+// The backend's stages for `pose` into `frame`. With `next` (render-ahead on a backend that has a
+// device), the next frame is started before this one is waited for, so the device always has the next
+// frame queued: this one is picked up where the last call started it, else started here first.
+Result<void> backend_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame,
+                           const NextFrame* next) {
     StageBackend& backend = *impl.backend;
     const SaveFlags mask = backend_save_mask(impl.options);
-    if (impl.started) {
+    const bool picked_up = impl.started && same_pose(impl.started_pose, pose);
+    if (impl.started && !picked_up) { // another pose than announced: wait for that work, drop it
         impl.started = false;
-        if (same_pose(impl.started_pose, pose)) {
-            // the device has been rendering it since the last call; the draws were made then, unless
-            // this frame's index is not the one announced
-            if (!impl.speckle_draws.empty() && !impl.draws_for(impl.overlap_frame_index))
-                impl.make_draws(impl.overlap_frame_index);
-            return backend.finish(frame);
-        }
-        if (auto dropped = backend.finish(frame); !dropped) return dropped; // another pose: wait, drop it
+        if (auto dropped = backend.finish(frame); !dropped) return dropped;
     }
-    if (!ahead) return backend.render(pose, mask, frame);
-    if (auto r = backend.start(pose, mask, false, true); !r) return r;
+    if (next == nullptr) {
+        if (!picked_up) return backend.render(pose, mask, frame); // draws made while the device works
+        impl.started = false;
+    } else {
+        if (!picked_up) {
+            if (auto r = backend.start(pose, mask, false, false); !r) return r;
+        }
+        impl.started = false;
+        // the next frame, queued behind this one; its draws are made after this frame's noise stage
+        if (auto r = backend.start(next->pose, mask, true, false); !r) {
+            (void)backend.finish(frame); // nothing left on the device
+            return r;
+        }
+        impl.started = true;
+        impl.started_pose = next->pose;
+    }
+    // this frame's draws, while the device works: made by the last call unless it announced another
+    // frame index (or the seed changed since)
+    if (!impl.speckle_draws.empty() && !impl.draws_for(frame_index)) impl.make_draws(frame_index);
     return backend.finish(frame);
 }
 
@@ -275,18 +288,13 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     frame.stages_run.clear();
     impl.overlap_frame_index = frame_index;
     const bool ahead = next != nullptr && impl.backend->renders_ahead();
-    if (auto r = backend_frame(impl, pose, frame, ahead); !r) return r;
-    if (impl.labels) { // before the next frame starts: it reads the backend's sub-pixel returns of this one
+    if (auto r = backend_frame(impl, pose, frame_index, frame, ahead ? next : nullptr); !r) return r;
+    if (impl.labels) { // the backend's sub-pixel returns are this frame's (one per frame slot)
         const auto start = std::chrono::steady_clock::now();
         impl.labels->run(frame, pose, impl.backend->subpixel_returns());
         frame.times.push_back(
             {"labels", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count()});
         frame.stages_run.push_back("labels");
-    }
-    if (ahead) { // the device renders the next frame into the other readback while the host goes on
-        if (auto r = impl.backend->start(next->pose, backend_save_mask(impl.options), true, false); !r) return r;
-        impl.started = true;
-        impl.started_pose = next->pose;
     }
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;

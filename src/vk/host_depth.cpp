@@ -311,9 +311,9 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
     for (const StageInfo& stage : kStageTable)
         if (stage.runs(b.plan_)) stages[stage_total++] = &stage;
     VKS_VK_TRY(context.fn.vkResetCommandPool(context.device, b.command_pool_.get(), 0));
-    b.commands_kept_ = false; // render()'s kept buffers are gone
+    b.commands_kept_ = {}; // render()'s kept buffers are gone
     for (std::uint32_t i = 0; i <= stage_total; ++i) {
-        VkCommandBuffer commands = b.command_buffers_[i];
+        VkCommandBuffer commands = b.command_buffers_[0][i];
         VkCommandBufferBeginInfo begin{};
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
@@ -338,7 +338,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
             submit.pWaitSemaphores = &image.wait_semaphore;
             submit.pWaitDstStageMask = &wait_stage;
         }
-        VkFence fence = b.fence_.get();
+        VkFence fence = b.fences_[0].get();
         VKS_VK_TRY(context.fn.vkResetFences(context.device, 1, &fence));
         VKS_VK_TRY(queue_submit(context, submit, fence));
         VKS_VK_TRY(context.fn.vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));

@@ -61,9 +61,10 @@ std::uint32_t most_row_candidates(const Plan& plan) {
 } // namespace
 
 VulkanBackend::~VulkanBackend() {
-    // A frame started (start()) and never finished, or a failed wait.
-    if (fence_) {
-        VkFence fence = fence_.get();
+    // Frames started (start()) and never finished, or a failed wait.
+    for (const OwnedFence& owned : fences_) {
+        if (!owned) continue;
+        VkFence fence = owned.get();
         context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
     }
 }
@@ -157,7 +158,8 @@ Result<void> VulkanBackend::create_scene_buffers() {
     build_depth_clusters(scene, clusters_);
     draw_pushes_.resize(std::size_t(plan_.views) * scene.draws.size());
     clusters_drawn_.resize(std::size_t(plan_.views) * clusters_.size());
-    subpixel_returns_.prepare(plan_);
+    for (SubpixelReturns& returns : subpixel_returns_)
+        returns.prepare(plan_);
 
     const VkBufferUsageFlags dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     auto vertices =
@@ -303,12 +305,22 @@ Result<void> VulkanBackend::create_working_buffers() {
         if (!buffer) return buffer.error();
         *w.buffer = std::move(buffer.value());
     }
-    // The sub-pixel returns: written by the host every frame before the submit (render() waits for the
-    // frame, so one buffer serves every frame), sized once for the plan's capacity.
-    auto subpixel = create_buffer(context_, SubpixelReturns::buffer_bytes(plan_), storage, MemoryUse::upload);
+    // The sub-pixel returns, sized once for the plan's capacity: written by the host into the frame
+    // slot's upload buffer before the submit, copied on the device into subpixel_.
+    const std::size_t subpixel_bytes = SubpixelReturns::buffer_bytes(plan_);
+    auto subpixel = create_buffer(context_, subpixel_bytes, in, MemoryUse::device);
     if (!subpixel) return subpixel.error();
     subpixel_ = std::move(subpixel.value());
-    if (subpixel_.mapped != nullptr) std::memset(subpixel_.mapped, 0, SubpixelReturns::buffer_bytes(plan_));
+    { // zeros: no returns listed (what the host-depth path, which lists none, reads)
+        const std::vector<std::uint8_t> zeros(subpixel_bytes, 0);
+        if (auto r = upload_to_buffer(context_, subpixel_, zeros.data(), subpixel_bytes); !r) return r.error();
+    }
+    for (Buffer& upload : subpixel_uploads_) {
+        auto made = create_buffer(context_, subpixel_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
+        if (!made) return made.error();
+        upload = std::move(made.value());
+        if (upload.mapped != nullptr) std::memset(upload.mapped, 0, subpixel_bytes);
+    }
 
     return {};
 }
@@ -610,16 +622,19 @@ Result<void> VulkanBackend::create_commands() {
     allocate_info.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
     allocate_info.commandPool = pool;
     allocate_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    allocate_info.commandBufferCount = static_cast<std::uint32_t>(command_buffers_.size());
-    VKS_VK_TRY(context_.fn.vkAllocateCommandBuffers(device, &allocate_info, command_buffers_.data()));
+    allocate_info.commandBufferCount = kCommandBufferCount;
+    for (auto& slot : command_buffers_)
+        VKS_VK_TRY(context_.fn.vkAllocateCommandBuffers(device, &allocate_info, slot.data()));
 
     VkFenceCreateInfo fence_info{};
     fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
     // Signalled: the destructor waits on it, also when nothing was ever submitted (every submit resets it first).
     fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
-    VkFence fence = VK_NULL_HANDLE;
-    VKS_VK_TRY(context_.fn.vkCreateFence(device, &fence_info, allocator, &fence));
-    fence_ = OwnedFence(context_, fence);
+    for (OwnedFence& owned : fences_) {
+        VkFence fence = VK_NULL_HANDLE;
+        VKS_VK_TRY(context_.fn.vkCreateFence(device, &fence_info, allocator, &fence));
+        owned = OwnedFence(context_, fence);
+    }
 
     // Stage times: timestamp queries where the queue has them, except on CPU devices. lavapipe's
     // timestamps do not bracket compute dispatches (a dispatch's time shows up in a neighbouring
@@ -635,7 +650,7 @@ Result<void> VulkanBackend::create_commands() {
         VkQueryPoolCreateInfo query_info{};
         query_info.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
         query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
-        query_info.queryCount = kQueryCount;
+        query_info.queryCount = kQueryCount * kFrameSlots;
         VkQueryPool query_pool = VK_NULL_HANDLE;
         VKS_VK_TRY(context_.fn.vkCreateQueryPool(device, &query_info, allocator, &query_pool));
         query_pool_ = OwnedQueryPool(context_, query_pool);

@@ -26,12 +26,13 @@ namespace vksonar::vk {
 
 // The timed stages, in order. Each is recorded into its own command buffer so that, without
 // timestamp queries, they can be submitted and timed one by one.
-// One command buffer per stage of kStageTable, and one for the readback (into readback slot 0); the
-// readback into slot 1 has one more, after these (kSlotOneReadback).
+// One command buffer per stage of kStageTable, and one for the readback, in each frame slot.
 constexpr std::uint32_t kCommandBufferCount = static_cast<std::uint32_t>(kStageCount) + 1;
-constexpr std::uint32_t kSlotOneReadback = kCommandBufferCount;
-// Timestamps: one before the first command buffer and one after each, then (StageTiming::passes) one
-// after each pass of the beamform stage.
+// Frame slots: render-ahead has up to two frames on the device (start() twice, then finish()), each
+// with its own command buffers, fence, queries, sub-pixel upload and readback buffer.
+constexpr std::uint32_t kFrameSlots = 2;
+// Timestamps, per slot (from slot * kQueryCount): one before the first command buffer and one after
+// each, then (StageTiming::passes) one after each pass of the beamform stage.
 constexpr std::uint32_t kPassQueryBase = kCommandBufferCount + 1;
 constexpr std::uint32_t kQueryCount = kPassQueryBase + static_cast<std::uint32_t>(kMaxDispatches);
 
@@ -83,7 +84,7 @@ public:
     Result<void> start(const Pose& pose, SaveFlags save_mask, bool keep_last, bool overlap) override;
     Result<void> finish(Frame& frame) override;
     const char* name() const override { return "vulkan"; }
-    const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_; }
+    const SubpixelReturns* subpixel_returns() const override { return &subpixel_returns_[read_slot_]; }
     void defer_clean(bool defer) override { defer_clean_ = defer; }
     void set_gpu_overlap(void (*work)(void*), void* context) override {
         overlap_work_ = work;
@@ -109,6 +110,8 @@ private:
     // (The stages' commands are kStageTable's record functions, the friends above.)
     // The polar scan, then the buffers of the saved images (kStageTable's saved), into readbacks_[slot].
     void record_readback(VkCommandBuffer commands, SaveFlags save_mask, std::uint32_t slot = 0);
+    // The slot's sub-pixel list (written by the host) into subpixel_, which profile.comp reads.
+    void record_subpixel_upload(VkCommandBuffer commands, std::uint32_t slot);
     struct Saved {
         const Buffer* buffer = nullptr; // null: not one of the Frame's images
         const Region* region = nullptr;
@@ -119,7 +122,8 @@ private:
     void dispatch(VkCommandBuffer commands, const Dispatch& groups);
 
     // overlap: run overlap_work_ between the submission and the wait
-    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count, bool overlap = false);
+    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
+                                 bool overlap = false);
     void copy_out(const Region& region, void* destination) const;
     // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)
     void copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean = true) const;
@@ -139,23 +143,25 @@ private:
     bool face_normals_ = false;  // plan_.face_normals: the depth pass has the face-normal attachment
     bool timestamps_ = false;
     bool defer_clean_ = false;
-    // render() keeps the stages' command buffers but the depth pass's from frame to frame (recorded
-    // with this save mask); the host-depth path, which records its own into the same buffers, clears it
-    bool commands_kept_ = false;
-    SaveFlags kept_save_mask_ = SaveFlags::none;
+    // start() keeps each slot's stage command buffers but the depth pass's from frame to frame (recorded
+    // with this save mask); the host-depth path, which records its own into slot 0's, clears them
+    std::array<bool, kFrameSlots> commands_kept_{};
+    std::array<SaveFlags, kFrameSlots> kept_save_mask_{};
     void (*overlap_work_)(void*) = nullptr; // set_gpu_overlap: run between the submission and the wait
     void* overlap_context_ = nullptr;
     // StageTiming::passes: a timestamp after each beamform pass (pass_timestamp), host clocks around the
     // host's steps; Frame::times gets both as extra entries.
     bool pass_timestamps_ = false;
     std::uint32_t passes_recorded_ = 0;
+    std::uint32_t query_base_ = 0; // the slot being recorded: its first query
     std::array<const char*, kMaxDispatches> pass_names_{};
     void pass_timestamp(VkCommandBuffer commands, const char* name);
 
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
     std::vector<std::uint8_t> clusters_drawn_;   // slices * clusters: 0 = culled this frame
-    SubpixelReturns subpixel_returns_;           // the frame's sub-pixel returns (core/subpixel.h)
+    // each slot's frame's sub-pixel returns (core/subpixel.h)
+    std::array<SubpixelReturns, kFrameSlots> subpixel_returns_;
 
     Buffer vertices_, indices_;
     Image depth_image_, material_image_;
@@ -169,11 +175,15 @@ private:
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
     Buffer cone_coord_;                         // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
     Buffer far_table_, far_energy_, far_cells_; // far side lobes (16-byte stand-ins without them)
-    Buffer subpixel_; // host-visible: subpixel_returns_'s list, written every frame (16 bytes without any)
-    // Host-visible: what a frame reads back (Region), twice: while the host still reads the frame
-    // finished last (read_slot_), the next one renders into the other (start() with keep_last). Slot 1
-    // is touched only then.
-    std::array<Buffer, 2> readbacks_;
+    // subpixel_returns_'s list: written by the host into the slot's upload buffer, copied by the slot's
+    // first command buffer into subpixel_ (so a frame queued behind another cannot overwrite what that
+    // one reads); 16 bytes each without any
+    Buffer subpixel_;
+    std::array<Buffer, kFrameSlots> subpixel_uploads_;
+    // Host-visible: what a frame reads back (Region), per slot: while the host still reads the frame
+    // finished last (read_slot_), the next one renders into the other. Slot 1 is touched only by
+    // render-ahead.
+    std::array<Buffer, kFrameSlots> readbacks_;
     std::uint32_t read_slot_ = 0; // the slot of the frame finished last: copy_out, pending_clean
     const Buffer& readback() const { return readbacks_[read_slot_]; }
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
@@ -188,20 +198,22 @@ private:
     OwnedPipeline far_deposit_pipeline_, far_convolve_pipeline_;
 
     OwnedCommandPool command_pool_;
-    std::array<VkCommandBuffer, kCommandBufferCount + 1> command_buffers_{}; // freed with the pool
-    std::array<bool, 2> readback_kept_{}; // the kept readback buffer of each slot is recorded
-    OwnedFence fence_;
+    // per slot; freed with the pool
+    std::array<std::array<VkCommandBuffer, kCommandBufferCount>, kFrameSlots> command_buffers_{};
+    std::array<OwnedFence, kFrameSlots> fences_;
     // Between start() and finish(): the frame on the device, and what finish() reports of it.
     struct InFlight {
         bool active = false;
         std::uint32_t slot = 0;
         std::uint32_t stage_total = 0;
+        SaveFlags save_mask = SaveFlags::none;
         std::array<const StageInfo*, kStageCount> stages{};
         std::array<double, kCommandBufferCount> stage_ms{}; // host-timed: measured by start()
         std::array<double, 4> host_ms{};                    // prepare, record, gpu_wait, copy
         std::chrono::steady_clock::time_point host_clock{};
     };
-    InFlight in_flight_;
+    std::array<InFlight, kFrameSlots> in_flight_;
+    std::uint32_t oldest_ = 0; // the slot finish() finishes next, when in flight
     OwnedQueryPool query_pool_;
     std::uint32_t queries_written_ = 0;
 };

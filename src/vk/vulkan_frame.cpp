@@ -152,7 +152,7 @@ void VulkanBackend::pass_timestamp(VkCommandBuffer commands, const char* name) {
     if (!pass_timestamps_ || passes_recorded_ >= kMaxDispatches) return;
     pass_names_[passes_recorded_] = name;
     context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(),
-                                    kPassQueryBase + passes_recorded_);
+                                    query_base_ + kPassQueryBase + passes_recorded_);
     ++passes_recorded_;
 }
 
@@ -198,17 +198,32 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
     pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
 }
 
-Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count, bool overlap) {
+Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count,
+                                            std::uint32_t slot, bool overlap) {
     VkSubmitInfo submit{};
     submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     submit.commandBufferCount = count;
     submit.pCommandBuffers = command_buffers;
-    VkFence fence = fence_.get();
+    VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
     VKS_VK_TRY(queue_submit(context_, submit, fence));
     if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
     VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     return {};
+}
+
+void VulkanBackend::record_subpixel_upload(VkCommandBuffer commands, std::uint32_t slot) {
+    const Functions& fn = context_.fn;
+    // The frame before (queued ahead of this one) may still read subpixel_ in its profile pass (WAR:
+    // an execution dependency suffices).
+    fn.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0,
+                            nullptr, 0, nullptr, 0, nullptr);
+    const VkBufferCopy region{0, 0, SubpixelReturns::buffer_bytes(plan_)};
+    fn.vkCmdCopyBuffer(commands, subpixel_uploads_[slot].get(), subpixel_.get(), 1, &region);
+    VkBufferMemoryBarrier copied =
+        buffer_barrier(subpixel_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT);
+    pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1,
+                     &copied);
 }
 
 void VulkanBackend::copy_out(const Region& region, void* destination) const {
@@ -250,24 +265,30 @@ Result<void> VulkanBackend::render(const Pose& pose, SaveFlags save_mask, Frame&
     return finish(frame);
 }
 
-// Prepares, records and submits one frame's work into readback slot `keep_last ? the other one : 0`,
-// and returns without waiting (with host timing, the stages are submitted and waited one by one here).
+// Prepares, records and submits one frame's work into a frame slot and returns without waiting (with
+// host timing, the stages are submitted and waited one by one here). The slot: the other one while a
+// frame is on the device, or while the host still reads the frame finished last (keep_last), else 0.
 Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool keep_last, bool overlap) {
-    if (in_flight_.active) { // a frame started and never finished: wait for it, drop it
-        VkFence fence = fence_.get();
-        VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
-        in_flight_.active = false;
+    std::uint32_t slot = 0;
+    if (in_flight_[oldest_].active) {
+        if (in_flight_[1 - oldest_].active)
+            return make_error(ErrorCode::invalid_argument, "VulkanBackend::start: two frames are on the device");
+        slot = 1 - oldest_;
+    } else {
+        slot = keep_last ? 1 - read_slot_ : 0;
+        oldest_ = slot;
     }
-    InFlight& flight = in_flight_;
-    flight.slot = keep_last ? 1u - read_slot_ : 0u;
+    InFlight& flight = in_flight_[slot];
+    flight.slot = slot;
     // StageTiming::passes: the host's own steps; otherwise the clock is not read
     if (pass_timestamps_) flight.host_clock = std::chrono::steady_clock::now();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
     cull_depth_clusters(clusters_, scene_.draws.size(), draw_pushes_, clusters_drawn_);
     // the objects a few pixels across or less: their returns (profile.comp adds them) instead of their
     // pixels' echo
-    subpixel_returns_.build(plan_, scene_, pose, clusters_, draw_pushes_, clusters_drawn_);
-    if (plan_.subpixel_capacity > 0) subpixel_returns_.write_buffer(plan_, subpixel_.mapped);
+    SubpixelReturns& subpixel = subpixel_returns_[slot];
+    subpixel.build(plan_, scene_, pose, clusters_, draw_pushes_, clusters_drawn_);
+    if (plan_.subpixel_capacity > 0) subpixel.write_buffer(plan_, subpixel_uploads_[slot].mapped);
 
     // Record: one command buffer per stage of kStageTable that this plan runs, then one for the readback.
     std::array<const StageInfo*, kStageCount>& stages = flight.stages;
@@ -279,43 +300,43 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
 
     if (pass_timestamps_) flight.host_ms[0] = ms_since(flight.host_clock);
     // Only the depth pass's commands change from frame to frame (its draws follow the pose); the other
-    // stages' and the readbacks' are recorded once and submitted again, until the save mask changes.
-    const bool keep = commands_kept_ && kept_save_mask_ == save_mask;
-    if (!keep) {
-        passes_recorded_ = 0;
-        readback_kept_ = {};
-    }
-    std::array<VkCommandBuffer, kCommandBufferCount> recorded{};
+    // stages' and the readback's are recorded once per slot and submitted again, until the save mask
+    // changes.
+    const bool keep = commands_kept_[slot] && kept_save_mask_[slot] == save_mask;
+    if (!keep) passes_recorded_ = 0;
+    query_base_ = slot * kQueryCount;
+    const std::array<VkCommandBuffer, kCommandBufferCount>& recorded = command_buffers_[slot];
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
-        const bool readback = i == stage_total;
-        VkCommandBuffer commands =
-            readback && flight.slot == 1 ? command_buffers_[kSlotOneReadback] : command_buffers_[i];
-        recorded[i] = commands;
-        // the first buffer resets the queries; the depth pass draws this frame's clusters
+        VkCommandBuffer commands = recorded[i];
+        // the first buffer resets the queries and uploads the sub-pixel list; the depth pass draws this
+        // frame's clusters
         const bool per_frame = i == 0 || (i < stage_total && stages[i]->vulkan.record == record_depth);
-        if (keep && !per_frame && (!readback || readback_kept_[flight.slot])) continue;
+        if (keep && !per_frame) continue;
         VkCommandBufferBeginInfo begin{}; // resets the buffer (the pool lets each buffer reset alone)
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = per_frame ? VkCommandBufferUsageFlags(VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT) : 0u;
         VKS_VK_TRY(context_.fn.vkBeginCommandBuffer(commands, &begin));
         if (timestamps_ && i == 0) {
-            context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
-            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), 0);
+            context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), query_base_, kQueryCount);
+            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(),
+                                            query_base_);
         }
-        if (!readback) {
+        if (i == 0 && plan_.subpixel_capacity > 0) record_subpixel_upload(commands, slot);
+        if (i < stage_total) {
             RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_, shape_)};
             stages[i]->vulkan.record(record);
         } else {
-            record_readback(commands, save_mask, flight.slot);
-            readback_kept_[flight.slot] = true;
+            record_readback(commands, save_mask, slot);
         }
         if (timestamps_) {
-            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(), i + 1);
+            context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_.get(),
+                                            query_base_ + i + 1);
         }
         VKS_VK_TRY(context_.fn.vkEndCommandBuffer(commands));
     }
-    commands_kept_ = true;
-    kept_save_mask_ = save_mask;
+    commands_kept_[slot] = true;
+    kept_save_mask_[slot] = save_mask;
+    flight.save_mask = save_mask;
 
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
     if (pass_timestamps_) flight.host_ms[1] = ms_since(flight.host_clock);
@@ -324,7 +345,7 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
         submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
         submit.commandBufferCount = buffer_total;
         submit.pCommandBuffers = recorded.data();
-        VkFence fence = fence_.get();
+        VkFence fence = fences_[slot].get();
         VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
         VKS_VK_TRY(queue_submit(context_, submit, fence));
         if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
@@ -332,7 +353,7 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
         for (std::uint32_t i = 0; i < buffer_total; ++i) {
             const auto begin = std::chrono::steady_clock::now();
             // the overlap work while the readback (last, not a reported stage) copies
-            if (auto r = submit_and_wait(&recorded[i], 1, overlap && i + 1 == buffer_total); !r) return r;
+            if (auto r = submit_and_wait(&recorded[i], 1, slot, overlap && i + 1 == buffer_total); !r) return r;
             flight.stage_ms[i] =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - begin).count();
         }
@@ -341,25 +362,28 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
     return {};
 }
 
-// Waits for the frame start() submitted and fills `frame` from its readback slot.
+// Waits for the oldest frame start() submitted and fills `frame` from its readback slot.
 Result<void> VulkanBackend::finish(Frame& frame) {
-    InFlight& flight = in_flight_;
+    InFlight& flight = in_flight_[oldest_];
     if (!flight.active) return make_error(ErrorCode::invalid_argument, "VulkanBackend::finish: no frame started");
     flight.active = false;
+    const std::uint32_t slot = flight.slot;
+    if (in_flight_[1 - slot].active) oldest_ = 1 - slot;
     frame.times.clear();
     frame.stages_run.clear();
     const std::uint32_t stage_total = flight.stage_total, buffer_total = stage_total + 1;
     std::array<double, kMaxDispatches> pass_ms{};
     if (timestamps_) {
-        VkFence fence = fence_.get();
+        VkFence fence = fences_[slot].get();
         VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
         if (pass_timestamps_) flight.host_ms[2] = ms_since(flight.host_clock);
+        const std::uint32_t base = slot * kQueryCount;
         std::array<std::uint64_t, kQueryCount> ticks{};
         VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
-            context_.device, query_pool_.get(), 0, buffer_total + 1, sizeof(std::uint64_t) * ticks.size(), ticks.data(),
-            sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+            context_.device, query_pool_.get(), base, buffer_total + 1, sizeof(std::uint64_t) * ticks.size(),
+            ticks.data(), sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
         if (passes_recorded_ > 0) {
-            VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(context_.device, query_pool_.get(), kPassQueryBase,
+            VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(context_.device, query_pool_.get(), base + kPassQueryBase,
                                                          passes_recorded_, sizeof(std::uint64_t) * passes_recorded_,
                                                          ticks.data() + kPassQueryBase, sizeof(std::uint64_t),
                                                          VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
@@ -384,7 +408,7 @@ Result<void> VulkanBackend::finish(Frame& frame) {
             }
         }
     }
-    read_slot_ = flight.slot;
+    read_slot_ = slot;
     // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
         const char* name = flight.stages[i]->name;
@@ -392,7 +416,7 @@ Result<void> VulkanBackend::finish(Frame& frame) {
         frame.stages_run.emplace_back(name);
     }
 
-    copy_frame_out(kept_save_mask_, frame, !defer_clean_);
+    copy_frame_out(flight.save_mask, frame, !defer_clean_);
     if (pass_timestamps_) { // the names fit std::string's inline buffer: no allocation
         for (std::uint32_t n = 0; n < passes_recorded_; ++n)
             frame.times.push_back(StageTime{pass_names_[n], pass_ms[n]});
