@@ -597,6 +597,29 @@ TEST(HostImages, FanWiderThan180IsSquareAndCentred) {
     EXPECT_GT(starboard, 0);
 }
 
+// The fan image in bands of rows on 3 threads (the CLI's writer on a machine with 6+ cores): the same
+// bytes as on one, for every colormap (each has its own loop) and a scan with NaN and out-of-range cells.
+TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
+    host::Workers three(3);
+    for (Colormap map : {Colormap::gray, Colormap::viridis, Colormap::sonar, Colormap::jet}) {
+        Plan p = test_plan(64, 100, 120, 0.01, 40, /*equisine=*/true);
+        p.config.colormap = map;
+        const host::FanRenderer fan(p);
+        Frame f = test_frame(p);
+        for (std::size_t i = 0; i < f.display.size(); ++i)
+            f.display[i] = static_cast<float>((i * 37) % 101) / 80.0f - 0.1f; // [-0.1, 1.15]
+        f.display[5] = std::numeric_limits<float>::quiet_NaN();
+        host::Image alone, shared;
+        fan.render(f, alone);
+        fan.render(f, shared, &three);
+        ASSERT_EQ(alone.width, shared.width);
+        EXPECT_EQ(alone.rgb, shared.rgb) << int(map);
+        const std::size_t middle = (std::size_t(alone.height / 2) * alone.width + alone.width / 2) * 3;
+        EXPECT_FALSE(std::equal(alone.rgb.begin(), alone.rgb.begin() + 3, alone.rgb.begin() + middle))
+            << "corner (background) and fan centre differ";
+    }
+}
+
 // ------------------------------------------------------------------------------------------- files
 
 TEST(HostFiles, NpyHeaderShapeAndSize) {

@@ -51,8 +51,9 @@ TEST(Mcap, Crc32IsTheZlibCrc) {
     EXPECT_EQ(mcap::crc32(text + 4, 5, mcap::crc32(text, 4)), 0xCBF43926u);
     EXPECT_EQ(mcap::crc32(text, 0), 0u);
     // Against a bit-at-a-time CRC written here, for every length 0..300 and split points that cut
-    // the 8-byte steps anywhere.
-    std::vector<std::uint8_t> bytes(300);
+    // the 8-byte table steps and the 16- and 64-byte carry-less steps anywhere (from 64 bytes on,
+    // where the CPU has PCLMULQDQ), then at lengths up to 5000 from odd offsets.
+    std::vector<std::uint8_t> bytes(5003);
     std::uint32_t state = 12345;
     for (auto& b : bytes)
         b = static_cast<std::uint8_t>((state = state * 1103515245u + 12345u) >> 24);
@@ -65,11 +66,17 @@ TEST(Mcap, Crc32IsTheZlibCrc) {
         }
         return c ^ 0xFFFFFFFFu;
     };
-    for (std::size_t n = 0; n <= bytes.size(); ++n) {
+    for (std::size_t n = 0; n <= 300; ++n) {
         const std::uint32_t want = bitwise(n);
         ASSERT_EQ(mcap::crc32(bytes.data(), n), want) << n;
         const std::size_t cut = (n * 7) / 13;
         ASSERT_EQ(mcap::crc32(bytes.data() + cut, n - cut, mcap::crc32(bytes.data(), cut)), want) << n;
+    }
+    for (std::size_t n : {511u, 1024u, 1999u, 4096u, 5000u}) {
+        const std::uint32_t want = bitwise(n + 3);
+        const std::size_t cut = 3 + (n * 5) / 11; // the second part starts at an odd address
+        ASSERT_EQ(mcap::crc32(bytes.data(), n + 3), want) << n;
+        ASSERT_EQ(mcap::crc32(bytes.data() + cut, n + 3 - cut, mcap::crc32(bytes.data(), cut)), want) << n;
     }
 }
 

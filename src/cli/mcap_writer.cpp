@@ -1,6 +1,10 @@
 // MCAP writer (mcap_writer.h). All integers little endian; strings and byte arrays length-prefixed.
 #include "cli/mcap_writer.h"
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -100,12 +104,11 @@ void channel_record(Bytes& out, std::uint16_t id, std::uint16_t schema_id, const
 
 } // namespace
 
-std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) {
-    // Every byte of a bag goes through here (twice when written, once more when merged), so eight
-    // bytes a step (slicing-by-8) rather than one: several times faster, the same CRC.
+namespace {
+
+// The table CRC on the raw (pre-inverted) state c: eight bytes a step (slicing-by-8).
+std::uint32_t crc32_tables(const std::uint8_t* p, std::size_t size, std::uint32_t c) {
     static const std::array<std::array<std::uint32_t, 256>, 8> t = make_crc_tables();
-    const auto* p = static_cast<const std::uint8_t*>(data);
-    std::uint32_t c = crc ^ 0xFFFFFFFFu;
     for (; size >= 8; size -= 8, p += 8) {
         const std::uint32_t a = c ^ (std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 |
                                      std::uint32_t(p[3]) << 24);
@@ -116,7 +119,75 @@ std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) {
     }
     for (; size > 0; --size, ++p)
         c = t[0][(c ^ *p) & 0xFFu] ^ (c >> 8);
-    return c ^ 0xFFFFFFFFu;
+    return c;
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+__attribute__((target("pclmul,sse4.1"))) inline __m128i load(const std::uint8_t* at) {
+    return _mm_loadu_si128(reinterpret_cast<const __m128i*>(at));
+}
+// x's two 64-bit halves carried forward by the constants in k's halves, plus the next 16 bytes.
+__attribute__((target("pclmul,sse4.1"))) inline __m128i fold(__m128i x, __m128i k, __m128i next) {
+    return _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x, k, 0x00), _mm_clmulepi64_si128(x, k, 0x11)), next);
+}
+#endif
+
+// The same CRC by carry-less multiplication (PCLMULQDQ), 64 bytes a step: four 128-bit lanes folded
+// forward by x^(512+-32) mod P, then into one, reduced to 64 and 32 bits and by Barrett's reduction
+// (Intel, "Fast CRC Computation for Generic Polynomials Using PCLMULQDQ", with the bit-reflected
+// constants of CRC-32's P = 0x104C11DB7). size >= 64, a multiple of 16; c is the raw state.
+__attribute__((target("pclmul,sse4.1"))) std::uint32_t crc32_clmul(const std::uint8_t* p, std::size_t size,
+                                                                   std::uint32_t c) {
+    const __m128i k1k2 = _mm_set_epi64x(0x1c6e41596, 0x154442bd4);    // x^(4*128+32), x^(4*128-32) mod P
+    const __m128i k3k4 = _mm_set_epi64x(0x0ccaa009e, 0x1751997d0);    // x^(128+32), x^(128-32) mod P
+    const __m128i k5 = _mm_set_epi64x(0, 0x163cd6124);                // x^64 mod P
+    const __m128i poly_mu = _mm_set_epi64x(0x1F7011641, 0x1DB710641); // mu = x^64 / P, P
+    const __m128i mask32 = _mm_set_epi32(0, 0, 0, -1);
+    __m128i x0 = _mm_xor_si128(load(p), _mm_cvtsi32_si128(static_cast<int>(c)));
+    __m128i x1 = load(p + 16), x2 = load(p + 32), x3 = load(p + 48);
+    p += 64;
+    size -= 64;
+    for (; size >= 64; size -= 64, p += 64) {
+        x0 = fold(x0, k1k2, load(p));
+        x1 = fold(x1, k1k2, load(p + 16));
+        x2 = fold(x2, k1k2, load(p + 32));
+        x3 = fold(x3, k1k2, load(p + 48));
+    }
+    __m128i x = fold(fold(fold(x0, k3k4, x1), k3k4, x2), k3k4, x3);
+    for (; size >= 16; size -= 16, p += 16)
+        x = fold(x, k3k4, load(p));
+    // 128 -> 64 bits (times x^32), then -> 32 bits, then Barrett's reduction
+    x = _mm_xor_si128(_mm_srli_si128(x, 8), _mm_clmulepi64_si128(k3k4, x, 0x01));
+    x = _mm_xor_si128(_mm_srli_si128(x, 4), _mm_clmulepi64_si128(_mm_and_si128(x, mask32), k5, 0x00));
+    __m128i t = _mm_clmulepi64_si128(_mm_and_si128(x, mask32), poly_mu, 0x10);
+    t = _mm_clmulepi64_si128(_mm_and_si128(t, mask32), poly_mu, 0x00);
+    return static_cast<std::uint32_t>(_mm_extract_epi32(_mm_xor_si128(x, t), 1));
+}
+
+bool has_clmul() {
+    static const bool has = __builtin_cpu_supports("pclmul") && __builtin_cpu_supports("sse4.1");
+    return has;
+}
+#endif
+
+} // namespace
+
+std::uint32_t crc32(const void* data, std::size_t size, std::uint32_t crc) {
+    // Every byte of a bag goes through here (twice when written, once more when merged): by carry-less
+    // multiplication where the CPU has it (the MCAP writer's thread spent 3.3 ms a frame here on the
+    // table), else eight bytes a table step. The same CRC either way (mcap_test).
+    const auto* p = static_cast<const std::uint8_t*>(data);
+    std::uint32_t c = crc ^ 0xFFFFFFFFu;
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    if (size >= 64 && has_clmul()) {
+        const std::size_t bulk = size & ~std::size_t(15);
+        c = crc32_clmul(p, bulk, c);
+        p += bulk;
+        size -= bulk;
+    }
+#endif
+    return crc32_tables(p, size, c) ^ 0xFFFFFFFFu;
 }
 
 bool zstd_available() {

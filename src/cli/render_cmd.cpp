@@ -18,6 +18,7 @@
 #include <optional>
 #include <string>
 #include <system_error>
+#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -37,6 +38,7 @@
 #include "host/boxes.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
+#include "host/workers.h"
 #include "legacy/legacy.h"
 #include "vksonar/vksonar.h"
 
@@ -399,7 +401,7 @@ void write_bag_frame(const WriteBehind::Slot& slot, const RenderJob& job, Output
     const McapOptions& bag_options = *job.bag_options;
     const bool u16 = bag_options.polar || bag_options.sonar_u16;
     if (u16) host::quantize_display(slot.frame, outputs.quantized);
-    if (bag_options.fan) outputs.fan.render(slot.frame, outputs.image);
+    if (bag_options.fan) outputs.fan.render(slot.frame, outputs.image, outputs.image_workers);
     // Without a time column, time_s is the frame's ordinal in the whole trajectory (a shard's
     // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
     // unsharded run's.
@@ -618,6 +620,12 @@ int run_render(const std::vector<std::string>& argv) {
     const host::FanRenderer fan(plan);
     LegacyState legacy_state;
     Outputs outputs = make_outputs(plan, job, device, fan, legacy_state, loaded.scene);
+    // The writer thread draws a fan image a frame for .mcap and fan.png (about 5 ms here at the default,
+    // more than a GPU's frame): with half the cores, where there are four or more, it shares the rows out
+    // (the rest are the renderer's; a 2-core machine's cores are busy rendering).
+    const unsigned cores = std::thread::hardware_concurrency();
+    host::Workers image_workers(cores >= 4 ? std::min(8u, cores / 2) : 1u);
+    outputs.image_workers = &image_workers;
     std::vector<Frame> slots = make_slots(job, renderer);
     Writers writers = open_writers(args, job, plan, outputs, target);
 

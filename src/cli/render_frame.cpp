@@ -184,7 +184,7 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
     if (out.legacy) {
         write_legacy(*out.legacy, out, dir, frame);
     } else if (out.save.fan) {
-        out.fan.render(frame, out.image);
+        out.fan.render(frame, out.image, out.image_workers);
         write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
     }
     if (out.save.polar_png) {

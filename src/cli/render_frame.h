@@ -89,6 +89,8 @@ struct Outputs {
     host::BoxFinder box_finder;           // --save labels: boxes.json, its scratch kept across frames
     std::vector<host::Box> boxes;
     std::string boxes_text; // the frame's boxes.json (frame_boxes)
+    // Threads for the fan image (image_workers in run_render; null: the writer thread alone).
+    host::Workers* image_workers = nullptr;
 };
 
 // The frame's boxes.json text, for the frame folder and the dataset file alike, so the two never differ.

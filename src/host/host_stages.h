@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/plan.h"
+#include "host/colormap.h"
 #include "vksonar/frame.h"
 #include "vksonar/result.h"
 
@@ -44,10 +45,7 @@ bool noise_draws_ahead(const Plan& plan);
 void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, const NoiseDraws& draws,
                  Workers* workers);
 
-struct Rgb8 {
-    std::uint8_t r, g, b;
-};
-Rgb8 colormap(Colormap map, float value01);
+Rgb8 colormap(Colormap map, float value01); // (host/colormap.h: colormap_of, inline)
 
 // Stage 6 images: 8-bit RGB, row-major, preallocated by the caller through the *Image structs.
 struct Image {
@@ -60,7 +58,8 @@ void polar_image(const Plan& plan, const Frame& frame, Image& out);
 class FanRenderer {
 public:
     explicit FanRenderer(const Plan& plan); // precomputes the pixel -> (beam, bin) lookup once
-    void render(const Frame& frame, Image& out) const;
+    // workers: rows shared out among its threads (the same bytes); null: on the caller alone.
+    void render(const Frame& frame, Image& out, Workers* workers = nullptr) const;
     // A per-cell id array (bins * beams, e.g. Frame::instance) on the fan image's pixels, by the
     // nearest cell (never interpolated: ids stay ids); 0 outside the fan. out: width * height.
     void nearest_cell(const std::vector<std::uint16_t>& cells, std::vector<std::uint16_t>& out) const;
@@ -69,6 +68,8 @@ public:
 
 private:
     struct Lookup;
+    template <Colormap Map>
+    void render_rows(const Frame& frame, Image& out, std::uint32_t row_begin, std::uint32_t row_end) const;
     std::vector<std::int32_t> beam0_, bin0_; // -1: outside the fan
     std::vector<float> beam_t_, bin_t_;
     std::vector<std::uint8_t> overlay_; // 1 where rings/bearing lines are drawn

@@ -5,6 +5,7 @@
 
 #include "core/angles.h"
 #include "host/host_stages.h"
+#include "host/workers.h"
 
 namespace vksonar::host {
 namespace {
@@ -219,13 +220,43 @@ std::uint32_t FanRenderer::height() const {
     return height_;
 }
 
-void FanRenderer::render(const Frame& frame, Image& out) const {
+void FanRenderer::render(const Frame& frame, Image& out, Workers* workers) const {
     ensure_size(out, width_, height_);
-    const std::size_t npix = static_cast<std::size_t>(width_) * height_;
+    struct Job {
+        const FanRenderer* fan;
+        const Frame* frame;
+        Image* out;
+    } job{this, &frame, &out};
+    // one loop per map, the map's formula inlined (host/colormap.h); part of parts: a band of rows
+    const auto band = [](void* context, std::uint32_t part, std::uint32_t parts) {
+        const Job& j = *static_cast<const Job*>(context);
+        const std::uint64_t rows = j.fan->height_;
+        const auto begin = static_cast<std::uint32_t>(rows * part / parts);
+        const auto end = static_cast<std::uint32_t>(rows * (part + 1) / parts);
+        switch (j.fan->colormap_) {
+        case Colormap::gray:
+            return j.fan->render_rows<Colormap::gray>(*j.frame, *j.out, begin, end);
+        case Colormap::viridis:
+            return j.fan->render_rows<Colormap::viridis>(*j.frame, *j.out, begin, end);
+        case Colormap::sonar:
+            return j.fan->render_rows<Colormap::sonar>(*j.frame, *j.out, begin, end);
+        case Colormap::jet:
+            return j.fan->render_rows<Colormap::jet>(*j.frame, *j.out, begin, end);
+        }
+    };
+    if (workers != nullptr && workers->count() > 1)
+        workers->run(band, &job);
+    else
+        band(&job, 0, 1);
+}
+
+template <Colormap Map>
+void FanRenderer::render_rows(const Frame& frame, Image& out, std::uint32_t row_begin, std::uint32_t row_end) const {
     const std::size_t beams = beams_;
     const bool sized = frame.display.size() >= beams * bins_;
     const float* d = frame.display.data();
-    for (std::size_t p = 0; p < npix; ++p) {
+    const std::size_t pixel_end = std::size_t(row_end) * width_;
+    for (std::size_t p = std::size_t(row_begin) * width_; p < pixel_end; ++p) {
         Rgb8 c = kBackground;
         const std::int32_t j0 = beam0_[p];
         if (j0 >= 0 && sized) {
@@ -240,7 +271,7 @@ void FanRenderer::render(const Frame& frame, Image& out) const {
                 (1.0f - tj) * finite_or_zero(d[ka * beams + ja]) + tj * finite_or_zero(d[ka * beams + jb]);
             const float v_far =
                 (1.0f - tj) * finite_or_zero(d[kb * beams + ja]) + tj * finite_or_zero(d[kb * beams + jb]);
-            c = colormap(colormap_, (1.0f - tk) * v_near + tk * v_far);
+            c = colormap_of<Map>((1.0f - tk) * v_near + tk * v_far);
         }
         if (overlay_[p]) {
             auto mix = [](std::uint8_t a, std::uint8_t b) {
