@@ -48,10 +48,6 @@ constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider fo
 // Wider spreads keep their shares in double in Pixels::wide_shares, up to kWideSharesPerPixel per pixel
 // of a row on average (a row that needs more recomputes the rest where the beams read them).
 constexpr std::size_t kWideSharesPerPixel = 2;
-// Rows of the pixel cache a thread takes at a time (LabelsStage::run).
-constexpr std::uint32_t kCacheRows = 4;
-// Bands of rows per thread for each object drawn alone (LabelsStage::visibility).
-constexpr std::uint32_t kAloneBandsPerPart = 4, kAloneBandRows = 8;
 constexpr std::uint32_t kNoWideShares = ~0u;
 
 struct PixelLabel {
@@ -544,16 +540,13 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     std::fill(frame.elevation.begin(), frame.elevation.end(), nan);
     std::fill(frame.elevation_spread.begin(), frame.elevation_spread.end(), nan);
     std::fill(frame.point.begin(), frame.point.end(), nan);
-    // Rows dealt out in blocks of kCacheRows in turn: the hit pixels crowd into some rows (a seabed fills
-    // the lower ones), so halves of the grid gave one thread most of the work (6.0 ms on one thread,
-    // 4.5 on two). Each block's pixels keep their shares in the block's own room (cache_rows).
+    // Beams dealt out in blocks of kBeamBlock in turn: a line array's edge beams gather from more columns.
     const auto cache = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         const std::uint32_t rows = t.plan->rows;
-        for (std::uint32_t begin = part * kCacheRows; begin < rows; begin += parts * kCacheRows)
-            cache_rows(*t.plan, *t.frame, *t.pixels, begin, std::min(begin + kCacheRows, rows));
+        cache_rows(*t.plan, *t.frame, *t.pixels, static_cast<std::uint32_t>(std::uint64_t(rows) * part / parts),
+                   static_cast<std::uint32_t>(std::uint64_t(rows) * (part + 1) / parts));
     };
-    // Beams dealt out in blocks of kBeamBlock in turn: a line array's edge beams gather from more columns.
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         LabelsStage::Scratch& scratch = *(*t.scratch)[part];
@@ -585,8 +578,8 @@ struct BandTally {
     std::uint32_t pixels = 0, hidden = 0, outside = 0, own = 0;
 };
 
-// One labelled object drawn alone, in bands of rows (visibility): part `part` of `parts` draws its bands
-// (draw_alone_band) and counts them into tally[part].
+// One labelled object drawn alone, in bands of rows (visibility): part `part` of `parts` draws rows
+// [rows part / parts, rows (part + 1) / parts) and counts them into tally[part].
 struct AloneBands {
     const Plan* plan;
     const SceneData* scene;
@@ -596,9 +589,14 @@ struct AloneBands {
     std::array<BandTally, host::Workers::kMaxThreads> tally;
 };
 
-void draw_alone_rows(AloneBands& b, BandTally& tally, std::uint32_t row_begin, std::uint32_t row_end) {
+void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
+    AloneBands& b = *static_cast<AloneBands*>(context);
     const Plan& plan = *b.plan;
     LabelsStage::Alone& a = *b.alone;
+    const auto row_begin = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * part / parts);
+    const auto row_end = static_cast<std::uint32_t>(std::uint64_t(plan.rows) * (part + 1) / parts);
+    BandTally& tally = b.tally[part];
+    tally = BandTally{};
     if (row_begin == row_end) return;
     const DepthClusters only{a.clusters, a.drawn_alone};
     DepthRegion band;
@@ -618,21 +616,6 @@ void draw_alone_rows(AloneBands& b, BandTally& tally, std::uint32_t row_begin, s
                                                static_cast<std::uint32_t>(p % plan.columns), d);
         if (range < plan.config.range_min_m || range >= plan.config.range_max_m) ++tally.outside;
     }
-}
-
-// Part `part` of `parts` takes every parts-th of kAloneBandsPerPart * parts bands of rows: an object
-// often covers a few rows only, and one band per thread left most threads without any of it.
-void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
-    AloneBands& b = *static_cast<AloneBands*>(context);
-    // (at least kAloneBandRows rows a band: a triangle across several bands is set up in each)
-    const std::uint64_t rows = b.plan->rows;
-    const std::uint64_t bands = std::max<std::uint64_t>(
-        1, std::min<std::uint64_t>(std::uint64_t(parts) * kAloneBandsPerPart, rows / kAloneBandRows));
-    BandTally& tally = b.tally[part];
-    tally = BandTally{};
-    for (std::uint64_t band = part; band < bands; band += parts)
-        draw_alone_rows(b, tally, static_cast<std::uint32_t>(rows * band / bands),
-                        static_cast<std::uint32_t>(rows * (band + 1) / bands));
 }
 
 } // namespace
