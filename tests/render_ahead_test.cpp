@@ -34,12 +34,7 @@ SonarConfig noisy_config() {
 }
 
 void expect_same_frame(const Frame& ahead, const Frame& plain, const std::string& step) {
-    EXPECT_EQ(ahead.clean, plain.clean) << step;
-    EXPECT_EQ(ahead.intensity, plain.intensity) << step;
-    EXPECT_EQ(ahead.display, plain.display) << step;
-    EXPECT_EQ(ahead.depth, plain.depth) << step;
-    EXPECT_EQ(ahead.echo, plain.echo) << step;
-    EXPECT_EQ(ahead.profiles, plain.profiles) << step;
+    expect_same_images(ahead, plain, step);
     EXPECT_EQ(ahead.frame_index, plain.frame_index) << step;
     EXPECT_EQ(ahead.stages_run, plain.stages_run) << step;
 }

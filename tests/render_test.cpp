@@ -409,13 +409,7 @@ TEST(CpuVectorLoops, OffGivesTheSameBytes) {
             const Frame& a = frames[0];
             const Frame& b = frames[1];
             EXPECT_GT(sum(a.clean), 0.0) << name;
-            EXPECT_EQ(a.depth, b.depth) << name;
-            EXPECT_EQ(a.material, b.material) << name;
-            EXPECT_EQ(a.normals, b.normals) << name;
-            EXPECT_EQ(a.echo, b.echo) << name;
-            EXPECT_EQ(a.profiles, b.profiles) << name;
-            EXPECT_EQ(a.beam_profiles, b.beam_profiles) << name;
-            EXPECT_EQ(a.clean, b.clean) << name;
+            expect_same_images(a, b, name);
         }
     }
 }

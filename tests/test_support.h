@@ -158,6 +158,20 @@ inline SonarConfig quiet_config() {
     return config;
 }
 
+// Every image two frames hold, compared byte for byte (an image neither saved compares as empty), with
+// `what` in each failure.
+inline void expect_same_images(const Frame& a, const Frame& b, const std::string& what) {
+    EXPECT_EQ(a.depth, b.depth) << what;
+    EXPECT_EQ(a.material, b.material) << what;
+    EXPECT_EQ(a.normals, b.normals) << what;
+    EXPECT_EQ(a.echo, b.echo) << what;
+    EXPECT_EQ(a.profiles, b.profiles) << what;
+    EXPECT_EQ(a.beam_profiles, b.beam_profiles) << what;
+    EXPECT_EQ(a.clean, b.clean) << what;
+    EXPECT_EQ(a.intensity, b.intensity) << what;
+    EXPECT_EQ(a.display, b.display) << what;
+}
+
 struct Rendered {
     Renderer renderer;
     Frame frame;
