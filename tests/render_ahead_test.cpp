@@ -2,6 +2,9 @@
 // readback buffer while the host finishes this one, and the next frame's noise draws are made then.
 // Every frame must be the bytes a plain render() gives for its pose, frame index and seed, whether the
 // next call asks for the announced frame, another frame index, another pose, or a plain render.
+#include <algorithm>
+#include <cstring>
+
 #include "test_support.h"
 
 namespace vksonar::testing {
@@ -94,6 +97,54 @@ TEST_P(RenderAhead, EveryFrameIsAPlainRendersBytes) {
     ASSERT_TRUE(a.render(poses[0], 9, ahead->frame, NextFrame{poses[1], 10}));
     ASSERT_TRUE(p.render(poses[0], 9, plain->frame));
     expect_same_frame(ahead->frame, plain->frame, "a new seed after the announcement");
+}
+
+// The same bytes, as bits (NaN where a cell has no label).
+template <class T> bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
+}
+
+// With labels: the labels stage reads the sub-pixel returns of the frame it labels, which render-ahead
+// keeps per frame slot while the next frame's are built.
+TEST_P(RenderAhead, LabelsAreAPlainRendersBytes) {
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    RendererOptions options;
+    options.backend = GetParam().backend;
+    options.stage_timing = GetParam().timing;
+    std::array<Pose, 3> poses{};
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        poses[i].pitch_deg = 8.0 + 3.0 * double(i);
+        poses[i].yaw_deg = -10.0 + 10.0 * double(i);
+    }
+    auto ahead = render_once(options.backend, noisy_config(), scene.value(), poses[2], SaveFlags::labels, 1, options);
+    auto plain = render_once(options.backend, noisy_config(), scene.value(), poses[2], SaveFlags::labels, 1, options);
+    ASSERT_TRUE(ahead && plain);
+    std::size_t labelled = 0;
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+        SCOPED_TRACE(i);
+        const NextFrame next{poses[(i + 1) % poses.size()], i + 1};
+        ASSERT_TRUE(ahead->renderer.render(poses[i], i, ahead->frame, next));
+        ASSERT_TRUE(plain->renderer.render(poses[i], i, plain->frame));
+        const Frame& a = ahead->frame;
+        const Frame& p = plain->frame;
+        expect_same_images(a, p, "labels run");
+        EXPECT_EQ(a.instance, p.instance);
+        EXPECT_EQ(a.object_class, p.object_class);
+        EXPECT_TRUE(same_bits(a.instance_fraction, p.instance_fraction));
+        EXPECT_TRUE(same_bits(a.elevation, p.elevation));
+        EXPECT_TRUE(same_bits(a.elevation_spread, p.elevation_spread));
+        EXPECT_TRUE(same_bits(a.point, p.point));
+        ASSERT_EQ(a.visibility.size(), p.visibility.size());
+        for (std::size_t v = 0; v < a.visibility.size(); ++v) {
+            EXPECT_EQ(a.visibility[v].instance, p.visibility[v].instance);
+            EXPECT_EQ(a.visibility[v].pixels, p.visibility[v].pixels);
+            EXPECT_EQ(a.visibility[v].hidden, p.visibility[v].hidden);
+        }
+        labelled +=
+            std::size_t(std::count_if(a.instance.begin(), a.instance.end(), [](std::uint16_t id) { return id; }));
+    }
+    EXPECT_GT(labelled, 0u) << "the harbour's objects are labelled";
 }
 
 TEST_P(RenderAhead, RejectsANonFiniteNextPose) {

@@ -274,6 +274,38 @@ TEST_P(Subpixel, LabelsNameTheCableItsReturnsLight) {
 // An open mesh has no outside: a 3 cm square plate at 15 m facing the sonar returns mu A / R^4 (cos
 // theta = 1 to 1e-6 over it) whichever way its two triangles are wound; a closed mesh wound inside out
 // (the sphere's triangles reversed) still shows its near half, 2 pi a^2 mu / (3 R^4).
+// Render-ahead (Renderer::render with a NextFrame) builds the next frame's returns while this frame's
+// labels read this frame's: each frame slot keeps its own list. Two poses that see the cable at
+// different bearings, alternated, each announcing the other: the labels are a plain render's, with
+// timestamps on Vulkan (one submission per frame, two frames on the device).
+TEST_P(Subpixel, RenderAheadLabelsEachFrameFromItsOwnReturns) {
+    const SonarConfig config = closed_form_config();
+    constexpr std::uint32_t kCable = 9;
+    Scene scene;
+    add_cable(scene, 0.005, 5.0, {10.0, 0.0, 0.0}, 12, 100, lambert(-20.0), true, kCable);
+    RendererOptions options;
+    options.stage_timing = StageTiming::timestamps;
+    Pose a, b;
+    b.yaw_deg = 12.0;
+    auto ahead = render_once(GetParam(), config, scene, a, SaveFlags::labels, 1, options);
+    auto plain = render_once(GetParam(), config, scene, a, SaveFlags::labels, 1, options);
+    ASSERT_TRUE(ahead && plain);
+    std::vector<std::uint16_t> first;
+    for (std::uint64_t i = 0; i < 4; ++i) {
+        const Pose& pose = i % 2 ? b : a;
+        ASSERT_TRUE(ahead->renderer.render(pose, i, ahead->frame, NextFrame{i % 2 ? a : b, i + 1}));
+        ASSERT_TRUE(plain->renderer.render(pose, i, plain->frame));
+        EXPECT_EQ(ahead->frame.instance, plain->frame.instance) << i;
+        EXPECT_EQ(ahead->frame.clean, plain->frame.clean) << i;
+        const auto cable_cells = std::count(plain->frame.instance.begin(), plain->frame.instance.end(), kCable);
+        EXPECT_GT(cable_cells, 0) << i;
+        if (i == 0) first = plain->frame.instance;
+        if (i == 1) {
+            EXPECT_NE(plain->frame.instance, first) << "the two poses see the cable in other cells";
+        }
+    }
+}
+
 TEST_P(Subpixel, AnOpenSheetIsSeenFromEitherSideAndAClosedMeshFromOutside) {
     const SonarConfig config = closed_form_config();
     const double mu = 0.01, half = 0.015, range = 15.0;
