@@ -97,6 +97,7 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
         impl.options.backend == Backend::vulkan || impl.plan.config.cpu_precision != Precision::f64;
     impl.labels = std::make_unique<cpu::LabelsStage>(impl.plan, std::move(class_of_instance), impl.workers.get(), scene,
                                                      float_spreads);
+    impl.labels->set_part_timing(impl.options.stage_timing == StageTiming::passes);
     return {};
 }
 
@@ -222,7 +223,7 @@ Frame make_frame_for(const RendererImpl& impl) {
         f.point.assign(cells * 3, 0.0f);
         f.visibility.reserve(impl.visibility_capacity);
     }
-    f.times.reserve(16); // the stages, and with StageTiming::passes the passes and host steps
+    f.times.reserve(24); // the stages, and with StageTiming::passes the passes, host steps and labels parts
     f.stages_run.reserve(8);
     f.effects = p.effects.states;
     return f;

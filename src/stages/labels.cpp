@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -532,6 +533,15 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
 } // namespace
 
 void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel) {
+    // set_part_timing: each part's host time into frame.times (the clock is read only then)
+    std::chrono::steady_clock::time_point part_start;
+    if (part_timing_) part_start = std::chrono::steady_clock::now();
+    const auto part_done = [&](const char* name) {
+        if (!part_timing_) return;
+        const auto now = std::chrono::steady_clock::now();
+        frame.times.push_back({name, std::chrono::duration<double, std::milli>(now - part_start).count()});
+        part_start = now;
+    };
     Job job{&plan_, &class_of_instance_, &scratch_, pixels_.get(), &frame, subpixel};
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::fill(frame.instance.begin(), frame.instance.end(), std::uint16_t(0));
@@ -556,15 +566,20 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
             label_beams(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, begin,
                         std::min(begin + kBeamBlock, beams));
     };
+    part_done("labels:clear");
     if (workers_ != nullptr && workers_->count() > 1) {
         workers_->run(cache, &job);
+        part_done("labels:pixels");
         workers_->run(task, &job);
     } else {
         cache(&job, 0, 1);
+        part_done("labels:pixels");
         task(&job, 0, 1);
     }
+    part_done("labels:beams");
     frame.visibility.clear();
     if (alone_) visibility(frame, pose, subpixel);
+    part_done("labels:visible");
     // The material image as without labels: the material id alone.
     for (std::uint32_t& m : frame.material)
         if (m != shared::kNoMaterial) m &= shared::kMaterialIdMask;

@@ -54,6 +54,9 @@ public:
     // subpixel: the backend's sub-pixel returns of this frame (null: none): objects too small or thin for
     // the pixel grid (a cable) label the cells their returns reach, as their echo does.
     void run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel = nullptr);
+    // StageTiming::passes: run() also adds its parts' host times to frame.times ("labels:clear",
+    // "labels:pixels", "labels:beams", "labels:visible"; names with a ':' are not stages).
+    void set_part_timing(bool on) { part_timing_ = on; }
 
     struct Scratch; // per thread: one beam's bins
     struct Pixels;  // per pixel: what the beams read of it
@@ -68,6 +71,7 @@ private:
     std::vector<std::unique_ptr<Scratch>> scratch_; // one per worker thread
     std::unique_ptr<Pixels> pixels_;
     std::unique_ptr<Alone> alone_; // null without a scene
+    bool part_timing_ = false;
 };
 
 // Flow between two labelled frames of one plan (docs/labels.md): for each cell of `from` with a label,
