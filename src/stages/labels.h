@@ -54,8 +54,9 @@ public:
     // subpixel: the backend's sub-pixel returns of this frame (null: none): objects too small or thin for
     // the pixel grid (a cable) label the cells their returns reach, as their echo does.
     void run(Frame& frame, const Pose& pose, const SubpixelReturns* subpixel = nullptr);
-    // StageTiming::passes: run() also adds its parts' host times to frame.times ("labels:clear",
-    // "labels:pixels", "labels:beams", "labels:visible"; names with a ':' are not stages).
+    // StageTiming::passes: run() also adds its parts' host times to frame.times ("labels:pixels": the
+    // label arrays cleared and each hit pixel's spread; "labels:beams"; "labels:visible": the objects
+    // drawn alone; names with a ':' are not stages).
     void set_part_timing(bool on) { part_timing_ = on; }
 
     struct Scratch; // per thread: one beam's bins
