@@ -235,9 +235,10 @@ bool finite_pose(const Pose& pose) {
     return true;
 }
 
+// Bit for bit (-0 is not 0: the started frame is the one this pose would give, to the last bit).
 bool same_pose(const Pose& a, const Pose& b) {
-    return a.x_m == b.x_m && a.y_m == b.y_m && a.z_m == b.z_m && a.roll_deg == b.roll_deg &&
-           a.pitch_deg == b.pitch_deg && a.yaw_deg == b.yaw_deg;
+    static_assert(sizeof(Pose) == 6 * sizeof(double), "Pose: six doubles, no padding");
+    return std::memcmp(&a, &b, sizeof(Pose)) == 0;
 }
 
 // The backend's stages for `pose` into `frame`. With `next` (render-ahead on a backend that has a

@@ -596,6 +596,12 @@ std::size_t SubpixelReturns::buffer_bytes(const Plan& plan) {
     return header * sizeof(std::uint32_t) + std::size_t(plan.subpixel_capacity) * sizeof(shared::SubpixelReturn);
 }
 
+std::size_t SubpixelReturns::written_bytes(const Plan& plan) const {
+    if (capacity_ == 0) return 0;
+    const std::size_t header = (std::size_t(plan.profile_columns) + 2 + 3) & ~std::size_t(3);
+    return header * sizeof(std::uint32_t) + std::size_t(count_) * sizeof(shared::SubpixelReturn);
+}
+
 void SubpixelReturns::write_buffer(const Plan& plan, void* destination) const {
     if (capacity_ == 0) return;
     auto* bytes = static_cast<char*>(destination);

@@ -67,6 +67,9 @@ public:
     static std::size_t buffer_bytes(const Plan& plan);
     // The first buffer_bytes of this frame's list (only the returns listed are copied).
     void write_buffer(const Plan& plan, void* destination) const;
+    // How many bytes of the buffer write_buffer wrote (the header and this frame's returns: what the
+    // device needs copied of it).
+    std::size_t written_bytes(const Plan& plan) const;
 
 private:
     std::vector<std::uint32_t> column_begin_;

@@ -218,7 +218,9 @@ void VulkanBackend::record_subpixel_upload(VkCommandBuffer commands, std::uint32
     // an execution dependency suffices).
     fn.vkCmdPipelineBarrier(commands, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0,
                             nullptr, 0, nullptr, 0, nullptr);
-    const VkBufferCopy region{0, 0, SubpixelReturns::buffer_bytes(plan_)};
+    // the header and this frame's returns only (the list holds up to 4 MiB, and the upload buffer is
+    // host memory the device reads across the bus)
+    const VkBufferCopy region{0, 0, subpixel_returns_[slot].written_bytes(plan_)};
     fn.vkCmdCopyBuffer(commands, subpixel_uploads_[slot].get(), subpixel_.get(), 1, &region);
     VkBufferMemoryBarrier copied =
         buffer_barrier(subpixel_.get(), VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT);
@@ -321,7 +323,7 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
             context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(),
                                             query_base_);
         }
-        if (i == 0 && plan_.subpixel_capacity > 0) record_subpixel_upload(commands, slot);
+        if (i == 0 && subpixel.written_bytes(plan_) > 0) record_subpixel_upload(commands, slot);
         if (i < stage_total) {
             RecordContext record{*this, commands, stages[i]->vulkan.dispatches(plan_, shape_)};
             stages[i]->vulkan.record(record);
