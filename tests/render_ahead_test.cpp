@@ -22,6 +22,13 @@ protected:
     void SetUp() override {
         if (GetParam().backend == Backend::vulkan) VKSONAR_REQUIRE_VULKAN();
     }
+    // The case's backend and stage timing.
+    RendererOptions case_options() const {
+        RendererOptions options;
+        options.backend = GetParam().backend;
+        options.stage_timing = GetParam().timing;
+        return options;
+    }
     ValidationGuard validation_;
 };
 
@@ -50,9 +57,7 @@ TEST_P(RenderAhead, EveryFrameIsAPlainRendersBytes) {
         poses[i].pitch_deg = 10.0 + 4.0 * double(i);
         poses[i].yaw_deg = 5.0 * double(i);
     }
-    RendererOptions options;
-    options.backend = GetParam().backend;
-    options.stage_timing = GetParam().timing;
+    const RendererOptions options = case_options();
     const SaveFlags saves = SaveFlags::depth | SaveFlags::echo | SaveFlags::profiles;
     auto ahead = render_once(options.backend, noisy_config(), scene.value(), poses[3], saves, 1, options);
     auto plain = render_once(options.backend, noisy_config(), scene.value(), poses[3], saves, 1, options);
@@ -109,9 +114,7 @@ template <class T> bool same_bits(const std::vector<T>& a, const std::vector<T>&
 TEST_P(RenderAhead, LabelsAreAPlainRendersBytes) {
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/harbour.gltf");
     ASSERT_TRUE(scene) << scene.error().message;
-    RendererOptions options;
-    options.backend = GetParam().backend;
-    options.stage_timing = GetParam().timing;
+    const RendererOptions options = case_options();
     std::array<Pose, 3> poses{};
     for (std::size_t i = 0; i < poses.size(); ++i) {
         poses[i].pitch_deg = 8.0 + 3.0 * double(i);
@@ -150,9 +153,7 @@ TEST_P(RenderAhead, LabelsAreAPlainRendersBytes) {
 TEST_P(RenderAhead, RejectsANonFiniteNextPose) {
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
     ASSERT_TRUE(scene) << scene.error().message;
-    RendererOptions options;
-    options.backend = GetParam().backend;
-    options.stage_timing = GetParam().timing;
+    const RendererOptions options = case_options();
     auto r = render_once(options.backend, quiet_config(), scene.value(), {}, SaveFlags::none, 1, options);
     ASSERT_TRUE(r);
     NextFrame next;
