@@ -123,7 +123,6 @@ std::uint32_t crc32_tables(const std::uint8_t* p, std::size_t size, std::uint32_
 }
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target("pclmul,sse4.1"))) inline __m128i load(const std::uint8_t* at) {
     return _mm_loadu_si128(reinterpret_cast<const __m128i*>(at));
 }
@@ -131,7 +130,6 @@ __attribute__((target("pclmul,sse4.1"))) inline __m128i load(const std::uint8_t*
 __attribute__((target("pclmul,sse4.1"))) inline __m128i fold(__m128i x, __m128i k, __m128i next) {
     return _mm_xor_si128(_mm_xor_si128(_mm_clmulepi64_si128(x, k, 0x00), _mm_clmulepi64_si128(x, k, 0x11)), next);
 }
-#endif
 
 // The same CRC by carry-less multiplication (PCLMULQDQ), 64 bytes a step: four 128-bit lanes folded
 // forward by x^(512+-32) mod P, then into one, reduced to 64 and 32 bits and by Barrett's reduction
