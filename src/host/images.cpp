@@ -244,10 +244,7 @@ void FanRenderer::render(const Frame& frame, Image& out, Workers* workers) const
             return j.fan->render_rows<Colormap::jet>(*j.frame, *j.out, begin, end);
         }
     };
-    if (workers != nullptr && workers->count() > 1)
-        workers->run(band, &job);
-    else
-        band(&job, 0, 1);
+    run_parts(workers, band, &job);
 }
 
 template <Colormap Map>

@@ -55,4 +55,13 @@ private:
     std::uint32_t active_ = 0;
 };
 
+// task(context, part, parts) for every part of `workers` (Workers::run), or as the one part on the
+// caller where there is no pool.
+inline void run_parts(Workers* workers, Workers::Task task, void* context) {
+    if (workers != nullptr)
+        workers->run(task, context);
+    else
+        task(context, 0, 1);
+}
+
 } // namespace vksonar::host

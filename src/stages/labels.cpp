@@ -579,15 +579,9 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
             label_beams(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, begin,
                         std::min(begin + kBeamBlock, beams));
     };
-    if (workers_ != nullptr && workers_->count() > 1) {
-        workers_->run(cache, &job);
-        part_done("labels:pixels");
-        workers_->run(task, &job);
-    } else {
-        cache(&job, 0, 1);
-        part_done("labels:pixels");
-        task(&job, 0, 1);
-    }
+    host::run_parts(workers_, cache, &job);
+    part_done("labels:pixels");
+    host::run_parts(workers_, task, &job);
     part_done("labels:beams");
     frame.visibility.clear();
     if (alone_) visibility(frame, pose, subpixel);
@@ -700,13 +694,10 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
         }
         std::uint32_t own = 0; // its pixels in the frame's own depth image
         if (any) {
-            // In bands of rows, one per thread: each draws the object into its rows and tallies them
-            // (counts, so the sum does not depend on the split).
+            // In bands of rows dealt to the threads (draw_alone_band): each draws the object into its rows and tallies
+            // them (counts, so the sum does not depend on the split).
             AloneBands bands{&plan_, &scene, &a, &frame, id, {}};
-            if (workers_ != nullptr && workers_->count() > 1)
-                workers_->run(draw_alone_band, &bands);
-            else
-                draw_alone_band(&bands, 0, 1);
+            host::run_parts(workers_, draw_alone_band, &bands);
             for (const BandTally& band : bands.tally) {
                 v.pixels += band.pixels;
                 v.hidden += band.hidden;
