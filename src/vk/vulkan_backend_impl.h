@@ -121,9 +121,11 @@ private:
     void compute_barrier(VkCommandBuffer commands, const Buffer& written);
     void dispatch(VkCommandBuffer commands, const Dispatch& groups);
 
-    // overlap: run overlap_work_ between the submission and the wait
-    Result<void> submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
-                                 bool overlap = false);
+    // Submits on the slot's fence; overlap: then runs overlap_work_ (before anyone waits). wait: for the
+    // slot's fence.
+    Result<void> submit(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
+                        bool overlap = false);
+    Result<void> wait(std::uint32_t slot);
     void copy_out(const Region& region, void* destination) const;
     // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)
     void copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean = true) const;
@@ -201,10 +203,10 @@ private:
     // per slot; freed with the pool
     std::array<std::array<VkCommandBuffer, kCommandBufferCount>, kFrameSlots> command_buffers_{};
     std::array<OwnedFence, kFrameSlots> fences_;
-    // Between start() and finish(): the frame on the device, and what finish() reports of it.
+    // Between start() and finish(): the frame on the device in slot i (in_flight_[i]), and what finish()
+    // reports of it.
     struct InFlight {
         bool active = false;
-        std::uint32_t slot = 0;
         std::uint32_t stage_total = 0;
         SaveFlags save_mask = SaveFlags::none;
         std::array<const StageInfo*, kStageCount> stages{};

@@ -198,8 +198,8 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
     pipeline_barrier(context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 1, &barrier);
 }
 
-Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffers, std::uint32_t count,
-                                            std::uint32_t slot, bool overlap) {
+Result<void> VulkanBackend::submit(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
+                                   bool overlap) {
     VkSubmitInfo submit{};
     submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     submit.commandBufferCount = count;
@@ -208,6 +208,11 @@ Result<void> VulkanBackend::submit_and_wait(const VkCommandBuffer* command_buffe
     VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
     VKS_VK_TRY(queue_submit(context_, submit, fence));
     if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
+    return {};
+}
+
+Result<void> VulkanBackend::wait(std::uint32_t slot) {
+    VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     return {};
 }
@@ -281,7 +286,6 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
         oldest_ = slot;
     }
     InFlight& flight = in_flight_[slot];
-    flight.slot = slot;
     // StageTiming::passes: the host's own steps; otherwise the clock is not read
     if (pass_timestamps_) flight.host_clock = std::chrono::steady_clock::now();
     compose_depth_draws(plan_, scene_, pose, draw_pushes_);
@@ -343,19 +347,13 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
     // Submit: all at once with timestamps, else one command buffer at a time, timed on the host.
     if (pass_timestamps_) flight.host_ms[1] = ms_since(flight.host_clock);
     if (timestamps_) {
-        VkSubmitInfo submit{};
-        submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
-        submit.commandBufferCount = buffer_total;
-        submit.pCommandBuffers = recorded.data();
-        VkFence fence = fences_[slot].get();
-        VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
-        VKS_VK_TRY(queue_submit(context_, submit, fence));
-        if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
+        if (auto r = submit(recorded.data(), buffer_total, slot, overlap); !r) return r;
     } else {
         for (std::uint32_t i = 0; i < buffer_total; ++i) {
             const auto begin = std::chrono::steady_clock::now();
             // the overlap work while the readback (last, not a reported stage) copies
-            if (auto r = submit_and_wait(&recorded[i], 1, slot, overlap && i + 1 == buffer_total); !r) return r;
+            if (auto r = submit(&recorded[i], 1, slot, overlap && i + 1 == buffer_total); !r) return r;
+            if (auto r = wait(slot); !r) return r;
             flight.stage_ms[i] =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - begin).count();
         }
@@ -366,18 +364,17 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
 
 // Waits for the oldest frame start() submitted and fills `frame` from its readback slot.
 Result<void> VulkanBackend::finish(Frame& frame) {
-    InFlight& flight = in_flight_[oldest_];
+    const std::uint32_t slot = oldest_;
+    InFlight& flight = in_flight_[slot];
     if (!flight.active) return make_error(ErrorCode::invalid_argument, "VulkanBackend::finish: no frame started");
     flight.active = false;
-    const std::uint32_t slot = flight.slot;
     if (in_flight_[1 - slot].active) oldest_ = 1 - slot;
     frame.times.clear();
     frame.stages_run.clear();
     const std::uint32_t stage_total = flight.stage_total, buffer_total = stage_total + 1;
     std::array<double, kMaxDispatches> pass_ms{};
     if (timestamps_) {
-        VkFence fence = fences_[slot].get();
-        VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        if (auto r = wait(slot); !r) return r;
         if (pass_timestamps_) flight.host_ms[2] = ms_since(flight.host_clock);
         const std::uint32_t base = slot * kQueryCount;
         std::array<std::uint64_t, kQueryCount> ticks{};
