@@ -53,6 +53,10 @@ public:
     bool draws_for(std::uint64_t frame_index) const {
         return draws_made && draws_seed == options.seed && draws_frame_index == frame_index;
     }
+    // Makes the frame's draws unless this renderer makes none ahead or has them already.
+    void ensure_draws(std::uint64_t frame_index) {
+        if (!speckle_draws.empty() && !draws_for(frame_index)) make_draws(frame_index);
+    }
 };
 
 namespace {
@@ -145,7 +149,7 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
             impl->backend->set_gpu_overlap(
                 [](void* renderer) {
                     auto& i = *static_cast<RendererImpl*>(renderer);
-                    if (!i.draws_for(i.overlap_frame_index)) i.make_draws(i.overlap_frame_index);
+                    i.ensure_draws(i.overlap_frame_index);
                 },
                 impl.get());
         }
@@ -248,19 +252,17 @@ Result<void> backend_frame(RendererImpl& impl, const Pose& pose, std::uint64_t f
                            const NextFrame* next) {
     StageBackend& backend = *impl.backend;
     const SaveFlags mask = backend_save_mask(impl.options);
-    const bool picked_up = impl.started && same_pose(impl.started_pose, pose);
-    if (impl.started && !picked_up) { // another pose than announced: wait for that work, drop it
-        impl.started = false;
+    const bool was_started = impl.started;
+    impl.started = false; // taken up, dropped or (below) replaced by the next frame
+    const bool picked_up = was_started && same_pose(impl.started_pose, pose);
+    if (was_started && !picked_up) { // another pose than announced: wait for that work, drop it
         if (auto dropped = backend.finish(frame); !dropped) return dropped;
     }
-    if (next == nullptr) {
-        if (!picked_up) return backend.render(pose, mask, frame); // draws made while the device works
-        impl.started = false;
-    } else {
+    if (next == nullptr && !picked_up) return backend.render(pose, mask, frame); // draws made while it works
+    if (next != nullptr) {
         if (!picked_up) {
             if (auto r = backend.start(pose, mask, false, false); !r) return r;
         }
-        impl.started = false;
         // the next frame, queued behind this one; its draws are made after this frame's noise stage
         if (auto r = backend.start(next->pose, mask, true, false); !r) {
             (void)backend.finish(frame); // nothing left on the device
@@ -271,7 +273,7 @@ Result<void> backend_frame(RendererImpl& impl, const Pose& pose, std::uint64_t f
     }
     // this frame's draws, while the device works: made by the last call unless it announced another
     // frame index (or the seed changed since)
-    if (!impl.speckle_draws.empty() && !impl.draws_for(frame_index)) impl.make_draws(frame_index);
+    impl.ensure_draws(frame_index);
     return backend.finish(frame);
 }
 
@@ -307,7 +309,7 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     const auto t1 = std::chrono::steady_clock::now();
     frame.times.push_back({"noise", std::chrono::duration<double, std::milli>(t1 - t0).count()});
     frame.stages_run.push_back("noise");
-    if (ahead && !impl.speckle_draws.empty()) impl.make_draws(next->frame_index); // while the device works
+    if (ahead) impl.ensure_draws(next->frame_index); // while the device works
     return {};
 }
 
