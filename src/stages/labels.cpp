@@ -87,8 +87,10 @@ struct LabelsStage::Pixels {
     // The spreads and shares as the float profile loop makes them, else in double (LabelsStage's
     // float_spreads).
     bool float_spreads = true;
-    std::vector<PixelLabel> pixels; // rows * columns
-    std::vector<PixelRay> rays;     // rows * columns
+    // rows * columns; written for the pixels with echo energy only (a frame's empty pixels keep an earlier
+    // frame's entry: every reader tests the echo first; marking them empty cost 0.5-0.9 ms a frame here)
+    std::vector<PixelLabel> pixels;
+    std::vector<PixelRay> rays; // rows * columns
     // per (row, view): the columns [first, end) between the view's first and last hit pixel in that row
     // (first == end: none), which are all that the beams need to visit there
     std::vector<std::uint32_t> hit_columns; // rows * views * 2
@@ -286,11 +288,9 @@ void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache
             hits[2 * view] = hits[2 * view + 1] = column; // none yet
             for (; column < view_end; ++column) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + column;
-                PixelLabel& out = pixels[p];
-                out.spread.k_first = 0;
-                out.spread.k_last = -1;
                 const double e = frame.echo[2 * p];
                 if (!(e > 0.0)) continue;
+                PixelLabel& out = pixels[p];
                 if (hits[2 * view] == hits[2 * view + 1]) hits[2 * view] = column;
                 hits[2 * view + 1] = column + 1;
                 out.range = frame.echo[2 * p + 1];
