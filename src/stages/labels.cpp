@@ -334,6 +334,13 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
         return cache.float_spreads ? double(Math<float>::range_share(spread_in<float>(spread), k))
                                    : M::range_share(spread, k);
     };
+    // each beam's first and last bin that took energy, widening [*k_low[b], *k_high[b]] once at the end (locals
+    // the compiler keeps apart from the cells: through the pointers every addition reloaded and stored them)
+    int low[kBeamBlock], high[kBeamBlock];
+    for (std::uint32_t b = 0; b < beams; ++b) {
+        low[b] = spread.k_last + 1;
+        high[b] = spread.k_first - 1;
+    }
     for (int k = spread.k_first; k <= spread.k_last; ++k) {
         const double share = cached ? double(pixel.shares[k - spread.k_first]) : (wide ? wide[k] : computed_share(k));
         double range = pixel.range;
@@ -347,9 +354,14 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
             const double w = share * e[b];
             if (!(w > 0.0)) continue;
             add(cells[b][static_cast<std::size_t>(k)], pixel.instance, w, ray.elevation, point);
-            *k_low[b] = std::min(*k_low[b], k);
-            *k_high[b] = std::max(*k_high[b], k);
+            low[b] = std::min(low[b], k);
+            high[b] = k;
         }
+    }
+    for (std::uint32_t b = 0; b < beams; ++b) {
+        if (high[b] < low[b]) continue; // no energy
+        *k_low[b] = std::min(*k_low[b], low[b]);
+        *k_high[b] = std::max(*k_high[b], high[b]);
     }
 }
 
