@@ -120,6 +120,7 @@ struct Target {
     // clusters wholly above or below it are skipped before their setup).
     double band_top_ndc = -1.0, band_bottom_ndc = 1.0;
     bool band = false;
+    PixelBox* drawn = nullptr; // DepthRegion::drawn
 };
 
 // First pixel index whose centre is >= lo, clamped into [begin, end]; lo may be huge or -huge.
@@ -258,6 +259,11 @@ void raster_triangle_in_box(ScreenVertex v0, ScreenVertex v1, ScreenVertex v2, s
     const Edge e0 = make_edge(v1, v2); // weight of v0
     const Edge e1 = make_edge(v2, v0); // weight of v1
     const Edge e2 = make_edge(v0, v1); // weight of v2
+    if (t.drawn != nullptr) {
+        PixelBox& box = *t.drawn;
+        if (box.x0 >= box.x1) box = {x0, x1, y0, y1};
+        box = {std::min(box.x0, x0), std::max(box.x1, x1), std::min(box.y0, y0), std::max(box.y1, y1)};
+    }
 
 #if defined(__x86_64__) && defined(__GNUC__)
     if (t.simd && has_avx2()) {
@@ -528,7 +534,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
     // the region's pixels: rows [row_begin, row_end) of the views' columns (the views are contiguous)
     const std::size_t column_first = view_first_column(plan, view_begin);
     const std::size_t column_end = view_first_column(plan, view_end - 1) + view_columns(plan, view_end - 1);
-    for (std::size_t row = row_begin; row < row_end; ++row) {
+    for (std::size_t row = row_begin; row < row_end && region.clear; ++row) {
         const std::size_t first = row * columns + column_first, last = row * columns + column_end;
         std::fill(depth + first, depth + last, 0.0f);
         std::fill(material + first, material + last, shared::kNoMaterial);
@@ -548,6 +554,7 @@ void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shar
         target.band = row_begin > 0 || row_end < rows;
         target.band_top_ndc = 2.0 * row_begin / rows - 1.0;
         target.band_bottom_ndc = 2.0 * row_end / rows - 1.0;
+        target.drawn = region.drawn;
         const double x_offset = static_cast<double>(view_first);
         if (clusters) {
             const std::size_t count = clusters->runs.size();

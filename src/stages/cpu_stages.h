@@ -39,12 +39,21 @@ struct DepthClusters {
 // again: a few bands per view, not many). simd: the pixels four at a time where the CPU has AVX2 and
 // cpu.vector_loops is not off (false: one at a time; the same bytes, tested). vertex_cache: a run's
 // vertices transformed and projected once each where its indices span few enough (false: once per
-// corner of every triangle; the same bytes, tested).
+// corner of every triangle; the same bytes, tested). clear = false: the caller has the region's depth at
+// 0 already (nothing drawn) and does not read its material where the depth is 0, so neither is cleared
+// (the labels' objects drawn alone, one after another into one image). drawn: where not null, widened to
+// hold the pixel box of every triangle that reached the rasterizer, so every pixel the pass wrote lies
+// inside it (columns and rows of the whole image; x0 >= x1 while nothing was drawn).
+struct PixelBox {
+    std::int64_t x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+};
 struct DepthRegion {
     std::uint32_t row_begin = 0, row_end = ~0u;
     std::uint32_t view_begin = 0, view_end = ~0u;
     bool simd = true;
     bool vertex_cache = true;
+    bool clear = true;
+    PixelBox* drawn = nullptr;
 };
 void depth_pass(const Plan& plan, const SceneData& scene, const std::vector<shared::DepthPush>& draws, float* depth,
                 std::uint32_t* material, float* face_normal = nullptr, const DepthClusters* clusters = nullptr,
