@@ -320,9 +320,10 @@ TEST(CpuThreads, ABigTerrainGivesTheSameBytesOnAnyThreadCount) {
 }
 
 // The labels stage splits its work between the Renderer's threads too: the pixel cache by rows, the
-// beams in blocks of kBeamBlock dealt out in turn (a block's beams interleaved row by row), each
-// labelled object's visibility pass by bands of rows. Every cell is still filled by one thread from its
-// pixels in one order, and the visibility counts are sums of integers: any thread count gives the same
+// beams in blocks of kBeamBlock dealt out in turn (a block's beams interleaved row by row), the labelled
+// objects drawn alone as (object, band of rows) pairs taken by whichever thread is free, each into its
+// own image. Every cell is still filled by one thread from its pixels in one order, and the visibility
+// counts are sums of integers: any thread count gives the same
 // bytes (compared as bytes: the arrays hold NaN where a cell has no label). 3 and 5 threads split
 // unevenly; both beam geometries.
 TEST(CpuThreads, LabelsDoNotDependOnTheThreadCount) {

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
@@ -99,20 +100,36 @@ struct LabelsStage::Pixels {
     std::vector<double> wide_shares;
 };
 
-// Frame::visibility: the scene's depth clusters, culled per frame, and a depth image for one object
-// drawn alone (the CPU rasterizer: the same coverage rule as the depth pass on either backend).
+// One labelled object's counts drawn alone by one thread (ObjectVisibility's, and `own`: its pixels that
+// the frame's depth image also shows it in).
+struct AloneTally {
+    std::uint32_t pixels = 0, hidden = 0, outside = 0, own = 0;
+};
+
+// Frame::visibility: the scene's depth clusters, culled per frame, and per thread a depth image into which
+// it draws one labelled object alone at a time (the CPU rasterizer: the same coverage rule as the depth
+// pass on either backend).
 struct LabelsStage::Alone {
     const SceneData* scene;
     std::vector<shared::DepthPush> draws;
     std::vector<DepthCluster> clusters;
-    std::vector<std::uint8_t> drawn, drawn_alone; // slices * clusters
-    // One object drawn alone: 0 (nothing drawn) outside the band being drawn; the tally puts each drawn
-    // pixel back to 0 as it counts it, so the next object needs no clearing (12 MB a frame for the
-    // bundled scene's seven objects). Its material is written by the rasterizer and never read.
-    std::vector<float> depth;
-    std::vector<std::uint32_t> material;
-    std::vector<double> slant_factor;   // rows * columns: a pixel's slant range / its view-space z
-    std::vector<std::uint8_t> labelled; // 65536: the ids with a labelled cell this frame
+    std::vector<std::uint8_t> drawn; // slices * clusters
+    // A thread's image: all 0 (nothing drawn) between two bands; each band's tally puts the pixels it drew
+    // back to 0 as it counts them, so nothing is cleared (15 MiB a frame for the bundled scene's seven
+    // objects when it was). The material is the rasterizer's output, never read.
+    struct Image {
+        std::vector<float> depth;
+        std::vector<std::uint32_t> material;
+        std::vector<std::uint8_t> drawn_alone; // slices * clusters: object `alone_id`'s runs this frame
+        std::uint32_t alone_id = 0;            // 0: drawn_alone not made this frame
+        std::vector<AloneTally> tally;         // per labelled object (objects' order), this frame
+    };
+    std::vector<Image> images;            // one per thread
+    std::vector<std::uint32_t> objects;   // the labelled ids this frame, increasing
+    std::atomic<std::uint32_t> next_band; // the next (object, band) to draw
+    std::uint32_t bands = 1;              // bands of rows per object this frame
+    std::vector<double> slant_factor;     // rows * columns: a pixel's slant range / its view-space z
+    std::vector<std::uint8_t> labelled;   // 65536: the ids with a labelled cell this frame
     // With sub-pixel objects possible (Plan::subpixel_capacity > 0), per instance id up to the scene's
     // largest: the tally of its sub-pixel returns this frame (one pass over the list), zeroed once read.
     std::vector<ObjectVisibility> from_returns;
@@ -170,10 +187,17 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         alone_->draws.resize(static_cast<std::size_t>(plan_.views) * scene->draws.size());
         build_depth_clusters(*scene, alone_->clusters);
         alone_->drawn.resize(static_cast<std::size_t>(plan_.views) * alone_->clusters.size());
-        alone_->drawn_alone.resize(alone_->drawn.size());
-        alone_->depth.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
-        alone_->material.resize(alone_->depth.size());
-        alone_->slant_factor.resize(alone_->depth.size());
+        // (ids are uint16 with labels on: at most 65535 objects)
+        const std::size_t objects = std::min<std::size_t>(scene->draws.size(), 65535);
+        alone_->objects.reserve(objects);
+        alone_->images.resize(parts);
+        for (Alone::Image& image : alone_->images) {
+            image.depth.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
+            image.material.resize(image.depth.size());
+            image.drawn_alone.resize(alone_->drawn.size());
+            image.tally.resize(objects);
+        }
+        alone_->slant_factor.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
         for (std::uint32_t row = 0; row < plan_.rows; ++row)
             for (std::uint32_t column = 0; column < plan_.columns; ++column)
                 alone_->slant_factor[std::size_t(row) * plan_.columns + column] =
@@ -620,45 +644,47 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
 
 namespace {
 
-// One band's counts of an object drawn alone (ObjectVisibility's, and `own`: its pixels that the frame's
-// depth image also shows it in).
-struct BandTally {
-    std::uint32_t pixels = 0, hidden = 0, outside = 0, own = 0;
-};
-
-// One labelled object drawn alone, in bands of rows (visibility): part `part` of `parts` draws its bands
-// (draw_alone_band) and counts them into tally[part].
-struct AloneBands {
+// The (object, band) pairs of LabelsStage::visibility, taken in turn by the threads: the object's runs
+// (where the frustum does not rule them out) drawn alone into the thread's image in one band of rows, and
+// counted into the thread's tally of the object (counts, so the sums do not depend on who drew what).
+struct AloneJob {
     const Plan* plan;
     const SceneData* scene;
     LabelsStage::Alone* alone;
     const Frame* frame;
-    std::uint32_t id;
-    std::array<BandTally, host::Workers::kMaxThreads> tally;
 };
 
-void draw_alone_rows(AloneBands& b, BandTally& tally, std::uint32_t row_begin, std::uint32_t row_end) {
-    const Plan& plan = *b.plan;
-    LabelsStage::Alone& a = *b.alone;
+void draw_alone_band(const AloneJob& job, LabelsStage::Alone::Image& image, std::uint32_t object,
+                     std::uint32_t row_begin, std::uint32_t row_end) {
+    const Plan& plan = *job.plan;
+    LabelsStage::Alone& a = *job.alone;
+    const std::uint32_t id = a.objects[object];
     if (row_begin == row_end) return;
-    const DepthClusters only{a.clusters, a.drawn_alone};
+    if (image.alone_id != id) { // this object's runs, once per thread and object
+        image.alone_id = id;
+        const std::size_t runs = a.clusters.size();
+        for (std::size_t i = 0; i < a.drawn.size(); ++i)
+            image.drawn_alone[i] = job.scene->draws[a.clusters[i % runs].draw].instance == id ? a.drawn[i] : 0;
+    }
+    const DepthClusters only{a.clusters, image.drawn_alone};
     DepthRegion band;
     band.row_begin = row_begin;
     band.row_end = row_end;
-    band.clear = false; // the band is all 0: nothing drawn since the last object's tally (Alone::depth)
+    band.clear = false; // the image is all 0 between two bands (Alone::Image)
     PixelBox drawn;     // the tally visits only this box: most objects cover a few rows and columns
     band.drawn = &drawn;
-    depth_pass(plan, *b.scene, a.draws, a.depth.data(), a.material.data(), nullptr, &only, band);
+    depth_pass(plan, *job.scene, a.draws, image.depth.data(), image.material.data(), nullptr, &only, band);
     // The depth test is strict GREATER against 0: every drawn pixel holds a depth > 0.
-    float* depth = a.depth.data();
+    AloneTally& tally = image.tally[object];
+    float* depth = image.depth.data();
     for (std::int64_t row = drawn.y0; row < drawn.y1 && drawn.x0 < drawn.x1; ++row) {
         for (std::int64_t column = drawn.x0; column < drawn.x1; ++column) {
             const std::size_t p = std::size_t(row) * plan.columns + std::size_t(column);
             const float d = depth[p];
             if (!(d > 0.0f)) continue;
-            depth[p] = 0.0f; // back to nothing drawn, for the next object
+            depth[p] = 0.0f; // back to nothing drawn, for the next band
             ++tally.pixels;
-            if (instance_of(b.frame->material[p]) != b.id) {
+            if (instance_of(job.frame->material[p]) != id) {
                 ++tally.hidden;
                 continue;
             }
@@ -669,19 +695,21 @@ void draw_alone_rows(AloneBands& b, BandTally& tally, std::uint32_t row_begin, s
     }
 }
 
-// Part `part` of `parts` takes every parts-th of up to kAloneBandsPerPart * parts bands of rows: an
-// object often covers a few rows only, and one band per thread left most threads without any of it
-// (the objects drawn alone: 7.4 ms on one thread of an H100's host, 3.1 on 16).
-void draw_alone_band(void* context, std::uint32_t part, std::uint32_t parts) {
-    AloneBands& b = *static_cast<AloneBands*>(context);
-    const std::uint64_t rows = b.plan->rows;
-    const std::uint64_t bands = std::max<std::uint64_t>(
-        1, std::min<std::uint64_t>(std::uint64_t(parts) * kAloneBandsPerPart, rows / kAloneBandRows));
-    BandTally& tally = b.tally[part];
-    tally = BandTally{};
-    for (std::uint64_t band = part; band < bands; band += parts)
-        draw_alone_rows(b, tally, static_cast<std::uint32_t>(rows * band / bands),
-                        static_cast<std::uint32_t>(rows * (band + 1) / bands));
+// Part `part` takes the (object, band) pairs in turn until none is left: objects one after another (the
+// bundled scene's seabed, then small ones covering a few rows each), each in Alone::bands bands of rows,
+// so that small objects run side by side on the threads instead of one after another on all of them.
+void draw_alone_bands(void* context, std::uint32_t part, std::uint32_t) {
+    const AloneJob& job = *static_cast<const AloneJob*>(context);
+    LabelsStage::Alone& a = *job.alone;
+    LabelsStage::Alone::Image& image = a.images[part];
+    const std::uint32_t bands = a.bands, rows = job.plan->rows;
+    const std::uint32_t count = static_cast<std::uint32_t>(a.objects.size()) * bands;
+    for (std::uint32_t i = a.next_band.fetch_add(1, std::memory_order_relaxed); i < count;
+         i = a.next_band.fetch_add(1, std::memory_order_relaxed)) {
+        const std::uint32_t band = i % bands;
+        draw_alone_band(job, image, i / bands, static_cast<std::uint32_t>(std::uint64_t(rows) * band / bands),
+                        static_cast<std::uint32_t>(std::uint64_t(rows) * (band + 1) / bands));
+    }
 }
 
 } // namespace
@@ -694,7 +722,6 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     a.labelled[0] = 0;
     compose_depth_draws(plan_, scene, pose, a.draws);
     cull_depth_clusters(a.clusters, scene.draws.size(), a.draws, a.drawn);
-    const std::size_t runs = a.clusters.size();
     // Objects taken out of the depth pass this frame (below the pixel grid's size, core/subpixel.h) have no
     // pixel of their own there, and drawn alone they look hidden by whatever lies behind them: their
     // returns say instead (each a piece of it in one profile column), hidden as the profile stage hides
@@ -715,30 +742,33 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
                 ++tally.outside;
         }
     }
+    a.objects.clear();
     for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
         if (!a.labelled[id]) continue;
         a.labelled[id] = 0;
+        if (a.objects.size() < a.objects.capacity()) a.objects.push_back(id); // (capacity: the scene's draws)
+    }
+    // Each object in bands of rows dealt to the threads as they come free (draw_alone_bands).
+    const std::uint32_t parts = static_cast<std::uint32_t>(a.images.size());
+    a.bands = std::max<std::uint32_t>(1, std::min(parts * kAloneBandsPerPart, plan_.rows / kAloneBandRows));
+    a.next_band.store(0, std::memory_order_relaxed);
+    for (Alone::Image& image : a.images) {
+        image.alone_id = 0;
+        std::fill(image.tally.begin(), image.tally.begin() + a.objects.size(), AloneTally{});
+    }
+    AloneJob job{&plan_, &scene, &a, &frame};
+    host::run_parts(workers_, draw_alone_bands, &job);
+    for (std::size_t object = 0; object < a.objects.size(); ++object) {
+        const std::uint32_t id = a.objects[object];
         ObjectVisibility v;
         v.instance = id;
-        // Only this object's runs (where the frustum does not rule them out): it alone in the depth image.
-        bool any = false;
-        for (std::size_t i = 0; i < a.drawn.size(); ++i) {
-            const bool mine = scene.draws[a.clusters[i % runs].draw].instance == id;
-            a.drawn_alone[i] = mine ? a.drawn[i] : 0;
-            any = any || a.drawn_alone[i];
-        }
         std::uint32_t own = 0; // its pixels in the frame's own depth image
-        if (any) {
-            // In bands of rows dealt to the threads (draw_alone_band): each draws the object into its rows and tallies
-            // them (counts, so the sum does not depend on the split).
-            AloneBands bands{&plan_, &scene, &a, &frame, id, {}};
-            host::run_parts(workers_, draw_alone_band, &bands);
-            for (const BandTally& band : bands.tally) {
-                v.pixels += band.pixels;
-                v.hidden += band.hidden;
-                v.outside += band.outside;
-                own += band.own;
-            }
+        for (const Alone::Image& image : a.images) {
+            const AloneTally& t = image.tally[object];
+            v.pixels += t.pixels;
+            v.hidden += t.hidden;
+            v.outside += t.outside;
+            own += t.own;
         }
         if (id < a.from_returns.size()) { // its returns' tally, when it has no pixel of its own
             ObjectVisibility& tally = a.from_returns[id];
