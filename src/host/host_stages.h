@@ -72,6 +72,7 @@ private:
     void render_rows(const Frame& frame, Image& out, std::uint32_t row_begin, std::uint32_t row_end) const;
     std::vector<std::int32_t> beam0_, bin0_; // -1: outside the fan
     std::vector<float> beam_t_, bin_t_;
+    std::vector<std::int32_t> nearest_; // nearest_cell's cell (bin * beams + beam), -1 outside the fan
     std::vector<std::uint8_t> overlay_; // 1 where rings/bearing lines are drawn
     std::uint32_t width_ = 0, height_ = 0;
     std::uint32_t beams_ = 0, bins_ = 0;

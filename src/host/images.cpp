@@ -211,6 +211,17 @@ FanRenderer::FanRenderer(const Plan& plan) {
             bin_t_[p] = kt;
         }
     }
+    // Each pixel's nearest cell: the nearer of the two beams and of the two bins that render() blends.
+    nearest_.assign(npix, -1);
+    for (std::size_t p = 0; p < npix; ++p) {
+        const std::int32_t j0 = beam0_[p];
+        if (j0 < 0) continue;
+        std::size_t j = static_cast<std::size_t>(j0);
+        if (beam_t_[p] >= 0.5f) j = j + 1 < beams_ ? j + 1 : 0;
+        std::size_t k = static_cast<std::size_t>(bin0_[p]);
+        if (bin_t_[p] >= 0.5f && k + 1 < bins_) ++k;
+        nearest_[p] = static_cast<std::int32_t>(k * beams_ + j);
+    }
 }
 
 std::uint32_t FanRenderer::width() const {
@@ -282,17 +293,14 @@ void FanRenderer::render_rows(const Frame& frame, Image& out, std::uint32_t row_
 
 void FanRenderer::nearest_cell(const std::vector<std::uint16_t>& cells, std::vector<std::uint16_t>& out) const {
     const std::size_t npix = static_cast<std::size_t>(width_) * height_;
-    out.assign(npix, 0);
-    if (cells.size() < static_cast<std::size_t>(beams_) * bins_) return;
+    out.resize(npix);
+    if (cells.size() < static_cast<std::size_t>(beams_) * bins_) {
+        std::fill(out.begin(), out.end(), std::uint16_t(0));
+        return;
+    }
     for (std::size_t p = 0; p < npix; ++p) {
-        const std::int32_t j0 = beam0_[p];
-        if (j0 < 0) continue;
-        // The nearer of the two beams and of the two bins that render() blends.
-        std::size_t j = static_cast<std::size_t>(j0);
-        if (beam_t_[p] >= 0.5f) j = j + 1 < beams_ ? j + 1 : 0;
-        std::size_t k = static_cast<std::size_t>(bin0_[p]);
-        if (bin_t_[p] >= 0.5f && k + 1 < bins_) ++k;
-        out[p] = cells[k * beams_ + j];
+        const std::int32_t cell = nearest_[p];
+        out[p] = cell >= 0 ? cells[static_cast<std::size_t>(cell)] : 0;
     }
 }
 
