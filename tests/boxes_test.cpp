@@ -134,6 +134,97 @@ TEST(Boxes, ExtentsCellsAndEnergyOfHandMadeLabels) {
     EXPECT_TRUE(boxes.empty());
 }
 
+// The finder takes runs of one id along a bin (and along a fan row) at a time. Random labels made of
+// runs, of single cells and of ids that come back along a row, against the box of each id worked out
+// here cell by cell; the energy in the same cell order, so it must match to the bit.
+TEST(Boxes, RunsOfOneIdGiveTheBoxesOfACellByCellPass) {
+    std::uint64_t state = 0x9E3779B97F4A7C15ull;
+    auto next = [&](std::uint32_t n) {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return static_cast<std::uint32_t>((state >> 33) % n);
+    };
+    vksonar::Frame f;
+    f.bins = 37;
+    f.beams = 53;
+    const std::size_t cells = std::size_t(f.bins) * f.beams;
+    for (std::size_t i = 0; i < cells;) { // runs of 1 to 9 cells of id 0 to 5, crossing bins
+        const std::uint16_t id = static_cast<std::uint16_t>(next(6));
+        for (std::uint32_t n = 1 + next(9); n > 0 && i < cells; --n, ++i)
+            f.instance.push_back(id);
+    }
+    f.object_class.resize(cells);
+    f.instance_fraction.resize(cells);
+    f.clean.resize(cells);
+    for (std::size_t i = 0; i < cells; ++i) {
+        f.object_class[i] = static_cast<std::uint16_t>(f.instance[i] ? 100 + f.instance[i] : 0);
+        f.instance_fraction[i] = 0.1f + 0.01f * static_cast<float>(next(90));
+        f.clean[i] = 1e-3f * static_cast<float>(1 + next(100000));
+    }
+    const std::uint32_t width = 41, height = 23;
+    std::vector<std::uint16_t> fan(std::size_t(width) * height);
+    for (std::size_t p = 0; p < fan.size();) {
+        const std::uint16_t id = static_cast<std::uint16_t>(next(7)); // 6: an id no cell has
+        for (std::uint32_t n = 1 + next(12); n > 0 && p < fan.size(); --n, ++p)
+            fan[p] = id;
+    }
+    std::map<std::uint16_t, vksonar::host::Box> expected;
+    for (std::uint32_t k = 0; k < f.bins; ++k) {
+        for (std::uint32_t j = 0; j < f.beams; ++j) {
+            const std::size_t i = std::size_t(k) * f.beams + j;
+            const std::uint16_t id = f.instance[i];
+            if (id == 0) continue;
+            auto [it, made] = expected.try_emplace(id);
+            vksonar::host::Box& b = it->second;
+            if (made) {
+                b.instance_id = id;
+                b.class_id = f.object_class[i];
+                b.bin_first = k;
+                b.beam_first = b.beam_last = j;
+            }
+            b.bin_last = k;
+            b.beam_first = std::min(b.beam_first, j);
+            b.beam_last = std::max(b.beam_last, j);
+            ++b.cells;
+            b.energy += double(f.clean[i]) * double(f.instance_fraction[i]);
+        }
+    }
+    for (std::uint32_t y = 0; y < height; ++y) {
+        for (std::uint32_t x = 0; x < width; ++x) {
+            const auto it = expected.find(fan[std::size_t(y) * width + x]);
+            if (it == expected.end()) continue;
+            vksonar::host::Box& b = it->second;
+            if (b.fan_pixels == 0) {
+                b.x0 = b.x1 = x;
+                b.y0 = y;
+            }
+            b.x0 = std::min(b.x0, x);
+            b.x1 = std::max(b.x1, x);
+            b.y1 = y;
+            ++b.fan_pixels;
+        }
+    }
+    vksonar::host::BoxFinder finder;
+    std::vector<vksonar::host::Box> boxes;
+    finder.find(f, fan, width, height, boxes);
+    ASSERT_EQ(boxes.size(), expected.size());
+    ASSERT_EQ(expected.size(), 5u);
+    for (const vksonar::host::Box& b : boxes) {
+        const vksonar::host::Box& e = expected.at(b.instance_id);
+        EXPECT_EQ(b.class_id, e.class_id) << b.instance_id;
+        EXPECT_EQ(b.bin_first, e.bin_first) << b.instance_id;
+        EXPECT_EQ(b.bin_last, e.bin_last) << b.instance_id;
+        EXPECT_EQ(b.beam_first, e.beam_first) << b.instance_id;
+        EXPECT_EQ(b.beam_last, e.beam_last) << b.instance_id;
+        EXPECT_EQ(b.cells, e.cells) << b.instance_id;
+        EXPECT_EQ(b.energy, e.energy) << b.instance_id;
+        EXPECT_EQ(b.fan_pixels, e.fan_pixels) << b.instance_id;
+        EXPECT_EQ(b.x0, e.x0) << b.instance_id;
+        EXPECT_EQ(b.x1, e.x1) << b.instance_id;
+        EXPECT_EQ(b.y0, e.y0) << b.instance_id;
+        EXPECT_EQ(b.y1, e.y1) << b.instance_id;
+    }
+}
+
 TEST(Boxes, JsonText) {
     vksonar::Frame f = labelled_frame({0, 0, 0, 0, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}, 0);
     vksonar::host::BoxFinder finder;

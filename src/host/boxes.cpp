@@ -19,11 +19,20 @@ void BoxFinder::find(const Frame& frame, const std::vector<std::uint16_t>& fan_i
     if (slot_.empty()) slot_.assign(std::size_t{std::numeric_limits<std::uint16_t>::max()} + 1, 0);
     const bool has_clean = frame.clean.size() >= cells;
 
+    // A row's cells in runs of one id (an object's cells lie side by side along a bin): one box update a
+    // run. Its cells' energy still goes into the box one by one, in the order of the cells.
     for (std::size_t k = 0; k < bins; ++k) {
-        for (std::size_t j = 0; j < beams; ++j) {
+        const std::uint16_t* ids = frame.instance.data() + k * beams;
+        for (std::size_t j = 0; j < beams;) {
+            const std::uint16_t id = ids[j];
+            std::size_t end = j + 1;
+            while (end < beams && ids[end] == id)
+                ++end;
+            if (id == 0) {
+                j = end;
+                continue;
+            }
             const std::size_t i = k * beams + j;
-            const std::uint16_t id = frame.instance[i];
-            if (id == 0) continue;
             std::uint32_t& slot = slot_[id];
             if (slot == 0) {
                 Box box;
@@ -38,30 +47,36 @@ void BoxFinder::find(const Frame& frame, const std::vector<std::uint16_t>& fan_i
             // Cells are visited bin by bin, so bin_first is the first bin seen and bin_last the latest.
             box.bin_last = static_cast<std::uint32_t>(k);
             box.beam_first = std::min(box.beam_first, static_cast<std::uint32_t>(j));
-            box.beam_last = std::max(box.beam_last, static_cast<std::uint32_t>(j));
-            ++box.cells;
-            if (has_clean)
-                box.energy += static_cast<double>(frame.clean[i]) * static_cast<double>(frame.instance_fraction[i]);
+            box.beam_last = std::max(box.beam_last, static_cast<std::uint32_t>(end - 1));
+            box.cells += end - j;
+            for (std::size_t c = i; c < i + (end - j) && has_clean; ++c)
+                box.energy += static_cast<double>(frame.clean[c]) * static_cast<double>(frame.instance_fraction[c]);
+            j = end;
         }
     }
 
     // Fan pixels carry the ids of cells, so every id found there has a box already; a pixel whose id has
-    // none (fan_ids from another frame) is skipped rather than invented a box.
+    // none (fan_ids from another frame) is skipped rather than invented a box. Runs of one id per row.
     if (fan_ids.size() >= static_cast<std::size_t>(width) * height) {
         for (std::uint32_t y = 0; y < height; ++y) {
             const std::uint16_t* row = fan_ids.data() + static_cast<std::size_t>(y) * width;
-            for (std::uint32_t x = 0; x < width; ++x) {
+            for (std::uint32_t x = 0; x < width;) {
                 const std::uint16_t id = row[x];
-                if (id == 0 || slot_[id] == 0) continue;
-                Box& box = boxes[slot_[id] - 1];
-                if (box.fan_pixels == 0) {
-                    box.x0 = box.x1 = x;
-                    box.y0 = box.y1 = y;
+                std::uint32_t end = x + 1;
+                while (end < width && row[end] == id)
+                    ++end;
+                if (id != 0 && slot_[id] != 0) {
+                    Box& box = boxes[slot_[id] - 1];
+                    if (box.fan_pixels == 0) {
+                        box.x0 = box.x1 = x;
+                        box.y0 = box.y1 = y;
+                    }
+                    box.x0 = std::min(box.x0, x);
+                    box.x1 = std::max(box.x1, end - 1);
+                    box.y1 = y; // rows in order: the latest row is the lowest
+                    box.fan_pixels += end - x;
                 }
-                box.x0 = std::min(box.x0, x);
-                box.x1 = std::max(box.x1, x);
-                box.y1 = y; // rows in order: the latest row is the lowest
-                ++box.fan_pixels;
+                x = end;
             }
         }
     }
