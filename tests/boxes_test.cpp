@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <map>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -208,21 +209,13 @@ TEST(Boxes, RunsOfOneIdGiveTheBoxesOfACellByCellPass) {
     finder.find(f, fan, width, height, boxes);
     ASSERT_EQ(boxes.size(), expected.size());
     ASSERT_EQ(expected.size(), 5u);
-    for (const vksonar::host::Box& b : boxes) {
-        const vksonar::host::Box& e = expected.at(b.instance_id);
-        EXPECT_EQ(b.class_id, e.class_id) << b.instance_id;
-        EXPECT_EQ(b.bin_first, e.bin_first) << b.instance_id;
-        EXPECT_EQ(b.bin_last, e.bin_last) << b.instance_id;
-        EXPECT_EQ(b.beam_first, e.beam_first) << b.instance_id;
-        EXPECT_EQ(b.beam_last, e.beam_last) << b.instance_id;
-        EXPECT_EQ(b.cells, e.cells) << b.instance_id;
-        EXPECT_EQ(b.energy, e.energy) << b.instance_id;
-        EXPECT_EQ(b.fan_pixels, e.fan_pixels) << b.instance_id;
-        EXPECT_EQ(b.x0, e.x0) << b.instance_id;
-        EXPECT_EQ(b.x1, e.x1) << b.instance_id;
-        EXPECT_EQ(b.y0, e.y0) << b.instance_id;
-        EXPECT_EQ(b.y1, e.y1) << b.instance_id;
-    }
+    // (class, polar extent, cells, energy, fan pixels, fan extent)
+    const auto fields = [](const vksonar::host::Box& b) {
+        return std::tuple(b.class_id, b.bin_first, b.bin_last, b.beam_first, b.beam_last, b.cells, b.energy,
+                          b.fan_pixels, b.x0, b.x1, b.y0, b.y1);
+    };
+    for (const vksonar::host::Box& b : boxes)
+        EXPECT_EQ(fields(b), fields(expected.at(b.instance_id))) << "instance " << b.instance_id;
 }
 
 TEST(Boxes, JsonText) {

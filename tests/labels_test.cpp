@@ -522,15 +522,21 @@ TEST_P(LabelBackendTest, FlowStopsAtAnOccluder) {
 // so that part is the cap t < t_out with r(t_out) = 13.5, its share of the disc t < asin(a / D) in
 // solid angle (1 - cos t_out) / (1 - cos t_max). Tolerance: the pixels along the disc's edge and the
 // cut (one pixel wide, about 8 % of a 13-pixel-radius disc; 0.05 on a half).
+// A sphere of radius a at distance D straight ahead and, 8 m away, a wall covering the azimuths below 0
+// (the visibility tests).
+void add_sphere_behind_half_wall(Scene& scene, double D, double a, std::uint32_t sphere_id, std::uint32_t wall_id) {
+    add_sphere(scene, D, 0.0, 0.0, a, 96, -10.0, sphere_id);
+    AcousticMaterial m;
+    m.backscatter_db = -20.0;
+    add_quad(scene, 8.0, -2.0, 0.0, 4.0, 6.0, m, 0.0, wall_id);
+}
+
 TEST_P(LabelBackendTest, VisibilityOfAHalfHiddenAndAPartlyOutsideObject) {
     const double D = 14.0, a = 1.0;
     {
         const SonarConfig config = labels_config(BeamGeometry::line_array);
         Scene scene;
-        add_sphere(scene, D, 0.0, 0.0, a, 96, -10.0, kSphereId);
-        AcousticMaterial m;
-        m.backscatter_db = -20.0;
-        add_quad(scene, 8.0, -2.0, 0.0, 4.0, 6.0, m, 0.0, kQuadId);
+        add_sphere_behind_half_wall(scene, D, a, kSphereId, kQuadId);
         auto r = render_once(GetParam(), config, scene, {}, SaveFlags::labels);
         ASSERT_TRUE(r);
         const auto& vis = r->frame.visibility;
@@ -581,10 +587,7 @@ TEST_P(LabelBackendTest, ObjectsDrawnAloneDoNotSeeTheObjectsDrawnBefore) {
     const std::uint32_t wall_id = 3, sphere_id = 5;
     const SonarConfig config = labels_config(BeamGeometry::line_array);
     Scene scene;
-    add_sphere(scene, D, 0.0, 0.0, a, 96, -10.0, sphere_id);
-    AcousticMaterial m;
-    m.backscatter_db = -20.0;
-    add_quad(scene, 8.0, -2.0, 0.0, 4.0, 6.0, m, 0.0, wall_id);
+    add_sphere_behind_half_wall(scene, D, a, sphere_id, wall_id);
     auto r = render_once(GetParam(), config, scene, {}, SaveFlags::labels);
     ASSERT_TRUE(r);
     const std::vector<ObjectVisibility> first = r->frame.visibility;
