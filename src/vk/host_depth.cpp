@@ -327,21 +327,9 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         VKS_VK_TRY(context.fn.vkEndCommandBuffer(commands));
 
         const auto start = std::chrono::steady_clock::now();
-        VkSubmitInfo submit{};
-        submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
-        submit.commandBufferCount = 1;
-        submit.pCommandBuffers = &commands;
-        const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
         // the first stage reads the host's image (stage_table_test): it waits for the host's semaphore
-        if (i == 0 && image.wait_semaphore != VK_NULL_HANDLE) {
-            submit.waitSemaphoreCount = 1;
-            submit.pWaitSemaphores = &image.wait_semaphore;
-            submit.pWaitDstStageMask = &wait_stage;
-        }
-        VkFence fence = b.fences_[0].get();
-        VKS_VK_TRY(context.fn.vkResetFences(context.device, 1, &fence));
-        VKS_VK_TRY(queue_submit(context, submit, fence));
-        VKS_VK_TRY(context.fn.vkWaitForFences(context.device, 1, &fence, VK_TRUE, UINT64_MAX));
+        if (auto r = b.submit(&commands, 1, 0, false, i == 0 ? image.wait_semaphore : VK_NULL_HANDLE); !r) return r;
+        if (auto r = b.wait(0); !r) return r;
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         if (i < stage_total) { // the readback is a transfer, not a stage
             frame.times.push_back(StageTime{stages[i]->host_depth_name, ms});

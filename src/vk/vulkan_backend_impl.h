@@ -121,10 +121,11 @@ private:
     void compute_barrier(VkCommandBuffer commands, const Buffer& written);
     void dispatch(VkCommandBuffer commands, const Dispatch& groups);
 
-    // Submits on the slot's fence; overlap: then runs overlap_work_ (before anyone waits). wait: for the
-    // slot's fence.
+    // Submits on the slot's fence; overlap: then runs overlap_work_ (before anyone waits); wait_semaphore
+    // (not null): the submission's compute work waits for it (a host depth image's). wait: for the slot's
+    // fence.
     Result<void> submit(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
-                        bool overlap = false);
+                        bool overlap = false, VkSemaphore wait_semaphore = VK_NULL_HANDLE);
     Result<void> wait(std::uint32_t slot);
     void copy_out(const Region& region, void* destination) const;
     // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)

@@ -199,11 +199,17 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
 }
 
 Result<void> VulkanBackend::submit(const VkCommandBuffer* command_buffers, std::uint32_t count, std::uint32_t slot,
-                                   bool overlap) {
+                                   bool overlap, VkSemaphore wait_semaphore) {
     VkSubmitInfo submit{};
     submit.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     submit.commandBufferCount = count;
     submit.pCommandBuffers = command_buffers;
+    const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+    if (wait_semaphore != VK_NULL_HANDLE) {
+        submit.waitSemaphoreCount = 1;
+        submit.pWaitSemaphores = &wait_semaphore;
+        submit.pWaitDstStageMask = &wait_stage;
+    }
     VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
     VKS_VK_TRY(queue_submit(context_, submit, fence));
