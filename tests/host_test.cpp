@@ -620,6 +620,36 @@ TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
     }
 }
 
+// instance_fan.png's colours (label_image) depend on the id alone: black for 0, each channel in
+// [64, 255] for the others, the same colour for an id wherever it is, whatever its neighbours (runs of
+// one id, an id coming back after another, single pixels), and different colours for the ids used here.
+TEST(HostImages, LabelColoursDependOnTheIdAlone) {
+    const std::uint32_t width = 29, height = 7;
+    std::vector<std::uint16_t> ids(std::size_t(width) * height);
+    std::uint32_t state = 12345;
+    for (std::size_t p = 0; p < ids.size();) {
+        state = state * 1664525u + 1013904223u;
+        const std::uint16_t id = static_cast<std::uint16_t>((state >> 24) % 5 == 0 ? 0 : 1 + (state >> 16) % 9);
+        for (std::uint32_t n = 1 + (state >> 8) % 6; n > 0 && p < ids.size(); --n, ++p)
+            ids[p] = id;
+    }
+    host::Image image, one;
+    host::label_image(ids, width, height, image);
+    std::vector<std::vector<std::uint8_t>> colour_of(10);
+    for (std::uint16_t id = 0; id < 10; ++id) {
+        host::label_image({id}, 1, 1, one);
+        colour_of[id] = one.rgb;
+        for (std::uint8_t channel : one.rgb)
+            EXPECT_TRUE(id == 0 ? channel == 0 : channel >= 64) << id;
+        for (std::uint16_t other = 1; other < id; ++other)
+            EXPECT_NE(colour_of[other], colour_of[id]) << other << " and " << id;
+    }
+    for (std::size_t p = 0; p < ids.size(); ++p) {
+        const std::vector<std::uint8_t> pixel(image.rgb.begin() + 3 * p, image.rgb.begin() + 3 * p + 3);
+        EXPECT_EQ(pixel, colour_of[ids[p]]) << "pixel " << p << ", id " << ids[p];
+    }
+}
+
 // ------------------------------------------------------------------------------------------- files
 
 TEST(HostFiles, NpyHeaderShapeAndSize) {

@@ -306,18 +306,25 @@ void FanRenderer::nearest_cell(const std::vector<std::uint16_t>& cells, std::vec
 
 void label_image(const std::vector<std::uint16_t>& ids, std::uint32_t width, std::uint32_t height, Image& out) {
     ensure_size(out, width, height);
+    const auto colour_of = [](std::uint16_t id) -> Rgb8 {
+        if (id == 0) return {0, 0, 0};
+        // splitmix-style bit mixing of the id, each channel lifted into [64, 255]
+        std::uint32_t h = id * 0x9e3779b9u;
+        h ^= h >> 16;
+        h *= 0x85ebca6bu;
+        h ^= h >> 13;
+        return {static_cast<std::uint8_t>(64 + (h & 0xff) * 191 / 255),
+                static_cast<std::uint8_t>(64 + ((h >> 8) & 0xff) * 191 / 255),
+                static_cast<std::uint8_t>(64 + ((h >> 16) & 0xff) * 191 / 255)};
+    };
+    // ids come in runs along a row (an object's pixels side by side): a colour is made when the id changes
+    std::uint16_t id = 0;
+    Rgb8 c = colour_of(0);
     const std::size_t npix = static_cast<std::size_t>(width) * height;
     for (std::size_t p = 0; p < npix && p < ids.size(); ++p) {
-        Rgb8 c{0, 0, 0};
-        if (ids[p] != 0) {
-            // splitmix-style bit mixing of the id, each channel lifted into [64, 255]
-            std::uint32_t h = ids[p] * 0x9e3779b9u;
-            h ^= h >> 16;
-            h *= 0x85ebca6bu;
-            h ^= h >> 13;
-            c = {static_cast<std::uint8_t>(64 + (h & 0xff) * 191 / 255),
-                 static_cast<std::uint8_t>(64 + ((h >> 8) & 0xff) * 191 / 255),
-                 static_cast<std::uint8_t>(64 + ((h >> 16) & 0xff) * 191 / 255)};
+        if (ids[p] != id) {
+            id = ids[p];
+            c = colour_of(id);
         }
         put(out, p, c);
     }
