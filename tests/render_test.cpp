@@ -322,10 +322,10 @@ TEST(CpuThreads, ABigTerrainGivesTheSameBytesOnAnyThreadCount) {
 // The labels stage splits its work between the Renderer's threads too: the pixel cache by rows, the
 // beams in blocks of kBeamBlock dealt out in turn (a block's beams interleaved row by row), the labelled
 // objects drawn alone as (object, band of rows) pairs taken by whichever thread is free, each into its
-// own image. Every cell is still filled by one thread from its pixels in one order, and the visibility
-// counts are sums of integers: any thread count gives the same
-// bytes (compared as bytes: the arrays hold NaN where a cell has no label). 3 and 5 threads split
-// unevenly; both beam geometries.
+// own image; the flow to a next frame in blocks of cells. Every cell is still filled by one thread from
+// its pixels in one order, the visibility counts are sums of integers, and a cell's flow depends on the
+// two frames alone: any thread count gives the same bytes (compared as bytes: the arrays hold NaN where
+// a cell has no label). 3 and 5 threads split unevenly; both beam geometries.
 TEST(CpuThreads, LabelsDoNotDependOnTheThreadCount) {
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
     ASSERT_TRUE(scene) << scene.error().message;
@@ -334,13 +334,28 @@ TEST(CpuThreads, LabelsDoNotDependOnTheThreadCount) {
     auto same_bytes = [](const auto& a, const auto& b) {
         return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])) == 0;
     };
+    // and the flow to a frame 0.4 m ahead and turned 2 degrees (cells in blocks between the threads)
+    Pose next_pose = pose;
+    next_pose.x_m = 0.4;
+    next_pose.yaw_deg = 2.0;
     for (BeamGeometry geometry : {BeamGeometry::line_array, BeamGeometry::planar}) {
         SonarConfig config = quiet_config();
         config.beam_geometry = geometry;
         std::unique_ptr<Rendered> one;
+        std::vector<float> first_flow;
         for (std::uint32_t threads : {1u, 2u, 3u, 5u}) {
             auto rendered = render_on_threads(config, scene.value(), pose, threads, SaveFlags::labels);
             ASSERT_TRUE(rendered);
+            Frame next = rendered->renderer.make_frame();
+            ASSERT_TRUE(rendered->renderer.render(next_pose, 1, next));
+            std::vector<float> flow;
+            ASSERT_TRUE(rendered->renderer.label_flow(rendered->frame, pose, next, next_pose, flow));
+            if (first_flow.empty()) {
+                ASSERT_GT(std::count_if(flow.begin(), flow.end(), [](float v) { return !std::isnan(v); }), 10000);
+                first_flow = flow;
+            } else {
+                EXPECT_TRUE(same_bytes(first_flow, flow)) << threads << " threads";
+            }
             if (!one) {
                 ASSERT_GE(rendered->frame.visibility.size(), 5u); // seabed, pilings, pipe, crate, sphere
                 ASSERT_GT(std::count_if(rendered->frame.instance.begin(), rendered->frame.instance.end(),

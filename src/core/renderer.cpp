@@ -393,7 +393,7 @@ Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, cons
     if (from.instance.size() != cells || from.point.size() != 3 * cells || to.depth.size() != pixels)
         return make_error(ErrorCode::invalid_argument, "label_flow: the frames were not made by this renderer");
     if (flow.size() != 2 * cells) flow.resize(2 * cells);
-    cpu::label_flow(p, from, from_pose, to, to_pose, flow.data());
+    impl_->labels->flow(from, from_pose, to, to_pose, flow.data());
     return {};
 }
 

@@ -91,7 +91,8 @@ struct LabelsStage::Pixels {
     // rows * columns; written for the pixels with echo energy only (a frame's empty pixels keep an earlier
     // frame's entry: every reader tests the echo first; marking them empty cost 0.5-0.9 ms a frame here)
     std::vector<PixelLabel> pixels;
-    std::vector<PixelRay> rays; // rows * columns
+    std::vector<PixelRay> rays;       // rows * columns
+    std::vector<double> slant_factor; // rows * columns: a pixel's slant range / its view-space z
     // per (row, view): the columns [first, end) between the view's first and last hit pixel in that row
     // (first == end: none), which are all that the beams need to visit there
     std::vector<std::uint32_t> hit_columns; // rows * views * 2
@@ -128,7 +129,6 @@ struct LabelsStage::Alone {
     std::vector<std::uint32_t> objects;   // the labelled ids this frame, increasing
     std::atomic<std::uint32_t> next_band; // the next (object, band) to draw
     std::uint32_t bands = 1;              // bands of rows per object this frame
-    std::vector<double> slant_factor;     // rows * columns: a pixel's slant range / its view-space z
     std::vector<std::uint8_t> labelled;   // 65536: the ids with a labelled cell this frame
     // With sub-pixel objects possible (Plan::subpixel_capacity > 0), per instance id up to the scene's
     // largest: the tally of its sub-pixel returns this frame (one pass over the list), zeroed once read.
@@ -177,9 +177,12 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
     pixels_->rays.resize(pixels_->pixels.size());
     pixels_->hit_columns.resize(std::size_t(plan_.rows) * plan_.views * 2);
+    pixels_->slant_factor.resize(pixels_->pixels.size());
     for (std::uint32_t row = 0; row < plan_.rows; ++row)
-        for (std::uint32_t column = 0; column < plan_.columns; ++column)
+        for (std::uint32_t column = 0; column < plan_.columns; ++column) {
             pixels_->rays[std::size_t(row) * plan_.columns + column] = pixel_ray_of(plan_, row, column);
+            pixels_->slant_factor[std::size_t(row) * plan_.columns + column] = pixel_slant_factor(plan_, row, column);
+        }
     pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
     if (scene != nullptr) {
         alone_ = std::make_unique<Alone>();
@@ -197,11 +200,6 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
             image.drawn_alone.resize(alone_->drawn.size());
             image.tally.resize(objects);
         }
-        alone_->slant_factor.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
-        for (std::uint32_t row = 0; row < plan_.rows; ++row)
-            for (std::uint32_t column = 0; column < plan_.columns; ++column)
-                alone_->slant_factor[std::size_t(row) * plan_.columns + column] =
-                    pixel_slant_factor(plan_, row, column);
         alone_->labelled.assign(65536, 0);
         if (plan_.subpixel_capacity > 0) {
             std::uint32_t largest = 0;
@@ -652,6 +650,7 @@ struct AloneJob {
     const SceneData* scene;
     LabelsStage::Alone* alone;
     const Frame* frame;
+    const double* slant_factor; // Pixels::slant_factor
 };
 
 void draw_alone_band(const AloneJob& job, LabelsStage::Alone::Image& image, std::uint32_t object,
@@ -689,7 +688,7 @@ void draw_alone_band(const AloneJob& job, LabelsStage::Alone::Image& image, std:
                 continue;
             }
             ++tally.own;
-            const double range = M::view_z_from_depth(double(d), plan.depth_a, plan.depth_b) * a.slant_factor[p];
+            const double range = M::view_z_from_depth(double(d), plan.depth_a, plan.depth_b) * job.slant_factor[p];
             if (range < plan.config.range_min_m || range >= plan.config.range_max_m) ++tally.outside;
         }
     }
@@ -756,7 +755,7 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
         image.alone_id = 0;
         std::fill(image.tally.begin(), image.tally.begin() + a.objects.size(), AloneTally{});
     }
-    AloneJob job{&plan_, &scene, &a, &frame};
+    AloneJob job{&plan_, &scene, &a, &frame, pixels_->slant_factor.data()};
     host::run_parts(workers_, draw_alone_bands, &job);
     for (std::size_t object = 0; object < a.objects.size(); ++object) {
         const std::uint32_t id = a.objects[object];
@@ -816,7 +815,7 @@ void polar_coordinates(const Plan& plan, const double p[3], double& bin, double&
 // its direction holds a surface at least as far as r - tolerance (a nearer surface in all nine is an
 // occluder; the neighbours absorb the pixel grid's own range steps at grazing incidence). False outside
 // the depth pass's coverage.
-bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) {
+bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r, const double* slant_factor) {
     const double direction[3] = {p[0] / r, p[1] / r, p[2] / r};
     const double sin_elevation = direction[2];
     for (std::uint32_t s = 0; s < plan.views; ++s) {
@@ -848,8 +847,10 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
                 const double d = to.depth[q];
                 if (!(d > 0.0)) continue;
                 const std::uint32_t column_in_image = first + static_cast<std::uint32_t>(x);
-                if (pixel_slant_range(plan, static_cast<std::uint32_t>(y), column_in_image, d) >= r - tolerance)
-                    return true;
+                const double range = slant_factor != nullptr
+                                         ? M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * slant_factor[q]
+                                         : pixel_slant_range(plan, static_cast<std::uint32_t>(y), column_in_image, d);
+                if (range >= r - tolerance) return true;
             }
         return false;
     }
@@ -858,12 +859,28 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r) 
 
 } // namespace
 
-void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow) {
+namespace {
+
+// label_flow's cells [begin, end).
+struct FlowJob {
+    const Plan* plan;
+    const Frame* from;
+    const Frame* to;
+    std::array<double, 16> a, b; // sonar_from_world of the two poses
+    float* flow;
+    const double* slant_factor;
+};
+
+void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
+    const Plan& plan = *job.plan;
+    const Frame& from = *job.from;
+    const Frame& to = *job.to;
+    const auto& a = job.a;
+    const auto& b = job.b;
+    float* flow = job.flow;
     const float nan = std::numeric_limits<float>::quiet_NaN();
     const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
-    const auto a = sonar_from_world(from_pose), b = sonar_from_world(to_pose);
-    for (std::size_t i = 0; i < cells; ++i) {
+    for (std::size_t i = begin; i < end; ++i) {
         flow[2 * i] = flow[2 * i + 1] = nan;
         if (from.instance.size() != cells || from.instance[i] == 0 || to.depth.empty()) continue;
         const double p[3] = {from.point[3 * i], from.point[3 * i + 1], from.point[3 * i + 2]};
@@ -882,10 +899,37 @@ void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, cons
         polar_coordinates(plan, p, bin_from, beam_from);
         polar_coordinates(plan, q, bin_to, beam_to);
         const double r = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
-        if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, to, q, r)) continue;
+        if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, to, q, r, job.slant_factor)) continue;
         flow[2 * i] = static_cast<float>(bin_to - bin_from);
         flow[2 * i + 1] = static_cast<float>(beam_to - beam_from);
     }
+}
+
+// Cells in a block of label_flow's work (each cell is a function of the two frames alone: any split
+// gives the same flow).
+constexpr std::size_t kFlowBlock = 4096;
+
+} // namespace
+
+void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                float* flow, host::Workers* workers, const double* slant_factor) {
+    FlowJob job{&plan, &from, &to, sonar_from_world(from_pose), sonar_from_world(to_pose), flow, slant_factor};
+    const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
+    if (workers == nullptr) {
+        flow_cells(job, 0, cells);
+        return;
+    }
+    const auto block = [](void* context, std::uint32_t index, std::uint32_t) {
+        const FlowJob& t = *static_cast<const FlowJob*>(context);
+        const std::size_t all = static_cast<std::size_t>(t.plan->bins) * t.plan->beams;
+        flow_cells(t, std::size_t(index) * kFlowBlock, std::min(all, std::size_t(index + 1) * kFlowBlock));
+    };
+    workers->run_blocks(block, &job, static_cast<std::uint32_t>((cells + kFlowBlock - 1) / kFlowBlock));
+}
+
+void LabelsStage::flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                       float* flow) const {
+    label_flow(plan_, from, from_pose, to, to_pose, flow, workers_, pixels_->slant_factor.data());
 }
 
 } // namespace vksonar::cpu

@@ -58,6 +58,8 @@ public:
     // label arrays cleared and each hit pixel's spread; "labels:beams"; "labels:visible": the objects
     // drawn alone; names with a ':' are not stages).
     void set_part_timing(bool on) { part_timing_ = on; }
+    // label_flow (below) on this stage's threads and tables.
+    void flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose, float* flow) const;
 
     struct Scratch; // per thread: one beam's bins
     struct Pixels;  // per pixel: what the beams read of it
@@ -80,8 +82,10 @@ private:
 // scene: flow[2 i] = d_bin, flow[2 i + 1] = d_beam (fractional; the point's coordinates in `to` minus
 // those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
 // the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
-// (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2.
+// (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2. workers: the cells split in
+// blocks between its threads (null: all on the caller); slant_factor: LabelsStage's per-pixel table
+// (null: worked out per pixel; the same values). The flow does not depend on either.
 void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow);
+                float* flow, host::Workers* workers = nullptr, const double* slant_factor = nullptr);
 
 } // namespace vksonar::cpu
