@@ -14,6 +14,7 @@
 
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "stages/labels.h"
 #include "stages/pixel_spread.h"
 #include "test_support.h"
 
@@ -620,6 +621,49 @@ TEST_P(LabelBackendTest, ObjectsDrawnAloneDoNotSeeTheObjectsDrawnBefore) {
     EXPECT_EQ(first[1].pixels, alone->frame.visibility[0].pixels);
     EXPECT_NEAR(double(first[1].hidden) / first[1].pixels, 0.5, 0.05);
     EXPECT_EQ(first[0].hidden, 0u);
+}
+
+// Flow finds the beam an angle falls on through BeamBuckets instead of a binary search: the same first
+// beam below the angle for evenly spaced, sine-spaced and irregular tables (2 to 1024 beams), at random
+// angles, at every beam's own angle and just beside it.
+TEST(LabelFlowBeams, BucketsFindTheBinarySearchsBeam) {
+    std::uint64_t state = 88172645463325252ull;
+    auto uniform = [&] { // [0, 1)
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return double(state >> 11) * 0x1.0p-53;
+    };
+    for (std::size_t n : {2u, 3u, 7u, 130u, 512u, 1024u}) {
+        for (int kind = 0; kind < 3; ++kind) {
+            std::vector<double> t(n);
+            for (std::size_t j = 0; j < n; ++j) {
+                const double x = 1.0 - 2.0 * double(j) / double(n - 1); // 1 .. -1
+                const double spacing = 2.2 / double(n - 1); // kind 2: each angle moved by up to 0.3 spacings
+                t[j] = kind == 0   ? 1.1 * x
+                       : kind == 1 ? std::asin(0.9 * x)
+                                   : 1.1 * x + 0.3 * spacing * std::sin(7.0 * j);
+            }
+            ASSERT_TRUE(std::is_sorted(t.rbegin(), t.rend()) && std::adjacent_find(t.begin(), t.end()) == t.end());
+            const cpu::BeamBuckets buckets(t);
+            ASSERT_EQ(buckets.first.size(), 4 * n);
+            std::vector<double> angles;
+            for (int i = 0; i < 2000; ++i)
+                angles.push_back(t[n - 1] + (t[0] - t[n - 1]) * uniform());
+            for (std::size_t j = 1; j + 1 < n; ++j) {
+                angles.push_back(t[j]);
+                angles.push_back(std::nextafter(t[j], 10.0));
+                angles.push_back(std::nextafter(t[j], -10.0));
+            }
+            for (double a : angles) {
+                if (!(a > t[n - 1] && a < t[0])) continue;
+                const auto expected = static_cast<std::size_t>(
+                    std::upper_bound(t.begin(), t.end(), a, [](double x, double angle) { return x > angle; }) -
+                    t.begin());
+                ASSERT_EQ(buckets.first_below(t, a), expected) << n << " beams, table " << kind << ", angle " << a;
+            }
+        }
+    }
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, LabelBackendTest, ::testing::Values(Backend::vulkan, Backend::cpu),

@@ -184,6 +184,7 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
             pixels_->slant_factor[std::size_t(row) * plan_.columns + column] = pixel_slant_factor(plan_, row, column);
         }
     pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
+    beam_buckets_ = BeamBuckets(plan_.beam_angle_rad);
     if (scene != nullptr) {
         alone_ = std::make_unique<Alone>();
         alone_->scene = scene;
@@ -781,11 +782,40 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     }
 }
 
+BeamBuckets::BeamBuckets(const std::vector<double>& t) {
+    const std::size_t n = t.size();
+    if (n < 2 || !(t[0] > t[n - 1])) return;
+    const std::size_t count = 4 * n;
+    low = t[n - 1];
+    per_rad = double(count) / (t[0] - t[n - 1]);
+    first.resize(count);
+    // bucket b's upper edge: low + (b + 1) / per_rad (the last one: beyond every angle)
+    std::size_t j = n; // {j : t[j] < edge} is a suffix [j, n) of the decreasing table, growing with the edge
+    for (std::size_t b = 0; b < count; ++b) {
+        const double edge = b + 1 == count ? std::numeric_limits<double>::infinity() : low + double(b + 1) / per_rad;
+        while (j > 0 && t[j - 1] < edge)
+            --j;
+        first[b] = static_cast<std::uint32_t>(j); // the first j with t[j] < edge
+    }
+}
+
+std::size_t BeamBuckets::first_below(const std::vector<double>& t, double a) const {
+    // The bucket above a's (a rounding of a's bucket by one is covered): every j before first[b] has
+    // t[j] >= that bucket's upper edge > a, so the answer is first[b] or after it.
+    const double u = (a - low) * per_rad;
+    std::size_t b = u > 0.0 ? static_cast<std::size_t>(u) + 1 : 1;
+    b = std::min(b, first.size() - 1);
+    std::size_t j = first[b];
+    while (j < t.size() && !(t[j] < a))
+        ++j;
+    return j;
+}
+
 namespace {
 
 // The fractional beam index of steering angle a on the beam table (strictly decreasing, port first):
 // linear between beam centres, extrapolated by the edge spacing up to the fan's edge; NaN outside it.
-double beam_coordinate(const Plan& plan, double a) {
+double beam_coordinate(const Plan& plan, double a, const BeamBuckets* buckets) {
     const std::vector<double>& t = plan.beam_angle_rad;
     const std::size_t n = t.size();
     const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
@@ -794,21 +824,26 @@ double beam_coordinate(const Plan& plan, double a) {
     if (a >= t[0]) return (t[0] - a) / (t[0] - t[1]);
     if (a <= t[n - 1]) return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]);
     // first j with t[j] < a (t decreasing): the point lies between beams j - 1 and j
-    const std::size_t j = static_cast<std::size_t>(
-        std::upper_bound(t.begin(), t.end(), a, [](double x, double angle) { return x > angle; }) - t.begin());
+    std::size_t j;
+    if (buckets != nullptr && !buckets->first.empty()) {
+        j = buckets->first_below(t, a);
+    } else {
+        j = static_cast<std::size_t>(
+            std::upper_bound(t.begin(), t.end(), a, [](double x, double angle) { return x > angle; }) - t.begin());
+    }
     return double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]);
 }
 
 // The point p (sonar frame) as (bin, beam) coordinates: bin b covers [b, b + 1) (cell k's centre at
 // k + 0.5); NaN outside the window.
-void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam) {
+void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets* buckets) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
     bin = r >= plan.config.range_min_m && r < plan.config.range_max_m ? (r - plan.config.range_min_m) / plan.bin_width_m
                                                                       : nan;
     // The beam a direction is heard on: its cone (line array, the sine along the y axis) or its azimuth.
     const double angle = plan.line_array ? std::asin(std::clamp(p[1] / r, -1.0, 1.0)) : std::atan2(p[1], p[0]);
-    beam = r > 0.0 ? beam_coordinate(plan, angle) : nan;
+    beam = r > 0.0 ? beam_coordinate(plan, angle, buckets) : nan;
 }
 
 // Whether the depth image `to` sees the point p (sonar frame, range r): some pixel of the 3 x 3 around
@@ -869,6 +904,7 @@ struct FlowJob {
     std::array<double, 16> a, b; // sonar_from_world of the two poses
     float* flow;
     const double* slant_factor;
+    const BeamBuckets* buckets;
 };
 
 void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
@@ -896,8 +932,8 @@ void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
         for (int m = 0; m < 3; ++m)
             q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
         double bin_from, beam_from, bin_to, beam_to;
-        polar_coordinates(plan, p, bin_from, beam_from);
-        polar_coordinates(plan, q, bin_to, beam_to);
+        polar_coordinates(plan, p, bin_from, beam_from, job.buckets);
+        polar_coordinates(plan, q, bin_to, beam_to, job.buckets);
         const double r = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
         if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, to, q, r, job.slant_factor)) continue;
         flow[2 * i] = static_cast<float>(bin_to - bin_from);
@@ -912,8 +948,8 @@ constexpr std::size_t kFlowBlock = 4096;
 } // namespace
 
 void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow, host::Workers* workers, const double* slant_factor) {
-    FlowJob job{&plan, &from, &to, sonar_from_world(from_pose), sonar_from_world(to_pose), flow, slant_factor};
+                float* flow, host::Workers* workers, const double* slant_factor, const BeamBuckets* buckets) {
+    FlowJob job{&plan, &from, &to, sonar_from_world(from_pose), sonar_from_world(to_pose), flow, slant_factor, buckets};
     const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
     if (workers == nullptr) {
         flow_cells(job, 0, cells);
@@ -929,7 +965,7 @@ void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, cons
 
 void LabelsStage::flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
                        float* flow) const {
-    label_flow(plan_, from, from_pose, to, to_pose, flow, workers_, pixels_->slant_factor.data());
+    label_flow(plan_, from, from_pose, to, to_pose, flow, workers_, pixels_->slant_factor.data(), &beam_buckets_);
 }
 
 } // namespace vksonar::cpu

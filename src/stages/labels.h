@@ -34,6 +34,18 @@ namespace vksonar::cpu {
 // (so a cell that mixed that many objects has a small instance_fraction, as it should).
 inline constexpr std::uint32_t kLabelSlots = 4;
 
+// The beam table's steering angles (strictly decreasing) in 4 buckets per beam, each with the first
+// beam below its upper edge: label_flow finds the first beam below an angle in a step or two from there
+// instead of a binary search (the same beam).
+struct BeamBuckets {
+    BeamBuckets() = default;
+    explicit BeamBuckets(const std::vector<double>& beam_angles); // empty with fewer than two beams
+    // the first j with beam_angles[j] < a, for beam_angles[n - 1] < a < beam_angles[0]
+    std::size_t first_below(const std::vector<double>& beam_angles, double a) const;
+    double low = 0.0, per_rad = 0.0;
+    std::vector<std::uint32_t> first;
+};
+
 class LabelsStage {
 public:
     // class_of_instance[id] = the class id of instance id (0 for 0 and any id past the table).
@@ -75,6 +87,7 @@ private:
     std::unique_ptr<Pixels> pixels_;
     std::unique_ptr<Alone> alone_; // null without a scene
     bool part_timing_ = false;
+    BeamBuckets beam_buckets_; // flow()
 };
 
 // Flow between two labelled frames of one plan (docs/labels.md): for each cell of `from` with a label,
@@ -83,9 +96,11 @@ private:
 // those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
 // the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
 // (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2. workers: the cells split in
-// blocks between its threads (null: all on the caller); slant_factor: LabelsStage's per-pixel table
-// (null: worked out per pixel; the same values). The flow does not depend on either.
+// blocks between its threads (null: all on the caller); slant_factor, buckets: LabelsStage's per-pixel
+// table and beam buckets (null: worked out per pixel, a binary search; the same values). The flow does
+// not depend on any of them.
 void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow, host::Workers* workers = nullptr, const double* slant_factor = nullptr);
+                float* flow, host::Workers* workers = nullptr, const double* slant_factor = nullptr,
+                const BeamBuckets* buckets = nullptr);
 
 } // namespace vksonar::cpu
