@@ -127,6 +127,7 @@ struct LabelsStage::Alone {
     };
     std::vector<Image> images;            // one per thread
     std::vector<std::uint32_t> objects;   // the labelled ids this frame, increasing
+    std::size_t max_objects = 0;          // objects' reserved size, and each Image::tally's
     std::atomic<std::uint32_t> next_band; // the next (object, band) to draw
     std::uint32_t bands = 1;              // bands of rows per object this frame
     std::vector<std::uint8_t> labelled;   // 65536: the ids with a labelled cell this frame
@@ -193,6 +194,7 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         alone_->drawn.resize(static_cast<std::size_t>(plan_.views) * alone_->clusters.size());
         // (ids are uint16 with labels on: at most 65535 objects)
         const std::size_t objects = std::min<std::size_t>(scene->draws.size(), 65535);
+        alone_->max_objects = objects;
         alone_->objects.reserve(objects);
         alone_->images.resize(parts);
         for (Alone::Image& image : alone_->images) {
@@ -746,7 +748,7 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
         if (!a.labelled[id]) continue;
         a.labelled[id] = 0;
-        if (a.objects.size() < a.objects.capacity()) a.objects.push_back(id); // (capacity: the scene's draws)
+        if (a.objects.size() < a.max_objects) a.objects.push_back(id); // (no more ids than the scene's draws)
     }
     // Each object in bands of rows dealt to the threads as they come free (draw_alone_bands).
     const std::uint32_t parts = static_cast<std::uint32_t>(a.images.size());
@@ -803,8 +805,8 @@ std::size_t BeamBuckets::first_below(const std::vector<double>& t, double a) con
     // The bucket above a's (a rounding of a's bucket by one is covered): every j before first[b] has
     // t[j] >= that bucket's upper edge > a, so the answer is first[b] or after it.
     const double u = (a - low) * per_rad;
-    std::size_t b = u > 0.0 ? static_cast<std::size_t>(u) + 1 : 1;
-    b = std::min(b, first.size() - 1);
+    std::size_t b = first.size() - 1; // (its edge is beyond every angle: from the first beam)
+    if (u >= 0.0 && u < double(first.size() - 1)) b = static_cast<std::size_t>(u) + 1;
     std::size_t j = first[b];
     while (j < t.size() && !(t[j] < a))
         ++j;
