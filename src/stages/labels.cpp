@@ -127,9 +127,7 @@ struct LabelsStage::Alone {
     };
     std::vector<Image> images;            // one per thread
     std::vector<std::uint32_t> objects;   // the labelled ids this frame, increasing
-    std::size_t max_objects = 0;          // objects' reserved size, and each Image::tally's
     std::atomic<std::uint32_t> next_band; // the next (object, band) to draw
-    std::uint32_t bands = 1;              // bands of rows per object this frame
     std::vector<std::uint8_t> labelled;   // 65536: the ids with a labelled cell this frame
     // With sub-pixel objects possible (Plan::subpixel_capacity > 0), per instance id up to the scene's
     // largest: the tally of its sub-pixel returns this frame (one pass over the list), zeroed once read.
@@ -194,7 +192,6 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         alone_->drawn.resize(static_cast<std::size_t>(plan_.views) * alone_->clusters.size());
         // (ids are uint16 with labels on: at most 65535 objects)
         const std::size_t objects = std::min<std::size_t>(scene->draws.size(), 65535);
-        alone_->max_objects = objects;
         alone_->objects.reserve(objects);
         alone_->images.resize(parts);
         for (Alone::Image& image : alone_->images) {
@@ -230,11 +227,6 @@ struct Job {
 // was hit).
 inline std::uint32_t instance_of(std::uint32_t material_id) {
     return material_id == shared::kNoMaterial ? 0u : material_id >> shared::kInstanceShift;
-}
-
-// The slant range of pixel (row, column) at reversed-Z depth d > 0 (as the echo stage reconstructs it).
-inline double pixel_slant_range(const Plan& plan, std::uint32_t row, std::uint32_t column, double d) {
-    return M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * pixel_slant_factor(plan, row, column);
 }
 
 // Adds w (energy) of a pixel of `instance` at elevation psi and point p to the cell.
@@ -698,13 +690,15 @@ void draw_alone_band(const AloneJob& job, LabelsStage::Alone::Image& image, std:
 }
 
 // Part `part` takes the (object, band) pairs in turn until none is left: objects one after another (the
-// bundled scene's seabed, then small ones covering a few rows each), each in Alone::bands bands of rows,
+// bundled scene's seabed, then small ones covering a few rows each), each in kAloneBandsPerPart bands of
+// rows per part (at least kAloneBandRows rows each),
 // so that small objects run side by side on the threads instead of one after another on all of them.
-void draw_alone_bands(void* context, std::uint32_t part, std::uint32_t) {
+void draw_alone_bands(void* context, std::uint32_t part, std::uint32_t parts) {
     const AloneJob& job = *static_cast<const AloneJob*>(context);
     LabelsStage::Alone& a = *job.alone;
     LabelsStage::Alone::Image& image = a.images[part];
-    const std::uint32_t bands = a.bands, rows = job.plan->rows;
+    const std::uint32_t rows = job.plan->rows;
+    const std::uint32_t bands = std::max<std::uint32_t>(1, std::min(parts * kAloneBandsPerPart, rows / kAloneBandRows));
     const std::uint32_t count = static_cast<std::uint32_t>(a.objects.size()) * bands;
     for (std::uint32_t i = a.next_band.fetch_add(1, std::memory_order_relaxed); i < count;
          i = a.next_band.fetch_add(1, std::memory_order_relaxed)) {
@@ -748,11 +742,10 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     for (std::uint32_t id = 1; id < a.labelled.size(); ++id) {
         if (!a.labelled[id]) continue;
         a.labelled[id] = 0;
-        if (a.objects.size() < a.max_objects) a.objects.push_back(id); // (no more ids than the scene's draws)
+        // (no more ids than the scene's draws, which sized each Image::tally)
+        if (a.objects.size() < a.images.front().tally.size()) a.objects.push_back(id);
     }
     // Each object in bands of rows dealt to the threads as they come free (draw_alone_bands).
-    const std::uint32_t parts = static_cast<std::uint32_t>(a.images.size());
-    a.bands = std::max<std::uint32_t>(1, std::min(parts * kAloneBandsPerPart, plan_.rows / kAloneBandRows));
     a.next_band.store(0, std::memory_order_relaxed);
     for (Alone::Image& image : a.images) {
         image.alone_id = 0;
@@ -802,12 +795,12 @@ BeamBuckets::BeamBuckets(const std::vector<double>& t) {
 }
 
 std::size_t BeamBuckets::first_below(const std::vector<double>& t, double a) const {
-    // The bucket above a's (a rounding of a's bucket by one is covered): every j before first[b] has
-    // t[j] >= that bucket's upper edge > a, so the answer is first[b] or after it.
+    // From the bucket above a's (a rounding of a's bucket by one is covered): every j before that bucket's
+    // first has t[j] >= its upper edge > a, so the answer is there or after it. No buckets, or a NaN or
+    // huge quotient: from the first beam.
     const double u = (a - low) * per_rad;
-    std::size_t b = first.size() - 1; // (its edge is beyond every angle: from the first beam)
-    if (u >= 0.0 && u < double(first.size() - 1)) b = static_cast<std::size_t>(u) + 1;
-    std::size_t j = first[b];
+    std::size_t j = 0;
+    if (u >= 0.0 && u + 1.0 < double(first.size())) j = first[static_cast<std::size_t>(u) + 1];
     while (j < t.size() && !(t[j] < a))
         ++j;
     return j;
@@ -817,7 +810,7 @@ namespace {
 
 // The fractional beam index of steering angle a on the beam table (strictly decreasing, port first):
 // linear between beam centres, extrapolated by the edge spacing up to the fan's edge; NaN outside it.
-double beam_coordinate(const Plan& plan, double a, const BeamBuckets* buckets) {
+double beam_coordinate(const Plan& plan, double a, const BeamBuckets& buckets) {
     const std::vector<double>& t = plan.beam_angle_rad;
     const std::size_t n = t.size();
     const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
@@ -826,19 +819,13 @@ double beam_coordinate(const Plan& plan, double a, const BeamBuckets* buckets) {
     if (a >= t[0]) return (t[0] - a) / (t[0] - t[1]);
     if (a <= t[n - 1]) return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]);
     // first j with t[j] < a (t decreasing): the point lies between beams j - 1 and j
-    std::size_t j;
-    if (buckets != nullptr && !buckets->first.empty()) {
-        j = buckets->first_below(t, a);
-    } else {
-        j = static_cast<std::size_t>(
-            std::upper_bound(t.begin(), t.end(), a, [](double x, double angle) { return x > angle; }) - t.begin());
-    }
+    const std::size_t j = buckets.first_below(t, a);
     return double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]);
 }
 
 // The point p (sonar frame) as (bin, beam) coordinates: bin b covers [b, b + 1) (cell k's centre at
 // k + 0.5); NaN outside the window.
-void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets* buckets) {
+void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets& buckets) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
     bin = r >= plan.config.range_min_m && r < plan.config.range_max_m ? (r - plan.config.range_min_m) / plan.bin_width_m
@@ -883,10 +870,8 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r, 
                 const std::size_t q = static_cast<std::size_t>(y) * plan.columns + first + static_cast<std::size_t>(x);
                 const double d = to.depth[q];
                 if (!(d > 0.0)) continue;
-                const std::uint32_t column_in_image = first + static_cast<std::uint32_t>(x);
-                const double range = slant_factor != nullptr
-                                         ? M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * slant_factor[q]
-                                         : pixel_slant_range(plan, static_cast<std::uint32_t>(y), column_in_image, d);
+                // (its slant range as the echo stage reconstructs it: LabelsStage's per-pixel factor)
+                const double range = M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * slant_factor[q];
                 if (range >= r - tolerance) return true;
             }
         return false;
@@ -898,14 +883,14 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r, 
 
 namespace {
 
-// label_flow's cells [begin, end).
+// LabelsStage::flow's cells [begin, end).
 struct FlowJob {
     const Plan* plan;
     const Frame* from;
     const Frame* to;
     std::array<double, 16> a, b; // sonar_from_world of the two poses
     float* flow;
-    const double* slant_factor;
+    const double* slant_factor; // Pixels::slant_factor
     const BeamBuckets* buckets;
 };
 
@@ -934,8 +919,8 @@ void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
         for (int m = 0; m < 3; ++m)
             q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
         double bin_from, beam_from, bin_to, beam_to;
-        polar_coordinates(plan, p, bin_from, beam_from, job.buckets);
-        polar_coordinates(plan, q, bin_to, beam_to, job.buckets);
+        polar_coordinates(plan, p, bin_from, beam_from, *job.buckets);
+        polar_coordinates(plan, q, bin_to, beam_to, *job.buckets);
         const double r = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
         if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, to, q, r, job.slant_factor)) continue;
         flow[2 * i] = static_cast<float>(bin_to - bin_from);
@@ -943,17 +928,24 @@ void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
     }
 }
 
-// Cells in a block of label_flow's work (each cell is a function of the two frames alone: any split
+// Cells in a block of the flow's work (each cell is a function of the two frames alone: any split
 // gives the same flow).
 constexpr std::size_t kFlowBlock = 4096;
 
 } // namespace
 
-void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow, host::Workers* workers, const double* slant_factor, const BeamBuckets* buckets) {
-    FlowJob job{&plan, &from, &to, sonar_from_world(from_pose), sonar_from_world(to_pose), flow, slant_factor, buckets};
-    const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
-    if (workers == nullptr) {
+void LabelsStage::flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
+                       float* flow) const {
+    FlowJob job{&plan_,
+                &from,
+                &to,
+                sonar_from_world(from_pose),
+                sonar_from_world(to_pose),
+                flow,
+                pixels_->slant_factor.data(),
+                &beam_buckets_};
+    const std::size_t cells = static_cast<std::size_t>(plan_.bins) * plan_.beams;
+    if (workers_ == nullptr) {
         flow_cells(job, 0, cells);
         return;
     }
@@ -962,12 +954,7 @@ void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, cons
         const std::size_t all = static_cast<std::size_t>(t.plan->bins) * t.plan->beams;
         flow_cells(t, std::size_t(index) * kFlowBlock, std::min(all, std::size_t(index + 1) * kFlowBlock));
     };
-    workers->run_blocks(block, &job, static_cast<std::uint32_t>((cells + kFlowBlock - 1) / kFlowBlock));
-}
-
-void LabelsStage::flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                       float* flow) const {
-    label_flow(plan_, from, from_pose, to, to_pose, flow, workers_, pixels_->slant_factor.data(), &beam_buckets_);
+    workers_->run_blocks(block, &job, static_cast<std::uint32_t>((cells + kFlowBlock - 1) / kFlowBlock));
 }
 
 } // namespace vksonar::cpu

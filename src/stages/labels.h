@@ -35,7 +35,7 @@ namespace vksonar::cpu {
 inline constexpr std::uint32_t kLabelSlots = 4;
 
 // The beam table's steering angles (strictly decreasing) in 4 buckets per beam, each with the first
-// beam below its upper edge: label_flow finds the first beam below an angle in a step or two from there
+// beam below its upper edge: LabelsStage::flow finds the first beam below an angle in a step or two from there
 // instead of a binary search (the same beam).
 struct BeamBuckets {
     BeamBuckets() = default;
@@ -70,7 +70,13 @@ public:
     // label arrays cleared and each hit pixel's spread; "labels:beams"; "labels:visible": the objects
     // drawn alone; names with a ':' are not stages).
     void set_part_timing(bool on) { part_timing_ = on; }
-    // label_flow (below) on this stage's threads and tables.
+    // Flow between two labelled frames of this plan (docs/labels.md): for each cell of `from` with a label,
+    // where its point moves in the polar grid when the sonar goes from from_pose to to_pose in a static
+    // scene: flow[2 i] = d_bin, flow[2 i + 1] = d_beam (fractional; the point's coordinates in `to` minus
+    // those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
+    // the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
+    // (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2. The cells are split in
+    // blocks between the threads; the flow does not depend on them.
     void flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose, float* flow) const;
 
     struct Scratch; // per thread: one beam's bins
@@ -89,18 +95,5 @@ private:
     bool part_timing_ = false;
     BeamBuckets beam_buckets_; // flow()
 };
-
-// Flow between two labelled frames of one plan (docs/labels.md): for each cell of `from` with a label,
-// where its point moves in the polar grid when the sonar goes from from_pose to to_pose in a static
-// scene: flow[2 i] = d_bin, flow[2 i + 1] = d_beam (fractional; the point's coordinates in `to` minus
-// those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
-// the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
-// (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2. workers: the cells split in
-// blocks between its threads (null: all on the caller); slant_factor, buckets: LabelsStage's per-pixel
-// table and beam buckets (null: worked out per pixel, a binary search; the same values). The flow does
-// not depend on any of them.
-void label_flow(const Plan& plan, const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
-                float* flow, host::Workers* workers = nullptr, const double* slant_factor = nullptr,
-                const BeamBuckets* buckets = nullptr);
 
 } // namespace vksonar::cpu
