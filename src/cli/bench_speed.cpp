@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstddef>
 #include <cstdio>
 #include <map>
@@ -23,7 +24,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: vksonar bench speed [--backend vulkan|cpu] [--frames N] [--scene FILE] [--sonar PRESET|FILE]\n"
     "                           [--set key=value ...] [--pose x,y,z,roll,pitch,yaw] [--memory-frames M]\n"
-    "                           [--labels]\n"
+    "                           [--labels] [--flow]\n"
     "\n"
     "Renders N timed frames (default 300) of the scene (default: the bundled scene, pose 0,0,0,0,10,0)\n"
     "and prints the median time of each stage (Frame.times; the CPU backend runs normals and echo fused,\n"
@@ -36,7 +37,10 @@ constexpr const char* kUsage =
     "<= 1.5x the depth pass, on the faster backend of a machine without a GPU; RSS growth <= 1 MiB,\n"
     "0 allocations per frame. full frame / depth is printed too (the retired target, for comparison).\n"
     "--labels: every frame also runs the labels stage (as `render --save labels` does; Frame.times\n"
-    "'labels', part of the full frame): what a dataset run with ground truth pays per frame.\n";
+    "'labels', part of the full frame): what a dataset run with ground truth pays per frame.\n"
+    "--flow (implies --labels): then N calls of Renderer::label_flow from a frame to one 5 cm ahead and\n"
+    "0.1 deg of yaw (a trajectory's step; `render --save flow`), timed apart from the frame: the\n"
+    "median ms per call, and its allocations after the first.\n";
 
 struct SpeedSamples {
     std::vector<double> full_ms, depth_ms, ratio, stage_sum_ms;
@@ -44,6 +48,43 @@ struct SpeedSamples {
     std::vector<std::string> stage_order;
     std::string depth_source;
 };
+
+// --flow: Renderer::label_flow from `frame` (rendered at pose) to a frame one trajectory step ahead,
+// `calls` times (each call the same work: the flow of two fixed frames).
+void run_flow_timing(Renderer& renderer, const Pose& pose, std::uint64_t frame_index, std::uint32_t calls,
+                     Frame& frame) {
+    Pose ahead = pose;
+    const double yaw = pose.yaw_deg * 3.14159265358979323846 / 180.0;
+    ahead.x_m += 0.05 * std::cos(yaw);
+    ahead.y_m += 0.05 * std::sin(yaw);
+    ahead.yaw_deg += 0.1;
+    Frame next = renderer.make_frame();
+    timed_render(renderer, pose, frame_index, frame);
+    timed_render(renderer, ahead, frame_index + 1, next);
+    std::vector<float> flow;
+    std::vector<double> ms;
+    ms.reserve(calls);
+    std::uint64_t allocations = 0;
+    for (std::uint32_t i = 0; i <= calls; ++i) {
+        const std::uint64_t before = heap_allocations();
+        const auto t0 = std::chrono::steady_clock::now();
+        auto flowed = renderer.label_flow(frame, pose, next, ahead, flow);
+        const auto t1 = std::chrono::steady_clock::now();
+        if (!flowed) throw Failure("label_flow: " + flowed.error().message);
+        if (i == 0) continue; // the first call sizes `flow`
+        allocations += heap_allocations() - before;
+        ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    }
+    std::size_t labelled = 0, moved = 0;
+    for (std::size_t c = 0; c + 1 < flow.size(); c += 2) {
+        labelled += frame.instance[c / 2] != 0;
+        moved += flow[c] == flow[c];
+    }
+    std::printf("flow (Renderer::label_flow to a frame 5 cm ahead and 0.1 deg of yaw, %u calls; %zu labelled "
+                "cells, %zu with a flow): median %s ms, p10 %s, p90 %s; allocations after the first call %llu\n",
+                calls, labelled, moved, fmt(median(ms), 3).c_str(), fmt(percentile(ms, 0.1), 3).c_str(),
+                fmt(percentile(ms, 0.9), 3).c_str(), static_cast<unsigned long long>(allocations));
+}
 
 } // namespace
 
@@ -57,6 +98,7 @@ int run_bench_speed(const std::vector<std::string>& argv) {
                                   {"--set", true, true},
                                   {"--pose", true, false},
                                   {"--labels", false, false},
+                                  {"--flow", false, false},
                                   {"--help", false, false}},
                                  "bench speed");
     if (args.has("--help")) {
@@ -72,8 +114,9 @@ int run_bench_speed(const std::vector<std::string>& argv) {
 
     Setup setup = load_setup(args);
     Context context = make_context(backend);
+    const bool flow = args.has("--flow");
     Renderer renderer = make_renderer(context, setup.config, setup.scene, backend, 1,
-                                      args.has("--labels") ? SaveFlags::labels : SaveFlags::none);
+                                      flow || args.has("--labels") ? SaveFlags::labels : SaveFlags::none);
     Frame frame = renderer.make_frame();
     const std::string device = backend == Backend::vulkan ? context.device_description() : "CPU backend";
     const SceneStats& stats = setup.scene.stats();
@@ -276,6 +319,7 @@ int run_bench_speed(const std::vector<std::string>& argv) {
         std::printf("  (note: only %llu frames rendered; the target is stated for 1000)\n",
                     static_cast<unsigned long long>(frame_index));
     std::printf("(timings vary +-30-50%% between runs on lavapipe; LP_NUM_THREADS=1 gives steadier numbers)\n");
+    if (flow) run_flow_timing(renderer, setup.pose, frame_index, frames, frame);
     return 0;
 }
 
