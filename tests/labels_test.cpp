@@ -14,6 +14,7 @@
 
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "stages/cpu_simd.h"
 #include "stages/labels.h"
 #include "stages/pixel_spread.h"
 #include "test_support.h"
@@ -665,6 +666,51 @@ TEST_P(LabelBackendTest, ObjectsDrawnAloneDoNotSeeTheObjectsDrawnBefore) {
     EXPECT_EQ(first[1].pixels, alone->frame.visibility[0].pixels);
     EXPECT_NEAR(double(first[1].hidden) / first[1].pixels, 0.5, 0.05);
     EXPECT_EQ(first[0].hidden, 0u);
+}
+
+// Flow with cpu.vector_loops off runs the plain loop where this CPU would take four labelled cells at a
+// time (AVX2): the same flow, byte for byte. Line array and planar fans, each with a move that takes
+// points out of the window, past the fan's edges (a yaw of 20 deg) and in front of the sonar (a step
+// forward), so that the lanes' other cases (beam_coordinate's edges, NaN ranges, no view) come up; and
+// a frame of 37 beams, whose labelled cells do not fill whole groups of four.
+TEST(CpuVectorLoops, FlowOffGivesTheSameBytes) {
+    if (!cpu::use_avx2(SonarConfig{})) GTEST_SKIP() << "this CPU has no AVX2: both settings run the same loop";
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose from, to;
+    from.pitch_deg = to.pitch_deg = 10.0;
+    to.x_m = 3.0;
+    to.y_m = 1.0;
+    to.yaw_deg = 20.0;
+    std::vector<std::pair<const char*, SonarConfig>> configs;
+    configs.emplace_back("line array", quiet_config());
+    configs.emplace_back("planar", quiet_config());
+    configs.back().second.beam_geometry = BeamGeometry::planar;
+    configs.emplace_back("37 beams", quiet_config());
+    configs.back().second.beams = 37;
+    for (const auto& [name, config] : configs) {
+        std::vector<float> flows[2];
+        std::size_t labelled = 0;
+        for (int off = 0; off < 2; ++off) {
+            SonarConfig c = config;
+            c.cpu_vector_loops = off ? CpuVectorLoops::off : CpuVectorLoops::automatic;
+            auto r = render_once(Backend::cpu, c, scene.value(), from, SaveFlags::labels);
+            ASSERT_TRUE(r) << name;
+            Frame next = r->renderer.make_frame();
+            ASSERT_TRUE(r->renderer.render(to, 1, next)) << name;
+            ASSERT_TRUE(r->renderer.label_flow(r->frame, from, next, to, flows[off])) << name;
+            labelled = static_cast<std::size_t>(
+                std::count_if(r->frame.instance.begin(), r->frame.instance.end(), [](auto id) { return id != 0; }));
+        }
+        std::size_t finite = 0;
+        for (std::size_t i = 0; i < flows[0].size(); i += 2)
+            finite += !std::isnan(flows[0][i]);
+        std::printf("[labels] flow, %s: %zu labelled cells, %zu with a flow\n", name, labelled, finite);
+        EXPECT_GT(finite, labelled / 4) << name; // most of the seabed stays in view
+        EXPECT_LT(finite, labelled) << name;     // and some of it leaves
+        ASSERT_EQ(flows[0].size(), flows[1].size()) << name;
+        EXPECT_EQ(std::memcmp(flows[0].data(), flows[1].data(), flows[0].size() * sizeof(float)), 0) << name;
+    }
 }
 
 // Flow finds the beam an angle falls on through BeamBuckets instead of a binary search: the same first

@@ -40,11 +40,24 @@ inline constexpr std::uint32_t kLabelSlots = 4;
 struct BeamBuckets {
     BeamBuckets() = default;
     explicit BeamBuckets(const std::vector<double>& beam_angles); // empty with fewer than two beams
-    // the first j with beam_angles[j] < a, for beam_angles[n - 1] < a < beam_angles[0]
+    // the first j with beam_angles[j] < a, for beam_angles[n - 1] < a < beam_angles[0] (inline: the flow
+    // asks it twice per labelled cell)
     std::size_t first_below(const std::vector<double>& beam_angles, double a) const;
     double low = 0.0, per_rad = 0.0;
     std::vector<std::uint32_t> first;
 };
+
+inline std::size_t BeamBuckets::first_below(const std::vector<double>& t, double a) const {
+    // From the bucket above a's (a rounding of a's bucket by one is covered): every j before that bucket's
+    // first has t[j] >= its upper edge > a, so the answer is there or after it. No buckets, or a NaN or
+    // huge quotient: from the first beam.
+    const double u = (a - low) * per_rad;
+    std::size_t j = 0;
+    if (u >= 0.0 && u + 1.0 < double(first.size())) j = first[static_cast<std::size_t>(u) + 1];
+    while (j < t.size() && !(t[j] < a))
+        ++j;
+    return j;
+}
 
 class LabelsStage {
 public:

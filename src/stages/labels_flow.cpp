@@ -1,14 +1,20 @@
 // LabelsStage::flow's cells (labels_flow.h): each labelled point of `from` moved to the pose of `to`, its
-// polar coordinates in either frame and whether `to`'s depth image sees it.
+// polar coordinates in either frame and whether `to`'s depth image sees it. With AVX2 four labelled cells
+// go side by side through the same operations as the plain loop, lane by lane (the angle's asin and the
+// beam search per lane), so the flow is the same bytes either way.
 #include "stages/labels_flow.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "core/angles.h"
 #include "core/sonar_math.hpp"
+#include "stages/cpu_simd.h"
 
 namespace vksonar::cpu {
 
@@ -31,18 +37,6 @@ BeamBuckets::BeamBuckets(const std::vector<double>& t) {
             --j;
         first[b] = static_cast<std::uint32_t>(j); // the first j with t[j] < edge
     }
-}
-
-std::size_t BeamBuckets::first_below(const std::vector<double>& t, double a) const {
-    // From the bucket above a's (a rounding of a's bucket by one is covered): every j before that bucket's
-    // first has t[j] >= its upper edge > a, so the answer is there or after it. No buckets, or a NaN or
-    // huge quotient: from the first beam.
-    const double u = (a - low) * per_rad;
-    std::size_t j = 0;
-    if (u >= 0.0 && u + 1.0 < double(first.size())) j = first[static_cast<std::size_t>(u) + 1];
-    while (j < t.size() && !(t[j] < a))
-        ++j;
-    return j;
 }
 
 namespace {
@@ -161,6 +155,175 @@ void flow_cell(const FlowJob& job, std::size_t i) {
     job.flow[2 * i + 1] = static_cast<float>(beam_to - beam_from);
 }
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#define VKS_AVX2 __attribute__((target("avx2")))
+
+VKS_AVX2 inline __m256d splat(double v) {
+    return _mm256_set1_pd(v);
+}
+
+// polar_coordinates of four points (x, y, z lanes), into bin[4] and beam[4]; their ranges in r. The same
+// operations lane by lane: the range's sqrt, bin and sine by vector, the angle (asin or atan2) and the
+// beam's search per lane, the beam's fraction by vector where the angle lies between two beams
+// (beam_coordinate's other cases per lane).
+VKS_AVX2 void polar_coordinates4(const Plan& plan, __m256d x, __m256d y, __m256d z, const BeamBuckets& buckets,
+                                 double* bin, double* beam, __m256d& r) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    r = _mm256_sqrt_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)), _mm256_mul_pd(z, z)));
+    const __m256d range_min = splat(plan.config.range_min_m);
+    const __m256d in_window = _mm256_and_pd(_mm256_cmp_pd(r, range_min, _CMP_GE_OQ),
+                                            _mm256_cmp_pd(r, splat(plan.config.range_max_m), _CMP_LT_OQ));
+    _mm256_storeu_pd(
+        bin,
+        _mm256_blendv_pd(splat(nan), _mm256_div_pd(_mm256_sub_pd(r, range_min), splat(plan.bin_width_m)), in_window));
+    alignas(32) double angle[4], range[4];
+    _mm256_store_pd(range, r);
+    if (plan.line_array) {
+        // std::clamp(y / r, -1, 1), a NaN kept
+        __m256d s = _mm256_div_pd(y, r);
+        s = _mm256_blendv_pd(s, splat(-1.0), _mm256_cmp_pd(s, splat(-1.0), _CMP_LT_OQ));
+        s = _mm256_blendv_pd(s, splat(1.0), _mm256_cmp_pd(splat(1.0), s, _CMP_LT_OQ));
+        _mm256_store_pd(angle, s);
+        for (double& a : angle)
+            a = std::asin(a);
+    } else {
+        alignas(32) double xs[4], ys[4];
+        _mm256_store_pd(xs, x);
+        _mm256_store_pd(ys, y);
+        for (int l = 0; l < 4; ++l)
+            angle[l] = std::atan2(ys[l], xs[l]);
+    }
+    // beam_coordinate's general case: double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j])
+    const std::vector<double>& t = plan.beam_angle_rad;
+    const std::size_t n = t.size();
+    const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
+    alignas(32) double above[4], below[4], base[4], other[4];
+    int others = 0;
+    for (int l = 0; l < 4; ++l) {
+        const double a = angle[l];
+        if (!(range[l] > 0.0) || n < 2 || !(std::abs(a) <= half) || a >= t[0] || a <= t[n - 1]) {
+            others |= 1 << l;
+            other[l] = range[l] > 0.0 ? beam_coordinate(plan, a, buckets) : nan;
+            above[l] = 1.0, below[l] = 0.0, base[l] = 0.0;
+            continue;
+        }
+        const std::size_t j = buckets.first_below(t, a);
+        above[l] = t[j - 1];
+        below[l] = t[j];
+        base[l] = double(j - 1);
+    }
+    const __m256d t_above = _mm256_load_pd(above);
+    _mm256_storeu_pd(beam,
+                     _mm256_add_pd(_mm256_load_pd(base), _mm256_div_pd(_mm256_sub_pd(t_above, _mm256_load_pd(angle)),
+                                                                       _mm256_sub_pd(t_above, _mm256_load_pd(below)))));
+    for (int l = 0; l < 4 && others != 0; ++l)
+        if (others & (1 << l)) beam[l] = other[l];
+}
+
+// (d0, d1, d2) . axis, lane by lane, summed left to right
+VKS_AVX2 inline __m256d dot3(__m256d d0, __m256d d1, __m256d d2, const double (&axis)[3]) {
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(d0, splat(axis[0])), _mm256_mul_pd(d1, splat(axis[1]))),
+                         _mm256_mul_pd(d2, splat(axis[2])));
+}
+
+// visible_in of four points (q lanes, ranges r) into visible[l] for the lanes in `wanted`: the same
+// operations lane by lane, the view each direction falls in and its place there by vector (the views in
+// order, each lane keeping the first that holds it), the pixels around it per lane (seen_around).
+VKS_AVX2 void visible_in4(const Plan& plan, const Frame& to, const double* slant_factor, const __m256d (&q)[3],
+                          __m256d r, int wanted, bool (&visible)[4]) {
+    const __m256d d0 = _mm256_div_pd(q[0], r), d1 = _mm256_div_pd(q[1], r), d2 = _mm256_div_pd(q[2], r);
+    const bool tiers = plan.views > plan.slices;
+    const __m256d none = _mm256_setzero_pd();
+    __m256d taken = none, cx = none, cy = none, view = splat(-1.0);
+    for (std::uint32_t s = 0; s < plan.views; ++s) {
+        const ViewGeometry& g = plan.view_geometry[s];
+        __m256d in = _mm256_andnot_pd(taken, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)));
+        if (tiers || g.wedge)
+            in = _mm256_and_pd(in, _mm256_and_pd(_mm256_cmp_pd(d2, splat(g.sin_elevation_min), _CMP_GE_OQ),
+                                                 _mm256_cmp_pd(d2, splat(g.sin_elevation_max), _CMP_LE_OQ)));
+        if (_mm256_movemask_pd(in) == 0) continue;
+        const __m256d z = dot3(d0, d1, d2, g.forward);
+        in = _mm256_and_pd(in, _mm256_cmp_pd(z, none, _CMP_GT_OQ));
+        const __m256d u = _mm256_div_pd(dot3(d0, d1, d2, g.right), z);
+        if (g.wedge) {
+            const __m256d after_start =
+                _mm256_sub_pd(_mm256_mul_pd(d1, splat(g.wedge_start[0])), _mm256_mul_pd(d0, splat(g.wedge_start[1])));
+            const __m256d after_end =
+                _mm256_sub_pd(_mm256_mul_pd(d1, splat(g.wedge_end[0])), _mm256_mul_pd(d0, splat(g.wedge_end[1])));
+            in = _mm256_and_pd(in, _mm256_and_pd(_mm256_cmp_pd(after_start, none, _CMP_GE_OQ),
+                                                 _mm256_cmp_pd(after_end, none, _CMP_LT_OQ)));
+        } else {
+            const __m256d abs_u = _mm256_andnot_pd(splat(-0.0), u);
+            in = _mm256_and_pd(in, _mm256_cmp_pd(abs_u, splat(g.tan_half_h + 1e-12), _CMP_LE_OQ));
+        }
+        if (_mm256_movemask_pd(in) == 0) continue;
+        const __m256d v = _mm256_div_pd(dot3(d0, d1, d2, g.down), z);
+        const __m256d half = splat(0.5), one = splat(1.0);
+        const __m256d x = _mm256_mul_pd(_mm256_mul_pd(_mm256_add_pd(_mm256_div_pd(u, splat(g.tan_half_h)), one), half),
+                                        splat(double(view_columns(plan, s))));
+        const __m256d y = _mm256_mul_pd(_mm256_mul_pd(_mm256_add_pd(_mm256_div_pd(v, splat(g.tan_half_v)), one), half),
+                                        splat(double(plan.rows)));
+        cx = _mm256_blendv_pd(cx, x, in);
+        cy = _mm256_blendv_pd(cy, y, in);
+        view = _mm256_blendv_pd(view, splat(double(s)), in);
+        taken = _mm256_or_pd(taken, in);
+        if (_mm256_movemask_pd(taken) == 15) break;
+    }
+    alignas(32) double xs[4], ys[4], views[4], range[4];
+    _mm256_store_pd(xs, cx);
+    _mm256_store_pd(ys, cy);
+    _mm256_store_pd(views, view);
+    _mm256_store_pd(range, r);
+    for (int l = 0; l < 4; ++l)
+        visible[l] = (wanted & (1 << l)) && views[l] >= 0.0 &&
+                     seen_around(plan, to, static_cast<std::uint32_t>(views[l]), xs[l], ys[l], range[l], slant_factor);
+}
+
+// flow_cell of four labelled cells side by side.
+VKS_AVX2 void flow_cells4(const FlowJob& job, const std::size_t (&cells)[4]) {
+    const Plan& plan = *job.plan;
+    const Frame& from = *job.from;
+    const auto& a = job.a;
+    const auto& b = job.b;
+    alignas(32) double p[3][4];
+    for (int l = 0; l < 4; ++l)
+        for (int m = 0; m < 3; ++m)
+            p[m][l] = from.point[3 * cells[l] + m];
+    const __m256d px = _mm256_load_pd(p[0]), py = _mm256_load_pd(p[1]), pz = _mm256_load_pd(p[2]);
+    __m256d world[3];
+    for (int k = 0; k < 3; ++k) {
+        __m256d sum = _mm256_setzero_pd();
+        for (int m = 0; m < 3; ++m)
+            sum = _mm256_add_pd(
+                sum, _mm256_mul_pd(splat(a[k * 4 + m]), _mm256_sub_pd(_mm256_load_pd(p[m]), splat(a[12 + m]))));
+        world[k] = sum;
+    }
+    __m256d q[3];
+    for (int m = 0; m < 3; ++m)
+        q[m] = _mm256_add_pd(
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(splat(b[m]), world[0]), _mm256_mul_pd(splat(b[4 + m]), world[1])),
+                          _mm256_mul_pd(splat(b[8 + m]), world[2])),
+            splat(b[12 + m]));
+    alignas(32) double bin_from[4], beam_from[4], bin_to[4], beam_to[4];
+    __m256d r_from, r_to;
+    polar_coordinates4(plan, px, py, pz, *job.buckets, bin_from, beam_from, r_from);
+    polar_coordinates4(plan, q[0], q[1], q[2], *job.buckets, bin_to, beam_to, r_to);
+    int wanted = 0;
+    for (int l = 0; l < 4; ++l)
+        wanted |= (!std::isnan(bin_to[l]) && !std::isnan(beam_to[l])) << l;
+    bool visible[4];
+    visible_in4(plan, *job.to, job.slant_factor, q, r_to, wanted, visible);
+    for (int l = 0; l < 4; ++l) {
+        if (!visible[l]) continue;
+        job.flow[2 * cells[l]] = static_cast<float>(bin_to[l] - bin_from[l]);
+        job.flow[2 * cells[l] + 1] = static_cast<float>(beam_to[l] - beam_from[l]);
+    }
+}
+#undef VKS_AVX2
+#else
+void flow_cells4(const FlowJob&, const std::size_t (&)[4]) {}
+#endif
+
 } // namespace
 
 void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
@@ -170,10 +333,24 @@ void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
     const std::size_t cells = static_cast<std::size_t>(plan.bins) * plan.beams;
     const bool any = from.instance.size() == cells && !job.to->depth.empty();
+    const bool by_four = any && use_avx2(plan.config);
+    std::size_t batch[4];
+    int batched = 0;
     for (std::size_t i = begin; i < end; ++i) {
         flow[2 * i] = flow[2 * i + 1] = nan;
-        if (any && from.instance[i] != 0) flow_cell(job, i);
+        if (!any || from.instance[i] == 0) continue;
+        if (!by_four) {
+            flow_cell(job, i);
+            continue;
+        }
+        batch[batched++] = i;
+        if (batched == 4) {
+            flow_cells4(job, batch);
+            batched = 0;
+        }
     }
+    for (int l = 0; l < batched; ++l)
+        flow_cell(job, batch[l]);
 }
 
 } // namespace vksonar::cpu

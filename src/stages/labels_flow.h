@@ -23,7 +23,7 @@ struct FlowJob {
 };
 
 // The flow of cells [begin, end): each cell a function of the two frames alone, so any split gives the
-// same flow.
+// same flow (and so do the AVX2 path and the plain one).
 void flow_cells(const FlowJob& job, std::size_t begin, std::size_t end);
 
 // Cells in a block of the flow's work.
