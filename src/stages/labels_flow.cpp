@@ -18,10 +18,6 @@
 
 namespace vksonar::cpu {
 
-namespace {
-using M = Math<double>;
-} // namespace
-
 BeamBuckets::BeamBuckets(const std::vector<double>& t) {
     const std::size_t n = t.size();
     if (n < 2 || !(t[0] > t[n - 1])) return;
@@ -40,6 +36,8 @@ BeamBuckets::BeamBuckets(const std::vector<double>& t) {
 }
 
 namespace {
+
+using M = Math<double>;
 
 // The fractional beam index of steering angle a on the beam table (strictly decreasing, port first):
 // linear between beam centres, extrapolated by the edge spacing up to the fan's edge; NaN outside it.
