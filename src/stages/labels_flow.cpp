@@ -15,6 +15,7 @@
 #include "core/angles.h"
 #include "core/sonar_math.hpp"
 #include "stages/cpu_simd.h"
+#include "stages/pixel_spread.h"
 
 namespace vksonar::cpu {
 
@@ -67,25 +68,43 @@ void polar_coordinates(const Plan& plan, const double p[3], double& bin, double&
 }
 
 // visible_in's test in view s, at the point's place (cx, cy) in the view's pixel grid: some pixel of the
-// 3 x 3 around it holds a surface at least as far as r - tolerance. False outside the grid.
+// 3 x 3 around it holds a surface at least as far as r - tolerance. False outside the grid. With the
+// footprint kernel a labelled point lies anywhere in its pixel's range footprint (labels.md), up to half
+// of it beyond the pixel's own range: where no pixel's range reaches the point (the seabed's far edge
+// seen at grazing incidence, whose pixels have no farther neighbour; the top of an object seen from
+// below), the far end of each pixel's footprint in `to` (pixel_spread on its echo) is what counts.
 bool seen_around(const Plan& plan, const Frame& to, std::uint32_t s, double cx, double cy, double r,
                  const double* slant_factor) {
     const std::uint32_t W = view_columns(plan, s), first = view_first_column(plan, s);
     if (!(cx >= 0.0 && cx < W && cy >= 0.0 && cy < plan.rows)) return false;
     const auto column = static_cast<std::int64_t>(cx), row = static_cast<std::int64_t>(cy);
     const double tolerance = plan.bin_width_m + 1e-3 * r;
-    for (std::int64_t dy = -1; dy <= 1; ++dy)
-        for (std::int64_t dx = -1; dx <= 1; ++dx) {
-            const std::int64_t y = row + dy, x = column + dx;
-            if (y < 0 || y >= plan.rows || x < 0 || x >= W) continue;
-            const std::size_t q = static_cast<std::size_t>(y) * plan.columns + first + static_cast<std::size_t>(x);
-            const double d = to.depth[q];
-            if (!(d > 0.0)) continue;
-            // (its slant range as the echo stage reconstructs it: LabelsStage's per-pixel factor)
-            const double range = M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * slant_factor[q];
-            if (range >= r - tolerance) return true;
-        }
-    return false;
+    const auto each_hit = [&](const auto& test) {
+        for (std::int64_t dy = -1; dy <= 1; ++dy)
+            for (std::int64_t dx = -1; dx <= 1; ++dx) {
+                const std::int64_t y = row + dy, x = column + dx;
+                if (y < 0 || y >= plan.rows || x < 0 || x >= W) continue;
+                const std::size_t q = static_cast<std::size_t>(y) * plan.columns + first + static_cast<std::size_t>(x);
+                const double d = to.depth[q];
+                if (d > 0.0 && test(q, d, static_cast<std::uint32_t>(y), first + static_cast<std::uint32_t>(x)))
+                    return true;
+            }
+        return false;
+    };
+    // (its slant range as the echo stage reconstructs it: LabelsStage's per-pixel factor)
+    if (each_hit([&](std::size_t q, double d, std::uint32_t, std::uint32_t) {
+            return M::view_z_from_depth(d, plan.depth_a, plan.depth_b) * slant_factor[q] >= r - tolerance;
+        }))
+        return true;
+    if (plan.params.range_kernel != shared::kRangeKernelFootprint || to.echo.size() != 2 * to.depth.size())
+        return false;
+    const double range_min = plan.config.range_min_m, inv_bin_width = 1.0 / plan.bin_width_m;
+    return each_hit([&](std::size_t q, double, std::uint32_t y, std::uint32_t c) {
+        const M::RangeSpread spread =
+            pixel_spread<double>(plan, to.echo.data(), y, c, double(to.echo[2 * q]), range_min, inv_bin_width);
+        return spread.kernel == shared::kRangeKernelFootprint &&
+               range_min + (spread.origin + spread.hi) * plan.bin_width_m >= r - tolerance;
+    });
 }
 
 // Whether the depth image `to` sees the point p (sonar frame, range r): some pixel of the 3 x 3 around
