@@ -1,10 +1,8 @@
 // The labels stage (labels.h): one beam at a time, every pixel that feeds the beam, each of its range
 // shares into the cell it lands in, with the pixel's instance, elevation and 3-D point.
 #include "stages/labels.h"
-#include "stages/labels_flow.h"
 
 #include <algorithm>
-#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -13,12 +11,12 @@
 #include <limits>
 #include <utility>
 
-#include "core/angles.h"
 #include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
 #include "host/workers.h"
 #include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
+#include "stages/labels_flow.h"
 #include "stages/pixel_spread.h"
 
 namespace vksonar::cpu {
