@@ -17,6 +17,7 @@
 
 #include "cli/bench_cmd.h"
 #include "cli/bench_common.h"
+#include "core/angles.h"
 
 namespace vksonar::cli::bench {
 namespace {
@@ -54,7 +55,7 @@ struct SpeedSamples {
 void run_flow_timing(Renderer& renderer, const Pose& pose, std::uint64_t frame_index, std::uint32_t calls,
                      Frame& frame) {
     Pose ahead = pose;
-    const double yaw = pose.yaw_deg * 3.14159265358979323846 / 180.0;
+    const double yaw = pose.yaw_deg * kDegToRad;
     ahead.x_m += 0.05 * std::cos(yaw);
     ahead.y_m += 0.05 * std::sin(yaw);
     ahead.yaw_deg += 0.1;

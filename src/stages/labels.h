@@ -88,8 +88,10 @@ public:
     // scene: flow[2 i] = d_bin, flow[2 i + 1] = d_beam (fractional; the point's coordinates in `to` minus
     // those in `from`), NaN where the cell has no label, where the point leaves the window (range, fan or
     // the depth pass's vertical coverage) or where `to`'s depth image has something nearer in front of it
-    // (occluded). `to` needs its depth (labels keep it). flow: bins * beams * 2. The cells are split in
-    // blocks between the threads; the flow does not depend on them.
+    // (occluded; with the footprint kernel, only where the point also lies beyond the far end of those
+    // pixels' range footprints, from `to`'s echo).
+    // `to` needs its depth and echo (labels keep both). flow: bins * beams * 2. The cells are split in
+    // blocks between the threads; the flow does not depend on them (stages/labels_flow.cpp).
     void flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose, float* flow) const;
 
     struct Scratch; // per thread: one beam's bins

@@ -40,24 +40,33 @@ namespace {
 
 using M = Math<double>;
 
-// The fractional beam index of steering angle a on the beam table (strictly decreasing, port first):
-// linear between beam centres, extrapolated by the edge spacing up to the fan's edge; NaN outside it.
+// Whether steering angle a lies strictly between the first and last beams of the table t (strictly
+// decreasing, port first) and inside the fan: beam_coordinate's general case, between two beam centres.
+inline bool between_beams(const std::vector<double>& t, double half_fan, double a) {
+    const std::size_t n = t.size();
+    return n >= 2 && std::abs(a) <= half_fan && a < t[0] && a > t[n - 1];
+}
+
+// The fractional beam index of steering angle a on the beam table: linear between beam centres,
+// extrapolated by the edge spacing up to the fan's edge; NaN outside it.
 double beam_coordinate(const Plan& plan, double a, const BeamBuckets& buckets) {
     const std::vector<double>& t = plan.beam_angle_rad;
     const std::size_t n = t.size();
     const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
+    if (between_beams(t, half, a)) {
+        // first j with t[j] < a (t decreasing): the point lies between beams j - 1 and j
+        const std::size_t j = buckets.first_below(t, a);
+        return double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]);
+    }
     if (n == 0 || !(std::abs(a) <= half)) return std::numeric_limits<double>::quiet_NaN();
     if (n == 1) return 0.0;
     if (a >= t[0]) return (t[0] - a) / (t[0] - t[1]);
-    if (a <= t[n - 1]) return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]);
-    // first j with t[j] < a (t decreasing): the point lies between beams j - 1 and j
-    const std::size_t j = buckets.first_below(t, a);
-    return double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]);
+    return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]); // a <= t[n - 1]
 }
 
 // The point p (sonar frame) as (bin, beam) coordinates: bin b covers [b, b + 1) (cell k's centre at
-// k + 0.5); NaN outside the window.
-void polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets& buckets) {
+// k + 0.5); NaN outside the window. Returns p's range.
+double polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets& buckets) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
     bin = r >= plan.config.range_min_m && r < plan.config.range_max_m ? (r - plan.config.range_min_m) / plan.bin_width_m
@@ -65,6 +74,7 @@ void polar_coordinates(const Plan& plan, const double p[3], double& bin, double&
     // The beam a direction is heard on: its cone (line array, the sine along the y axis) or its azimuth.
     const double angle = plan.line_array ? std::asin(std::clamp(p[1] / r, -1.0, 1.0)) : std::atan2(p[1], p[0]);
     beam = r > 0.0 ? beam_coordinate(plan, angle, buckets) : nan;
+    return r;
 }
 
 // visible_in's test in view s, at the point's place (cx, cy) in the view's pixel grid: some pixel of the
@@ -141,10 +151,6 @@ bool visible_in(const Plan& plan, const Frame& to, const double p[3], double r, 
     return false;
 }
 
-} // namespace
-
-namespace {
-
 // One labelled cell i: its point p (sonar frame of `from`) carried to `to`'s sonar frame.
 void flow_cell(const FlowJob& job, std::size_t i) {
     const Plan& plan = *job.plan;
@@ -165,8 +171,7 @@ void flow_cell(const FlowJob& job, std::size_t i) {
         q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
     double bin_from, beam_from, bin_to, beam_to;
     polar_coordinates(plan, p, bin_from, beam_from, *job.buckets);
-    polar_coordinates(plan, q, bin_to, beam_to, *job.buckets);
-    const double r = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    const double r = polar_coordinates(plan, q, bin_to, beam_to, *job.buckets);
     if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, *job.to, q, r, job.slant_factor)) return;
     job.flow[2 * i] = static_cast<float>(bin_to - bin_from);
     job.flow[2 * i + 1] = static_cast<float>(beam_to - beam_from);
@@ -210,15 +215,15 @@ VKS_AVX2 void polar_coordinates4(const Plan& plan, __m256d x, __m256d y, __m256d
         for (int l = 0; l < 4; ++l)
             angle[l] = std::atan2(ys[l], xs[l]);
     }
-    // beam_coordinate's general case: double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j])
+    // beam_coordinate's general case by vector: double(j - 1) + (t[j - 1] - a) / (t[j - 1] - t[j]); the
+    // others per lane
     const std::vector<double>& t = plan.beam_angle_rad;
-    const std::size_t n = t.size();
     const double half = 0.5 * plan.config.hfov_deg * kDegToRad;
     alignas(32) double above[4], below[4], base[4], other[4];
     int others = 0;
     for (int l = 0; l < 4; ++l) {
         const double a = angle[l];
-        if (!(range[l] > 0.0) || n < 2 || !(std::abs(a) <= half) || a >= t[0] || a <= t[n - 1]) {
+        if (!(range[l] > 0.0) || !between_beams(t, half, a)) {
             others |= 1 << l;
             other[l] = range[l] > 0.0 ? beam_coordinate(plan, a, buckets) : nan;
             above[l] = 1.0, below[l] = 0.0, base[l] = 0.0;
