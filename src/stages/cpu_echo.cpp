@@ -66,11 +66,10 @@ namespace {
 // the first pixel. Returns false, having written nothing, where a lane needs what only the scalar
 // kernel does: a rough material's facet term, or an absorption exponent beyond exp4's range.
 // material_count > 0; normals4: at the first pixel, or null without incidence.
-__attribute__((target("avx2,fma"))) bool echo4(const Math<float>::EchoConstants& k, const Math<float>::EchoTerms& terms,
-                                               const float* depth, const std::uint32_t* material, const float* normals4,
-                                               const float* u, float v, const float* row_terms,
-                                               const shared::MaterialGpu* materials, std::uint32_t material_count,
-                                               float* out) {
+__attribute__((target("avx2,fma"), always_inline)) inline bool
+echo4(const Math<float>::EchoConstants& k, const Math<float>::EchoTerms& terms, const float* depth,
+      const std::uint32_t* material, const float* normals4, const float* u, float v, const float* row_terms,
+      const shared::MaterialGpu* materials, std::uint32_t material_count, float* out) {
     const __m128 zero = _mm_setzero_ps();
     const __m128 d = _mm_loadu_ps(depth);
     const __m128 hit = _mm_cmpgt_ps(d, zero);
@@ -94,34 +93,46 @@ __attribute__((target("avx2,fma"))) bool echo4(const Math<float>::EchoConstants&
     const int live_mask = _mm_movemask_ps(live);
     __m128 e = zero;
     if (live_mask != 0) {
-        // per lane: the material's backscatter and the scattering factor echo_at_range picks
-        alignas(16) float backscatter[4], scatter[4];
+        // per lane: the material's backscatter (0 in a lane not live) and the scattering factor echo_at_range
+        // picks (1 in a lane not live), built in registers: lanes written one by one to memory and read back
+        // as a vector stall on store forwarding
+        const __m128 one = _mm_set1_ps(1.0f);
+        __m128 backscatter, scatter = one;
         const __m128i ids = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(material)),
                                           _mm_set1_epi32(static_cast<int>(shared::kMaterialIdMask)));
+        // cos incidence of the four pixels: the w of each normal
+        auto normal_w = [&] {
+            const __m128 t0 = _mm_unpackhi_ps(_mm_loadu_ps(normals4), _mm_loadu_ps(normals4 + 4));      // z0 z1 w0 w1
+            const __m128 t1 = _mm_unpackhi_ps(_mm_loadu_ps(normals4 + 8), _mm_loadu_ps(normals4 + 12)); // z2 z3 w2 w3
+            return _mm_movehl_ps(t1, t0);
+        };
         if (_mm_movemask_epi8(_mm_cmpeq_epi32(ids, _mm_shuffle_epi32(ids, 0))) == 0xffff) {
             // one material under all four pixels (a seabed): one lookup
             const std::uint32_t id = material[0] & shared::kMaterialIdMask;
             const shared::MaterialGpu& mat = materials[id < material_count ? id : 0u];
             if (terms.incidence && terms.rough_materials && mat.model == shared::kScatterRough) return false;
-            const bool lambert = terms.incidence && mat.model == shared::kScatterLambert;
-            for (int l = 0; l < 4; ++l) {
-                const bool lane_live = (live_mask & (1 << l)) != 0;
-                backscatter[l] = lane_live ? mat.backscatter_linear : 0.0f;
-                scatter[l] = lane_live && lambert ? normals4[4 * l + 3] : 1.0f;
-            }
+            backscatter = _mm_and_ps(live, _mm_set1_ps(mat.backscatter_linear));
+            if (terms.incidence && mat.model == shared::kScatterLambert) scatter = _mm_blendv_ps(one, normal_w(), live);
         } else {
+            float b[4], lambert[4];
             for (int l = 0; l < 4; ++l) {
-                backscatter[l] = 0.0f;
-                scatter[l] = 1.0f;
+                b[l] = 0.0f;
+                lambert[l] = 0.0f;
                 if (!(live_mask & (1 << l))) continue;
                 const std::uint32_t id = material[l] & shared::kMaterialIdMask;
                 const shared::MaterialGpu& mat = materials[id < material_count ? id : 0u];
-                backscatter[l] = mat.backscatter_linear;
+                b[l] = mat.backscatter_linear;
                 if (terms.incidence && terms.rough_materials && mat.model == shared::kScatterRough) return false;
-                if (terms.incidence && mat.model == shared::kScatterLambert) scatter[l] = normals4[4 * l + 3];
+                if (terms.incidence && mat.model == shared::kScatterLambert) lambert[l] = 1.0f;
+            }
+            backscatter = _mm_setr_ps(b[0], b[1], b[2], b[3]);
+            if (terms.incidence) {
+                const __m128 lambert_lanes =
+                    _mm_cmpneq_ps(_mm_setr_ps(lambert[0], lambert[1], lambert[2], lambert[3]), zero);
+                scatter = _mm_blendv_ps(one, normal_w(), lambert_lanes);
             }
         }
-        e = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_load_ps(backscatter), _mm_load_ps(scatter)), omega), vertical);
+        e = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(backscatter, scatter), omega), vertical);
         const __m128 r2 = _mm_mul_ps(r, r);
         e = terms.spreading ? _mm_div_ps(e, r2) : _mm_mul_ps(_mm_mul_ps(e, r), r);
         if (terms.absorption) {
@@ -137,10 +148,26 @@ __attribute__((target("avx2,fma"))) bool echo4(const Math<float>::EchoConstants&
     _mm_storeu_ps(out + 4, _mm_unpackhi_ps(e, r));
     return true;
 }
+
+// echo4 along one view row of W pixels from its first (depth, material, normals4 (null without incidence),
+// out: at that pixel), four at a time: returns the pixels done, a multiple of 4 (the rest, from the first
+// block echo4 declines, take the scalar loop).
+__attribute__((target("avx2,fma"))) std::uint32_t
+echo_row4(const Math<float>::EchoConstants& k, const Math<float>::EchoTerms& terms, const float* depth,
+          const std::uint32_t* material, const float* normals4, const float* u, float v, const float* row_terms,
+          const shared::MaterialGpu* materials, std::uint32_t material_count, float* out, std::uint32_t W) {
+    std::uint32_t x = 0;
+    for (; x + 4 <= W; x += 4)
+        if (!echo4(k, terms, depth + x, material + x, normals4 != nullptr ? normals4 + 4 * x : nullptr, u + x, v,
+                   row_terms + 2 * x, materials, material_count, out + 2 * x))
+            break;
+    return x;
+}
 #else
-bool echo4(const Math<float>::EchoConstants&, const Math<float>::EchoTerms&, const float*, const std::uint32_t*,
-           const float*, const float*, float, const float*, const shared::MaterialGpu*, std::uint32_t, float*) {
-    return false;
+std::uint32_t echo_row4(const Math<float>::EchoConstants&, const Math<float>::EchoTerms&, const float*,
+                        const std::uint32_t*, const float*, const float*, float, const float*,
+                        const shared::MaterialGpu*, std::uint32_t, float*, std::uint32_t) {
+    return 0;
 }
 #endif
 
@@ -175,12 +202,9 @@ void echo_rows(const Plan& plan, const float* depth, const std::uint32_t* materi
             if constexpr (std::is_same_v<Real, float>) {
                 // four pixels at a time where echo4 can (the same floats), the others one by one below
                 if (simd && material_count > 0) {
-                    for (; x + 4 <= W; x += 4) {
-                        const std::size_t p = static_cast<std::size_t>(j) * C + c0 + x;
-                        if (!echo4(k, terms, depth + p, material + p, terms.incidence ? normals4 + 4 * p : nullptr,
-                                   u + x, v, row_terms + 2 * x, plan.materials.data(), material_count, echo2 + 2 * p))
-                            break;
-                    }
+                    const std::size_t p = static_cast<std::size_t>(j) * C + c0;
+                    x = echo_row4(k, terms, depth + p, material + p, terms.incidence ? normals4 + 4 * p : nullptr, u, v,
+                                  row_terms, plan.materials.data(), material_count, echo2 + 2 * p, W);
                 }
             }
             for (; x < W; ++x) {
