@@ -480,6 +480,14 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     if (batched > 0) flush();
 }
 
+// static_cast<int>(std::floor(x)) for x within int's range (and the same INT_MIN outside it or for NaN),
+// without a libm call or a rounding instruction the baseline x86-64 build lacks: truncate, then step down
+// where truncation rounded up (x negative, not whole).
+template <class Real> inline int floor_to_int(Real x) {
+    const int truncated = static_cast<int>(x);
+    return truncated - (x < static_cast<Real>(truncated) ? 1 : 0);
+}
+
 // line_array: the pixel columns [first, second) of row j and view `view` that feed cone columns
 // [cone_begin, cone_end): those within one column of them, x in (cone_begin - 1, cone_end). Along a
 // view's row the cone coordinate increases with the column (plan_cone_table).
@@ -525,8 +533,9 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
                     const Real* shares) {
                     const int k_first = spread.k_first;
                     const Real x = static_cast<Real>(cone_x[pc]);
-                    const int first_cone = std::max(static_cast<int>(std::floor(x)), static_cast<int>(cone_begin));
-                    const int last_cone = std::min(static_cast<int>(std::floor(x)) + 1, static_cast<int>(cone_end) - 1);
+                    const int below = floor_to_int(x);
+                    const int first_cone = std::max(below, static_cast<int>(cone_begin));
+                    const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
                     // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
                     for (int cone = first_cone; cone <= last_cone; ++cone) {
                         const Real weight = M::cone_share(x, cone, count);
