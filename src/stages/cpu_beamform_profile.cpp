@@ -181,13 +181,16 @@ VKS_AVX2_INLINE __m256 missing_edge8(__m256 r, __m256 other, __m256 r_near, __m2
 // the same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which
 // matches expf here), into out[0..7]. False where a pixel's bin coordinate is NaN (the caller then uses
 // the scalar kernel).
-__attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in, float range_min, float ibw,
-                                                           float jump_rel, int bins, Math<float>::RangeSpread* out) {
+// The lanes footprint_spread8 reads, in registers.
+struct SpreadVectors {
+    __m256 e, r, up2_r, up_r, up_e, down_r, down2_r, down_e, left_r, right_r;
+};
+VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_min, float ibw, float jump_rel, int bins,
+                                          Math<float>::RangeSpread* out) {
     const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f),
                  two = _mm256_set1_ps(2.0f);
     const __m256 vibw = _mm256_set1_ps(ibw);
-    const __m256 r = _mm256_load_ps(in.r), up2_r = _mm256_load_ps(in.up2_r), up_r = _mm256_load_ps(in.up_r),
-                 down_r = _mm256_load_ps(in.down_r), down2_r = _mm256_load_ps(in.down2_r);
+    const __m256 r = in.r, up2_r = in.up2_r, up_r = in.up_r, down_r = in.down_r, down2_r = in.down2_r;
     const __m256 x = _mm256_mul_ps(_mm256_sub_ps(r, _mm256_set1_ps(range_min)), vibw); // range_bin_coord
     if (_mm256_movemask_ps(_mm256_cmp_ps(x, x, _CMP_UNORD_Q)) != 0) return false;
     const __m256 a = edge_offset8(r, jump_rel, up_r, up2_r, down_r),
@@ -204,7 +207,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const __m256 xl = _mm256_add_ps(f, _mm256_mul_ps(min8(min8(a2, b2), zero), vibw)); // footprint_lo
     const __m256 xh = _mm256_add_ps(f, _mm256_mul_ps(max8(max8(a2, b2), zero), vibw)); // footprint_hi
     // footprint_across: the extent along the row, from the left and right neighbours (none beyond them)
-    const __m256 left_r = _mm256_load_ps(in.left_r), right_r = _mm256_load_ps(in.right_r);
+    const __m256 left_r = in.left_r, right_r = in.right_r;
     const __m256 al = edge_offset8(r, jump_rel, left_r, zero, right_r),
                  ar = edge_offset8(r, jump_rel, right_r, zero, left_r);
     const __m256 al2 = select8(_mm256_cmp_ps(al, zero, _CMP_NEQ_UQ), al, neg8(ar)),
@@ -227,7 +230,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     const __m256 span =
         _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(two, _mm256_sub_ps(up_r, down_r)), _mm256_sub_ps(up2_r, down2_r)),
                       _mm256_set1_ps(0.25f * ibw));
-    const __m256 e_up = _mm256_load_ps(in.up_e), e_down = _mm256_load_ps(in.down_e);
+    const __m256 e_up = in.up_e, e_down = in.down_e;
     // footprint_log_slope's arguments: both sides (up against down), or with one side only that side's
     // neighbour q against this pixel's own footprint
     const __m256 up_side = _mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_UQ), _mm256_cmp_ps(up2_r, zero, _CMP_GT_OQ));
@@ -243,7 +246,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
                                     r),
                       vibw),
         _mm256_sub_ps(column_centre, f));
-    const __m256 e_self = _mm256_load_ps(in.e), w_self = _mm256_sub_ps(xh, xl);
+    const __m256 e_self = in.e, w_self = _mm256_sub_ps(xh, xl);
     const __m256 e1 = select8(both, e_up, e_q), w1 = select8(both, w_up, w_q);
     const __m256 e2 = select8(both, e_down, e_self), w2 = select8(both, w_down, w_self);
     const __m256 slope_span = select8(both, span, span_q);
@@ -312,6 +315,57 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in
     }
     return true;
 }
+
+// footprint_spread8 of lanes the caller filled one by one.
+__attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in, float range_min, float ibw,
+                                                           float jump_rel, int bins, Math<float>::RangeSpread* out) {
+    const SpreadVectors v{_mm256_load_ps(in.e),       _mm256_load_ps(in.r),      _mm256_load_ps(in.up2_r),
+                          _mm256_load_ps(in.up_r),    _mm256_load_ps(in.up_e),   _mm256_load_ps(in.down_r),
+                          _mm256_load_ps(in.down2_r), _mm256_load_ps(in.down_e), _mm256_load_ps(in.left_r),
+                          _mm256_load_ps(in.right_r)};
+    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, out);
+}
+
+// The (e, r) pairs of the eight pixels of row `row` from column c0 as two registers (zeros for a row
+// outside [0, R)): two loads; per 128-bit half a shuffle gives (e0 e1 e4 e5 | e2 e3 e6 e7), then the
+// halves' pairs in order.
+VKS_AVX2_INLINE void spread_row_lanes(const float* echo2, std::uint32_t C, std::uint32_t R, std::int64_t row,
+                                      std::uint32_t c0, __m256& e, __m256& r) {
+    if (row < 0 || row >= static_cast<std::int64_t>(R)) {
+        e = r = _mm256_setzero_ps();
+        return;
+    }
+    const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+    const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c0);
+    const __m256 a = _mm256_loadu_ps(q), b = _mm256_loadu_ps(q + 8); // (e0 r0 .. e3 r3), (e4 r4 .. e7 r7)
+    e = _mm256_permutevar8x32_ps(_mm256_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0)), order);
+    r = _mm256_permutevar8x32_ps(_mm256_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)), order);
+}
+
+// footprint_spread8 of the eight neighbouring pixels of row j from column c0 (c0 + 8 <= C), straight from
+// echo2 into registers (lanes stored one by one and read back as a vector stall on store forwarding): each
+// row's (e, r) pairs by two loads and a shuffle, zeros for rows outside [0, R); the row neighbours from the
+// centre row's ranges, left_range and right_range beyond the eight (0 past the view's edge).
+__attribute__((target("avx2,fma"))) bool footprint_spread8_run(const float* echo2, std::uint32_t C, std::uint32_t R,
+                                                               std::uint32_t j, std::uint32_t c0, float left_range,
+                                                               float right_range, float range_min, float ibw,
+                                                               float jump_rel, int bins,
+                                                               Math<float>::RangeSpread* out) {
+    SpreadVectors v;
+    __m256 unused_e;
+    const std::int64_t jj = j;
+    spread_row_lanes(echo2, C, R, jj, c0, v.e, v.r);
+    spread_row_lanes(echo2, C, R, jj - 2, c0, unused_e, v.up2_r);
+    spread_row_lanes(echo2, C, R, jj - 1, c0, v.up_e, v.up_r);
+    spread_row_lanes(echo2, C, R, jj + 1, c0, v.down_e, v.down_r);
+    spread_row_lanes(echo2, C, R, jj + 2, c0, unused_e, v.down2_r);
+    // left: (left_range, r0 .. r6); right: (r1 .. r7, right_range)
+    v.left_r = _mm256_blend_ps(_mm256_permutevar8x32_ps(v.r, _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6)),
+                               _mm256_set1_ps(left_range), 0x01);
+    v.right_r = _mm256_blend_ps(_mm256_permutevar8x32_ps(v.r, _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7)),
+                                _mm256_set1_ps(right_range), 0x80);
+    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, out);
+}
 #undef VKS_AVX2_INLINE
 
 #else
@@ -321,6 +375,10 @@ struct SpreadLanes {
         right_r[8];
 };
 bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
+    return false;
+}
+bool footprint_spread8_run(const float*, std::uint32_t, std::uint32_t, std::uint32_t, std::uint32_t, float, float,
+                           float, float, float, int, Math<float>::RangeSpread*) {
     return false;
 }
 bool footprint_shares8(const Math<float>::RangeSpread&, int, float*) {
@@ -369,36 +427,13 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
             SpreadLanes in;
 #if defined(__x86_64__) && defined(__GNUC__)
             if (n == kSpreadLanes && c[7] == c[0] + 7 && view.end > 0) {
-                // Eight neighbouring pixels (most batches): each row's (e, r) pairs by four vector loads,
-                // and the row neighbours from the centre row's ranges; the same values as the loop below.
-                const std::int64_t jj = j;
-                auto row_lanes = [&](std::int64_t row, float* e, float* r) {
-                    if (row < 0 || row >= static_cast<std::int64_t>(R)) {
-                        std::fill(e, e + kSpreadLanes, 0.0f);
-                        std::fill(r, r + kSpreadLanes, 0.0f);
-                        return;
-                    }
-                    const float* q = echo2 + 2 * (static_cast<std::size_t>(row) * C + c[0]);
-                    for (int half = 0; half < 2; ++half, q += 8) {
-                        const __m128 a = _mm_loadu_ps(q), b = _mm_loadu_ps(q + 4);
-                        _mm_store_ps(e + 4 * half, _mm_shuffle_ps(a, b, _MM_SHUFFLE(2, 0, 2, 0)));
-                        _mm_store_ps(r + 4 * half, _mm_shuffle_ps(a, b, _MM_SHUFFLE(3, 1, 3, 1)));
-                    }
-                };
-                row_lanes(jj, in.e, in.r);
-                row_lanes(jj - 2, in.up2_e, in.up2_r);
-                row_lanes(jj - 1, in.up_e, in.up_r);
-                row_lanes(jj + 1, in.down_e, in.down_r);
-                row_lanes(jj + 2, in.down2_e, in.down2_r);
+                // Eight neighbouring pixels (most batches): their windows straight into registers, the row
+                // neighbours from the centre row's ranges; the same values as the loop below.
                 const float* p = echo2 + 2 * (static_cast<std::size_t>(j) * C + c[0]);
-                in.left_r[0] = c[0] > view.first ? p[-1] : 0.0f;
-                in.right_r[7] = c[7] + 1 < view.end ? p[17] : 0.0f;
-                for (int l = 0; l < 7; ++l) {
-                    in.left_r[l + 1] = in.r[l];
-                    in.right_r[l] = in.r[l + 1];
-                }
-                if (footprint_spread8(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
-                                      static_cast<int>(plan.bins), out))
+                if (footprint_spread8_run(echo2, C, R, j, c[0], c[0] > view.first ? p[-1] : 0.0f,
+                                          c[7] + 1 < view.end ? p[17] : 0.0f, range_min, inv_bin_width,
+                                          static_cast<float>(plan.params.edge_relative_jump),
+                                          static_cast<int>(plan.bins), out))
                     return;
             }
 #endif
@@ -527,22 +562,23 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const std::size_t at = 2 * (static_cast<std::size_t>(j) * plan.views + view);
             const auto [c_begin, c_end] =
                 spans != nullptr ? std::pair{spans[at], spans[at + 1]} : cone_span(plan, j, view, cone_begin, cone_end);
-            for_each_spread_pixel<Real>(
-                plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
-                [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread, int spread_bins,
-                    const Real* shares) {
-                    const int k_first = spread.k_first;
-                    const Real x = static_cast<Real>(cone_x[pc]);
-                    const int below = floor_to_int(x);
-                    const int first_cone = std::max(below, static_cast<int>(cone_begin));
-                    const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
-                    // The range shares once for both cone columns (a footprint spans <= kMaxFootprintBins + 1 bins).
-                    for (int cone = first_cone; cone <= last_cone; ++cone) {
-                        const Real weight = M::cone_share(x, cone, count);
-                        if (!(weight > Real(0))) continue;
-                        add_shares(acc + static_cast<std::size_t>(cone) * T + k_first, shares, spread_bins, weight * e);
-                    }
-                });
+            for_each_spread_pixel<Real>(plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
+                                        [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
+                                            int spread_bins, const Real* shares) {
+                                            const int k_first = spread.k_first;
+                                            const Real x = static_cast<Real>(cone_x[pc]);
+                                            const int below = floor_to_int(x);
+                                            const int first_cone = std::max(below, static_cast<int>(cone_begin));
+                                            const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
+                                            // The range shares once for both cone columns (a footprint spans <=
+                                            // kMaxFootprintBins + 1 bins).
+                                            for (int cone = first_cone; cone <= last_cone; ++cone) {
+                                                const Real weight = M::cone_share(x, cone, count);
+                                                if (!(weight > Real(0))) continue;
+                                                add_shares(acc + static_cast<std::size_t>(cone) * T + k_first, shares,
+                                                           spread_bins, weight * e);
+                                            }
+                                        });
         }
     }
 }
