@@ -242,14 +242,15 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
     Real* ring = scratch + 3 * C; // rows j % kRingRows, then the zero row
     Real* zero_row = ring + kRingRows * stride;
     std::fill(zero_row, zero_row + stride, Real(0));
-    for (std::int64_t c = 0; c < C; ++c) {
-        const std::uint32_t col = static_cast<std::uint32_t>(c), s = view_of_column(plan, col);
+    for (std::uint32_t s = 0; s < plan.views; ++s) { // a view's columns, its view looked up once
         const typename M::PixelView view = pixel_view<Real>(plan, s);
-        const auto ray = M::pixel_ray(
-            M::pixel_coord(col - view_first_column(plan, s), view_columns(plan, s), view.tan_half_h), Real(0), view);
-        ray_x[c] = ray.x;
-        ray_y[c] = ray.y;
-        ray_z[c] = ray.z;
+        const std::uint32_t first = view_first_column(plan, s), W = view_columns(plan, s);
+        for (std::uint32_t x = 0; x < W; ++x) {
+            const auto ray = M::pixel_ray(M::pixel_coord(x, W, view.tan_half_h), Real(0), view);
+            ray_x[first + x] = ray.x;
+            ray_y[first + x] = ray.y;
+            ray_z[first + x] = ray.z;
+        }
     }
     auto fill_row = [&](std::int64_t j) {
         Real* row = ring + (j % kRingRows) * stride;
