@@ -503,11 +503,23 @@ TEST_P(LabelBackendTest, FlowOfAFrameToItselfIsZeroWhereverThereIsALabel) {
     ASSERT_TRUE(scene) << scene.error().message;
     Pose pose;
     pose.pitch_deg = 10.0;
-    // (planar beams have no tier views: their pixel grid ends at the slices' rows)
-    for (BeamGeometry geometry : {BeamGeometry::line_array, BeamGeometry::planar}) {
-        const bool line_array = geometry == BeamGeometry::line_array;
+    // (planar beams have no tier views: their pixel grid ends at the slices' rows.) The tent and nearest
+    // kernels too: the tent puts a pixel up to half a bin beyond either end of the window into the end bin,
+    // its point where the pixel is, so that half bin counts as inside the window (the flow's bin then runs
+    // from -0.5 to bins + 0.5).
+    struct Case {
+        BeamGeometry geometry;
+        RangeKernel kernel;
+        const char* what;
+    };
+    for (const Case& c : {Case{BeamGeometry::line_array, RangeKernel::footprint, "line array"},
+                          Case{BeamGeometry::planar, RangeKernel::footprint, "planar"},
+                          Case{BeamGeometry::line_array, RangeKernel::tent, "line array, tent"},
+                          Case{BeamGeometry::line_array, RangeKernel::nearest, "line array, nearest"}}) {
+        const bool line_array = c.geometry == BeamGeometry::line_array;
         SonarConfig config = quiet_config();
-        config.beam_geometry = geometry;
+        config.beam_geometry = c.geometry;
+        config.range_kernel = c.kernel;
         auto r = render_once(GetParam(), config, scene.value(), pose, SaveFlags::labels);
         ASSERT_TRUE(r);
         std::vector<float> flow;
@@ -528,7 +540,7 @@ TEST_P(LabelBackendTest, FlowOfAFrameToItselfIsZeroWhereverThereIsALabel) {
             // (not exactly 0: the point goes to the world frame and back, a few ulps off)
             nonzero += std::abs(flow[2 * i]) > 1e-6f || std::abs(flow[2 * i + 1]) > 1e-6f;
         }
-        const char* what = line_array ? "line array" : "planar";
+        const char* what = c.what;
         std::printf("[labels] flow to itself, %s: %zu labelled cells, %zu without a flow; %zu below the slices, %zu "
                     "of them without\n",
                     what, labelled, without, steep, steep_without);

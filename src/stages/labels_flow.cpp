@@ -64,13 +64,23 @@ double beam_coordinate(const Plan& plan, double a, const BeamBuckets& buckets) {
     return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]); // a <= t[n - 1]
 }
 
+// The ranges a labelled point can lie at: the window, and with the tent kernel half a bin beyond either
+// end (the tent puts a pixel there into the end bin, its point at the pixel's range).
+struct PointWindow {
+    double min_m, max_m;
+};
+PointWindow point_window(const Plan& plan) {
+    const double reach = plan.params.range_kernel == shared::kRangeKernelTent ? 0.5 * plan.bin_width_m : 0.0;
+    return {plan.config.range_min_m - reach, plan.config.range_max_m + reach};
+}
+
 // The point p (sonar frame) as (bin, beam) coordinates: bin b covers [b, b + 1) (cell k's centre at
-// k + 0.5); NaN outside the window. Returns p's range.
+// k + 0.5); NaN outside point_window. Returns p's range.
 double polar_coordinates(const Plan& plan, const double p[3], double& bin, double& beam, const BeamBuckets& buckets) {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-    bin = r >= plan.config.range_min_m && r < plan.config.range_max_m ? (r - plan.config.range_min_m) / plan.bin_width_m
-                                                                      : nan;
+    const PointWindow window = point_window(plan);
+    bin = r >= window.min_m && r < window.max_m ? (r - plan.config.range_min_m) / plan.bin_width_m : nan;
     // The beam a direction is heard on: its cone (line array, the sine along the y axis) or its azimuth.
     const double angle = plan.line_array ? std::asin(std::clamp(p[1] / r, -1.0, 1.0)) : std::atan2(p[1], p[0]);
     beam = r > 0.0 ? beam_coordinate(plan, angle, buckets) : nan;
@@ -193,8 +203,9 @@ VKS_AVX2 void polar_coordinates4(const Plan& plan, __m256d x, __m256d y, __m256d
     const double nan = std::numeric_limits<double>::quiet_NaN();
     r = _mm256_sqrt_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)), _mm256_mul_pd(z, z)));
     const __m256d range_min = splat(plan.config.range_min_m);
-    const __m256d in_window = _mm256_and_pd(_mm256_cmp_pd(r, range_min, _CMP_GE_OQ),
-                                            _mm256_cmp_pd(r, splat(plan.config.range_max_m), _CMP_LT_OQ));
+    const PointWindow window = point_window(plan);
+    const __m256d in_window = _mm256_and_pd(_mm256_cmp_pd(r, splat(window.min_m), _CMP_GE_OQ),
+                                            _mm256_cmp_pd(r, splat(window.max_m), _CMP_LT_OQ));
     _mm256_storeu_pd(
         bin,
         _mm256_blendv_pd(splat(nan), _mm256_div_pd(_mm256_sub_pd(r, range_min), splat(plan.bin_width_m)), in_window));
