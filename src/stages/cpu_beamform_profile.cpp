@@ -562,23 +562,23 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const std::size_t at = 2 * (static_cast<std::size_t>(j) * plan.views + view);
             const auto [c_begin, c_end] =
                 spans != nullptr ? std::pair{spans[at], spans[at + 1]} : cone_span(plan, j, view, cone_begin, cone_end);
+            // each pixel into the cone columns floor(x) and floor(x) + 1 of this block, the range shares once for
+            // both (a footprint spans <= kMaxFootprintBins + 1 bins)
+            const auto add_to_cones = [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
+                                          int spread_bins, const Real* shares) {
+                const Real x = static_cast<Real>(cone_x[pc]);
+                const int below = floor_to_int(x);
+                const int first_cone = std::max(below, static_cast<int>(cone_begin));
+                const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
+                for (int cone = first_cone; cone <= last_cone; ++cone) {
+                    const Real weight = M::cone_share(x, cone, count);
+                    if (!(weight > Real(0))) continue;
+                    add_shares(acc + static_cast<std::size_t>(cone) * T + spread.k_first, shares, spread_bins,
+                               weight * e);
+                }
+            };
             for_each_spread_pixel<Real>(plan, echo2, j, c_begin, c_end, exp4, range_min, inv_bin_width, columns,
-                                        [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
-                                            int spread_bins, const Real* shares) {
-                                            const int k_first = spread.k_first;
-                                            const Real x = static_cast<Real>(cone_x[pc]);
-                                            const int below = floor_to_int(x);
-                                            const int first_cone = std::max(below, static_cast<int>(cone_begin));
-                                            const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
-                                            // The range shares once for both cone columns (a footprint spans <=
-                                            // kMaxFootprintBins + 1 bins).
-                                            for (int cone = first_cone; cone <= last_cone; ++cone) {
-                                                const Real weight = M::cone_share(x, cone, count);
-                                                if (!(weight > Real(0))) continue;
-                                                add_shares(acc + static_cast<std::size_t>(cone) * T + k_first, shares,
-                                                           spread_bins, weight * e);
-                                            }
-                                        });
+                                        add_to_cones);
         }
     }
 }
