@@ -234,6 +234,40 @@ std::unique_ptr<Rendered> render_on_threads(const SonarConfig& config, const Sce
     return rendered;
 }
 
+// StageTiming::passes on the CPU backend: the beamform stage's row is followed by its two passes' rows,
+// which lie inside it (host clocks: profile + beams <= the stage), and nothing else changes.
+TEST(CpuBackendTiming, PassesFollowTheBeamformStageAndChangeNothingElse) {
+    auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(scene) << scene.error().message;
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    RendererOptions passes;
+    passes.stage_timing = StageTiming::passes;
+    auto plain = render_once(Backend::cpu, quiet_config(), scene.value(), pose);
+    auto by_pass = render_once(Backend::cpu, quiet_config(), scene.value(), pose, SaveFlags::none, 1, passes);
+    ASSERT_TRUE(plain && by_pass);
+    EXPECT_EQ(by_pass->frame.clean, plain->frame.clean);
+    EXPECT_EQ(by_pass->frame.stages_run, plain->frame.stages_run);
+    std::vector<std::string> expected, got;
+    for (const StageTime& t : plain->frame.times) {
+        expected.push_back(t.stage);
+        if (t.stage == "beamform") {
+            expected.push_back("bf:profile");
+            expected.push_back("bf:beams");
+        }
+    }
+    double beamform = -1.0, inside = 0.0;
+    for (const StageTime& t : by_pass->frame.times) {
+        got.push_back(t.stage);
+        EXPECT_GE(t.ms, 0.0) << t.stage;
+        if (t.stage == "beamform") beamform = t.ms;
+        if (t.stage.rfind("bf:", 0) == 0) inside += t.ms;
+    }
+    EXPECT_EQ(got, expected);
+    EXPECT_GT(beamform, 0.0);
+    EXPECT_LE(inside, beamform);
+}
+
 // The CPU backend splits its stages between the Renderer's threads: the depth pass by views and bands
 // of rows (more bands per view with more threads), normals and echo by blocks of rows (fused), beamform
 // by pixel columns and bins. Every value is computed by one thread in the order of the single-threaded

@@ -154,7 +154,8 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
                 impl.get());
         }
     } else {
-        impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get());
+        impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get(),
+                                          options.stage_timing == StageTiming::passes);
     }
     Renderer r;
     r.impl_ = std::move(impl);

@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "host/workers.h"
@@ -74,8 +75,8 @@ template <class T> void save(std::vector<T>& dst, const std::vector<T>& src, boo
 // The CPU backend's working buffers, allocated once at construction, and the frame being rendered:
 // what the table's run_* functions work on.
 template <class Real> struct StageContext {
-    StageContext(const Plan& plan_in, const SceneData& scene_in, host::Workers* workers_in)
-        : plan(plan_in), scene(scene_in), workers(workers_in) {
+    StageContext(const Plan& plan_in, const SceneData& scene_in, host::Workers* workers_in, bool pass_timing_in)
+        : plan(plan_in), scene(scene_in), workers(workers_in), pass_timing(pass_timing_in) {
         const std::uint32_t parts = workers != nullptr ? workers->count() : 1;
         const std::size_t pixels = static_cast<std::size_t>(plan.rows) * plan.columns;
         depth.assign(pixels, 0.0f);
@@ -114,6 +115,11 @@ template <class Real> struct StageContext {
     Plan plan;              // copied: the backend may outlive the caller's Plan object
     const SceneData& scene; // the scene must outlive the renderer (renderer.h)
     host::Workers* workers; // the Renderer's threads, borrowed (null: all on the caller)
+    // StageTiming::passes: a whole stage's passes add their host times here (cleared per stage; a
+    // stage's row is followed by its passes' rows in Frame::times)
+    bool pass_timing = false;
+    std::array<std::pair<const char*, double>, 4> passes{};
+    std::size_t pass_count = 0;
     // this frame's
     Pose pose{};
     SaveFlags save_mask = SaveFlags::none;
@@ -200,6 +206,16 @@ template <class Real> void rows_echo(StageContext<Real>& s, std::uint32_t begin,
 }
 
 template <class Real> void run_beamform(StageContext<Real>& s) {
+    // StageTiming::passes: the profile pass, then the beams pass (the resample, the far and the near side
+    // lobes, fused per block of bins)
+    auto pass_done = [&](const char* name, Clock::time_point& start) {
+        if (!s.pass_timing) return;
+        const auto now = Clock::now();
+        s.passes[s.pass_count++] = {name, std::chrono::duration<double, std::milli>(now - start).count()};
+        start = now;
+    };
+    Clock::time_point start;
+    if (s.pass_timing) start = Clock::now();
     // the float profiles only when saved: the resample reads the accumulators
     float* profiles = any(s.save_mask & SaveFlags::profiles) ? s.profiles.data() : nullptr;
     const SubpixelInput subpixel{s.subpixel, s.depth.data(), s.material.data()};
@@ -213,10 +229,12 @@ template <class Real> void run_beamform(StageContext<Real>& s) {
             beamform_profiles<Real>(s.plan, s.echo.data(), profiles, s.scratch.data(), begin, end, with_subpixel,
                                     s.view_drawn.data(), spans);
         });
+    pass_done("bf:profile", start);
     split_blocks(s.workers, s.plan.bins, kBinBlock, [&](std::uint32_t begin, std::uint32_t end, std::uint32_t) {
         beamform_beams<Real>(s.plan, s.scratch.data(), s.resample_w.data(), s.beam_profiles.data(), s.polar, begin,
                              end);
     });
+    pass_done("bf:beams", start);
 }
 
 // The table's pointers name these; they are defined here, next to the buffers they touch.
@@ -233,7 +251,8 @@ namespace {
 
 template <class Real> class CpuBackend final : public StageBackend {
 public:
-    CpuBackend(const Plan& plan, const SceneData& scene, host::Workers* workers) : stage_(plan, scene, workers) {}
+    CpuBackend(const Plan& plan, const SceneData& scene, host::Workers* workers, bool pass_timing)
+        : stage_(plan, scene, workers, pass_timing) {}
 
     Result<void> render(const Pose& pose, SaveFlags save_mask, Frame& frame) override {
         const double pose_values[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
@@ -262,9 +281,12 @@ public:
             ++i;
             if (!stage.runs(stage_.plan)) continue;
             const auto start = Clock::now();
+            stage_.pass_count = 0;
             cpu_function<Real>(stage.cpu)(stage_);
             frame.times.push_back({stage.name, ms_since(start)});
             frame.stages_run.emplace_back(stage.name);
+            for (std::size_t p = 0; p < stage_.pass_count; ++p)
+                frame.times.push_back({stage_.passes[p].first, stage_.passes[p].second});
         }
         for (const StageInfo& stage : kStageTable) {
             if (!any(save_mask & stage.saves)) continue;
@@ -343,9 +365,11 @@ private:
 
 } // namespace
 
-std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers) {
-    if (plan.config.cpu_precision == Precision::f64) return std::make_unique<CpuBackend<double>>(plan, scene, workers);
-    return std::make_unique<CpuBackend<float>>(plan, scene, workers);
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers,
+                                           bool pass_timing) {
+    if (plan.config.cpu_precision == Precision::f64)
+        return std::make_unique<CpuBackend<double>>(plan, scene, workers, pass_timing);
+    return std::make_unique<CpuBackend<float>>(plan, scene, workers, pass_timing);
 }
 
 } // namespace vksonar::cpu

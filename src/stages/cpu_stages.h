@@ -152,6 +152,9 @@ void spread_row_pixels(const Plan& plan, const float* echo2, std::uint32_t row, 
 
 // workers: the Renderer's threads (borrowed; null or one thread: everything on the caller). The
 // normals, echo and beamform stages are split between them; the depth pass runs on the caller.
-std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers = nullptr);
+// pass_timing (StageTiming::passes): the beamform stage's row in Frame::times is followed by its passes'
+// ("bf:profile", "bf:beams"; host clocks).
+std::unique_ptr<StageBackend> make_backend(const Plan& plan, const SceneData& scene, host::Workers* workers = nullptr,
+                                           bool pass_timing = false);
 
 } // namespace vksonar::cpu
