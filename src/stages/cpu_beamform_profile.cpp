@@ -377,10 +377,6 @@ struct SpreadLanes {
 bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
     return false;
 }
-bool footprint_spread8_run(const float*, std::uint32_t, std::uint32_t, std::uint32_t, std::uint32_t, float, float,
-                           float, float, float, int, Math<float>::RangeSpread*) {
-    return false;
-}
 bool footprint_shares8(const Math<float>::RangeSpread&, int, float*) {
     return false;
 }
