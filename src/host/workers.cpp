@@ -3,7 +3,33 @@
 #include <algorithm>
 #include <cstdlib>
 
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
+#include <chrono>
+
 namespace vksonar::host {
+
+namespace {
+
+// Spins until done() or about kSpinMicroseconds have passed; true if done. A futex wake-up costs tens of
+// microseconds on a VM, against stages of a few hundred: a thread that is about to sleep between two jobs
+// of a frame (or while the last helper finishes) waits this long awake first.
+constexpr int kSpinMicroseconds = 50;
+template <class Done> bool spin_until(const Done& done) {
+    const auto start = std::chrono::steady_clock::now();
+    for (;;) {
+        for (int i = 0; i < 64; ++i) {
+            if (done()) return true;
+#if defined(__x86_64__) || defined(__i386__)
+            _mm_pause();
+#endif
+        }
+        if (std::chrono::steady_clock::now() - start > std::chrono::microseconds(kSpinMicroseconds)) return done();
+    }
+}
+
+} // namespace
 
 Workers::Workers(std::uint32_t threads) {
     if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
@@ -36,6 +62,7 @@ void Workers::run(Task task, void* context) {
     start_.notify_all();
     task(context, 0, parts);
     if (parts > 1) {
+        spin_until([this] { return pending_.load(std::memory_order_acquire) == 0; });
         std::unique_lock<std::mutex> lock(mutex_);
         done_.wait(lock, [this] { return pending_ == 0; });
     }
@@ -82,6 +109,11 @@ void Workers::run_blocks(BlockTask task, void* context, std::uint32_t blocks) {
     // helpers still running the blocks they took.
     std::unique_lock<std::mutex> lock(mutex_);
     open_ = false;
+    if (active_ != 0) {
+        lock.unlock();
+        spin_until([this] { return active_.load(std::memory_order_acquire) == 0; });
+        lock.lock();
+    }
     done_.wait(lock, [this] { return active_ == 0; });
 }
 
@@ -92,6 +124,7 @@ void Workers::helper_loop(std::uint32_t part) {
         void* context;
         bool blocks;
         {
+            spin_until([&] { return generation_.load(std::memory_order_acquire) != seen; });
             std::unique_lock<std::mutex> lock(mutex_);
             start_.wait(lock, [&] { return stop_ || generation_ != seen; });
             if (stop_) return;

@@ -46,13 +46,15 @@ private:
     std::condition_variable start_, done_;
     Task task_ = nullptr;
     void* context_ = nullptr;
-    std::uint64_t generation_ = 0; // bumped by run(): helpers wait for a new one
-    std::uint32_t pending_ = 0;    // helpers still working on the current generation
+    // Written under mutex_; atomic so that a thread may spin on them briefly before it sleeps
+    // (spin_until): the next job of a frame, or the last helper's end, comes within microseconds.
+    std::atomic<std::uint64_t> generation_{0}; // bumped by run(): helpers wait for a new one
+    std::atomic<std::uint32_t> pending_{0};    // helpers still working on the current generation
     bool stop_ = false;
     // run_blocks: helpers join the generation only while it is open, and the caller waits for the
     // ones that joined (active_) after closing it.
     bool blocks_ = false, open_ = false;
-    std::uint32_t active_ = 0;
+    std::atomic<std::uint32_t> active_{0};
 };
 
 // task(context, part, parts) for every part of `workers` (Workers::run), or as the one part on the
