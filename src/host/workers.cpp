@@ -12,20 +12,21 @@ namespace vksonar::host {
 
 namespace {
 
-// Spins until done() or about kSpinMicroseconds have passed; true if done. A futex wake-up costs tens of
+// Spins until done() or about kSpinMicroseconds have passed (the caller then checks again under its lock,
+// and sleeps if need be). A futex wake-up costs tens of
 // microseconds on a VM, against stages of a few hundred: a thread that is about to sleep between two jobs
 // of a frame (or while the last helper finishes) waits this long awake first.
 constexpr int kSpinMicroseconds = 50;
-template <class Done> bool spin_until(const Done& done) {
+template <class Done> void spin_until(const Done& done) {
     const auto start = std::chrono::steady_clock::now();
     for (;;) {
         for (int i = 0; i < 64; ++i) {
-            if (done()) return true;
+            if (done()) return;
 #if defined(__x86_64__) || defined(__i386__)
             _mm_pause();
 #endif
         }
-        if (std::chrono::steady_clock::now() - start > std::chrono::microseconds(kSpinMicroseconds)) return done();
+        if (std::chrono::steady_clock::now() - start > std::chrono::microseconds(kSpinMicroseconds)) return;
     }
 }
 

@@ -177,14 +177,15 @@ VKS_AVX2_INLINE __m256 missing_edge8(__m256 r, __m256 other, __m256 r_near, __m2
     return select8(scaled, _mm256_mul_ps(neg8(other), _mm256_div_ps(s, t)), neg8(other));
 }
 
-// range_spread with the footprint kernel (float) for eight pixels as AVX lanes: the same operations in
-// the same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which
-// matches expf here), into out[0..7]. False where a pixel's bin coordinate is NaN (the caller then uses
-// the scalar kernel).
 // The lanes footprint_spread8 reads, in registers.
 struct SpreadVectors {
     __m256 e, r, up2_r, up_r, up_e, down_r, down2_r, down_e, left_r, right_r;
 };
+
+// range_spread with the footprint kernel (float) for eight pixels as AVX lanes: the same operations in
+// the same order (std::min/max's choices between equal values kept, logf per lane, exp as exp4, which
+// matches expf here), into out[0..7]. False where a pixel's bin coordinate is NaN (the caller then uses
+// the scalar kernel).
 VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_min, float ibw, float jump_rel, int bins,
                                           Math<float>::RangeSpread* out) {
     const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f),
@@ -420,7 +421,6 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
     if constexpr (std::is_same_v<Real, float>) {
         if (exp4 && plan.params.range_kernel == shared::kRangeKernelFootprint) {
             const std::uint32_t C = plan.columns, R = plan.rows;
-            SpreadLanes in;
 #if defined(__x86_64__) && defined(__GNUC__)
             if (n == kSpreadLanes && c[7] == c[0] + 7 && view.end > 0) {
                 // Eight neighbouring pixels (most batches): their windows straight into registers, the row
@@ -433,6 +433,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                     return;
             }
 #endif
+            SpreadLanes in;
             for (int l = 0; l < kSpreadLanes; ++l) {
                 const std::uint32_t col = c[std::min(l, n - 1)];
                 auto row = [&](std::int64_t jj, float* e, float* r) {
