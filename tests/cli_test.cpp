@@ -119,6 +119,14 @@ TEST_F(Cli, InvalidValues) {
     // A value from a config file names the file too.
     write_text(dir_ / "zero_beams.json", R"({"beams": 0})");
     expect_bad_render({"--config", (dir_ / "zero_beams.json").string()}, {"zero_beams.json", "beams = 0"});
+    // ... as a --sonar file, and a --set names itself; the layer named is the one whose value is wrong:
+    // a later --set that mends it leaves no error, one that breaks another key is named instead.
+    expect_bad_render({"--sonar", (dir_ / "zero_beams.json").string()}, {"--sonar ", "zero_beams.json", "beams = 0"});
+    expect_bad_render({"--set", "range_max=-5"}, {"--set range_max=-5: range_max = -5"});
+    expect_bad_render({"--sonar", (dir_ / "zero_beams.json").string(), "--set", "beams=8", "--set", "hfov=400"},
+                      {"--set hfov=400: hfov = 400"});
+    expect_bad_render({"--config", (dir_ / "zero_beams.json").string(), "--set", "beams=8", "--set", "bins=0"},
+                      {"--set bins=0: bins = 0"});
 }
 
 // Issue 25: a value outside physics is refused (exit 2, one line naming key, value and range, nothing
@@ -348,6 +356,11 @@ TEST_F(Cli, BenchDispatch) {
     EXPECT_EQ(extra.err_lines().size(), 1u);
     const CliRun bad = run({"bench", "sped"});
     EXPECT_EQ(bad.exit_code, 2);
+    // an invalid value names the --set that gave it, as render does
+    const CliRun invalid = run({"bench", "speed", "--backend", "cpu", "--frames", "1", "--set", "bins=0"});
+    EXPECT_EQ(invalid.exit_code, 2);
+    ASSERT_EQ(invalid.err_lines().size(), 1u) << invalid.err;
+    EXPECT_NE(invalid.err.find("invalid config: --set bins=0: bins = 0"), std::string::npos) << invalid.err;
     // The quad behind the sonar: an accuracy sweep with nothing to compare is an error, not zeros.
     const CliRun empty = run({"bench", "accuracy", "--no-vulkan", "--frames", "1", "--scene",
                               (dir_ / "quad.gltf").string(), "--pose", "0,0,0,0,0,180"});

@@ -109,18 +109,21 @@ Setup load_setup(const Args& args) {
 
 SonarConfig layered_config(const Setup& setup, const std::vector<std::string>& overrides) {
     SonarConfig config = setup.preset;
+    ProblemOrigin problem(config, "--sonar " + setup.sonar_name);
     if (!setup.scene_effects.empty()) {
-        auto layered = apply_config_json(config, "{\"effects\": " + setup.scene_effects + "}",
-                                         setup.scene_path + " (scene extras vksonar.effects)");
+        const std::string scene_origin = setup.scene_path + " (scene extras vksonar.effects)";
+        auto layered = apply_config_json(config, "{\"effects\": " + setup.scene_effects + "}", scene_origin);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
+        problem.after(config, scene_origin);
     }
     for (const auto& item : overrides) {
         auto layered = apply_config_override(config, item);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
+        problem.after(config, "--set " + item);
     }
-    if (auto valid = config.validate(); !valid) throw BadInput("invalid config: " + valid.error().message);
+    problem.throw_if_invalid();
     return config;
 }
 

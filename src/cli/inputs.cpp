@@ -57,6 +57,27 @@ SonarConfig sonar_base_config(const std::string& sonar) {
 }
 
 namespace {
+std::string config_problem(const SonarConfig& config) {
+    const auto valid = config.validate();
+    return valid ? std::string() : valid.error().message;
+}
+} // namespace
+
+ProblemOrigin::ProblemOrigin(const SonarConfig& config, std::string origin)
+    : problem_(config_problem(config)), origin_(std::move(origin)) {}
+
+void ProblemOrigin::after(const SonarConfig& config, const std::string& layer) {
+    if (std::string problem = config_problem(config); problem != problem_) {
+        problem_ = std::move(problem);
+        origin_ = layer;
+    }
+}
+
+void ProblemOrigin::throw_if_invalid() const {
+    if (!problem_.empty()) throw BadInput("invalid config: " + origin_ + ": " + problem_);
+}
+
+namespace {
 // A Vulkan context with what the environment asks for (VKSONAR_VALIDATION, VKSONAR_DEVICE).
 Result<Context> create_context_from_env() {
     auto options = context_options_from_env();

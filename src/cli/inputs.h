@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "vksonar/vksonar.h"
 
@@ -16,6 +17,24 @@ std::filesystem::path find_default_scene();
 // is not a preset name). A file's config is named after the file unless it names itself.
 // Throws BadInput naming the file or the preset.
 SonarConfig sonar_base_config(const std::string& sonar);
+
+// Which config layer made the config invalid: the last one that changed SonarConfig::validate's answer
+// (a later layer may mend an earlier one's value, or break another key), so that the error names the
+// file or the --set that holds the value as well as the key.
+class ProblemOrigin {
+public:
+    // `config`'s values came from `origin` ("--sonar NAME_OR_FILE")
+    ProblemOrigin(const SonarConfig& config, std::string origin);
+    // `config` is the one after the layer `layer` ("--set key=value", a file path)
+    void after(const SonarConfig& config, const std::string& layer);
+    const std::string& origin() const { return origin_; }
+    // BadInput "invalid config: ORIGIN: KEY = VALUE: why" where the last config given was invalid
+    void throw_if_invalid() const;
+
+private:
+    std::string problem_; // validate()'s message, empty for a usable config
+    std::string origin_;
+};
 
 // A context for `backend` (validation only through VKSONAR_VALIDATION); for vulkan, throws Failure
 // when no device exists, with the hint to use --backend cpu.

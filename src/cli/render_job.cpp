@@ -174,12 +174,6 @@ Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::stri
 
 // ---- one dataset file ---------------------------------------------------------------------------
 
-// The first problem SonarConfig::validate names, or empty for a usable config.
-std::string config_problem(const SonarConfig& config) {
-    const auto valid = config.validate();
-    return valid ? std::string() : valid.error().message;
-}
-
 std::string lower_extension(const std::string& path) {
     std::string ext = fs::path(path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
@@ -425,39 +419,33 @@ RenderJob parse_job(const Args& args) {
 
 namespace {
 
-// The user's config layers on top of `config`: --config < --quality < --set, then the checks of the
-// result. Run twice (load_scene_and_config): once on the preset, before the (possibly slow) scene
-// load, and again above the scene's effects.
-SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig config) {
-    // A value the config file made invalid (and no later layer changed) is reported with the file.
-    std::string file_problem, file_path;
+// The user's config layers on top of `config` (whose values came from `origin`): --config < --quality
+// < --set, then the checks of the result. Run twice (load_scene_and_config): once on the preset, before
+// the (possibly slow) scene load, and again above the scene's effects.
+SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig config, const std::string& origin) {
+    ProblemOrigin problem(config, origin);
     if (args.has("--config")) {
         std::error_code ec;
         const std::string path = args.value("--config");
         if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
-        const std::string before = config_problem(config);
         auto layered = apply_config_file(config, path);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
-        if (std::string after = config_problem(config); after != before) {
-            file_problem = std::move(after);
-            file_path = path;
-        }
+        problem.after(config, path);
     }
     if (args.has("--quality")) {
         auto layered = apply_quality(config, args.value("--quality"));
         if (!layered) throw BadInput("--quality: " + layered.error().message);
         config = layered.value();
+        problem.after(config, "--quality " + args.value("--quality"));
     }
     for (const auto& item : args.values("--set")) {
         auto layered = apply_config_override(config, item);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
+        problem.after(config, "--set " + item);
     }
-    if (std::string problem = config_problem(config); !problem.empty()) {
-        const bool from_file = !file_problem.empty() && problem == file_problem;
-        throw BadInput("invalid config: " + (from_file ? file_path + ": " : std::string()) + problem);
-    }
+    problem.throw_if_invalid();
     if ((save.multibeam || save.raw_scan) && config.mode != SonarMode::uuv_legacy)
         throw BadInput(std::string("--save ") + (save.multibeam ? "multibeam" : "raw_scan") +
                        ": only mode uuv-legacy has this output (use --sonar uuv-legacy or --set mode=uuv-legacy)");
@@ -469,8 +457,9 @@ SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig
 // The config layers (preset < scene effects < --config < --quality < --set) and the scene; fills in
 // a --pose frame pose. Still nothing on disk.
 SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
-    const SonarConfig preset = sonar_base_config(args.value("--sonar", "default"));
-    SonarConfig config = apply_user_layers(args, job.save, preset);
+    const std::string sonar = args.value("--sonar", "default");
+    const SonarConfig preset = sonar_base_config(sonar);
+    SonarConfig config = apply_user_layers(args, job.save, preset, "--sonar " + sonar);
     const std::string asset_root = args.value("--asset-root", config.scene_asset_root);
     auto scene = Scene::load_gltf(job.scene_path, SceneLoadOptions{asset_root, config.scene_scale});
     if (!scene) {
@@ -483,10 +472,12 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
         std::fprintf(stderr, "warning: %s\n", warning.c_str());
     const std::string& scene_effects = scene->effects_json();
     if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
-        auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}",
-                                         job.scene_path + " (scene extras vksonar.effects)");
+        const std::string scene_origin = job.scene_path + " (scene extras vksonar.effects)";
+        auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}", scene_origin);
         if (!layered) throw BadInput(layered.error().message);
-        config = apply_user_layers(args, job.save, layered.value());
+        ProblemOrigin base(preset, "--sonar " + sonar);
+        base.after(layered.value(), scene_origin);
+        config = apply_user_layers(args, job.save, layered.value(), base.origin());
     }
     config.scene_asset_root = asset_root; // meta.json's config says which folder the scene's files came from
     if (job.bag && config.mode != SonarMode::physical)
