@@ -69,12 +69,6 @@ struct LabelsStage::Scratch {
     // bins of the beams being labelled (kBeamBlock * bins, beam after beam): value-initialised here, and
     // label_beams resets every cell it touched, so each beam starts from zeros without a per-frame clear
     std::vector<Cell> cells;
-    // line_array: per (row, view), the first pixel of the last block's cone columns, and that block's
-    // lower cone bound (infinity: none yet this frame). A thread labels its blocks of beams in increasing
-    // order, whose cone columns move towards starboard, so the next block's first pixel is found by a few
-    // steps from there instead of a binary search per row and view.
-    std::vector<std::uint32_t> first;
-    float first_lo = std::numeric_limits<float>::infinity();
 };
 
 // A pixel's direction, a function of the grid alone (made once with the stage).
@@ -98,6 +92,10 @@ struct LabelsStage::Pixels {
     // rows * columns * kWideSharesPerPixel: the shares of the wide spreads, each thread's part of the
     // array its own (LabelsStage::run)
     std::vector<double> wide_shares;
+    // line_array: per block of kBeamBlock beams, row and view, the first pixel column whose cone coordinate
+    // reaches the block's (block_first_pixel): a function of the plan, made once with the stage. Found per
+    // frame it was a scan from the last block's that took 4-5 % of labels:beams here.
+    std::vector<std::uint32_t> block_first;
 };
 
 // One labelled object's counts drawn alone by one thread (ObjectVisibility's, and `own`: its pixels that
@@ -159,6 +157,17 @@ PixelRay pixel_ray_of(const Plan& plan, std::uint32_t row, std::uint32_t column)
     out.elevation = static_cast<float>(std::asin(std::clamp(ray.z * inv_length, -1.0, 1.0)));
     return out;
 }
+
+// line_array: the first pixel column of row `row` in view `view` whose cone coordinate reaches the lower
+// bound of the block of beams from j_begin (label_beams visits the pixels within one cone column of its
+// beams' columns: x >= its first column - 1). Along a view's row the cone coordinate increases with the
+// column (plan_cone_table): a binary search.
+std::uint32_t block_first_pixel(const Plan& plan, std::uint32_t j_begin, std::uint32_t row, std::uint32_t view) {
+    const float lo = static_cast<float>(plan.beam_column_begin[j_begin]) - 1.0f;
+    const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
+    const float* view_x = cone_x + view_first_column(plan, view);
+    return static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) - cone_x);
+}
 } // namespace
 
 LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_instance, host::Workers* workers,
@@ -168,7 +177,6 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     for (std::uint32_t i = 0; i < parts; ++i) {
         scratch_.push_back(std::make_unique<Scratch>());
         scratch_.back()->cells.resize(std::size_t(kBeamBlock) * plan_.bins);
-        scratch_.back()->first.resize(static_cast<std::size_t>(plan_.rows) * plan_.views);
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->float_spreads = float_spreads;
@@ -182,6 +190,15 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
             pixels_->slant_factor[std::size_t(row) * plan_.columns + column] = pixel_slant_factor(plan_, row, column);
         }
     pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
+    if (plan_.line_array) {
+        const std::uint32_t blocks = (plan_.beams + kBeamBlock - 1) / kBeamBlock;
+        pixels_->block_first.resize(std::size_t(blocks) * plan_.rows * plan_.views);
+        for (std::uint32_t block = 0; block < blocks; ++block)
+            for (std::uint32_t row = 0; row < plan_.rows; ++row)
+                for (std::uint32_t view = 0; view < plan_.views; ++view)
+                    pixels_->block_first[(std::size_t(block) * plan_.rows + row) * plan_.views + view] =
+                        block_first_pixel(plan_, block * kBeamBlock, row, view);
+    }
     beam_buckets_ = BeamBuckets(plan_.beam_angle_rad);
     if (scene != nullptr) {
         alone_ = std::make_unique<Alone>();
@@ -472,33 +489,19 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
         block_cells[j - j_begin] = cells_of(j);
         block_hi = std::max(block_hi, static_cast<float>(plan.beam_column_end[j]));
     }
-    const float block_lo = block > 0 ? static_cast<float>(plan.beam_column_begin[j_begin]) - 1.0f : 0.0f;
     for (std::uint32_t row = 0; row < plan.rows && plan.line_array && block > 0; ++row) {
         // The pixels of this row within one cone column of a beam's [q_begin, q_end): x in [q_begin - 1,
         // q_end), each visited once with the sum of its two cone columns' shares of each beam. Per view:
         // along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
+        const std::uint32_t* block_first =
+            cache.block_first.data() + (std::size_t(j_begin / kBeamBlock) * plan.rows + row) * plan.views;
         for (std::uint32_t view = 0; view < plan.views; ++view) {
-            // No hit in this row of the view: nothing to visit. (Its first pixel below is then never set
-            // or read this frame, the same for every block.)
+            // no hit in this row of the view: nothing to visit
             const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
             if (hits[0] == hits[1]) continue;
-            const float* view_x = cone_x + view_first_column(plan, view);
-            const std::uint32_t view_end = view_first_column(plan, view) + view_columns(plan, view);
-            // the first pixel with x >= the block's lo (std::lower_bound), from the last block's where lo has
-            // not decreased (this thread's blocks come in increasing order, their cone columns towards starboard)
-            std::uint32_t& first_pixel = scratch.first[std::size_t(row) * plan.views + view];
-            std::uint32_t c;
-            if (block_lo >= scratch.first_lo) {
-                for (c = first_pixel; c < view_end && cone_x[c] < block_lo; ++c) {
-                }
-            } else {
-                c = static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), block_lo) -
-                                               cone_x);
-            }
-            first_pixel = c;
             std::uint32_t b_low = 0;
-            for (c = std::max(c, hits[0]); c < hits[1] && cone_x[c] < block_hi; ++c) {
+            for (std::uint32_t c = std::max(block_first[view], hits[0]); c < hits[1] && cone_x[c] < block_hi; ++c) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
                 // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching
                 // their cache entry
@@ -535,7 +538,6 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
             }
         }
     }
-    if (plan.line_array && block > 0) scratch.first_lo = block_lo;
 
     for (std::uint32_t j = j_begin; j < j_end; ++j) {
         const std::uint32_t b = j - j_begin;
@@ -616,7 +618,6 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         LabelsStage::Scratch& scratch = *(*t.scratch)[part];
-        scratch.first_lo = std::numeric_limits<float>::infinity(); // a new frame: no last beam
         const std::uint32_t beams = t.plan->beams;
         for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
             label_beams(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, begin,
