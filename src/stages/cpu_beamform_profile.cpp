@@ -123,12 +123,12 @@ __attribute__((target("avx2,fma"))) bool footprint_shares4x2(const Math<float>::
     return true;
 }
 
-// The five-row windows of eight pixels for footprint_spread8, lane by lane: each pixel's (energy, range)
-// and those of the rows above (up2, up) and below (down, down2); (0, 0) outside the image.
+// The five-row windows of eight pixels for footprint_spread8, lane by lane: each pixel's (energy, range),
+// those of the rows above and below (up, down) and the ranges of the rows two away (up2, down2); 0
+// outside the image.
 constexpr int kSpreadLanes = 8;
 struct SpreadLanes {
-    alignas(32) float e[8], r[8], up2_e[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_e[8], down2_r[8],
-        left_r[8], right_r[8];
+    alignas(32) float e[8], r[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_r[8], left_r[8], right_r[8];
 };
 
 // footprint_spread8's lane-wise helpers
@@ -372,8 +372,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8_run(const float* echo
 #else
 constexpr int kSpreadLanes = 8;
 struct SpreadLanes {
-    float e[8], r[8], up2_e[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_e[8], down2_r[8], left_r[8],
-        right_r[8];
+    float e[8], r[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_r[8], left_r[8], right_r[8];
 };
 bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
     return false;
@@ -436,18 +435,19 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
             SpreadLanes in;
             for (int l = 0; l < kSpreadLanes; ++l) {
                 const std::uint32_t col = c[std::min(l, n - 1)];
+                // (the rows two away give their range only: the kernel reads no energy there)
                 auto row = [&](std::int64_t jj, float* e, float* r) {
                     const bool inside = jj >= 0 && jj < static_cast<std::int64_t>(R);
                     const float* q = echo2 + 2 * (static_cast<std::size_t>(inside ? jj : 0) * C + col);
-                    e[l] = inside ? q[0] : 0.0f;
+                    if (e != nullptr) e[l] = inside ? q[0] : 0.0f;
                     r[l] = inside ? q[1] : 0.0f;
                 };
                 const std::int64_t jj = j;
                 row(jj, in.e, in.r);
-                row(jj - 2, in.up2_e, in.up2_r);
+                row(jj - 2, nullptr, in.up2_r);
                 row(jj - 1, in.up_e, in.up_r);
                 row(jj + 1, in.down_e, in.down_r);
-                row(jj + 2, in.down2_e, in.down2_r);
+                row(jj + 2, nullptr, in.down2_r);
                 const RowNeighbours across = across_of(col);
                 in.left_r[l] = across.left_r;
                 in.right_r[l] = across.right_r;
