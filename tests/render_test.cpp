@@ -359,7 +359,9 @@ TEST(CpuThreads, ABigTerrainGivesTheSameBytesOnAnyThreadCount) {
 // own image; the flow to a next frame in blocks of cells. Every cell is still filled by one thread from
 // its pixels in one order, the visibility counts are sums of integers, and a cell's flow depends on the
 // two frames alone: any thread count gives the same bytes (compared as bytes: the arrays hold NaN where
-// a cell has no label). 3 and 5 threads split unevenly; both beam geometries.
+// a cell has no label). 3 and 5 threads split unevenly; both beam geometries. The beams per block
+// follow the thread count too (512 beams: 32 on 1-3 threads, 16 on 5), so this also checks that a
+// block's size leaves every beam's cells as that beam labelled alone.
 TEST(CpuThreads, LabelsDoNotDependOnTheThreadCount) {
     auto scene = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
     ASSERT_TRUE(scene) << scene.error().message;

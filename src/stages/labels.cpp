@@ -40,9 +40,22 @@ struct Cell {
 
 } // namespace
 
-// A thread labels kBeamBlock neighbouring beams at a time (label_beams): with a line array they share
-// most of their pixels.
-constexpr std::uint32_t kBeamBlock = 8;
+// A thread labels a block of neighbouring beams at a time (label_beams): with a line array they share
+// most of their pixels, which the block reads once. Blocks of kMaxBeamBlock beams where every thread
+// still gets kBlocksPerThread blocks (a line array's edge beams gather from more columns, and the blocks
+// are dealt out in turn), else half or a quarter of that (beam_block_of; many threads keep the blocks
+// of 8 that were measured on an H100's 16-thread host). On the 2-core development machine, two
+// threads with blocks of 32 instead of 8: labels:beams 7.0-7.8 ms against 7.4-9.8 (4 interleaved
+// rounds; earlier runs 7.1-8.8 against 9.6-10.0, with blocks of 16 at 8.4-8.5 and 64 at 7.5-9.0). One
+// thread: no change. The slow rounds of blocks of 8 fit two threads on neighbouring blocks writing into
+// the same cache lines of the label arrays (8 uint16 or floats a bin per block).
+constexpr std::uint32_t kMaxBeamBlock = 32, kMinBeamBlock = 8, kBlocksPerThread = 4;
+constexpr std::uint32_t beam_block_of(std::uint32_t beams, std::uint32_t threads) {
+    std::uint32_t block = kMaxBeamBlock;
+    while (block > kMinBeamBlock && std::uint64_t(beams) < std::uint64_t(block) * kBlocksPerThread * threads)
+        block /= 2;
+    return block;
+}
 
 // What the beams need of a pixel, worked out once per frame (a pixel feeds up to four beams).
 constexpr int kCachedShares = 8; // most pixels spread over fewer bins; wider footprints keep theirs apart
@@ -66,7 +79,7 @@ struct PixelLabel {
 };
 
 struct LabelsStage::Scratch {
-    // bins of the beams being labelled (kBeamBlock * bins, beam after beam): value-initialised here, and
+    // bins of the beams being labelled (Pixels::beam_block * bins, beam after beam): value-initialised here, and
     // label_beams resets every cell it touched, so each beam starts from zeros without a per-frame clear
     std::vector<Cell> cells;
 };
@@ -92,7 +105,9 @@ struct LabelsStage::Pixels {
     // rows * columns * kWideSharesPerPixel: the shares of the wide spreads, each thread's part of the
     // array its own (LabelsStage::run)
     std::vector<double> wide_shares;
-    // line_array: per block of kBeamBlock beams, row and view, the first pixel column whose cone coordinate
+    // beams per block (beam_block_of the beams and the threads)
+    std::uint32_t beam_block = kMinBeamBlock;
+    // line_array: per block of beam_block beams, row and view, the first pixel column whose cone coordinate
     // reaches the block's (block_first_pixel): a function of the plan, made once with the stage. Found per
     // frame it was a scan from the last block's that took 4-5 % of labels:beams here.
     std::vector<std::uint32_t> block_first;
@@ -176,10 +191,11 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
     const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
     for (std::uint32_t i = 0; i < parts; ++i) {
         scratch_.push_back(std::make_unique<Scratch>());
-        scratch_.back()->cells.resize(std::size_t(kBeamBlock) * plan_.bins);
+        scratch_.back()->cells.resize(std::size_t(beam_block_of(plan_.beams, parts)) * plan_.bins);
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->float_spreads = float_spreads;
+    pixels_->beam_block = beam_block_of(plan_.beams, parts);
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
     pixels_->rays.resize(pixels_->pixels.size());
     pixels_->hit_columns.resize(std::size_t(plan_.rows) * plan_.views * 2);
@@ -191,13 +207,14 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         }
     pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
     if (plan_.line_array) {
-        const std::uint32_t blocks = (plan_.beams + kBeamBlock - 1) / kBeamBlock;
+        const std::uint32_t block_beams = pixels_->beam_block;
+        const std::uint32_t blocks = (plan_.beams + block_beams - 1) / block_beams;
         pixels_->block_first.resize(std::size_t(blocks) * plan_.rows * plan_.views);
         for (std::uint32_t block = 0; block < blocks; ++block)
             for (std::uint32_t row = 0; row < plan_.rows; ++row)
                 for (std::uint32_t view = 0; view < plan_.views; ++view)
                     pixels_->block_first[(std::size_t(block) * plan_.rows + row) * plan_.views + view] =
-                        block_first_pixel(plan_, block * kBeamBlock, row, view);
+                        block_first_pixel(plan_, block * block_beams, row, view);
     }
     beam_buckets_ = BeamBuckets(plan_.beam_angle_rad);
     if (scene != nullptr) {
@@ -358,7 +375,7 @@ void cache_rows(const Plan& plan, const Frame& frame, LabelsStage::Pixels& cache
     }
 }
 
-// One pixel's energy into the cells of up to kBeamBlock beams along its range shares: beam b (< beams) takes
+// One pixel's energy into the cells of up to kMaxBeamBlock beams along its range shares: beam b (< beams) takes
 // weight[b] > 0 of it into cells[b], and widens its touched bins [*k_low[b], *k_high[b]]. Its point in a cell lies
 // along its direction at the range of the part of its footprint inside the cell's bin (the footprint kernel spreads one
 // pixel over many bins at grazing incidence; the tent and nearest kernels keep its range). Each beam's cells receive
@@ -370,7 +387,7 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
     const PixelRay& ray = cache.rays[p];
     const M::RangeSpread& spread = pixel.spread;
     if (spread.k_last < spread.k_first) return;
-    double e[kBeamBlock];
+    double e[kMaxBeamBlock];
     for (std::uint32_t b = 0; b < beams; ++b)
         e[b] = frame.echo[2 * p] * weight[b];
     const bool footprint = spread.kernel == shared::kRangeKernelFootprint;
@@ -384,7 +401,7 @@ void add_pixel(const Plan& plan, const Frame& frame, const LabelsStage::Pixels& 
     };
     // each beam's first and last bin that took energy, widening [*k_low[b], *k_high[b]] once at the end (locals
     // the compiler keeps apart from the cells: through the pointers every addition reloaded and stored them)
-    int low[kBeamBlock], high[kBeamBlock];
+    int low[kMaxBeamBlock], high[kMaxBeamBlock];
     for (std::uint32_t b = 0; b < beams; ++b) {
         low[b] = spread.k_last + 1;
         high[b] = spread.k_first - 1;
@@ -450,16 +467,16 @@ inline double beam_weight(const Plan& plan, std::uint32_t j, std::uint32_t q) {
     return share == 1 ? cw : (share == 2 ? 1.0 - cw : 0.0);
 }
 
-// Labels beams [j_begin, j_end) (at most kBeamBlock) into the frame's label arrays. Each beam has its
-// own cells (scratch.cells from (j - j_begin) * bins) and receives its pixels in the order of one beam
-// labelled alone: rows, then views, then columns, then bins. With a line array the block walks each row
-// of each view once and gives each pixel to all the beams it feeds, so that the pixels they share are
-// read once, not once per beam (each beam's own order, and so every cell's sums and ties, unchanged).
+// Labels beams [j_begin, j_end) (a block: cache.beam_block beams from a multiple of it, or fewer at the end) into the
+// frame's label arrays. Each beam has its own cells (scratch.cells from (j - j_begin) * bins) and receives its pixels
+// in the order of one beam labelled alone: rows, then views, then columns, then bins. With a line array the block walks
+// each row of each view once and gives each pixel to all the beams it feeds, so that the pixels they share are read
+// once, not once per beam (each beam's own order, and so every cell's sums and ties, unchanged).
 void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_instance,
                  const LabelsStage::Pixels& cache, const SubpixelReturns* subpixel, LabelsStage::Scratch& scratch,
                  Frame& frame, std::uint32_t j_begin, std::uint32_t j_end) {
     const std::uint32_t beams = plan.beams, PC = plan.profile_columns, bins = plan.bins;
-    int k_low[kBeamBlock], k_high[kBeamBlock];
+    int k_low[kMaxBeamBlock], k_high[kMaxBeamBlock];
     for (std::uint32_t j = j_begin; j < j_end; ++j) {
         k_low[j - j_begin] = static_cast<int>(bins);
         k_high[j - j_begin] = -1;
@@ -483,7 +500,7 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
     }
     // line_array: the block's pixels of each row, each visited once for all the beams it feeds.
     const std::uint32_t block = j_end - j_begin;
-    Cell* block_cells[kBeamBlock];
+    Cell* block_cells[kMaxBeamBlock];
     float block_hi = -std::numeric_limits<float>::infinity();
     for (std::uint32_t j = j_begin; j < j_end; ++j) {
         block_cells[j - j_begin] = cells_of(j);
@@ -495,7 +512,7 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
         // along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const std::uint32_t* block_first =
-            cache.block_first.data() + (std::size_t(j_begin / kBeamBlock) * plan.rows + row) * plan.views;
+            cache.block_first.data() + (std::size_t(j_begin / cache.beam_block) * plan.rows + row) * plan.views;
         for (std::uint32_t view = 0; view < plan.views; ++view) {
             // no hit in this row of the view: nothing to visit
             const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
@@ -513,10 +530,10 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
                 // without columns, [0, 0) in assign_columns_to_beams, is passed over or gets no weight)
                 while (b_low < block && std::int64_t(plan.beam_column_end[j_begin + b_low]) <= first)
                     ++b_low;
-                Cell* cells[kBeamBlock];
-                double weight[kBeamBlock];
-                int* low[kBeamBlock];
-                int* high[kBeamBlock];
+                Cell* cells[kMaxBeamBlock];
+                double weight[kMaxBeamBlock];
+                int* low[kMaxBeamBlock];
+                int* high[kMaxBeamBlock];
                 std::uint32_t fed = 0;
                 for (std::uint32_t b = b_low; b < block; ++b) {
                     const std::uint32_t j = j_begin + b;
@@ -614,14 +631,14 @@ void LabelsStage::run(Frame& frame, const Pose& pose, const SubpixelReturns* sub
         for (std::uint32_t begin = part * kCacheRows; begin < rows; begin += parts * kCacheRows)
             cache_rows(*t.plan, f, *t.pixels, begin, std::min(begin + kCacheRows, rows), room);
     };
-    // Beams dealt out in blocks of kBeamBlock in turn: a line array's edge beams gather from more columns.
+    // Beams dealt out in blocks in turn: a line array's edge beams gather from more columns.
     const auto task = [](void* context, std::uint32_t part, std::uint32_t parts) {
         const Job& t = *static_cast<const Job*>(context);
         LabelsStage::Scratch& scratch = *(*t.scratch)[part];
-        const std::uint32_t beams = t.plan->beams;
-        for (std::uint32_t begin = part * kBeamBlock; begin < beams; begin += parts * kBeamBlock)
+        const std::uint32_t beams = t.plan->beams, block = t.pixels->beam_block;
+        for (std::uint32_t begin = part * block; begin < beams; begin += parts * block)
             label_beams(*t.plan, *t.class_of_instance, *t.pixels, t.subpixel, scratch, *t.frame, begin,
-                        std::min(begin + kBeamBlock, beams));
+                        std::min(begin + block, beams));
     };
     host::run_parts(workers_, cache, &job);
     part_done("labels:pixels");
