@@ -43,8 +43,8 @@ struct Cell {
 // A thread labels a block of neighbouring beams at a time (label_beams): with a line array they share
 // most of their pixels, which the block reads once. Blocks of kMaxBeamBlock beams where every thread
 // still gets kBlocksPerThread blocks (a line array's edge beams gather from more columns, and the blocks
-// are dealt out in turn), else half or a quarter of that (beam_block_of; many threads keep the blocks
-// of 8 that were measured on an H100's 16-thread host). On the 2-core development machine, two
+// are dealt out in turn), else half or a quarter of that (beam_block_of: many threads keep the blocks of
+// 8 they had; nothing here measured more than 2 threads). On the 2-core development machine, two
 // threads with blocks of 32 instead of 8: labels:beams 7.0-7.8 ms against 7.4-9.8 (4 interleaved
 // rounds; earlier runs 7.1-8.8 against 9.6-10.0, with blocks of 16 at 8.4-8.5 and 64 at 7.5-9.0). One
 // thread: no change. The slow rounds of blocks of 8 fit two threads on neighbouring blocks writing into
