@@ -112,7 +112,10 @@ def test_errors_are_the_cli_messages(tmp_path):
     assert run.returncode == 2
     with pytest.raises(ValueError) as error:
         small_config().set("source_level", 400)
-    assert run.stderr.strip() == "error: " + str(error.value)
+    # the CLI also names the option that gave the value; the rest of the line is the same
+    prefix = "invalid config: "
+    assert str(error.value).startswith(prefix)
+    assert run.stderr.strip() == "error: " + prefix + "--set source_level=400: " + str(error.value)[len(prefix):]
     config = small_config()
     with pytest.raises(ValueError):
         config.set("source_level", 400)
