@@ -190,13 +190,14 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
                          const SceneData* scene, bool float_spreads)
     : plan_(plan), class_of_instance_(std::move(class_of_instance)), workers_(workers) {
     const std::uint32_t parts = workers_ != nullptr ? workers_->count() : 1;
+    const std::uint32_t beam_block = beam_block_of(plan_.beams, parts);
     for (std::uint32_t i = 0; i < parts; ++i) {
         scratch_.push_back(std::make_unique<Scratch>());
-        scratch_.back()->cells.resize(std::size_t(beam_block_of(plan_.beams, parts)) * plan_.bins);
+        scratch_.back()->cells.resize(std::size_t(beam_block) * plan_.bins);
     }
     pixels_ = std::make_unique<Pixels>();
     pixels_->float_spreads = float_spreads;
-    pixels_->beam_block = beam_block_of(plan_.beams, parts);
+    pixels_->beam_block = beam_block;
     pixels_->pixels.resize(static_cast<std::size_t>(plan_.rows) * plan_.columns);
     pixels_->rays.resize(pixels_->pixels.size());
     pixels_->hit_columns.resize(std::size_t(plan_.rows) * plan_.views * 2);
@@ -208,14 +209,13 @@ LabelsStage::LabelsStage(const Plan& plan, std::vector<std::uint16_t> class_of_i
         }
     pixels_->wide_shares.resize(pixels_->pixels.size() * kWideSharesPerPixel);
     if (plan_.line_array) {
-        const std::uint32_t block_beams = pixels_->beam_block;
-        const std::uint32_t blocks = (plan_.beams + block_beams - 1) / block_beams;
+        const std::uint32_t blocks = (plan_.beams + beam_block - 1) / beam_block;
         pixels_->block_first.resize(std::size_t(blocks) * plan_.rows * plan_.views);
         for (std::uint32_t block = 0; block < blocks; ++block)
             for (std::uint32_t row = 0; row < plan_.rows; ++row)
                 for (std::uint32_t view = 0; view < plan_.views; ++view)
                     pixels_->block_first[(std::size_t(block) * plan_.rows + row) * plan_.views + view] =
-                        block_first_pixel(plan_, block * block_beams, row, view);
+                        block_first_pixel(plan_, block * beam_block, row, view);
     }
     beam_buckets_ = BeamBuckets(plan_.beam_angle_rad);
     if (scene != nullptr) {
