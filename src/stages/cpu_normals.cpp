@@ -390,43 +390,30 @@ void normals_rows(const Plan& plan, const float* depth, float* normals4, Real* s
             if constexpr (std::is_same_v<Real, float>) {
                 // Eight pixels at a time where the CPU has AVX2 and their windows are smooth
                 // (sobel3_smooth8), else four (sobel3_smooth4), the others by the scalar kernel; the windows
-                // of the last columns reach into the zero columns.
-                if (avx2 && !sobel5 && x % 8 == 0 && x + 8 <= C && (!tiers || group(x - 1) == group(x + 8))) {
-                    alignas(32) float fast[32];
-                    const int done = sobel3_smooth8(up, mid, down, x, jump_rel, fast);
-                    if (done == 0xff) {
+                // of the last columns reach into the zero columns. True where it took pixels x .. x + lanes - 1
+                // (x then stands on the last of them).
+                auto smooth_run = [&](auto lanes, auto kernel) {
+                    constexpr int kLanes = decltype(lanes)::value;
+                    if (sobel5 || x % kLanes != 0 || x + kLanes > C || (tiers && group(x - 1) != group(x + kLanes)))
+                        return false;
+                    alignas(32) float fast[4 * kLanes];
+                    const int done = kernel(up, mid, down, x, jump_rel, fast);
+                    if (done == (1 << kLanes) - 1) { // all smooth (most runs)
                         std::memcpy(out_row + 4 * x, fast, sizeof fast);
-                        x += 7;
-                        continue;
+                        x += kLanes - 1;
+                        return true;
                     }
-                    for (int i = 0; i < 8; ++i, ++x) {
-                        if (done & (1 << i)) {
-                            std::memcpy(out_row + 4 * x, fast + 4 * i, 4 * sizeof(float));
-                            continue;
-                        }
-                        pixel(x);
+                    for (int i = 0; i < kLanes; ++i) {
+                        if (done & (1 << i))
+                            std::memcpy(out_row + 4 * (x + i), fast + 4 * i, 4 * sizeof(float));
+                        else
+                            pixel(x + i);
                     }
-                    --x;
-                    continue;
-                }
-                if (!sobel5 && x % 4 == 0 && x + 4 <= C && (!tiers || group(x - 1) == group(x + 4))) {
-                    alignas(16) float fast[16];
-                    const int done = sobel3_smooth4(up, mid, down, x, jump_rel, fast);
-                    if (done == 0xf) {
-                        std::memcpy(out_row + 4 * x, fast, sizeof fast);
-                        x += 3;
-                        continue;
-                    }
-                    for (int i = 0; i < 4; ++i, ++x) {
-                        if (done & (1 << i)) {
-                            std::memcpy(out_row + 4 * x, fast + 4 * i, 4 * sizeof(float));
-                            continue;
-                        }
-                        pixel(x);
-                    }
-                    --x;
-                    continue;
-                }
+                    x += kLanes - 1;
+                    return true;
+                };
+                if (avx2 && smooth_run(std::integral_constant<int, 8>{}, sobel3_smooth8)) continue;
+                if (smooth_run(std::integral_constant<int, 4>{}, sobel3_smooth4)) continue;
             }
             pixel(x);
         }
