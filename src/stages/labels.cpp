@@ -797,14 +797,8 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
 
 void LabelsStage::flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
                        float* flow) const {
-    FlowJob job{&plan_,
-                &from,
-                &to,
-                sonar_from_world(from_pose),
-                sonar_from_world(to_pose),
-                flow,
-                pixels_->slant_factor.data(),
-                &beam_buckets_};
+    const std::array<double, 16> a = sonar_from_world(from_pose), b = sonar_from_world(to_pose);
+    FlowJob job{&plan_, &from, &to, a, b, a == b, flow, pixels_->slant_factor.data(), &beam_buckets_};
     const std::size_t cells = static_cast<std::size_t>(plan_.bins) * plan_.beams;
     if (workers_ == nullptr) {
         flow_cells(job, 0, cells);

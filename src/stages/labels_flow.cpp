@@ -168,17 +168,19 @@ void flow_cell(const FlowJob& job, std::size_t i) {
     const auto& a = job.a;
     const auto& b = job.b;
     const double p[3] = {from.point[3 * i], from.point[3 * i + 1], from.point[3 * i + 2]};
-    // a = sonar_from_world = [R^T | -R^T t]: the world point is R (p - a's translation column)
-    double world[3];
-    for (int k = 0; k < 3; ++k) {
-        double sum = 0.0;
+    double q[3] = {p[0], p[1], p[2]}; // the same pose: the point stays where it is (a flow of exactly 0)
+    if (!job.same_pose) {
+        // a = sonar_from_world = [R^T | -R^T t]: the world point is R (p - a's translation column)
+        double world[3];
+        for (int k = 0; k < 3; ++k) {
+            double sum = 0.0;
+            for (int m = 0; m < 3; ++m)
+                sum += a[k * 4 + m] * (p[m] - a[12 + m]);
+            world[k] = sum;
+        }
         for (int m = 0; m < 3; ++m)
-            sum += a[k * 4 + m] * (p[m] - a[12 + m]);
-        world[k] = sum;
+            q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
     }
-    double q[3];
-    for (int m = 0; m < 3; ++m)
-        q[m] = b[m] * world[0] + b[4 + m] * world[1] + b[8 + m] * world[2] + b[12 + m];
     double bin_from, beam_from, bin_to, beam_to;
     polar_coordinates(plan, p, bin_from, beam_from, *job.buckets);
     const double r = polar_coordinates(plan, q, bin_to, beam_to, *job.buckets);
@@ -331,8 +333,8 @@ VKS_AVX2 void flow_cells4(const FlowJob& job, const std::size_t (&cells)[4]) {
                 sum, _mm256_mul_pd(splat(a[k * 4 + m]), _mm256_sub_pd(_mm256_load_pd(p[m]), splat(a[12 + m]))));
         world[k] = sum;
     }
-    __m256d q[3];
-    for (int m = 0; m < 3; ++m)
+    __m256d q[3] = {px, py, pz};
+    for (int m = 0; m < 3 && !job.same_pose; ++m)
         q[m] = _mm256_add_pd(
             _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(splat(b[m]), world[0]), _mm256_mul_pd(splat(b[4 + m]), world[1])),
                           _mm256_mul_pd(splat(b[8 + m]), world[2])),

@@ -17,6 +17,7 @@ struct FlowJob {
     const Frame* from;
     const Frame* to;
     std::array<double, 16> a, b; // sonar_from_world of the two poses
+    bool same_pose;              // a == b: each point maps onto itself, exactly
     float* flow;
     const double* slant_factor; // LabelsStage::Pixels::slant_factor
     const BeamBuckets* buckets;
