@@ -22,6 +22,7 @@
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/host_stages.h"
+#include "host/meta_fields.h"
 #include "scene/scene_data.h"
 #include "vksonar/vksonar.h"
 
@@ -89,35 +90,39 @@ struct ConfigObject {
 
 struct SceneObject {
     Scene scene;
+    std::optional<std::string> path; // the glTF file it was loaded from (meta.json "scene"); none for arrays
 
     static std::shared_ptr<SceneObject> load(const std::string& path, const std::string& asset_root) {
         auto s = std::make_shared<SceneObject>();
         s->scene = take(Scene::load_gltf(path, SceneLoadOptions{asset_root}));
+        s->path = path;
         return s;
     }
 
     // One mesh from numpy arrays: vertices [n, 3] (metres, sonar world frame: x forward, y port, z up),
-    // triangle indices [m, 3] (or flat), one material, drawn once with a 4x4 row-major transform.
+    // triangle indices [m, 3] (or flat), one material, drawn once with a 4x4 row-major transform;
+    // `instance`: the object id its labels carry (0: none; a scene built here has no class table).
     static std::shared_ptr<SceneObject>
-    from_arrays(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices,
-                const py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>& indices,
+    from_arrays(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices, const py::array& indices,
                 double backscatter_db,
-                const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform) {
+                const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
+                std::int64_t instance) {
         auto s = std::make_shared<SceneObject>();
-        s->add(vertices, indices, backscatter_db, transform);
+        s->add(vertices, indices, backscatter_db, transform, instance);
         return s;
     }
 
     std::uint32_t add(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices,
-                      const py::array_t<std::uint32_t, py::array::c_style | py::array::forcecast>& indices,
-                      double backscatter_db,
-                      const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform) {
+                      const py::array& indices, double backscatter_db,
+                      const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
+                      std::int64_t instance) {
         if (vertices.ndim() != 2 || vertices.shape(1) != 3)
             throw py::value_error("vertices: expected shape (n, 3), got " + shape_text(vertices));
-        if (indices.size() % 3 != 0)
-            throw py::value_error("indices: " + std::to_string(indices.size()) + " values, not whole triangles");
+        const std::vector<std::uint32_t> index_values = checked_indices(indices);
+        if (instance < 0 || instance > 0xffff)
+            throw py::value_error("instance: " + std::to_string(instance) + " is not an object id in [0, 65535]");
         const auto mesh = take(scene.add_mesh(vertices.data(), static_cast<std::uint32_t>(vertices.shape(0)),
-                                              indices.data(), static_cast<std::uint32_t>(indices.size())));
+                                              index_values.data(), static_cast<std::uint32_t>(index_values.size())));
         AcousticMaterial material;
         material.name = "from_arrays";
         material.backscatter_db = backscatter_db;
@@ -126,6 +131,7 @@ struct SceneObject {
         SceneDraw draw;
         draw.mesh = mesh;
         draw.material = scene.add_material(material);
+        draw.instance = static_cast<std::uint32_t>(instance);
         if (transform) {
             if (transform->ndim() != 2 || transform->shape(0) != 4 || transform->shape(1) != 4)
                 throw py::value_error("transform: expected shape (4, 4), got " + shape_text(*transform));
@@ -135,6 +141,28 @@ struct SceneObject {
         }
         check(scene.add_draw(draw));
         return mesh;
+    }
+
+    // Triangle indices as uint32: an integer array (any width) of whole triangles, none negative or past
+    // uint32 (numpy's own cast would wrap -1 to 4294967295 and truncate floats without a word).
+    static std::vector<std::uint32_t> checked_indices(const py::array& indices) {
+        const char kind = indices.dtype().kind();
+        if (kind != 'i' && kind != 'u')
+            throw py::value_error("indices: dtype " + py::str(indices.dtype()).cast<std::string>() +
+                                  " is not an integer type");
+        if (indices.size() % 3 != 0)
+            throw py::value_error("indices: " + std::to_string(indices.size()) + " values, not whole triangles");
+        const auto wide = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(indices);
+        if (!wide) throw py::value_error("indices: not convertible to 64-bit integers");
+        std::vector<std::uint32_t> out(static_cast<std::size_t>(wide.size()));
+        const std::int64_t* v = wide.data();
+        for (std::size_t i = 0; i < out.size(); ++i) {
+            if (v[i] < 0 || v[i] > 0xffffffffLL)
+                throw py::value_error("indices: index " + std::to_string(i) + " = " + std::to_string(v[i]) +
+                                      " is not a vertex index");
+            out[i] = static_cast<std::uint32_t>(v[i]);
+        }
+        return out;
     }
 
     template <class A> static std::string shape_text(const A& a) {
@@ -164,6 +192,7 @@ struct RendererObject {
     Renderer renderer;
     std::unique_ptr<host::FanRenderer> fan;
     std::string backend;
+    std::string device; // the Vulkan device, or "cpu" (meta.json "device")
     std::string config_json;
 };
 
@@ -178,11 +207,21 @@ template <class T> py::object view(std::vector<T>& data, std::vector<py::ssize_t
 py::object frame_meta(FrameObject& f) {
     const py::module_ json = py::module_::import("json");
     py::dict extra;
+    const RendererObject& r = f.renderer.cast<RendererObject&>();
+    // the CLI's keys in the CLI's order (render_frame.cpp), but `legacy`, which describes the legacy
+    // outputs only the CLI writes
     extra["config"] = json.attr("loads")(config_to_json(f.plan->config));
-    extra["backend"] = f.renderer.cast<RendererObject&>().backend;
+    extra["scene"] = r.scene->path ? py::object(py::str(*r.scene->path)) : py::object(py::none());
     extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
                              py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
                              py::arg("yaw_deg") = f.pose.yaw_deg);
+    extra["objects"] = json.attr("loads")(host::objects_json(r.scene->scene).dump());
+    extra["backend"] = r.backend;
+    extra["backend_reason"] = "Renderer(backend='" + r.backend + "')";
+    extra["device"] = r.device;
+    extra["mode"] = f.plan->config.mode == SonarMode::uuv_legacy    ? "uuv-legacy"
+                    : f.plan->config.mode == SonarMode::gtri_legacy ? "gtri-legacy"
+                                                                    : "physical";
     const std::string text = host::meta_json_text(*f.plan, f.frame, json.attr("dumps")(extra).cast<std::string>());
     return json.attr("loads")(text);
 }
@@ -208,10 +247,12 @@ PYBIND11_MODULE(vksonar, m) {
         .def_static("load", &SceneObject::load, py::arg("path"), py::arg("asset_root") = "",
                     "Loads .gltf / .glb; files it names must lie inside asset_root (default: its folder).")
         .def_static("from_arrays", &SceneObject::from_arrays, py::arg("vertices"), py::arg("indices"),
-                    py::arg("backscatter_db") = -30.0, py::arg("transform") = py::none(),
-                    "One mesh: vertices (n, 3) float, indices (m, 3) uint32, a Lambert material, a 4x4 transform.")
+                    py::arg("backscatter_db") = -30.0, py::arg("transform") = py::none(), py::arg("instance") = 0,
+                    "One mesh: vertices (n, 3) float, indices (m, 3) integers, a Lambert material, a 4x4 transform, "
+                    "the object id its labels carry (0: none).")
         .def("add", &SceneObject::add, py::arg("vertices"), py::arg("indices"), py::arg("backscatter_db") = -30.0,
-             py::arg("transform") = py::none(), "Adds one more mesh, material and draw; returns the mesh index.")
+             py::arg("transform") = py::none(), py::arg("instance") = 0,
+             "Adds one more mesh, material and draw (object id `instance`); returns the mesh index.")
         .def_property_readonly("triangles", [](const SceneObject& s) { return s.scene.stats().triangles; })
         .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene.stats().warnings; })
         .def_property_readonly(
@@ -397,6 +438,7 @@ PYBIND11_MODULE(vksonar, m) {
                  r->context = std::make_shared<Context>(options.backend == Backend::cpu
                                                             ? Context::cpu_only()
                                                             : take(Context::create(take(context_options_from_env()))));
+                 r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
                  r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
@@ -455,6 +497,8 @@ PYBIND11_MODULE(vksonar, m) {
                 if (!from || !to) throw py::value_error("flow: frames must not be None");
                 if (from->renderer.ptr() != self.ptr() || to->renderer.ptr() != self.ptr())
                     throw py::value_error("flow: frames of another Renderer");
+                if (!renderer_plan(r.renderer).labels)
+                    throw py::value_error("flow: this Renderer was made without outputs=['labels']");
                 std::vector<float> flow;
                 check(r.renderer.label_flow(from->frame, from->pose, to->frame, to->pose, flow));
                 const std::size_t bins = from->frame.bins, beams = from->frame.beams;

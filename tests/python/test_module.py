@@ -59,6 +59,11 @@ def test_arrays_equal_the_cli_files(tmp_path, renderer):
     assert frame.meta["beam_angles_rad"] == meta["beam_angles_rad"]
     assert frame.meta["config"] == meta["config"]
     assert frame.meta["seed"] == 9 and frame.meta["pose"]["yaw_deg"] == 3.0
+    # every key of the CLI's meta.json, the same values but for why the backend was chosen
+    assert list(frame.meta) == list(meta)
+    for key in ("scene", "objects", "backend", "device"):
+        assert frame.meta[key] == meta[key], key
+    assert meta["backend_reason"] == "--backend cpu" and frame.meta["backend_reason"] == "Renderer(backend='cpu')"
 
 
 def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
@@ -135,6 +140,20 @@ def test_errors_are_the_cli_messages(tmp_path):
         vksonar.Scene.from_arrays(np.zeros((4, 2)), np.zeros((1, 3), np.uint32))
     with pytest.raises(ValueError):
         vksonar.Scene.from_arrays(np.zeros((3, 3)), np.array([[0, 1, 7]], np.uint32))  # index out of range
+    # numpy's cast to uint32 would wrap -1 and truncate 1.5 without a word
+    with pytest.raises(ValueError, match="index 2 = -1 is not a vertex index"):
+        vksonar.Scene.from_arrays(np.zeros((3, 3)), np.array([[0, 1, -1]]))
+    with pytest.raises(ValueError, match="dtype float64 is not an integer type"):
+        vksonar.Scene.from_arrays(np.zeros((3, 3)), np.array([[0.0, 1.0, 2.0]]))
+    with pytest.raises(ValueError, match=r"instance: 65536 is not an object id in \[0, 65535\]"):
+        vksonar.Scene.from_arrays(np.zeros((3, 3)), np.array([[0, 1, 2]]), instance=65536)
+    # arguments of the wrong type are pybind11's TypeError (docs/python.md)
+    with pytest.raises(TypeError):
+        renderer.render("0,0,0,0,10,0")
+    plain = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu")
+    frame = plain.render((0, 0, 0, 0, 10, 0))
+    with pytest.raises(ValueError, match=r"flow: this Renderer was made without outputs=\['labels'\]"):
+        plain.flow(frame, frame)
 
 
 def test_a_scene_from_arrays_echoes_at_its_range():
@@ -152,6 +171,12 @@ def test_a_scene_from_arrays_echoes_at_its_range():
     frame = vksonar.Renderer(vksonar.Scene.from_arrays(vertices, indices, transform=moved), config,
                              backend="cpu").render((0, 0, 0, 0, 0, 0))
     assert abs(frame.ranges_m[int(np.argmax(frame.polar.max(axis=1)))] - 16.0) <= 20.0 / 128
+    # with an object id its cells carry it in the labels (int64 indices, numpy's default, taken as they are)
+    scene = vksonar.Scene.from_arrays(vertices, indices.astype(np.int64), instance=7)
+    frame = vksonar.Renderer(scene, config, backend="cpu", outputs=["labels"]).render((0, 0, 0, 0, 0, 0))
+    assert set(np.unique(frame.instance).tolist()) == {0, 7}
+    assert frame.instance[peak_bin].max() == 7
+    assert [v["instance"] for v in frame.visibility] == [7]
 
 
 def test_render_releases_the_gil():
