@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include <sched.h>
 #include <unistd.h>
 
 #include "host/host_stages.h"
@@ -596,6 +597,29 @@ TEST(HostImages, FanWiderThan180IsSquareAndCentred) {
     EXPECT_GT(port, 0);
     EXPECT_GT(starboard, 0);
 }
+
+#if defined(__linux__)
+// The default thread count follows the CPUs the process may run on (a Slurm task's, taskset's), not the
+// machine's: a Workers made by a thread confined to one CPU has one thread. (Affinity is per thread on
+// Linux; this thread's mask is put back afterwards.)
+TEST(HostWorkers, DefaultCountFollowsTheAffinityMask) {
+    cpu_set_t all;
+    ASSERT_EQ(sched_getaffinity(0, sizeof all, &all), 0);
+    EXPECT_EQ(host::usable_cpus(), static_cast<std::uint32_t>(CPU_COUNT(&all)));
+    int first = 0;
+    while (!CPU_ISSET(first, &all))
+        ++first;
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(first, &one);
+    ASSERT_EQ(sched_setaffinity(0, sizeof one, &one), 0);
+    const std::uint32_t confined = host::usable_cpus();
+    const std::uint32_t threads = host::Workers().count();
+    ASSERT_EQ(sched_setaffinity(0, sizeof all, &all), 0);
+    EXPECT_EQ(confined, 1u);
+    EXPECT_EQ(threads, 1u);
+}
+#endif
 
 // The fan image in bands of rows on 3 threads (the CLI's writer on a machine with 6+ cores): the same
 // bytes as on one, for every colormap (each has its own loop) and a scan with NaN and out-of-range cells.

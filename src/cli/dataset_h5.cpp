@@ -15,7 +15,6 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
-#include <thread>
 
 #include "cli/h5_util.h"
 #include "host/workers.h"
@@ -287,8 +286,7 @@ public:
         std::uint32_t deflating = 0;
         for (const RowDataset* d : row_sets())
             deflating += d->deflate ? 1u : 0u;
-        const std::uint32_t threads =
-            std::min({deflating, std::max(1u, std::thread::hardware_concurrency()), host::Workers::kMaxThreads});
+        const std::uint32_t threads = std::min({deflating, host::usable_cpus(), host::Workers::kMaxThreads});
         deflaters_ = threads > 1 ? std::make_unique<host::Workers>(threads) : nullptr;
         if (H5Fflush(file_.get(), H5F_SCOPE_LOCAL) < 0 || !write_commit()) return fail("cannot flush");
         return {};

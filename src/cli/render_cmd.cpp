@@ -18,7 +18,6 @@
 #include <optional>
 #include <string>
 #include <system_error>
-#include <thread>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -623,7 +622,7 @@ int run_render(const std::vector<std::string>& argv) {
     // The writer thread draws a fan image a frame for .mcap and fan.png (about 5 ms here at the default,
     // more than a GPU's frame): with half the cores, where there are four or more, it shares the rows out
     // (the rest are the renderer's; a 2-core machine's cores are busy rendering).
-    const unsigned cores = std::thread::hardware_concurrency();
+    const unsigned cores = host::usable_cpus();
     host::Workers image_workers(cores >= 4 ? std::min(8u, cores / 2) : 1u);
     outputs.image_workers = &image_workers;
     std::vector<Frame> slots = make_slots(job, renderer);

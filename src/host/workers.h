@@ -13,11 +13,16 @@
 
 namespace vksonar::host {
 
+// The CPUs this process may run on: its affinity mask where the system has one (a Slurm task, `taskset`,
+// a container's cpuset), which std::thread::hardware_concurrency ignores, else the hardware threads;
+// at least 1.
+std::uint32_t usable_cpus();
+
 class Workers {
 public:
     using Task = void (*)(void* context, std::uint32_t part, std::uint32_t parts);
 
-    // threads = 0: one per hardware thread; at most kMaxThreads.
+    // threads = 0: one per usable CPU (usable_cpus); at most kMaxThreads.
     // 1: everything on the caller.
     explicit Workers(std::uint32_t threads = 0);
     ~Workers();
