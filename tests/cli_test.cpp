@@ -635,6 +635,16 @@ TEST_F(Cli, InfoScaleAndFramingForAStrangersScene) {
     EXPECT_NE(info.out.find("triangles: 2 drawn"), std::string::npos) << info.out;
     EXPECT_NE(info.out.find("extensions: none"), std::string::npos) << info.out;
     EXPECT_EQ(run({"info", (dir_ / "none.gltf").string()}).exit_code, 2);
+    // Without a scene: the device, and the backend render's default (auto) runs on it, as meta.json says
+    const CliRun device = run({"info"});
+    if (device.exit_code == 0) { // (a machine without a Vulkan device exits 1)
+        EXPECT_NE(device.out.find("Vulkan: "), std::string::npos) << device.out;
+        const bool cpu_device = device.out.find(", CPU)") != std::string::npos;
+        EXPECT_NE(device.out.find(cpu_device ? "render --backend auto: cpu (auto: the Vulkan device is a CPU"
+                                             : "render --backend auto: vulkan (auto: a GPU"),
+                  std::string::npos)
+            << device.out;
+    }
     const CliRun harbour = run({"info", VKSONAR_ASSET_DIR "/scenes/harbour.gltf"});
     EXPECT_NE(harbour.out.find("objects: 12 in 5 classes: seabed (1), wall (1), pier (1), piling (8), crate (1)"),
               std::string::npos)

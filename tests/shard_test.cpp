@@ -442,4 +442,34 @@ TEST_F(Shard, MergeRefusesGapsOverlapsAndOtherRuns) {
     EXPECT_TRUE(fs::exists(dir_ / "out" / "frame_000008" / "polar.npy"));
 }
 
+// A folder shard and an unsharded run never share a folder: an unsharded run into a shard's folder left
+// the stale shard.json beside its own frames, and merge then took frames of two runs (seeds 1 and 9 here)
+// as one; a shard into an unsharded run's folder took that run's frames as its own. Both are refused in
+// one line, the folder left as it was.
+TEST_F(Shard, FolderShardAndUnshardedRunNeverShareAFolder) {
+    ASSERT_EQ(run(render_args("p0", {"--save", "polar", "--shard", "0/2"})).exit_code, 0);
+    const std::string record = read_text(dir_ / "p0" / "shard.json");
+    const std::string frame = read_text(dir_ / "p0" / "frame_000001" / "polar.npy");
+    ShardRun r = run(render_args("p0", {"--save", "polar", "--seed", "9"}));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("holds shard 0/2 of a run (shard.json): give the unsharded run another --out"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(read_text(dir_ / "p0" / "shard.json"), record);
+    EXPECT_TRUE(read_text(dir_ / "p0" / "frame_000001" / "polar.npy") == frame);
+
+    ASSERT_EQ(run(render_args("whole", {"--save", "polar"})).exit_code, 0);
+    r = run(render_args("whole", {"--save", "polar", "--shard", "1/2"}));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("holds an unsharded run, not shard 1/2: give each shard its own --out"), std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "whole" / "shard.json"));
+    // an unsharded run over an unsharded run's folder, and a shard into an empty folder, as before
+    EXPECT_EQ(run(render_args("whole", {"--save", "polar"})).exit_code, 0);
+    fs::create_directories(dir_ / "empty");
+    EXPECT_EQ(run(render_args("empty", {"--save", "polar", "--shard", "1/2"})).exit_code, 0);
+}
+
 } // namespace

@@ -344,6 +344,9 @@ public:
 
     Result<void> append(const Frame& frame, const Pose& pose, double time_s, const std::uint16_t* display_u16,
                         const float* flow, const std::string* boxes_json) override {
+        // (HDF5's error printing is per thread in a thread-safe build, and frames are written on the
+        // write-behind thread, not the one that opened the file: a full disk printed its whole stack)
+        H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
         const double pose_row[6] = {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg};
         const std::uint64_t index = frame.frame_index;
         // A Renderer made without SaveFlags::labels leaves the label arrays empty (refused below).
@@ -393,6 +396,7 @@ public:
     }
 
     Result<void> close() override {
+        H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
         if (!set_count("complete", 1)) return fail("cannot mark the file complete");
         close_datasets();
         if (H5Fclose(file_.release()) < 0) return fail("cannot close the file");

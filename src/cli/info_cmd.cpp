@@ -6,6 +6,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/inputs.h"
 #include "vksonar/context.h"
 #include "vksonar/scene.h"
 
@@ -62,7 +63,8 @@ int run_info(const std::vector<std::string>& argv) {
     if (args.has("--help")) {
         std::printf("usage: vksonar info [--validation]\n"
                     "       vksonar info SCENE.gltf|.glb [--asset-root DIR]\n"
-                    "  prints the Vulkan device and driver in use (VKSONAR_DEVICE=N picks a device),\n"
+                    "  prints the Vulkan device and driver in use (VKSONAR_DEVICE=N picks a device) and the backend\n"
+                    "  render --backend auto runs on it,\n"
                     "  or a scene's bounds, triangles, instances, materials and glTF extensions\n"
                     "  --validation   also enable VK_LAYER_KHRONOS_validation\n");
         return 0;
@@ -81,6 +83,11 @@ int run_info(const std::vector<std::string>& argv) {
         return 1;
     }
     std::printf("Vulkan: %s\n", context->device_description().c_str());
+    // what `render` runs on by default (meta.json's backend and backend_reason say the same per run)
+    Backend backend = Backend::vulkan;
+    std::string why;
+    choose_backend(backend, why);
+    std::printf("render --backend auto: %s (%s)\n", backend == Backend::cpu ? "cpu" : "vulkan", why.c_str());
     return 0;
 }
 

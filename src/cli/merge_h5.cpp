@@ -205,7 +205,11 @@ void h5_merge(const std::vector<ShardInput>& shards, const std::string& out) {
                                (".~" + target.filename().string() + ".merging-" + std::to_string(::getpid()));
     std::error_code ec;
     fs::copy_file(shards[0].path, temporary, fs::copy_options::overwrite_existing, ec);
-    if (ec) throw Failure("merge: cannot write " + temporary.string() + ": " + ec.message());
+    if (ec) {
+        const std::string why = ec.message();
+        fs::remove(temporary, ec); // a copy cut off by a full disk is not left behind
+        throw Failure("merge: cannot write " + temporary.string() + ": " + why);
+    }
     try {
         merge_into(shards, temporary.string(), out);
     } catch (...) {

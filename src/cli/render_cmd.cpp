@@ -226,6 +226,30 @@ std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, cons
 
 // ---- the steps of a render after its inputs (run_render below runs them in order) -----------------
 
+// Frame folders: a shard's --out and an unsharded run's are never the same folder. A re-run shard resumes
+// the frames its folder holds, and `merge` takes a folder with shard.json as that shard's whole output, so
+// an unsharded run there (its frames beside a stale shard.json) would be merged as the shard, and a shard
+// in an unsharded run's folder would count that run's frames as its own. Refused before anything is
+// written. (A .h5 or bag is one file: an unsharded run replaces it whole, and a shard refuses an
+// unsharded run's file when it resumes.)
+void refuse_mixed_folders(const RenderJob& job) {
+    if (job.dataset || job.bag) return;
+    std::error_code ec;
+    const std::string& out = job.out_path;
+    if (!fs::is_directory(out, ec)) return;
+    const bool shard_record = fs::exists(fs::path(out) / "shard.json", ec);
+    if (!job.shard && shard_record) {
+        const ShardRecord held = read_manifest(out).shard;
+        throw BadInput("--out " + out + " holds shard " + std::to_string(held.index) + "/" +
+                       std::to_string(held.count) + " of a run (shard.json): give the unsharded run another --out");
+    }
+    if (!job.shard || shard_record) return;
+    for (const auto& entry : fs::directory_iterator(out, ec))
+        if (entry.path().filename() == "meta.json" || entry.path().filename().string().rfind("frame_", 0) == 0)
+            throw BadInput("--out " + out + " holds an unsharded run, not shard " + std::to_string(job.shard->index) +
+                           "/" + std::to_string(job.shard->count) + ": give each shard its own --out");
+}
+
 // The output directory, or the .h5 / .mcap file's place: made only once every input is valid, and
 // removed again if the run fails before a frame is on disk.
 struct OutputTarget {
@@ -610,6 +634,7 @@ int run_render(const std::vector<std::string>& argv) {
     }
     RenderJob job = parse_job(args);
     const SceneAndConfig loaded = load_scene_and_config(args, job);
+    refuse_mixed_folders(job);
     OutputTarget target;
     create_output(job, target);
 
