@@ -429,6 +429,30 @@ TEST(SceneWarnings, ControlCharactersFromTheFileAreEscaped) {
         << w[0];
 }
 
+// extras.vksonar keys the loader does not read are never dropped in silence: a scene's (it holds effects
+// only: a sonar key there is not a config layer) and a node's or mesh's (class only), each one warning
+// naming the place and the key; a mesh drawn by two nodes warns once.
+TEST(SceneWarnings, UnknownExtrasKeysOfScenesNodesAndMeshes) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["scenes"][0]["extras"]["vksonar"] = {{"beams", 10}, {"effects", {{"speckle", "off"}}}};
+    doc["nodes"][2]["extras"]["vksonar"] = {{"klass", "x"}};
+    doc["meshes"][0]["extras"]["vksonar"] = {{"class", "tri"}, {"material", "steel"}};
+    const std::string path = temp_path("unknown_extras_keys.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    EXPECT_FALSE(scene.effects_json().empty()); // the effects are still read
+    const std::vector<std::string>& w = scene.stats().warnings;
+    ASSERT_EQ(w.size(), 3u) << ::testing::PrintToString(w);
+    const auto has = [&](const std::string& text) {
+        return std::any_of(w.begin(), w.end(), [&](const std::string& x) { return x.find(text) != std::string::npos; });
+    };
+    EXPECT_TRUE(has("scene 0: extras.vksonar.beams ignored: a scene's extras.vksonar holds effects only"))
+        << ::testing::PrintToString(w);
+    EXPECT_TRUE(has("unknown key extras.vksonar.klass ignored")) << ::testing::PrintToString(w);
+    EXPECT_TRUE(has("mesh 0: unknown key extras.vksonar.material ignored")) << ::testing::PrintToString(w);
+}
+
 // Objects for ground-truth labels (SceneInstance): the node index + 1, the class from the node's
 // extras, else its mesh's, else the mesh's name; every draw of a node carries its id.
 TEST(SceneObjects, IdsAreNodeIndicesAndClassesComeFromExtrasOrTheMeshName) {

@@ -79,6 +79,11 @@ public:
 
 private:
     void warn(std::string text) { out_.stats.warnings.push_back(std::move(text)); }
+    // Once per text: a mesh's extras are read for every node that draws it.
+    void warn_once(std::string text) {
+        std::vector<std::string>& w = out_.stats.warnings;
+        if (std::find(w.begin(), w.end(), text) == w.end()) w.push_back(std::move(text));
+    }
 
     // A material's acoustics: its extras.vksonar when it has them, else its name looked up in
     // acoustic_material_by_name (scene.h), else the default (Lambert, -30 dB). The names that fell to
@@ -190,6 +195,11 @@ private:
         if (vk == extras.end()) return;
         const std::string where = "scene " + std::to_string(scene_index) + ": extras.vksonar";
         if (!vk->is_object()) fail(ErrorCode::parse, where + " is not an object");
+        for (const auto& [key, value] : vk->items())
+            if (key != "effects")
+                warn(where + "." + key +
+                     " ignored: a scene's extras.vksonar holds effects only (sonar keys go in "
+                     "--config or --set)");
         const auto effects = vk->find("effects");
         if (effects == vk->end()) return;
         if (!effects->is_object()) fail(ErrorCode::parse, where + ".effects is not an object");
@@ -337,6 +347,10 @@ private:
         const json extras = json::parse(extras_json, nullptr, /*allow_exceptions=*/false);
         if (!extras.is_object() || !extras.contains("vksonar") || !extras["vksonar"].is_object()) return {};
         const json& vk = extras["vksonar"];
+        for (const auto& [key, value] : vk.items())
+            if (key != "class")
+                warn_once(where + ": unknown key extras.vksonar." + key +
+                          " ignored (a node's or mesh's extras.vksonar holds class only)");
         if (!vk.contains("class")) return {};
         if (!vk["class"].is_string() || vk["class"].get<std::string>().empty())
             fail(ErrorCode::parse, where + ": extras.vksonar.class = " + vk["class"].dump() + " is not a name");
