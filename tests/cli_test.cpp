@@ -118,7 +118,8 @@ TEST_F(Cli, InvalidValues) {
     expect_bad_render({"--set", "accuracy.max_slice=200"}, {"accuracy.max_slice = 200"});
     // A value from a config file names the file too.
     write_text(dir_ / "zero_beams.json", R"({"beams": 0})");
-    expect_bad_render({"--config", (dir_ / "zero_beams.json").string()}, {"zero_beams.json", "beams = 0"});
+    expect_bad_render({"--config", (dir_ / "zero_beams.json").string()},
+                      {"invalid config: --config " + (dir_ / "zero_beams.json").string() + ": beams = 0"});
     // ... as a --sonar file, and a --set names itself; the layer named is the one whose value is wrong:
     // a later --set that mends it leaves no error, one that breaks another key is named instead.
     expect_bad_render({"--sonar", (dir_ / "zero_beams.json").string()}, {"--sonar ", "zero_beams.json", "beams = 0"});
@@ -127,6 +128,10 @@ TEST_F(Cli, InvalidValues) {
                       {"--set hfov=400: hfov = 400"});
     expect_bad_render({"--config", (dir_ / "zero_beams.json").string(), "--set", "beams=8", "--set", "bins=0"},
                       {"--set bins=0: bins = 0"});
+    // A later layer that changes only the reason's wording (the legacy mode's hfov rule names max_slice's
+    // value) leaves the blame with the value that is wrong.
+    expect_bad_render({"--sonar", "uuv-legacy", "--set", "hfov=200", "--set", "accuracy.max_slice=120"},
+                      {"--set hfov=200: hfov = 200", "(120 degrees)"});
 }
 
 // Issue 25: a value outside physics is refused (exit 2, one line naming key, value and range, nothing

@@ -67,10 +67,13 @@ ProblemOrigin::ProblemOrigin(const SonarConfig& config, std::string origin)
     : problem_(config_problem(config)), origin_(std::move(origin)) {}
 
 void ProblemOrigin::after(const SonarConfig& config, const std::string& layer) {
-    if (std::string problem = config_problem(config); problem != problem_) {
-        problem_ = std::move(problem);
-        origin_ = layer;
-    }
+    // What is wrong is the message's "KEY = VALUE" (validate()'s messages start with it): a layer that
+    // changes only the reason's wording (another key the rule names, e.g. accuracy.max_slice after an
+    // hfov the legacy mode refuses) leaves the blame with the layer that gave the value.
+    const auto subject = [](const std::string& problem) { return problem.substr(0, problem.find(": ")); };
+    std::string problem = config_problem(config);
+    if (subject(problem) != subject(problem_)) origin_ = layer;
+    problem_ = std::move(problem);
 }
 
 void ProblemOrigin::throw_if_invalid() const {

@@ -25,7 +25,8 @@ class ProblemOrigin {
 public:
     // `config`'s values came from `origin` ("--sonar NAME_OR_FILE")
     ProblemOrigin(const SonarConfig& config, std::string origin);
-    // `config` is the one after the layer `layer` ("--set key=value", a file path)
+    // `config` is the one after the layer `layer` ("--set key=value", "--config FILE"); the layer is
+    // blamed where it changed what is invalid (validate()'s "KEY = VALUE"), not only its reason's wording
     void after(const SonarConfig& config, const std::string& layer);
     const std::string& origin() const { return origin_; }
     // BadInput "invalid config: ORIGIN: KEY = VALUE: why" where the last config given was invalid

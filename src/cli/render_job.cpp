@@ -431,7 +431,7 @@ SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig
         auto layered = apply_config_file(config, path);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();
-        problem.after(config, path);
+        problem.after(config, "--config " + path);
     }
     if (args.has("--quality")) {
         auto layered = apply_quality(config, args.value("--quality"));
