@@ -441,6 +441,9 @@ TEST_F(BoxesCli, BoxesJsonIsTightOnTheLabelsAndCocoMatchesIt) {
     const fs::path kept = dir_ / "kept.json";
     write_text(kept, "{\"old\": true}\n");
     expect_bad_export({"coco", (dir_ / "no_such_run").string(), kept.string()}, "no_such_run: no such folder");
+    write_text(dir_ / "run.h5", "not a folder");
+    expect_bad_export({"coco", (dir_ / "run.h5").string(), kept.string()},
+                      "run.h5: not a folder (export reads a render's frame folders");
     fs::create_directories(dir_ / "empty");
     expect_bad_export({"coco", (dir_ / "empty").string(), kept.string()}, "empty: no boxes.json");
     expect_bad_export({"coco", run_dir.string(), (dir_ / "missing" / "out.json").string()}, "no folder");

@@ -225,7 +225,10 @@ int run_export(const std::vector<std::string>& argv) {
                        std::to_string(args.positional.size() - 1) + " arguments");
     const fs::path run = args.positional[1], out = args.positional[2];
     std::error_code ec;
-    if (!fs::is_directory(run, ec)) throw BadInput(run.string() + ": no such folder");
+    if (!fs::is_directory(run, ec))
+        throw BadInput(run.string() + (fs::exists(run, ec) ? ": not a folder (export reads a render's frame folders, "
+                                                             "written with --save fan,labels)"
+                                                           : ": no such folder"));
 
     const std::vector<FrameFolder> frames = frame_folders(run);
     std::uint64_t left_out = 0;

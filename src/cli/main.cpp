@@ -20,11 +20,11 @@ constexpr const char* kUsage =
     "commands:\n"
     "  render    render a scene (or a trajectory) to PNG/NPY/PLY/JSON files\n"
     "  presets   list the sonar presets; --show NAME prints one as JSON\n"
-    "  info      print the Vulkan device and driver vksonar would use\n"
+    "  info      print the Vulkan device and driver, and the backend render picks (or: info SCENE)\n"
     "  merge     merge the shards of a trajectory (render --shard i/N) into one output\n"
     "  compare   compare two .npy scans (max abs, RMSE, max dB difference, PSNR)\n"
     "  export    export a run's boxes (render --save fan,labels) as COCO: export coco RUN OUT.json\n"
-    "  bench     benchmarks: speed | effects | accuracy\n"
+    "  bench     benchmarks: speed | effects | accuracy | load\n"
     "\n"
     "Run 'vksonar <command> --help' for the options of a command.\n";
 // clang-format on

@@ -15,7 +15,7 @@ int run_presets(const std::vector<std::string>& argv) {
     const Args args =
         parse_args(argv, {{"--show", true, false}, {"--keys", false, false}, {"--help", false, false}}, "presets");
     if (args.has("--help")) {
-        std::printf("usage: vksonar presets [--show NAME]\n"
+        std::printf("usage: vksonar presets [--show NAME | --keys]\n"
                     "  (no option)   list the presets with a one-line description\n"
                     "  --show NAME   print the fully resolved config of preset NAME as JSON\n"
                     "  --keys        print the config reference table (Markdown; docs/config.md)\n");

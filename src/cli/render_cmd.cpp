@@ -47,9 +47,9 @@ namespace vksonar::cli {
 namespace {
 
 constexpr const char* kUsage =
-    "usage: vksonar render [--scene FILE.gltf] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
+    "usage: vksonar render [--scene FILE.gltf|.glb] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
-    "                      [--quality fast|balanced|accurate] [--seed N] [--backend vulkan|cpu]\n"
+    "                      [--quality fast|balanced|accurate] [--seed N] [--backend auto|vulkan|cpu]\n"
     "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
     "                      [--compress] [--shard INDEX/COUNT] [--shard-count N] [--ros-prefix /TOPIC]\n"
     "                      [--ros-frame ID] [--rate HZ] [--ros-sonar-dtype float32|uint16]\n"
@@ -89,8 +89,9 @@ constexpr const char* kUsage =
     "                '..' resolved (default: the scene file's folder; config key scene.asset_root)\n"
     "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
-    "                --save polar (default), polar_u16 and labels only: labels adds instance, class,\n"
-    "                instance_fraction, elevation, elevation_spread [frames, bins, beams] and point [..., 3])\n"
+    "                --save polar (default), polar_u16, labels and flow only: labels adds instance, class,\n"
+    "                instance_fraction, elevation, elevation_spread [frames, bins, beams] and point [..., 3],\n"
+    "                flow [frames, bins, beams, 2])\n"
     "                or a FILE.mcap: one ROS 2 bag (rosbag2 MCAP: ros2 bag play, Foxglove; docs/ros2.md) of\n"
     "                marine_acoustic_msgs/ProjectedSonarImage, the fan and polar sensor_msgs/Image, /tf and, with\n"
     "                --save cloud, a PointCloud2; with --save labels, PREFIX/instance: the instance ids as a\n"
