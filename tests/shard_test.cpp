@@ -135,6 +135,7 @@ TEST_F(Shard, BadShardFlagIsOneLine) {
     expect_bad({"--shard", "-1/4"}, {}, {"--shard '-1/4'", "INDEX/COUNT"});
     expect_bad({"--shard", "1/4", "--shard-count", "4"}, {}, {"--shard-count", "only with JOB_COMPLETION_INDEX"});
     expect_bad({"--shard-count", "4"}, {}, {"--shard-count 4", "no JOB_COMPLETION_INDEX"});
+    expect_bad({}, {"VKSONAR_SHARD_COUNT=4"}, {"VKSONAR_SHARD_COUNT=4", "no JOB_COMPLETION_INDEX"});
     // Without a trajectory there is nothing to split.
     const ShardRun r = run({"render", "--backend", "cpu", "--shard", "0/2", "--out", (dir_ / "never").string()});
     EXPECT_EQ(r.exit_code, 2) << r.err;

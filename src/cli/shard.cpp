@@ -131,9 +131,8 @@ std::optional<ShardRecord> resolve_shard(const std::optional<std::string>& flag,
             shard->index = index;
             shard->count = *count;
             shard->source = where + " (" + count_name + ")";
-        } else if (count_flag) {
-            throw BadInput("--shard-count " + *count_flag +
-                           ": no JOB_COMPLETION_INDEX in the environment; give --shard INDEX/COUNT");
+        } else if (count) { // (VKSONAR_SHARD_COUNT alone rendered the whole trajectory, as if unsharded)
+            throw BadInput(count_name + ": no JOB_COMPLETION_INDEX in the environment; give --shard INDEX/COUNT");
         }
     }
     if (shard) {

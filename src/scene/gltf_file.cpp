@@ -347,9 +347,13 @@ ExternalFiles check_external_buffers(const json& doc, const std::string& base_di
         const std::filesystem::path file = std::filesystem::canonical(joined, ec); // symlinks and ".." resolved
         if (ec) fail(ErrorCode::io, refusal(i, uri, "not found in " + base_dir + " (" + ec.message() + ")"));
         if (!lies_inside(file, root))
-            fail(ErrorCode::io, refusal(i, uri,
-                                        "lies outside the asset root " + root.string() +
-                                            (asset_root.empty() ? " (use --asset-root)" : "")));
+            fail(ErrorCode::io,
+                 refusal(i, uri,
+                         "lies outside the asset root " + root.string() +
+                             (asset_root.empty()
+                                  ? " (a wider asset root: --asset-root DIR, config scene.asset_root, Python "
+                                    "Scene.load(asset_root=))"
+                                  : "")));
         ExternalBuffer b{uri, file, byte_length};
         std::string why;
         const int fd = open_checked(b, why);

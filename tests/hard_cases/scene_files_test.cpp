@@ -110,7 +110,8 @@ TEST_F(SceneFiles, AFifoIsRefusedWithoutBlocking) {
 TEST_F(SceneFiles, PathsLeavingTheAssetRootAreRefused) {
     // ".." to a real file of exactly the right size outside the scene's folder.
     expect_refused(load("../elsewhere/triangle.bin"), "../elsewhere/triangle.bin", "lies outside the asset root");
-    expect_refused(load("sub/../../elsewhere/triangle.bin"), "sub/../../elsewhere/triangle.bin", "(use --asset-root)");
+    expect_refused(load("sub/../../elsewhere/triangle.bin"), "sub/../../elsewhere/triangle.bin",
+                   "(a wider asset root: --asset-root DIR");
     // A symlink inside the folder to a file outside it.
     fs::create_symlink(root_ / "elsewhere" / "triangle.bin", root_ / "scenes" / "link.bin");
     expect_refused(load("link.bin"), "link.bin", "lies outside the asset root");
