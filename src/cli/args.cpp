@@ -10,7 +10,6 @@
 #include "config/config_keys.h"
 
 namespace vksonar::cli {
-namespace {
 
 std::string trim(const std::string& text) {
     const auto first = text.find_first_not_of(" \t\r\n");
@@ -18,8 +17,6 @@ std::string trim(const std::string& text) {
     const auto last = text.find_last_not_of(" \t\r\n");
     return text.substr(first, last - first + 1);
 }
-
-} // namespace
 
 std::string Args::value(const std::string& name, const std::string& fallback) const {
     const auto it = options.find(name);

@@ -51,6 +51,8 @@ std::uint64_t parse_u64(const std::string& text, const std::string& what);
 // "x,y,z,roll,pitch,yaw" (metres, degrees). `what` names where the text came from.
 Pose parse_pose(const std::string& text, const std::string& what);
 
+// `text` without the spaces, tabs and line ends around it.
+std::string trim(const std::string& text);
 // Splits on `separator`, trimming spaces around each item.
 std::vector<std::string> split(const std::string& text, char separator);
 

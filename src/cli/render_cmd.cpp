@@ -429,8 +429,8 @@ void write_bag_frame(const WriteBehind::Slot& slot, const RenderJob& job, Output
     // Without a time column, time_s is the frame's ordinal in the whole trajectory (a shard's
     // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
     // unsharded run's.
-    const double seconds = job.timed ? slot.time_s : slot.time_s / writers.bag_rate;
-    const auto stamp_ns = static_cast<std::uint64_t>(std::llround(seconds * 1e9));
+    const auto stamp_ns =
+        job.timed ? slot.time_ns : static_cast<std::uint64_t>(std::llround(slot.time_s / writers.bag_rate * 1e9));
     auto appended =
         writers.bag->append(slot.frame, slot.pose, stamp_ns, &outputs.image, u16 ? outputs.quantized.data() : nullptr);
     if (!appended) throw Failure(appended.error().message);
@@ -571,6 +571,7 @@ private:
         slot.pose = item.pose;
         slot.line = item.line;
         slot.time_s = job_.timed ? item.time_s : static_cast<double>(i); // the .h5 time: the global ordinal
+        slot.time_ns = item.time_ns;
     }
 
     // `next`: the frame after the held one, or null where the trajectory ends.

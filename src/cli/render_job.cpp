@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -21,6 +23,28 @@ namespace fs = std::filesystem;
 
 namespace vksonar::cli {
 namespace {
+
+// A trajectory's time text (already read as `seconds`) in whole nanoseconds, exactly where it is a plain
+// decimal ("1700000000.923456789": the digits, rounded half up past the ninth decimal), else rounded
+// from the double (an exponent; a negative time, which the bag's check refuses). A double holds an epoch
+// time to about 0.2 us only: through it a ROS stamp came out up to 235 ns off the file's value.
+std::uint64_t time_ns_of(const std::string& text, double seconds) {
+    const std::string t = trim(text);
+    const std::size_t dot = t.find('.');
+    const std::string whole = t.substr(0, dot), fraction = dot == std::string::npos ? "" : t.substr(dot + 1);
+    const auto digits = [](const std::string& d) {
+        return std::all_of(d.begin(), d.end(), [](char c) { return c >= '0' && c <= '9'; });
+    };
+    if (whole.size() > 10 || (whole.empty() && fraction.empty()) || !digits(whole) || !digits(fraction) ||
+        !(seconds >= 0.0))
+        return seconds >= 0.0 ? static_cast<std::uint64_t>(std::llround(seconds * 1e9)) : 0;
+    std::uint64_t ns = whole.empty() ? 0 : std::stoull(whole) * 1000000000ull;
+    std::uint64_t scale = 100000000ull;
+    for (std::size_t i = 0; i < fraction.size() && i < 9; ++i, scale /= 10)
+        ns += static_cast<std::uint64_t>(fraction[i] - '0') * scale;
+    if (fraction.size() > 9 && fraction[9] >= '5') ++ns;
+    return ns;
+}
 
 const std::vector<std::string> kSaveItems = {"default",  "fan",     "polar", "polar_png", "polar_u16",
                                              "depth",    "normals", "echo",  "cloud",     "multibeam",
@@ -108,6 +132,7 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         if (timed) {
             const std::size_t comma = line.find(',');
             item.time_s = parse_double(line.substr(0, comma), where + ": time");
+            item.time_ns = time_ns_of(line.substr(0, comma), item.time_s);
             if (!poses.empty() && item.time_s < poses.back().time_s)
                 throw BadInput(where + ": time " + line.substr(0, comma) + " is before the previous line's");
             pose_text = comma == std::string::npos ? std::string() : line.substr(comma + 1);

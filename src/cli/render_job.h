@@ -20,7 +20,8 @@ namespace vksonar::cli {
 struct TrajectoryPose {
     Pose pose;
     std::uint64_t line = 0;
-    double time_s = 0.0; // the trajectory's time column, when it has one
+    double time_s = 0.0;       // the trajectory's time column, when it has one
+    std::uint64_t time_ns = 0; // the same, exactly as written where it is a plain decimal (ROS stamps)
 };
 
 // What the command line asks for, read and checked before any output exists (parse_job), completed

@@ -28,9 +28,10 @@ public:
     struct Slot {
         Frame frame;
         Pose pose;
-        std::uint64_t line = 0;  // the trajectory line (the frame index)
-        double time_s = 0.0;     // the trajectory's time column, if any
-        std::vector<float> flow; // --save flow: label_flow to the next frame (sized on first use)
+        std::uint64_t line = 0;    // the trajectory line (the frame index)
+        double time_s = 0.0;       // the trajectory's time column, if any
+        std::uint64_t time_ns = 0; // ... in nanoseconds as written (TrajectoryPose::time_ns)
+        std::vector<float> flow;   // --save flow: label_flow to the next frame (sized on first use)
     };
     using WriteFn = std::function<void(const Slot&)>;
 

@@ -70,7 +70,14 @@ async function main() {
   // A trajectory with a time column; the same frames into folders and into bags.
   const poses = [];
   for (let i = 0; i < 5; i++) poses.push([0.25 * i, 0.1 * i, -0.05 * i, 2 * i, 10 + i, 4 * i]);
-  const times = [0, 0.1, 0.25, 0.4, 1.5];
+  // Epoch times to the nanosecond: a double holds them to about 0.2 us only, so the stamps must come
+  // from the text (1700000000.923456789 came out 235 ns off through a double); the expected stamps are
+  // worked out here from the same text, in BigInt.
+  const times = ["1700000000", "1700000000.1", "1700000000.25", "1700000000.923456789", "1700000001.5"];
+  const textNs = (t) => {
+    const [whole, fraction = ""] = t.split(".");
+    return BigInt(whole) * 1000000000n + BigInt((fraction + "000000000").slice(0, 9));
+  };
   fs.writeFileSync(file("timed.csv"),
     "time,x,y,z,roll,pitch,yaw\n" + poses.map((p, i) => [times[i], ...p].join(",")).join("\n") + "\n");
   render(["--trajectory", file("timed.csv"), "--out", file("frames"), "--save", "polar,polar_u16,fan,cloud", ...SMALL]);
@@ -127,7 +134,7 @@ async function main() {
     const meta = JSON.parse(fs.readFileSync(path.join(dir, "meta.json"), "utf8"));
     const polar = readNpy(path.join(dir, "polar.npy")), u16 = readNpy(path.join(dir, "polar_u16.npy"));
     const at = (topic) => messages.filter((m) => m.topic === topic)[i];
-    const expectNs = BigInt(Math.round(times[i] * 1e9));
+    const expectNs = textNs(times[i]);
     for (const topic of ["/vksonar/sonar_image", "/vksonar/fan", "/vksonar/polar", "/vksonar/points", "/tf"]) {
       const m = at(topic);
       const header = topic === "/tf" ? m.decoded.transforms[0].header : m.decoded.header;
