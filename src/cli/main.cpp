@@ -2,6 +2,7 @@
 // exit code: 0 success, 2 bad input, 1 any other failure.
 #include <cstdio>
 #include <exception>
+#include <new>
 #include <string>
 #include <utility>
 #include <vector>
@@ -73,6 +74,11 @@ int main(int argc, char** argv) {
         return 2;
     } catch (const Failure& e) {
         std::fprintf(stderr, "error: %s\n", one_line(e.what()).c_str());
+        return 1;
+    } catch (const std::bad_alloc&) {
+        // (a config validate() accepts can still need more memory than the machine or its limit gives)
+        std::fprintf(stderr, "error: out of memory: this config's buffers do not fit (fewer bins, beams or "
+                             "accuracy.rows_per_vfov / pixels_per_beam need less)\n");
         return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "error: internal: %s\n", one_line(e.what()).c_str());
