@@ -134,6 +134,30 @@ TEST_F(Cli, InvalidValues) {
                       {"--set hfov=200: hfov = 200", "(120 degrees)"});
 }
 
+// A glTF node's object id is its index + 1: a node past index 65534 cannot be labelled in 16 bits. With
+// --save labels that is one line naming the node (unnamed here) and its id, exit 2; without labels the
+// scene renders.
+TEST_F(Cli, LabelsRefuseNodeIdsPastSixteenBits) {
+    nlohmann::json doc = nlohmann::json::parse(kQuadGltf);
+    nlohmann::json nodes = nlohmann::json::array();
+    for (int i = 0; i < 65535; ++i)
+        nodes.push_back(nlohmann::json::object());
+    nodes.push_back({{"mesh", 0}});
+    doc["nodes"] = nodes;
+    doc["scenes"][0]["nodes"] = {65535};
+    write_text(dir_ / "far_node.gltf", doc.dump());
+    const std::vector<std::string> scene = {
+        "--scene", (dir_ / "far_node.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set", "beams=16"};
+    std::vector<std::string> labelled = scene;
+    labelled.insert(labelled.end(), {"--save", "labels"});
+    expect_bad_render(labelled, {"labels: node 65535 (unnamed) has instance id 65536; labels hold ids up to 65535"});
+    std::vector<std::string> plain = {"render"};
+    plain.insert(plain.end(), scene.begin(), scene.end());
+    plain.insert(plain.end(), {"--save", "polar", "--out", (dir_ / "far_node_polar").string()});
+    const CliRun r = run(plain);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
 // Issue 25: a value outside physics is refused (exit 2, one line naming key, value and range, nothing
 // written); a model outside its domain is one warning line and an entry in meta.json's "validity".
 TEST_F(Cli, ValuesOutsidePhysicsAreRefused) {

@@ -310,6 +310,23 @@ TEST_P(LabelBackendTest, BundledSceneTableAndNoChangeToIntensities) {
 //   2 cone columns it feeds, each resampled into at most 2 beams. Budget: 4 cells per footprint bin of
 //   those pixels, counted here on both backends' echoes.
 // The H100's 24 failed the first budget when it was 1e-4 on every device.
+// Labels hold ids in 16 bits: a draw whose object id passes 65535 is refused when labels are asked for
+// (one line naming the draw and the id), and rendered as before without them.
+TEST(LabelIds, IdsPastSixteenBitsAreRefusedOnlyWithLabels) {
+    Scene scene;
+    AcousticMaterial m;
+    add_quad(scene, 10.0, 0.0, 0.0, 2.0, 2.0, m, 0.0, 70000);
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    options.save_mask = SaveFlags::labels;
+    auto refused = Renderer::create(cpu_context(), quiet_config(), scene, options);
+    ASSERT_FALSE(refused);
+    EXPECT_EQ(refused.error().code, ErrorCode::invalid_argument);
+    EXPECT_EQ(refused.error().message, "labels: draw 0 has instance id 70000; labels hold ids up to 65535");
+    options.save_mask = SaveFlags::none;
+    EXPECT_TRUE(Renderer::create(cpu_context(), quiet_config(), scene, options));
+}
+
 TEST(LabelGpuCpu, BundledSceneLabelsAgree) {
     VKSONAR_REQUIRE_VULKAN();
     ValidationGuard validation;

@@ -82,9 +82,11 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
     if (scene != nullptr) {
         for (const SceneInstance& instance : scene->instances) {
             if (instance.id > 0xffffu || instance.class_id > 0xffffu)
-                return make_error(ErrorCode::invalid_argument, "labels: node '" + instance.node + "' has instance id " +
-                                                                   std::to_string(instance.id) +
-                                                                   "; labels hold ids up to 65535");
+                return make_error(ErrorCode::invalid_argument,
+                                  "labels: node " + std::to_string(instance.id - 1) +
+                                      (instance.node.empty() ? std::string(" (unnamed)") : " '" + instance.node + "'") +
+                                      " has instance id " + std::to_string(instance.id) +
+                                      "; labels hold ids up to 65535");
             if (class_of_instance.size() <= instance.id) class_of_instance.resize(instance.id + 1, 0);
             class_of_instance[instance.id] = static_cast<std::uint16_t>(instance.class_id);
         }
