@@ -148,7 +148,7 @@ struct SonarConfig {
 
     // Checks every key against its physical range and the rules that tie keys together. Returns
     // success, or ErrorCode::invalid_argument whose message names the first problem (key and value,
-    // e.g. "hfov = 400: must be in [0.1, 360] degrees"). Pure: no allocation beyond the message.
+    // e.g. "hfov = 400: must be in (0, 360] deg"). Pure: no allocation beyond the message.
     [[nodiscard]] Result<void> validate() const;
 
     // Number of range bins: `bins`, or with bandwidth_hz > 0 the window (range_max - range_min) over the

@@ -5,8 +5,8 @@
 //
 // Requirements (checked by create and adopt, with an error naming what is missing): Vulkan 1.1 (instance
 // and device), a queue family with compute (and graphics for Renderer::render's depth pass; process()
-// needs compute only), D32_SFLOAT depth + R32_UINT colour attachments for the depth pass. No device
-// extension and no optional device feature is required.
+// needs compute only). Renderer::create checks that the device has D32_SFLOAT depth + R32_UINT colour
+// attachments for its depth pass. No device extension and no optional device feature is required.
 #pragma once
 
 #include <cstdint>

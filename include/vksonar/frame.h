@@ -58,7 +58,8 @@ struct ObjectVisibility {
 // clocks around the stage's submission (RendererOptions::stage_timing); host stages on host clocks.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct StageTime {
-    std::string stage; // "depth", "normals", "echo", "beamform", "noise", "image"
+    std::string stage; // "depth" ("import" on a HostDepthRenderer), "normals", "echo", "beamform", "noise",
+                       // and "labels" with SaveFlags::labels
     double ms = 0;
 };
 

@@ -34,8 +34,10 @@ enum class DepthEncoding : std::uint8_t {
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct HostDepthDesc {
     std::uint32_t width = 0, height = 0;
-    // D32_SFLOAT, D16_UNORM, X8_D24_UNORM_PACK32, D24_UNORM_S8_UINT, D32_SFLOAT_S8_UINT (the view must
-    // then select the depth aspect only), or R32_SFLOAT for linear_m. Must support SAMPLED_IMAGE.
+    // A depth format: D32_SFLOAT, D16_UNORM, X8_D24_UNORM_PACK32, D16_UNORM_S8_UINT, D24_UNORM_S8_UINT,
+    // D32_SFLOAT_S8_UINT (with a stencil the view must select the depth aspect only); or depth kept as
+    // colour: R32_SFLOAT, R16_SFLOAT, R16_UNORM (linear_m needs R32_SFLOAT or R16_SFLOAT). Must support
+    // SAMPLED_IMAGE.
     VkFormat format = VK_FORMAT_D32_SFLOAT;
     double fx_px = 0, fy_px = 0; // focal lengths in pixels (tan(half fov) = width / (2 fx))
     double cx_px = 0, cy_px = 0; // principal point in pixels (0, 0 = top-left corner of the image)
@@ -90,7 +92,9 @@ public:
     // their buffers and the import pass on `context`'s device. Needs a Vulkan context (created or
     // adopted; a compute queue is enough) and options.backend == Backend::vulkan. Fails with
     // ErrorCode::invalid_argument for a CPU context, the CPU backend or a bad config or desc, and with
-    // ErrorCode::unsupported if the image does not cover the sonar or the format cannot be sampled.
+    // ErrorCode::unsupported if the image does not cover the sonar, its principal point is not the image
+    // centre, the format is none of HostDepthDesc's or cannot be sampled, or the config asks for
+    // accuracy.normal_method = geometric (which needs the triangles, not a depth image).
     // `context` must outlive the renderer; `config`, `desc` and `options` are copied. Thread-safety:
     // may be called from any thread, also while other renderers on the same context work.
     [[nodiscard]] static Result<HostDepthRenderer>
@@ -121,8 +125,8 @@ public:
     [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
     // After the command buffer given to record() has finished executing (the host waited for its
     // fence): copies the result to host memory and runs the host stages (noise, gain) into `frame`.
-    // Fails with ErrorCode::invalid_argument, without touching `frame`, if nothing was recorded or
-    // the GPU work has not finished.
+    // Fails with ErrorCode::invalid_argument, without touching `frame`'s arrays (its stage lists, times
+    // and stages_run, start over empty), if nothing was recorded or the GPU work has not finished.
     [[nodiscard]] Result<void> read_back(std::uint64_t frame_index, Frame& frame);
     // The clean polar scan on the GPU after a recorded ping (before speckle, noise and gain, which are
     // host stages), for drawing it in the engine. Owned by the renderer: the host borrows it. The same
