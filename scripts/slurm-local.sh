@@ -7,7 +7,7 @@
 #
 #   sudo bash scripts/slurm-local.sh [path/to/vksonar]      (default: build/vksonar)
 #
-# Needs root (packages, slurmd). Exit 0: both merged outputs equal the single-process run; 77: this
+# Needs root (packages, slurmd). Exit 0: all three merged outputs equal the single-process run's; 77: this
 # machine cannot run it (not root, no apt, Slurm already running here); anything else: a failure.
 # ctest runs it as the test slurm_local when VKSONAR_SLURM_TEST=1.
 set -euo pipefail
