@@ -15,7 +15,7 @@ case "$mode" in
   render)
     out="${2:-out}"
     "$BUILD_DIR/vksonar" render --out "$out"
-    echo "wrote $out/fan.png, $out/polar.png, $out/polar.npy, $out/meta.json"
+    echo "wrote $out/fan.png, $out/polar.png, $out/polar.npy, $out/polar_u16.npy, $out/meta.json"
     ;;
   test)
     ctest --test-dir "$BUILD_DIR" --output-on-failure -j"$(nproc)"
