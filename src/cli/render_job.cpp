@@ -131,10 +131,11 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         std::string pose_text = line;
         if (timed) {
             const std::size_t comma = line.find(',');
-            item.time_s = parse_double(line.substr(0, comma), where + ": time");
-            item.time_ns = time_ns_of(line.substr(0, comma), item.time_s);
+            const std::string time_text = line.substr(0, comma);
+            item.time_s = parse_double(time_text, where + ": time");
+            item.time_ns = time_ns_of(time_text, item.time_s);
             if (!poses.empty() && item.time_s < poses.back().time_s)
-                throw BadInput(where + ": time " + line.substr(0, comma) + " is before the previous line's");
+                throw BadInput(where + ": time " + time_text + " is before the previous line's");
             pose_text = comma == std::string::npos ? std::string() : line.substr(comma + 1);
         }
         item.pose = parse_pose(pose_text, where);

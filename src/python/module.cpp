@@ -210,7 +210,8 @@ py::object frame_meta(FrameObject& f) {
     const RendererObject& r = f.renderer.cast<RendererObject&>();
     // the CLI's keys in the CLI's order (render_frame.cpp), but `legacy`, which describes the legacy
     // outputs only the CLI writes
-    extra["config"] = json.attr("loads")(config_to_json(f.plan->config));
+    const py::dict config = json.attr("loads")(config_to_json(f.plan->config));
+    extra["config"] = config;
     extra["scene"] = r.scene->path ? py::object(py::str(*r.scene->path)) : py::object(py::none());
     extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
                              py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
@@ -219,9 +220,7 @@ py::object frame_meta(FrameObject& f) {
     extra["backend"] = r.backend;
     extra["backend_reason"] = "Renderer(backend='" + r.backend + "')";
     extra["device"] = r.device;
-    extra["mode"] = f.plan->config.mode == SonarMode::uuv_legacy    ? "uuv-legacy"
-                    : f.plan->config.mode == SonarMode::gtri_legacy ? "gtri-legacy"
-                                                                    : "physical";
+    extra["mode"] = config["mode"]; // the config's own name for it, as the CLI writes it
     const std::string text = host::meta_json_text(*f.plan, f.frame, json.attr("dumps")(extra).cast<std::string>());
     return json.attr("loads")(text);
 }

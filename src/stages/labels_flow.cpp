@@ -325,20 +325,22 @@ VKS_AVX2 void flow_cells4(const FlowJob& job, const std::size_t (&cells)[4]) {
         for (int m = 0; m < 3; ++m)
             p[m][l] = from.point[3 * cells[l] + m];
     const __m256d px = _mm256_load_pd(p[0]), py = _mm256_load_pd(p[1]), pz = _mm256_load_pd(p[2]);
-    __m256d world[3];
-    for (int k = 0; k < 3; ++k) {
-        __m256d sum = _mm256_setzero_pd();
+    __m256d q[3] = {px, py, pz}; // the same pose: flow_cell's exact 0
+    if (!job.same_pose) {
+        __m256d world[3];
+        for (int k = 0; k < 3; ++k) {
+            __m256d sum = _mm256_setzero_pd();
+            for (int m = 0; m < 3; ++m)
+                sum = _mm256_add_pd(
+                    sum, _mm256_mul_pd(splat(a[k * 4 + m]), _mm256_sub_pd(_mm256_load_pd(p[m]), splat(a[12 + m]))));
+            world[k] = sum;
+        }
         for (int m = 0; m < 3; ++m)
-            sum = _mm256_add_pd(
-                sum, _mm256_mul_pd(splat(a[k * 4 + m]), _mm256_sub_pd(_mm256_load_pd(p[m]), splat(a[12 + m]))));
-        world[k] = sum;
+            q[m] = _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(splat(b[m]), world[0]),
+                                                             _mm256_mul_pd(splat(b[4 + m]), world[1])),
+                                               _mm256_mul_pd(splat(b[8 + m]), world[2])),
+                                 splat(b[12 + m]));
     }
-    __m256d q[3] = {px, py, pz};
-    for (int m = 0; m < 3 && !job.same_pose; ++m)
-        q[m] = _mm256_add_pd(
-            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(splat(b[m]), world[0]), _mm256_mul_pd(splat(b[4 + m]), world[1])),
-                          _mm256_mul_pd(splat(b[8 + m]), world[2])),
-            splat(b[12 + m]));
     alignas(32) double bin_from[4], beam_from[4], bin_to[4], beam_to[4];
     __m256d r_from, r_to;
     polar_coordinates4(plan, px, py, pz, *job.buckets, bin_from, beam_from, r_from);
