@@ -100,15 +100,36 @@ layout(std430, binding = kBindingConeCoord) readonly buffer ConeCoordBuffer { fl
 // line_array: one invocation owns the cone columns [first_cone, end_cone) (kConesPerInvocation of
 // them) and gathers, row by row (top to bottom) and within a row by increasing pixel column, every
 // pixel whose cone coordinate lies within one column of them; each such pixel's window is loaded and
-// its range spread computed once, then added to the (at most two) of its cone columns this invocation
-// owns. So every profile cell receives its additions in the order of the CPU backend's scatter
+// its range spread computed once, then added to the (at most two; a tier view's pixel: those its extent
+// touches) of its cone columns this invocation owns. So every profile cell receives its additions in the order of the CPU backend's scatter
 // (src/stages/cpu_beamform_profile.cpp): rows, then pixel columns, then bins. Along a row of one view the cone
 // coordinate increases with the pixel column (the plan checks it), so in each view the first such
 // pixel is found by a binary search on the first row and then moves by a few columns from row to row.
-void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone) {
+// The share of cone column `cone` of pixel column c of a row (row_start: its first pixel): cone_share at
+// its cone coordinate, a tier view's pixel's by its cone extent (sonar_kernels.h cone_extent_share, the
+// extent as src/core/tier_extent.h reads it from the same table).
+float pixel_cone_share(uint row_start, uint c, int cone, int count) {
+    float x = cone_coords[row_start + c];
+    uint slices_end = params.slices * params.slice_columns;
+    if (c < slices_end || params.tier_columns == 0u) {
+        return cone_share(x, cone, count);
+    }
+    uint begin = slices_end + ((c - slices_end) / params.tier_columns) * params.tier_columns;
+    bool has_previous = c > begin;
+    bool has_next = c + 1u < begin + params.tier_columns;
+    float previous = has_previous ? cone_coords[row_start + c - 1u] : x;
+    float next = has_next ? cone_coords[row_start + c + 1u] : x;
+    return cone_extent_share(x, cone_extent_low(previous, x, next, has_previous, has_next),
+                             cone_extent_high(previous, x, next, has_previous, has_next), cone, count);
+}
+
+// reach: 0 for the slices, Plan::tier_cone_reach for a tier view (its pixels feed the cone columns their
+// extent touches).
+void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uint first_cone, uint end_cone,
+                 float reach) {
     uint row_start = row * params.columns;
-    float lo = float(first_cone) - 1.0;
-    float hi = float(end_cone);
+    float lo = float(first_cone) - 1.0 - reach;
+    float hi = float(end_cone) + reach;
     int count = int(params.profile_columns);
     while (first > view_begin && cone_coords[row_start + first - 1u] > lo) {
         --first;
@@ -120,6 +141,40 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
         float x = cone_coords[row_start + c];
         if (!(x < hi)) {
             break;
+        }
+        if (reach > 0.0) {
+            // a tier view's pixel: the cone columns its extent touches, those of them this invocation owns
+            vec2 er = load_echo(row_start + c);
+            if (!(er.x > 0.0)) {
+                continue;
+            }
+            bool has_previous = c > view_begin;
+            bool has_next = c + 1u < view_end;
+            float previous = has_previous ? cone_coords[row_start + c - 1u] : x;
+            float next = has_next ? cone_coords[row_start + c + 1u] : x;
+            float extent_lo = cone_extent_low(previous, x, next, has_previous, has_next);
+            float extent_hi = cone_extent_high(previous, x, next, has_previous, has_next);
+            int cone_first = max(int(floor(extent_lo)), int(first_cone));
+            int cone_last = min(int(floor(extent_hi)) + 1, int(end_cone) - 1);
+            bool spread_made = false;
+            RangeSpread spread;
+            for (int cone = cone_first; cone <= cone_last; ++cone) {
+                float weight = cone_extent_share(x, extent_lo, extent_hi, cone, count);
+                if (!(weight > 0.0)) {
+                    continue;
+                }
+                if (!spread_made) {
+                    spread = pixel_spread(row, c, er);
+                    spread_made = true;
+                }
+                precise float weighted = weight * er.x;
+                uint base = uint(cone) * params.bins_padded;
+                for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
+                    precise float add = range_share(spread, k) * weighted;
+                    profiles[base + uint(k)] += add;
+                }
+            }
+            continue;
         }
         // its cone columns floor(x) and floor(x) + 1, those of them this invocation owns
         int below = int(floor(x));
@@ -170,17 +225,18 @@ void gather_cone_columns(uint first_cone, uint end_cone) {
     uint width = params.tier_columns; // each tier view's
     uint tiers = kTierViews != 0u && width > 0u ? (params.columns - slices_end) / width : 0u;
     float lo = float(first_cone) - 1.0;
+    float tier_lo = lo - params.tier_cone_reach;
     uint first_slices = first_above(0u, slices_end, lo);
     uint first_tier[kMaxViews];
     for (uint t = 0u; t < tiers; ++t) {
         uint begin = slices_end + t * width;
-        first_tier[t] = first_above(begin, begin + width, lo);
+        first_tier[t] = first_above(begin, begin + width, tier_lo);
     }
     for (uint row = 0u; row < params.rows; ++row) {
-        gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone);
+        gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone, 0.0);
         for (uint t = 0u; t < tiers; ++t) {
             uint begin = slices_end + t * width;
-            gather_view(row, begin, begin + width, first_tier[t], first_cone, end_cone);
+            gather_view(row, begin, begin + width, first_tier[t], first_cone, end_cone, params.tier_cone_reach);
         }
     }
 }
@@ -241,10 +297,10 @@ void put_round(uint slot, RangeSpread spread, float weighted) {
 // Row `row`'s pixels in view [view_begin, view_end) that feed cone column `cone` (as gather_view finds
 // them, from the column `first` the block before left), appended to this lane's list; returns the view's
 // first column for this row.
-uint list_view(uint row, uint view_begin, uint view_end, uint first, uint cone, uint list, inout uint n) {
+uint list_view(uint row, uint view_begin, uint view_end, uint first, uint cone, uint list, inout uint n, float reach) {
     uint row_start = row * params.columns;
-    float lo = float(cone) - 1.0;
-    float hi = float(cone) + 1.0;
+    float lo = float(cone) - 1.0 - reach;
+    float hi = float(cone) + 1.0 + reach;
     int count = int(params.profile_columns);
     while (first > view_begin && cone_coords[row_start + first - 1u] > lo) {
         --first;
@@ -257,7 +313,8 @@ uint list_view(uint row, uint view_begin, uint view_end, uint first, uint cone, 
         if (!(x < hi)) {
             break;
         }
-        if (load_echo(row_start + c).x > 0.0 && cone_share(x, int(cone), count) > 0.0 && n < kRowCandidates) {
+        if (load_echo(row_start + c).x > 0.0 && pixel_cone_share(row_start, c, int(cone), count) > 0.0 &&
+            n < kRowCandidates) {
             block_column[list + n] = c;
             ++n;
         }
@@ -273,6 +330,7 @@ void gather_block_rows(uint cone, bool owned) {
     uint tiers = kTierViews != 0u && width > 0u ? (params.columns - slices_end) / width : 0u;
     uint firsts = side * (kMaxViews + 1u);
     float lo = float(cone) - 1.0;
+    float tier_lo = lo - params.tier_cone_reach;
     for (uint k = lane; k < kSharedBins; k += kBlockRows) {
         block_profile[side * kSharedBins + k] = 0.0;
     }
@@ -280,7 +338,7 @@ void gather_block_rows(uint cone, bool owned) {
         block_first[firsts] = first_above(0u, slices_end, lo);
         for (uint t = 0u; t < tiers; ++t) {
             uint begin = slices_end + t * width;
-            block_first[firsts + 1u + t] = first_above(begin, begin + width, lo);
+            block_first[firsts + 1u + t] = first_above(begin, begin + width, tier_lo);
         }
     }
     barrier();
@@ -295,13 +353,14 @@ void gather_block_rows(uint cone, bool owned) {
             // the last row leaves each view's first column for the next block (block_next_first: the
             // other lanes are still reading block_first)
             bool last = row == last_row;
-            uint f = list_view(row, 0u, slices_end, block_first[firsts], cone, list, n);
+            uint f = list_view(row, 0u, slices_end, block_first[firsts], cone, list, n, 0.0);
             if (last) {
                 block_next_first[firsts] = f;
             }
             for (uint t = 0u; t < tiers; ++t) {
                 uint begin = slices_end + t * width;
-                f = list_view(row, begin, begin + width, block_first[firsts + 1u + t], cone, list, n);
+                f = list_view(row, begin, begin + width, block_first[firsts + 1u + t], cone, list, n,
+                              params.tier_cone_reach);
                 if (last) {
                     block_next_first[firsts + 1u + t] = f;
                 }
@@ -340,7 +399,7 @@ void gather_block_rows(uint cone, bool owned) {
                 uint pixel_row = row0 + r;
                 uint p = pixel_row * params.columns + c;
                 vec2 er = load_echo(p);
-                precise float weighted = cone_share(cone_coords[p], int(cone), count) * er.x;
+                precise float weighted = pixel_cone_share(pixel_row * params.columns, c, int(cone), count) * er.x;
                 put_round(slot, pixel_spread(pixel_row, c, er), weighted);
             }
             barrier();

@@ -552,6 +552,50 @@ VKS_FN REAL cone_share(REAL x, int c, int count) {
     return max(REAL(1) - abs(xc - REAL(c)), REAL(0));
 }
 
+// A tier view's pixel (vertical side lobes) is up to accuracy.tier_pixel_ratio times as wide as a cone
+// column: the tent between its two nearest columns would leave the columns between neighbouring pixels
+// empty (beams that get nothing with the horizontal pattern off, +-2 dB from beam to beam with it on, on
+// a flat seabed heard through the side lobes). So a tier pixel covers the cone coordinates [lo, hi]
+// halfway to its row neighbours in its view (one-sided at the view's edges; a point where it has none)...
+VKS_FN REAL cone_extent_low(REAL previous, REAL x, REAL next, bool has_previous, bool has_next) {
+    VKS_PRECISE REAL half_step = REAL(0.5) * (next - x);
+    return has_previous ? REAL(0.5) * (previous + x) : (has_next ? x - half_step : x);
+}
+VKS_FN REAL cone_extent_high(REAL previous, REAL x, REAL next, bool has_previous, bool has_next) {
+    VKS_PRECISE REAL half_step = REAL(0.5) * (x - previous);
+    return has_next ? REAL(0.5) * (x + next) : (has_previous ? x + half_step : x);
+}
+
+// ... and its energy spreads evenly over them: column c receives the integral of its basis (its tent, the
+// edge columns' widened to the fan's edges as cone_share's) over [lo, hi] clipped to the fan, over the
+// clipped width. As with cone_share a pixel is in the fan by its centre: one inside gives all its energy
+// (its shares sum to 1, to rounding), one outside none. A pixel of no width takes cone_share.
+VKS_FN REAL tent_integral(REAL t) { // the integral of max(1 - |s|, 0) from -1 to t
+    REAL u = min(max(t, REAL(-1)), REAL(1));
+    VKS_PRECISE REAL below = REAL(0.5) * (REAL(1) + u) * (REAL(1) + u);
+    VKS_PRECISE REAL above = REAL(1) - REAL(0.5) * (REAL(1) - u) * (REAL(1) - u);
+    return u <= REAL(0) ? below : above;
+}
+VKS_FN REAL cone_extent_share(REAL x, REAL lo, REAL hi, int c, int count) {
+    REAL last = REAL(count - 1);
+    REAL a = max(lo, REAL(-0.5));
+    REAL b = min(hi, REAL(count) - REAL(0.5));
+    if (!(b > a) || !(x >= REAL(-0.5) && x < REAL(count) - REAL(0.5))) {
+        return cone_share(x, c, count);
+    }
+    REAL inner_a = min(max(a, REAL(0)), last);
+    REAL inner_b = min(max(b, REAL(0)), last);
+    VKS_PRECISE REAL s = tent_integral(inner_b - REAL(c)) - tent_integral(inner_a - REAL(c));
+    if (c == 0) {
+        s += max(min(b, REAL(0)) - a, REAL(0));
+    }
+    if (c == count - 1) {
+        s += max(b - max(a, last), REAL(0));
+    }
+    VKS_PRECISE REAL width = b - a;
+    return max(s, REAL(0)) / width;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Sub-pixel returns (stage 4a, docs/pipeline.md "Sub-pixel objects"): an object smaller (or thinner)
 // than a pixel is not rasterized; the host lists its triangles' pieces with their echo (src/core/subpixel.cpp)

@@ -201,7 +201,8 @@ struct SonarParams {
     // no vertical power, so that every azimuth sees the same elevations; 2 (no gate) where none applies.
     float elevation_gate_sin;
     uint tier_columns; // pixel columns of each tier view (Plan::tier_columns; 0: none), after the slices
-    uint pad_gate1;
+    // how far a tier view's pixel reaches from its cone coordinate (Plan::tier_cone_reach; 0: no tiers)
+    float tier_cone_reach;
     uint pad_gate2;
 };
 #ifdef __cplusplus

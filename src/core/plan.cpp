@@ -411,6 +411,7 @@ void plan_gpu_params(Plan& p) {
     g.rows = p.rows;
     g.slice_columns = p.slice_columns;
     g.tier_columns = p.tier_columns;
+    g.tier_cone_reach = p.tier_cone_reach;
     g.slices = p.slices;
     g.beams = p.beams;
     g.bins = p.bins;

@@ -91,6 +91,9 @@ struct Plan {
     // line_array: each pixel's cone coordinate (rows * columns; sonar_kernels.h cone_coord, in float
     // from the same float inputs as the GPU's), for the CPU backend's scatter onto cone columns.
     std::vector<float> pixel_cone_coord;
+    // line_array with tier views: how far a tier pixel's cone extent (core/tier_extent.h) reaches from
+    // its cone coordinate, with a margin: the profile's searches widen a cone column's pixels by it.
+    float tier_cone_reach = 0;
 
     // Beams and range bins.
     std::uint32_t beams = 0, bins = 0;

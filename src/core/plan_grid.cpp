@@ -11,6 +11,7 @@
 #include "core/angles.h"
 #include "core/plan_steps.h"
 #include "core/sonar_math.hpp"
+#include "core/tier_extent.h"
 
 namespace vksonar::plan_steps {
 
@@ -462,6 +463,20 @@ void plan_cone_table(Plan& p) {
             if (col != first && index >= p.slices) x = std::max(x, (&x)[-1]);
         }
     }
+    // The tier pixels' widest reach from their cone coordinate, over 1 per mille and a thousandth of a
+    // column: the searches compare x with a cone column's bounds widened by it, in float.
+    float reach = 0.0f;
+    for (std::uint32_t row = 0; row < p.rows; ++row) {
+        const float* row_x = p.pixel_cone_coord.data() + std::size_t(row) * p.columns;
+        for (std::uint32_t view = p.slices; view < p.views; ++view) {
+            const std::uint32_t first = view_first_column(p, view), end = first + view_columns(p, view);
+            for (std::uint32_t col = first; col < end; ++col) {
+                const ConeExtent e = tier_cone_extent(row_x, col, first, end);
+                reach = std::max({reach, row_x[col] - e.lo, e.hi - row_x[col]});
+            }
+        }
+    }
+    p.tier_cone_reach = reach > 0.0f ? reach * 1.001f + 1e-3f : 0.0f;
 }
 
 } // namespace vksonar::plan_steps

@@ -1,6 +1,7 @@
 // CPU reference of the beamform stage's first pass (docs/pipeline.md §4): per-column range profiles.
 // Each hit pixel is spread over the range bins by the range kernel (nearest, tent or footprint) and added
-// into its pixel column (planar) or the two cone columns its direction falls between (line_array);
+// into its pixel column (planar) or the two cone columns its direction falls between (line_array; a tier
+// view's pixel: those its cone extent touches);
 // the sub-pixel returns follow. Every accumulator receives its additions in one fixed order, so the
 // result is deterministic (bit-identical run to run). Sums accumulate in Real. The second pass, the
 // beams, is in cpu_beamform.cpp.
@@ -16,6 +17,7 @@
 #include <utility>
 
 #include "core/sonar_math.hpp"
+#include "core/tier_extent.h"
 #include "stages/cpu_simd.h"
 #include "stages/cpu_stages.h"
 #include "stages/pixel_spread.h"
@@ -521,12 +523,14 @@ template <class Real> inline int floor_to_int(Real x) {
 }
 
 // line_array: the pixel columns [first, second) of row j and view `view` that feed cone columns
-// [cone_begin, cone_end): those within one column of them, x in (cone_begin - 1, cone_end). Along a
-// view's row the cone coordinate increases with the column (plan_cone_table).
+// [cone_begin, cone_end): those within one column of them, x in (cone_begin - 1, cone_end), a tier view's
+// within one column and its pixels' reach (Plan::tier_cone_reach). Along a view's row the cone
+// coordinate increases with the column (plan_cone_table).
 std::pair<std::uint32_t, std::uint32_t> cone_span(const Plan& plan, std::uint32_t j, std::uint32_t view,
                                                   std::uint32_t cone_begin, std::uint32_t cone_end) {
     const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(j) * plan.columns;
-    const float lo = static_cast<float>(cone_begin) - 1.0f, hi = static_cast<float>(cone_end);
+    const float reach = view >= plan.slices ? plan.tier_cone_reach : 0.0f;
+    const float lo = static_cast<float>(cone_begin) - 1.0f - reach, hi = static_cast<float>(cone_end) + reach;
     const float* first = cone_x + view_first_column(plan, view);
     const float* last = first + view_columns(plan, view);
     const std::uint32_t c_begin = static_cast<std::uint32_t>(std::upper_bound(first, last, lo) - cone_x);
@@ -559,16 +563,21 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const std::size_t at = 2 * (static_cast<std::size_t>(j) * plan.views + view);
             const auto [c_begin, c_end] =
                 spans != nullptr ? std::pair{spans[at], spans[at + 1]} : cone_span(plan, j, view, cone_begin, cone_end);
-            // each pixel into the cone columns floor(x) and floor(x) + 1 of this block, the range shares once for
-            // both (a footprint spans <= kMaxFootprintBins + 1 bins)
+            // each pixel into the cone columns floor(x) and floor(x) + 1 of this block (a tier view's pixel: those
+            // its cone extent touches), the range shares once for all (a footprint spans <= kMaxFootprintBins + 1
+            // bins)
+            const bool tier = view >= plan.slices;
             const auto add_to_cones = [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
                                           int spread_bins, const Real* shares) {
                 const Real x = static_cast<Real>(cone_x[pc]);
-                const int below = floor_to_int(x);
-                const int first_cone = std::max(below, static_cast<int>(cone_begin));
-                const int last_cone = std::min(below + 1, static_cast<int>(cone_end) - 1);
+                ConeExtent extent{cone_x[pc], cone_x[pc]};
+                if (tier) extent = tier_cone_extent(cone_x, pc, columns.first, columns.end);
+                const int first_cone = std::max(floor_to_int(extent.lo), static_cast<int>(cone_begin));
+                const int last_cone = std::min(floor_to_int(extent.hi) + 1, static_cast<int>(cone_end) - 1);
                 for (int cone = first_cone; cone <= last_cone; ++cone) {
-                    const Real weight = M::cone_share(x, cone, count);
+                    const Real weight = tier ? M::cone_extent_share(x, static_cast<Real>(extent.lo),
+                                                                    static_cast<Real>(extent.hi), cone, count)
+                                             : M::cone_share(x, cone, count);
                     if (!(weight > Real(0))) continue;
                     add_shares(acc + static_cast<std::size_t>(cone) * T + spread.k_first, shares, spread_bins,
                                weight * e);

@@ -13,6 +13,7 @@
 
 #include "core/pixel_views.h"
 #include "core/sonar_math.hpp"
+#include "core/tier_extent.h"
 #include "host/workers.h"
 #include "scene/scene_data.h"
 #include "stages/cpu_stages.h"
@@ -176,10 +177,11 @@ PixelRay pixel_ray_of(const Plan& plan, std::uint32_t row, std::uint32_t column)
 
 // line_array: the first pixel column of row `row` in view `view` whose cone coordinate reaches the lower
 // bound of the block of beams from j_begin (label_beams visits the pixels within one cone column of its
-// beams' columns: x >= its first column - 1). Along a view's row the cone coordinate increases with the
-// column (plan_cone_table): a binary search.
+// beams' columns, a tier view's widened by their reach: x >= its first column - 1 - reach). Along a
+// view's row the cone coordinate increases with the column (plan_cone_table): a binary search.
 std::uint32_t block_first_pixel(const Plan& plan, std::uint32_t j_begin, std::uint32_t row, std::uint32_t view) {
-    const float lo = static_cast<float>(plan.beam_column_begin[j_begin]) - 1.0f;
+    const float reach = view >= plan.slices ? plan.tier_cone_reach : 0.0f;
+    const float lo = static_cast<float>(plan.beam_column_begin[j_begin]) - 1.0f - reach;
     const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
     const float* view_x = cone_x + view_first_column(plan, view);
     return static_cast<std::uint32_t>(std::lower_bound(view_x, view_x + view_columns(plan, view), lo) - cone_x);
@@ -509,7 +511,8 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
     }
     for (std::uint32_t row = 0; row < plan.rows && plan.line_array && block > 0; ++row) {
         // The pixels of this row within one cone column of a beam's [q_begin, q_end): x in [q_begin - 1,
-        // q_end), each visited once with the sum of its two cone columns' shares of each beam. Per view:
+        // q_end) (a tier view's: widened by its pixels' reach), each visited once with the sum of its cone
+        // columns' shares of each beam (two, or those a tier pixel's extent touches). Per view:
         // along a view's row the cone coordinate increases with the column (not across views).
         const float* cone_x = plan.pixel_cone_coord.data() + static_cast<std::size_t>(row) * plan.columns;
         const std::uint32_t* block_first =
@@ -518,17 +521,25 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
             // no hit in this row of the view: nothing to visit
             const std::uint32_t* hits = cache.hit_columns.data() + (std::size_t(row) * plan.views + view) * 2;
             if (hits[0] == hits[1]) continue;
+            // a tier view's pixel feeds the cone columns its extent touches (the profile's shares)
+            const bool tier = view >= plan.slices;
+            const float view_hi = block_hi + (tier ? plan.tier_cone_reach : 0.0f);
+            const std::uint32_t view_first = view_first_column(plan, view);
+            const std::uint32_t view_end = view_first + view_columns(plan, view);
             std::uint32_t b_low = 0;
-            for (std::uint32_t c = std::max(block_first[view], hits[0]); c < hits[1] && cone_x[c] < block_hi; ++c) {
+            for (std::uint32_t c = std::max(block_first[view], hits[0]); c < hits[1] && cone_x[c] < view_hi; ++c) {
                 const std::size_t p = static_cast<std::size_t>(row) * plan.columns + c;
                 // the echo (8 bytes a pixel, contiguous) says which pixels are empty without touching
                 // their cache entry
                 if (!(frame.echo[2 * p] > 0.0f)) continue;
                 const double x = cone_x[c];
-                const auto first = static_cast<std::int64_t>(std::floor(x));
-                // the beams whose cone columns hold floor(x) or the next: from the first that does not end
-                // at or before floor(x) (x grows along the view's row, as do the beams' columns; a beam
-                // without columns, [0, 0) in assign_columns_to_beams, is passed over or gets no weight)
+                ConeExtent extent{cone_x[c], cone_x[c]};
+                if (tier) extent = tier_cone_extent(cone_x, c, view_first, view_end);
+                const auto first = static_cast<std::int64_t>(std::floor(extent.lo));
+                const auto last = static_cast<std::int64_t>(std::floor(extent.hi)) + 1;
+                // the beams whose cone columns hold one of [first, last]: from the first that does not end
+                // at or before `first` (x and the extent grow along the view's row, as do the beams' columns; a
+                // beam without columns, [0, 0) in assign_columns_to_beams, is passed over or gets no weight)
                 while (b_low < block && std::int64_t(plan.beam_column_end[j_begin + b_low]) <= first)
                     ++b_low;
                 Cell* cells[kMaxBeamBlock];
@@ -539,12 +550,14 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
                 for (std::uint32_t b = b_low; b < block; ++b) {
                     const std::uint32_t j = j_begin + b;
                     const std::int64_t q_begin = plan.beam_column_begin[j], q_end = plan.beam_column_end[j];
-                    if (q_begin > first + 1) break;
+                    if (q_begin > last) break;
                     double w = 0.0;
-                    for (std::int64_t q = first; q <= first + 1; ++q)
-                        if (q >= q_begin && q < q_end)
-                            w += M::cone_share(x, static_cast<int>(q), static_cast<int>(PC)) *
-                                 beam_weight(plan, j, static_cast<std::uint32_t>(q));
+                    for (std::int64_t q = std::max(first, q_begin); q <= last && q < q_end; ++q) {
+                        const double share = tier ? M::cone_extent_share(x, double(extent.lo), double(extent.hi),
+                                                                         static_cast<int>(q), static_cast<int>(PC))
+                                                  : M::cone_share(x, static_cast<int>(q), static_cast<int>(PC));
+                        w += share * beam_weight(plan, j, static_cast<std::uint32_t>(q));
+                    }
                     if (!(w > 0.0)) continue;
                     cells[fed] = block_cells[b];
                     weight[fed] = w;

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/tier_extent.h"
 #include "vk/commands.h"
 #include "vk/handles.h"
 #include "vk/pipelines.h"
@@ -39,7 +40,8 @@ namespace {
 constexpr std::uint32_t kMaxRowCandidates = 16;
 
 // The most pixels one row gives one cone column c (line_array): those of every view whose cone coordinate
-// x has c - 1 < x < c + 1, compared in float as profile.comp compares them.
+// x has c - 1 < x < c + 1 (a tier view's: widened by Plan::tier_cone_reach, and with a share of c, as
+// profile.comp's list_view takes them), compared in float as profile.comp compares them.
 std::uint32_t most_row_candidates(const Plan& plan) {
     const std::uint32_t count = plan.profile_columns;
     std::vector<std::uint32_t> per_cone(count);
@@ -47,11 +49,22 @@ std::uint32_t most_row_candidates(const Plan& plan) {
     for (std::uint32_t row = 0; row < plan.rows && !plan.pixel_cone_coord.empty(); ++row) {
         std::fill(per_cone.begin(), per_cone.end(), 0u);
         const float* x = plan.pixel_cone_coord.data() + std::size_t(row) * plan.columns;
-        for (std::uint32_t column = 0; column < plan.columns; ++column) {
-            if (!(x[column] > -1.0f && x[column] < float(count))) continue; // NaN too
-            const auto below = static_cast<std::int64_t>(std::floor(x[column]));
-            for (std::int64_t c = std::max<std::int64_t>(below, 0); c <= below + 1 && c < count; ++c) {
-                if (x[column] > float(c) - 1.0f && x[column] < float(c) + 1.0f) most = std::max(most, ++per_cone[c]);
+        for (std::uint32_t view = 0; view < plan.views; ++view) {
+            const bool tier = view >= plan.slices;
+            const float reach = tier ? plan.tier_cone_reach : 0.0f;
+            const std::uint32_t first = view_first_column(plan, view), end = first + view_columns(plan, view);
+            for (std::uint32_t column = first; column < end; ++column) {
+                if (!(x[column] > -1.0f - reach && x[column] < float(count) + reach)) continue; // NaN too
+                const ConeExtent extent = tier ? tier_cone_extent(x, column, first, end) : ConeExtent{};
+                const auto below = static_cast<std::int64_t>(std::floor(x[column] - reach));
+                const auto above = static_cast<std::int64_t>(std::floor(x[column] + reach)) + 1;
+                for (std::int64_t c = std::max<std::int64_t>(below, 0); c <= above && c < count; ++c) {
+                    if (!(x[column] > float(c) - 1.0f - reach && x[column] < float(c) + 1.0f + reach)) continue;
+                    if (tier && !(math_f32::cone_extent_share(x[column], extent.lo, extent.hi, static_cast<int>(c),
+                                                              static_cast<int>(count)) > 0.0f))
+                        continue;
+                    most = std::max(most, ++per_cone[c]);
+                }
             }
         }
     }
