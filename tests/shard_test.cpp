@@ -2,9 +2,13 @@
 // are one line naming the flag or variable, exit 2, nothing written; frame-folder shards merge into
 // the unsharded run's files byte for byte; shard.json and meta.json say which shard a frame came from.
 // (.h5 shards, kill-and-resume: tests/python/check_shards.py.)
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
@@ -471,6 +475,141 @@ TEST_F(Shard, FolderShardAndUnshardedRunNeverShareAFolder) {
     EXPECT_EQ(run(render_args("whole", {"--save", "polar"})).exit_code, 0);
     fs::create_directories(dir_ / "empty");
     EXPECT_EQ(run(render_args("empty", {"--save", "polar", "--shard", "1/2"})).exit_code, 0);
+}
+
+// ---- the writers: nothing this run did not make is removed or truncated --------------------------
+
+// The Shard fixture's small run, for the output writers (not sharded unless a test says so).
+class Writer : public Shard {
+protected:
+    // `commands` run at once (each a CLI run: its arguments), waited for; their exit codes in order.
+    std::vector<int> run_together(const std::vector<std::vector<std::string>>& commands) const {
+        std::string script;
+        for (std::size_t i = 0; i < commands.size(); ++i) {
+            std::string command = quote(VKSONAR_CLI);
+            for (const auto& a : commands[i])
+                command += " " + quote(a);
+            const std::string rc = quote((dir_ / ("rc" + std::to_string(i))).string());
+            script += "( " + command + " > /dev/null 2>&1 < /dev/null; echo $? > " + rc + " ) & ";
+        }
+        script += "wait";
+        EXPECT_EQ(std::system(script.c_str()), 0);
+        std::vector<int> codes;
+        for (std::size_t i = 0; i < commands.size(); ++i)
+            codes.push_back(std::atoi(read_text(dir_ / ("rc" + std::to_string(i))).c_str()));
+        return codes;
+    }
+    // Writes a trajectory of `frames` poses to dir_/NAME; returns its path.
+    std::string long_trajectory(const std::string& name, int frames) const {
+        std::string poses = "x,y,z,roll,pitch,yaw\n";
+        for (int i = 0; i < frames; ++i)
+            poses += std::to_string(0.001 * i) + ",0,0,0,10," + std::to_string(0.01 * i) + "\n";
+        write_text(dir_ / name, poses);
+        return (dir_ / name).string();
+    }
+    // The names in dir_ that start with ".~" (temporaries and locks left behind).
+    std::vector<std::string> leftovers() const {
+        std::vector<std::string> names;
+        for (const auto& entry : fs::directory_iterator(dir_))
+            if (entry.path().filename().string().rfind(".~", 0) == 0) names.push_back(entry.path().filename());
+        return names;
+    }
+    // Skips the test where this build has no HDF5.
+    bool no_hdf5(const ShardRun& r) const { return r.err.find("this build has no HDF5") != std::string::npos; }
+};
+
+// A complete .h5 held open by a reader (HDF5 takes a shared flock, as h5py does): an unsharded run to it
+// failed on HDF5's file lock with no reason given and removed the reader's file. It now writes a new
+// file beside it and renames it over: the run succeeds, the reader keeps the file it opened.
+TEST_F(Writer, AnUnshardedH5ReplacesAFileHeldOpenWhole) {
+    const ShardRun first = run(render_args("held.h5"));
+    if (no_hdf5(first)) GTEST_SKIP() << "no HDF5 in this build";
+    ASSERT_EQ(first.exit_code, 0) << first.err;
+    const std::string before = read_text(dir_ / "held.h5");
+    const int fd = ::open((dir_ / "held.h5").c_str(), O_RDONLY | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::flock(fd, LOCK_SH | LOCK_NB), 0);
+    const ShardRun again = run(render_args("held.h5", {"--seed", "5"}));
+    EXPECT_EQ(again.exit_code, 0) << again.err;
+    EXPECT_TRUE(fs::is_regular_file(dir_ / "held.h5"));
+    EXPECT_NE(read_text(dir_ / "held.h5"), before) << "not replaced by the new run";
+    struct stat held {};
+    ASSERT_EQ(::fstat(fd, &held), 0);
+    EXPECT_EQ(static_cast<std::size_t>(held.st_size), before.size()) << "the reader's file was truncated";
+    ::close(fd);
+    EXPECT_TRUE(leftovers().empty());
+}
+
+// Two unsharded runs to the same .h5 or bag at once: the second failed and removed the first's .h5, and
+// two bags interleaved into one corrupt file while both exited 0. Each now renames its own whole file
+// onto OUT: both succeed and OUT is one run's file (a bag byte for byte the run's alone).
+TEST_F(Writer, ConcurrentUnshardedRunsLeaveOneWholeFile) {
+    const std::string poses = long_trajectory("long.csv", 300);
+    auto args = [&](const std::string& out) {
+        std::vector<std::string> a = render_args(out);
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = poses;
+        return a;
+    };
+    fs::create_directories(dir_ / "alone");
+    ASSERT_EQ(run(args("alone/run.mcap")).exit_code, 0);
+    EXPECT_EQ(run_together({args("run.mcap"), args("run.mcap")}), (std::vector<int>{0, 0}));
+    EXPECT_TRUE(read_text(dir_ / "run.mcap") == read_text(dir_ / "alone" / "run.mcap"))
+        << "the bag is not one run's whole bag";
+
+    const ShardRun probe = run(render_args("probe.h5"));
+    if (!no_hdf5(probe)) {
+        EXPECT_EQ(run_together({args("run.h5"), args("run.h5")}), (std::vector<int>{0, 0}));
+        EXPECT_TRUE(fs::is_regular_file(dir_ / "run.h5"));
+    }
+    EXPECT_TRUE(leftovers().empty());
+}
+
+// One shard run twice at once: the second truncated the file the first was writing (the first then
+// exited 0 with a corrupt file). A shard now holds a lock beside its file; a second writer is refused
+// in one line and touches nothing.
+TEST_F(Writer, ASecondWriterOfAShardIsRefused) {
+    const ShardRun probe = run(render_args("probe.h5"));
+    for (const std::string name : {"cs.mcap", "cs.h5"}) {
+        if (name == "cs.h5" && no_hdf5(probe)) continue;
+        const fs::path lock = dir_ / (".~" + name + ".lock");
+        const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+        ASSERT_GE(fd, 0);
+        ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0); // as a run of the shard holds it
+        const ShardRun r = run(render_args(name, {"--shard", "0/2"}));
+        EXPECT_EQ(r.exit_code, 1) << name << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << name << r.err;
+        EXPECT_NE(r.err.find("error: --out " + (dir_ / name).string() + ": another vksonar run is writing this shard"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / name)) << name;
+        ::close(fd);
+        fs::remove(lock);
+        const ShardRun alone = run(render_args(name, {"--shard", "0/2"}));
+        EXPECT_EQ(alone.exit_code, 0) << name << alone.err;
+        EXPECT_TRUE(fs::is_regular_file(dir_ / name)) << name;
+    }
+    EXPECT_TRUE(leftovers().empty()) << "the lock is removed at the end of the run";
+}
+
+// A shard's --out that is a symlink: the resume renamed its new file onto the link, replacing it with a
+// regular file and leaving the target stale. It now writes and renames onto the link's target.
+TEST_F(Writer, ASymlinkedShardOutStaysALink) {
+    fs::create_directories(dir_ / "real");
+    for (const std::string name : {"s1.h5", "s1.mcap"}) {
+        fs::create_symlink(fs::path("real") / name, dir_ / ("ln" + name));
+        const ShardRun r = run(render_args("ln" + name, {"--shard", "1/2"}));
+        if (name == "s1.h5" && no_hdf5(r)) continue;
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        const ShardRun again = run(render_args("ln" + name, {"--shard", "1/2"})); // a re-run: resumes (.h5 copies)
+        ASSERT_EQ(again.exit_code, 0) << again.err;
+        EXPECT_TRUE(fs::is_symlink(dir_ / ("ln" + name))) << name << ": the link was replaced";
+        EXPECT_TRUE(fs::is_regular_file(dir_ / "real" / name)) << name;
+        // an unsharded run through the link replaces the target, not the link
+        EXPECT_EQ(run(render_args("ln" + name)).exit_code, 0) << name;
+        EXPECT_TRUE(fs::is_symlink(dir_ / ("ln" + name))) << name;
+    }
+    EXPECT_TRUE(leftovers().empty());
 }
 
 } // namespace

@@ -3,21 +3,28 @@
 // Order matters for the "no partial output" promise: every input (config layers, scene, poses,
 // trajectory, --save list) is read and validated first; only then is the output directory created,
 // and it is removed again if anything fails before the first frame is on disk. Each file is written
-// under a temporary name and renamed, so a reader never sees half a file.
+// under a temporary name and renamed, so a reader never sees half a file; an unsharded .h5 or bag is
+// written whole under a temporary name and renamed onto OUT at the end (DatasetFile).
 //
 // run_render (at the end) reads as the list of steps; the inputs are read and checked by
 // render_job.cpp, the per-frame files written by render_frame.cpp.
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <string>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -163,31 +170,111 @@ private:
 
 // ---- the output file -------------------------------------------------------------------------
 
-// The dataset file's path: its folder must exist and be writable before anything renders; the file
-// is removed again unless keep() is called (a frame is in it). A shard's file that is already there
-// (an earlier run of the shard) is never removed: a failed re-run must not lose its frames.
-class DatasetFile {
+// OUT with the links of its last part followed: a run writes and renames onto the link's target, so a
+// symlinked --out stays a link to the file that is written.
+fs::path resolve_links(fs::path path) {
+    std::error_code ec;
+    for (int hops = 0; hops < 40 && fs::is_symlink(path, ec); ++hops) {
+        const fs::path to = fs::read_symlink(path, ec);
+        if (ec) break;
+        path = to.is_absolute() ? to : (path.has_parent_path() ? path.parent_path() : fs::path(".")) / to;
+    }
+    return path;
+}
+
+// A shard's file has one writer at a time: an advisory lock (flock) on `.~NAME.lock` beside it, held
+// for the run and removed at its end. A second run of the same shard is refused in one line rather
+// than writing into (or truncating) the file the first one writes. The lock file's inode is checked
+// after the lock is taken, so a run that took the lock of a file its holder removed tries again.
+class ShardLock {
 public:
-    DatasetFile(const fs::path& path, bool keep_existing) : path_(path) {
-        std::error_code ec;
-        keep_ = keep_existing && fs::exists(path, ec);
-        const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
-        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + path.string() + ": no folder " + folder.string());
-        if (fs::is_directory(path, ec)) throw BadInput("--out " + path.string() + ": is a directory");
-        if (::access(folder.c_str(), W_OK) != 0)
-            throw BadInput("--out " + path.string() + ": the folder is not writable");
+    ShardLock(const fs::path& target, const std::string& out) {
+        const std::string name = ".~" + target.filename().string() + ".lock";
+        path_ = target.has_parent_path() ? target.parent_path() / name : fs::path(name);
+        for (int attempt = 0; attempt < 16; ++attempt) {
+            fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+            if (fd_ < 0)
+                throw Failure("--out " + out + ": cannot create the lock file " + path_.string() + ": " +
+                              std::strerror(errno));
+            if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+                const int e = errno;
+                ::close(std::exchange(fd_, -1));
+                if (e == EWOULDBLOCK)
+                    throw Failure("--out " + out + ": another vksonar run is writing this shard (it holds the lock " +
+                                  path_.string() + ")");
+                throw Failure("--out " + out + ": cannot lock " + path_.string() + ": " + std::strerror(e));
+            }
+            struct stat held {};
+            struct stat named {};
+            if (::fstat(fd_, &held) == 0 && ::stat(path_.c_str(), &named) == 0 && held.st_dev == named.st_dev &&
+                held.st_ino == named.st_ino)
+                return;
+            ::close(std::exchange(fd_, -1)); // its holder removed it as we took it: take the new one
+        }
+        throw Failure("--out " + out + ": cannot take the lock " + path_.string());
     }
-    ~DatasetFile() {
-        std::error_code ec;
-        if (!keep_) fs::remove(path_, ec);
+    ~ShardLock() {
+        if (fd_ < 0) return;
+        ::unlink(path_.c_str()); // while still held: a waiting run sees another inode and tries again
+        ::close(fd_);
     }
-    DatasetFile(const DatasetFile&) = delete;
-    DatasetFile& operator=(const DatasetFile&) = delete;
-    void keep() { keep_ = true; }
+    ShardLock(const ShardLock&) = delete;
+    ShardLock& operator=(const ShardLock&) = delete;
 
 private:
     fs::path path_;
-    bool keep_ = false;
+    int fd_ = -1;
+};
+
+// The dataset file (.h5 or .mcap): its folder must exist and be writable before anything renders.
+// Nothing here removes or truncates a file this run did not create:
+// - an unsharded run writes a new file under a temporary name beside OUT (`.~NAME.writing-PID`) and
+//   renames it onto OUT once it is closed (publish): readers and concurrent runs never see a torn
+//   file, and a failed run removes its temporary and leaves OUT as it was;
+// - a shard holds its lock (ShardLock), writes a new file the same way and renames it onto OUT as soon
+//   as it is made (publish), so a killed shard leaves its frames at OUT for the re-run; a resume
+//   replaces OUT by rename too. A shard's file that this run did not make is never removed.
+// OUT's links are followed (target()).
+class DatasetFile {
+public:
+    DatasetFile(const fs::path& out, bool shard) : target_(resolve_links(out)) {
+        std::error_code ec;
+        const std::string named = out.string();
+        const fs::path folder = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
+        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + named + ": no folder " + folder.string());
+        if (fs::is_directory(target_, ec)) throw BadInput("--out " + named + ": is a directory");
+        if (::access(folder.c_str(), W_OK) != 0) throw BadInput("--out " + named + ": the folder is not writable");
+        const std::string name = ".~" + target_.filename().string() + ".writing-" + std::to_string(::getpid());
+        temporary_ = target_.has_parent_path() ? folder / name : fs::path(name);
+        if (shard) lock_.emplace(target_, named);
+    }
+    ~DatasetFile() {
+        std::error_code ec;
+        if (!published_) fs::remove(temporary_, ec); // this run's own file, not (yet) OUT
+        if (published_ && removable_ && !keep_) fs::remove(target_, ec);
+    }
+    DatasetFile(const DatasetFile&) = delete;
+    DatasetFile& operator=(const DatasetFile&) = delete;
+
+    // A frame is in it (a shard's published file stays).
+    void keep() { keep_ = true; }
+    const fs::path& target() const { return target_; }
+    const fs::path& temporary() const { return temporary_; }
+    // Renames the temporary onto OUT's target. A shard's new file, made where no file was, is removed
+    // again if the run fails before its first frame.
+    void publish() {
+        std::error_code ec;
+        const bool was_there = fs::exists(target_, ec);
+        fs::rename(temporary_, target_, ec);
+        if (ec) throw Failure("cannot rename " + temporary_.string() + " to " + target_.string() + ": " + ec.message());
+        published_ = true;
+        removable_ = !was_there;
+    }
+
+private:
+    fs::path target_, temporary_;
+    std::optional<ShardLock> lock_;
+    bool published_ = false, removable_ = false, keep_ = false;
 };
 
 DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::string& backend,
@@ -220,8 +307,9 @@ std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, cons
         if (resumed.error().code == ErrorCode::invalid_argument) throw BadInput("--out " + resumed.error().message);
         std::fprintf(stderr, "warning: %s: starting the shard over\n", resumed.error().message.c_str());
     }
-    auto created = DatasetWriter::create(path, plan, meta, options);
+    auto created = DatasetWriter::create(path, plan, meta, options, file.temporary().string());
     if (!created) throw Failure(created.error().message);
+    if (meta.shard) file.publish(); // at OUT from its first flush on: a killed shard resumes from it
     return std::move(created.value());
 }
 
@@ -356,7 +444,7 @@ void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs
     options.flow = job.save.flow;
     options.compress = args.has("--compress");
     options.has_time = job.timed;
-    writers.dataset = open_dataset_writer(job.out_path, plan, meta, options, file, writers.done);
+    writers.dataset = open_dataset_writer(file.target().string(), plan, meta, options, file, writers.done);
 }
 
 // A shard of frame folders: its manifest (which lines, which run) in the output directory; a re-run
@@ -377,7 +465,7 @@ void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const O
 // (merge_mcap.cpp); the identity also names what the bag's messages depend on. A re-run goes on
 // after the frames already in the bag.
 void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& outputs, McapOptions& bag_options,
-                      Writers& writers) {
+                      const fs::path& target, Writers& writers) {
     const ShardRecord& shard = *job.shard;
     Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
                                      save_list(job.save), job.timed, &shard);
@@ -388,22 +476,25 @@ void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& out
                                      {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},
                                      {"rate", job.timed ? std::string("time column") : std::string(rate)}});
     bag_options.shard = shard_metadata(shard, identity, outputs.backend, outputs.device, bag_options.zstd);
-    BagResume resumed = bag_shard_resume(job.out_path, plan, bag_options, shard, identity);
+    BagResume resumed = bag_shard_resume(target.string(), plan, bag_options, shard, identity);
     for (std::uint64_t k = 0; k < resumed.frames; ++k)
         writers.done[job.first + k] = 1;
     writers.bag = std::move(resumed.writer);
     writers.bag_complete = resumed.complete;
 }
 
-void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, Writers& writers) {
+void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, DatasetFile& file,
+              Writers& writers) {
     McapOptions& bag_options = *job.bag_options;
     bag_options.zstd = args.has("--compress");
     bag_options.library = "vksonar 0.1.0 (its own MCAP writer)";
-    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, writers);
+    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, file.target(), writers);
     if (!writers.bag && !writers.bag_complete) {
-        auto created = McapDatasetWriter::create(job.out_path, plan, bag_options);
+        // Named as OUT's target in the bag (rosbag2's metadata), written under the temporary name.
+        auto created = McapDatasetWriter::create(file.target().string(), plan, bag_options, file.temporary().string());
         if (!created) throw Failure(created.error().message);
         writers.bag = std::move(created.value());
+        if (job.shard) file.publish(); // at OUT from its first record on: a killed shard resumes from it
     }
 }
 
@@ -415,7 +506,7 @@ Writers open_writers(const Args& args, RenderJob& job, const Plan& plan, const O
     else if (job.shard && !job.bag)
         start_folder_manifest(job, outputs, *target.dir, writers);
     writers.bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
-    if (job.bag) open_bag(args, job, plan, outputs, writers);
+    if (job.bag) open_bag(args, job, plan, outputs, *target.file, writers);
     return writers;
 }
 
@@ -614,6 +705,8 @@ void finish_run(const RenderJob& job, WriteBehind& writer, Writers& writers, Out
     if (writers.bag)
         if (auto closed = writers.bag->close(); !closed) throw Failure(closed.error().message);
     progress.finish();
+    // An unsharded .h5 or bag replaces OUT only now, whole.
+    if (target.file && !job.shard && (writers.dataset || writers.bag)) target.file->publish();
     if (!job.shard) return;
     // A shard's output is its result even when its block is empty or was already complete.
     if (target.file) target.file->keep();
