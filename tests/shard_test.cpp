@@ -612,4 +612,78 @@ TEST_F(Writer, ASymlinkedShardOutStaysALink) {
     EXPECT_TRUE(leftovers().empty());
 }
 
+// The output folder removed during a frame-folder run: the run made the path again for each frame and
+// exited 0 with the earlier frames missing. Now it stops with one line naming the folder.
+TEST_F(Writer, AFolderRemovedDuringTheRunStopsIt) {
+    const std::string poses = long_trajectory("long.csv", 3000);
+    std::vector<std::string> a = render_args("gone", {"--save", "polar"});
+    for (std::size_t i = 0; i + 1 < a.size(); ++i)
+        if (a[i] == "--trajectory") a[i + 1] = poses;
+    std::string command = quote(VKSONAR_CLI);
+    for (const auto& x : a)
+        command += " " + quote(x);
+    const fs::path out = dir_ / "gone", err = dir_ / "gone.err", rc = dir_ / "gone.rc";
+    const std::string script =
+        "( " + command + " > /dev/null 2> " + quote(err.string()) + " < /dev/null; echo $? > " + quote(rc.string()) +
+        " ) & pid=$!; n=0; while [ ! -e " + quote((out / "frame_000003" / "meta.json").string()) +
+        " ] && [ $n -lt 3000 ]; do sleep 0.01; n=$((n+1)); done; n=0; while [ -e " + quote(out.string()) +
+        " ] && [ $n -lt 100 ]; do rm -rf " + quote(out.string()) + " 2> /dev/null; n=$((n+1)); done; wait $pid";
+    ASSERT_EQ(std::system(script.c_str()), 0);
+    const std::string text = read_text(err);
+    EXPECT_NE(std::atoi(read_text(rc).c_str()), 0) << text;
+    ShardRun r;
+    r.err = text;
+    EXPECT_EQ(r.err_lines(), 1u) << text;
+    EXPECT_EQ(text.rfind("error: ", 0), 0u) << text;
+    EXPECT_NE(text.find(out.string()), std::string::npos) << text;
+    EXPECT_FALSE(fs::exists(out)) << "the folder was made again";
+}
+
+// A reused frame folder: a shorter run with another --save kept the earlier run's files beside its own
+// (frame_000002's fan.png beside the new meta.json) and its later frames whole. An unsharded run now
+// removes the earlier run's frame folders and files first, and nothing else.
+TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
+    // `args` with --trajectory's value replaced (empty: a single --pose instead).
+    auto with = [&](std::vector<std::string> args, const std::string& poses) {
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--trajectory") {
+                if (poses.empty()) {
+                    args[i] = "--pose";
+                    args[i + 1] = "0,0,0,0,10,0";
+                } else {
+                    args[i + 1] = poses;
+                }
+            }
+        return args;
+    };
+    write_text(dir_ / "two.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    ASSERT_EQ(run(with(render_args("kd"), "")).exit_code, 0); // a single pose: its files in kd itself
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "fan.png"));
+    ASSERT_EQ(run(render_args("kd")).exit_code, 0); // 7 frames, frame_000002..frame_000008
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "frame_000008" / "fan.png"));
+    write_text(dir_ / "kd" / "notes.txt", "mine");
+    fs::create_directories(dir_ / "kd" / "frame_extra");
+    write_text(dir_ / "kd" / ".~fan.png", "a killed run's temporary");
+    ASSERT_EQ(run(with(render_args("kd", {"--save", "polar"}), (dir_ / "two.csv").string())).exit_code, 0);
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(dir_ / "kd"))
+        names.push_back(entry.path().filename());
+    std::sort(names.begin(), names.end());
+    EXPECT_EQ(names, (std::vector<std::string>{"frame_000002", "frame_000003", "frame_extra", "notes.txt"}));
+    for (const std::string frame : {"frame_000002", "frame_000003"}) {
+        names.clear();
+        for (const auto& entry : fs::directory_iterator(dir_ / "kd" / frame))
+            names.push_back(entry.path().filename());
+        std::sort(names.begin(), names.end());
+        EXPECT_EQ(names, (std::vector<std::string>{"meta.json", "polar.npy"})) << frame;
+    }
+    EXPECT_EQ(read_text(dir_ / "kd" / "notes.txt"), "mine");
+
+    // A run that fails before its first frame leaves the earlier run as it was.
+    EXPECT_EQ(
+        run(with(render_args("kd", {"--save", "polar", "--set", "bins=-1"}), (dir_ / "two.csv").string())).exit_code,
+        2);
+    EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
+}
+
 } // namespace

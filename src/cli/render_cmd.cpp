@@ -94,7 +94,8 @@ constexpr const char* kUsage =
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
     "                '..' resolved (default: the scene file's folder; config key scene.asset_root)\n"
-    "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
+    "  --out         output directory (created; an unsharded run first removes an earlier run's frames\n"
+    "                and files there, no others), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
     "                --save polar (default), polar_u16, labels and flow only: labels adds instance, class,\n"
     "                instance_fraction, elevation, elevation_spread [frames, bins, beams] and point [..., 3],\n"
@@ -157,7 +158,64 @@ public:
     void keep() { keep_ = true; }
     const fs::path& path() const { return dir_; }
 
+    // An unsharded run replaces the previous run in its folder, as a .h5 or bag is replaced whole:
+    // before its first frame is written, the entries an earlier run wrote there go (frame_NNNNNN
+    // folders, the files a single pose writes, their leftover temporaries); no other file is touched.
+    // Run once, on the write-behind thread, just before the first frame: a run that fails before it
+    // leaves the earlier run as it was.
+    void clear_previous_run() {
+        if (cleared_) return;
+        cleared_ = true;
+        std::error_code ec;
+        std::vector<fs::path> stale;
+        for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+            std::string name = entry.path().filename().string();
+            if (name.rfind(".~", 0) == 0) name = name.substr(2);
+            const bool frame_folder = name.size() > 6 && name.rfind("frame_", 0) == 0 &&
+                                      name.find_first_not_of("0123456789", 6) == std::string::npos &&
+                                      entry.is_directory(ec) && !entry.is_symlink(ec);
+            if (frame_folder || (is_frame_file(name) && !entry.is_directory(ec))) stale.push_back(entry.path());
+        }
+        if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
+        for (const fs::path& path : stale) {
+            fs::remove_all(path, ec);
+            if (ec) throw Failure("cannot remove " + path.string() + " (an earlier run's): " + ec.message());
+        }
+    }
+
 private:
+    // The files vksonar writes in a frame's folder (render_frame.cpp; a single pose's go in OUT itself).
+    static bool is_frame_file(const std::string& name) {
+        static const char* const kNames[] = {"meta.json",
+                                             "fan.png",
+                                             "polar.npy",
+                                             "polar.png",
+                                             "polar_u16.npy",
+                                             "depth.npy",
+                                             "normals.npy",
+                                             "echo.npy",
+                                             "cloud.ply",
+                                             "flow.npy",
+                                             "instance.npy",
+                                             "class.npy",
+                                             "instance_fraction.npy",
+                                             "elevation.npy",
+                                             "elevation_spread.npy",
+                                             "point.npy",
+                                             "instance_fan.npy",
+                                             "class_fan.npy",
+                                             "instance_fan.png",
+                                             "boxes.json",
+                                             "normals.png",
+                                             "multibeam.png",
+                                             "multibeam.npy",
+                                             "raw_scan.png",
+                                             "raw_scan.npy"};
+        for (const char* known : kNames)
+            if (name == known) return true;
+        return false;
+    }
+
     void cleanup() {
         std::error_code ec;
         if (!created_.empty()) fs::remove_all(created_, ec);
@@ -166,6 +224,7 @@ private:
     fs::path dir_;
     fs::path created_;
     bool keep_ = false;
+    bool cleared_ = false;
 };
 
 // ---- the output file -------------------------------------------------------------------------
@@ -541,13 +600,18 @@ void write_dataset_frame(const WriteBehind::Slot& slot, const RenderJob& job, Ou
 }
 
 // A trajectory's frame goes to DIR/frame_NNNNNN/ (NNNNNN its line), a single pose's to DIR itself.
-void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs,
-                        const OutputDir& out_dir) {
+void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, OutputDir& out_dir) {
+    if (!job.shard) out_dir.clear_previous_run(); // a shard resumes the frames its folder holds
     fs::path dir = out_dir.path();
     if (job.trajectory) {
-        dir /= frame_dir_name(slot.line);
+        // The run's folder was made once (OutputDir); a frame's folder is made in it, never the path
+        // to it again: a folder removed during the run stops it with one line instead of being made
+        // anew with the earlier frames missing.
         std::error_code ec;
-        fs::create_directories(dir, ec);
+        if (!fs::is_directory(out_dir.path(), ec))
+            throw Failure("--out " + out_dir.path().string() + ": the output folder is gone (removed during the run)");
+        dir /= frame_dir_name(slot.line);
+        fs::create_directory(dir, ec);
         if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
     }
     write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
