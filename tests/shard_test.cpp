@@ -639,6 +639,21 @@ TEST_F(Writer, AFolderRemovedDuringTheRunStopsIt) {
     EXPECT_FALSE(fs::exists(out)) << "the folder was made again";
 }
 
+// A trajectory that starts with a UTF-8 byte order mark (with and without a header) reads as without.
+TEST_F(Writer, ATrajectoryByteOrderMarkIsSkipped) {
+    write_text(dir_ / "bom_header.csv", "\xEF\xBB\xBFx,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    write_text(dir_ / "bom.csv", "\xEF\xBB\xBF"
+                                 "0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    for (const std::string name : {"bom_header.csv", "bom.csv"}) {
+        std::vector<std::string> a = render_args("out_" + name, {"--save", "polar"});
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = (dir_ / name).string();
+        const ShardRun r = run(a);
+        EXPECT_EQ(r.exit_code, 0) << name << r.err;
+        EXPECT_TRUE(fs::exists(dir_ / ("out_" + name) / "frame_000002" / "meta.json")) << name;
+    }
+}
+
 // A reused frame folder: a shorter run with another --save kept the earlier run's files beside its own
 // (frame_000002's fan.png beside the new meta.json) and its later frames whole. An unsharded run now
 // removes the earlier run's frame folders and files first, and nothing else.

@@ -116,6 +116,8 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
     while (std::getline(file, line)) {
         ++number;
         if (!line.empty() && line.back() == '\r') line.pop_back();
+        // A UTF-8 byte order mark (editors on Windows write one) is not part of the first line.
+        if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
         const auto first = line.find_first_not_of(" \t");
         if (first == std::string::npos || line[first] == '#') continue;
         const std::string where = path + ":" + std::to_string(number);
