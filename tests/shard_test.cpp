@@ -654,6 +654,32 @@ TEST_F(Writer, ATrajectoryByteOrderMarkIsSkipped) {
     }
 }
 
+// A re-run shard with the scene file changed at the same path: the identity held the scene's path only,
+// so the shard resumed with frames of two scenes. It now holds a hash of the loaded scene's content;
+// the same content re-saved (here: another layout of the JSON) still resumes.
+TEST_F(Writer, AReRunShardRefusesAChangedScene) {
+    const std::string original = read_text(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+    const std::string key = "\"backscatter_db\": -30";
+    ASSERT_NE(original.find(key), std::string::npos);
+    for (const std::string out : {"scene_shard", "scene_shard.mcap"}) {
+        write_text(dir_ / "scene.gltf", original);
+        const std::vector<std::string> args =
+            render_args(out, {"--scene", (dir_ / "scene.gltf").string(), "--save", "polar", "--shard", "0/2"});
+        ASSERT_EQ(run(args).exit_code, 0) << out;
+        write_text(dir_ / "scene.gltf", original + "\n\n");
+        ShardRun r = run(args);
+        EXPECT_EQ(r.exit_code, 0) << out << r.err;
+        std::string changed = original;
+        changed.replace(changed.find(key), key.size(), "\"backscatter_db\": -31");
+        write_text(dir_ / "scene.gltf", changed);
+        r = run(args);
+        EXPECT_EQ(r.exit_code, 2) << out << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << out << r.err;
+        EXPECT_NE(r.err.find("holds "), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("another run (scene_fnv1a64: "), std::string::npos) << out << r.err;
+    }
+}
+
 // A reused frame folder: a shorter run with another --save kept the earlier run's files beside its own
 // (frame_000002's fan.png beside the new meta.json) and its later frames whole. An unsharded run now
 // removes the earlier run's frame folders and files first, and nothing else.

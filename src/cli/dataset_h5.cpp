@@ -304,7 +304,8 @@ public:
             const ShardRecord& r = *meta.shard;
             ok = count("shard_index", r.index) && count("shard_count", r.count) && text("shard_source", r.source) &&
                  count("shard_first", r.first) && count("shard_end", r.end) && count("trajectory_frames", r.total) &&
-                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash);
+                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash) &&
+                 (r.scene_hash.empty() || text("scene_fnv1a64", r.scene_hash));
         }
         if (!ok) return fail("cannot write the dataset's layout");
         std::uint32_t deflating = 0;
@@ -736,6 +737,7 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
         r.source = *source;
         r.trajectory = h5::read_text(f, "trajectory").value_or("");
         r.trajectory_hash = *hash;
+        r.scene_hash = h5::read_text(f, "scene_fnv1a64").value_or(""); // absent: written before it was recorded
         info.shard = r;
     }
     const bool u16 = H5Lexists(f, "polar_u16", H5P_DEFAULT) > 0;

@@ -512,6 +512,8 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
         throw BadInput("--out " + job.out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
                        (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
     warn_if_unit_mistake(scene.value(), config, job.scene_path);
+    // A re-run shard must be the same run: the scene by its content, not only its path.
+    if (job.shard) job.shard->scene_hash = scene_fnv1a64(scene.value());
     if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), 0, 0.0}};
     return {std::move(scene.value()), std::move(config)};
 }
