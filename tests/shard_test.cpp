@@ -727,4 +727,30 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
     EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
 }
 
+// merge took frame folders whose arrays were missing or empty as whole frames. A frame folder now
+// holds the files every other frame of the run holds, none of them empty, or merge refuses in one line.
+TEST_F(Writer, MergeRefusesAFrameFolderWithMissingOrEmptyArrays) {
+    ASSERT_EQ(run(render_args("m0", {"--save", "polar,fan", "--shard", "0/2"})).exit_code, 0);
+    ASSERT_EQ(run(render_args("m1", {"--save", "polar,fan", "--shard", "1/2"})).exit_code, 0);
+    const fs::path merged = dir_ / "merged";
+    const fs::path polar = dir_ / "m1" / "frame_000007" / "polar.npy";
+    const std::string bytes = read_text(polar);
+    write_text(polar, "");
+    ShardRun r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find(polar.string() + ": empty"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(merged));
+    fs::remove(polar);
+    r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("frame_000007 holds other files than"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("(lacks polar.npy)"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(merged));
+    write_text(polar, bytes);
+    r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
 } // namespace
