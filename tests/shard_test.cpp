@@ -589,6 +589,21 @@ TEST_F(Writer, ASecondWriterOfAShardIsRefused) {
         EXPECT_EQ(alone.exit_code, 0) << name << alone.err;
         EXPECT_TRUE(fs::is_regular_file(dir_ / name)) << name;
     }
+    // A frame-folder shard: the lock is DIR/.~shard.json.lock.
+    fs::create_directories(dir_ / "cs");
+    const fs::path lock = dir_ / "cs" / ".~shard.json.lock";
+    const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+    const ShardRun r = run(render_args("cs", {"--save", "polar", "--shard", "0/2"}));
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("another vksonar run is writing this shard"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "cs" / "shard.json"));
+    ::close(fd);
+    fs::remove(lock);
+    EXPECT_EQ(run(render_args("cs", {"--save", "polar", "--shard", "0/2"})).exit_code, 0);
+    EXPECT_FALSE(fs::exists(lock)) << "the lock is removed at the end of the run";
     EXPECT_TRUE(leftovers().empty()) << "the lock is removed at the end of the run";
 }
 

@@ -401,15 +401,19 @@ void refuse_mixed_folders(const RenderJob& job) {
 // The output directory, or the .h5 / .mcap file's place: made only once every input is valid, and
 // removed again if the run fails before a frame is on disk.
 struct OutputTarget {
-    std::optional<OutputDir> dir;    // frame folders
-    std::optional<DatasetFile> file; // .h5 or .mcap
+    std::optional<OutputDir> dir;      // frame folders
+    std::optional<ShardLock> dir_lock; // a frame-folder shard's lock (DIR/.~shard.json.lock)
+    std::optional<DatasetFile> file;   // .h5 or .mcap
 };
 
 void create_output(const RenderJob& job, OutputTarget& target) {
-    if (job.dataset || job.bag)
+    if (job.dataset || job.bag) {
         target.file.emplace(job.out_path, job.shard.has_value()); // a shard's file is resumed (or refused), not removed
-    else
-        target.dir.emplace(job.out_path);
+        return;
+    }
+    target.dir.emplace(job.out_path);
+    // One run of a frame-folder shard at a time too, as of a shard's file.
+    if (job.shard) target.dir_lock.emplace(fs::path(job.out_path) / "shard.json", job.out_path);
 }
 
 // The device and which backend runs on it; meta.json says which and why.
