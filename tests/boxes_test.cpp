@@ -456,6 +456,11 @@ TEST_F(BoxesCli, BoxesJsonIsTightOnTheLabelsAndCocoMatchesIt) {
     // A run rendered without labels; a frame of a labelled run that lost its boxes.json.
     const fs::path plain = render_run("fan");
     expect_bad_export({"coco", plain.string(), kept.string()}, "no boxes.json");
+    // A frame folder cut off before any of its files was skipped; it is refused.
+    fs::create_directories(run_dir / "frame_999999");
+    expect_bad_export({"coco", run_dir.string(), kept.string()},
+                      "frame_999999: a frame folder without meta.json and boxes.json");
+    fs::remove(run_dir / "frame_999999");
     fs::remove(run_dir / frames[2] / "boxes.json");
     expect_bad_export({"coco", run_dir.string(), kept.string()}, frames[2] + ": meta.json but no boxes.json");
     // A frame without its image.

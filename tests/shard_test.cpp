@@ -2,9 +2,13 @@
 // are one line naming the flag or variable, exit 2, nothing written; frame-folder shards merge into
 // the unsharded run's files byte for byte; shard.json and meta.json say which shard a frame came from.
 // (.h5 shards, kill-and-resume: tests/python/check_shards.py.)
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
@@ -471,6 +475,297 @@ TEST_F(Shard, FolderShardAndUnshardedRunNeverShareAFolder) {
     EXPECT_EQ(run(render_args("whole", {"--save", "polar"})).exit_code, 0);
     fs::create_directories(dir_ / "empty");
     EXPECT_EQ(run(render_args("empty", {"--save", "polar", "--shard", "1/2"})).exit_code, 0);
+}
+
+// ---- the writers: nothing this run did not make is removed or truncated --------------------------
+
+// The Shard fixture's small run, for the output writers (not sharded unless a test says so).
+class Writer : public Shard {
+protected:
+    // `commands` run at once (each a CLI run: its arguments), waited for; their exit codes in order.
+    std::vector<int> run_together(const std::vector<std::vector<std::string>>& commands) const {
+        std::string script;
+        for (std::size_t i = 0; i < commands.size(); ++i) {
+            std::string command = quote(VKSONAR_CLI);
+            for (const auto& a : commands[i])
+                command += " " + quote(a);
+            const std::string rc = quote((dir_ / ("rc" + std::to_string(i))).string());
+            script += "( " + command + " > /dev/null 2>&1 < /dev/null; echo $? > " + rc + " ) & ";
+        }
+        script += "wait";
+        EXPECT_EQ(std::system(script.c_str()), 0);
+        std::vector<int> codes;
+        for (std::size_t i = 0; i < commands.size(); ++i)
+            codes.push_back(std::atoi(read_text(dir_ / ("rc" + std::to_string(i))).c_str()));
+        return codes;
+    }
+    // Writes a trajectory of `frames` poses to dir_/NAME; returns its path.
+    std::string long_trajectory(const std::string& name, int frames) const {
+        std::string poses = "x,y,z,roll,pitch,yaw\n";
+        for (int i = 0; i < frames; ++i)
+            poses += std::to_string(0.001 * i) + ",0,0,0,10," + std::to_string(0.01 * i) + "\n";
+        write_text(dir_ / name, poses);
+        return (dir_ / name).string();
+    }
+    // The names in dir_ that start with ".~" (temporaries and locks left behind).
+    std::vector<std::string> leftovers() const {
+        std::vector<std::string> names;
+        for (const auto& entry : fs::directory_iterator(dir_))
+            if (entry.path().filename().string().rfind(".~", 0) == 0) names.push_back(entry.path().filename());
+        return names;
+    }
+    // Skips the test where this build has no HDF5.
+    bool no_hdf5(const ShardRun& r) const { return r.err.find("this build has no HDF5") != std::string::npos; }
+};
+
+// A complete .h5 held open by a reader (HDF5 takes a shared flock, as h5py does): an unsharded run to it
+// failed on HDF5's file lock with no reason given and removed the reader's file. It now writes a new
+// file beside it and renames it over: the run succeeds, the reader keeps the file it opened.
+TEST_F(Writer, AnUnshardedH5ReplacesAFileHeldOpenWhole) {
+    const ShardRun first = run(render_args("held.h5"));
+    if (no_hdf5(first)) GTEST_SKIP() << "no HDF5 in this build";
+    ASSERT_EQ(first.exit_code, 0) << first.err;
+    const std::string before = read_text(dir_ / "held.h5");
+    const int fd = ::open((dir_ / "held.h5").c_str(), O_RDONLY | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::flock(fd, LOCK_SH | LOCK_NB), 0);
+    const ShardRun again = run(render_args("held.h5", {"--seed", "5"}));
+    EXPECT_EQ(again.exit_code, 0) << again.err;
+    EXPECT_TRUE(fs::is_regular_file(dir_ / "held.h5"));
+    EXPECT_NE(read_text(dir_ / "held.h5"), before) << "not replaced by the new run";
+    struct stat held {};
+    ASSERT_EQ(::fstat(fd, &held), 0);
+    EXPECT_EQ(static_cast<std::size_t>(held.st_size), before.size()) << "the reader's file was truncated";
+    ::close(fd);
+    EXPECT_TRUE(leftovers().empty());
+}
+
+// Two unsharded runs to the same .h5 or bag at once: the second failed and removed the first's .h5, and
+// two bags interleaved into one corrupt file while both exited 0. Each now renames its own whole file
+// onto OUT: both succeed and OUT is one run's file (a bag byte for byte the run's alone).
+TEST_F(Writer, ConcurrentUnshardedRunsLeaveOneWholeFile) {
+    const std::string poses = long_trajectory("long.csv", 300);
+    auto args = [&](const std::string& out) {
+        std::vector<std::string> a = render_args(out);
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = poses;
+        return a;
+    };
+    fs::create_directories(dir_ / "alone");
+    ASSERT_EQ(run(args("alone/run.mcap")).exit_code, 0);
+    EXPECT_EQ(run_together({args("run.mcap"), args("run.mcap")}), (std::vector<int>{0, 0}));
+    EXPECT_TRUE(read_text(dir_ / "run.mcap") == read_text(dir_ / "alone" / "run.mcap"))
+        << "the bag is not one run's whole bag";
+
+    const ShardRun probe = run(render_args("probe.h5"));
+    if (!no_hdf5(probe)) {
+        EXPECT_EQ(run_together({args("run.h5"), args("run.h5")}), (std::vector<int>{0, 0}));
+        EXPECT_TRUE(fs::is_regular_file(dir_ / "run.h5"));
+    }
+    EXPECT_TRUE(leftovers().empty());
+}
+
+// One shard run twice at once: the second truncated the file the first was writing (the first then
+// exited 0 with a corrupt file). A shard now holds a lock beside its file; a second writer is refused
+// in one line and touches nothing.
+TEST_F(Writer, ASecondWriterOfAShardIsRefused) {
+    const ShardRun probe = run(render_args("probe.h5"));
+    for (const std::string name : {"cs.mcap", "cs.h5"}) {
+        if (name == "cs.h5" && no_hdf5(probe)) continue;
+        const fs::path lock = dir_ / (".~" + name + ".lock");
+        const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+        ASSERT_GE(fd, 0);
+        ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0); // as a run of the shard holds it
+        const ShardRun r = run(render_args(name, {"--shard", "0/2"}));
+        EXPECT_EQ(r.exit_code, 1) << name << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << name << r.err;
+        EXPECT_NE(r.err.find("error: --out " + (dir_ / name).string() + ": another vksonar run is writing this shard"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / name)) << name;
+        ::close(fd);
+        fs::remove(lock);
+        const ShardRun alone = run(render_args(name, {"--shard", "0/2"}));
+        EXPECT_EQ(alone.exit_code, 0) << name << alone.err;
+        EXPECT_TRUE(fs::is_regular_file(dir_ / name)) << name;
+    }
+    // A frame-folder shard: the lock is DIR/.~shard.json.lock.
+    fs::create_directories(dir_ / "cs");
+    const fs::path lock = dir_ / "cs" / ".~shard.json.lock";
+    const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);
+    const ShardRun r = run(render_args("cs", {"--save", "polar", "--shard", "0/2"}));
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("another vksonar run is writing this shard"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "cs" / "shard.json"));
+    ::close(fd);
+    fs::remove(lock);
+    EXPECT_EQ(run(render_args("cs", {"--save", "polar", "--shard", "0/2"})).exit_code, 0);
+    EXPECT_FALSE(fs::exists(lock)) << "the lock is removed at the end of the run";
+    EXPECT_TRUE(leftovers().empty()) << "the lock is removed at the end of the run";
+}
+
+// A shard's --out that is a symlink: the resume renamed its new file onto the link, replacing it with a
+// regular file and leaving the target stale. It now writes and renames onto the link's target.
+TEST_F(Writer, ASymlinkedShardOutStaysALink) {
+    fs::create_directories(dir_ / "real");
+    for (const std::string name : {"s1.h5", "s1.mcap"}) {
+        fs::create_symlink(fs::path("real") / name, dir_ / ("ln" + name));
+        const ShardRun r = run(render_args("ln" + name, {"--shard", "1/2"}));
+        if (name == "s1.h5" && no_hdf5(r)) continue;
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        const ShardRun again = run(render_args("ln" + name, {"--shard", "1/2"})); // a re-run: resumes (.h5 copies)
+        ASSERT_EQ(again.exit_code, 0) << again.err;
+        EXPECT_TRUE(fs::is_symlink(dir_ / ("ln" + name))) << name << ": the link was replaced";
+        EXPECT_TRUE(fs::is_regular_file(dir_ / "real" / name)) << name;
+        // an unsharded run through the link replaces the target, not the link
+        EXPECT_EQ(run(render_args("ln" + name)).exit_code, 0) << name;
+        EXPECT_TRUE(fs::is_symlink(dir_ / ("ln" + name))) << name;
+    }
+    EXPECT_TRUE(leftovers().empty());
+}
+
+// The output folder removed during a frame-folder run: the run made the path again for each frame and
+// exited 0 with the earlier frames missing. Now it stops with one line naming the folder.
+TEST_F(Writer, AFolderRemovedDuringTheRunStopsIt) {
+    const std::string poses = long_trajectory("long.csv", 3000);
+    std::vector<std::string> a = render_args("gone", {"--save", "polar"});
+    for (std::size_t i = 0; i + 1 < a.size(); ++i)
+        if (a[i] == "--trajectory") a[i + 1] = poses;
+    std::string command = quote(VKSONAR_CLI);
+    for (const auto& x : a)
+        command += " " + quote(x);
+    const fs::path out = dir_ / "gone", err = dir_ / "gone.err", rc = dir_ / "gone.rc";
+    const std::string script =
+        "( " + command + " > /dev/null 2> " + quote(err.string()) + " < /dev/null; echo $? > " + quote(rc.string()) +
+        " ) & pid=$!; n=0; while [ ! -e " + quote((out / "frame_000003" / "meta.json").string()) +
+        " ] && [ $n -lt 3000 ]; do sleep 0.01; n=$((n+1)); done; n=0; while [ -e " + quote(out.string()) +
+        " ] && [ $n -lt 100 ]; do rm -rf " + quote(out.string()) + " 2> /dev/null; n=$((n+1)); done; wait $pid";
+    ASSERT_EQ(std::system(script.c_str()), 0);
+    const std::string text = read_text(err);
+    EXPECT_NE(std::atoi(read_text(rc).c_str()), 0) << text;
+    ShardRun r;
+    r.err = text;
+    EXPECT_EQ(r.err_lines(), 1u) << text;
+    EXPECT_EQ(text.rfind("error: ", 0), 0u) << text;
+    EXPECT_NE(text.find(out.string()), std::string::npos) << text;
+    EXPECT_FALSE(fs::exists(out)) << "the folder was made again";
+}
+
+// A trajectory that starts with a UTF-8 byte order mark (with and without a header) reads as without.
+TEST_F(Writer, ATrajectoryByteOrderMarkIsSkipped) {
+    write_text(dir_ / "bom_header.csv", "\xEF\xBB\xBFx,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    write_text(dir_ / "bom.csv", "\xEF\xBB\xBF"
+                                 "0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    for (const std::string name : {"bom_header.csv", "bom.csv"}) {
+        std::vector<std::string> a = render_args("out_" + name, {"--save", "polar"});
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = (dir_ / name).string();
+        const ShardRun r = run(a);
+        EXPECT_EQ(r.exit_code, 0) << name << r.err;
+        EXPECT_TRUE(fs::exists(dir_ / ("out_" + name) / "frame_000002" / "meta.json")) << name;
+    }
+}
+
+// A re-run shard with the scene file changed at the same path: the identity held the scene's path only,
+// so the shard resumed with frames of two scenes. It now holds a hash of the loaded scene's content;
+// the same content re-saved (here: another layout of the JSON) still resumes.
+TEST_F(Writer, AReRunShardRefusesAChangedScene) {
+    const std::string original = read_text(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+    const std::string key = "\"backscatter_db\": -30";
+    ASSERT_NE(original.find(key), std::string::npos);
+    for (const std::string out : {"scene_shard", "scene_shard.mcap"}) {
+        write_text(dir_ / "scene.gltf", original);
+        const std::vector<std::string> args =
+            render_args(out, {"--scene", (dir_ / "scene.gltf").string(), "--save", "polar", "--shard", "0/2"});
+        ASSERT_EQ(run(args).exit_code, 0) << out;
+        write_text(dir_ / "scene.gltf", original + "\n\n");
+        ShardRun r = run(args);
+        EXPECT_EQ(r.exit_code, 0) << out << r.err;
+        std::string changed = original;
+        changed.replace(changed.find(key), key.size(), "\"backscatter_db\": -31");
+        write_text(dir_ / "scene.gltf", changed);
+        r = run(args);
+        EXPECT_EQ(r.exit_code, 2) << out << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << out << r.err;
+        EXPECT_NE(r.err.find("holds "), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("another run (scene_fnv1a64: "), std::string::npos) << out << r.err;
+    }
+}
+
+// A reused frame folder: a shorter run with another --save kept the earlier run's files beside its own
+// (frame_000002's fan.png beside the new meta.json) and its later frames whole. An unsharded run now
+// removes the earlier run's frame folders and files first, and nothing else.
+TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
+    // `args` with --trajectory's value replaced (empty: a single --pose instead).
+    auto with = [&](std::vector<std::string> args, const std::string& poses) {
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--trajectory") {
+                if (poses.empty()) {
+                    args[i] = "--pose";
+                    args[i + 1] = "0,0,0,0,10,0";
+                } else {
+                    args[i + 1] = poses;
+                }
+            }
+        return args;
+    };
+    write_text(dir_ / "two.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    ASSERT_EQ(run(with(render_args("kd"), "")).exit_code, 0); // a single pose: its files in kd itself
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "fan.png"));
+    ASSERT_EQ(run(render_args("kd")).exit_code, 0); // 7 frames, frame_000002..frame_000008
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "frame_000008" / "fan.png"));
+    write_text(dir_ / "kd" / "notes.txt", "mine");
+    fs::create_directories(dir_ / "kd" / "frame_extra");
+    write_text(dir_ / "kd" / ".~fan.png", "a killed run's temporary");
+    ASSERT_EQ(run(with(render_args("kd", {"--save", "polar"}), (dir_ / "two.csv").string())).exit_code, 0);
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(dir_ / "kd"))
+        names.push_back(entry.path().filename());
+    std::sort(names.begin(), names.end());
+    EXPECT_EQ(names, (std::vector<std::string>{"frame_000002", "frame_000003", "frame_extra", "notes.txt"}));
+    for (const std::string frame : {"frame_000002", "frame_000003"}) {
+        names.clear();
+        for (const auto& entry : fs::directory_iterator(dir_ / "kd" / frame))
+            names.push_back(entry.path().filename());
+        std::sort(names.begin(), names.end());
+        EXPECT_EQ(names, (std::vector<std::string>{"meta.json", "polar.npy"})) << frame;
+    }
+    EXPECT_EQ(read_text(dir_ / "kd" / "notes.txt"), "mine");
+
+    // A run that fails before its first frame leaves the earlier run as it was.
+    EXPECT_EQ(
+        run(with(render_args("kd", {"--save", "polar", "--set", "bins=-1"}), (dir_ / "two.csv").string())).exit_code,
+        2);
+    EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
+}
+
+// merge took frame folders whose arrays were missing or empty as whole frames. A frame folder now
+// holds the files every other frame of the run holds, none of them empty, or merge refuses in one line.
+TEST_F(Writer, MergeRefusesAFrameFolderWithMissingOrEmptyArrays) {
+    ASSERT_EQ(run(render_args("m0", {"--save", "polar,fan", "--shard", "0/2"})).exit_code, 0);
+    ASSERT_EQ(run(render_args("m1", {"--save", "polar,fan", "--shard", "1/2"})).exit_code, 0);
+    const fs::path merged = dir_ / "merged";
+    const fs::path polar = dir_ / "m1" / "frame_000007" / "polar.npy";
+    const std::string bytes = read_text(polar);
+    write_text(polar, "");
+    ShardRun r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find(polar.string() + ": empty"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(merged));
+    fs::remove(polar);
+    r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("frame_000007 holds other files than"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("(lacks polar.npy)"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(merged));
+    write_text(polar, bytes);
+    r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
 }
 
 } // namespace

@@ -12,6 +12,8 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <cerrno>
+
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -45,7 +47,7 @@ bool hdf5_available() {
 }
 
 Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& path, const Plan&, const DatasetMeta&,
-                                                             const DatasetOptions&) {
+                                                             const DatasetOptions&, const std::string&) {
     return make_error(ErrorCode::unsupported,
                       "--out " + path + ": this build has no HDF5 (install libhdf5-dev and rebuild)");
 }
@@ -213,6 +215,26 @@ std::optional<CommitRecord> read_commit(const std::string& path) {
     return best;
 }
 
+// Why H5Fcreate failed: H5Fcreate's own error says only that; the innermost entry of HDF5's error stack
+// says why ("unable to lock file": another process has it open), else errno.
+std::string create_failure_reason(const std::string& path) {
+    const int saved = errno;
+    std::string innermost;
+    H5Ewalk2(
+        H5E_DEFAULT, H5E_WALK_DOWNWARD,
+        [](unsigned, const H5E_error2_t* e, void* data) -> herr_t {
+            if (e && e->desc) *static_cast<std::string*>(data) = e->desc;
+            return 0;
+        },
+        &innermost);
+    std::error_code ec;
+    if (innermost.find("lock") != std::string::npos)
+        return "it is open in another process (HDF5 file lock: " + innermost + ")";
+    if (std::filesystem::exists(path, ec)) return "a file of that name is already there";
+    if (saved != 0) return std::strerror(saved);
+    return innermost.empty() ? std::string("HDF5 gave no reason") : innermost;
+}
+
 // The label arrays (--save labels): all of them or none, as the run asked. `boxes` holds one
 // boxes.json text per frame.
 struct LabelRows {
@@ -221,7 +243,8 @@ struct LabelRows {
 
 class H5Writer final : public DatasetWriter {
 public:
-    explicit H5Writer(std::string path) : path_(std::move(path)) {}
+    explicit H5Writer(std::string path, std::string name = std::string())
+        : path_(std::move(path)), name_(name.empty() ? path_ : std::move(name)) {}
     ~H5Writer() override { abandon(); }
     H5Writer(const H5Writer&) = delete;
     H5Writer& operator=(const H5Writer&) = delete;
@@ -232,8 +255,9 @@ public:
         // The user block holds the commit record (read_commit).
         const Hid create(H5Pcreate(H5P_FILE_CREATE), H5Pclose);
         if (!create.ok() || H5Pset_userblock(create.get(), kUserBlock) < 0) return fail("cannot make the user block");
-        file_ = Hid(H5Fcreate(path_.c_str(), H5F_ACC_TRUNC, create.get(), H5P_DEFAULT), H5Fclose);
-        if (!file_.ok()) return fail("cannot create the file");
+        // EXCL: a file that is there is not this run's to truncate (the caller writes a new name).
+        file_ = Hid(H5Fcreate(path_.c_str(), H5F_ACC_EXCL, create.get(), H5P_DEFAULT), H5Fclose);
+        if (!file_.ok()) return fail("cannot create " + path_ + ": " + create_failure_reason(path_));
         commit_fd_ = ::open(path_.c_str(), O_WRONLY | O_CLOEXEC);
         if (commit_fd_ < 0) return fail("cannot open the user block");
         const hsize_t bins = plan.bins, beams = plan.beams;
@@ -280,7 +304,8 @@ public:
             const ShardRecord& r = *meta.shard;
             ok = count("shard_index", r.index) && count("shard_count", r.count) && text("shard_source", r.source) &&
                  count("shard_first", r.first) && count("shard_end", r.end) && count("trajectory_frames", r.total) &&
-                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash);
+                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash) &&
+                 (r.scene_hash.empty() || text("scene_fnv1a64", r.scene_hash));
         }
         if (!ok) return fail("cannot write the dataset's layout");
         std::uint32_t deflating = 0;
@@ -547,7 +572,7 @@ private:
     }
 
     Error fail(const std::string& what) const {
-        return make_error(ErrorCode::io, "cannot write " + path_ + ": " + what);
+        return make_error(ErrorCode::io, "cannot write " + name_ + ": " + what);
     }
 
     // UTF-8 text of variable length (h5py: .asstr() reads str): /boxes' type in the file and in memory.
@@ -663,6 +688,7 @@ private:
     LabelRows labels_;
     RowDataset flow_;
     hsize_t frames_ = 0;
+    std::string name_;   // the file as messages name it (path_ may be a temporary beside it)
     int commit_fd_ = -1; // the file again, for the commit record in its user block
 };
 
@@ -711,6 +737,7 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
         r.source = *source;
         r.trajectory = h5::read_text(f, "trajectory").value_or("");
         r.trajectory_hash = *hash;
+        r.scene_hash = h5::read_text(f, "scene_fnv1a64").value_or(""); // absent: written before it was recorded
         info.shard = r;
     }
     const bool u16 = H5Lexists(f, "polar_u16", H5P_DEFAULT) > 0;
@@ -722,8 +749,9 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
 }
 
 Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& path, const Plan& plan,
-                                                             const DatasetMeta& meta, const DatasetOptions& options) {
-    auto writer = std::make_unique<H5Writer>(path);
+                                                             const DatasetMeta& meta, const DatasetOptions& options,
+                                                             const std::string& write_to) {
+    auto writer = std::make_unique<H5Writer>(write_to.empty() ? path : write_to, path);
     if (auto opened = writer->open(plan, meta, options); !opened) return opened.error();
     return std::unique_ptr<DatasetWriter>(std::move(writer));
 }

@@ -71,9 +71,12 @@ bool hdf5_available();
 
 class DatasetWriter {
 public:
-    // Creates (or truncates) `path`. Fails with one line naming the file.
+    // Creates `path`, or `write_to` when given (a new file the caller renames to `path`; messages name
+    // `path`). Never truncates a file that is there: an existing one is an error. Fails with one line
+    // naming the file and why (a held HDF5 file lock: another process has it open).
     static Result<std::unique_ptr<DatasetWriter>> create(const std::string& path, const Plan& plan,
-                                                         const DatasetMeta& meta, const DatasetOptions& options);
+                                                         const DatasetMeta& meta, const DatasetOptions& options,
+                                                         const std::string& write_to = std::string());
     // Goes on with `path`, written by an earlier run of the same shard, after the frames of its last
     // flush that returned (frames_written()): they are copied into a new file, checked against the
     // hashes recorded with them, and the new file replaces `path`; anything the kill cut off is dropped.

@@ -79,8 +79,9 @@ json classes_of(const fs::path& meta_path) {
 }
 
 // The frame folders of RUN: RUN itself when it holds boxes.json, else its sub-folders that hold one,
-// in frame order. A frame folder with only one of boxes.json and meta.json is refused: it is an
-// unfinished frame (meta.json is written last) or a frame rendered without labels.
+// in frame order. A frame folder with only one of boxes.json and meta.json, or (a frame_NNNNNN folder)
+// with neither, is refused: it is an unfinished frame (meta.json is written last) or a frame rendered
+// without labels.
 std::vector<FrameFolder> frame_folders(const fs::path& run) {
     std::error_code ec;
     std::vector<FrameFolder> frames;
@@ -93,8 +94,11 @@ std::vector<FrameFolder> frame_folders(const fs::path& run) {
                 if (!entry.is_directory(ec)) continue;
                 const bool boxes = fs::is_regular_file(entry.path() / "boxes.json", ec);
                 const bool meta = fs::is_regular_file(entry.path() / "meta.json", ec);
+                // A vksonar frame folder with neither is a frame cut off before its files (or emptied):
+                // refused below, not skipped.
+                const bool frame_named = entry.path().filename().string().rfind("frame_", 0) == 0;
                 any_boxes = any_boxes || boxes;
-                if (boxes || meta)
+                if (boxes || meta || frame_named)
                     frames.push_back({entry.path(), (entry.path().filename() / "fan.png").generic_string(), {}, 0});
             }
         } catch (const fs::filesystem_error& e) {
@@ -105,6 +109,8 @@ std::vector<FrameFolder> frame_folders(const fs::path& run) {
                            ": no boxes.json in it or in its frame folders (render with --save fan,labels)");
     }
     for (FrameFolder& f : frames) {
+        if (!fs::is_regular_file(f.dir / "boxes.json", ec) && !fs::is_regular_file(f.dir / "meta.json", ec))
+            throw BadInput(f.dir.string() + ": a frame folder without meta.json and boxes.json (an unfinished frame)");
         if (!fs::is_regular_file(f.dir / "boxes.json", ec))
             throw BadInput(f.dir.string() + ": meta.json but no boxes.json (rendered without --save labels?)");
         if (!fs::is_regular_file(f.dir / "meta.json", ec))

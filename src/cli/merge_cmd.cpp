@@ -81,6 +81,10 @@ void folder_merge(const std::vector<ShardInput>& shards, const std::string& out)
         throw Failure("merge: cannot create " + temporary.string() + ": " + ec.message());
     try {
         nlohmann::ordered_json list = nlohmann::ordered_json::array();
+        // Every frame of a run holds the same files (its --save list, one identity for all shards): the
+        // first frame's names, to check the others against.
+        std::set<std::string> first_files;
+        fs::path first_frame;
         for (const ShardInput& s : shards) {
             const FolderManifest m = read_manifest(s.path);
             for (std::uint64_t line : m.lines) {
@@ -88,10 +92,28 @@ void folder_merge(const std::vector<ShardInput>& shards, const std::string& out)
                 const fs::path from = fs::path(s.path) / name, to = temporary / name;
                 if (!fs::create_directory(to, ec) || ec)
                     throw BadInput("merge: " + name + " is in more than one shard (" + s.path + ")");
+                std::set<std::string> files;
                 for (const auto& entry : fs::directory_iterator(from)) {
                     const std::string file = entry.path().filename().string();
                     if (file.rfind(".~", 0) == 0 || !entry.is_regular_file()) continue; // a temporary of a killed run
+                    if (entry.file_size(ec) == 0 || ec)
+                        throw BadInput("merge: " + entry.path().string() + ": empty (a damaged frame: re-render it)");
+                    files.insert(file);
                     link_or_copy(entry.path(), to / file);
+                }
+                if (first_frame.empty()) {
+                    first_files = files;
+                    first_frame = from;
+                } else if (files != first_files) {
+                    std::string missing, extra;
+                    for (const std::string& f : first_files)
+                        if (!files.count(f)) missing += (missing.empty() ? "" : ", ") + f;
+                    for (const std::string& f : files)
+                        if (!first_files.count(f)) extra += (extra.empty() ? "" : ", ") + f;
+                    throw BadInput("merge: " + from.string() + " holds other files than " + first_frame.string() +
+                                   (missing.empty() ? "" : " (lacks " + missing + ")") +
+                                   (extra.empty() ? "" : " (has " + extra + " besides)") +
+                                   ": a damaged frame, re-render it");
                 }
             }
             list.push_back({{"index", s.shard.index},

@@ -3,21 +3,28 @@
 // Order matters for the "no partial output" promise: every input (config layers, scene, poses,
 // trajectory, --save list) is read and validated first; only then is the output directory created,
 // and it is removed again if anything fails before the first frame is on disk. Each file is written
-// under a temporary name and renamed, so a reader never sees half a file.
+// under a temporary name and renamed, so a reader never sees half a file; an unsharded .h5 or bag is
+// written whole under a temporary name and renamed onto OUT at the end (DatasetFile).
 //
 // run_render (at the end) reads as the list of steps; the inputs are read and checked by
 // render_job.cpp, the per-frame files written by render_frame.cpp.
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <string>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -87,7 +94,8 @@ constexpr const char* kUsage =
     "                (normals.png), multibeam (multibeam.png/.npy) and raw_scan (raw_scan.png/.npy)\n"
     "  --asset-root  folder that files named inside the scene (external buffers) must lie in, symlinks and\n"
     "                '..' resolved (default: the scene file's folder; config key scene.asset_root)\n"
-    "  --out         output directory (created), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
+    "  --out         output directory (created; an unsharded run first removes an earlier run's frames\n"
+    "                and files there, no others), or a FILE.h5 / FILE.hdf5: one HDF5 dataset for the whole\n"
     "                run (polar [frames, bins, beams], pose, frame_index, time, metadata; docs/datasets.md;\n"
     "                --save polar (default), polar_u16, labels and flow only: labels adds instance, class,\n"
     "                instance_fraction, elevation, elevation_spread [frames, bins, beams] and point [..., 3],\n"
@@ -150,7 +158,64 @@ public:
     void keep() { keep_ = true; }
     const fs::path& path() const { return dir_; }
 
+    // An unsharded run replaces the previous run in its folder, as a .h5 or bag is replaced whole:
+    // before its first frame is written, the entries an earlier run wrote there go (frame_NNNNNN
+    // folders, the files a single pose writes, their leftover temporaries); no other file is touched.
+    // Run once, on the write-behind thread, just before the first frame: a run that fails before it
+    // leaves the earlier run as it was.
+    void clear_previous_run() {
+        if (cleared_) return;
+        cleared_ = true;
+        std::error_code ec;
+        std::vector<fs::path> stale;
+        for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+            std::string name = entry.path().filename().string();
+            if (name.rfind(".~", 0) == 0) name = name.substr(2);
+            const bool frame_folder = name.size() > 6 && name.rfind("frame_", 0) == 0 &&
+                                      name.find_first_not_of("0123456789", 6) == std::string::npos &&
+                                      entry.is_directory(ec) && !entry.is_symlink(ec);
+            if (frame_folder || (is_frame_file(name) && !entry.is_directory(ec))) stale.push_back(entry.path());
+        }
+        if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
+        for (const fs::path& path : stale) {
+            fs::remove_all(path, ec);
+            if (ec) throw Failure("cannot remove " + path.string() + " (an earlier run's): " + ec.message());
+        }
+    }
+
 private:
+    // The files vksonar writes in a frame's folder (render_frame.cpp; a single pose's go in OUT itself).
+    static bool is_frame_file(const std::string& name) {
+        static const char* const kNames[] = {"meta.json",
+                                             "fan.png",
+                                             "polar.npy",
+                                             "polar.png",
+                                             "polar_u16.npy",
+                                             "depth.npy",
+                                             "normals.npy",
+                                             "echo.npy",
+                                             "cloud.ply",
+                                             "flow.npy",
+                                             "instance.npy",
+                                             "class.npy",
+                                             "instance_fraction.npy",
+                                             "elevation.npy",
+                                             "elevation_spread.npy",
+                                             "point.npy",
+                                             "instance_fan.npy",
+                                             "class_fan.npy",
+                                             "instance_fan.png",
+                                             "boxes.json",
+                                             "normals.png",
+                                             "multibeam.png",
+                                             "multibeam.npy",
+                                             "raw_scan.png",
+                                             "raw_scan.npy"};
+        for (const char* known : kNames)
+            if (name == known) return true;
+        return false;
+    }
+
     void cleanup() {
         std::error_code ec;
         if (!created_.empty()) fs::remove_all(created_, ec);
@@ -159,35 +224,116 @@ private:
     fs::path dir_;
     fs::path created_;
     bool keep_ = false;
+    bool cleared_ = false;
 };
 
 // ---- the output file -------------------------------------------------------------------------
 
-// The dataset file's path: its folder must exist and be writable before anything renders; the file
-// is removed again unless keep() is called (a frame is in it). A shard's file that is already there
-// (an earlier run of the shard) is never removed: a failed re-run must not lose its frames.
-class DatasetFile {
+// OUT with the links of its last part followed: a run writes and renames onto the link's target, so a
+// symlinked --out stays a link to the file that is written.
+fs::path resolve_links(fs::path path) {
+    std::error_code ec;
+    for (int hops = 0; hops < 40 && fs::is_symlink(path, ec); ++hops) {
+        const fs::path to = fs::read_symlink(path, ec);
+        if (ec) break;
+        path = to.is_absolute() ? to : (path.has_parent_path() ? path.parent_path() : fs::path(".")) / to;
+    }
+    return path;
+}
+
+// A shard's file has one writer at a time: an advisory lock (flock) on `.~NAME.lock` beside it, held
+// for the run and removed at its end. A second run of the same shard is refused in one line rather
+// than writing into (or truncating) the file the first one writes. The lock file's inode is checked
+// after the lock is taken, so a run that took the lock of a file its holder removed tries again.
+class ShardLock {
 public:
-    DatasetFile(const fs::path& path, bool keep_existing) : path_(path) {
-        std::error_code ec;
-        keep_ = keep_existing && fs::exists(path, ec);
-        const fs::path folder = path.has_parent_path() ? path.parent_path() : fs::path(".");
-        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + path.string() + ": no folder " + folder.string());
-        if (fs::is_directory(path, ec)) throw BadInput("--out " + path.string() + ": is a directory");
-        if (::access(folder.c_str(), W_OK) != 0)
-            throw BadInput("--out " + path.string() + ": the folder is not writable");
+    ShardLock(const fs::path& target, const std::string& out) {
+        const std::string name = ".~" + target.filename().string() + ".lock";
+        path_ = target.has_parent_path() ? target.parent_path() / name : fs::path(name);
+        for (int attempt = 0; attempt < 16; ++attempt) {
+            fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+            if (fd_ < 0)
+                throw Failure("--out " + out + ": cannot create the lock file " + path_.string() + ": " +
+                              std::strerror(errno));
+            if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+                const int e = errno;
+                ::close(std::exchange(fd_, -1));
+                if (e == EWOULDBLOCK)
+                    throw Failure("--out " + out + ": another vksonar run is writing this shard (it holds the lock " +
+                                  path_.string() + ")");
+                throw Failure("--out " + out + ": cannot lock " + path_.string() + ": " + std::strerror(e));
+            }
+            struct stat held {};
+            struct stat named {};
+            if (::fstat(fd_, &held) == 0 && ::stat(path_.c_str(), &named) == 0 && held.st_dev == named.st_dev &&
+                held.st_ino == named.st_ino)
+                return;
+            ::close(std::exchange(fd_, -1)); // its holder removed it as we took it: take the new one
+        }
+        throw Failure("--out " + out + ": cannot take the lock " + path_.string());
     }
-    ~DatasetFile() {
-        std::error_code ec;
-        if (!keep_) fs::remove(path_, ec);
+    ~ShardLock() {
+        if (fd_ < 0) return;
+        ::unlink(path_.c_str()); // while still held: a waiting run sees another inode and tries again
+        ::close(fd_);
     }
-    DatasetFile(const DatasetFile&) = delete;
-    DatasetFile& operator=(const DatasetFile&) = delete;
-    void keep() { keep_ = true; }
+    ShardLock(const ShardLock&) = delete;
+    ShardLock& operator=(const ShardLock&) = delete;
 
 private:
     fs::path path_;
-    bool keep_ = false;
+    int fd_ = -1;
+};
+
+// The dataset file (.h5 or .mcap): its folder must exist and be writable before anything renders.
+// Nothing here removes or truncates a file this run did not create:
+// - an unsharded run writes a new file under a temporary name beside OUT (`.~NAME.writing-PID`) and
+//   renames it onto OUT once it is closed (publish): readers and concurrent runs never see a torn
+//   file, and a failed run removes its temporary and leaves OUT as it was;
+// - a shard holds its lock (ShardLock), writes a new file the same way and renames it onto OUT as soon
+//   as it is made (publish), so a killed shard leaves its frames at OUT for the re-run; a resume
+//   replaces OUT by rename too. A shard's file that this run did not make is never removed.
+// OUT's links are followed (target()).
+class DatasetFile {
+public:
+    DatasetFile(const fs::path& out, bool shard) : target_(resolve_links(out)) {
+        std::error_code ec;
+        const std::string named = out.string();
+        const fs::path folder = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
+        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + named + ": no folder " + folder.string());
+        if (fs::is_directory(target_, ec)) throw BadInput("--out " + named + ": is a directory");
+        if (::access(folder.c_str(), W_OK) != 0) throw BadInput("--out " + named + ": the folder is not writable");
+        const std::string name = ".~" + target_.filename().string() + ".writing-" + std::to_string(::getpid());
+        temporary_ = target_.has_parent_path() ? folder / name : fs::path(name);
+        if (shard) lock_.emplace(target_, named);
+    }
+    ~DatasetFile() {
+        std::error_code ec;
+        if (!published_) fs::remove(temporary_, ec); // this run's own file, not (yet) OUT
+        if (published_ && removable_ && !keep_) fs::remove(target_, ec);
+    }
+    DatasetFile(const DatasetFile&) = delete;
+    DatasetFile& operator=(const DatasetFile&) = delete;
+
+    // A frame is in it (a shard's published file stays).
+    void keep() { keep_ = true; }
+    const fs::path& target() const { return target_; }
+    const fs::path& temporary() const { return temporary_; }
+    // Renames the temporary onto OUT's target. A shard's new file, made where no file was, is removed
+    // again if the run fails before its first frame.
+    void publish() {
+        std::error_code ec;
+        const bool was_there = fs::exists(target_, ec);
+        fs::rename(temporary_, target_, ec);
+        if (ec) throw Failure("cannot rename " + temporary_.string() + " to " + target_.string() + ": " + ec.message());
+        published_ = true;
+        removable_ = !was_there;
+    }
+
+private:
+    fs::path target_, temporary_;
+    std::optional<ShardLock> lock_;
+    bool published_ = false, removable_ = false, keep_ = false;
 };
 
 DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::string& backend,
@@ -220,8 +366,9 @@ std::unique_ptr<DatasetWriter> open_dataset_writer(const std::string& path, cons
         if (resumed.error().code == ErrorCode::invalid_argument) throw BadInput("--out " + resumed.error().message);
         std::fprintf(stderr, "warning: %s: starting the shard over\n", resumed.error().message.c_str());
     }
-    auto created = DatasetWriter::create(path, plan, meta, options);
+    auto created = DatasetWriter::create(path, plan, meta, options, file.temporary().string());
     if (!created) throw Failure(created.error().message);
+    if (meta.shard) file.publish(); // at OUT from its first flush on: a killed shard resumes from it
     return std::move(created.value());
 }
 
@@ -254,15 +401,19 @@ void refuse_mixed_folders(const RenderJob& job) {
 // The output directory, or the .h5 / .mcap file's place: made only once every input is valid, and
 // removed again if the run fails before a frame is on disk.
 struct OutputTarget {
-    std::optional<OutputDir> dir;    // frame folders
-    std::optional<DatasetFile> file; // .h5 or .mcap
+    std::optional<OutputDir> dir;      // frame folders
+    std::optional<ShardLock> dir_lock; // a frame-folder shard's lock (DIR/.~shard.json.lock)
+    std::optional<DatasetFile> file;   // .h5 or .mcap
 };
 
 void create_output(const RenderJob& job, OutputTarget& target) {
-    if (job.dataset || job.bag)
+    if (job.dataset || job.bag) {
         target.file.emplace(job.out_path, job.shard.has_value()); // a shard's file is resumed (or refused), not removed
-    else
-        target.dir.emplace(job.out_path);
+        return;
+    }
+    target.dir.emplace(job.out_path);
+    // One run of a frame-folder shard at a time too, as of a shard's file.
+    if (job.shard) target.dir_lock.emplace(fs::path(job.out_path) / "shard.json", job.out_path);
 }
 
 // The device and which backend runs on it; meta.json says which and why.
@@ -356,7 +507,7 @@ void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs
     options.flow = job.save.flow;
     options.compress = args.has("--compress");
     options.has_time = job.timed;
-    writers.dataset = open_dataset_writer(job.out_path, plan, meta, options, file, writers.done);
+    writers.dataset = open_dataset_writer(file.target().string(), plan, meta, options, file, writers.done);
 }
 
 // A shard of frame folders: its manifest (which lines, which run) in the output directory; a re-run
@@ -377,7 +528,7 @@ void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const O
 // (merge_mcap.cpp); the identity also names what the bag's messages depend on. A re-run goes on
 // after the frames already in the bag.
 void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& outputs, McapOptions& bag_options,
-                      Writers& writers) {
+                      const fs::path& target, Writers& writers) {
     const ShardRecord& shard = *job.shard;
     Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
                                      save_list(job.save), job.timed, &shard);
@@ -388,22 +539,25 @@ void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& out
                                      {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},
                                      {"rate", job.timed ? std::string("time column") : std::string(rate)}});
     bag_options.shard = shard_metadata(shard, identity, outputs.backend, outputs.device, bag_options.zstd);
-    BagResume resumed = bag_shard_resume(job.out_path, plan, bag_options, shard, identity);
+    BagResume resumed = bag_shard_resume(target.string(), plan, bag_options, shard, identity);
     for (std::uint64_t k = 0; k < resumed.frames; ++k)
         writers.done[job.first + k] = 1;
     writers.bag = std::move(resumed.writer);
     writers.bag_complete = resumed.complete;
 }
 
-void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, Writers& writers) {
+void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs& outputs, DatasetFile& file,
+              Writers& writers) {
     McapOptions& bag_options = *job.bag_options;
     bag_options.zstd = args.has("--compress");
     bag_options.library = "vksonar 0.1.0 (its own MCAP writer)";
-    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, writers);
+    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, file.target(), writers);
     if (!writers.bag && !writers.bag_complete) {
-        auto created = McapDatasetWriter::create(job.out_path, plan, bag_options);
+        // Named as OUT's target in the bag (rosbag2's metadata), written under the temporary name.
+        auto created = McapDatasetWriter::create(file.target().string(), plan, bag_options, file.temporary().string());
         if (!created) throw Failure(created.error().message);
         writers.bag = std::move(created.value());
+        if (job.shard) file.publish(); // at OUT from its first record on: a killed shard resumes from it
     }
 }
 
@@ -415,7 +569,7 @@ Writers open_writers(const Args& args, RenderJob& job, const Plan& plan, const O
     else if (job.shard && !job.bag)
         start_folder_manifest(job, outputs, *target.dir, writers);
     writers.bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
-    if (job.bag) open_bag(args, job, plan, outputs, writers);
+    if (job.bag) open_bag(args, job, plan, outputs, *target.file, writers);
     return writers;
 }
 
@@ -450,13 +604,18 @@ void write_dataset_frame(const WriteBehind::Slot& slot, const RenderJob& job, Ou
 }
 
 // A trajectory's frame goes to DIR/frame_NNNNNN/ (NNNNNN its line), a single pose's to DIR itself.
-void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs,
-                        const OutputDir& out_dir) {
+void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, OutputDir& out_dir) {
+    if (!job.shard) out_dir.clear_previous_run(); // a shard resumes the frames its folder holds
     fs::path dir = out_dir.path();
     if (job.trajectory) {
-        dir /= frame_dir_name(slot.line);
+        // The run's folder was made once (OutputDir); a frame's folder is made in it, never the path
+        // to it again: a folder removed during the run stops it with one line instead of being made
+        // anew with the earlier frames missing.
         std::error_code ec;
-        fs::create_directories(dir, ec);
+        if (!fs::is_directory(out_dir.path(), ec))
+            throw Failure("--out " + out_dir.path().string() + ": the output folder is gone (removed during the run)");
+        dir /= frame_dir_name(slot.line);
+        fs::create_directory(dir, ec);
         if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
     }
     write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
@@ -614,6 +773,8 @@ void finish_run(const RenderJob& job, WriteBehind& writer, Writers& writers, Out
     if (writers.bag)
         if (auto closed = writers.bag->close(); !closed) throw Failure(closed.error().message);
     progress.finish();
+    // An unsharded .h5 or bag replaces OUT only now, whole.
+    if (target.file && !job.shard && (writers.dataset || writers.bag)) target.file->publish();
     if (!job.shard) return;
     // A shard's output is its result even when its block is empty or was already complete.
     if (target.file) target.file->keep();

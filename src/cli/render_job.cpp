@@ -116,6 +116,8 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
     while (std::getline(file, line)) {
         ++number;
         if (!line.empty() && line.back() == '\r') line.pop_back();
+        // A UTF-8 byte order mark (editors on Windows write one) is not part of the first line.
+        if (number == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
         const auto first = line.find_first_not_of(" \t");
         if (first == std::string::npos || line[first] == '#') continue;
         const std::string where = path + ":" + std::to_string(number);
@@ -510,6 +512,8 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
         throw BadInput("--out " + job.out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
                        (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
     warn_if_unit_mistake(scene.value(), config, job.scene_path);
+    // A re-run shard must be the same run: the scene by its content, not only its path.
+    if (job.shard) job.shard->scene_hash = scene_fnv1a64(scene.value());
     if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), 0, 0.0}};
     return {std::move(scene.value()), std::move(config)};
 }

@@ -17,6 +17,10 @@
 #include <utility>
 #include <vector>
 
+namespace vksonar {
+class Scene;
+}
+
 namespace vksonar::cli {
 
 // Which block of which run a shard is.
@@ -27,6 +31,7 @@ struct ShardRecord {
     std::uint64_t total = 0;            // frames in the whole trajectory
     std::string trajectory;             // the trajectory file as given
     std::string trajectory_hash;        // FNV-1a 64 of its bytes, 16 hex digits
+    std::string scene_hash;             // scene_fnv1a64 of the loaded scene (empty: not known)
 };
 
 // Block i of N over `total` frames: [floor(i * total / N), floor((i + 1) * total / N)), so blocks are
@@ -51,6 +56,12 @@ std::optional<ShardRecord> resolve_shard(const std::optional<std::string>& flag,
 // FNV-1a 64 of a file's bytes as 16 hex digits (identifies the trajectory a shard came from).
 std::string file_fnv1a64(const std::string& path);
 
+// FNV-1a 64 of what the renderer uses of a loaded scene, as 16 hex digits: its vertex and index arrays,
+// meshes, draws (transforms, materials, objects), materials, objects, classes and effect requests. A
+// scene file changed in any of these (or an external buffer it names) hashes differently; one only
+// re-saved with the same content does not.
+std::string scene_fnv1a64(const Scene& scene);
+
 // ---- per-frame folders: DIR/shard.json and the done marker ------------------------------------
 
 // What must be equal between shards of one run, and between a shard and its re-run: name -> value
@@ -66,7 +77,7 @@ struct FolderManifest {
 };
 // The identity of a run: the resolved config (JSON text), seed, scene, backend, the arrays saved
 // (`save`, a canonical list), whether times come from the trajectory, and for a shard the
-// trajectory's hash and frame count.
+// trajectory's hash and frame count and the scene's content hash (scene_fnv1a64, when known).
 Identity run_identity(const std::string& config_json, std::uint64_t seed, const std::string& scene,
                       const std::string& backend, const std::string& save, bool timed, const ShardRecord* shard);
 

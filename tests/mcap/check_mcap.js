@@ -11,7 +11,8 @@
 //   - time stamps (header, log and publish time) from the time column, else frame ordinal / --rate;
 //   - CRCs: summary (checked on open), chunks (checked on read), data section (recomputed here);
 //   - --compress (zstd chunks) decodes to the same messages; --ros-sonar-dtype uint16 = polar_u16.npy;
-//   - a run killed half way, and a file cut in the middle of a chunk, read record by record up to the
+//   - a run killed half way (its temporary .~NAME.writing-PID; nothing at OUT), and a file cut in the
+//     middle of a chunk, read record by record up to the
 //     last whole chunk, equal to the same frames of a whole run;
 //   - 3 shard bags (--shard i/3): each its block with the unsharded run's stamps and a vksonar_shard
 //     Metadata record; `vksonar merge` of them equals the unsharded bag, message for message and byte
@@ -229,8 +230,9 @@ async function main() {
   const long = [];
   for (let i = 0; i < 3000; i++) long.push(`${0.001 * i},0,0,0,10,${0.01 * i}`);
   fs.writeFileSync(file("long.csv"), long.join("\n") + "\n");
-  const killedPath = file("killed.mcap");
-  const child = spawn(CLI, ["render", "--trajectory", file("long.csv"), "--out", killedPath, ...SMALL], { stdio: "ignore" });
+  // An unsharded run writes a temporary beside OUT and renames it onto OUT only when it is complete.
+  const child = spawn(CLI, ["render", "--trajectory", file("long.csv"), "--out", file("killed.mcap"), ...SMALL], { stdio: "ignore" });
+  const killedPath = file(`.~killed.mcap.writing-${child.pid}`);
   let exited = false;
   child.on("exit", () => (exited = true));
   const deadline = Date.now() + 60000;
@@ -239,6 +241,7 @@ async function main() {
   check(!exited, "the long run ended before it could be killed (make it longer)");
   child.kill("SIGKILL");
   await new Promise((r) => (exited ? r() : child.on("exit", r)));
+  check(!fs.existsSync(file("killed.mcap")), "a killed unsharded run leaves nothing at OUT");
   const killed = readStream(fs.readFileSync(killedPath));
   const killedSonar = killed.messages.filter((m) => m.topic === "/vksonar/sonar_image");
   const frames = killedSonar.length;

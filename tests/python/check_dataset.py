@@ -10,8 +10,9 @@ Checks, each of which can fail:
     frame, compressed with --compress; without it there are none;
   - with --save labels, /boxes holds each frame's boxes.json text, character for character, with and
     without --compress; without labels there is no /boxes;
-  - a run killed half way leaves a readable file: frames_written whole frames, equal to the same
-    frames of an uninterrupted run, and complete = 0;
+  - a run killed half way leaves a readable file under its temporary name (.~NAME.writing-PID) and
+    no file at OUT: frames_written whole frames, equal to the same frames of an uninterrupted run,
+    and complete = 0;
   - what a dataset cannot hold is refused with one line (exit 2) and no file is left.
 """
 import os
@@ -174,9 +175,11 @@ with tempfile.TemporaryDirectory() as tmp:
     long_poses = os.path.join(tmp, "long.csv")
     with open(long_poses, "w") as f:
         f.write("\n".join(f"{0.001 * i},0,0,0,10,{0.01 * i}" for i in range(3000)) + "\n")
-    killed = os.path.join(tmp, "killed.h5")
-    process = subprocess.Popen([CLI, "render", "--trajectory", long_poses, "--out", killed] + SMALL,
+    out = os.path.join(tmp, "killed.h5")
+    process = subprocess.Popen([CLI, "render", "--trajectory", long_poses, "--out", out] + SMALL,
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # An unsharded run writes a temporary beside OUT and renames it onto OUT only when it is complete.
+    killed = os.path.join(tmp, f".~killed.h5.writing-{process.pid}")
     deadline = time.time() + 60
     while time.time() < deadline and process.poll() is None:
         if os.path.exists(killed) and os.path.getsize(killed) > 200_000:
@@ -186,6 +189,7 @@ with tempfile.TemporaryDirectory() as tmp:
     process.send_signal(signal.SIGKILL)
     process.wait()
     check(still_running, "the long run ended before it could be killed (make the trajectory longer)")
+    check(not os.path.exists(out), "a killed unsharded run leaves nothing at OUT")
     with h5py.File(killed, "r") as f:
         written = int(f.attrs["frames_written"])
         check(f.attrs["complete"] == 0, "a killed run is not complete")
