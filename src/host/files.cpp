@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/angles.h"
+#include "core/sonar_math.hpp"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
 
@@ -327,13 +328,10 @@ void quantize_display(const Frame& frame, std::vector<std::uint16_t>& quantized)
     }
 }
 
-// Same formulas as shaders/sonar_math.h (pixel_coord, view_z_from_depth, slant_range), in double.
+// shaders/sonar_math.h's pixel_coord, view_z_from_depth and slant_range, in double.
 void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float>& range) {
     range.assign(frame.depth.size(), 0.0f);
     if (plan.slice_columns == 0) return;
-    auto pixel_coord = [](std::uint32_t i, std::uint32_t n, double tan_half) {
-        return (2.0 * (i + 0.5) / n - 1.0) * tan_half;
-    };
     for (std::uint32_t row = 0; row < frame.rows; ++row) {
         for (std::uint32_t column = 0; column < frame.columns; ++column) {
             const std::size_t p = static_cast<std::size_t>(row) * frame.columns + column;
@@ -345,10 +343,9 @@ void depth_to_view_range(const Plan& plan, const Frame& frame, std::vector<float
             const std::uint32_t view = std::min(view_of_column(plan, column), plan.views - 1);
             const ViewGeometry& g = plan.view_geometry[view];
             const double u =
-                pixel_coord(column - view_first_column(plan, view), view_columns(plan, view), g.tan_half_h);
-            const double v = pixel_coord(row, frame.rows, g.tan_half_v);
-            const double view_z = plan.depth_a / (d - plan.depth_b);
-            const double r = view_z * std::sqrt(1.0 + u * u + v * v);
+                math_f64::pixel_coord(column - view_first_column(plan, view), view_columns(plan, view), g.tan_half_h);
+            const double v = math_f64::pixel_coord(row, frame.rows, g.tan_half_v);
+            const double r = math_f64::slant_range(math_f64::view_z_from_depth(d, plan.depth_a, plan.depth_b), u, v);
             range[p] = std::isfinite(r) ? static_cast<float>(r) : 0.0f;
         }
     }
