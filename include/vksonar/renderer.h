@@ -45,10 +45,11 @@ enum class WorkLayout : std::uint8_t { automatic, cpu_device, gpu };
 // passes ("bf:profile", "bf:resample", "bf:far_deposit", "bf:far_convolve", "bf:sidelobe": GPU time from
 // the pass before to this one's end) and the host's own steps around the GPU work ("host:prepare":
 // draw matrices, culling, sub-pixel returns; "host:record"; "host:gpu_wait": submit to fence; "host:copy":
-// the readback out), and with labels the labels stage's parts ("labels:pixels", "labels:beams",
-// "labels:visible", host clocks; on either backend). The CPU backend lists its beamform passes on host
-// clocks ("bf:profile"; "bf:beams": the resample and the side lobes, fused). Those entries (names with a ':')
-// lie inside or beside the stages and are not stages:
+// the readback out; not on a HostDepthRenderer, which lists the passes only), and with labels the
+// labels stage's parts ("labels:pixels", "labels:beams", "labels:visible", host clocks; on either
+// backend). The CPU backend lists its beamform passes on host clocks ("bf:profile"; "bf:beams": the
+// resample and the side lobes, fused). Those entries (names with a ':') lie inside or beside the
+// stages and are not stages:
 // a sum over Frame::times skips them. A timestamp between passes can cost a little GPU time: for finding
 // where a frame goes, not for the frame rate.
 enum class StageTiming : std::uint8_t { automatic, host, timestamps, passes };

@@ -159,6 +159,13 @@ private:
     std::uint32_t query_base_ = 0; // the slot being recorded: its first query
     std::array<const char*, kMaxDispatches> pass_names_{};
     void pass_timestamp(VkCommandBuffer commands, const char* name);
+    // The host-depth path (host_depth.cpp) records the beamform stage outside start(), into slot 0's
+    // queries: reset_pass_queries resets them (before any pass_timestamp of the ping), mark_stage_start
+    // writes the stage's start into query `stage_query`, and add_pass_times appends the passes' times
+    // to frame.times once the recorded work has finished. Without pass timestamps all three do nothing.
+    void reset_pass_queries(VkCommandBuffer commands);
+    void mark_stage_start(VkCommandBuffer commands, std::uint32_t stage_query);
+    Result<void> add_pass_times(std::uint32_t stage_query, Frame& frame) const;
 
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame

@@ -156,6 +156,40 @@ void VulkanBackend::pass_timestamp(VkCommandBuffer commands, const char* name) {
     ++passes_recorded_;
 }
 
+void VulkanBackend::reset_pass_queries(VkCommandBuffer commands) {
+    if (!pass_timestamps_) return;
+    query_base_ = 0;
+    passes_recorded_ = 0;
+    context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
+}
+
+void VulkanBackend::mark_stage_start(VkCommandBuffer commands, std::uint32_t stage_query) {
+    if (!pass_timestamps_) return;
+    context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), stage_query);
+}
+
+Result<void> VulkanBackend::add_pass_times(std::uint32_t stage_query, Frame& frame) const {
+    if (!pass_timestamps_ || passes_recorded_ == 0) return {};
+    std::array<std::uint64_t, kMaxDispatches> ticks{};
+    std::uint64_t from = 0;
+    VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(context_.device, query_pool_.get(), stage_query, 1,
+                                                 sizeof(std::uint64_t), &from, sizeof(std::uint64_t),
+                                                 VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
+        context_.device, query_pool_.get(), kPassQueryBase, passes_recorded_, sizeof(std::uint64_t) * passes_recorded_,
+        ticks.data(), sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    const std::uint64_t mask = context_.timestamp_valid_bits >= 64
+                                   ? ~std::uint64_t(0)
+                                   : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
+    const double ns_per_tick = context_.properties.limits.timestampPeriod;
+    for (std::uint32_t n = 0; n < passes_recorded_; ++n) { // each from the end of the one before
+        const double ms = double(((ticks[n] & mask) - (from & mask)) & mask) * ns_per_tick * 1e-6;
+        frame.times.push_back(StageTime{pass_names_[n], ms});
+        from = ticks[n];
+    }
+    return {};
+}
+
 void VulkanBackend::dispatch(VkCommandBuffer commands, const Dispatch& groups) {
     context_.fn.vkCmdDispatch(commands, groups.x, groups.y, groups.z);
 }
