@@ -211,6 +211,10 @@ private:
     // per slot; freed with the pool
     std::array<std::array<VkCommandBuffer, kCommandBufferCount>, kFrameSlots> command_buffers_{};
     std::array<OwnedFence, kFrameSlots> fences_;
+    // Whether the slot's fence guards a submission (set by a successful submit). submit() resets the
+    // fence before vkQueueSubmit; if that fails, nothing will ever signal it, so wait() and the
+    // destructor wait only on a fence that has work behind it.
+    std::array<bool, kFrameSlots> fence_submitted_{};
     // Between start() and finish(): the frame on the device in slot i (in_flight_[i]), and what finish()
     // reports of it.
     struct InFlight {

@@ -4,6 +4,7 @@
 // records, submits, waits and copies out.
 #include <chrono>
 #include <cstring>
+#include <string>
 
 #include "core/half.h"
 #include "vk/commands.h"
@@ -246,12 +247,18 @@ Result<void> VulkanBackend::submit(const VkCommandBuffer* command_buffers, std::
     }
     VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
+    fence_submitted_[slot] = false; // unsignalled until a submission succeeds
     VKS_VK_TRY(queue_submit(context_, submit, fence));
+    fence_submitted_[slot] = true;
     if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
     return {};
 }
 
 Result<void> VulkanBackend::wait(std::uint32_t slot) {
+    if (!fence_submitted_[slot]) {
+        return make_error(ErrorCode::internal, "VulkanBackend::wait: nothing was submitted in frame slot " +
+                                                   std::to_string(slot) + " (its submission failed)");
+    }
     VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     return {};
@@ -349,7 +356,12 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
     // stages' and the readback's are recorded once per slot and submitted again, until the save mask
     // changes.
     const bool keep = commands_kept_[slot] && kept_save_mask_[slot] == save_mask;
-    if (!keep) passes_recorded_ = 0;
+    // Re-recording: not kept until every buffer is recorded again, so that a Begin/End failing partway
+    // leaves the slot to be recorded in full next time, not half of it submitted as kept.
+    if (!keep) {
+        passes_recorded_ = 0;
+        commands_kept_[slot] = false;
+    }
     query_base_ = slot * kQueryCount;
     const std::array<VkCommandBuffer, kCommandBufferCount>& recorded = command_buffers_[slot];
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
