@@ -236,6 +236,46 @@ Frame make_frame_for(const RendererImpl& impl) {
     return f;
 }
 
+// The array of `frame` that make_frame_for sizes and this renderer's save mask fills but `frame` holds
+// at another size (name null: none). The stages write those arrays by index (the labels stage into
+// instance ... point), so a frame from another renderer with the same bins x beams but other saved
+// arrays must be refused, not written past its end.
+struct Misfit {
+    const char* name = nullptr;
+    std::size_t size = 0, expected = 0;
+};
+
+Misfit misfit_array(const RendererImpl& impl, const Frame& frame) {
+    const Plan& p = impl.plan;
+    const SaveFlags mask = backend_save_mask(impl.options);
+    const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
+    const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
+    Misfit misfit;
+    auto check = [&](const char* name, std::size_t size, std::size_t expected) {
+        if (misfit.name == nullptr && size != expected) misfit = Misfit{name, size, expected};
+    };
+    check("clean", frame.clean.size(), cells);
+    if (any(mask & SaveFlags::depth)) {
+        check("depth", frame.depth.size(), pixels);
+        check("material", frame.material.size(), pixels);
+    }
+    if (any(mask & SaveFlags::normals)) check("normals", frame.normals.size(), pixels * 4);
+    if (any(mask & SaveFlags::echo)) check("echo", frame.echo.size(), pixels * 2);
+    if (any(mask & SaveFlags::profiles)) {
+        check("profiles", frame.profiles.size(), static_cast<std::size_t>(p.bins) * p.profile_columns);
+        check("beam_profiles", frame.beam_profiles.size(), cells);
+    }
+    if (any(mask & SaveFlags::labels)) {
+        check("instance", frame.instance.size(), cells);
+        check("instance_fraction", frame.instance_fraction.size(), cells);
+        check("object_class", frame.object_class.size(), cells);
+        check("elevation", frame.elevation.size(), cells);
+        check("elevation_spread", frame.elevation_spread.size(), cells);
+        check("point", frame.point.size(), cells * 3);
+    }
+    return misfit;
+}
+
 bool finite_pose(const Pose& pose) {
     for (double v : {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg})
         if (!std::isfinite(v)) return false;
@@ -286,8 +326,11 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     if (next != nullptr && !finite_pose(next->pose))
         return make_error(ErrorCode::invalid_argument, "next pose: non-finite value");
     const Plan& p = impl.plan;
-    if (frame.clean.size() != static_cast<std::size_t>(p.bins) * p.beams) {
-        return make_error(ErrorCode::invalid_argument, "render: frame was not made by this renderer's make_frame()");
+    if (const Misfit misfit = misfit_array(impl, frame); misfit.name != nullptr) {
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("render: frame was not made by this renderer's make_frame() (Frame::") +
+                              misfit.name + " has " + std::to_string(misfit.size) + " elements, this renderer's " +
+                              std::to_string(misfit.expected) + ")");
     }
     // Each render reports its own stages: the frame is reused, so the lists start empty (clear keeps
     // the capacity reserved by make_frame; no allocation).
