@@ -412,6 +412,22 @@ std::vector<std::size_t> npy_shape(const fs::path& path) {
     return shape;
 }
 
+// --asset-root naming a folder whose name is not UTF-8 (Latin-1 "caf\xe9"): the render works and
+// meta.json holds the name with U+FFFD for the bad byte (before: meta.json's config dump threw, and
+// the CLI printed "error: internal").
+TEST_F(Cli, AssetRootThatIsNotUtf8StillRenders) {
+    const fs::path root = dir_ / "caf\xe9";
+    fs::create_directories(root);
+    fs::copy_file(dir_ / "quad.gltf", root / "quad.gltf");
+    const fs::path out = dir_ / "out";
+    const CliRun r = run({"render", "--scene", (root / "quad.gltf").string(), "--asset-root", root.string(),
+                          "--backend", "cpu", "--set", "bins=64", "--set", "beams=48", "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
+    const std::string written = meta["config"]["scene"]["asset_root"].get<std::string>();
+    EXPECT_NE(written.find("caf\xef\xbf\xbd"), std::string::npos) << written;
+}
+
 TEST_F(Cli, RenderWritesEveryOutput) {
     const fs::path out = dir_ / "out" / "nested";
     const CliRun r = run({"render",
