@@ -105,7 +105,8 @@ public:
     // pipeline and command buffer it will use and uploads the scene (submitting on the context's queue
     // and waiting). Fails with ErrorCode::invalid_argument for a config or material that does not
     // validate (naming the key), ErrorCode::no_device for Backend::vulkan on a CPU-only context,
-    // ErrorCode::unsupported for a grid past the device's limits or an adopted queue without graphics,
+    // ErrorCode::unsupported for a grid past the device's limits, an adopted queue without graphics,
+    // host memory that runs out or a host thread that cannot start (RendererOptions::host_threads),
     // ErrorCode::vulkan if a Vulkan call fails. The context and scene must outlive the renderer;
     // config and options are copied. Thread-safety: may be called from any thread, also while other
     // renderers on the same context create or render.
@@ -141,7 +142,8 @@ public:
     // (docs/labels.md): for each cell of `from` with a label, where its point lands in the polar grid
     // seen from to_pose, as flow[2 i] = d_bin, flow[2 i + 1] = d_beam (bins * beams * 2, float; resized
     // only if its size differs); NaN where the cell has no label, the point leaves the window or
-    // something in `to` hides it. Fails with invalid_argument without labels or on frames not its own.
+    // something in `to` hides it. Fails with invalid_argument without labels or on frames not its own,
+    // unsupported if host memory for `flow` runs out.
     [[nodiscard]] Result<void> label_flow(const Frame& from, const Pose& from_pose, const Frame& to,
                                           const Pose& to_pose, std::vector<float>& flow) const;
 
