@@ -362,6 +362,47 @@ TEST_F(Cli, Compare) {
     EXPECT_EQ(junk.err_lines().size(), 1u);
 }
 
+// A .npy file with `dict` as its header (padded as NumPy pads it) and `data` after it.
+void write_npy_raw(const fs::path& path, std::string dict, const std::string& data) {
+    while ((10 + dict.size() + 1) % 64 != 0)
+        dict += ' ';
+    dict += '\n';
+    std::ofstream file(path, std::ios::binary);
+    file.write("\x93NUMPY\x01\x00", 8);
+    const char length[2] = {static_cast<char>(dict.size() & 0xff), static_cast<char>(dict.size() >> 8)};
+    file.write(length, 2);
+    file << dict << data;
+}
+
+// Crafted .npy headers are bad input (exit 2, one line naming the file), not "error: internal": a
+// shape with no tuple (substr past the end before), and a shape whose element count overflows 64 bits
+// (it wrapped to 0 before, so an empty data section passed as a huge array).
+TEST_F(Cli, CompareRefusesCraftedNpyHeaders) {
+    write_npy_f32(dir_ / "a.npy", {1, 2, 3}, 1, 3);
+    const std::string a = (dir_ / "a.npy").string();
+    struct Case {
+        const char* file;
+        std::string dict, data, expected;
+    };
+    const std::vector<Case> cases = {
+        {"no_tuple.npy", "{'descr': '<f4', 'fortran_order': False, 'shape':}", "", "'shape' is not a tuple"},
+        {"open_tuple.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': 3, }", std::string(12, '\0'),
+         "'shape' is not a tuple"},
+        {"overflow.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 16), }", "",
+         "more than 2^64 elements"},
+        {"overflow_bytes.npy", "{'descr': '<f8', 'fortran_order': False, 'shape': (2147483648, 2147483648), }", "",
+         "more than 2^64 data bytes"},
+    };
+    for (const Case& c : cases) {
+        write_npy_raw(dir_ / c.file, c.dict, c.data);
+        const CliRun r = run({"compare", a, (dir_ / c.file).string()});
+        EXPECT_EQ(r.exit_code, 2) << c.file << ": " << r.err;
+        ASSERT_EQ(r.err_lines().size(), 1u) << c.file << ": " << r.err;
+        EXPECT_NE(r.err.find(c.file), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find(c.expected), std::string::npos) << r.err;
+    }
+}
+
 TEST_F(Cli, BenchDispatch) {
     const CliRun usage = run({"bench"});
     EXPECT_EQ(usage.exit_code, 2);
