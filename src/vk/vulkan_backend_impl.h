@@ -229,7 +229,6 @@ private:
     std::array<InFlight, kFrameSlots> in_flight_;
     std::uint32_t oldest_ = 0; // the slot finish() finishes next, when in flight
     OwnedQueryPool query_pool_;
-    std::uint32_t queries_written_ = 0;
 };
 
 } // namespace vksonar::vk
