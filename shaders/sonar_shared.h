@@ -258,8 +258,8 @@ static_assert(sizeof(MaterialGpu) == 16, "MaterialGpu must match std430");
 // One sub-pixel return (src/core/subpixel.h, docs/pipeline.md "Sub-pixel objects"): a piece of a triangle of
 // an object too small (or too thin) for the pixel grid, its echo computed on the host from its area and
 // material. The list of a frame is sorted by profile column; the buffer (binding kBindingSubpixel, uints)
-// holds the columns' first returns, profile_columns + 1 of them, then, from the next multiple of 4, the
-// returns.
+// holds the columns' first returns, profile_columns + 1 of them, then the silent material (word
+// profile_columns + 1), then, from the next multiple of 4 ((profile_columns + 2 + 3) & ~3), the returns.
 struct SubpixelReturn {
     uint pixel;    // row * columns + column: the pixel whose depth may hide it (its direction's)
     float range_m; // slant range of its centroid

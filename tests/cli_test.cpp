@@ -362,6 +362,47 @@ TEST_F(Cli, Compare) {
     EXPECT_EQ(junk.err_lines().size(), 1u);
 }
 
+// A .npy file with `dict` as its header (padded as NumPy pads it) and `data` after it.
+void write_npy_raw(const fs::path& path, std::string dict, const std::string& data) {
+    while ((10 + dict.size() + 1) % 64 != 0)
+        dict += ' ';
+    dict += '\n';
+    std::ofstream file(path, std::ios::binary);
+    file.write("\x93NUMPY\x01\x00", 8);
+    const char length[2] = {static_cast<char>(dict.size() & 0xff), static_cast<char>(dict.size() >> 8)};
+    file.write(length, 2);
+    file << dict << data;
+}
+
+// Crafted .npy headers are bad input (exit 2, one line naming the file), not "error: internal": a
+// shape with no tuple (substr past the end before), and a shape whose element count overflows 64 bits
+// (it wrapped to 0 before, so an empty data section passed as a huge array).
+TEST_F(Cli, CompareRefusesCraftedNpyHeaders) {
+    write_npy_f32(dir_ / "a.npy", {1, 2, 3}, 1, 3);
+    const std::string a = (dir_ / "a.npy").string();
+    struct Case {
+        const char* file;
+        std::string dict, data, expected;
+    };
+    const std::vector<Case> cases = {
+        {"no_tuple.npy", "{'descr': '<f4', 'fortran_order': False, 'shape':}", "", "'shape' is not a tuple"},
+        {"open_tuple.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': 3, }", std::string(12, '\0'),
+         "'shape' is not a tuple"},
+        {"overflow.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296, 16), }", "",
+         "more than 2^64 elements"},
+        {"overflow_bytes.npy", "{'descr': '<f8', 'fortran_order': False, 'shape': (2147483648, 2147483648), }", "",
+         "more than 2^64 data bytes"},
+    };
+    for (const Case& c : cases) {
+        write_npy_raw(dir_ / c.file, c.dict, c.data);
+        const CliRun r = run({"compare", a, (dir_ / c.file).string()});
+        EXPECT_EQ(r.exit_code, 2) << c.file << ": " << r.err;
+        ASSERT_EQ(r.err_lines().size(), 1u) << c.file << ": " << r.err;
+        EXPECT_NE(r.err.find(c.file), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find(c.expected), std::string::npos) << r.err;
+    }
+}
+
 TEST_F(Cli, BenchDispatch) {
     const CliRun usage = run({"bench"});
     EXPECT_EQ(usage.exit_code, 2);
@@ -410,6 +451,22 @@ std::vector<std::size_t> npy_shape(const fs::path& path) {
     while (std::getline(items, item, ','))
         if (item.find_first_of("0123456789") != std::string::npos) shape.push_back(std::stoul(item));
     return shape;
+}
+
+// --asset-root naming a folder whose name is not UTF-8 (Latin-1 "caf\xe9"): the render works and
+// meta.json holds the name with U+FFFD for the bad byte (before: meta.json's config dump threw, and
+// the CLI printed "error: internal").
+TEST_F(Cli, AssetRootThatIsNotUtf8StillRenders) {
+    const fs::path root = dir_ / "caf\xe9";
+    fs::create_directories(root);
+    fs::copy_file(dir_ / "quad.gltf", root / "quad.gltf");
+    const fs::path out = dir_ / "out";
+    const CliRun r = run({"render", "--scene", (root / "quad.gltf").string(), "--asset-root", root.string(),
+                          "--backend", "cpu", "--set", "bins=64", "--set", "beams=48", "--out", out.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
+    const std::string written = meta["config"]["scene"]["asset_root"].get<std::string>();
+    EXPECT_NE(written.find("caf\xef\xbf\xbd"), std::string::npos) << written;
 }
 
 TEST_F(Cli, RenderWritesEveryOutput) {

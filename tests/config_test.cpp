@@ -179,6 +179,17 @@ TEST(Config, JsonRoundTrip) {
     EXPECT_EQ(nlohmann::json::parse(config_to_json(SonarConfig{}))["absorption"], "auto");
 }
 
+// A text key with bytes that are not UTF-8 (a Latin-1 folder name from --asset-root): config_to_json
+// must not throw (nlohmann's dump() throws type_error 316 on them); the bad byte becomes U+FFFD.
+TEST(Config, JsonOfNonUtf8TextDoesNotThrow) {
+    SonarConfig config;
+    config.scene_asset_root = "/data/caf\xe9/assets";
+    std::string text;
+    ASSERT_NO_THROW(text = config_to_json(config));
+    const auto json = nlohmann::json::parse(text);
+    EXPECT_EQ(json["scene"]["asset_root"], "/data/caf\xef\xbf\xbd/assets");
+}
+
 TEST(Presets, AllLoadValidateAndCiteASource) {
     const auto names = preset_names();
     for (const char* expected :

@@ -214,6 +214,53 @@ TEST_F(EmbedTest, RecordIntoHostFrameMatchesProcess) {
     EXPECT_EQ(host->messages.load(), 0u);
 }
 
+// StageTiming::passes on the host-depth path: process() and record() write the beamform stage's pass
+// timestamps, so they must reset those queries themselves (start() never runs there). Two pings each,
+// under the host's validation messenger, and the pass times come back where the queue has timestamps.
+TEST_F(EmbedTest, PassTimingOnHostDepthIsValidAndReported) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    auto context = Context::adopt(host::host_vulkan(*host->engine));
+    ASSERT_TRUE(context.ok()) << context.error().message;
+    RendererOptions options;
+    options.stage_timing = StageTiming::passes;
+    auto sonar = HostDepthRenderer::create(*context, host::demo_config(), host::depth_desc(host->options), options);
+    ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+    const VulkanContext& vulkan = *context_vulkan(*context);
+    const bool timestamps = vulkan.timestamp_valid_bits > 0 && vulkan.properties.limits.timestampPeriod > 0.0f;
+    auto passes_listed = [](const Frame& frame) {
+        std::size_t n = 0;
+        for (const StageTime& t : frame.times) {
+            if (t.stage.rfind("bf:", 0) != 0) continue;
+            EXPECT_GE(t.ms, 0.0) << t.stage;
+            ++n;
+        }
+        return n;
+    };
+    Frame frame = sonar->make_frame();
+    for (std::uint64_t ping = 0; ping < 2; ++ping) {
+        auto processed = sonar->process(host::depth_image(*host->engine), ping, frame);
+        ASSERT_TRUE(processed.ok()) << processed.error().message;
+        if (timestamps) {
+            EXPECT_GE(passes_listed(frame), 2u) << "bf:profile and bf:resample at least";
+        }
+    }
+    for (std::uint64_t ping = 2; ping < 4; ++ping) {
+        const std::string error = host->engine->render_depth(demo_camera(), [&](VkCommandBuffer commands) {
+            auto r = sonar->record(commands, host::depth_image(*host->engine));
+            return r ? std::string() : r.error().message;
+        });
+        ASSERT_EQ(error, "");
+        auto read = sonar->read_back(ping, frame);
+        ASSERT_TRUE(read.ok()) << read.error().message;
+        if (timestamps) {
+            EXPECT_GE(passes_listed(frame), 2u);
+        }
+    }
+    EXPECT_GT(sum(frame.clean), 0.0);
+    EXPECT_EQ(host->messages.load(), 0u) << "validation messages (e.g. timestamps into queries never reset)";
+}
+
 // The host's own objects for the frame after its depth pass, made and destroyed with the host's own
 // (null) allocator; destroyed before the engine.
 struct HostFrame {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <string>
 #include <vector>
 
 #include "core/plan.h"
@@ -325,6 +326,42 @@ TEST(LabelIds, IdsPastSixteenBitsAreRefusedOnlyWithLabels) {
     EXPECT_EQ(refused.error().message, "labels: draw 0 has instance id 70000; labels hold ids up to 65535");
     options.save_mask = SaveFlags::none;
     EXPECT_TRUE(Renderer::create(cpu_context(), quiet_config(), scene, options));
+}
+
+// A frame from a renderer without labels has the same bins x beams as a labels renderer's but no label
+// arrays: render must refuse it (naming the first array of the wrong size) instead of the labels stage
+// writing instance ... point past their ends. The labels renderer's own frame still renders.
+TEST(LabelFrames, AFrameWithoutTheLabelArraysIsRefused) {
+    Scene scene;
+    AcousticMaterial m;
+    add_quad(scene, 10.0, 0.0, 0.0, 2.0, 2.0, m, 0.0, 3);
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    options.host_threads = 1;
+    auto plain = Renderer::create(cpu_context(), quiet_config(), scene, options);
+    options.save_mask = SaveFlags::labels;
+    auto labelled = Renderer::create(cpu_context(), quiet_config(), scene, options);
+    ASSERT_TRUE(plain.ok() && labelled.ok());
+    Frame foreign = plain->make_frame();
+    ASSERT_EQ(foreign.clean.size(), labelled->make_frame().clean.size());
+    auto refused = labelled->render(Pose{}, 0, foreign);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_EQ(refused.error().code, ErrorCode::invalid_argument);
+    EXPECT_EQ(refused.error().message.rfind("render: frame was not made by this renderer's make_frame() (Frame::depth "
+                                            "has 0 elements, this renderer's ",
+                                            0),
+              0u)
+        << refused.error().message;
+    // Depth and echo sized by hand (as a labels frame's), the label arrays still missing: refused at instance.
+    Frame own = labelled->make_frame();
+    foreign.depth = own.depth;
+    foreign.material = own.material;
+    foreign.echo = own.echo;
+    refused = labelled->render(Pose{}, 0, foreign);
+    ASSERT_FALSE(refused.ok());
+    EXPECT_NE(refused.error().message.find("(Frame::instance has 0 elements"), std::string::npos)
+        << refused.error().message;
+    EXPECT_TRUE(labelled->render(Pose{}, 0, own).ok());
 }
 
 TEST(LabelGpuCpu, BundledSceneLabelsAgree) {

@@ -11,14 +11,19 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include "core/plan.h"
+#include "host/workers.h"
 #include "scene/scene_data.h"
+#include "test_support.h"
 #include "vksonar/scene.h"
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -178,6 +183,134 @@ TEST(SceneLoadMemory, PeakGrowthStaysNearTheFileAndTheArrays) {
     EXPECT_LE(peak - baseline, 1.15 * (file_mib + arrays_mib))
         << "file " << file_mib << " MiB, arrays " << arrays_mib << " MiB, peak " << peak << " MiB, baseline "
         << baseline << " MiB";
+}
+
+// Out of memory and out of threads, for real: a forked child (a death test) caps its own address space
+// (RLIMIT_AS) at what it uses now plus `margin`, so the next allocations and thread stacks fail. Each
+// test sweeps the margin so that the failure lands at different points of the call; the child exits 0
+// when every call came back as a value (an exception reaching the top, or std::terminate, fails it).
+// Not under AddressSanitizer, whose shadow memory needs the address space.
+std::size_t address_space_in_use() {
+    std::FILE* statm = std::fopen("/proc/self/statm", "r");
+    unsigned long pages = 0;
+    if (statm == nullptr) return 0;
+    if (std::fscanf(statm, "%lu", &pages) != 1) pages = 0;
+    std::fclose(statm);
+    return std::size_t(pages) * std::size_t(::sysconf(_SC_PAGESIZE));
+}
+
+void cap_address_space(std::size_t margin) {
+    struct rlimit limit {};
+    ::getrlimit(RLIMIT_AS, &limit);
+    limit.rlim_cur = margin == 0 ? limit.rlim_max : rlim_t(address_space_in_use() + margin);
+    ::setrlimit(RLIMIT_AS, &limit);
+}
+
+// The children's bodies (a function each: a death test's statement is a macro argument).
+[[noreturn]] void workers_child() {
+    int threw = 0;
+    for (std::size_t mib = 1; mib <= 80; mib += 3) {
+        cap_address_space(mib << 20);
+        try {
+            host::Workers workers(host::Workers::kMaxThreads);
+        } catch (const std::system_error&) {
+            ++threw;
+        } catch (const std::bad_alloc&) {
+            ++threw;
+        }
+        cap_address_space(0);
+    }
+    std::fprintf(stderr, "threw %d times\n", threw);
+    std::_Exit(threw > 0 ? 0 : 2);
+}
+
+[[noreturn]] void renderer_child(const SonarConfig& config, const Scene& scene, const RendererOptions& options) {
+    int failed = 0;
+    for (std::size_t mib = 1; mib <= 200; mib += 7) {
+        cap_address_space(mib << 20);
+        try {
+            auto renderer = Renderer::create(testing::cpu_context(), config, scene, options);
+            cap_address_space(0);
+            if (!renderer.ok()) {
+                if (renderer.error().message.rfind("Renderer::create: ", 0) != 0) std::_Exit(4);
+                ++failed;
+            }
+        } catch (...) {
+            std::_Exit(3); // an exception crossed the public API
+        }
+        cap_address_space(0);
+    }
+    std::fprintf(stderr, "failed %d times\n", failed);
+    std::_Exit(failed > 0 ? 0 : 2);
+}
+
+[[noreturn]] void add_mesh_child(const std::vector<float>& positions, const std::vector<std::uint32_t>& indices) {
+    const auto vertices = static_cast<std::uint32_t>(positions.size() / 3);
+    Scene scene;
+    AcousticMaterial material;
+    testing::add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0, material);
+    const SceneData& d = scene_data(scene);
+    int failed = 0;
+    for (std::size_t mib = 1; mib <= 120; mib += 2) {
+        const std::size_t p = d.positions.size(), i = d.indices.size(), m = d.meshes.size();
+        cap_address_space(mib << 20);
+        bool ok = false;
+        try {
+            auto added =
+                scene.add_mesh(positions.data(), vertices, indices.data(), static_cast<std::uint32_t>(indices.size()));
+            ok = added.ok();
+        } catch (...) {
+            cap_address_space(0);
+            std::_Exit(3); // an exception crossed the public API
+        }
+        cap_address_space(0);
+        if (ok) break; // it fitted: the sweep is done
+        ++failed;
+        if (d.positions.size() != p || d.indices.size() != i || d.meshes.size() != m) std::_Exit(4);
+    }
+    std::fprintf(stderr, "failed %d times\n", failed);
+    std::_Exit(failed > 0 ? 0 : 2);
+}
+
+// host::Workers: if the k-th thread cannot start, the threads already started are stopped and joined
+// and the std::system_error comes out of the constructor (before, they were destroyed joinable:
+// std::terminate).
+TEST(OutOfResources, WorkersThatCannotStartEveryThreadThrowInsteadOfTerminating) {
+#if defined(VKSONAR_TEST_UNDER_ASAN)
+    GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer's shadow memory do not mix";
+#endif
+    EXPECT_EXIT(workers_child(), ::testing::ExitedWithCode(0), "threw");
+}
+
+// Renderer::create out of memory or threads returns an Error naming it; no exception crosses the API.
+TEST(OutOfResources, RendererCreateReturnsAnError) {
+#if defined(VKSONAR_TEST_UNDER_ASAN)
+    GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer's shadow memory do not mix";
+#endif
+    Scene scene;
+    AcousticMaterial material;
+    testing::add_quad(scene, 10.0, 0.0, 0.0, 4.0, 4.0, material);
+    const SonarConfig config = testing::quiet_config();
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    options.host_threads = host::Workers::kMaxThreads;
+    EXPECT_EXIT(renderer_child(config, scene, options), ::testing::ExitedWithCode(0), "failed");
+}
+
+// Scene::add_mesh out of memory part way (the positions appended, the indices not; or in the spatial
+// ordering) leaves the scene as it was and returns an Error.
+TEST(OutOfResources, AddMeshLeavesTheSceneUnchanged) {
+#if defined(VKSONAR_TEST_UNDER_ASAN)
+    GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer's shadow memory do not mix";
+#endif
+    const std::uint32_t vertices = 1u << 20; // 12 MiB of positions, 12 MiB of indices
+    std::vector<float> positions(3 * std::size_t(vertices));
+    for (std::size_t i = 0; i < positions.size(); ++i)
+        positions[i] = float(i % 1000) * 0.01f;
+    std::vector<std::uint32_t> indices(3 * std::size_t(vertices));
+    for (std::size_t i = 0; i < indices.size(); ++i)
+        indices[i] = std::uint32_t((i * 7919) % vertices);
+    EXPECT_EXIT(add_mesh_child(positions, indices), ::testing::ExitedWithCode(0), "failed");
 }
 
 } // namespace

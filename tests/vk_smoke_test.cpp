@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -634,6 +635,80 @@ TEST_P(VkStageMatch, EachStageMatchesTheCpuReferenceOnTheSameInput) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Configs, VkStageMatch, ::testing::Values(0, 1));
+
+// Vulkan failures injected through the context's function table (the backend calls through it): a
+// failing vkQueueSubmit, an vkEndCommandBuffer that records but reports failure. Restored on scope exit.
+struct FailingCalls {
+    static inline PFN_vkEndCommandBuffer real_end = nullptr;
+    static inline int end_calls_before_failure = -1; // < 0: never fail
+
+    static VKAPI_ATTR VkResult VKAPI_CALL submit(VkQueue, std::uint32_t, const VkSubmitInfo*, VkFence) {
+        return VK_ERROR_OUT_OF_DEVICE_MEMORY;
+    }
+    static VKAPI_ATTR VkResult VKAPI_CALL end(VkCommandBuffer commands) {
+        const VkResult result = real_end(commands); // the buffer is recorded; the call reports a failure
+        if (end_calls_before_failure >= 0 && end_calls_before_failure-- == 0) return VK_ERROR_OUT_OF_DEVICE_MEMORY;
+        return result;
+    }
+
+    vk::Functions& fn;
+    vk::Functions saved;
+    explicit FailingCalls(vk::Functions& functions) : fn(functions), saved(functions) {
+        real_end = fn.vkEndCommandBuffer;
+    }
+    ~FailingCalls() { fn = saved; }
+};
+
+// A failed vkQueueSubmit leaves the frame slot's fence unsignalled (it was reset for the submission):
+// the render fails with ErrorCode::vulkan, and destroying the backend must not wait on that fence
+// (before the fix it waited for it forever: this test then hangs until ctest's timeout).
+TEST(VkBackend, FailedSubmitIsReportedAndDestructionDoesNotHang) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard guard;
+    RendererOptions options;
+    options.stage_timing = StageTiming::host; // one submission per stage
+    auto h = make_harness(small_config(), facing_plate(8.0, 40.0), options);
+    ASSERT_TRUE(h);
+    {
+        FailingCalls failing(context_vulkan(*vulkan_context())->fn);
+        failing.fn.vkQueueSubmit = &FailingCalls::submit;
+        auto rendered = h->render();
+        ASSERT_FALSE(rendered.ok());
+        EXPECT_EQ(rendered.error().code, ErrorCode::vulkan);
+        EXPECT_EQ(rendered.error().vk_result, VK_ERROR_OUT_OF_DEVICE_MEMORY);
+    }
+    h.reset(); // ~VulkanBackend
+    SUCCEED();
+}
+
+// A save-mask change re-records a slot's kept command buffers; if that fails partway (here the
+// readback's vkEndCommandBuffer), the slot must not stay "kept" with the old mask: the next render with
+// that mask would submit the readback recorded for the failed mask and return stale intermediates.
+TEST(VkBackend, FailedReRecordIsNotKept) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard guard;
+    auto h = make_harness(small_config(), facing_plate(8.0, 40.0));
+    auto reference = make_harness(small_config(), facing_plate(8.0, 40.0));
+    ASSERT_TRUE(h && reference);
+    ASSERT_TRUE(h->render().ok());                              // kSaveAll, from the origin: kept
+    const std::size_t buffers = h->frame.stages_run.size() + 1; // the stages and the readback
+    {
+        FailingCalls failing(context_vulkan(*vulkan_context())->fn);
+        failing.fn.vkEndCommandBuffer = &FailingCalls::end;
+        FailingCalls::end_calls_before_failure = static_cast<int>(buffers) - 1; // the readback's
+        auto rendered = h->render({}, SaveFlags::none);
+        FailingCalls::end_calls_before_failure = -1;
+        ASSERT_FALSE(rendered.ok());
+        EXPECT_EQ(rendered.error().code, ErrorCode::vulkan);
+    }
+    Pose closer;
+    closer.x_m = 3.0;
+    ASSERT_TRUE(h->render(closer).ok());
+    ASSERT_TRUE(reference->render(closer).ok());
+    EXPECT_EQ(h->frame.clean, reference->frame.clean);
+    EXPECT_EQ(h->frame.depth, reference->frame.depth) << "the readback of the failed re-record was submitted";
+    EXPECT_EQ(h->frame.echo, reference->frame.echo);
+}
 
 } // namespace
 } // namespace vksonar::testing

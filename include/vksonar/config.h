@@ -186,7 +186,8 @@ struct SonarConfig {
 // The `key=value` overrides a quality stands for (empty for an unknown name).
 [[nodiscard]] std::vector<std::string> quality_settings(const std::string& name);
 // The fully resolved config as JSON text, every key (for meta.json and `vksonar presets --show`);
-// apply_config_json of it gives the config back.
+// apply_config_json of it gives the config back, except a text key holding bytes that are not UTF-8
+// (e.g. a Latin-1 folder name in scene.asset_root): those bytes are written as U+FFFD. Never throws.
 [[nodiscard]] std::string config_to_json(const SonarConfig& config);
 
 } // namespace vksonar

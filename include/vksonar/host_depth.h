@@ -94,7 +94,8 @@ public:
     // ErrorCode::invalid_argument for a CPU context, the CPU backend or a bad config or desc, and with
     // ErrorCode::unsupported if the image does not cover the sonar, its principal point is not the image
     // centre, the format is none of HostDepthDesc's or cannot be sampled, or the config asks for
-    // accuracy.normal_method = geometric (which needs the triangles, not a depth image).
+    // accuracy.normal_method = geometric (which needs the triangles, not a depth image), or host memory
+    // runs out or a host thread cannot start.
     // `context` must outlive the renderer; `config`, `desc` and `options` are copied. Thread-safety:
     // may be called from any thread, also while other renderers on the same context work.
     [[nodiscard]] static Result<HostDepthRenderer>

@@ -45,10 +45,11 @@ enum class WorkLayout : std::uint8_t { automatic, cpu_device, gpu };
 // passes ("bf:profile", "bf:resample", "bf:far_deposit", "bf:far_convolve", "bf:sidelobe": GPU time from
 // the pass before to this one's end) and the host's own steps around the GPU work ("host:prepare":
 // draw matrices, culling, sub-pixel returns; "host:record"; "host:gpu_wait": submit to fence; "host:copy":
-// the readback out), and with labels the labels stage's parts ("labels:pixels", "labels:beams",
-// "labels:visible", host clocks; on either backend). The CPU backend lists its beamform passes on host
-// clocks ("bf:profile"; "bf:beams": the resample and the side lobes, fused). Those entries (names with a ':')
-// lie inside or beside the stages and are not stages:
+// the readback out; not on a HostDepthRenderer, which lists the passes only), and with labels the
+// labels stage's parts ("labels:pixels", "labels:beams", "labels:visible", host clocks; on either
+// backend). The CPU backend lists its beamform passes on host clocks ("bf:profile"; "bf:beams": the
+// resample and the side lobes, fused). Those entries (names with a ':') lie inside or beside the
+// stages and are not stages:
 // a sum over Frame::times skips them. A timestamp between passes can cost a little GPU time: for finding
 // where a frame goes, not for the frame rate.
 enum class StageTiming : std::uint8_t { automatic, host, timestamps, passes };
@@ -104,7 +105,8 @@ public:
     // pipeline and command buffer it will use and uploads the scene (submitting on the context's queue
     // and waiting). Fails with ErrorCode::invalid_argument for a config or material that does not
     // validate (naming the key), ErrorCode::no_device for Backend::vulkan on a CPU-only context,
-    // ErrorCode::unsupported for a grid past the device's limits or an adopted queue without graphics,
+    // ErrorCode::unsupported for a grid past the device's limits, an adopted queue without graphics,
+    // host memory that runs out or a host thread that cannot start (RendererOptions::host_threads),
     // ErrorCode::vulkan if a Vulkan call fails. The context and scene must outlive the renderer;
     // config and options are copied. Thread-safety: may be called from any thread, also while other
     // renderers on the same context create or render.
@@ -140,7 +142,8 @@ public:
     // (docs/labels.md): for each cell of `from` with a label, where its point lands in the polar grid
     // seen from to_pose, as flow[2 i] = d_bin, flow[2 i + 1] = d_beam (bins * beams * 2, float; resized
     // only if its size differs); NaN where the cell has no label, the point leaves the window or
-    // something in `to` hides it. Fails with invalid_argument without labels or on frames not its own.
+    // something in `to` hides it. Fails with invalid_argument without labels or on frames not its own,
+    // unsupported if host memory for `flow` runs out.
     [[nodiscard]] Result<void> label_flow(const Frame& from, const Pose& from_pose, const Frame& to,
                                           const Pose& to_pose, std::vector<float>& flow) const;
 

@@ -130,8 +130,8 @@ public:
     // Builds a scene from arrays an engine already has: positions xyz (mesh-local), triangle indices.
     // Adds one mesh (the arrays are copied; the caller keeps its own) and returns its index; then place
     // it with add_draw. Fails with ErrorCode::invalid_argument for null or empty arrays, an index count
-    // that is not a multiple of 3, an index out of range or a non-finite coordinate; the scene is then
-    // unchanged.
+    // that is not a multiple of 3, an index out of range or a non-finite coordinate, with
+    // ErrorCode::unsupported if host memory runs out; the scene is then unchanged.
     [[nodiscard]] Result<std::uint32_t> add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
                                                  const std::uint32_t* indices, std::uint32_t index_count);
     // Adds a material (copied; not validated until a Renderer is made from the scene, which then names
@@ -139,7 +139,7 @@ public:
     std::uint32_t add_material(const AcousticMaterial& material);
     // Adds a draw of a mesh added before with a material added before. Fails with
     // ErrorCode::invalid_argument naming the field for an unknown mesh or material index or a non-finite
-    // transform entry; the scene is then unchanged.
+    // transform entry, with ErrorCode::unsupported if host memory runs out; the scene is then unchanged.
     [[nodiscard]] Result<void> add_draw(const SceneDraw& draw);
 
     // What the scene holds (counts, the file's extensions, the loader's warnings); the reference is

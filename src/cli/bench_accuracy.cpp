@@ -380,7 +380,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
                         state.counters["max_db"] = rows[i].vulkan.max_db;
                     } catch (const std::exception& e) {
                         state.SkipWithError(e.what());
-                        record_failure(e.what());
+                        record_failure(setup, e.what());
                     }
                 })
                 ->UseManualTime()
@@ -410,14 +410,14 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
                                              state.counters["max_db"] = rows[i].cpu.max_db;
                                          } catch (const std::exception& e) {
                                              state.SkipWithError(e.what());
-                                             record_failure(e.what());
+                                             record_failure(setup, e.what());
                                          }
                                      })
             ->UseManualTime()
             ->Iterations(kCpuFrames)
             ->Unit(benchmark::kMillisecond);
     }
-    run_registered_benchmarks();
+    run_registered_benchmarks(setup);
 
     std::printf("\n## vksonar bench accuracy (reference: CPU double at the highest settings; noise off; errors "
                 "over cells above NL - DI = %s dB)\n\n",

@@ -70,14 +70,6 @@ void operator delete[](void* p, std::size_t) noexcept {
 }
 
 namespace vksonar::cli::bench {
-namespace {
-
-std::vector<std::string>& failures() {
-    static std::vector<std::string> list;
-    return list;
-}
-
-} // namespace
 
 Setup load_setup(const Args& args) {
     Setup setup;
@@ -213,28 +205,28 @@ std::uint32_t frames_option(const Args& args, std::uint32_t fallback) {
     return static_cast<std::uint32_t>(n);
 }
 
-void record_failure(const std::string& message) {
-    failures().push_back(message);
+void record_failure(Setup& setup, const std::string& message) {
+    setup.failures.push_back(message);
 }
 
-void run_registered_benchmarks() {
-    static bool initialized = false;
-    if (!initialized) {
-        // Google Benchmark reads its own flags from argv; ours are parsed already.
+void run_registered_benchmarks(Setup& setup) {
+    if (!setup.benchmark_initialized) {
+        // Google Benchmark reads its own flags from argv; ours are parsed already. Static storage:
+        // it keeps argv[0] as the executable's name for its report (never written here).
         static char arg0[] = "vksonar-bench";
         static char arg1[] = "--benchmark_counters_tabular=true";
         static char* argv[] = {arg0, arg1, nullptr};
         int argc = 2;
         benchmark::Initialize(&argc, argv);
-        initialized = true;
+        setup.benchmark_initialized = true;
     }
     std::fflush(stdout);
     benchmark::RunSpecifiedBenchmarks();
     benchmark::ClearRegisteredBenchmarks();
     std::fflush(stdout);
-    if (!failures().empty()) {
-        const std::string first = failures().front();
-        failures().clear();
+    if (!setup.failures.empty()) {
+        const std::string first = setup.failures.front();
+        setup.failures.clear();
         throw Failure(first);
     }
 }

@@ -26,6 +26,10 @@ struct Setup {
     std::string scene_effects; // the scene's "effects" JSON ("" if none)
     SonarConfig config;        // preset < scene effects < --set
     Pose pose;
+    // What the benchmark bodies reported (record_failure), for run_registered_benchmarks to rethrow,
+    // and whether it has initialized Google Benchmark: carried here, not in globals.
+    std::vector<std::string> failures;
+    bool benchmark_initialized = false;
 };
 
 // Reads --scene, --sonar, --set (repeatable) and --pose from `args` (any of them may be absent).
@@ -65,8 +69,8 @@ std::uint32_t frames_option(const Args& args, std::uint32_t fallback);
 
 // Runs every benchmark registered so far through Google Benchmark's console reporter (manual time,
 // fixed iteration counts). Errors a benchmark body reported (SkipWithError) are rethrown as Failure.
-void run_registered_benchmarks();
-// Call from inside a benchmark body: records `message` so run_registered_benchmarks() fails.
-void record_failure(const std::string& message);
+void run_registered_benchmarks(Setup& setup);
+// Call from inside a benchmark body: records `message` in `setup` so run_registered_benchmarks() fails.
+void record_failure(Setup& setup, const std::string& message);
 
 } // namespace vksonar::cli::bench

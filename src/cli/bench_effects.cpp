@@ -145,14 +145,14 @@ int run_bench_effects(const std::vector<std::string>& argv) {
                     result.done = true;
                 } catch (const std::exception& ex) {
                     state.SkipWithError(ex.what());
-                    record_failure(ex.what());
+                    record_failure(setup, ex.what());
                 }
             })
             ->UseManualTime()
             ->Iterations(rounds)
             ->Unit(benchmark::kMillisecond);
     }
-    run_registered_benchmarks();
+    run_registered_benchmarks(setup);
 
     std::printf("\n## vksonar bench effects (%s, %s; %u interleaved rounds; medians)\n\n", backend_name(backend),
                 device.c_str(), rounds);

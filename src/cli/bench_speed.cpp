@@ -210,13 +210,13 @@ int run_bench_speed(const std::vector<std::string>& argv) {
                                          state.counters["fps"] = 1000.0 / std::max(1e-9, median(samples.full_ms));
                                      } catch (const std::exception& e) {
                                          state.SkipWithError(e.what());
-                                         record_failure(e.what());
+                                         record_failure(setup, e.what());
                                      }
                                  })
         ->UseManualTime()
         ->Iterations(frames)
         ->Unit(benchmark::kMillisecond);
-    run_registered_benchmarks();
+    run_registered_benchmarks(setup);
 
     // Render-ahead (Renderer::render with a NextFrame): each call finishes its frame and starts the
     // next one's device work before its host stages, so a device renders while the host works. The

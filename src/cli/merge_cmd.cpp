@@ -129,7 +129,8 @@ void folder_merge(const std::vector<ShardInput>& shards, const std::string& out)
         merged["trajectory"] = {{"path", shards[0].shard.trajectory}, {"fnv1a64", shards[0].shard.trajectory_hash}};
         merged["shards"] = list;
         std::ofstream file(temporary / "merged.json", std::ios::binary);
-        file << merged.dump(2) << "\n";
+        // (a trajectory path that is not UTF-8: U+FFFD instead of dump() throwing)
+        file << merged.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) << "\n";
         if (!file.flush()) throw Failure("merge: cannot write " + (temporary / "merged.json").string());
         file.close();
         fs::rename(temporary, target, ec);

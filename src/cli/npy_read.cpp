@@ -6,6 +6,8 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
+#include <string>
 
 #include "cli/args.h"
 
@@ -73,12 +75,18 @@ NpyArray read_npy(const std::string& path) {
     if (dict_value(header, "fortran_order", path) != "False")
         throw BadInput(path + ": Fortran-order .npy files are not supported");
     const std::string shape = dict_value(header, "shape", path);
-    std::size_t count = 1;
+    if (shape.size() < 2 || shape.front() != '(' || shape.back() != ')')
+        throw BadInput(path + ": .npy header 'shape' is not a tuple: '" + shape + "'");
+    // The element count, checked: a crafted header's dimensions may multiply past 2^64.
+    constexpr std::uint64_t max_count = std::numeric_limits<std::uint64_t>::max();
+    std::uint64_t count = 1;
     for (const auto& item : split(shape.substr(1, shape.size() - 2), ',')) {
         if (item.empty()) continue; // "(5,)"
         const auto dim = parse_u64(item, path + ": shape");
+        if (dim != 0 && count > max_count / dim)
+            throw BadInput(path + ": .npy shape " + shape + " has more than 2^64 elements");
         array.shape.push_back(static_cast<std::size_t>(dim));
-        count *= static_cast<std::size_t>(dim);
+        count *= dim;
     }
 
     std::size_t element = 0;
@@ -95,8 +103,10 @@ NpyArray read_npy(const std::string& path) {
     else
         throw BadInput(path + ": unsupported dtype '" + array.dtype + "' (float32, float64, uint16, uint8, int32)");
 
+    if (count > max_count / element) throw BadInput(path + ": .npy shape " + shape + " has more than 2^64 data bytes");
     const std::size_t data_offset = offset + header_length;
-    if (bytes.size() - data_offset != count * element)
+    // (equal to the file's byte count, the element count fits std::size_t)
+    if (std::uint64_t(bytes.size() - data_offset) != count * element)
         throw BadInput(path + ": expected " + std::to_string(count * element) + " data bytes for shape " + shape +
                        ", found " + std::to_string(bytes.size() - data_offset));
     const std::vector<char> raw(bytes.begin() + static_cast<std::ptrdiff_t>(data_offset), bytes.end());

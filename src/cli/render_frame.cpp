@@ -62,7 +62,9 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
     } else {
         extra["mode"] = "physical";
     }
-    return extra.dump();
+    // The scene path (and --asset-root in the config) may hold bytes that are not UTF-8 (a Latin-1
+    // folder name): written as U+FFFD instead of dump() throwing.
+    return extra.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
 }
 
 // One channel of floats as a grey PNG: value in [0, 1] -> 0..255 (the plugin's convertTo(CV_8U, 255)).

@@ -323,7 +323,8 @@ std::string manifest_json(const FolderManifest& m) {
     for (const auto& [name, value] : m.identity)
         identity[name] = identity_value(value);
     j["identity"] = identity;
-    return j.dump(2) + "\n";
+    // paths that are not UTF-8 (a Latin-1 folder name): U+FFFD instead of dump() throwing
+    return j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 
 FolderManifest read_manifest(const std::string& dir) {

@@ -144,7 +144,9 @@ std::string config_to_json(const SonarConfig& config) {
         }
         (*node)[name] = key.get(config);
     }
-    return root.dump(2);
+    // A text key may hold bytes that are not UTF-8 (scene.asset_root from a Latin-1 folder name, via
+    // --asset-root): replaced by U+FFFD, as dump() would otherwise throw (nothing here may throw).
+    return root.dump(2, ' ', false, Json::error_handler_t::replace);
 }
 
 std::uint32_t SonarConfig::range_bins() const {

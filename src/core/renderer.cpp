@@ -8,7 +8,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <new>
 #include <string>
+#include <system_error>
 
 #include "core/host_plan.h"
 #include "core/plan.h"
@@ -60,6 +62,23 @@ public:
 };
 
 namespace {
+
+// Runs `body` (a create or label_flow) so that no exception crosses the public API: running out of
+// memory (a plan, tables or buffers too big for the machine) and std::system_error (a host thread that
+// could not start, host::Workers) come back as an Error naming `where`.
+template <class T, class Body> Result<T> without_exceptions(const char* where, Body&& body) {
+    try {
+        return body();
+    } catch (const std::bad_alloc&) {
+        return make_error(ErrorCode::unsupported,
+                          std::string(where) + ": out of memory: this config's buffers do not fit (fewer bins, beams "
+                                               "or accuracy.rows_per_vfov / pixels_per_beam need less)");
+    } catch (const std::system_error& e) {
+        return make_error(ErrorCode::unsupported,
+                          std::string(where) + ": " + e.what() +
+                              " (e.g. a host thread could not start: fewer RendererOptions::host_threads)");
+    }
+}
 
 Frame make_frame_for(const RendererImpl& impl);
 Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame,
@@ -124,44 +143,46 @@ Renderer& Renderer::operator=(Renderer&&) noexcept = default;
 
 Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, const Scene& scene,
                                   const RendererOptions& options) {
-    auto plan = make_plan(config, scene_data(scene));
-    if (!plan) return plan.error();
-    auto impl = std::make_unique<RendererImpl>();
-    impl->plan = std::move(plan.value());
-    impl->options = options;
-    impl->workers = std::make_unique<host::Workers>(options.host_threads);
-    if (auto labels = set_up_labels(*impl, &scene_data(scene)); !labels) return labels.error();
-    if (options.backend == Backend::vulkan) {
-        if (!context.has_vulkan()) {
-            return make_error(ErrorCode::no_device, "no Vulkan device in this context; use --backend cpu");
+    return without_exceptions<Renderer>("Renderer::create", [&]() -> Result<Renderer> {
+        auto plan = make_plan(config, scene_data(scene));
+        if (!plan) return plan.error();
+        auto impl = std::make_unique<RendererImpl>();
+        impl->plan = std::move(plan.value());
+        impl->options = options;
+        impl->workers = std::make_unique<host::Workers>(options.host_threads);
+        if (auto labels = set_up_labels(*impl, &scene_data(scene)); !labels) return labels.error();
+        if (options.backend == Backend::vulkan) {
+            if (!context.has_vulkan()) {
+                return make_error(ErrorCode::no_device, "no Vulkan device in this context; use --backend cpu");
+            }
+            if (!context_vulkan(context)->graphics) {
+                return make_error(ErrorCode::unsupported,
+                                  "Renderer::create: the adopted queue family has no graphics for the depth pass; "
+                                  "use HostDepthRenderer with the host's depth image, or adopt a graphics queue");
+            }
+            auto backend = vk::make_backend(*context_vulkan(context), impl->plan, scene_data(scene), options);
+            if (!backend) return backend.error();
+            impl->backend = std::move(backend.value());
+            impl->backend->defer_clean(true); // the noise stage copies the scan out on its threads
+            if (host::noise_draws_ahead(impl->plan)) {
+                const std::size_t cells = std::size_t(impl->plan.bins) * impl->plan.beams;
+                impl->speckle_draws.assign(cells, 0.0f);
+                impl->noise_draws.assign(cells, 0.0f);
+                impl->backend->set_gpu_overlap(
+                    [](void* renderer) {
+                        auto& i = *static_cast<RendererImpl*>(renderer);
+                        i.ensure_draws(i.overlap_frame_index);
+                    },
+                    impl.get());
+            }
+        } else {
+            impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get(),
+                                              options.stage_timing == StageTiming::passes);
         }
-        if (!context_vulkan(context)->graphics) {
-            return make_error(ErrorCode::unsupported,
-                              "Renderer::create: the adopted queue family has no graphics for the depth pass; "
-                              "use HostDepthRenderer with the host's depth image, or adopt a graphics queue");
-        }
-        auto backend = vk::make_backend(*context_vulkan(context), impl->plan, scene_data(scene), options);
-        if (!backend) return backend.error();
-        impl->backend = std::move(backend.value());
-        impl->backend->defer_clean(true); // the noise stage copies the scan out on its threads
-        if (host::noise_draws_ahead(impl->plan)) {
-            const std::size_t cells = std::size_t(impl->plan.bins) * impl->plan.beams;
-            impl->speckle_draws.assign(cells, 0.0f);
-            impl->noise_draws.assign(cells, 0.0f);
-            impl->backend->set_gpu_overlap(
-                [](void* renderer) {
-                    auto& i = *static_cast<RendererImpl*>(renderer);
-                    i.ensure_draws(i.overlap_frame_index);
-                },
-                impl.get());
-        }
-    } else {
-        impl->backend = cpu::make_backend(impl->plan, scene_data(scene), impl->workers.get(),
-                                          options.stage_timing == StageTiming::passes);
-    }
-    Renderer r;
-    r.impl_ = std::move(impl);
-    return r;
+        Renderer r;
+        r.impl_ = std::move(impl);
+        return r;
+    });
 }
 
 void Renderer::set_seed(std::uint64_t seed) {
@@ -236,6 +257,46 @@ Frame make_frame_for(const RendererImpl& impl) {
     return f;
 }
 
+// The array of `frame` that make_frame_for sizes and this renderer's save mask fills but `frame` holds
+// at another size (name null: none). The stages write those arrays by index (the labels stage into
+// instance ... point), so a frame from another renderer with the same bins x beams but other saved
+// arrays must be refused, not written past its end.
+struct Misfit {
+    const char* name = nullptr;
+    std::size_t size = 0, expected = 0;
+};
+
+Misfit misfit_array(const RendererImpl& impl, const Frame& frame) {
+    const Plan& p = impl.plan;
+    const SaveFlags mask = backend_save_mask(impl.options);
+    const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
+    const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
+    Misfit misfit;
+    auto check = [&](const char* name, std::size_t size, std::size_t expected) {
+        if (misfit.name == nullptr && size != expected) misfit = Misfit{name, size, expected};
+    };
+    check("clean", frame.clean.size(), cells);
+    if (any(mask & SaveFlags::depth)) {
+        check("depth", frame.depth.size(), pixels);
+        check("material", frame.material.size(), pixels);
+    }
+    if (any(mask & SaveFlags::normals)) check("normals", frame.normals.size(), pixels * 4);
+    if (any(mask & SaveFlags::echo)) check("echo", frame.echo.size(), pixels * 2);
+    if (any(mask & SaveFlags::profiles)) {
+        check("profiles", frame.profiles.size(), static_cast<std::size_t>(p.bins) * p.profile_columns);
+        check("beam_profiles", frame.beam_profiles.size(), cells);
+    }
+    if (any(mask & SaveFlags::labels)) {
+        check("instance", frame.instance.size(), cells);
+        check("instance_fraction", frame.instance_fraction.size(), cells);
+        check("object_class", frame.object_class.size(), cells);
+        check("elevation", frame.elevation.size(), cells);
+        check("elevation_spread", frame.elevation_spread.size(), cells);
+        check("point", frame.point.size(), cells * 3);
+    }
+    return misfit;
+}
+
 bool finite_pose(const Pose& pose) {
     for (double v : {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg})
         if (!std::isfinite(v)) return false;
@@ -286,8 +347,11 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     if (next != nullptr && !finite_pose(next->pose))
         return make_error(ErrorCode::invalid_argument, "next pose: non-finite value");
     const Plan& p = impl.plan;
-    if (frame.clean.size() != static_cast<std::size_t>(p.bins) * p.beams) {
-        return make_error(ErrorCode::invalid_argument, "render: frame was not made by this renderer's make_frame()");
+    if (const Misfit misfit = misfit_array(impl, frame); misfit.name != nullptr) {
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("render: frame was not made by this renderer's make_frame() (Frame::") +
+                              misfit.name + " has " + std::to_string(misfit.size) + " elements, this renderer's " +
+                              std::to_string(misfit.expected) + ")");
     }
     // Each render reports its own stages: the frame is reused, so the lists start empty (clear keeps
     // the capacity reserved by make_frame; no allocation).
@@ -327,24 +391,26 @@ HostDepthRenderer& HostDepthRenderer::operator=(HostDepthRenderer&&) noexcept = 
 
 Result<HostDepthRenderer> HostDepthRenderer::create(Context& context, const SonarConfig& config,
                                                     const HostDepthDesc& desc, const RendererOptions& options) {
-    if (options.backend != Backend::vulkan || !context.has_vulkan()) {
-        return make_error(ErrorCode::invalid_argument,
-                          "HostDepthRenderer::create: a host depth image needs the Vulkan backend and a Vulkan "
-                          "context");
-    }
-    auto plan = make_host_depth_plan(config, desc);
-    if (!plan) return plan.error();
-    HostDepthRenderer r;
-    r.impl_ = std::make_unique<RendererImpl>();
-    r.impl_->plan = std::move(plan.value());
-    r.impl_->options = options;
-    r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
-    if (auto labels = set_up_labels(*r.impl_, nullptr); !labels) return labels.error();
-    auto pass = vk::HostDepthPass::create(*context_vulkan(context), r.impl_->plan, desc, options);
-    if (!pass) return pass.error();
-    r.impl_->host_depth = pass.value().get();
-    r.impl_->backend = std::move(pass.value());
-    return r;
+    return without_exceptions<HostDepthRenderer>("HostDepthRenderer::create", [&]() -> Result<HostDepthRenderer> {
+        if (options.backend != Backend::vulkan || !context.has_vulkan()) {
+            return make_error(ErrorCode::invalid_argument,
+                              "HostDepthRenderer::create: a host depth image needs the Vulkan backend and a Vulkan "
+                              "context");
+        }
+        auto plan = make_host_depth_plan(config, desc);
+        if (!plan) return plan.error();
+        HostDepthRenderer r;
+        r.impl_ = std::make_unique<RendererImpl>();
+        r.impl_->plan = std::move(plan.value());
+        r.impl_->options = options;
+        r.impl_->workers = std::make_unique<host::Workers>(options.host_threads);
+        if (auto labels = set_up_labels(*r.impl_, nullptr); !labels) return labels.error();
+        auto pass = vk::HostDepthPass::create(*context_vulkan(context), r.impl_->plan, desc, options);
+        if (!pass) return pass.error();
+        r.impl_->host_depth = pass.value().get();
+        r.impl_->backend = std::move(pass.value());
+        return r;
+    });
 }
 
 Frame HostDepthRenderer::make_frame() const {
@@ -395,9 +461,11 @@ Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, cons
     const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
     if (from.instance.size() != cells || from.point.size() != 3 * cells || to.depth.size() != pixels)
         return make_error(ErrorCode::invalid_argument, "label_flow: the frames were not made by this renderer");
-    if (flow.size() != 2 * cells) flow.resize(2 * cells);
-    impl_->labels->flow(from, from_pose, to, to_pose, flow.data());
-    return {};
+    return without_exceptions<void>("label_flow", [&]() -> Result<void> {
+        if (flow.size() != 2 * cells) flow.resize(2 * cells);
+        impl_->labels->flow(from, from_pose, to, to_pose, flow.data());
+        return {};
+    });
 }
 
 const SonarConfig& Renderer::config() const {

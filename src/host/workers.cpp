@@ -49,11 +49,23 @@ Workers::Workers(std::uint32_t threads) {
     if (threads == 0) threads = usable_cpus();
     threads = std::min(threads, kMaxThreads);
     helpers_.reserve(threads - 1);
-    for (std::uint32_t part = 1; part < threads; ++part)
-        helpers_.emplace_back([this, part] { helper_loop(part); });
+    try {
+        for (std::uint32_t part = 1; part < threads; ++part)
+            helpers_.emplace_back([this, part] { helper_loop(part); });
+    } catch (...) {
+        // A thread that could not start (std::system_error): the destructor will not run, and a
+        // joinable std::thread destroyed with helpers_ would call std::terminate. Stop and join the
+        // ones that started, then let the caller see the failure.
+        stop_helpers();
+        throw;
+    }
 }
 
 Workers::~Workers() {
+    stop_helpers();
+}
+
+void Workers::stop_helpers() {
     {
         std::lock_guard<std::mutex> lock(mutex_);
         stop_ = true;

@@ -23,7 +23,8 @@ public:
     using Task = void (*)(void* context, std::uint32_t part, std::uint32_t parts);
 
     // threads = 0: one per usable CPU (usable_cpus); at most kMaxThreads.
-    // 1: everything on the caller.
+    // 1: everything on the caller. If a thread cannot start, the ones started are stopped and joined
+    // and the std::system_error (or std::bad_alloc) is rethrown: Renderer::create turns it into an Error.
     explicit Workers(std::uint32_t threads = 0);
     ~Workers();
     Workers(const Workers&) = delete;
@@ -45,6 +46,7 @@ public:
 
 private:
     void helper_loop(std::uint32_t part);
+    void stop_helpers(); // tells every helper to return and joins it
 
     std::vector<std::thread> helpers_;
     std::mutex mutex_;

@@ -122,14 +122,14 @@ void uuv_legacy(const float* depth, std::uint32_t width, std::uint32_t height, d
                 std::uint64_t frame_index, UuvImages& out);
 
 // vksonar's reversed-Z depth -> metres along the optical axis: view_z = depth_a / (d - depth_b), 0 where
-// d == 0. Contract: frame.depth must hold plan.rows * plan.columns values (save_depth); else out is empty.
+// d == 0. Contract: frame.depth must hold plan.rows * plan.columns values (SaveFlags::depth); else out is empty.
 void legacy_depth_from_frame(const Plan& plan, const Frame& frame, std::vector<float>& out);
 std::vector<float> legacy_depth_from_frame(const Plan& plan, const Frame& frame);
 
 struct GtriPoint; // x, y, z, value: the point type of both legacy clouds (GTRI section below)
 
 // The uuv plugin's point cloud: one sonar-frame point per pixel of a one-slice depth pass with a hit,
-// `retro` = the pixel's multibeam value (0..1). Contract: needs frame.depth (save_depth) and `images`
+// `retro` = the pixel's multibeam value (0..1). Contract: needs frame.depth (SaveFlags::depth) and `images`
 // filled by uuv_legacy for the same frame; else out is empty. No allocation once out is large enough.
 void uuv_cloud_from_frame(const Plan& plan, const Frame& frame, const UuvImages& images, std::vector<GtriPoint>& out);
 
@@ -179,7 +179,7 @@ void gtri_legacy(const std::vector<GtriPoint>& cloud, double hfov_rad, double ra
 // Point cloud of a depth pass: one point per pixel with a hit and slant range in [range_min, range_max),
 // sonar-frame position from the pixel's slice frame, retro = 255 * backscatter_linear / (brightest
 // material's backscatter_linear). Contract: frame.depth and frame.material must be rows * columns
-// (save_depth); else the result is empty.
+// (SaveFlags::depth); else the result is empty.
 std::vector<GtriPoint> gtri_cloud_from_frame(const Plan& plan, const Frame& frame);
 // Same, into a caller-owned vector (no allocation once it is large enough).
 void gtri_cloud_from_frame(const Plan& plan, const Frame& frame, std::vector<GtriPoint>& out);

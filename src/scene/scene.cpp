@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <new>
 #include <string>
 #include <utility>
 #include <vector>
@@ -65,12 +66,27 @@ Result<std::uint32_t> Scene::add_mesh(const float* positions_xyz, std::uint32_t 
     range.index_count = index_count;
     range.first_vertex = static_cast<std::uint32_t>(d.positions.size() / 3);
     range.vertex_count = vertex_count;
-    d.positions.insert(d.positions.end(), positions_xyz, positions_xyz + 3 * std::size_t(vertex_count));
-    d.indices.insert(d.indices.end(), indices, indices + index_count);
-    d.meshes.push_back(range);
-    order_triangles_spatially(d, range);
+    // Out of memory part way (appending, or in the spatial ordering, which rewrites only this mesh's
+    // tail of the arrays): the arrays are cut back to their sizes before the call, so the scene is
+    // unchanged on failure as for bad input.
+    const std::size_t positions_before = d.positions.size(), indices_before = d.indices.size(),
+                      meshes_before = d.meshes.size(), materials_before = d.materials.size();
+    try {
+        d.positions.insert(d.positions.end(), positions_xyz, positions_xyz + 3 * std::size_t(vertex_count));
+        d.indices.insert(d.indices.end(), indices, indices + index_count);
+        d.meshes.push_back(range);
+        order_triangles_spatially(d, range);
+        if (d.materials.empty()) d.materials.push_back(AcousticMaterial{"default"});
+    } catch (const std::bad_alloc&) {
+        d.positions.resize(positions_before); // shrinking: never throws
+        d.indices.resize(indices_before);
+        d.meshes.resize(meshes_before);
+        d.materials.resize(materials_before);
+        return make_error(ErrorCode::unsupported, "Scene::add_mesh: out of memory adding " +
+                                                      std::to_string(vertex_count) + " vertices and " +
+                                                      std::to_string(index_count) + " indices");
+    }
     d.stats.meshes = static_cast<std::uint32_t>(d.meshes.size());
-    if (d.materials.empty()) d.materials.push_back(AcousticMaterial{"default"});
     return static_cast<std::uint32_t>(d.meshes.size() - 1);
 }
 
@@ -94,7 +110,12 @@ Result<void> Scene::add_draw(const SceneDraw& draw) {
             return make_error(ErrorCode::invalid_argument,
                               "Scene::add_draw: world_from_local[" + std::to_string(k) + "] is NaN or Inf");
     }
-    d.draws.push_back(draw);
+    try {
+        d.draws.push_back(draw); // (strong guarantee: unchanged if it throws)
+    } catch (const std::bad_alloc&) {
+        return make_error(ErrorCode::unsupported,
+                          "Scene::add_draw: out of memory adding draw " + std::to_string(d.draws.size()));
+    }
     d.stats.draws = static_cast<std::uint32_t>(d.draws.size());
     d.stats.triangles += d.meshes[draw.mesh].index_count / 3;
     return {};

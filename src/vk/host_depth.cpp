@@ -42,6 +42,7 @@ struct HostDepthPass::Objects {
     OwnedEvent done;                            // set by the last command record() records
     bool recorded = false;
     SaveFlags recorded_mask = SaveFlags::none;
+    std::uint32_t stage_query = 0; // record(): the query with the beamform stage's start
     enum class Armed { none, process, read_back } armed = Armed::none;
     HostDepthImage armed_image;
 };
@@ -84,7 +85,7 @@ HostDepthPass::HostDepthPass() : objects_(std::make_unique<Objects>()) {}
 
 HostDepthPass::~HostDepthPass() {
     // process() waits for its own work. Work recorded into the host's command buffer may still be
-    // pending: the host must have finished it (documented on Renderer); waiting for the event would
+    // pending: the host must have finished it (documented on HostDepthRenderer); waiting for the event would
     // hang forever on a command buffer that was never submitted, so nothing is waited for here.
 }
 
@@ -312,12 +313,20 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         if (stage.runs(b.plan_)) stages[stage_total++] = &stage;
     VKS_VK_TRY(context.fn.vkResetCommandPool(context.device, b.command_pool_.get(), 0));
     b.commands_kept_ = {}; // render()'s kept buffers are gone
+    // StageTiming::passes: the beamform stage's passes on timestamps (queries reset by the first
+    // buffer, the stage's start in query `stage_query`), the stages themselves on host clocks.
+    std::uint32_t stage_query = 0;
     for (std::uint32_t i = 0; i <= stage_total; ++i) {
         VkCommandBuffer commands = b.command_buffers_[0][i];
         VkCommandBufferBeginInfo begin{};
         begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
         begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
         VKS_VK_TRY(context.fn.vkBeginCommandBuffer(commands, &begin));
+        if (i == 0) b.reset_pass_queries(commands);
+        if (i < stage_total && std::strcmp(stages[i]->name, "beamform") == 0) {
+            stage_query = i;
+            b.mark_stage_start(commands, stage_query);
+        }
         if (i < stage_total) {
             RecordContext record{b, commands, stages[i]->host_depth.dispatches(b.plan_, b.shape_), this, &image};
             stages[i]->host_depth.record(record);
@@ -337,12 +346,12 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
         }
     }
     copy_frame_out(save_mask, frame);
-    return {};
+    return b.add_pass_times(stage_query, frame);
 }
 
 Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImage& image, SaveFlags save_mask) {
     if (commands == VK_NULL_HANDLE) {
-        return make_error(ErrorCode::invalid_argument, "Renderer::record: command buffer is null");
+        return make_error(ErrorCode::invalid_argument, "HostDepthRenderer::record: command buffer is null");
     }
     if (auto r = check_image(image); !r) return r;
     Objects& o = *objects_;
@@ -351,8 +360,16 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     // The previous ping has finished (one ping in flight), so the event can be reset from the host.
     VKS_VK_TRY(context.fn.vkResetEvent(context.device, o.done.get()));
     bind_image(image);
+    // StageTiming::passes: as process(), in the host's command buffer (read by read_back)
+    b.reset_pass_queries(commands);
+    std::uint32_t position = 0;
     for (const StageInfo& stage : kStageTable) {
         if (!stage.runs(b.plan_)) continue;
+        if (std::strcmp(stage.name, "beamform") == 0) {
+            o.stage_query = position;
+            b.mark_stage_start(commands, o.stage_query);
+        }
+        ++position;
         RecordContext stage_record{b, commands, stage.host_depth.dispatches(b.plan_, b.shape_), this, &image};
         stage.host_depth.record(stage_record);
     }
@@ -372,20 +389,22 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
 Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
     Objects& o = *objects_;
     if (!o.recorded) {
-        return make_error(ErrorCode::invalid_argument, "Renderer::read_back: nothing was recorded (call record first)");
+        return make_error(ErrorCode::invalid_argument,
+                          "HostDepthRenderer::read_back: nothing was recorded (call record first)");
     }
     const VulkanContext& context = o.backend->context_;
     const VkResult status = context.fn.vkGetEventStatus(context.device, o.done.get());
     if (status == VK_EVENT_RESET) {
-        return make_error(ErrorCode::invalid_argument,
-                          "Renderer::read_back: the command buffer given to record() has not finished executing "
-                          "(wait for the host's fence of that submission first)");
+        return make_error(
+            ErrorCode::invalid_argument,
+            "HostDepthRenderer::read_back: the command buffer given to record() has not finished executing "
+            "(wait for the host's fence of that submission first)");
     }
     if (status != VK_EVENT_SET) return vk_error(status, "vkGetEventStatus");
     frame.times.clear();
     frame.stages_run.clear();
     copy_frame_out(save_mask & o.recorded_mask, frame);
-    return {};
+    return o.backend->add_pass_times(o.stage_query, frame);
 }
 
 void HostDepthPass::arm_process(const HostDepthImage& image) {

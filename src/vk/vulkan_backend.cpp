@@ -74,10 +74,11 @@ std::uint32_t most_row_candidates(const Plan& plan) {
 } // namespace
 
 VulkanBackend::~VulkanBackend() {
-    // Frames started (start()) and never finished, or a failed wait.
-    for (const OwnedFence& owned : fences_) {
-        if (!owned) continue;
-        VkFence fence = owned.get();
+    // Frames started (start()) and never finished, or a failed wait. Not a fence whose submission
+    // failed: nothing would ever signal it.
+    for (std::uint32_t slot = 0; slot < kFrameSlots; ++slot) {
+        if (!fences_[slot] || !fence_submitted_[slot]) continue;
+        VkFence fence = fences_[slot].get();
         context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX);
     }
 }
@@ -641,7 +642,7 @@ Result<void> VulkanBackend::create_commands() {
 
     VkFenceCreateInfo fence_info{};
     fence_info.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-    // Signalled: the destructor waits on it, also when nothing was ever submitted (every submit resets it first).
+    // Signalled, as a fence whose work is done (every submit resets it first).
     fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
     for (OwnedFence& owned : fences_) {
         VkFence fence = VK_NULL_HANDLE;

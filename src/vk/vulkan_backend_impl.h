@@ -159,6 +159,13 @@ private:
     std::uint32_t query_base_ = 0; // the slot being recorded: its first query
     std::array<const char*, kMaxDispatches> pass_names_{};
     void pass_timestamp(VkCommandBuffer commands, const char* name);
+    // The host-depth path (host_depth.cpp) records the beamform stage outside start(), into slot 0's
+    // queries: reset_pass_queries resets them (before any pass_timestamp of the ping), mark_stage_start
+    // writes the stage's start into query `stage_query`, and add_pass_times appends the passes' times
+    // to frame.times once the recorded work has finished. Without pass timestamps all three do nothing.
+    void reset_pass_queries(VkCommandBuffer commands);
+    void mark_stage_start(VkCommandBuffer commands, std::uint32_t stage_query);
+    Result<void> add_pass_times(std::uint32_t stage_query, Frame& frame) const;
 
     std::vector<DepthCluster> clusters_;         // the scene's draws as runs of triangles (core/plan.h)
     std::vector<shared::DepthPush> draw_pushes_; // slices * draws, refilled every frame
@@ -204,6 +211,10 @@ private:
     // per slot; freed with the pool
     std::array<std::array<VkCommandBuffer, kCommandBufferCount>, kFrameSlots> command_buffers_{};
     std::array<OwnedFence, kFrameSlots> fences_;
+    // Whether the slot's fence guards a submission (set by a successful submit). submit() resets the
+    // fence before vkQueueSubmit; if that fails, nothing will ever signal it, so wait() and the
+    // destructor wait only on a fence that has work behind it.
+    std::array<bool, kFrameSlots> fence_submitted_{};
     // Between start() and finish(): the frame on the device in slot i (in_flight_[i]), and what finish()
     // reports of it.
     struct InFlight {
@@ -218,7 +229,6 @@ private:
     std::array<InFlight, kFrameSlots> in_flight_;
     std::uint32_t oldest_ = 0; // the slot finish() finishes next, when in flight
     OwnedQueryPool query_pool_;
-    std::uint32_t queries_written_ = 0;
 };
 
 } // namespace vksonar::vk

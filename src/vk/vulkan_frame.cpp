@@ -4,6 +4,7 @@
 // records, submits, waits and copies out.
 #include <chrono>
 #include <cstring>
+#include <string>
 
 #include "core/half.h"
 #include "vk/commands.h"
@@ -156,6 +157,40 @@ void VulkanBackend::pass_timestamp(VkCommandBuffer commands, const char* name) {
     ++passes_recorded_;
 }
 
+void VulkanBackend::reset_pass_queries(VkCommandBuffer commands) {
+    if (!pass_timestamps_) return;
+    query_base_ = 0;
+    passes_recorded_ = 0;
+    context_.fn.vkCmdResetQueryPool(commands, query_pool_.get(), 0, kQueryCount);
+}
+
+void VulkanBackend::mark_stage_start(VkCommandBuffer commands, std::uint32_t stage_query) {
+    if (!pass_timestamps_) return;
+    context_.fn.vkCmdWriteTimestamp(commands, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_.get(), stage_query);
+}
+
+Result<void> VulkanBackend::add_pass_times(std::uint32_t stage_query, Frame& frame) const {
+    if (!pass_timestamps_ || passes_recorded_ == 0) return {};
+    std::array<std::uint64_t, kMaxDispatches> ticks{};
+    std::uint64_t from = 0;
+    VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(context_.device, query_pool_.get(), stage_query, 1,
+                                                 sizeof(std::uint64_t), &from, sizeof(std::uint64_t),
+                                                 VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    VKS_VK_TRY(context_.fn.vkGetQueryPoolResults(
+        context_.device, query_pool_.get(), kPassQueryBase, passes_recorded_, sizeof(std::uint64_t) * passes_recorded_,
+        ticks.data(), sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    const std::uint64_t mask = context_.timestamp_valid_bits >= 64
+                                   ? ~std::uint64_t(0)
+                                   : (std::uint64_t(1) << context_.timestamp_valid_bits) - 1;
+    const double ns_per_tick = context_.properties.limits.timestampPeriod;
+    for (std::uint32_t n = 0; n < passes_recorded_; ++n) { // each from the end of the one before
+        const double ms = double(((ticks[n] & mask) - (from & mask)) & mask) * ns_per_tick * 1e-6;
+        frame.times.push_back(StageTime{pass_names_[n], ms});
+        from = ticks[n];
+    }
+    return {};
+}
+
 void VulkanBackend::dispatch(VkCommandBuffer commands, const Dispatch& groups) {
     context_.fn.vkCmdDispatch(commands, groups.x, groups.y, groups.z);
 }
@@ -212,12 +247,18 @@ Result<void> VulkanBackend::submit(const VkCommandBuffer* command_buffers, std::
     }
     VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkResetFences(context_.device, 1, &fence));
+    fence_submitted_[slot] = false; // unsignalled until a submission succeeds
     VKS_VK_TRY(queue_submit(context_, submit, fence));
+    fence_submitted_[slot] = true;
     if (overlap && overlap_work_ != nullptr) overlap_work_(overlap_context_);
     return {};
 }
 
 Result<void> VulkanBackend::wait(std::uint32_t slot) {
+    if (!fence_submitted_[slot]) {
+        return make_error(ErrorCode::internal, "VulkanBackend::wait: nothing was submitted in frame slot " +
+                                                   std::to_string(slot) + " (its submission failed)");
+    }
     VkFence fence = fences_[slot].get();
     VKS_VK_TRY(context_.fn.vkWaitForFences(context_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     return {};
@@ -315,7 +356,12 @@ Result<void> VulkanBackend::start(const Pose& pose, SaveFlags save_mask, bool ke
     // stages' and the readback's are recorded once per slot and submitted again, until the save mask
     // changes.
     const bool keep = commands_kept_[slot] && kept_save_mask_[slot] == save_mask;
-    if (!keep) passes_recorded_ = 0;
+    // Re-recording: not kept until every buffer is recorded again, so that a Begin/End failing partway
+    // leaves the slot to be recorded in full next time, not half of it submitted as kept.
+    if (!keep) {
+        passes_recorded_ = 0;
+        commands_kept_[slot] = false;
+    }
     query_base_ = slot * kQueryCount;
     const std::array<VkCommandBuffer, kCommandBufferCount>& recorded = command_buffers_[slot];
     for (std::uint32_t i = 0; i < buffer_total; ++i) {
