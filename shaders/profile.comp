@@ -154,8 +154,10 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
             float next = has_next ? cone_coords[row_start + c + 1u] : x;
             float extent_lo = cone_extent_low(previous, x, next, has_previous, has_next);
             float extent_hi = cone_extent_high(previous, x, next, has_previous, has_next);
-            int cone_first = max(int(floor(extent_lo)), int(first_cone));
-            int cone_last = min(int(floor(extent_hi)) + 1, int(end_cone) - 1);
+            // the cells [c - 0.5, c + 0.5] its extent meets (the tent's two columns where it has no width)
+            bool wide = extent_hi > extent_lo;
+            int cone_first = max(wide ? int(floor(extent_lo + 0.5)) : int(floor(x)), int(first_cone));
+            int cone_last = min(wide ? int(floor(extent_hi + 0.5)) : int(floor(x)) + 1, int(end_cone) - 1);
             bool spread_made = false;
             RangeSpread spread;
             for (int cone = cone_first; cone <= cone_last; ++cone) {

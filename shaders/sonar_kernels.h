@@ -566,34 +566,20 @@ VKS_FN REAL cone_extent_high(REAL previous, REAL x, REAL next, bool has_previous
     return has_next ? REAL(0.5) * (x + next) : (has_previous ? x + half_step : x);
 }
 
-// ... and its energy spreads evenly over them: column c receives the integral of its basis (its tent, the
-// edge columns' widened to the fan's edges as cone_share's) over [lo, hi] clipped to the fan, over the
-// clipped width. As with cone_share a pixel is in the fan by its centre: one inside gives all its energy
-// (its shares sum to 1, to rounding), one outside none. A pixel of no width takes cone_share.
-VKS_FN REAL tent_integral(REAL t) { // the integral of max(1 - |s|, 0) from -1 to t
-    REAL u = min(max(t, REAL(-1)), REAL(1));
-    VKS_PRECISE REAL below = REAL(0.5) * (REAL(1) + u) * (REAL(1) + u);
-    VKS_PRECISE REAL above = REAL(1) - REAL(0.5) * (REAL(1) - u) * (REAL(1) - u);
-    return u <= REAL(0) ? below : above;
-}
+// ... and its energy spreads evenly over them: cone column c, whose cell is [c - 0.5, c + 0.5] (the
+// cells tile the fan from its edge at -0.5 to count - 0.5), receives the part of [lo, hi] in its cell,
+// over [lo, hi] clipped to the fan. As with cone_share a pixel is in the fan by its centre: one inside
+// gives all its energy (its shares sum to 1, to rounding), one outside none. A pixel of no width takes
+// cone_share.
 VKS_FN REAL cone_extent_share(REAL x, REAL lo, REAL hi, int c, int count) {
-    REAL last = REAL(count - 1);
     REAL a = max(lo, REAL(-0.5));
     REAL b = min(hi, REAL(count) - REAL(0.5));
     if (!(b > a) || !(x >= REAL(-0.5) && x < REAL(count) - REAL(0.5))) {
         return cone_share(x, c, count);
     }
-    REAL inner_a = min(max(a, REAL(0)), last);
-    REAL inner_b = min(max(b, REAL(0)), last);
-    VKS_PRECISE REAL s = tent_integral(inner_b - REAL(c)) - tent_integral(inner_a - REAL(c));
-    if (c == 0) {
-        s += max(min(b, REAL(0)) - a, REAL(0));
-    }
-    if (c == count - 1) {
-        s += max(b - max(a, last), REAL(0));
-    }
+    VKS_PRECISE REAL overlap = min(b, REAL(c) + REAL(0.5)) - max(a, REAL(c) - REAL(0.5));
     VKS_PRECISE REAL width = b - a;
-    return max(s, REAL(0)) / width;
+    return max(overlap, REAL(0)) / width;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -570,10 +570,16 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const auto add_to_cones = [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
                                           int spread_bins, const Real* shares) {
                 const Real x = static_cast<Real>(cone_x[pc]);
+                // the tent's two columns, or the cells [c - 0.5, c + 0.5] a tier pixel's extent meets
+                int below = floor_to_int(x), above = below + 1;
                 ConeExtent extent{cone_x[pc], cone_x[pc]};
                 if (tier) extent = tier_cone_extent(cone_x, pc, columns.first, columns.end);
-                const int first_cone = std::max(floor_to_int(extent.lo), static_cast<int>(cone_begin));
-                const int last_cone = std::min(floor_to_int(extent.hi) + 1, static_cast<int>(cone_end) - 1);
+                if (extent.hi > extent.lo) {
+                    below = floor_to_int(extent.lo + 0.5f);
+                    above = floor_to_int(extent.hi + 0.5f);
+                }
+                const int first_cone = std::max(below, static_cast<int>(cone_begin));
+                const int last_cone = std::min(above, static_cast<int>(cone_end) - 1);
                 for (int cone = first_cone; cone <= last_cone; ++cone) {
                     const Real weight = tier ? M::cone_extent_share(x, static_cast<Real>(extent.lo),
                                                                     static_cast<Real>(extent.hi), cone, count)
