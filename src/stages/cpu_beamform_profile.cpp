@@ -514,14 +514,6 @@ void for_each_spread_pixel(const Plan& plan, const float* echo2, std::uint32_t j
     if (batched > 0) flush();
 }
 
-// static_cast<int>(std::floor(x)) for x within int's range (and the same INT_MIN outside it or for NaN),
-// without a libm call or a rounding instruction the baseline x86-64 build lacks: truncate, then step down
-// where truncation rounded up (x negative, not whole).
-template <class Real> inline int floor_to_int(Real x) {
-    const int truncated = static_cast<int>(x);
-    return truncated - (x < static_cast<Real>(truncated) ? 1 : 0);
-}
-
 // line_array: the pixel columns [first, second) of row j and view `view` that feed cone columns
 // [cone_begin, cone_end): those within one column of them, x in (cone_begin - 1, cone_end), a tier view's
 // within one column and its pixels' reach (Plan::tier_cone_reach). Along a view's row the cone
@@ -570,16 +562,11 @@ void cone_profiles(const Plan& plan, const float* echo2, Real* acc, std::uint32_
             const auto add_to_cones = [&](std::uint32_t pc, Real e, const typename M::RangeSpread& spread,
                                           int spread_bins, const Real* shares) {
                 const Real x = static_cast<Real>(cone_x[pc]);
-                // the tent's two columns, or the cells [c - 0.5, c + 0.5] a tier pixel's extent meets
-                int below = floor_to_int(x), above = below + 1;
                 ConeExtent extent{cone_x[pc], cone_x[pc]};
                 if (tier) extent = tier_cone_extent(cone_x, pc, columns.first, columns.end);
-                if (extent.hi > extent.lo) {
-                    below = floor_to_int(extent.lo + 0.5f);
-                    above = floor_to_int(extent.hi + 0.5f);
-                }
-                const int first_cone = std::max(below, static_cast<int>(cone_begin));
-                const int last_cone = std::min(above, static_cast<int>(cone_end) - 1);
+                const ConeColumns fed = cone_columns_fed(cone_x[pc], extent);
+                const int first_cone = std::max(fed.first, static_cast<int>(cone_begin));
+                const int last_cone = std::min(fed.last, static_cast<int>(cone_end) - 1);
                 for (int cone = first_cone; cone <= last_cone; ++cone) {
                     const Real weight = tier ? M::cone_extent_share(x, static_cast<Real>(extent.lo),
                                                                     static_cast<Real>(extent.hi), cone, count)

@@ -535,11 +535,8 @@ void label_beams(const Plan& plan, const std::vector<std::uint16_t>& class_of_in
                 const double x = cone_x[c];
                 ConeExtent extent{cone_x[c], cone_x[c]};
                 if (tier) extent = tier_cone_extent(cone_x, c, view_first, view_end);
-                // the tent's two columns, or the cells [q - 0.5, q + 0.5] a tier pixel's extent meets
-                const bool wide = extent.hi > extent.lo;
-                const auto first = static_cast<std::int64_t>(std::floor(wide ? extent.lo + 0.5f : extent.lo));
-                const auto last =
-                    static_cast<std::int64_t>(std::floor(wide ? extent.hi + 0.5f : extent.hi)) + (wide ? 0 : 1);
+                const ConeColumns columns = cone_columns_fed(cone_x[c], extent);
+                const std::int64_t first = columns.first, last = columns.last;
                 // the beams whose cone columns hold one of [first, last]: from the first that does not end
                 // at or before `first` (x and the extent grow along the view's row, as do the beams' columns; a
                 // beam without columns, [0, 0) in assign_columns_to_beams, is passed over or gets no weight)
