@@ -77,7 +77,9 @@ TEST_F(EmbedTest, AdoptedDeviceOutlivesContextAndRenderer) {
     {
         auto context = Context::adopt(host::host_vulkan(*host->engine));
         ASSERT_TRUE(context.ok()) << context.error().message;
-        EXPECT_FALSE(context_vulkan(*context)->owns_device); // borrowed: ~VulkanContext destroys nothing
+        // Borrowed: no owner holds the host's instance or device, so ~VulkanContext destroys nothing.
+        EXPECT_FALSE(context_vulkan(*context)->owned_device);
+        EXPECT_FALSE(context_vulkan(*context)->owned_instance);
         auto sonar = HostDepthRenderer::create(*context, host::demo_config(), host::depth_desc(host->options));
         ASSERT_TRUE(sonar.ok()) << sonar.error().message;
         Frame frame = sonar->make_frame();

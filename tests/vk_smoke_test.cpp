@@ -119,8 +119,8 @@ TEST(VkContext, CreatesDeviceWithDescription) {
     ASSERT_NE(context_vulkan(*context), nullptr);
     EXPECT_NE(context_vulkan(*context)->device, VK_NULL_HANDLE);
     EXPECT_NE(context_vulkan(*context)->queue, VK_NULL_HANDLE);
-    EXPECT_TRUE(context_vulkan(*context)->owns_device);
-    EXPECT_TRUE(context_vulkan(*context)->owns_instance);
+    EXPECT_EQ(context_vulkan(*context)->owned_device.get(), context_vulkan(*context)->device);
+    EXPECT_EQ(context_vulkan(*context)->owned_instance.get(), context_vulkan(*context)->instance);
     EXPECT_FALSE(context->device_description().empty());
     EXPECT_NE(context->device_description().find("Vulkan 1."), std::string::npos) << context->device_description();
     EXPECT_EQ(context->validation_messages(), 0u);

@@ -1,5 +1,5 @@
 // Context::adopt: wraps a host engine's instance, device and queue. Everything here is borrowed:
-// owns_instance / owns_device stay false, so ~VulkanContext destroys nothing of the host's.
+// VulkanContext's owners stay empty, so ~VulkanContext destroys nothing of the host's.
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -88,8 +88,6 @@ Result<AdoptedContext> Context::adopt(const HostVulkan& host) {
     context.device = host.device;
     context.queue_family = host.queue_family;
     context.queue = host.queue;
-    context.owns_instance = false;
-    context.owns_device = false;
     context.graphics = (flags & VK_QUEUE_GRAPHICS_BIT) != 0;
     context.timestamp_valid_bits = families[host.queue_family].timestampValidBits;
     context.lock_queue = host.lock_queue;

@@ -210,16 +210,20 @@ Result<void> create_instance(VulkanContext& context, bool want_validation) {
     if (result != VK_SUCCESS) {
         return vk::vk_error(result, "vkCreateInstance");
     }
-    context.owns_instance = true;
-    if (auto loaded = vk::load_instance_functions(fn, context.instance, true, kWhose); !loaded) {
-        return loaded.error();
-    }
+    const auto loaded = vk::load_instance_functions(fn, context.instance, true, kWhose);
+    // Owned even when a later function failed to load: vkDestroyInstance is then null only if the
+    // table failed before it, and the instance cannot be destroyed through it either.
+    context.owned_instance.take(context.instance, context.allocator, fn.vkDestroyInstance);
+    if (!loaded) return loaded.error();
 
     if (debug_utils) {
         vk::load_debug_utils_functions(fn, context.instance);
         if (fn.vkCreateDebugUtilsMessengerEXT && fn.vkDestroyDebugUtilsMessengerEXT) {
-            VKS_VK_TRY(fn.vkCreateDebugUtilsMessengerEXT(context.instance, &messenger_info, context.allocator,
-                                                         &context.debug_messenger));
+            VkDebugUtilsMessengerEXT messenger = VK_NULL_HANDLE;
+            VKS_VK_TRY(
+                fn.vkCreateDebugUtilsMessengerEXT(context.instance, &messenger_info, context.allocator, &messenger));
+            context.debug_messenger.take(context.instance, messenger, context.allocator,
+                                         fn.vkDestroyDebugUtilsMessengerEXT);
         }
     }
     return {};
@@ -283,29 +287,19 @@ Result<void> create_device(VulkanContext& context, int device_index) {
     info.enabledExtensionCount = static_cast<std::uint32_t>(extensions.size());
     info.ppEnabledExtensionNames = extensions.data();
     VKS_VK_TRY(fn.vkCreateDevice(context.physical_device, &info, context.allocator, &context.device));
-    context.owns_device = true;
-    if (auto loaded = vk::load_device_functions(fn, context.device, true, kWhose); !loaded) {
-        return loaded.error();
-    }
+    const auto loaded = vk::load_device_functions(fn, context.device, true, kWhose);
+    context.owned_device.take(context.device, context.allocator, fn.vkDestroyDevice); // as for the instance
+    if (!loaded) return loaded.error();
     fn.vkGetDeviceQueue(context.device, context.queue_family, 0, &context.queue);
     return {};
 }
 
 } // namespace
 
-// A function is null here only if create failed while loading the table (then what it would destroy
-// cannot be destroyed through it either).
+// The owners destroy the device, messenger and instance after this (vulkan_context.h); a device
+// vksonar made first finishes its work. A borrowed device is the host engine's to wait for.
 VulkanContext::~VulkanContext() {
-    if (owns_device && device != VK_NULL_HANDLE && fn.vkDestroyDevice != nullptr) {
-        if (fn.vkDeviceWaitIdle != nullptr) fn.vkDeviceWaitIdle(device);
-        fn.vkDestroyDevice(device, allocator);
-    }
-    if (debug_messenger != VK_NULL_HANDLE && instance != VK_NULL_HANDLE) {
-        fn.vkDestroyDebugUtilsMessengerEXT(instance, debug_messenger, allocator);
-    }
-    if (owns_instance && instance != VK_NULL_HANDLE && fn.vkDestroyInstance != nullptr) {
-        fn.vkDestroyInstance(instance, allocator);
-    }
+    if (owned_device && fn.vkDeviceWaitIdle != nullptr) fn.vkDeviceWaitIdle(device);
 }
 
 Context::Context() = default;
