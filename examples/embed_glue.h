@@ -102,14 +102,15 @@ inline vksonar::Result<vksonar::Scene> to_scene(const std::vector<Mesh>& meshes,
     vksonar::AcousticMaterial material;
     material.name = "engine default";
     material.backscatter_db = backscatter_db;
-    const std::uint32_t material_id = scene.add_material(material);
+    const auto material_id = scene.add_material(material);
+    if (!material_id) return material_id.error();
     for (const Mesh& mesh : meshes) {
         auto id = scene.add_mesh(mesh.positions.data(), static_cast<std::uint32_t>(mesh.positions.size() / 3),
                                  mesh.indices.data(), static_cast<std::uint32_t>(mesh.indices.size()));
         if (!id) return id.error();
         vksonar::SceneDraw draw;
         draw.mesh = id.value();
-        draw.material = material_id;
+        draw.material = material_id.value();
         if (auto added = scene.add_draw(draw); !added) return added.error();
     }
     return scene;

@@ -32,7 +32,9 @@ void add_tilted_plane(Scene& scene, double z_centre, double half_w, double half_
     material.backscatter_db = -20.0;
     SceneDraw draw;
     draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
+    auto material_index = scene.add_material(material);
+    ASSERT_TRUE(material_index.ok()) << material_index.error().message;
+    draw.material = material_index.value();
     draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
     auto added = scene.add_draw(draw);
     ASSERT_TRUE(added.ok()) << added.error().message;

@@ -330,7 +330,9 @@ TEST(CpuThreads, ABigTerrainGivesTheSameBytesOnAnyThreadCount) {
     ASSERT_TRUE(mesh) << mesh.error().message;
     SceneDraw draw;
     draw.mesh = mesh.value();
-    draw.material = scene.add_material(AcousticMaterial{});
+    auto material_index = scene.add_material(AcousticMaterial{});
+    ASSERT_TRUE(material_index) << material_index.error().message;
+    draw.material = material_index.value();
     ASSERT_TRUE(scene.add_draw(draw));
     Pose pose;
     pose.pitch_deg = 10.0;

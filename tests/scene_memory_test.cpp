@@ -272,6 +272,33 @@ void cap_address_space(std::size_t margin) {
     std::_Exit(failed > 0 ? 0 : 2);
 }
 
+// A material whose name cannot be copied (64 MiB under a 16 MiB margin).
+[[noreturn]] void add_material_child() {
+    Scene scene;
+    AcousticMaterial material;
+    material.name.assign(std::size_t(64) << 20, 'm');
+    bool ok = false;
+    cap_address_space(std::size_t(16) << 20);
+    try {
+        auto added = scene.add_material(material);
+        ok = added.ok();
+        if (!ok && added.error().message.rfind("Scene::add_material: out of memory", 0) != 0) {
+            cap_address_space(0);
+            std::_Exit(4);
+        }
+    } catch (...) {
+        cap_address_space(0);
+        std::_Exit(3); // an exception crossed the public API
+    }
+    cap_address_space(0);
+    if (ok) std::_Exit(2); // it fitted: nothing was tested
+    if (!scene.materials().empty()) std::_Exit(5);
+    auto again = scene.add_material(material); // with memory back, the scene takes it as its first
+    if (!again.ok() || again.value() != 0) std::_Exit(6);
+    std::fprintf(stderr, "failed as expected\n");
+    std::_Exit(0);
+}
+
 // host::Workers: if the k-th thread cannot start, the threads already started are stopped and joined
 // and the std::system_error comes out of the constructor (before, they were destroyed joinable:
 // std::terminate).
@@ -311,6 +338,15 @@ TEST(OutOfResources, AddMeshLeavesTheSceneUnchanged) {
     for (std::size_t i = 0; i < indices.size(); ++i)
         indices[i] = std::uint32_t((i * 7919) % vertices);
     EXPECT_EXIT(add_mesh_child(positions, indices), ::testing::ExitedWithCode(0), "failed");
+}
+
+// Scene::add_material out of memory returns an Error and leaves the scene as it was (it used to let
+// std::bad_alloc out of a function documented "never fails").
+TEST(OutOfResources, AddMaterialReturnsAnError) {
+#if defined(VKSONAR_TEST_UNDER_ASAN)
+    GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer's shadow memory do not mix";
+#endif
+    EXPECT_EXIT(add_material_child(), ::testing::ExitedWithCode(0), "failed as expected");
 }
 
 } // namespace

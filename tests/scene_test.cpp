@@ -714,7 +714,9 @@ TEST(SceneBuilder, AddMeshValidatesItsArrays) {
     AcousticMaterial steel;
     steel.name = "steel";
     steel.backscatter_db = -10;
-    const std::uint32_t steel_index = scene.add_material(steel);
+    const auto added_steel = scene.add_material(steel);
+    ASSERT_TRUE(added_steel.ok()) << added_steel.error().message;
+    const std::uint32_t steel_index = added_steel.value();
     EXPECT_EQ(steel_index, 1u);
 
     SceneDraw draw;

@@ -92,7 +92,9 @@ inline void add_quad(Scene& scene, double cx, double cy, double cz, double width
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
     SceneDraw draw;
     draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
+    auto material_index = scene.add_material(material);
+    ASSERT_TRUE(material_index.ok()) << material_index.error().message;
+    draw.material = material_index.value();
     const double a = yaw_deg * 3.14159265358979323846 / 180.0;
     draw.world_from_local = {std::cos(a), std::sin(a), 0, 0, -std::sin(a), std::cos(a), 0,  0,
                              0,           0,           1, 0, cx,           cy,          cz, 1};
@@ -141,7 +143,9 @@ inline void add_sphere(Scene& scene, double cx, double cy, double cz, double rs,
     material.backscatter_db = mu_db;
     SceneDraw draw;
     draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
+    auto material_index = scene.add_material(material);
+    ASSERT_TRUE(material_index.ok()) << material_index.error().message;
+    draw.material = material_index.value();
     draw.world_from_local = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, cx, cy, cz, 1};
     draw.instance = instance;
     ASSERT_TRUE(scene.add_draw(draw).ok());

@@ -135,8 +135,9 @@ public:
     [[nodiscard]] Result<std::uint32_t> add_mesh(const float* positions_xyz, std::uint32_t vertex_count,
                                                  const std::uint32_t* indices, std::uint32_t index_count);
     // Adds a material (copied; not validated until a Renderer is made from the scene, which then names
-    // it in its error) and returns its index for SceneDraw::material. Never fails.
-    std::uint32_t add_material(const AcousticMaterial& material);
+    // it in its error) and returns its index for SceneDraw::material. Fails only with
+    // ErrorCode::unsupported if host memory runs out; the scene is then unchanged.
+    [[nodiscard]] Result<std::uint32_t> add_material(const AcousticMaterial& material);
     // Adds a draw of a mesh added before with a material added before. Fails with
     // ErrorCode::invalid_argument naming the field for an unknown mesh or material index or a non-finite
     // transform entry, with ErrorCode::unsupported if host memory runs out; the scene is then unchanged.

@@ -130,7 +130,7 @@ struct SceneObject {
             throw py::value_error("backscatter_db: " + valid.error().message);
         SceneDraw draw;
         draw.mesh = mesh;
-        draw.material = scene.add_material(material);
+        draw.material = take(scene.add_material(material));
         draw.instance = static_cast<std::uint32_t>(instance);
         if (transform) {
             if (transform->ndim() != 2 || transform->shape(0) != 4 || transform->shape(1) != 4)

@@ -90,9 +90,15 @@ Result<std::uint32_t> Scene::add_mesh(const float* positions_xyz, std::uint32_t 
     return static_cast<std::uint32_t>(d.meshes.size() - 1);
 }
 
-std::uint32_t Scene::add_material(const AcousticMaterial& material) {
-    data_->materials.push_back(material);
-    return static_cast<std::uint32_t>(data_->materials.size() - 1);
+Result<std::uint32_t> Scene::add_material(const AcousticMaterial& material) {
+    std::vector<AcousticMaterial>& materials = data_->materials;
+    try {
+        materials.push_back(material); // (strong guarantee: unchanged if it throws)
+    } catch (const std::bad_alloc&) {
+        return make_error(ErrorCode::unsupported,
+                          "Scene::add_material: out of memory adding material " + std::to_string(materials.size()));
+    }
+    return static_cast<std::uint32_t>(materials.size() - 1);
 }
 
 Result<void> Scene::add_draw(const SceneDraw& draw) {

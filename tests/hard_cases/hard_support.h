@@ -108,7 +108,9 @@ inline void add_mesh_draw(Scene& scene, const std::vector<float>& positions, con
     ASSERT_TRUE(mesh.ok()) << mesh.error().message;
     SceneDraw draw;
     draw.mesh = mesh.value();
-    draw.material = scene.add_material(material);
+    auto material_index = scene.add_material(material);
+    ASSERT_TRUE(material_index.ok()) << material_index.error().message;
+    draw.material = material_index.value();
     draw.world_from_local = world_from_local;
     draw.instance = instance;
     auto added = scene.add_draw(draw);
