@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/angles.h"
+#include "core/sonar_math.hpp"
 #include "legacy/legacy.h"
 #include "sonar_shared.h"
 
@@ -357,7 +358,7 @@ void legacy_depth_from_frame(const Plan& plan, const Frame& frame, std::vector<f
     for (std::size_t p = 0; p < pixels; ++p) {
         const double d = frame.depth[p];
         // Reversed-Z: d = 0 is "nothing hit" (the far plane), the plugin's 0 = no reading.
-        double z = d > 0.0 && d > plan.depth_b ? plan.depth_a / (d - plan.depth_b) : 0.0;
+        double z = d > 0.0 && d > plan.depth_b ? math_f64::view_z_from_depth(d, plan.depth_a, plan.depth_b) : 0.0;
         if (!std::isfinite(z) || z < 0) z = 0;
         out[p] = static_cast<float>(z);
     }
