@@ -3,16 +3,21 @@
 // the unsharded run's files byte for byte; shard.json and meta.json say which shard a frame came from.
 // (.h5 shards, kill-and-resume: tests/python/check_shards.py.)
 #include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -766,6 +771,261 @@ TEST_F(Writer, MergeRefusesAFrameFolderWithMissingOrEmptyArrays) {
     write_text(polar, bytes);
     r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
     EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+// ---- SIGINT and SIGTERM: a render stops at a frame boundary and says what it left ----------------
+
+// Starts VKSONAR_CLI with `args` as a child process that a test can signal: stdin and stdout
+// /dev/null, stderr to `err`, SIGINT and SIGTERM at their default actions and unblocked whatever this
+// process has, the engines' variables unset (as Shard::run). -1 when it cannot be started.
+pid_t start_cli(const std::vector<std::string>& args, const fs::path& err) {
+    std::vector<std::string> words = {VKSONAR_CLI};
+    words.insert(words.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (std::string& word : words)
+        argv.push_back(word.data());
+    argv.push_back(nullptr);
+    std::vector<char*> envp;
+    for (char** entry = environ; *entry; ++entry) {
+        const std::string name = std::string(*entry).substr(0, std::string(*entry).find('='));
+        if (name.rfind("SLURM_ARRAY_TASK_", 0) == 0 || name == "JOB_COMPLETION_INDEX" || name == "VKSONAR_SHARD_COUNT")
+            continue;
+        envp.push_back(*entry);
+    }
+    envp.push_back(nullptr);
+    posix_spawn_file_actions_t files;
+    posix_spawn_file_actions_init(&files);
+    posix_spawn_file_actions_addopen(&files, 0, "/dev/null", O_RDONLY, 0);
+    posix_spawn_file_actions_addopen(&files, 1, "/dev/null", O_WRONLY, 0);
+    posix_spawn_file_actions_addopen(&files, 2, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    sigset_t defaults, none;
+    sigemptyset(&defaults);
+    sigaddset(&defaults, SIGINT);
+    sigaddset(&defaults, SIGTERM);
+    sigemptyset(&none);
+    posix_spawnattr_setsigdefault(&attr, &defaults);
+    posix_spawnattr_setsigmask(&attr, &none);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGDEF | POSIX_SPAWN_SETSIGMASK);
+    pid_t pid = -1;
+    const int started = posix_spawn(&pid, argv[0], &files, &attr, argv.data(), envp.data());
+    posix_spawnattr_destroy(&attr);
+    posix_spawn_file_actions_destroy(&files);
+    return started == 0 ? pid : -1;
+}
+
+// Polls `ready` every 5 ms until it holds or `seconds` have passed; whether it held.
+bool wait_until(const std::function<bool()>& ready, double seconds) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    for (;;) {
+        if (ready()) return true;
+        if (std::chrono::steady_clock::now() > deadline) return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+}
+
+// The wait status of `pid` once it ends, within `seconds`; else it is killed (SIGKILL) and -1 returned.
+int wait_exit(pid_t pid, double seconds) {
+    int status = 0;
+    if (wait_until([&] { return ::waitpid(pid, &status, WNOHANG) == pid; }, seconds)) return status;
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+    return -1;
+}
+
+// The lines of `text` that contain `part`.
+std::vector<std::string> lines_with(const std::string& text, const std::string& part) {
+    std::vector<std::string> found;
+    std::stringstream stream(text);
+    std::string line;
+    while (std::getline(stream, line))
+        if (line.find(part) != std::string::npos) found.push_back(line);
+    return found;
+}
+
+// The number after `prefix` in `text` (-1 where `prefix` is not there).
+long number_after(const std::string& text, const std::string& prefix) {
+    const std::size_t at = text.find(prefix);
+    return at == std::string::npos ? -1 : std::atol(text.c_str() + at + prefix.size());
+}
+
+// The Writer fixture's run over a long trajectory, started as a process to signal. The run takes
+// about a second or more on two busy cores: long enough that it is still rendering when the signal
+// comes, short enough to be resumed in a test.
+class Interrupt : public Writer {
+protected:
+    static constexpr int kFrames = 400;
+
+    void SetUp() override {
+        Writer::SetUp();
+        poses_ = long_trajectory("long.csv", kFrames);
+    }
+    // render_args(out, extra) over the long trajectory, with fewer pixel rows (a few ms a frame).
+    std::vector<std::string> long_args(const std::string& out, std::vector<std::string> extra = {}) const {
+        extra.insert(extra.begin(), {"--set", "accuracy.rows_per_vfov=4"});
+        std::vector<std::string> a = render_args(out, std::move(extra));
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = poses_;
+        return a;
+    }
+    // Starts the run, waits until `ready` holds (at most 10 s: then the test fails), sends `signal`
+    // and waits for the exit (at most 20 s); its wait status and stderr.
+    ShardRun interrupt(const std::vector<std::string>& args, const std::function<bool(pid_t)>& ready, int signal) {
+        const fs::path err = dir_ / "interrupted.err";
+        const pid_t pid = start_cli(args, err);
+        EXPECT_GT(pid, 0) << "cannot start " << VKSONAR_CLI;
+        ShardRun r;
+        if (pid <= 0) return r;
+        EXPECT_TRUE(wait_until([&] { return ready(pid); }, 10.0)) << "the run never got to its frames";
+        EXPECT_EQ(::kill(pid, signal), 0);
+        const int status = wait_exit(pid, 20.0);
+        r.err = read_text(err);
+        EXPECT_NE(status, -1) << "still running 20 s after the signal: " << r.err;
+        EXPECT_TRUE(status != -1 && WIFEXITED(status))
+            << "ended by the signal (" << (status != -1 && WIFSIGNALED(status) ? WTERMSIG(status) : 0)
+            << ") instead of stopping: " << r.err;
+        r.exit_code = status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+        return r;
+    }
+    // True once `file` is there and has grown since it was first seen, or 300 ms after it appeared
+    // (a bag's frames reach the file a chunk at a time): a frame or more is on its way to disk.
+    std::function<bool(pid_t)> file_written(const std::function<fs::path(pid_t)>& file) {
+        seen_size_ = -1;
+        return [this, file](pid_t pid) {
+            std::error_code ec;
+            const auto size = fs::file_size(file(pid), ec);
+            if (ec) return false;
+            const auto now = std::chrono::steady_clock::now();
+            if (seen_size_ < 0) {
+                seen_size_ = static_cast<long long>(size);
+                seen_at_ = now;
+            }
+            return static_cast<long long>(size) > seen_size_ || now - seen_at_ > std::chrono::milliseconds(300);
+        };
+    }
+    bool have_hdf5() const { return !no_hdf5(run(render_args("probe.h5"))); }
+
+    std::string poses_;
+    long long seen_size_ = -1;
+    std::chrono::steady_clock::time_point seen_at_;
+};
+
+// Ctrl-C during an unsharded .h5 or bag run: the default action ended it (no message, exit by signal)
+// and left its temporary `.~NAME.writing-PID` beside OUT. Now the run stops at a frame boundary, removes
+// its temporary, says so in one line and exits 130; an earlier file at OUT is left as it was.
+TEST_F(Interrupt, CtrlCLeavesAnUnshardedFileAsItWas) {
+    const bool hdf5 = have_hdf5();
+    for (const std::string name : {"run.mcap", "run.h5"}) {
+        if (name == "run.h5" && !hdf5) continue;
+        write_text(dir_ / name, "an earlier run's file\n");
+        const ShardRun r = interrupt(
+            long_args(name),
+            file_written([&](pid_t pid) { return dir_ / (".~" + name + ".writing-" + std::to_string(pid)); }), SIGINT);
+        EXPECT_EQ(r.exit_code, 130) << name << ": " << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << name << ": " << r.err;
+        EXPECT_EQ(r.err.rfind("vksonar render: interrupted (SIGINT) after ", 0), 0u) << r.err;
+        EXPECT_NE(r.err.find("; " + (dir_ / name).string() + " was not written\n"), std::string::npos) << r.err;
+        EXPECT_LT(number_after(r.err, "after "), kFrames) << r.err;
+        EXPECT_EQ(read_text(dir_ / name), "an earlier run's file\n") << name << " was changed";
+        EXPECT_TRUE(leftovers().empty()) << name << ": " << (leftovers().empty() ? "" : leftovers()[0]);
+    }
+}
+
+// SIGTERM during a frame-folder run: exit 143 and one line naming the frames on disk, every one of them
+// whole (its meta.json, written last, is there) and no temporary left in any.
+TEST_F(Interrupt, SigtermStopsAFolderRunAfterWholeFrames) {
+    const fs::path out = dir_ / "frames";
+    const ShardRun r = interrupt(
+        long_args("frames", {"--save", "polar"}),
+        [&](pid_t) { return fs::exists(out / vksonar::cli::frame_dir_name(3) / "meta.json"); }, SIGTERM);
+    EXPECT_EQ(r.exit_code, 143) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    const long written = number_after(r.err, "vksonar render: interrupted (SIGTERM) after ");
+    ASSERT_GE(written, 2) << r.err;
+    ASSERT_LT(written, kFrames) << r.err;
+    EXPECT_NE(r.err.find(" of " + std::to_string(kFrames) + " frames; " + out.string() + " holds this run's first " +
+                         std::to_string(written) + " frames, each whole (frame_000002 to " +
+                         vksonar::cli::frame_dir_name(written + 1) + ")"),
+              std::string::npos)
+        << r.err;
+    std::size_t folders = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(out)) {
+        const std::string name = entry.path().filename().string();
+        EXPECT_NE(name.rfind(".~", 0), 0u) << entry.path() << " left behind";
+        if (name.rfind("frame_", 0) != 0) continue;
+        ++folders;
+        const long line = std::atol(name.c_str() + 6);
+        EXPECT_TRUE(line >= 2 && line <= written + 1) << name << " is not one of the frames the line names";
+        EXPECT_TRUE(fs::exists(entry.path() / "meta.json") && fs::exists(entry.path() / "polar.npy"))
+            << name << " is not whole";
+    }
+    EXPECT_EQ(folders, static_cast<std::size_t>(written));
+}
+
+// Ctrl-C during a shard (--shard 0/1: the whole trajectory in one shard): exit 130 and one line saying
+// how many frames the shard keeps; the shard is left as a resume takes it (its lock removed), so running
+// the same command again renders only the rest, and the merged shard is the uninterrupted run's output.
+class InterruptShard : public Interrupt {
+protected:
+    // `out` is the shard's --out, `whole` the unsharded run's, `merged` the merge of the resumed shard;
+    // `ready` says when a frame is on its way to disk. Returns the frames the interrupted run kept.
+    long interrupt_and_resume(const std::string& out, const std::string& whole, const std::string& merged,
+                              const std::function<bool(pid_t)>& ready, const std::vector<std::string>& extra = {}) {
+        std::vector<std::string> shard = extra;
+        shard.insert(shard.end(), {"--shard", "0/1"});
+        const ShardRun r = interrupt(long_args(out, shard), ready, SIGINT);
+        EXPECT_EQ(r.exit_code, 130) << r.err;
+        const std::vector<std::string> said = lines_with(r.err, "interrupted");
+        EXPECT_EQ(said.size(), 1u) << r.err;
+        const long kept = number_after(r.err, "shard " + (dir_ / out).string() + " keeps ");
+        EXPECT_GE(kept, 0) << r.err;
+        EXPECT_LT(kept, kFrames) << "the run was not interrupted: " << r.err;
+        EXPECT_NE(r.err.find(" of its " + std::to_string(kFrames) + " frames, re-run the same command to resume"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_TRUE(leftovers().empty()) << (leftovers().empty() ? "" : leftovers()[0]);
+        const ShardRun again = run(long_args(out, shard));
+        EXPECT_EQ(again.exit_code, 0) << again.err;
+        EXPECT_NE(again.err.find(", " + std::to_string(kept) + " already on disk"), std::string::npos)
+            << "the re-run did not resume after the kept frames: " << again.err;
+        EXPECT_EQ(again.err.find("warning"), std::string::npos) << again.err;
+        EXPECT_EQ(run(long_args(whole, extra)).exit_code, 0);
+        const ShardRun joined = run({"merge", (dir_ / merged).string(), (dir_ / out).string()});
+        EXPECT_EQ(joined.exit_code, 0) << joined.err;
+        return kept;
+    }
+};
+
+TEST_F(InterruptShard, AFolderShardResumesIntoTheUninterruptedRun) {
+    interrupt_and_resume(
+        "part", "whole", "merged",
+        [&](pid_t) { return fs::exists(dir_ / "part" / vksonar::cli::frame_dir_name(2) / "meta.json"); },
+        {"--save", "polar"});
+    for (int line = 2; line < kFrames + 2; ++line) {
+        const std::string frame = vksonar::cli::frame_dir_name(line);
+        const std::string a = read_text(dir_ / "whole" / frame / "polar.npy"),
+                          b = read_text(dir_ / "merged" / frame / "polar.npy");
+        ASSERT_FALSE(a.empty()) << frame;
+        ASSERT_TRUE(a == b) << frame << " differs from the uninterrupted run";
+    }
+}
+
+TEST_F(InterruptShard, ABagShardResumesIntoTheUninterruptedBag) {
+    fs::create_directories(dir_ / "whole");
+    fs::create_directories(dir_ / "merged");
+    interrupt_and_resume("part.mcap", "whole/run.mcap", "merged/run.mcap",
+                         file_written([&](pid_t) { return dir_ / "part.mcap"; }));
+    const std::string whole = read_text(dir_ / "whole" / "run.mcap");
+    EXPECT_GT(whole.size(), 1000u);
+    EXPECT_TRUE(whole == read_text(dir_ / "merged" / "run.mcap")) << "the merged bag differs from the unsharded one";
+}
+
+// (The values of a resumed .h5 against the uninterrupted one: tests/python/check_shards.py; here the
+// resume must take the frames and the merge the shard as whole.)
+TEST_F(InterruptShard, AnH5ShardResumesAndMerges) {
+    if (!have_hdf5()) GTEST_SKIP() << "no HDF5 in this build";
+    interrupt_and_resume("part.h5", "whole.h5", "merged.h5", file_written([&](pid_t) { return dir_ / "part.h5"; }));
 }
 
 } // namespace

@@ -8,14 +8,22 @@
 //
 // run_render (at the end) reads as the list of steps; the inputs are read and checked by
 // render_job.cpp, the per-frame files written by render_frame.cpp.
+//
+// SIGINT and SIGTERM (Ctrl-C, a scheduler's stop) end a run at the next frame boundary, not by the
+// default action: the frames already rendered are written, the output is left as described in one
+// stderr line (stop_run), and the exit code is the shell's 130 / 143. A second signal while it stops
+// kills at once. The handlers are the command's, installed for the run only (InterruptGuard): the
+// library never installs any (an embedding engine owns its signals).
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -115,7 +123,72 @@ constexpr const char* kUsage =
     "                without it a Slurm array (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job\n"
     "                (JOB_COMPLETION_INDEX) picks the block. Re-running a shard skips the frames already\n"
     "                on disk. Merge the shards with 'vksonar merge' (docs/scale.md)\n"
-    "  --shard-count with JOB_COMPLETION_INDEX: the number of shards (else VKSONAR_SHARD_COUNT)\n";
+    "  --shard-count with JOB_COMPLETION_INDEX: the number of shards (else VKSONAR_SHARD_COUNT)\n"
+    "\n"
+    "Exit codes: 0 done, 2 bad input, 1 any other failure, 130 / 143 stopped by SIGINT (Ctrl-C) / SIGTERM: the run\n"
+    "stops after the frame being rendered, writes the frames already rendered and says in one line what OUT holds\n"
+    "(an unsharded .h5 or bag is not written; a shard resumes when re-run); a second signal kills it at once.\n";
+
+// ---- SIGINT and SIGTERM ---------------------------------------------------------------------------
+
+// The signal that asked the running `render` to stop (0: none). The one exception to the project's
+// rule of no global mutable state: a signal handler can reach nothing else. A lock-free atomic, so
+// the handler's store is async-signal-safe and the frame loop (another thread, maybe) reads it
+// without a data race; only InterruptGuard and the handler below touch it.
+std::atomic<int> g_render_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free, "the handler's store must be lock-free");
+
+// Async-signal-safe only: the first signal is recorded for the frame loop (no printing here); a
+// second one restores the default action and re-raises, so a run stuck while stopping still dies
+// (the signal stays blocked until this handler returns, then the default action ends the process).
+void on_render_signal(int signal) {
+    int none = 0;
+    if (g_render_signal.compare_exchange_strong(none, signal)) return;
+    struct sigaction fallback {};
+    fallback.sa_handler = SIG_DFL;
+    sigemptyset(&fallback.sa_mask);
+    ::sigaction(signal, &fallback, nullptr);
+    ::raise(signal);
+}
+
+// SIGINT and SIGTERM handled for the duration of a render (the earlier actions restored when it
+// ends), except where one was ignored when the run began (nohup, a background job of a script):
+// that one stays ignored. SA_RESTART: a file write interrupted by the signal goes on instead of
+// failing with EINTR.
+class InterruptGuard {
+public:
+    InterruptGuard() {
+        g_render_signal.store(0);
+        for (std::size_t k = 0; k < 2; ++k) {
+            struct sigaction action {};
+            action.sa_handler = on_render_signal;
+            action.sa_flags = SA_RESTART;
+            sigemptyset(&action.sa_mask);
+            installed_[k] = ::sigaction(kSignals[k], &action, &previous_[k]) == 0;
+            if (installed_[k] && previous_[k].sa_handler == SIG_IGN) ::sigaction(kSignals[k], &previous_[k], nullptr);
+        }
+    }
+    ~InterruptGuard() {
+        for (std::size_t k = 0; k < 2; ++k)
+            if (installed_[k]) ::sigaction(kSignals[k], &previous_[k], nullptr);
+    }
+    InterruptGuard(const InterruptGuard&) = delete;
+    InterruptGuard& operator=(const InterruptGuard&) = delete;
+
+    // The signal that asked the run to stop, 0 for none.
+    static int requested() { return g_render_signal.load(); }
+
+private:
+    static constexpr int kSignals[2] = {SIGINT, SIGTERM};
+    struct sigaction previous_[2]{};
+    bool installed_[2] = {false, false};
+};
+
+// A render stopped by a signal: which, and the end of its one line ("after 3 of 9 frames; ...").
+struct Interrupted {
+    int signal = 0;
+    std::string what;
+};
 
 // ---- output directory --------------------------------------------------------------------------
 
@@ -683,9 +756,12 @@ public:
     FrameLoop(const Args& args, const RenderJob& job, Renderer& renderer, WriteBehind& writer)
         : args_(args), job_(job), renderer_(renderer), writer_(writer) {}
 
-    void run(const std::vector<char>& done, Progress& progress) {
+    // False: a signal stopped it at a frame boundary (InterruptGuard) before every frame was
+    // submitted; a frame held back for its flow is then dropped, not written.
+    bool run(const std::vector<char>& done, Progress& progress) {
         for (std::size_t i = job_.first; i < job_.end; ++i) {
-            if (done[i] && !held_) continue;                          // a re-run shard: this frame is complete on disk
+            if (done[i] && !held_) continue; // a re-run shard: this frame is complete on disk
+            if (InterruptGuard::requested()) return false;
             WriteBehind::Slot& slot = writer_.acquire(held_ ? 1 : 0); // rethrows a write error: the run stops there
             render_into(i, slot, next_rendered(i, done));
             if (held_) submit_held(&slot);
@@ -697,7 +773,8 @@ public:
             }
             progress.show(false);
         }
-        if (!held_) return;
+        if (!held_) return true;
+        if (InterruptGuard::requested()) return false;
         if (job_.end < job_.poses.size()) { // the next shard's first frame
             WriteBehind::Slot& next = writer_.acquire(1);
             render_into(job_.end, next);
@@ -705,6 +782,7 @@ public:
         } else {
             submit_held(nullptr);
         }
+        return true;
     }
 
 private:
@@ -785,18 +863,53 @@ void finish_run(const RenderJob& job, WriteBehind& writer, Writers& writers, Out
                  todo, seconds, seconds > 0 ? static_cast<double>(todo) / seconds : 0.0);
 }
 
-} // namespace
+// A signal stopped the frame loop at a frame boundary. The frames it had rendered are written first
+// (the ring holds at most three, each written whole, in a few ms): so what is on disk is the run's
+// first frames, every one whole, and no rendered frame is thrown away; a write that hangs is what the
+// second signal is for. Then each output is left as a re-run expects it:
+// - a shard's .h5 is closed without `complete` (each frame was flushed with its commit record: the
+//   re-run resumes after the last), its bag closed with every frame written (a resume copies them);
+//   a frame folder holds its whole frames and shard.json. Its lock goes when `target` does.
+// - an unsharded .h5 or bag is abandoned: its temporary is removed with `target`, OUT stays as it was.
+// - an unsharded frame-folder run keeps the frames written (an earlier run's frames went before the
+//   first; with none written the folder is as it was, or removed when this run made it).
+Interrupted stop_run(const RenderJob& job, WriteBehind& writer, Writers& writers, Progress& progress, std::size_t todo,
+                     int signal) {
+    writer.finish(); // rethrows a write error: that is the run's outcome then
+    const std::uint64_t written = writer.written();
+    progress.finish();
+    const std::string& out = job.out_path;
+    std::string state;
+    if (job.shard) {
+        if (writers.bag)
+            if (auto closed = writers.bag->close(); !closed) throw Failure(closed.error().message);
+        writers.bag.reset();
+        writers.dataset.reset(); // not close(): that would mark it complete
+        const std::size_t block = job.end - job.first;
+        state = "shard " + out + " keeps " + std::to_string(block - todo + written) + " of its " +
+                std::to_string(block) + " frames, re-run the same command to resume";
+    } else if (job.dataset || job.bag) {
+        writers.bag.reset();
+        writers.dataset.reset();
+        state = out + " was not written";
+    } else if (written == 0) {
+        state = "nothing was written to " + out;
+    } else {
+        state = out + " holds this run's first " + std::to_string(written) + " frames, each whole (" +
+                frame_dir_name(job.poses[job.first].line) + " to " +
+                frame_dir_name(job.poses[job.first + written - 1].line) + ")";
+    }
+    return {signal, "after " + std::to_string(written) + " of " + std::to_string(todo) + " frames; " + state};
+}
 
 // Order matters for the "no partial output" promise (top of the file): everything that can be
-// checked is checked before create_output.
-int run_render(const std::vector<std::string>& argv) {
-    const Args args = parse_render_args(argv);
-    if (args.has("--help")) {
-        std::fputs(kUsage, stdout);
-        return 0;
-    }
+// checked is checked before create_output. Returns the stop a signal asked for; every output is
+// closed, and a temporary removed, by the time it returns.
+std::optional<Interrupted> render(const Args& args) {
     RenderJob job = parse_job(args);
     const SceneAndConfig loaded = load_scene_and_config(args, job);
+    if (const int signal = InterruptGuard::requested())
+        return Interrupted{signal, "before the first frame; nothing was written"};
     refuse_mixed_folders(job);
     OutputTarget target;
     create_output(job, target);
@@ -827,9 +940,29 @@ int run_render(const std::vector<std::string>& argv) {
                                    job.end > job.first ? job.poses[job.end - 1].line : 0, job.end - job.first - todo)
                          .c_str());
     Progress progress(writer, todo, job.trajectory && ::isatty(::fileno(stderr)));
-    FrameLoop(args, job, renderer, writer).run(writers.done, progress);
+    if (!FrameLoop(args, job, renderer, writer).run(writers.done, progress))
+        return stop_run(job, writer, writers, progress, todo, InterruptGuard::requested());
     finish_run(job, writer, writers, target, progress, todo);
-    return 0;
+    return std::nullopt;
+}
+
+} // namespace
+
+// A signal's stop is one line once every output is closed (render returned), exit 130 (SIGINT) or
+// 143 (SIGTERM), as a shell reports a process its signal ended. A signal that comes after the last
+// frame was rendered lets the run finish as usual.
+int run_render(const std::vector<std::string>& argv) {
+    const Args args = parse_render_args(argv);
+    if (args.has("--help")) {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
+    const InterruptGuard guard;
+    const std::optional<Interrupted> stopped = render(args);
+    if (!stopped) return 0;
+    std::fprintf(stderr, "vksonar render: interrupted (%s) %s\n", stopped->signal == SIGINT ? "SIGINT" : "SIGTERM",
+                 detail::escape_control_chars(stopped->what).c_str());
+    return 128 + stopped->signal;
 }
 
 } // namespace vksonar::cli
