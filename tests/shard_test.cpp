@@ -752,8 +752,9 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
 }
 
 // Every file a frame writes is in frame_files.h's table, which an unsharded re-run clears OUT by (a file
-// written under another name would survive the re-run and mix two runs), and every entry of the table
-// is written by the --save item it names: a render with every item the CLI offers, in each mode.
+// written under another name would survive the re-run and mix two runs); every entry of the table is
+// written by one of these renders and names a --save item the CLI offers. Renders with every item the
+// CLI offers, in each mode.
 TEST_F(Writer, EveryFileAFrameWritesIsInTheFrameFileTable) {
     // The items as the CLI's own error lists them, so an item added there is rendered here too.
     const ShardRun bad = run(render_args("never", {"--save", "no_such_item"}));
