@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -24,6 +25,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "cli/frame_files.h"
 #include "cli/shard.h"
 #include "cli_support.h"
 
@@ -718,10 +720,17 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
         return args;
     };
     write_text(dir_ / "two.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
-    ASSERT_EQ(run(with(render_args("kd"), "")).exit_code, 0); // a single pose: its files in kd itself
-    ASSERT_TRUE(fs::exists(dir_ / "kd" / "fan.png"));
-    ASSERT_EQ(run(render_args("kd")).exit_code, 0); // 7 frames, frame_000002..frame_000008
-    ASSERT_TRUE(fs::exists(dir_ / "kd" / "frame_000008" / "fan.png"));
+    // A single pose: its files in kd itself, every kind a frame writes but flow (a trajectory's), the
+    // uuv-legacy mode's own among them.
+    ShardRun r = run(with(render_args("kd", {"--sonar", "uuv-legacy", "--save",
+                                             "default,depth,normals,echo,cloud,multibeam,raw_scan,labels"}),
+                          ""));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "raw_scan.npy"));
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "boxes.json"));
+    r = run(render_args("kd", {"--save", "default,depth,normals,echo,cloud,labels,flow"}));
+    ASSERT_EQ(r.exit_code, 0) << r.err; // 7 frames, frame_000002..frame_000008
+    ASSERT_TRUE(fs::exists(dir_ / "kd" / "frame_000008" / "flow.npy"));
     write_text(dir_ / "kd" / "notes.txt", "mine");
     fs::create_directories(dir_ / "kd" / "frame_extra");
     write_text(dir_ / "kd" / ".~fan.png", "a killed run's temporary");
@@ -745,6 +754,62 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
         run(with(render_args("kd", {"--save", "polar", "--set", "bins=-1"}), (dir_ / "two.csv").string())).exit_code,
         2);
     EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
+}
+
+// Every file a frame writes is in frame_files.h's table, which an unsharded re-run clears OUT by (a file
+// written under another name would survive the re-run and mix two runs); every entry of the table is
+// written by one of these renders and names a --save item the CLI offers. Renders with every item the
+// CLI offers, in each mode.
+TEST_F(Writer, EveryFileAFrameWritesIsInTheFrameFileTable) {
+    // The items as the CLI's own error lists them, so an item added there is rendered here too.
+    const ShardRun bad = run(render_args("never", {"--save", "no_such_item"}));
+    ASSERT_EQ(bad.exit_code, 2) << bad.err;
+    const std::size_t valid = bad.err.find("valid: ");
+    ASSERT_NE(valid, std::string::npos) << bad.err;
+    std::set<std::string> items;
+    std::istringstream list(bad.err.substr(valid + 7, bad.err.find(')', valid) - valid - 7));
+    for (std::string item; std::getline(list, item, ',');)
+        items.insert(item);
+    ASSERT_TRUE(items.count("labels") && items.count("flow") && items.count("raw_scan")) << bad.err;
+    for (const vksonar::cli::FrameFile& file : vksonar::cli::kFrameFiles)
+        EXPECT_TRUE(file.save.empty() || items.count(std::string(file.save))) << file.name << ": " << file.save;
+
+    write_text(dir_ / "two.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.1,0,0,0,10,1\n");
+    std::set<std::string> written;
+    for (const std::string mode : {"physical", "uuv-legacy", "gtri-legacy"}) {
+        std::string save;
+        for (const std::string& item : items) // multibeam and raw_scan: refused but in uuv-legacy
+            if (mode == "uuv-legacy" || (item != "multibeam" && item != "raw_scan"))
+                save += (save.empty() ? "" : ",") + item;
+        const fs::path out = dir_ / mode;
+        std::vector<std::string> args = {"render",
+                                         "--backend",
+                                         "cpu",
+                                         "--set",
+                                         "bins=32",
+                                         "--set",
+                                         "beams=16",
+                                         "--save",
+                                         save,
+                                         "--trajectory",
+                                         (dir_ / "two.csv").string(),
+                                         "--out",
+                                         out.string()};
+        if (mode != "physical") args.insert(args.end(), {"--sonar", mode});
+        const ShardRun r = run(args);
+        ASSERT_EQ(r.exit_code, 0) << mode << ": " << r.err;
+        std::size_t files = 0;
+        for (const auto& entry : fs::recursive_directory_iterator(out)) {
+            if (entry.is_directory()) continue;
+            const std::string name = entry.path().filename().string();
+            EXPECT_TRUE(vksonar::cli::is_frame_file(name)) << entry.path() << ": not in frame_files.h's table";
+            written.insert(name);
+            ++files;
+        }
+        EXPECT_GT(files, 0u) << mode;
+    }
+    for (const vksonar::cli::FrameFile& file : vksonar::cli::kFrameFiles)
+        EXPECT_TRUE(written.count(std::string(file.name))) << file.name << ": in the table, written by no run";
 }
 
 // merge took frame folders whose arrays were missing or empty as whole frames. A frame folder now

@@ -20,6 +20,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/frame_files.h"
 
 namespace fs = std::filesystem;
 
@@ -85,21 +86,21 @@ json classes_of(const fs::path& meta_path) {
 std::vector<FrameFolder> frame_folders(const fs::path& run) {
     std::error_code ec;
     std::vector<FrameFolder> frames;
-    if (fs::is_regular_file(run / "boxes.json", ec)) {
-        frames.push_back({run, "fan.png", {}, 0});
+    if (fs::is_regular_file(run / kBoxesJson, ec)) {
+        frames.push_back({run, std::string(kFanPng), {}, 0});
     } else {
         bool any_boxes = false;
         try {
             for (const auto& entry : fs::directory_iterator(run)) {
                 if (!entry.is_directory(ec)) continue;
-                const bool boxes = fs::is_regular_file(entry.path() / "boxes.json", ec);
-                const bool meta = fs::is_regular_file(entry.path() / "meta.json", ec);
+                const bool boxes = fs::is_regular_file(entry.path() / kBoxesJson, ec);
+                const bool meta = fs::is_regular_file(entry.path() / kMetaJson, ec);
                 // A vksonar frame folder with neither is a frame cut off before its files (or emptied):
                 // refused below, not skipped.
                 const bool frame_named = entry.path().filename().string().rfind("frame_", 0) == 0;
                 any_boxes = any_boxes || boxes;
                 if (boxes || meta || frame_named)
-                    frames.push_back({entry.path(), (entry.path().filename() / "fan.png").generic_string(), {}, 0});
+                    frames.push_back({entry.path(), (entry.path().filename() / kFanPng).generic_string(), {}, 0});
             }
         } catch (const fs::filesystem_error& e) {
             throw BadInput(run.string() + ": cannot list the folder (" + e.code().message() + ")");
@@ -109,16 +110,16 @@ std::vector<FrameFolder> frame_folders(const fs::path& run) {
                            ": no boxes.json in it or in its frame folders (render with --save fan,labels)");
     }
     for (FrameFolder& f : frames) {
-        if (!fs::is_regular_file(f.dir / "boxes.json", ec) && !fs::is_regular_file(f.dir / "meta.json", ec))
+        if (!fs::is_regular_file(f.dir / kBoxesJson, ec) && !fs::is_regular_file(f.dir / kMetaJson, ec))
             throw BadInput(f.dir.string() + ": a frame folder without meta.json and boxes.json (an unfinished frame)");
-        if (!fs::is_regular_file(f.dir / "boxes.json", ec))
+        if (!fs::is_regular_file(f.dir / kBoxesJson, ec))
             throw BadInput(f.dir.string() + ": meta.json but no boxes.json (rendered without --save labels?)");
-        if (!fs::is_regular_file(f.dir / "meta.json", ec))
+        if (!fs::is_regular_file(f.dir / kMetaJson, ec))
             throw BadInput(f.dir.string() + ": boxes.json but no meta.json (an unfinished frame)");
-        if (!fs::is_regular_file(f.dir / "fan.png", ec))
+        if (!fs::is_regular_file(f.dir / kFanPng, ec))
             throw BadInput(f.dir.string() + ": no fan.png, the image the boxes are on (render with --save fan,labels)");
-        f.boxes = read_json(f.dir / "boxes.json");
-        f.frame_index = unsigned_at(f.boxes, "frame_index", f.dir / "boxes.json");
+        f.boxes = read_json(f.dir / kBoxesJson);
+        f.frame_index = unsigned_at(f.boxes, "frame_index", f.dir / kBoxesJson);
     }
     std::sort(frames.begin(), frames.end(), [](const FrameFolder& a, const FrameFolder& b) {
         return a.frame_index != b.frame_index ? a.frame_index < b.frame_index : a.dir < b.dir;
@@ -127,7 +128,7 @@ std::vector<FrameFolder> frame_folders(const fs::path& run) {
 }
 
 json coco_document(const fs::path& run, const std::vector<FrameFolder>& frames, std::uint64_t& left_out) {
-    json categories = classes_of(frames.front().dir / "meta.json");
+    json categories = classes_of(frames.front().dir / kMetaJson);
     std::vector<std::uint64_t> category_ids;
     for (const json& c : categories)
         category_ids.push_back(c["id"].get<std::uint64_t>());
@@ -135,11 +136,11 @@ json coco_document(const fs::path& run, const std::vector<FrameFolder>& frames, 
     std::uint64_t image_id = 0, annotation_id = 0;
     left_out = 0;
     for (const FrameFolder& f : frames) {
-        const fs::path boxes_path = f.dir / "boxes.json";
+        const fs::path boxes_path = f.dir / kBoxesJson;
         // Frames of one run share the scene: other classes mean folders of different runs.
-        if (&f != &frames.front() && classes_of(f.dir / "meta.json") != categories)
-            throw BadInput((f.dir / "meta.json").string() + ": its classes differ from " +
-                           (frames.front().dir / "meta.json").string() + "'s (frames of different scenes?)");
+        if (&f != &frames.front() && classes_of(f.dir / kMetaJson) != categories)
+            throw BadInput((f.dir / kMetaJson).string() + ": its classes differ from " +
+                           (frames.front().dir / kMetaJson).string() + "'s (frames of different scenes?)");
         if (!f.boxes.contains("image_size")) throw BadInput(boxes_path.string() + ": 'image_size' is missing");
         const std::uint64_t width = unsigned_at(f.boxes["image_size"], "width", boxes_path);
         const std::uint64_t height = unsigned_at(f.boxes["image_size"], "height", boxes_path);

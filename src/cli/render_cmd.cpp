@@ -41,6 +41,7 @@
 #include "cli/commands.h"
 #include "cli/dataset_h5.h"
 #include "cli/dataset_mcap.h"
+#include "cli/frame_files.h"
 #include "cli/inputs.h"
 #include "cli/merge.h"
 #include "cli/render_frame.h"
@@ -233,7 +234,8 @@ public:
 
     // An unsharded run replaces the previous run in its folder, as a .h5 or bag is replaced whole:
     // before its first frame is written, the entries an earlier run wrote there go (frame_NNNNNN
-    // folders, the files a single pose writes, their leftover temporaries); no other file is touched.
+    // folders, the files a single pose writes (frame_files.h), their leftover temporaries); no other
+    // file is touched.
     // Run once, on the write-behind thread, just before the first frame: a run that fails before it
     // leaves the earlier run as it was.
     void clear_previous_run() {
@@ -257,38 +259,6 @@ public:
     }
 
 private:
-    // The files vksonar writes in a frame's folder (render_frame.cpp; a single pose's go in OUT itself).
-    static bool is_frame_file(const std::string& name) {
-        static const char* const kNames[] = {"meta.json",
-                                             "fan.png",
-                                             "polar.npy",
-                                             "polar.png",
-                                             "polar_u16.npy",
-                                             "depth.npy",
-                                             "normals.npy",
-                                             "echo.npy",
-                                             "cloud.ply",
-                                             "flow.npy",
-                                             "instance.npy",
-                                             "class.npy",
-                                             "instance_fraction.npy",
-                                             "elevation.npy",
-                                             "elevation_spread.npy",
-                                             "point.npy",
-                                             "instance_fan.npy",
-                                             "class_fan.npy",
-                                             "instance_fan.png",
-                                             "boxes.json",
-                                             "normals.png",
-                                             "multibeam.png",
-                                             "multibeam.npy",
-                                             "raw_scan.png",
-                                             "raw_scan.npy"};
-        for (const char* known : kNames)
-            if (name == known) return true;
-        return false;
-    }
-
     void cleanup() {
         std::error_code ec;
         if (!created_.empty()) fs::remove_all(created_, ec);
@@ -466,7 +436,7 @@ void refuse_mixed_folders(const RenderJob& job) {
     }
     if (!job.shard || shard_record) return;
     for (const auto& entry : fs::directory_iterator(out, ec))
-        if (entry.path().filename() == "meta.json" || entry.path().filename().string().rfind("frame_", 0) == 0)
+        if (entry.path().filename() == kMetaJson || entry.path().filename().string().rfind("frame_", 0) == 0)
             throw BadInput("--out " + out + " holds an unsharded run, not shard " + std::to_string(job.shard->index) +
                            "/" + std::to_string(job.shard->count) + ": give each shard its own --out");
 }

@@ -6,11 +6,13 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "cli/args.h"
+#include "cli/frame_files.h"
 #include "core/plan.h"
 #include "host/boxes.h"
 #include "host/host_stages.h"
@@ -44,7 +46,7 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
     if (out.legacy && out.legacy->mode == SonarMode::uuv_legacy) {
         extra["mode"] = "uuv-legacy";
         extra["legacy"] = {
-            {"fan.png", "uuv_simulator visual scan (400 rows, fixed 17 m range), see docs/legacy.md"},
+            {kFanPng, "uuv_simulator visual scan (400 rows, fixed 17 m range), see docs/legacy.md"},
             {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy scan"},
             {"raw_scan", "raw_scan.npy (--save raw_scan): the legacy 400-row float scan after dilation and speckle"},
             {"scan_rows", out.legacy->uuv.scan_rows},
@@ -54,9 +56,9 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
     } else if (out.legacy && out.legacy->mode == SonarMode::gtri_legacy) {
         extra["mode"] = "gtri-legacy";
         extra["legacy"] = {
-            {"fan.png", "GTRI 600x600 image (forward up, apex at the centre), see docs/legacy.md"},
+            {kFanPng, "GTRI 600x600 image (forward up, apex at the centre), see docs/legacy.md"},
             {"polar", "polar.npy/png/u16 hold vksonar's physical model of the same ping, not the legacy image"},
-            {"cloud.ply", "the GTRI point cloud before the x jitter, intensity = retro 0..255 (--save cloud)"},
+            {kCloudPly, "the GTRI point cloud before the x jitter, intensity = retro 0..255 (--save cloud)"},
             {"points", out.legacy->cloud.size()},
             {"pixels_per_m", legacy::kGtriRangePixels / out.plan.config.range_max_m}};
     } else {
@@ -91,14 +93,14 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
     const double hfov = plan.config.hfov_deg * kDegToRad;
     auto write_ply = [&](const char* comment) {
-        write_atomically(dir / "cloud.ply", [&](const std::string& p) {
+        write_atomically(dir / kCloudPly, [&](const std::string& p) {
             return host::write_points_ply(p, reinterpret_cast<const float*>(L.cloud.data()), L.cloud.size(), comment);
         });
     };
     if (L.mode == SonarMode::uuv_legacy) {
         legacy::uuv_legacy(L.depth.data(), plan.columns, plan.rows, hfov, frame.seed, frame.frame_index, L.uuv);
         if (out.save.fan)
-            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
+            write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
         const legacy::UuvImages& u = L.uuv;
         if (out.save.normals) {
             L.gray.width = u.width;
@@ -106,19 +108,19 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
             L.gray.rgb.resize(u.normals.size());
             for (std::size_t i = 0; i < u.normals.size(); ++i)
                 L.gray.rgb[i] = static_cast<std::uint8_t>(std::lround(std::clamp(u.normals[i], 0.0f, 1.0f) * 255.0f));
-            write_atomically(dir / "normals.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
+            write_atomically(dir / kNormalsPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
         }
         if (out.save.multibeam) {
             gray_image(u.multibeam.data(), 1, u.width, u.height, L.gray);
-            write_atomically(dir / "multibeam.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / "multibeam.npy", [&](const std::string& p) {
+            write_atomically(dir / kMultibeamPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
+            write_atomically(dir / kMultibeamNpy, [&](const std::string& p) {
                 return host::write_npy_f32(p, u.multibeam.data(), u.height, u.width);
             });
         }
         if (out.save.raw_scan) {
             gray_image(u.raw_scan.data(), 1, u.scan_cols, u.scan_rows, L.gray);
-            write_atomically(dir / "raw_scan.png", [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / "raw_scan.npy", [&](const std::string& p) {
+            write_atomically(dir / kRawScanPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
+            write_atomically(dir / kRawScanNpy, [&](const std::string& p) {
                 return host::write_npy_f32(p, u.raw_scan.data(), u.scan_rows, u.scan_cols);
             });
         }
@@ -131,7 +133,7 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
         legacy::gtri_cloud_from_frame(plan, frame, L.cloud);
         legacy::gtri_legacy(L.cloud, hfov, plan.config.range_max_m, frame.seed, frame.frame_index, L.gtri);
         if (out.save.fan)
-            write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
+            write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
         if (out.save.cloud)
             write_ply("gtri-legacy cloud in the sonar frame: x forward, y port (left), z up; intensity = retro 0..255");
     }
@@ -153,29 +155,29 @@ namespace {
 // instance and class, nearest cell (docs/labels.md), and each object's box (boxes.json, docs/datasets.md).
 void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     const std::uint32_t bins = frame.bins, beams = frame.beams;
-    const auto u16 = [&](const char* name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
+    const auto u16 = [&](std::string_view name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
                          std::uint32_t cols) {
         write_atomically(dir / name,
                          [&](const std::string& p) { return host::write_npy_u16(p, v.data(), rows, cols); });
     };
-    const auto f32 = [&](const char* name, const std::vector<float>& v, std::uint32_t channels) {
+    const auto f32 = [&](std::string_view name, const std::vector<float>& v, std::uint32_t channels) {
         write_atomically(dir / name,
                          [&](const std::string& p) { return host::write_npy_f32(p, v.data(), bins, beams, channels); });
     };
-    u16("instance.npy", frame.instance, bins, beams);
-    f32("instance_fraction.npy", frame.instance_fraction, 1);
-    u16("class.npy", frame.object_class, bins, beams);
-    f32("elevation.npy", frame.elevation, 1);
-    f32("elevation_spread.npy", frame.elevation_spread, 1);
-    f32("point.npy", frame.point, 3);
+    u16(kInstanceNpy, frame.instance, bins, beams);
+    f32(kInstanceFractionNpy, frame.instance_fraction, 1);
+    u16(kClassNpy, frame.object_class, bins, beams);
+    f32(kElevationNpy, frame.elevation, 1);
+    f32(kElevationSpreadNpy, frame.elevation_spread, 1);
+    f32(kPointNpy, frame.point, 3);
     const std::uint32_t width = out.fan.width(), height = out.fan.height();
     out.fan.nearest_cell(frame.object_class, out.fan_ids);
-    u16("class_fan.npy", out.fan_ids, height, width);
+    u16(kClassFanNpy, out.fan_ids, height, width);
     const std::string& boxes = frame_boxes(out, frame);
-    u16("instance_fan.npy", out.fan_ids, height, width);
-    write_atomically(dir / "boxes.json", [&](const std::string& p) { return host::write_text_file(p, boxes); });
+    u16(kInstanceFanNpy, out.fan_ids, height, width);
+    write_atomically(dir / kBoxesJson, [&](const std::string& p) { return host::write_text_file(p, boxes); });
     host::label_image(out.fan_ids, width, height, out.image);
-    write_atomically(dir / "instance_fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+    write_atomically(dir / kInstanceFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
 }
 
 } // namespace
@@ -187,46 +189,45 @@ void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Po
         write_legacy(*out.legacy, out, dir, frame);
     } else if (out.save.fan) {
         out.fan.render(frame, out.image, out.image_workers);
-        write_atomically(dir / "fan.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+        write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
     }
     if (out.save.polar_png) {
         host::polar_image(plan, frame, out.image);
-        write_atomically(dir / "polar.png", [&](const std::string& p) { return host::write_png(p, out.image); });
+        write_atomically(dir / kPolarPng, [&](const std::string& p) { return host::write_png(p, out.image); });
     }
     if (out.save.polar)
-        write_atomically(dir / "polar.npy", [&](const std::string& p) {
+        write_atomically(dir / kPolarNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
         });
     if (out.save.polar_u16) {
         host::quantize_display(frame, out.quantized);
-        write_atomically(dir / "polar_u16.npy", [&](const std::string& p) {
+        write_atomically(dir / kPolarU16Npy, [&](const std::string& p) {
             return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
         });
     }
     if (out.save.depth) {
         host::depth_to_view_range(plan, frame, out.view_range);
-        write_atomically(dir / "depth.npy", [&](const std::string& p) {
+        write_atomically(dir / kDepthNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, out.view_range.data(), frame.rows, frame.columns);
         });
     }
     if (out.save.normals)
-        write_atomically(dir / "normals.npy", [&](const std::string& p) {
+        write_atomically(dir / kNormalsNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.normals.data(), frame.rows, frame.columns, 4);
         });
     if (out.save.echo)
-        write_atomically(dir / "echo.npy", [&](const std::string& p) {
+        write_atomically(dir / kEchoNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
         });
     if (out.save.labels) write_labels(out, dir, frame);
     if (flow)
-        write_atomically(dir / "flow.npy", [&](const std::string& p) {
+        write_atomically(dir / kFlowNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, flow->data(), frame.bins, frame.beams, 2);
         });
     if (out.save.cloud && !out.legacy)
-        write_atomically(dir / "cloud.ply",
-                         [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
+        write_atomically(dir / kCloudPly, [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
     const std::string extra = extra_meta_fields(out, pose, time_s);
-    write_atomically(dir / "meta.json", [&](const std::string& p) {
+    write_atomically(dir / kMetaJson, [&](const std::string& p) {
         return host::write_meta_json(p, plan, frame, extra, &out.meta_plan_part);
     });
 }

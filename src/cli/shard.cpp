@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/args.h"
+#include "cli/frame_files.h"
 #include "core/access.h"
 #include "scene/scene_data.h"
 
@@ -409,7 +410,7 @@ std::string shard_summary(const ShardRecord& shard, std::uint64_t first_line, st
 
 bool frame_folder_done(const std::string& frame_dir) {
     std::error_code ec;
-    return fs::is_regular_file(fs::path(frame_dir) / "meta.json", ec);
+    return fs::is_regular_file(fs::path(frame_dir) / kMetaJson, ec);
 }
 
 std::string frame_dir_name(std::uint64_t line) {
