@@ -94,11 +94,13 @@ SaveSet parse_save(const std::vector<std::string>& values) {
                 save.labels = true;
             else if (item == "flow")
                 save.flow = true;
-            else
+            else {
+                std::string valid; // from kSaveItems, so the message lists exactly what is accepted
+                for (const std::string& known : kSaveItems)
+                    valid += (valid.empty() ? "" : ",") + known;
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
-                               closest_word(item, kSaveItems) +
-                               "'? valid: default,fan,polar,polar_png,polar_u16,depth,normals,echo,cloud,multibeam,"
-                               "raw_scan,labels,flow)");
+                               closest_word(item, kSaveItems) + "'? valid: " + valid + ")");
+            }
         }
     }
     return save;
