@@ -634,6 +634,44 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     EXPECT_EQ(meta["frame_index"], 4);
 }
 
+// --frame-index renders one frame of a trajectory again alone, bit for bit: the noise is keyed by
+// (seed, frame index), and a single pose used to be frame 0 always (its speckle never matched the
+// trajectory's frame). meta.json records what wrote the frame and the scene by content.
+TEST_F(Cli, FrameIndexRendersATrajectoryFrameAlone) {
+    write_text(dir_ / "poses.csv", "x,y,z,roll,pitch,yaw\n# comment\n0,0,0,0,0,0\n0.5,0,0.2,1,2,5\n");
+    const std::vector<std::string> common = {"--scene",   (dir_ / "quad.gltf").string(),
+                                             "--backend", "cpu",
+                                             "--seed",    "77",
+                                             "--set",     "bins=32",
+                                             "--set",     "beams=16",
+                                             "--save",    "polar"};
+    auto args = [&](std::vector<std::string> more) {
+        std::vector<std::string> all = {"render"};
+        all.insert(all.end(), common.begin(), common.end());
+        all.insert(all.end(), more.begin(), more.end());
+        return all;
+    };
+    const fs::path traj = dir_ / "traj", alone = dir_ / "alone", frame0 = dir_ / "frame0";
+    ASSERT_EQ(run(args({"--trajectory", (dir_ / "poses.csv").string(), "--out", traj.string()})).exit_code, 0);
+    const CliRun r = run(args({"--pose", "0.5,0,0.2,1,2,5", "--frame-index", "4", "--out", alone.string()}));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    ASSERT_EQ(run(args({"--pose", "0.5,0,0.2,1,2,5", "--out", frame0.string()})).exit_code, 0);
+    const std::string polar = read_text(traj / "frame_000004" / "polar.npy");
+    ASSERT_FALSE(polar.empty());
+    EXPECT_EQ(read_text(alone / "polar.npy"), polar) << "frame 4 rendered alone differs from the trajectory's";
+    EXPECT_NE(read_text(frame0 / "polar.npy"), polar) << "frame 0's noise should differ from frame 4's";
+    const auto meta = nlohmann::json::parse(read_text(alone / "meta.json"));
+    EXPECT_EQ(meta["frame_index"], 4);
+    EXPECT_EQ(meta["vksonar_version"].get<std::string>().empty(), false);
+    const auto traj_meta = nlohmann::json::parse(read_text(traj / "frame_000003" / "meta.json"));
+    ASSERT_TRUE(meta.contains("scene_fnv1a64"));
+    EXPECT_EQ(meta["scene_fnv1a64"].get<std::string>().size(), 16u);
+    EXPECT_EQ(meta["scene_fnv1a64"], traj_meta["scene_fnv1a64"]);
+    expect_bad_render({"--trajectory", (dir_ / "poses.csv").string(), "--frame-index", "3"},
+                      {"--frame-index", "trajectory"});
+    expect_bad_render({"--frame-index", "-1"}, {"--frame-index"});
+}
+
 // Issue 20: --save selects exactly what is written (meta.json always); without it, the default set.
 TEST_F(Cli, SaveWritesExactlyWhatIsListed) {
     auto files_of = [&](const std::vector<std::string>& save) {

@@ -19,6 +19,7 @@
 #include <memory>
 
 #include "cli/h5_util.h"
+#include "host/meta_fields.h"
 #include "host/workers.h"
 #ifdef VKSONAR_HAVE_ZLIB
 #include <zlib.h>
@@ -72,6 +73,15 @@ namespace {
 using h5::Hid;
 
 constexpr std::uint64_t kHashSeed = 0xcbf29ce484222325ull;
+
+// A dataset creation list without HDF5's object timestamps: with them every dataset's header holds
+// its creation and change times, so two runs of one command wrote files whose arrays and attributes
+// were equal but whose bytes were not (a checksum of the file said they differed).
+Hid dataset_create_list() {
+    Hid create(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
+    if (create.ok() && H5Pset_obj_track_times(create.get(), 0) < 0) create.reset();
+    return create;
+}
 
 // A dataset of rows that grows by one row per frame: [frames, row_dims...], one row per chunk.
 struct RowDataset {
@@ -299,6 +309,8 @@ public:
              text("validity", meta.validity_json) && text("beam_geometry", plan.line_array ? "line_array" : "planar") &&
              text("beam_geometry_why", plan.beam_geometry_why) && text("objects", meta.objects_json) &&
              text("scene", meta.scene) && text("backend", meta.backend) && text("device", meta.device) &&
+             text("vksonar_version", host::vksonar_version()) &&
+             (meta.shard || meta.scene_hash.empty() || text("scene_fnv1a64", meta.scene_hash)) &&
              count("frames_written", 0) && count("complete", 0);
         if (ok && meta.shard) {
             const ShardRecord& r = *meta.shard;
@@ -592,7 +604,7 @@ private:
         }
         if (row.empty()) chunk[0] = 1024; // scalars per frame: one chunk holds many frames
         const Hid space(H5Screate_simple(int(dims.size()), dims.data(), max.data()), H5Sclose);
-        const Hid create(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
+        const Hid create(dataset_create_list());
         if (!space.ok() || !create.ok() || H5Pset_chunk(create.get(), int(chunk.size()), chunk.data()) < 0)
             return false;
         if (compress && (H5Pset_shuffle(create.get()) < 0 || H5Pset_deflate(create.get(), unsigned(kDeflateLevel)) < 0))
@@ -649,7 +661,8 @@ private:
     static bool vector(hid_t file, const char* name, const std::vector<double>& values) {
         const hsize_t n = values.size();
         const Hid space(H5Screate_simple(1, &n, nullptr), H5Sclose);
-        const Hid set(H5Dcreate2(file, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+        const Hid create(dataset_create_list());
+        const Hid set(H5Dcreate2(file, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, create.get(), H5P_DEFAULT),
                       H5Dclose);
         return set.ok() && H5Dwrite(set.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()) >= 0;
     }

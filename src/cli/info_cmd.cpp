@@ -7,6 +7,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/inputs.h"
+#include "host/meta_fields.h"
 #include "vksonar/context.h"
 #include "vksonar/scene.h"
 
@@ -71,7 +72,7 @@ int run_info(const std::vector<std::string>& argv) {
     }
     if (args.positional.size() == 1) return scene_info(args.positional[0], args.value("--asset-root"));
     if (!args.positional.empty()) throw BadInput("info: unexpected argument '" + args.positional[1] + "'");
-    std::printf("vksonar 0.1.0\n");
+    std::printf("vksonar %s\n", host::vksonar_version());
     ContextOptions options;
     options.enable_validation = args.has("--validation");
     auto from_env = context_options_from_env(options);

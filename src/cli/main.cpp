@@ -9,6 +9,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "host/meta_fields.h"
 #include "vksonar/result.h"
 
 namespace {
@@ -43,7 +44,7 @@ int dispatch(const std::vector<std::string>& argv) {
         return 0;
     }
     if (command == "--version") {
-        std::printf("vksonar 0.1.0\n");
+        std::printf("vksonar %s\n", vksonar::host::vksonar_version());
         return 0;
     }
     if (command == "render") return run_render(rest);

@@ -65,7 +65,8 @@ namespace {
 constexpr const char* kUsage =
     "usage: vksonar render [--scene FILE.gltf|.glb] [--sonar PRESET|FILE.json] [--config FILE.json]\n"
     "                      [--pose x,y,z,roll,pitch,yaw | --trajectory POSES.csv] [--set key=value ...]\n"
-    "                      [--quality fast|balanced|accurate] [--seed N] [--backend auto|vulkan|cpu]\n"
+    "                      [--quality fast|balanced|accurate] [--seed N] [--frame-index N]\n"
+    "                      [--backend auto|vulkan|cpu]\n"
     "                      [--save default,fan,polar,polar_png,polar_u16,depth,...] [--asset-root DIR]\n"
     "                      [--compress] [--shard INDEX/COUNT] [--shard-count N] [--ros-prefix /TOPIC]\n"
     "                      [--ros-frame ID] [--rate HZ] [--ros-sonar-dtype float32|uint16]\n"
@@ -83,7 +84,11 @@ constexpr const char* kUsage =
     "  --trajectory  CSV of poses (x,y,z,roll,pitch,yaw per line; '#' comments and a header allowed; a header\n"
     "                t,x,y,z,roll,pitch,yaw adds a time in s before each pose: meta.json time_s, the .h5 time);\n"
     "                frames go to DIR/frame_NNNNNN/ with NNNNNN the line number\n"
-    "  --seed        noise seed (default 1)\n"
+    "  --seed        noise seed (default 1). The noise of a frame is keyed by (seed, frame index, beam, bin)\n"
+    "                only: two renders with one seed and one frame index share their speckle whatever the pose or\n"
+    "                scene. For independent noise give each render its own frame index or seed\n"
+    "  --frame-index with --pose (or no pose): the frame index of the single render (default 0), as a trajectory's\n"
+    "                line number is its frames'; so frame N of a trajectory is rendered again alone, bit for bit\n"
     "  --backend     auto (default: Vulkan on a GPU, the CPU backend where the only Vulkan device is a CPU\n"
     "                implementation such as lavapipe, or where there is none), vulkan or cpu; meta.json says\n"
     "                which and why (backend, backend_reason)\n"
@@ -379,9 +384,10 @@ private:
     bool published_ = false, removable_ = false, keep_ = false;
 };
 
-DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::string& backend,
-                         const std::string& device, std::uint64_t seed) {
+DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::string& scene_hash,
+                         const std::string& backend, const std::string& device, std::uint64_t seed) {
     DatasetMeta meta;
+    meta.scene_hash = scene_hash;
     meta.config_json = config_to_json(plan.config);
     meta.effects_json = host::effects_json(plan.effects.states).dump();
     meta.validity_json = host::validity_json(plan.validity).dump();
@@ -511,6 +517,7 @@ Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& devic
                    nlohmann::ordered_json::parse(config_text),
                    host::meta_json_plan_part(plan),
                    job.scene_path,
+                   job.scene_hash,
                    device.backend_name,
                    device.backend_reason,
                    device.description,
@@ -541,7 +548,7 @@ struct Writers {
 
 void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs, const Args& args, DatasetFile& file,
                   Writers& writers) {
-    DatasetMeta meta = dataset_meta(plan, job.scene_path, outputs.backend, outputs.device, job.seed);
+    DatasetMeta meta = dataset_meta(plan, job.scene_path, job.scene_hash, outputs.backend, outputs.device, job.seed);
     meta.objects_json = outputs.objects.dump();
     meta.shard = job.shard;
     DatasetOptions options;
@@ -593,7 +600,7 @@ void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs&
               Writers& writers) {
     McapOptions& bag_options = *job.bag_options;
     bag_options.zstd = args.has("--compress");
-    bag_options.library = "vksonar 0.1.0 (its own MCAP writer)";
+    bag_options.library = std::string("vksonar ") + host::vksonar_version() + " (its own MCAP writer)";
     if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, file.target(), writers);
     if (!writers.bag && !writers.bag_complete) {
         // Named as OUT's target in the bag (rosbag2's metadata), written under the temporary name.

@@ -28,8 +28,10 @@ namespace {
 // `time_s`: the trajectory's time column, or null when it has none.
 std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
     nlohmann::ordered_json extra;
+    extra["vksonar_version"] = host::vksonar_version();
     extra["config"] = out.config_parsed;
     extra["scene"] = out.scene_path;
+    extra["scene_fnv1a64"] = out.scene_hash;
     if (time_s) extra["time_s"] = *time_s;
     extra["pose"] = {{"x_m", pose.x_m},
                      {"y_m", pose.y_m},

@@ -74,6 +74,7 @@ struct Outputs {
     nlohmann::ordered_json config_parsed; // config_json parsed once (meta.json's "config" every frame)
     std::string meta_plan_part;           // host::meta_json_plan_part(plan), made once
     std::string scene_path;
+    std::string scene_hash; // scene_fnv1a64: the scene by its content (the path may mean another file later)
     std::string backend;
     std::string backend_reason; // why this backend (--backend, or what auto saw)
     std::string device;

@@ -17,6 +17,7 @@
 
 #include "cli/dataset_h5.h"
 #include "cli/inputs.h"
+#include "host/meta_fields.h"
 #include "vksonar/vksonar.h"
 
 namespace fs = std::filesystem;
@@ -340,28 +341,15 @@ std::string save_list(const SaveSet& s) {
 // ---- the command line, in the order its errors are reported ------------------------------------------
 
 Args parse_render_args(const std::vector<std::string>& argv) {
-    return parse_args(argv,
-                      {{"--scene", true, false},
-                       {"--sonar", true, false},
-                       {"--config", true, false},
-                       {"--pose", true, false},
-                       {"--trajectory", true, false},
-                       {"--set", true, true},
-                       {"--quality", true, false},
-                       {"--seed", true, false},
-                       {"--backend", true, false},
-                       {"--save", true, true},
-                       {"--out", true, false},
-                       {"--asset-root", true, false},
-                       {"--compress", false, false},
-                       {"--ros-prefix", true, false},
-                       {"--ros-frame", true, false},
-                       {"--rate", true, false},
-                       {"--ros-sonar-dtype", true, false},
-                       {"--shard", true, false},
-                       {"--shard-count", true, false},
-                       {"--help", false, false}},
-                      "render");
+    return parse_args(
+        argv, {{"--scene", true, false},      {"--sonar", true, false},       {"--config", true, false},
+               {"--pose", true, false},       {"--trajectory", true, false},  {"--set", true, true},
+               {"--quality", true, false},    {"--seed", true, false},        {"--frame-index", true, false},
+               {"--backend", true, false},    {"--save", true, true},         {"--out", true, false},
+               {"--asset-root", true, false}, {"--compress", false, false},   {"--ros-prefix", true, false},
+               {"--ros-frame", true, false},  {"--rate", true, false},        {"--ros-sonar-dtype", true, false},
+               {"--shard", true, false},      {"--shard-count", true, false}, {"--help", false, false}},
+        "render");
 }
 
 namespace {
@@ -393,18 +381,22 @@ void parse_options(const Args& args, RenderJob& job) {
 // here: load_scene_and_config computes it once the scene is loaded.
 void read_poses(const Args& args, RenderJob& job) {
     job.trajectory = args.has("--trajectory");
+    if (job.trajectory && args.has("--frame-index"))
+        throw BadInput("--frame-index: a trajectory's frames are its line numbers; --frame-index is for one --pose");
+    // The frame index keys the noise (with the seed): a single render takes it from here.
+    const std::uint64_t frame = args.has("--frame-index") ? parse_u64(args.value("--frame-index"), "--frame-index") : 0;
     if (job.trajectory) {
         job.poses = read_trajectory(args.value("--trajectory"), job.timed);
         if (job.bag) check_bag_times(job.poses, job.timed, args);
     } else if (args.has("--pose") && args.value("--pose") == "frame") {
         job.frame_pose = true;
-        job.poses.push_back({Pose{}, 0});
+        job.poses.push_back({Pose{}, frame});
     } else if (args.has("--pose")) {
-        job.poses.push_back({parse_pose(args.value("--pose"), "--pose"), 0});
+        job.poses.push_back({parse_pose(args.value("--pose"), "--pose"), frame});
     } else {
         Pose pose;
         if (job.default_scene) pose.pitch_deg = 10.0; // nose down: the seabed at z = -5 m fills the lower beams
-        job.poses.push_back({pose, 0});
+        job.poses.push_back({pose, frame});
     }
 }
 
@@ -514,9 +506,11 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
         throw BadInput("--out " + job.out_path + ": a ROS 2 bag holds the physical model only (not --sonar " +
                        (config.mode == SonarMode::uuv_legacy ? "uuv-legacy" : "gtri-legacy") + ")");
     warn_if_unit_mistake(scene.value(), config, job.scene_path);
-    // A re-run shard must be the same run: the scene by its content, not only its path.
-    if (job.shard) job.shard->scene_hash = scene_fnv1a64(scene.value());
-    if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), 0, 0.0}};
+    // The scene by its content, not only its path: every output records it, and a re-run shard must
+    // be the same run.
+    job.scene_hash = host::scene_fnv1a64(scene.value());
+    if (job.shard) job.shard->scene_hash = job.scene_hash;
+    if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), job.poses[0].line, 0.0}};
     return {std::move(scene.value()), std::move(config)};
 }
 

@@ -37,6 +37,7 @@ struct RenderJob {
     std::optional<McapOptions> bag_options; // open_bag adds compression and the shard record
     bool default_scene = false;             // no --scene: the bundled one
     std::string scene_path;
+    std::string scene_hash;  // scene_fnv1a64 of the loaded scene (load_scene_and_config)
     bool trajectory = false; // --trajectory (poses holds its lines)
     std::vector<TrajectoryPose> poses;
     bool timed = false;      // the trajectory has a time column

@@ -56,12 +56,6 @@ std::optional<ShardRecord> resolve_shard(const std::optional<std::string>& flag,
 // FNV-1a 64 of a file's bytes as 16 hex digits (identifies the trajectory a shard came from).
 std::string file_fnv1a64(const std::string& path);
 
-// FNV-1a 64 of what the renderer uses of a loaded scene, as 16 hex digits: its vertex and index arrays,
-// meshes, draws (transforms, materials, objects), materials, objects, classes and effect requests. A
-// scene file changed in any of these (or an external buffer it names) hashes differently; one only
-// re-saved with the same content does not.
-std::string scene_fnv1a64(const Scene& scene);
-
 // ---- per-frame folders: DIR/shard.json and the done marker ------------------------------------
 
 // What must be equal between shards of one run, and between a shard and its re-run: name -> value

@@ -2,6 +2,7 @@
 // dataset's attributes (src/cli/render_cmd.cpp), so both say the same thing the same way.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -11,6 +12,14 @@
 #include "vksonar/validity.h"
 
 namespace vksonar::host {
+
+// run_record.cpp: vksonar's version ("0.1.0"), and the scene's content as FNV-1a 64 in 16 hex digits:
+// its vertex and index arrays, meshes, draws (transforms, materials, objects), materials, objects,
+// classes and effect requests: a scene file changed in any of these (or an external buffer it names)
+// hashes differently; one only re-saved with the same content does not. Every output records both
+// (meta.json, the .h5 attributes).
+const char* vksonar_version();
+std::string scene_fnv1a64(const Scene& scene);
 
 // {"name": {"on": bool, "why": "..."}, ...} in the plan's effect order.
 inline nlohmann::ordered_json effects_json(const std::vector<EffectState>& states) {

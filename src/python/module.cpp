@@ -194,6 +194,7 @@ struct RendererObject {
     std::string backend;
     std::string device; // the Vulkan device, or "cpu" (meta.json "device")
     std::string config_json;
+    std::string scene_hash; // meta.json "scene_fnv1a64" of the scene as the renderer took it
 };
 
 // A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`; None where the frame has no
@@ -211,8 +212,10 @@ py::object frame_meta(FrameObject& f) {
     // the CLI's keys in the CLI's order (render_frame.cpp), but `legacy`, which describes the legacy
     // outputs only the CLI writes
     const py::dict config = json.attr("loads")(config_to_json(f.plan->config));
+    extra["vksonar_version"] = host::vksonar_version();
     extra["config"] = config;
     extra["scene"] = r.scene->path ? py::object(py::str(*r.scene->path)) : py::object(py::none());
+    extra["scene_fnv1a64"] = r.scene_hash;
     extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
                              py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
                              py::arg("yaw_deg") = f.pose.yaw_deg);
@@ -439,6 +442,7 @@ PYBIND11_MODULE(vksonar, m) {
                                                             : take(Context::create(take(context_options_from_env()))));
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
                  r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
+                 r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
              }),
