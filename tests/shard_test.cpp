@@ -38,6 +38,13 @@ using vksonar::testing::write_text;
 
 namespace {
 
+// Makes meta.json as a run before it listed the frame's files wrote it.
+void strip_files(const fs::path& meta) {
+    auto json = nlohmann::ordered_json::parse(read_text(meta));
+    json.erase("files");
+    write_text(meta, json.dump());
+}
+
 struct ShardRun {
     int exit_code = -1;
     std::string err;
@@ -820,6 +827,9 @@ TEST_F(Writer, MergeRefusesAFrameFolderWithMissingOrEmptyArrays) {
     const fs::path merged = dir_ / "merged";
     const fs::path polar = dir_ / "m1" / "frame_000007" / "polar.npy";
     const std::string bytes = read_text(polar);
+    // A frame of a run from before meta.json listed its files: merge's own checks find the damage
+    // (MergeNamesTheDamagedFileAndItsSizes: a frame whose meta.json lists them).
+    strip_files(dir_ / "m1" / "frame_000007" / "meta.json");
     write_text(polar, "");
     ShardRun r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
     EXPECT_EQ(r.exit_code, 2) << r.err;
@@ -836,6 +846,120 @@ TEST_F(Writer, MergeRefusesAFrameFolderWithMissingOrEmptyArrays) {
     write_text(polar, bytes);
     r = run({"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()});
     EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+// A frame whose meta.json lists a file of another size than the file's, or one that is not there (a
+// node crash before the data reached the disk): merge names the file and both sizes.
+TEST_F(Writer, MergeNamesTheDamagedFileAndItsSizes) {
+    ASSERT_EQ(run(render_args("m0", {"--save", "polar,fan", "--shard", "0/2"})).exit_code, 0);
+    ASSERT_EQ(run(render_args("m1", {"--save", "polar,fan", "--shard", "1/2"})).exit_code, 0);
+    const fs::path merged = dir_ / "merged";
+    const fs::path polar = dir_ / "m1" / "frame_000007" / "polar.npy";
+    const std::string bytes = read_text(polar);
+    const std::string says = ", meta.json says " + std::to_string(bytes.size());
+    const std::vector<std::string> merge = {"merge", merged.string(), (dir_ / "m0").string(), (dir_ / "m1").string()};
+    for (const auto& [text, wanted] : std::vector<std::pair<std::string, std::string>>{
+             {"", "frame_000007/polar.npy: 0 bytes" + says},
+             {bytes + "x", "frame_000007/polar.npy: " + std::to_string(bytes.size() + 1) + " bytes" + says},
+             {"-", "frame_000007/polar.npy: missing" + says}}) {
+        if (text == "-")
+            fs::remove(polar);
+        else
+            write_text(polar, text);
+        const ShardRun r = run(merge);
+        EXPECT_EQ(r.exit_code, 2) << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << r.err;
+        EXPECT_NE(r.err.find(wanted), std::string::npos) << "wanted: " << wanted << "\ngot: " << r.err;
+        EXPECT_NE(r.err.find("re-run the shard"), std::string::npos) << r.err;
+        EXPECT_FALSE(fs::exists(merged));
+    }
+    write_text(polar, bytes);
+    EXPECT_EQ(run(merge).exit_code, 0);
+}
+
+// Names of a folder's entries, sorted.
+std::vector<std::string> entries(const fs::path& dir) {
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(dir))
+        names.push_back(entry.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+}
+
+// A folder shard of 4 frames whose meta.json is on disk but whose files are not as it says (a node
+// crash before the data reached the disk: one array empty, one gone) is re-rendered by the re-run,
+// which says so; the folder then equals an uninterrupted shard's, file for file and byte for byte.
+TEST_F(Writer, AReRunShardReRendersDamagedFrames) {
+    write_text(dir_ / "four.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n0.3,0,-0.1,0,10,4\n"
+                                  "0.6,0,-0.2,0,10,8\n0.9,0,-0.3,0,10,12\n");
+    auto args = [&](const std::string& out) {
+        std::vector<std::string> a =
+            render_args(out, {"--shard", "0/1", "--set", "accuracy.rows_per_vfov=4", "--save", "default,labels"});
+        for (std::size_t i = 0; i + 1 < a.size(); ++i)
+            if (a[i] == "--trajectory") a[i + 1] = (dir_ / "four.csv").string();
+        return a;
+    };
+    ShardRun r = run(args("part"));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    ASSERT_EQ(run(args("whole")).exit_code, 0);
+    // meta.json lists every other file of its frame with its size.
+    const fs::path f3 = dir_ / "part" / "frame_000003", f4 = dir_ / "part" / "frame_000004";
+    const auto meta = nlohmann::json::parse(read_text(f3 / "meta.json"));
+    ASSERT_TRUE(meta.contains("files")) << "meta.json has no files";
+    std::vector<std::string> listed;
+    for (auto it = meta["files"].begin(); it != meta["files"].end(); ++it) {
+        listed.push_back(it.key());
+        EXPECT_EQ(it.value().get<std::uintmax_t>(), fs::file_size(f3 / it.key())) << it.key();
+    }
+    listed.push_back("meta.json");
+    std::sort(listed.begin(), listed.end());
+    EXPECT_EQ(listed, entries(f3));
+
+    write_text(f3 / "polar.npy", "");   // delayed allocation: the name there, the data not
+    fs::remove(f4 / "boxes.json");      // the rename lost
+    write_text(f4 / "flow.npy", "old"); // a file this run does not write: must not survive the re-render
+    r = run(args("part"));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find(", 2 already on disk, 2 damaged (re-rendered): frame_000003, frame_000004"), std::string::npos)
+        << r.err;
+    for (int line = 2; line <= 5; ++line) {
+        const std::string frame = vksonar::cli::frame_dir_name(line);
+        const fs::path a = dir_ / "whole" / frame, b = dir_ / "part" / frame;
+        ASSERT_EQ(entries(a), entries(b)) << frame;
+        for (const std::string& name : entries(a)) {
+            if (name == "meta.json") continue;
+            EXPECT_TRUE(read_text(a / name) == read_text(b / name)) << frame << "/" << name << " differs";
+        }
+        auto ma = nlohmann::json::parse(read_text(a / "meta.json"));
+        auto mb = nlohmann::json::parse(read_text(b / "meta.json"));
+        ma.erase("timings_ms"); // measured, so never the same
+        mb.erase("timings_ms");
+        EXPECT_TRUE(ma == mb) << frame << ": meta.json differs beyond its timings";
+    }
+    r = run(args("part"));
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find(", 4 already on disk"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("damaged"), std::string::npos) << r.err;
+    EXPECT_EQ(run({"merge", (dir_ / "merged").string(), (dir_ / "part").string()}).exit_code, 0);
+}
+
+// A frame folder from a run before meta.json listed its files (no "files" key) is done when its
+// meta.json is there, as then: an older shard resumes without rendering its frames again.
+TEST_F(Writer, AMetaJsonWithoutFilesStillCountsAsDone) {
+    ASSERT_EQ(run(render_args("part", {"--save", "polar", "--shard", "0/1"})).exit_code, 0);
+    for (int line = 2; line <= 8; ++line) {
+        const fs::path meta = dir_ / "part" / vksonar::cli::frame_dir_name(line) / "meta.json";
+        ASSERT_TRUE(nlohmann::json::parse(read_text(meta)).contains("files")) << meta; // this run's record
+        strip_files(meta);
+    }
+    // Even a frame of such a run with an empty array counts (there is no record to see it by); merge's
+    // own check still refuses it (MergeRefusesAFrameFolderWithMissingOrEmptyArrays).
+    write_text(dir_ / "part" / "frame_000004" / "polar.npy", "");
+    const ShardRun r = run(render_args("part", {"--save", "polar", "--shard", "0/1"}));
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.err.find(", 7 already on disk"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("damaged"), std::string::npos) << r.err;
+    EXPECT_EQ(read_text(dir_ / "part" / "frame_000004" / "polar.npy"), "");
 }
 
 // ---- SIGINT and SIGTERM: a render stops at a frame boundary and says what it left ----------------

@@ -43,7 +43,8 @@ struct FrameFile {
 };
 
 inline constexpr FrameFile kFrameFiles[] = {
-    {kMetaJson, "", "what the arrays are: config, pose, beams, ranges, objects, backend; written last"},
+    {kMetaJson, "",
+     "what the arrays are: config, pose, beams, ranges, objects, backend; files: the others, written last"},
     {kFanPng, "fan", "the fan image (in legacy modes the legacy plugin's image)"},
     {kPolarNpy, "polar", "float32 [bins, beams], received intensity in uPa^2"},
     {kPolarPng, "polar_png", "the polar image as the display shows it"},

@@ -53,10 +53,15 @@ ShardInput folder_read(const std::string& path) {
     in.backend = m.backend;
     in.device = m.device;
     for (std::uint64_t line : m.lines) {
-        if (frame_folder_done((fs::path(path) / frame_dir_name(line)).string()))
+        const std::string name = frame_dir_name(line);
+        const FrameFolderState state = frame_folder_check((fs::path(path) / name).string());
+        if (state.kind == FrameFolderState::complete)
             ++in.frames;
+        else if (state.kind == FrameFolderState::damaged) // meta.json is there but a file is not as it says
+            throw BadInput("merge: " + (fs::path(path) / name).string() + "/" + state.problem +
+                           ": a damaged frame, re-run the shard (it renders the frame again)");
         else if (in.first_missing.empty())
-            in.first_missing = frame_dir_name(line) + " (no meta.json)";
+            in.first_missing = name + " (no meta.json)";
     }
     return in;
 }

@@ -531,6 +531,7 @@ Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& devic
                    scene.classes(),
                    {},
                    {},
+                   {},
                    {}};
 }
 
@@ -541,6 +542,7 @@ Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& devic
 struct Writers {
     std::unique_ptr<DatasetWriter> dataset;
     std::vector<char> done;
+    std::vector<std::string> damaged; // a re-run folder shard: frames whose files are not as meta.json says
     std::unique_ptr<McapDatasetWriter> bag;
     bool bag_complete = false; // a re-run shard whose bag holds its whole block already
     double bag_rate = 10.0;    // --rate
@@ -571,7 +573,7 @@ void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const O
                             outputs.device};
     for (std::size_t i = job.first; i < job.end; ++i)
         manifest.lines.push_back(job.poses[i].line);
-    start_folder_shard(dir.path().string(), manifest, writers.done);
+    start_folder_shard(dir.path().string(), manifest, writers.done, &writers.damaged);
 }
 
 // A shard's bag: its record and the run's identity, for `vksonar merge` and a re-run
@@ -653,6 +655,24 @@ void write_dataset_frame(const WriteBehind::Slot& slot, const RenderJob& job, Ou
     if (!appended) throw Failure(appended.error().message);
 }
 
+// Removes a frame folder's frame files and leftover temporaries, meta.json first: a crash while
+// clearing leaves a folder without meta.json, which a re-run renders again. Other names are left.
+void clear_frame_folder(const fs::path& dir) {
+    std::error_code ec;
+    fs::remove(dir / kMetaJson, ec);
+    if (ec) throw Failure("cannot remove " + (dir / kMetaJson).string() + " (a damaged frame's): " + ec.message());
+    std::vector<fs::path> stale;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+        const std::string name = entry.path().filename().string();
+        if ((is_frame_file(name) || name.rfind(".~", 0) == 0) && !entry.is_directory(ec)) stale.push_back(entry.path());
+    }
+    if (ec) throw Failure("cannot list " + dir.string() + ": " + ec.message());
+    for (const fs::path& path : stale) {
+        fs::remove(path, ec);
+        if (ec) throw Failure("cannot remove " + path.string() + " (a damaged frame's): " + ec.message());
+    }
+}
+
 // A trajectory's frame goes to DIR/frame_NNNNNN/ (NNNNNN its line), a single pose's to DIR itself.
 void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, OutputDir& out_dir) {
     if (!job.shard) out_dir.clear_previous_run(); // a shard resumes the frames its folder holds
@@ -665,8 +685,12 @@ void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Out
         if (!fs::is_directory(out_dir.path(), ec))
             throw Failure("--out " + out_dir.path().string() + ": the output folder is gone (removed during the run)");
         dir /= frame_dir_name(slot.line);
-        fs::create_directory(dir, ec);
+        const bool made = fs::create_directory(dir, ec);
         if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
+        // A shard's frame folder that is already there is one the re-run found damaged or cut off:
+        // its files go first, so it ends up holding exactly this frame's files (a file the earlier
+        // run left that this one does not write would otherwise stay, and merge refuse the frame).
+        if (!made && job.shard) clear_frame_folder(dir);
     }
     write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
                 job.save.flow ? &slot.flow : nullptr); // meta.json last: done
@@ -914,7 +938,8 @@ std::optional<Interrupted> render(const Args& args) {
     if (job.shard)
         std::fprintf(stderr, "vksonar: %s\n",
                      shard_summary(*job.shard, job.end > job.first ? job.poses[job.first].line : 0,
-                                   job.end > job.first ? job.poses[job.end - 1].line : 0, job.end - job.first - todo)
+                                   job.end > job.first ? job.poses[job.end - 1].line : 0, job.end - job.first - todo,
+                                   writers.damaged)
                          .c_str());
     Progress progress(writer, todo, job.trajectory && ::isatty(::fileno(stderr)));
     if (!FrameLoop(args, job, renderer, writer).run(writers.done, progress))

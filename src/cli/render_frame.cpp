@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -24,6 +25,18 @@ namespace fs = std::filesystem;
 
 namespace vksonar::cli {
 namespace {
+
+// Writes one file of the frame (write_atomically) and notes its name and size for meta.json's
+// "files": meta.json is the frame's commit record, and a re-run shard or merge checks the files
+// against it (shard.h, frame_folder_check). Without fsync a crash can leave meta.json on disk but an
+// earlier file empty or missing; the sizes are how that is seen.
+template <class WriteFn> void put(Outputs& out, const fs::path& path, WriteFn&& write) {
+    write_atomically(path, std::forward<WriteFn>(write));
+    std::error_code ec;
+    const std::uintmax_t size = fs::file_size(path, ec);
+    if (ec) throw Failure("cannot read the size of " + path.string() + ": " + ec.message());
+    out.written.emplace_back(path.filename().string(), size);
+}
 
 // `time_s`: the trajectory's time column, or null when it has none.
 std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
@@ -66,6 +79,11 @@ std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double
     } else {
         extra["mode"] = "physical";
     }
+    // Every other file of this frame, name -> bytes, in the order written (docs/scale.md, "Restarting").
+    nlohmann::ordered_json files = nlohmann::ordered_json::object();
+    for (const auto& [name, size] : out.written)
+        files[name] = size;
+    extra["files"] = std::move(files);
     // The scene path (and --asset-root in the config) may hold bytes that are not UTF-8 (a Latin-1
     // folder name): written as U+FFFD instead of dump() throwing.
     return extra.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
@@ -95,14 +113,14 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
     constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
     const double hfov = plan.config.hfov_deg * kDegToRad;
     auto write_ply = [&](const char* comment) {
-        write_atomically(dir / kCloudPly, [&](const std::string& p) {
+        put(out, dir / kCloudPly, [&](const std::string& p) {
             return host::write_points_ply(p, reinterpret_cast<const float*>(L.cloud.data()), L.cloud.size(), comment);
         });
     };
     if (L.mode == SonarMode::uuv_legacy) {
         legacy::uuv_legacy(L.depth.data(), plan.columns, plan.rows, hfov, frame.seed, frame.frame_index, L.uuv);
         if (out.save.fan)
-            write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
+            put(out, dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.uuv.visual); });
         const legacy::UuvImages& u = L.uuv;
         if (out.save.normals) {
             L.gray.width = u.width;
@@ -110,19 +128,18 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
             L.gray.rgb.resize(u.normals.size());
             for (std::size_t i = 0; i < u.normals.size(); ++i)
                 L.gray.rgb[i] = static_cast<std::uint8_t>(std::lround(std::clamp(u.normals[i], 0.0f, 1.0f) * 255.0f));
-            write_atomically(dir / kNormalsPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
+            put(out, dir / kNormalsPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
         }
         if (out.save.multibeam) {
             gray_image(u.multibeam.data(), 1, u.width, u.height, L.gray);
-            write_atomically(dir / kMultibeamPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / kMultibeamNpy, [&](const std::string& p) {
-                return host::write_npy_f32(p, u.multibeam.data(), u.height, u.width);
-            });
+            put(out, dir / kMultibeamPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
+            put(out, dir / kMultibeamNpy,
+                [&](const std::string& p) { return host::write_npy_f32(p, u.multibeam.data(), u.height, u.width); });
         }
         if (out.save.raw_scan) {
             gray_image(u.raw_scan.data(), 1, u.scan_cols, u.scan_rows, L.gray);
-            write_atomically(dir / kRawScanPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
-            write_atomically(dir / kRawScanNpy, [&](const std::string& p) {
+            put(out, dir / kRawScanPng, [&](const std::string& p) { return host::write_png(p, L.gray); });
+            put(out, dir / kRawScanNpy, [&](const std::string& p) {
                 return host::write_npy_f32(p, u.raw_scan.data(), u.scan_rows, u.scan_cols);
             });
         }
@@ -135,7 +152,7 @@ void write_legacy(LegacyState& legacy_state, Outputs& out, const fs::path& dir, 
         legacy::gtri_cloud_from_frame(plan, frame, L.cloud);
         legacy::gtri_legacy(L.cloud, hfov, plan.config.range_max_m, frame.seed, frame.frame_index, L.gtri);
         if (out.save.fan)
-            write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
+            put(out, dir / kFanPng, [&](const std::string& p) { return host::write_png(p, L.gtri.color); });
         if (out.save.cloud)
             write_ply("gtri-legacy cloud in the sonar frame: x forward, y port (left), z up; intensity = retro 0..255");
     }
@@ -159,12 +176,11 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     const std::uint32_t bins = frame.bins, beams = frame.beams;
     const auto u16 = [&](std::string_view name, const std::vector<std::uint16_t>& v, std::uint32_t rows,
                          std::uint32_t cols) {
-        write_atomically(dir / name,
-                         [&](const std::string& p) { return host::write_npy_u16(p, v.data(), rows, cols); });
+        put(out, dir / name, [&](const std::string& p) { return host::write_npy_u16(p, v.data(), rows, cols); });
     };
     const auto f32 = [&](std::string_view name, const std::vector<float>& v, std::uint32_t channels) {
-        write_atomically(dir / name,
-                         [&](const std::string& p) { return host::write_npy_f32(p, v.data(), bins, beams, channels); });
+        put(out, dir / name,
+            [&](const std::string& p) { return host::write_npy_f32(p, v.data(), bins, beams, channels); });
     };
     u16(kInstanceNpy, frame.instance, bins, beams);
     f32(kInstanceFractionNpy, frame.instance_fraction, 1);
@@ -177,9 +193,9 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
     u16(kClassFanNpy, out.fan_ids, height, width);
     const std::string& boxes = frame_boxes(out, frame);
     u16(kInstanceFanNpy, out.fan_ids, height, width);
-    write_atomically(dir / kBoxesJson, [&](const std::string& p) { return host::write_text_file(p, boxes); });
+    put(out, dir / kBoxesJson, [&](const std::string& p) { return host::write_text_file(p, boxes); });
     host::label_image(out.fan_ids, width, height, out.image);
-    write_atomically(dir / kInstanceFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
+    put(out, dir / kInstanceFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
 }
 
 } // namespace
@@ -187,47 +203,47 @@ void write_labels(Outputs& out, const fs::path& dir, const Frame& frame) {
 void write_frame(Outputs& out, const fs::path& dir, const Frame& frame, const Pose& pose, const double* time_s,
                  const std::vector<float>* flow) {
     const Plan& plan = out.plan;
+    out.written.clear();
     if (out.legacy) {
         write_legacy(*out.legacy, out, dir, frame);
     } else if (out.save.fan) {
         out.fan.render(frame, out.image, out.image_workers);
-        write_atomically(dir / kFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
+        put(out, dir / kFanPng, [&](const std::string& p) { return host::write_png(p, out.image); });
     }
     if (out.save.polar_png) {
         host::polar_image(plan, frame, out.image);
-        write_atomically(dir / kPolarPng, [&](const std::string& p) { return host::write_png(p, out.image); });
+        put(out, dir / kPolarPng, [&](const std::string& p) { return host::write_png(p, out.image); });
     }
     if (out.save.polar)
-        write_atomically(dir / kPolarNpy, [&](const std::string& p) {
+        put(out, dir / kPolarNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.intensity.data(), frame.bins, frame.beams);
         });
     if (out.save.polar_u16) {
         host::quantize_display(frame, out.quantized);
-        write_atomically(dir / kPolarU16Npy, [&](const std::string& p) {
+        put(out, dir / kPolarU16Npy, [&](const std::string& p) {
             return host::write_npy_u16(p, out.quantized.data(), frame.bins, frame.beams);
         });
     }
     if (out.save.depth) {
         host::depth_to_view_range(plan, frame, out.view_range);
-        write_atomically(dir / kDepthNpy, [&](const std::string& p) {
+        put(out, dir / kDepthNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, out.view_range.data(), frame.rows, frame.columns);
         });
     }
     if (out.save.normals)
-        write_atomically(dir / kNormalsNpy, [&](const std::string& p) {
+        put(out, dir / kNormalsNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.normals.data(), frame.rows, frame.columns, 4);
         });
     if (out.save.echo)
-        write_atomically(dir / kEchoNpy, [&](const std::string& p) {
+        put(out, dir / kEchoNpy, [&](const std::string& p) {
             return host::write_npy_f32(p, frame.echo.data(), frame.rows, frame.columns, 2);
         });
     if (out.save.labels) write_labels(out, dir, frame);
     if (flow)
-        write_atomically(dir / kFlowNpy, [&](const std::string& p) {
-            return host::write_npy_f32(p, flow->data(), frame.bins, frame.beams, 2);
-        });
+        put(out, dir / kFlowNpy,
+            [&](const std::string& p) { return host::write_npy_f32(p, flow->data(), frame.bins, frame.beams, 2); });
     if (out.save.cloud && !out.legacy)
-        write_atomically(dir / kCloudPly, [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
+        put(out, dir / kCloudPly, [&](const std::string& p) { return host::write_cloud_ply(p, plan, frame); });
     const std::string extra = extra_meta_fields(out, pose, time_s);
     write_atomically(dir / kMetaJson, [&](const std::string& p) {
         return host::write_meta_json(p, plan, frame, extra, &out.meta_plan_part);

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -90,6 +91,8 @@ struct Outputs {
     host::BoxFinder box_finder;           // --save labels: boxes.json, its scratch kept across frames
     std::vector<host::Box> boxes;
     std::string boxes_text; // the frame's boxes.json (frame_boxes)
+    // The files write_frame wrote for this frame so far, name -> bytes: meta.json's "files".
+    std::vector<std::pair<std::string, std::uintmax_t>> written;
     // Threads for the fan image (image_workers in run_render; null: the writer thread alone).
     host::Workers* image_workers = nullptr;
 };

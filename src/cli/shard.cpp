@@ -307,7 +307,8 @@ FolderManifest read_manifest(const std::string& dir) {
     return m;
 }
 
-void start_folder_shard(const std::string& dir, const FolderManifest& manifest, std::vector<char>& done) {
+void start_folder_shard(const std::string& dir, const FolderManifest& manifest, std::vector<char>& done,
+                        std::vector<std::string>* damaged) {
     const fs::path path = fs::path(dir) / "shard.json";
     const std::string name = std::to_string(manifest.shard.index) + "/" + std::to_string(manifest.shard.count);
     std::error_code ec;
@@ -319,9 +320,14 @@ void start_folder_shard(const std::string& dir, const FolderManifest& manifest, 
         if (std::string d = identity_difference(old.identity, manifest.identity); !d.empty())
             throw BadInput("--out " + dir + " holds shard " + name + " of another run (" + d +
                            "): remove it or give another --out");
-        for (std::uint64_t k = 0; k < manifest.lines.size(); ++k)
-            if (frame_folder_done((fs::path(dir) / frame_dir_name(manifest.lines[k])).string()))
+        for (std::uint64_t k = 0; k < manifest.lines.size(); ++k) {
+            const std::string frame = frame_dir_name(manifest.lines[k]);
+            const FrameFolderState state = frame_folder_check((fs::path(dir) / frame).string());
+            if (state.kind == FrameFolderState::complete)
                 done[manifest.shard.first + k] = 1;
+            else if (state.kind == FrameFolderState::damaged && damaged)
+                damaged->push_back(frame);
+        }
     }
     const fs::path temporary = fs::path(dir) / ".~shard.json";
     {
@@ -334,7 +340,7 @@ void start_folder_shard(const std::string& dir, const FolderManifest& manifest, 
 }
 
 std::string shard_summary(const ShardRecord& shard, std::uint64_t first_line, std::uint64_t last_line,
-                          std::uint64_t already_done) {
+                          std::uint64_t already_done, const std::vector<std::string>& damaged) {
     std::string text =
         "shard " + std::to_string(shard.index) + "/" + std::to_string(shard.count) + " (" + shard.source + "): ";
     if (shard.end == shard.first)
@@ -344,12 +350,65 @@ std::string shard_summary(const ShardRecord& shard, std::uint64_t first_line, st
             std::to_string(shard.total) + " (lines " + std::to_string(first_line) + ".." + std::to_string(last_line) +
             ")";
     if (already_done) text += ", " + std::to_string(already_done) + " already on disk";
+    if (!damaged.empty()) {
+        // The first few by name (a crash damages the frames in flight, a handful); the count says the rest.
+        constexpr std::size_t kNamed = 5;
+        text += ", " + std::to_string(damaged.size()) + " damaged (re-rendered): ";
+        for (std::size_t i = 0; i < damaged.size() && i < kNamed; ++i)
+            text += (i ? ", " : "") + damaged[i];
+        if (damaged.size() > kNamed) text += ", ...";
+    }
     return text;
 }
 
-bool frame_folder_done(const std::string& frame_dir) {
+FrameFolderState frame_folder_check(const std::string& frame_dir) {
+    const fs::path meta_path = fs::path(frame_dir) / kMetaJson;
     std::error_code ec;
-    return fs::is_regular_file(fs::path(frame_dir) / kMetaJson, ec);
+    FrameFolderState state;
+    if (!fs::is_regular_file(meta_path, ec)) return state;
+    state.kind = FrameFolderState::damaged;
+    std::ifstream in(meta_path, std::ios::binary);
+    nlohmann::json meta = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    if (meta.is_discarded() || !meta.is_object()) {
+        state.problem = std::string(kMetaJson) + ": not a JSON object";
+        return state;
+    }
+    const auto files = meta.find("files");
+    if (files == meta.end()) { // written before meta.json recorded the files: its presence is all there is
+        state.kind = FrameFolderState::complete;
+        return state;
+    }
+    if (!files->is_object()) {
+        state.problem = std::string(kMetaJson) + ": \"files\" is not an object";
+        return state;
+    }
+    for (auto it = files->begin(); it != files->end(); ++it) {
+        const std::string& name = it.key();
+        // Only the frame's own file names: a meta.json can never send the check outside the folder.
+        if (!is_frame_file(name) || name == kMetaJson || !it.value().is_number_unsigned()) {
+            state.problem = std::string(kMetaJson) + ": \"files\" has a bad entry " + nlohmann::json(name).dump();
+            return state;
+        }
+        const std::uintmax_t want = it.value().get<std::uintmax_t>();
+        const fs::path path = fs::path(frame_dir) / name;
+        const std::string says = ", meta.json says " + std::to_string(want);
+        if (!fs::is_regular_file(path, ec)) {
+            state.problem = name + ": missing" + says;
+            return state;
+        }
+        const std::uintmax_t size = fs::file_size(path, ec);
+        if (ec || size != want) {
+            state.problem =
+                name + ": " + (ec ? "size unreadable (" + ec.message() + ")" : std::to_string(size) + " bytes") + says;
+            return state;
+        }
+    }
+    state.kind = FrameFolderState::complete;
+    return state;
+}
+
+bool frame_folder_done(const std::string& frame_dir) {
+    return frame_folder_check(frame_dir).kind == FrameFolderState::complete;
 }
 
 std::string frame_dir_name(std::uint64_t line) {

@@ -86,15 +86,33 @@ std::string identity_difference(const Identity& a, const Identity& b);
 // Starts (or resumes) a shard in the output folder `dir`: when dir/shard.json is there it must be
 // this shard of this run (else BadInput naming what differs), and every frame of the block whose
 // folder is complete is marked in `done` (indexed by frame ordinal); then writes dir/shard.json.
-void start_folder_shard(const std::string& dir, const FolderManifest& manifest, std::vector<char>& done);
+// `damaged` (when given) gets the folder names of the block's frames whose meta.json is there but
+// whose files are not as it says (frame_folder_check): they stay not done and are rendered again.
+void start_folder_shard(const std::string& dir, const FolderManifest& manifest, std::vector<char>& done,
+                        std::vector<std::string>* damaged = nullptr);
 
-// "shard 1/4 (--shard 1/4): frames 250..499 of 1000 (lines 252..501), 20 already on disk".
+// "shard 1/4 (--shard 1/4): frames 250..499 of 1000 (lines 252..501), 20 already on disk", and
+// ", 1 damaged (re-rendered): frame_000012" when a re-run found damaged frames.
 std::string shard_summary(const ShardRecord& shard, std::uint64_t first_line, std::uint64_t last_line,
-                          std::uint64_t already_done);
+                          std::uint64_t already_done, const std::vector<std::string>& damaged = {});
 
-// A frame folder is complete when its meta.json is there: meta.json is written last, after every
-// other file of the frame, and each file is renamed into place whole (docs/scale.md, "Restarting").
-bool frame_folder_done(const std::string& frame_dir);
+// Where a frame folder stands. meta.json is written last, after every other file of the frame, and
+// each file is renamed into place whole (docs/scale.md, "Restarting"); its "files" ({name: bytes})
+// lists what was written before it. Nothing is fsynced, so after a crash of the machine (not of
+// the process) meta.json can be on disk while an earlier file is empty or missing: the sizes catch that.
+struct FrameFolderState {
+    enum Kind { absent, complete, damaged };
+    Kind kind = absent; // absent: no meta.json (never written, or cut off before it)
+    // damaged: the first thing not as meta.json says, relative to the frame folder:
+    // "polar.npy: 0 bytes, meta.json says 1048704", "polar.npy: missing, meta.json says 1048704",
+    // "meta.json: not JSON (...)".
+    std::string problem;
+};
+// complete: meta.json parses and every file its "files" lists is a regular file of that size. A
+// meta.json without "files" (written before it was recorded) is complete as it stands, so shards of
+// earlier runs still resume.
+FrameFolderState frame_folder_check(const std::string& frame_dir);
+bool frame_folder_done(const std::string& frame_dir); // frame_folder_check(...).kind == complete
 std::string frame_dir_name(std::uint64_t line);
 
 } // namespace vksonar::cli

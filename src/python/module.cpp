@@ -210,7 +210,7 @@ py::object frame_meta(FrameObject& f) {
     py::dict extra;
     const RendererObject& r = f.renderer.cast<RendererObject&>();
     // the CLI's keys in the CLI's order (render_frame.cpp), but `legacy`, which describes the legacy
-    // outputs only the CLI writes
+    // outputs only the CLI writes, and `files`, the files the CLI wrote before meta.json
     const py::dict config = json.attr("loads")(config_to_json(f.plan->config));
     extra["vksonar_version"] = host::vksonar_version();
     extra["config"] = config;
