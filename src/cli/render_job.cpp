@@ -10,9 +10,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <optional>
 #include <string>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include "cli/dataset_h5.h"
@@ -47,9 +49,28 @@ std::uint64_t time_ns_of(const std::string& text, double seconds) {
     return ns;
 }
 
-const std::vector<std::string> kSaveItems = {"default",  "fan",     "polar", "polar_png", "polar_u16",
-                                             "depth",    "normals", "echo",  "cloud",     "multibeam",
-                                             "raw_scan", "labels",  "flow"};
+// The --save items that name one output each, with the SaveSet member each sets, in the order a
+// shard's identity lists them (save_list). One table for parsing, listing and the error's "valid:"
+// list; "default" (fan, polar, polar_png, polar_u16) is the one item that names several.
+constexpr std::pair<const char*, bool SaveSet::*> kSaveOutputs[] = {{"fan", &SaveSet::fan},
+                                                                    {"polar", &SaveSet::polar},
+                                                                    {"polar_png", &SaveSet::polar_png},
+                                                                    {"polar_u16", &SaveSet::polar_u16},
+                                                                    {"depth", &SaveSet::depth},
+                                                                    {"normals", &SaveSet::normals},
+                                                                    {"echo", &SaveSet::echo},
+                                                                    {"cloud", &SaveSet::cloud},
+                                                                    {"multibeam", &SaveSet::multibeam},
+                                                                    {"raw_scan", &SaveSet::raw_scan},
+                                                                    {"labels", &SaveSet::labels},
+                                                                    {"flow", &SaveSet::flow}};
+
+const std::vector<std::string> kSaveItems = [] {
+    std::vector<std::string> items = {"default"};
+    for (const auto& [name, member] : kSaveOutputs)
+        items.emplace_back(name);
+    return items;
+}();
 
 // A trajectory whose header's first column is t, time or time_s has a time (s) before each pose.
 bool header_names_time(const std::string& header) {
@@ -69,39 +90,20 @@ SaveSet parse_save(const std::vector<std::string>& values) {
     for (const auto& value : values) {
         for (const auto& item : split(value, ',')) {
             if (item.empty()) continue;
-            if (item == "default")
+            if (item == "default") {
                 save.fan = save.polar = save.polar_png = save.polar_u16 = true;
-            else if (item == "fan")
-                save.fan = true;
-            else if (item == "polar")
-                save.polar = true;
-            else if (item == "polar_png")
-                save.polar_png = true;
-            else if (item == "polar_u16")
-                save.polar_u16 = true;
-            else if (item == "depth")
-                save.depth = true;
-            else if (item == "normals")
-                save.normals = true;
-            else if (item == "echo")
-                save.echo = true;
-            else if (item == "cloud")
-                save.cloud = true;
-            else if (item == "multibeam")
-                save.multibeam = true;
-            else if (item == "raw_scan")
-                save.raw_scan = true;
-            else if (item == "labels")
-                save.labels = true;
-            else if (item == "flow")
-                save.flow = true;
-            else {
+                continue;
+            }
+            const auto* output = std::find_if(std::begin(kSaveOutputs), std::end(kSaveOutputs),
+                                              [&](const auto& known) { return item == known.first; });
+            if (output == std::end(kSaveOutputs)) {
                 std::string valid; // from kSaveItems, so the message lists exactly what is accepted
                 for (const std::string& known : kSaveItems)
                     valid += (valid.empty() ? "" : ",") + known;
                 throw BadInput("--save: unknown output '" + item + "' (did you mean '" +
                                closest_word(item, kSaveItems) + "'? valid: " + valid + ")");
             }
+            save.*(output->second) = true;
         }
     }
     return save;
@@ -321,20 +323,8 @@ void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const
 // The --save set as a canonical list (a shard's identity).
 std::string save_list(const SaveSet& s) {
     std::string list;
-    const std::pair<bool, const char*> items[] = {{s.fan, "fan"},
-                                                  {s.polar, "polar"},
-                                                  {s.polar_png, "polar_png"},
-                                                  {s.polar_u16, "polar_u16"},
-                                                  {s.depth, "depth"},
-                                                  {s.normals, "normals"},
-                                                  {s.echo, "echo"},
-                                                  {s.cloud, "cloud"},
-                                                  {s.multibeam, "multibeam"},
-                                                  {s.raw_scan, "raw_scan"},
-                                                  {s.labels, "labels"},
-                                                  {s.flow, "flow"}};
-    for (const auto& [on, name] : items)
-        if (on) list += (list.empty() ? "" : ",") + std::string(name);
+    for (const auto& [name, member] : kSaveOutputs)
+        if (s.*member) list += (list.empty() ? "" : ",") + std::string(name);
     return list;
 }
 
