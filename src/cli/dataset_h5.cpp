@@ -310,14 +310,13 @@ public:
              text("beam_geometry_why", plan.beam_geometry_why) && text("objects", meta.objects_json) &&
              text("scene", meta.scene) && text("backend", meta.backend) && text("device", meta.device) &&
              text("vksonar_version", host::vksonar_version()) &&
-             (meta.shard || meta.scene_hash.empty() || text("scene_fnv1a64", meta.scene_hash)) &&
-             count("frames_written", 0) && count("complete", 0);
+             (meta.scene_hash.empty() || text("scene_fnv1a64", meta.scene_hash)) && count("frames_written", 0) &&
+             count("complete", 0);
         if (ok && meta.shard) {
             const ShardRecord& r = *meta.shard;
             ok = count("shard_index", r.index) && count("shard_count", r.count) && text("shard_source", r.source) &&
                  count("shard_first", r.first) && count("shard_end", r.end) && count("trajectory_frames", r.total) &&
-                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash) &&
-                 (r.scene_hash.empty() || text("scene_fnv1a64", r.scene_hash));
+                 text("trajectory", r.trajectory) && text("trajectory_fnv1a64", r.trajectory_hash);
         }
         if (!ok) return fail("cannot write the dataset's layout");
         std::uint32_t deflating = 0;

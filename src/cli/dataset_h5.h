@@ -48,7 +48,7 @@ struct DatasetMeta {
     std::string config_json, effects_json, validity_json;
     std::string objects_json; // the scene's objects and classes (meta.json "objects")
     std::string scene, backend, device;
-    std::string scene_hash; // scene_fnv1a64 (a shard also records it in its shard attributes)
+    std::string scene_hash; // scene_fnv1a64, written with the general attributes (a shard reads it back from there)
     std::uint64_t seed = 0;
     std::optional<ShardRecord> shard; // a shard of a trajectory: written as attributes
 };

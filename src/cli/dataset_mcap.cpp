@@ -192,6 +192,7 @@ public:
         std::vector<BagTopic> topics;
         for (const Topic* t : {&sonar_image_, &fan_, &polar_, &cloud_, &instance_, &tf_, &tf_static_})
             if (t->channel) topics.push_back({t->name, t->type, t->qos, t->sequence});
+        if (!options_.run.empty()) writer_.add_metadata(kRunRecordName, options_.run);
         writer_.add_metadata(
             "rosbag2", {{"serialized_metadata", rosbag2_metadata_yaml(path_.substr(path_.find_last_of('/') + 1), topics,
                                                                       first_ns_, last_ns_, writer_.message_count())}});

@@ -42,10 +42,15 @@ struct McapOptions {
     // right after the Header, that `vksonar merge` and a re-run of the shard read; empty for an
     // unsharded run (then there is no such record).
     mcap::KeyValues shard;
+    // An unsharded run's record (run_metadata in merge.h): a "vksonar_run" Metadata record written at
+    // close(), before rosbag2's; a merged bag gets the same one. Empty: none (a shard's bag).
+    mcap::KeyValues run;
 };
 
 // The name of a shard bag's Metadata record (McapOptions::shard), written before its first frame.
 inline constexpr const char* kShardRecordName = "vksonar_shard";
+// The name of an unsharded or merged bag's run record (McapOptions::run).
+inline constexpr const char* kRunRecordName = "vksonar_run";
 
 // One topic of a bag as rosbag2's metadata lists it.
 struct BagTopic {

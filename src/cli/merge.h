@@ -47,6 +47,10 @@ void h5_merge(const std::vector<ShardInput>& shards, const std::string& out);
 // `zstd`: the shard's chunks are compressed (--compress), and so will the merged bag's be.
 mcap::KeyValues shard_metadata(const ShardRecord& shard, const Identity& identity, const std::string& backend,
                                const std::string& device, bool zstd);
+// An unsharded or a merged bag's "vksonar_run" Metadata record (kRunRecordName): the run's identity
+// (what a shard's record holds as identity.*), then vksonar_version, the version that rendered it (a
+// shard's record carries it too, so the merged bag names the renderer, not the merger).
+mcap::KeyValues run_metadata(const Identity& identity, const std::string& vksonar_version);
 bool mcap_merge_accepts(const std::string& path);
 bool mcap_merge_output_ok(const std::string& out);
 ShardInput mcap_merge_read(const std::string& path);

@@ -18,6 +18,7 @@
 #include "cli/dataset_mcap.h"
 #include "cli/mcap_reader.h"
 #include "cli/merge.h"
+#include "host/meta_fields.h"
 
 namespace fs = std::filesystem;
 
@@ -53,6 +54,7 @@ struct BagScan {
     bool record = false, complete = false;
     std::uint64_t messages = 0;
     std::string compression; // the record's: "zstd" or "none"
+    std::string version;     // the record's vksonar_version (empty: a shard rendered before it was recorded)
 };
 
 // Fails with one line starting with the path.
@@ -93,6 +95,8 @@ Result<BagScan> scan_bag(const std::string& path) {
                 in.device = value;
             else if (key == "compression")
                 scan.compression = value;
+            else if (key == "vksonar_version")
+                scan.version = value;
             else if (key.rfind(kIdentityPrefix, 0) == 0)
                 in.identity.emplace_back(key.substr(9), value);
         }
@@ -130,9 +134,16 @@ mcap::KeyValues shard_metadata(const ShardRecord& s, const Identity& identity, c
                           {"trajectory_hash", s.trajectory_hash},
                           {"backend", backend},
                           {"device", device},
-                          {"compression", zstd ? "zstd" : "none"}};
+                          {"compression", zstd ? "zstd" : "none"},
+                          {"vksonar_version", host::vksonar_version()}};
     for (const auto& [key, value] : identity)
         kv.emplace_back(kIdentityPrefix + key, value);
+    return kv;
+}
+
+mcap::KeyValues run_metadata(const Identity& identity, const std::string& vksonar_version) {
+    mcap::KeyValues kv(identity.begin(), identity.end());
+    if (!vksonar_version.empty()) kv.emplace_back("vksonar_version", vksonar_version);
     return kv;
 }
 
@@ -319,6 +330,9 @@ void mcap_merge(const std::vector<ShardInput>& shards, const std::string& out) {
         std::vector<BagTopic> topics;
         for (const auto& [id, t] : bag_topics)
             topics.push_back(t);
+        // The run record of the unsharded run: shard 0's identity (the shards' agree: checked) and the
+        // version that rendered it.
+        writer.add_metadata(kRunRecordName, run_metadata(shards[0].identity, record->version));
         writer.add_metadata("rosbag2",
                             {{"serialized_metadata", rosbag2_metadata_yaml(target.filename().string(), topics, first_ns,
                                                                            last_ns, writer.message_count())}});

@@ -576,20 +576,33 @@ void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const O
     start_folder_shard(dir.path().string(), manifest, writers.done, &writers.damaged);
 }
 
-// A shard's bag: its record and the run's identity, for `vksonar merge` and a re-run
-// (merge_mcap.cpp); the identity also names what the bag's messages depend on. A re-run goes on
-// after the frames already in the bag.
-void resume_bag_shard(const RenderJob& job, const Plan& plan, const Outputs& outputs, McapOptions& bag_options,
-                      const fs::path& target, Writers& writers) {
-    const ShardRecord& shard = *job.shard;
+// What a bag's messages depend on: the run's identity (shard.h) with the trajectory's hash and frame
+// count and the scene's hash, and the bag's own settings. A shard's bag records it in its shard record
+// (compared by `vksonar merge` and a re-run); an unsharded or merged bag in its run record, the same
+// entries (an unsharded run is the one shard of itself), so that the two bags stay byte-identical.
+Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& outputs, const McapOptions& bag_options,
+                      double bag_rate) {
+    ShardRecord whole;
+    whole.total = job.poses.size();
+    whole.scene_hash = job.scene_hash;
+    if (job.trajectory) whole.trajectory_hash = file_fnv1a64(args.value("--trajectory"));
     Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
-                                     save_list(job.save), job.timed, &shard);
+                                     save_list(job.save), job.timed, job.shard ? &*job.shard : &whole);
     char rate[32];
-    std::snprintf(rate, sizeof rate, "%.17g", writers.bag_rate);
+    std::snprintf(rate, sizeof rate, "%.17g", bag_rate);
     identity.insert(identity.end(), {{"ros_prefix", bag_options.prefix},
                                      {"ros_frame", bag_options.frame},
                                      {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},
                                      {"rate", job.timed ? std::string("time column") : std::string(rate)}});
+    return identity;
+}
+
+// A shard's bag: its record and the run's identity, for `vksonar merge` and a re-run
+// (merge_mcap.cpp). A re-run goes on after the frames already in the bag.
+void resume_bag_shard(const Args& args, const RenderJob& job, const Plan& plan, const Outputs& outputs,
+                      McapOptions& bag_options, const fs::path& target, Writers& writers) {
+    const ShardRecord& shard = *job.shard;
+    const Identity identity = bag_identity(args, job, outputs, bag_options, writers.bag_rate);
     bag_options.shard = shard_metadata(shard, identity, outputs.backend, outputs.device, bag_options.zstd);
     BagResume resumed = bag_shard_resume(target.string(), plan, bag_options, shard, identity);
     for (std::uint64_t k = 0; k < resumed.frames; ++k)
@@ -603,7 +616,11 @@ void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs&
     McapOptions& bag_options = *job.bag_options;
     bag_options.zstd = args.has("--compress");
     bag_options.library = std::string("vksonar ") + host::vksonar_version() + " (its own MCAP writer)";
-    if (job.shard) resume_bag_shard(job, plan, outputs, bag_options, file.target(), writers);
+    if (job.shard)
+        resume_bag_shard(args, job, plan, outputs, bag_options, file.target(), writers);
+    else
+        bag_options.run =
+            run_metadata(bag_identity(args, job, outputs, bag_options, writers.bag_rate), host::vksonar_version());
     if (!writers.bag && !writers.bag_complete) {
         // Named as OUT's target in the bag (rosbag2's metadata), written under the temporary name.
         auto created = McapDatasetWriter::create(file.target().string(), plan, bag_options, file.temporary().string());

@@ -289,6 +289,28 @@ async function main() {
     merged.messages.every((m, k) => key(m) === key(whole.messages[k]) && bytesEqual(m.data, whole.messages[k].data)),
     "merged shards: the unsharded bag's messages (topic, sequence, stamps, data)");
   check(bytesEqual(merged.bytes, whole.bytes), "merged shards: the unsharded bag byte for byte");
+  // The run record: what the bag's messages depend on, in the unsharded bag and (being the same bytes)
+  // the merged one; none in a shard's bag (its vksonar_shard record holds the same as identity.*).
+  const runRecords = async (bag) => {
+    const records = [];
+    for await (const m of bag.reader.readMetadata({ name: "vksonar_run" })) records.push(m.metadata);
+    return records;
+  };
+  let fnv = 0xcbf29ce484222325n; // FNV-1a 64 of the trajectory file's bytes
+  for (const b of fs.readFileSync(file("untimed.csv"))) fnv = ((fnv ^ BigInt(b)) * 0x100000001b3n) & 0xffffffffffffffffn;
+  const version = spawnSync(CLI, ["--version"], { encoding: "utf8" }).stdout.trim().split(/\s+/).pop();
+  for (const [name, bag] of [["unsharded", whole], ["merged", merged]]) {
+    const records = await runRecords(bag);
+    const r = records.length === 1 ? records[0] : new Map();
+    let config = {};
+    try { config = JSON.parse(r.get("config") || "{}"); } catch (e) { config = {}; }
+    check(records.length === 1 && r.get("seed") === "5" && r.get("backend") === "cpu" && r.get("frames") === "10" &&
+      r.get("trajectory") === fnv.toString(16).padStart(16, "0") && /^[0-9a-f]{16}$/.test(r.get("scene_fnv1a64") || "") &&
+      r.get("rate") === "4" && r.get("ros_prefix") === "/vksonar" && config.bins === 64 && config.beams === 32 &&
+      r.get("vksonar_version") === version,
+      `${name} bag: vksonar_run record ${records.length ? [...r.entries()].map(([k, v]) => `${k}=${v.slice(0, 40)}`).join(" ") : "missing"}`);
+  }
+  for (const part of parts) check((await runRecords(await readIndexed(part))).length === 0, `${part}: a run record in a shard's bag`);
   console.log(`shards: 3 bags merged into ${merged.messages.length} messages, ${merged.bytes.length} bytes, ` +
     `identical to the unsharded bag: ${bytesEqual(merged.bytes, whole.bytes)}`);
 
