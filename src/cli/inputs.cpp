@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "host/backend_choice.h"
 #include "vk/vulkan_context.h"
 
 namespace fs = std::filesystem;
@@ -101,23 +102,7 @@ Context make_context(Backend backend) {
 }
 
 Context choose_backend(Backend& backend, std::string& why) {
-    auto created = create_context_from_env();
-    if (!created) {
-        backend = Backend::cpu;
-        why = "auto: no usable Vulkan device (" + created.error().message + "): the CPU backend";
-        return Context::cpu_only();
-    }
-    Context context = std::move(created.value());
-    const VulkanContext* vk = context_vulkan(context);
-    if (vk != nullptr && vk->properties.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
-        backend = Backend::cpu;
-        why = "auto: the Vulkan device is a CPU implementation (" + context.device_description() +
-              "), where the CPU backend is as fast or faster (docs/benchmarks.md, 'How cost grows')";
-        return Context::cpu_only();
-    }
-    backend = Backend::vulkan;
-    why = "auto: a GPU (" + context.device_description() + ")";
-    return context;
+    return host::choose_backend(create_context_from_env(), backend, why);
 }
 
 } // namespace vksonar::cli

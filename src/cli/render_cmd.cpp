@@ -509,30 +509,20 @@ Renderer make_renderer(Device& device, const SonarConfig& config, const Scene& s
 Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& device, const host::FanRenderer& fan,
                      LegacyState& legacy_state, const Scene& scene) {
     legacy_state.mode = plan.config.mode;
-    const std::string config_text = config_to_json(plan.config);
-    return Outputs{plan,
-                   job.save,
-                   fan,
-                   config_text,
-                   nlohmann::ordered_json::parse(config_text),
-                   host::meta_json_plan_part(plan),
-                   job.scene_path,
-                   job.scene_hash,
-                   device.backend_name,
-                   device.backend_reason,
-                   device.description,
-                   {},
-                   {},
-                   {},
-                   plan.config.mode != SonarMode::physical ? &legacy_state : nullptr,
-                   job.shard ? &*job.shard : nullptr,
-                   host::objects_json(scene),
-                   {},
-                   scene.classes(),
-                   {},
-                   {},
-                   {},
-                   {}};
+    Outputs out(plan, job.save, fan);
+    out.config_json = config_to_json(plan.config);
+    out.config_parsed = nlohmann::ordered_json::parse(out.config_json);
+    out.meta_plan_part = host::meta_json_plan_part(plan);
+    out.scene_path = job.scene_path;
+    out.scene_hash = job.scene_hash;
+    out.backend = device.backend_name;
+    out.backend_reason = device.backend_reason;
+    out.device = device.description;
+    out.legacy = plan.config.mode != SonarMode::physical ? &legacy_state : nullptr;
+    out.shard = job.shard ? &*job.shard : nullptr;
+    out.objects = host::objects_json(scene);
+    out.class_names = scene.classes();
+    return out;
 }
 
 // ---- where the frames go -----------------------------------------------------------------------

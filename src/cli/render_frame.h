@@ -68,6 +68,11 @@ struct LegacyState {
 };
 
 struct Outputs {
+    // The run's plan, --save set and fan renderer; the rest is set by name (make_outputs), so a new
+    // member is one more line there, not a position in a list.
+    Outputs(const Plan& plan_, const SaveSet& save_, const host::FanRenderer& fan_)
+        : plan(plan_), save(save_), fan(fan_) {}
+
     const Plan& plan;
     const SaveSet& save;
     const host::FanRenderer& fan;

@@ -21,6 +21,7 @@
 
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "host/backend_choice.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
 #include "scene/scene_data.h"
@@ -191,8 +192,9 @@ struct RendererObject {
     std::shared_ptr<SceneObject> scene;
     Renderer renderer;
     std::unique_ptr<host::FanRenderer> fan;
-    std::string backend;
-    std::string device; // the Vulkan device, or "cpu" (meta.json "device")
+    std::string backend;        // vulkan or cpu ("auto" resolved)
+    std::string backend_reason; // meta.json "backend_reason": Renderer(backend='cpu'), or what auto saw
+    std::string device;         // the Vulkan device, or "cpu" (meta.json "device")
     std::string config_json;
     std::string scene_hash; // meta.json "scene_fnv1a64" of the scene as the renderer took it
 };
@@ -221,7 +223,7 @@ py::object frame_meta(FrameObject& f) {
                              py::arg("yaw_deg") = f.pose.yaw_deg);
     extra["objects"] = json.attr("loads")(host::objects_json(r.scene->scene).dump());
     extra["backend"] = r.backend;
-    extra["backend_reason"] = "Renderer(backend='" + r.backend + "')";
+    extra["backend_reason"] = r.backend_reason;
     extra["device"] = r.device;
     extra["mode"] = config["mode"]; // the config's own name for it, as the CLI writes it
     const std::string text = host::meta_json_text(*f.plan, f.frame, json.attr("dumps")(extra).cast<std::string>());
@@ -419,8 +421,8 @@ PYBIND11_MODULE(vksonar, m) {
                  RendererOptions options = renderer_options_from_env();
                  if (backend == "cpu")
                      options.backend = Backend::cpu;
-                 else if (backend != "vulkan")
-                     throw py::value_error("backend: '" + backend + "' is not a backend (vulkan or cpu)");
+                 else if (backend != "vulkan" && backend != "auto")
+                     throw py::value_error("backend: '" + backend + "' is not a backend (auto, vulkan or cpu)");
                  options.seed = seed;
                  for (const std::string& o : outputs) {
                      if (o == "depth")
@@ -436,17 +438,26 @@ PYBIND11_MODULE(vksonar, m) {
                  }
                  auto r = std::make_shared<RendererObject>();
                  r->scene = std::move(scene);
-                 r->backend = backend;
-                 r->context = std::make_shared<Context>(options.backend == Backend::cpu
-                                                            ? Context::cpu_only()
-                                                            : take(Context::create(take(context_options_from_env()))));
+                 if (backend == "auto") { // the CLI's rule (host/backend_choice.h)
+                     auto vulkan_options = context_options_from_env();
+                     r->context = std::make_shared<Context>(
+                         host::choose_backend(vulkan_options ? Context::create(vulkan_options.value())
+                                                             : Result<Context>(vulkan_options.error()),
+                                              options.backend, r->backend_reason));
+                 } else {
+                     r->backend_reason = "Renderer(backend='" + backend + "')";
+                     r->context = std::make_shared<Context>(
+                         options.backend == Backend::cpu ? Context::cpu_only()
+                                                         : take(Context::create(take(context_options_from_env()))));
+                 }
+                 r->backend = options.backend == Backend::cpu ? "cpu" : "vulkan";
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
                  r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
              }),
-             py::arg("scene"), py::arg("config") = ConfigObject::preset("default"), py::arg("backend") = "vulkan",
+             py::arg("scene"), py::arg("config") = ConfigObject::preset("default"), py::arg("backend") = "auto",
              py::arg("seed") = 1, py::arg("outputs") = std::vector<std::string>{})
         .def(
             "render",

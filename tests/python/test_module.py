@@ -67,6 +67,26 @@ def test_arrays_equal_the_cli_files(tmp_path, renderer):
     assert meta["backend_reason"] == "--backend cpu" and frame.meta["backend_reason"] == "Renderer(backend='cpu')"
 
 
+def test_the_default_backend_is_the_clis_auto(tmp_path):
+    # Renderer() without backend= runs what `vksonar render` runs without --backend (its auto rule:
+    # a GPU runs Vulkan, lavapipe or no device the CPU backend), and says why in the same words;
+    # the frame is then the CLI's, bit for bit.
+    args = [CLI, "render", "--scene", SCENE, "--seed", "9", "--out", str(tmp_path),
+            "--pose", ",".join(str(v) for v in POSE)]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    assert subprocess.run(args, capture_output=True, text=True).returncode == 0
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), seed=9)
+    frame = renderer.render(POSE, frame=0)
+    assert meta["backend_reason"].startswith("auto: ")
+    assert renderer.backend == meta["backend"] and frame.meta["backend"] == meta["backend"]
+    assert frame.meta["backend_reason"] == meta["backend_reason"] and frame.meta["device"] == meta["device"]
+    assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    explicit = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="auto", seed=9)
+    assert explicit.backend == renderer.backend
+
+
 def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
     frame = renderer.render(POSE, frame=0)
     polar = frame.polar
