@@ -453,6 +453,22 @@ TEST(SceneWarnings, UnknownExtrasKeysOfScenesNodesAndMeshes) {
     EXPECT_TRUE(has("mesh 0: unknown key extras.vksonar.material ignored")) << ::testing::PrintToString(w);
 }
 
+// Effects put in the file's top-level extras (where a person might look for "the scene's") are not
+// read, and the loader says where they go instead of dropping them in silence.
+TEST(SceneWarnings, TopLevelExtrasVksonarSaysWhereEffectsGo) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["extras"]["vksonar"] = {{"effects", {{"speckle", "off"}}}};
+    const std::string path = temp_path("top_level_extras.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    EXPECT_TRUE(scene.effects_json().empty()); // not read: effects belong to a scene
+    const std::vector<std::string>& w = scene.stats().warnings;
+    ASSERT_EQ(w.size(), 1u) << ::testing::PrintToString(w);
+    EXPECT_EQ(w[0], path + ": extras.vksonar at the file's top level ignored: a scene's effects go in "
+                           "scenes[N].extras.vksonar.effects");
+}
+
 // Objects for ground-truth labels (SceneInstance): the node index + 1, the class from the node's
 // extras, else its mesh's, else the mesh's name; every draw of a node carries its id.
 TEST(SceneObjects, IdsAreNodeIndicesAndClassesComeFromExtrasOrTheMeshName) {

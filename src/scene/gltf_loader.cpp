@@ -166,6 +166,14 @@ private:
     }
 
     void select_scene() {
+        // extras.vksonar at the file's top level reads as the scene's to a person, but the effects
+        // belong to a scene (a file can hold several): say where they go rather than drop them silently.
+        if (!model_.extras_json_string.empty()) {
+            const json top = json::parse(model_.extras_json_string, nullptr, /*allow_exceptions=*/false);
+            if (top.is_object() && top.contains("vksonar"))
+                warn("extras.vksonar at the file's top level ignored: a scene's effects go in "
+                     "scenes[N].extras.vksonar.effects");
+        }
         std::vector<int> roots;
         if (model_.scenes.empty()) {
             // No scene: draw every node that is nobody's child, as most viewers do.
