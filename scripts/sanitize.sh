@@ -38,10 +38,11 @@ cc -shared -fPIC -O2 -o "$preload" scripts/keep_vulkan_loaded.c -ldl
 # vulkan_gpu_layout_slow: they re-run the Vulkan cases of the suite with the GPU work layout
 # (VKSONAR_LAYOUT=gpu), which this job already runs once with the default layout through the same
 # host code; under ASan they took 673 s and 375 s of a CI run near its 90-minute limit, and the main
-# job runs them. SANITIZE_EXCLUDE overrides the regex (SANITIZE_EXCLUDE='^install_consumer$' runs them).
+# job runs them. clang_format checks the sources' layout, which no sanitizer changes.
+# SANITIZE_EXCLUDE overrides the regex (SANITIZE_EXCLUDE='^install_consumer$' runs them).
 if [ -z "${SANITIZE_EXCLUDE:-}" ]; then
-  echo "sanitize: skipped here (the main test job runs them): install_consumer, vulkan_gpu_layout, vulkan_gpu_layout_slow" >&2
+  echo "sanitize: skipped here (the main test job runs them): install_consumer, vulkan_gpu_layout, vulkan_gpu_layout_slow, clang_format" >&2
 fi
 LD_PRELOAD="$preload" ctest --test-dir "$BUILD_DIR" --output-on-failure -j"$JOBS" --timeout 600 \
-  -E "${SANITIZE_EXCLUDE:-^(install_consumer|vulkan_gpu_layout|vulkan_gpu_layout_slow)$}" "$@"
+  -E "${SANITIZE_EXCLUDE:-^(install_consumer|vulkan_gpu_layout|vulkan_gpu_layout_slow|clang_format)$}" "$@"
 echo "sanitize: tests took $(($(date +%s) - built)) s" >&2
