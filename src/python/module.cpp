@@ -57,13 +57,26 @@ void check(const Result<void>& r) {
 
 struct ConfigObject {
     SonarConfig config;
+    // How it was made, so that a Renderer can put a scene's effect requests between the preset and the
+    // user's keys, as the CLI layers them (preset < scene effects < --config < --quality < --set): the
+    // preset, then each from_dict / set / quality in the order they were called.
+    enum class Layer { json, key, quality };
+    std::string base = "default";
+    std::vector<std::pair<Layer, std::string>> layers;
 
-    static ConfigObject preset(const std::string& name) { return {take(load_preset(name))}; }
+    static ConfigObject preset(const std::string& name) {
+        ConfigObject c;
+        c.config = take(load_preset(name));
+        c.base = name;
+        return c;
+    }
     // Keys as in a config file (nested dicts for groups, "effects": {...}), over a preset.
     static ConfigObject from_dict(const py::dict& keys, const std::string& base) {
         const std::string text = py::module_::import("json").attr("dumps")(keys).cast<std::string>();
-        ConfigObject c{take(apply_config_json(take(load_preset(base)), text, "dict"))};
+        ConfigObject c = preset(base);
+        c.config = take(apply_layer(c.config, Layer::json, text));
         c.validate();
+        c.layers.emplace_back(Layer::json, text);
         return c;
     }
     // One key as --set takes it ("effects.speckle", "off").
@@ -73,17 +86,46 @@ struct ConfigObject {
             text = value.cast<std::string>();
         else
             text = py::str(py::module_::import("json").attr("dumps")(value)).cast<std::string>();
-        ConfigObject changed{take(apply_config_override(config, key + "=" + text))};
+        ConfigObject changed;
+        changed.config = take(apply_layer(config, Layer::key, key + "=" + text));
         changed.validate(); // the config stays as it was when the new value is refused
         config = std::move(changed.config);
+        layers.emplace_back(Layer::key, key + "=" + text);
     }
-    void quality(const std::string& name) { config = take(apply_quality(config, name)); }
+    void quality(const std::string& name) {
+        config = take(apply_layer(config, Layer::quality, name));
+        layers.emplace_back(Layer::quality, name);
+    }
     void validate() const {
         if (const auto valid = config.validate(); !valid)
             throw py::value_error("invalid config: " + valid.error().message);
     }
     py::dict to_dict() const {
         return py::module_::import("json").attr("loads")(config_to_json(config)).cast<py::dict>();
+    }
+    // The config a Renderer of `scene` runs: with the scene's effect requests (its glTF
+    // scenes[N].extras.vksonar.effects) over the preset and under this config's own keys, as the CLI does.
+    SonarConfig for_scene(const Scene& scene) const {
+        const std::string& effects = scene.effects_json();
+        if (effects.empty() || effects == "{}" || effects == "null") return config;
+        SonarConfig c = take(apply_config_json(take(load_preset(base)), "{\"effects\": " + effects + "}",
+                                               "the scene's extras vksonar.effects"));
+        for (const auto& [layer, text] : layers)
+            c = take(apply_layer(c, layer, text));
+        return c;
+    }
+
+private:
+    static Result<SonarConfig> apply_layer(const SonarConfig& c, Layer layer, const std::string& text) {
+        switch (layer) {
+        case Layer::json:
+            return apply_config_json(c, text, "dict");
+        case Layer::key:
+            return apply_config_override(c, text);
+        case Layer::quality:
+            return apply_quality(c, text);
+        }
+        return c;
     }
 };
 
@@ -452,7 +494,10 @@ PYBIND11_MODULE(vksonar, m) {
                  }
                  r->backend = options.backend == Backend::cpu ? "cpu" : "vulkan";
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
-                 r->renderer = take(Renderer::create(*r->context, config.config, r->scene->scene, options));
+                 const SonarConfig resolved = config.for_scene(r->scene->scene);
+                 if (const auto valid = resolved.validate(); !valid)
+                     throw py::value_error("invalid config: " + valid.error().message);
+                 r->renderer = take(Renderer::create(*r->context, resolved, r->scene->scene, options));
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;

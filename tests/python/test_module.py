@@ -87,6 +87,30 @@ def test_the_default_backend_is_the_clis_auto(tmp_path):
     assert explicit.backend == renderer.backend
 
 
+def test_a_scenes_effect_requests_layer_as_in_the_cli(tmp_path):
+    # A glTF scene's extras.vksonar.effects sit between the preset and the user's keys (CLI: preset <
+    # scene effects < --config < --quality < --set); a Renderer applies them the same way, so its frame
+    # is the CLI's for the same scene, and a key the user set still wins over the scene's request.
+    with open(SCENE) as f:
+        doc = json.load(f)
+    doc["scenes"][0]["extras"] = {"vksonar": {"effects": {"speckle": "off", "vertical_sidelobes": "off"}}}
+    scene_path = tmp_path / "quiet.gltf"
+    scene_path.write_text(json.dumps(doc))
+    args = [CLI, "render", "--scene", str(scene_path), "--backend", "cpu", "--seed", "9", "--out",
+            str(tmp_path / "cli"), "--pose", ",".join(str(v) for v in POSE), "--set", "effects.vertical_sidelobes=on"]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    assert subprocess.run(args, capture_output=True, text=True).returncode == 0
+    meta = json.loads((tmp_path / "cli" / "meta.json").read_text())
+    config = small_config()
+    config.set("effects.vertical_sidelobes", "on")
+    frame = vksonar.Renderer(vksonar.Scene.load(str(scene_path)), config, backend="cpu", seed=9).render(POSE, frame=0)
+    assert meta["effects"]["speckle"]["on"] is False and meta["effects"]["vertical_sidelobes"]["on"] is True
+    assert frame.meta["effects"] == meta["effects"] and frame.meta["config"] == meta["config"]
+    assert np.array_equal(frame.polar, np.load(tmp_path / "cli" / "polar.npy"))
+    assert config.to_dict()["effects"]["speckle"] == "auto"  # the Config itself is left as the user made it
+
+
 def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
     frame = renderer.render(POSE, frame=0)
     polar = frame.polar
