@@ -12,6 +12,7 @@
 #include <pybind11/stl.h>
 
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -19,6 +20,7 @@
 #include <utility>
 #include <vector>
 
+#include "config/config_keys.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/backend_choice.h"
@@ -53,49 +55,59 @@ void check(const Result<void>& r) {
     if (!r) raise(r.error());
 }
 
+// A Python UserWarning (warnings.warn) for what the CLI prints as a `warning:` line.
+void warn(const std::string& text) {
+    if (PyErr_WarnEx(PyExc_UserWarning, text.c_str(), 1) < 0) throw py::error_already_set();
+}
+
 // ---- Config ----------------------------------------------------------------------------------------
+
+// A Python value as JSON text: numpy scalars (np.int64(64), np.float32(0.5)) as the Python numbers
+// they hold, which json.dumps alone refuses.
+std::string json_text(const py::object& value) {
+    const py::object json = py::module_::import("json");
+    const py::cpp_function plain([](const py::object& o) -> py::object {
+        if (py::hasattr(o, "item")) return o.attr("item")();
+        throw py::type_error("Object of type " + py::str(py::type::of(o).attr("__name__")).cast<std::string>() +
+                             " is not JSON serializable");
+    });
+    return json.attr("dumps")(value, py::arg("default") = plain).cast<std::string>();
+}
 
 struct ConfigObject {
     SonarConfig config;
-    // How it was made, so that a Renderer can put a scene's effect requests between the preset and the
-    // user's keys, as the CLI layers them (preset < scene effects < --config < --quality < --set): the
-    // preset, then each from_dict / set / quality in the order they were called.
-    enum class Layer { json, key, quality };
-    std::string base = "default";
+    // How it was made, kept so that the layers apply in the CLI's order whatever the order of the calls,
+    // and so that a Renderer can put a scene's effect requests between the base and the user's keys:
+    // base (preset or --sonar FILE) < scene effects < from_dict (--config) < quality (--quality) < set
+    // (--set).
+    enum class Layer { json, quality, key };
+    SonarConfig base;
     std::vector<std::pair<Layer, std::string>> layers;
 
-    static ConfigObject preset(const std::string& name) {
-        ConfigObject c;
-        c.config = take(load_preset(name));
-        c.base = name;
-        return c;
+    static ConfigObject preset(const std::string& name) { return over(take(load_preset(name))); }
+    // A sonar config file, as `--sonar FILE.json` reads it: its keys over the built-in defaults, named
+    // by the file's stem unless it names itself.
+    static ConfigObject from_file(const std::string& path) {
+        SonarConfig c = take(apply_config_file(SonarConfig{}, path));
+        if (c.name == SonarConfig{}.name) c.name = std::filesystem::path(path).stem().string();
+        ConfigObject o = over(c);
+        if (const std::string problem = config_keys::check_ranges(o.config); !problem.empty())
+            throw py::value_error("invalid config: " + problem);
+        return o;
     }
     // Keys as in a config file (nested dicts for groups, "effects": {...}), over a preset.
     static ConfigObject from_dict(const py::dict& keys, const std::string& base) {
-        const std::string text = py::module_::import("json").attr("dumps")(keys).cast<std::string>();
         ConfigObject c = preset(base);
-        c.config = take(apply_layer(c.config, Layer::json, text));
-        c.validate();
-        c.layers.emplace_back(Layer::json, text);
+        c.add(Layer::json, json_text(keys));
         return c;
     }
-    // One key as --set takes it ("effects.speckle", "off").
+    // One key as --set takes it ("effects.speckle", "off"). The key's own range is checked here; how keys
+    // agree with each other (range_min below range_max, ...) when a Renderer takes the config, as the
+    // CLI checks after all its layers.
     void set(const std::string& key, const py::object& value) {
-        std::string text;
-        if (py::isinstance<py::str>(value))
-            text = value.cast<std::string>();
-        else
-            text = py::str(py::module_::import("json").attr("dumps")(value)).cast<std::string>();
-        ConfigObject changed;
-        changed.config = take(apply_layer(config, Layer::key, key + "=" + text));
-        changed.validate(); // the config stays as it was when the new value is refused
-        config = std::move(changed.config);
-        layers.emplace_back(Layer::key, key + "=" + text);
+        add(Layer::key, key + "=" + (py::isinstance<py::str>(value) ? value.cast<std::string>() : json_text(value)));
     }
-    void quality(const std::string& name) {
-        config = take(apply_layer(config, Layer::quality, name));
-        layers.emplace_back(Layer::quality, name);
-    }
+    void quality(const std::string& name) { add(Layer::quality, name); }
     void validate() const {
         if (const auto valid = config.validate(); !valid)
             throw py::value_error("invalid config: " + valid.error().message);
@@ -104,26 +116,46 @@ struct ConfigObject {
         return py::module_::import("json").attr("loads")(config_to_json(config)).cast<py::dict>();
     }
     // The config a Renderer of `scene` runs: with the scene's effect requests (its glTF
-    // scenes[N].extras.vksonar.effects) over the preset and under this config's own keys, as the CLI does.
+    // scenes[N].extras.vksonar.effects) over the base and under this config's own keys, as the CLI does.
     SonarConfig for_scene(const Scene& scene) const {
         const std::string& effects = scene.effects_json();
         if (effects.empty() || effects == "{}" || effects == "null") return config;
-        SonarConfig c = take(apply_config_json(take(load_preset(base)), "{\"effects\": " + effects + "}",
-                                               "the scene's extras vksonar.effects"));
-        for (const auto& [layer, text] : layers)
-            c = take(apply_layer(c, layer, text));
-        return c;
+        return replay(
+            take(apply_config_json(base, "{\"effects\": " + effects + "}", "the scene's extras vksonar.effects")),
+            layers);
     }
 
 private:
-    static Result<SonarConfig> apply_layer(const SonarConfig& c, Layer layer, const std::string& text) {
+    static ConfigObject over(const SonarConfig& base) {
+        ConfigObject c;
+        c.config = c.base = base;
+        return c;
+    }
+    // Adds a layer; a refused one (a parse error, a value outside its key's range) leaves the config as it was.
+    void add(Layer layer, const std::string& text) {
+        std::vector<std::pair<Layer, std::string>> more = layers;
+        more.emplace_back(layer, text);
+        SonarConfig changed = replay(base, more);
+        if (const std::string problem = config_keys::check_ranges(changed); !problem.empty())
+            throw py::value_error("invalid config: " + problem);
+        config = std::move(changed);
+        layers = std::move(more);
+    }
+    // `from` with the layers in the CLI's order (json, then quality, then keys), each kind in call order.
+    static SonarConfig replay(SonarConfig from, const std::vector<std::pair<Layer, std::string>>& layers) {
+        for (const Layer kind : {Layer::json, Layer::quality, Layer::key})
+            for (const auto& [layer, text] : layers)
+                if (layer == kind) from = take(apply(from, layer, text));
+        return from;
+    }
+    static Result<SonarConfig> apply(const SonarConfig& c, Layer layer, const std::string& text) {
         switch (layer) {
         case Layer::json:
             return apply_config_json(c, text, "dict");
-        case Layer::key:
-            return apply_config_override(c, text);
         case Layer::quality:
             return apply_quality(c, text);
+        case Layer::key:
+            return apply_config_override(c, text);
         }
         return c;
     }
@@ -134,11 +166,16 @@ private:
 struct SceneObject {
     Scene scene;
     std::optional<std::string> path; // the glTF file it was loaded from (meta.json "scene"); none for arrays
+    SceneLoadOptions loaded;         // the asset root and scale it was loaded with (the config's scene.* keys)
 
-    static std::shared_ptr<SceneObject> load(const std::string& path, const std::string& asset_root) {
+    static std::shared_ptr<SceneObject> load(const std::string& path, const std::string& asset_root, double scale) {
         auto s = std::make_shared<SceneObject>();
-        s->scene = take(Scene::load_gltf(path, SceneLoadOptions{asset_root}));
+        s->loaded = SceneLoadOptions{asset_root, scale};
+        s->scene = take(Scene::load_gltf(path, s->loaded));
         s->path = path;
+        // What the loader skipped or ignored, as the CLI's warning lines (also in scene.warnings).
+        for (const std::string& w : s->scene.stats().warnings)
+            warn(w);
         return s;
     }
 
@@ -229,6 +266,26 @@ struct FrameObject {
     Pose pose;
 };
 
+// The CLI applies the config's scene.scale and scene.asset_root as it loads the scene; here the Scene
+// is loaded first (Scene.load(path, asset_root, scale)), so the config must agree with how it was, and
+// meta.json's config then says what was applied, as the CLI's does.
+void resolve_scene_keys(SonarConfig& config, const SceneObject& scene) {
+    const SceneLoadOptions& loaded = scene.loaded;
+    const SonarConfig defaults;
+    const auto fmt = [](double x) { return py::str(py::float_(x)).cast<std::string>(); };
+    if (config.scene_scale != defaults.scene_scale && config.scene_scale != loaded.scale)
+        throw py::value_error("scene.scale = " + fmt(config.scene_scale) + " in the config, but the scene was " +
+                              (scene.path ? "loaded at scale " + fmt(loaded.scale) +
+                                                ": Scene.load(path, scale=" + fmt(config.scene_scale) + ")"
+                                          : "built from arrays (scene.scale applies as a glTF file loads)"));
+    if (!config.scene_asset_root.empty() && config.scene_asset_root != loaded.asset_root)
+        throw py::value_error("scene.asset_root = '" + config.scene_asset_root +
+                              "' in the config, but the scene was loaded with asset_root '" + loaded.asset_root +
+                              "': Scene.load(path, asset_root='" + config.scene_asset_root + "')");
+    config.scene_scale = loaded.scale;
+    config.scene_asset_root = loaded.asset_root;
+}
+
 struct RendererObject {
     std::shared_ptr<Context> context;
     std::shared_ptr<SceneObject> scene;
@@ -282,6 +339,8 @@ PYBIND11_MODULE(vksonar, m) {
         .def_static("preset", &ConfigObject::preset, py::arg("name") = "default", "A bundled preset by name.")
         .def_static("from_dict", &ConfigObject::from_dict, py::arg("keys"), py::arg("base") = "default",
                     "Keys as in a config file (nested dicts for groups) over the preset `base`.")
+        .def_static("from_file", &ConfigObject::from_file, py::arg("path"),
+                    "A sonar config file, as `vksonar render --sonar FILE.json` reads it.")
         .def_static("presets", &preset_names, "The bundled presets' names.")
         .def("set", &ConfigObject::set, py::arg("key"), py::arg("value"), "One key as --set takes it.")
         .def("quality", &ConfigObject::quality, py::arg("name"), "fast | balanced | accurate (the accuracy keys).")
@@ -290,8 +349,10 @@ PYBIND11_MODULE(vksonar, m) {
 
     py::class_<SceneObject, std::shared_ptr<SceneObject>>(m, "Scene", "A scene: a glTF file or meshes from arrays.")
         .def(py::init([] { return std::make_shared<SceneObject>(); }))
-        .def_static("load", &SceneObject::load, py::arg("path"), py::arg("asset_root") = "",
-                    "Loads .gltf / .glb; files it names must lie inside asset_root (default: its folder).")
+        .def_static("load", &SceneObject::load, py::arg("path"), py::arg("asset_root") = "", py::arg("scale") = 1.0,
+                    "Loads .gltf / .glb; files it names must lie inside asset_root (default: its folder); scale "
+                    "multiplies its coordinates (the config's scene.asset_root and scene.scale, which the CLI "
+                    "applies as it loads the scene).")
         .def_static("from_arrays", &SceneObject::from_arrays, py::arg("vertices"), py::arg("indices"),
                     py::arg("backscatter_db") = -30.0, py::arg("transform") = py::none(), py::arg("instance") = 0,
                     "One mesh: vertices (n, 3) float, indices (m, 3) integers, a Lambert material, a 4x4 transform, "
@@ -494,10 +555,13 @@ PYBIND11_MODULE(vksonar, m) {
                  }
                  r->backend = options.backend == Backend::cpu ? "cpu" : "vulkan";
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
-                 const SonarConfig resolved = config.for_scene(r->scene->scene);
+                 SonarConfig resolved = config.for_scene(r->scene->scene);
                  if (const auto valid = resolved.validate(); !valid)
                      throw py::value_error("invalid config: " + valid.error().message);
+                 resolve_scene_keys(resolved, *r->scene);
                  r->renderer = take(Renderer::create(*r->context, resolved, r->scene->scene, options));
+                 for (const ModelValidity& v : r->renderer.validity())
+                     if (!v.ok) warn(v.warning()); // the CLI's warning lines (also renderer.validity())
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
@@ -517,6 +581,8 @@ PYBIND11_MODULE(vksonar, m) {
                     throw py::value_error("next_pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
                                           std::to_string(next_pose->size()));
                 if (next_frame && !next_pose) throw py::value_error("next_frame: given without next_pose");
+                // seed= is this render's: the Renderer's own seed comes back after it.
+                const std::uint64_t own_seed = r.renderer.seed();
                 if (seed) r.renderer.set_seed(*seed);
                 if (!out) {
                     out = std::make_shared<FrameObject>();
@@ -540,6 +606,7 @@ PYBIND11_MODULE(vksonar, m) {
                         rendered = r.renderer.render(out->pose, frame_index, out->frame);
                     }
                 }
+                if (seed) r.renderer.set_seed(own_seed);
                 check(rendered);
                 return out;
             },

@@ -111,6 +111,69 @@ def test_a_scenes_effect_requests_layer_as_in_the_cli(tmp_path):
     assert config.to_dict()["effects"]["speckle"] == "auto"  # the Config itself is left as the user made it
 
 
+def test_config_layers_apply_in_the_clis_order(tmp_path):
+    # The CLI checks how keys agree once, after every layer, and applies --quality under --set whatever
+    # their order on the command line; Config does the same, whatever the order of the calls.
+    config = small_config()
+    config.set("range_min", 50)  # past the preset's range_max (40) until the next call
+    config.set("range_max", 100)
+    config.set("accuracy.pixels_per_beam", 3)
+    config.quality("fast")  # after the set, as on the CLI: the set still wins
+    assert config.to_dict()["accuracy"]["pixels_per_beam"] == 3
+    config.set("range_max", np.float64(90.0))  # numpy scalars as the numbers they hold
+    config.set("range_min", np.int64(45))
+    assert (config.to_dict()["range_min"], config.to_dict()["range_max"]) == (45, 90)
+    run = cli(tmp_path, "--set", "range_min=50", "--set", "range_max=100", "--set", "accuracy.pixels_per_beam=3",
+              "--quality", "fast", "--set", "range_max=90", "--set", "range_min=45")
+    assert run.returncode == 0, run.stderr
+    frame = vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend="cpu", seed=9).render(POSE, frame=0)
+    assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    assert frame.meta["config"] == json.loads((tmp_path / "meta.json").read_text())["config"]
+    crossed = small_config()
+    crossed.set("range_min", 50)  # the keys disagree: refused when a Renderer takes the config
+    with pytest.raises(ValueError, match="range_max"):
+        vksonar.Renderer(vksonar.Scene.load(SCENE), crossed, backend="cpu")
+    sonar_file = tmp_path / "mysonar.json"
+    sonar_file.write_text(json.dumps({"beams": 48, "bins": 64, "range_min": 6}))
+    from_file = vksonar.Config.from_file(str(sonar_file))  # as --sonar FILE.json reads it
+    assert from_file.to_dict()["name"] == "mysonar" and from_file.to_dict()["beams"] == 48
+
+
+def test_scene_scale_and_asset_root_are_the_clis(tmp_path):
+    # The CLI applies scene.scale as it loads the scene; Scene.load(scale=) does here, and a config that
+    # says another scale than the scene was loaded with is refused, naming the fix.
+    run = cli(tmp_path, "--set", "scene.scale=0.5")
+    assert run.returncode == 0, run.stderr
+    config = small_config()
+    config.set("scene.scale", 0.5)
+    with pytest.raises(ValueError, match=r"scene.scale = 0.5 in the config, but the scene was loaded at scale 1.0"):
+        vksonar.Renderer(vksonar.Scene.load(SCENE), config, backend="cpu")
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE, scale=0.5), config, backend="cpu", seed=9)
+    frame = renderer.render(POSE, frame=0)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    assert frame.meta["config"] == meta["config"] and frame.meta["scene_fnv1a64"] == meta["scene_fnv1a64"]
+    plain = vksonar.Renderer(vksonar.Scene.load(SCENE, scale=0.5), small_config(), backend="cpu", seed=9)
+    assert plain.render(POSE, frame=0).meta["config"]["scene"]["scale"] == 0.5  # what was applied
+
+
+def test_render_seed_is_that_renders_only(renderer):
+    a = renderer.render(POSE, frame=3).polar
+    renderer.render(POSE, frame=3, seed=10)
+    assert renderer.seed == 9 and np.array_equal(renderer.render(POSE, frame=3).polar, a)
+
+
+def test_warnings_are_the_clis_lines(tmp_path):
+    # The CLI prints a model used outside its domain as a `warning:` line; Python warns with the same text.
+    args = [CLI, "render", "--backend", "cpu", "--out", str(tmp_path)]
+    run = subprocess.run(args, capture_output=True, text=True)
+    lines = [line[len("warning: "):] for line in run.stderr.splitlines() if line.startswith("warning: ")]
+    assert run.returncode == 0 and lines
+    with pytest.warns(UserWarning) as caught:
+        vksonar.Renderer(vksonar.Scene.load(SCENE), backend="cpu")
+    assert [str(w.message) for w in caught] == lines
+
+
 def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
     frame = renderer.render(POSE, frame=0)
     polar = frame.polar
