@@ -62,12 +62,12 @@ void warn(const std::string& text) {
 
 // ---- Config ----------------------------------------------------------------------------------------
 
-// A Python value as JSON text: numpy scalars (np.int64(64), np.float32(0.5)) as the Python numbers
-// they hold, which json.dumps alone refuses.
+// A Python value as JSON text: numpy scalars (np.int64(64), np.float32(0.5)) and arrays as the Python
+// numbers and lists they hold, which json.dumps alone refuses.
 std::string json_text(const py::object& value) {
     const py::object json = py::module_::import("json");
     const py::cpp_function plain([](const py::object& o) -> py::object {
-        if (py::hasattr(o, "item")) return o.attr("item")();
+        if (py::hasattr(o, "tolist")) return o.attr("tolist")(); // numpy scalars and arrays
         throw py::type_error("Object of type " + py::str(py::type::of(o).attr("__name__")).cast<std::string>() +
                              " is not JSON serializable");
     });
