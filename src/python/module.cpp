@@ -24,6 +24,7 @@
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/backend_choice.h"
+#include "host/boxes.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
 #include "scene/scene_data.h"
@@ -262,7 +263,8 @@ struct FrameObject {
     std::vector<std::uint16_t> u16;
     std::vector<float> range;
     host::Image fan_image;
-    bool u16_ready = false, range_ready = false, fan_ready = false;
+    std::vector<std::uint16_t> instance_fan, class_fan; // labels on the fan image (instance_fan.npy, class_fan.npy)
+    bool u16_ready = false, range_ready = false, fan_ready = false, instance_fan_ready = false, class_fan_ready = false;
     Pose pose;
 };
 
@@ -296,6 +298,10 @@ struct RendererObject {
     std::string device;         // the Vulkan device, or "cpu" (meta.json "device")
     std::string config_json;
     std::string scene_hash; // meta.json "scene_fnv1a64" of the scene as the renderer took it
+    // Frame.boxes: the CLI's boxes.json (host/boxes.h), its scratch kept across frames.
+    host::BoxFinder box_finder;
+    std::vector<host::Box> boxes;
+    std::vector<std::string> class_names; // Scene::classes() as the renderer took the scene
 };
 
 // A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`; None where the frame has no
@@ -304,6 +310,19 @@ struct RendererObject {
 template <class T> py::object view(std::vector<T>& data, std::vector<py::ssize_t> shape, const py::object& owner) {
     if (data.empty()) return py::none();
     return py::array_t<T>(shape, data.data(), owner);
+}
+
+// A label image on the fan (nearest cell: ids stay ids), as the CLI's instance_fan.npy / class_fan.npy;
+// None without labels. Made on first use, once per render.
+py::object fan_labels(py::object self, bool instance) {
+    auto& f = self.cast<FrameObject&>();
+    if (f.frame.instance.empty()) return py::none();
+    const host::FanRenderer& fan = *f.renderer.cast<RendererObject&>().fan;
+    std::vector<std::uint16_t>& out = instance ? f.instance_fan : f.class_fan;
+    bool& ready = instance ? f.instance_fan_ready : f.class_fan_ready;
+    if (!ready) fan.nearest_cell(instance ? f.frame.instance : f.frame.object_class, out);
+    ready = true;
+    return view(out, {fan.height(), fan.width()}, self);
 }
 
 py::object frame_meta(FrameObject& f) {
@@ -493,6 +512,26 @@ PYBIND11_MODULE(vksonar, m) {
             "how many a nearer object hides and how many unhidden ones lie outside the range window, as dicts "
             "(outputs=['labels'], docs/labels.md)")
         .def_property_readonly(
+            "instance_fan", [](py::object self) { return fan_labels(self, true); },
+            "uint16 [height, width]: instance on the fan image, each pixel its nearest cell's (instance_fan.npy); "
+            "None without outputs=['labels']")
+        .def_property_readonly(
+            "class_fan", [](py::object self) { return fan_labels(self, false); },
+            "uint16 [height, width]: object_class on the fan image (class_fan.npy); None without labels")
+        .def_property_readonly(
+            "boxes",
+            [](py::object self) -> py::object {
+                auto& f = self.cast<FrameObject&>();
+                if (f.frame.instance.empty()) return py::none();
+                auto& r = f.renderer.cast<RendererObject&>();
+                fan_labels(self, true); // f.instance_fan, which the fan extents are read off
+                r.box_finder.find(f.frame, f.instance_fan, r.fan->width(), r.fan->height(), r.boxes);
+                return py::module_::import("json").attr("loads")(
+                    host::boxes_json_text(f.frame, r.fan->width(), r.fan->height(), r.boxes, r.class_names));
+            },
+            "The frame's boxes.json as a dict: each labelled object's polar and fan extent, cells and energy "
+            "(docs/datasets.md, 'Boxes and COCO export'); None without labels")
+        .def_property_readonly(
             "fan",
             [](py::object self) {
                 auto& f = self.cast<FrameObject&>();
@@ -563,6 +602,7 @@ PYBIND11_MODULE(vksonar, m) {
                  for (const ModelValidity& v : r->renderer.validity())
                      if (!v.ok) warn(v.warning()); // the CLI's warning lines (also renderer.validity())
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
+                 r->class_names = r->scene->scene.classes();
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
              }),
@@ -594,6 +634,7 @@ PYBIND11_MODULE(vksonar, m) {
                 out->renderer = self;
                 out->pose = Pose{pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]};
                 out->u16_ready = out->range_ready = out->fan_ready = false;
+                out->instance_fan_ready = out->class_fan_ready = false;
                 Result<void> rendered;
                 {
                     py::gil_scoped_release unlocked; // other Python threads run while the sonar renders

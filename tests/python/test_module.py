@@ -375,8 +375,14 @@ def test_labels_equal_the_cli_files_and_leave_the_intensities_alone(tmp_path, la
     plain = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9).render(POSE, frame=0)
     assert np.array_equal(frame.polar, plain.polar) and np.array_equal(frame.clean, plain.clean)
     assert np.array_equal(frame.polar, np.load(tmp_path / "polar.npy"))
+    # the labels on the fan image and the boxes, as the CLI's files
+    assert frame.instance_fan.dtype == np.uint16 and frame.instance_fan.shape == frame.fan.shape[:2]
+    assert np.array_equal(frame.instance_fan, np.load(tmp_path / "instance_fan.npy"))
+    assert np.array_equal(frame.class_fan, np.load(tmp_path / "class_fan.npy"))
+    boxes = frame.boxes
+    assert boxes == json.loads((tmp_path / "boxes.json").read_text()) and len(boxes["boxes"]) >= 2
     for name in ("instance", "instance_fraction", "object_class", "elevation", "elevation_spread", "point",
-                 "depth", "normals", "echo"):
+                 "depth", "normals", "echo", "instance_fan", "class_fan", "boxes"):
         assert getattr(plain, name) is None, name  # not asked for
     with pytest.raises(ValueError, match="labels"):
         vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", outputs=["label"])
