@@ -266,6 +266,7 @@ struct FrameObject {
     std::vector<std::uint16_t> instance_fan, class_fan; // labels on the fan image (instance_fan.npy, class_fan.npy)
     bool u16_ready = false, range_ready = false, fan_ready = false, instance_fan_ready = false, class_fan_ready = false;
     Pose pose;
+    std::optional<double> time_s; // render(time_s=): meta's time_s, as a trajectory's time column gives it
 };
 
 // The CLI applies the config's scene.scale and scene.asset_root as it loads the scene; here the Scene
@@ -336,6 +337,7 @@ py::object frame_meta(FrameObject& f) {
     extra["config"] = config;
     extra["scene"] = r.scene->path ? py::object(py::str(*r.scene->path)) : py::object(py::none());
     extra["scene_fnv1a64"] = r.scene_hash;
+    if (f.time_s) extra["time_s"] = *f.time_s; // render(time_s=): a trajectory's time column
     extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
                              py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
                              py::arg("yaw_deg") = f.pose.yaw_deg);
@@ -612,7 +614,8 @@ PYBIND11_MODULE(vksonar, m) {
             "render",
             [](py::object self, const std::vector<double>& pose, std::uint64_t frame_index,
                std::optional<std::uint64_t> seed, std::shared_ptr<FrameObject> out,
-               std::optional<std::vector<double>> next_pose, std::optional<std::uint64_t> next_frame) {
+               std::optional<std::vector<double>> next_pose, std::optional<std::uint64_t> next_frame,
+               std::optional<double> time_s) {
                 auto& r = self.cast<RendererObject&>();
                 if (pose.size() != 6)
                     throw py::value_error("pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
@@ -633,6 +636,7 @@ PYBIND11_MODULE(vksonar, m) {
                 out->plan = &renderer_plan(r.renderer);
                 out->renderer = self;
                 out->pose = Pose{pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]};
+                out->time_s = time_s;
                 out->u16_ready = out->range_ready = out->fan_ready = false;
                 out->instance_fan_ready = out->class_fan_ready = false;
                 Result<void> rendered;
@@ -652,11 +656,12 @@ PYBIND11_MODULE(vksonar, m) {
                 return out;
             },
             py::arg("pose"), py::arg("frame") = 0, py::arg("seed") = py::none(), py::arg("out") = nullptr,
-            py::arg("next_pose") = py::none(), py::arg("next_frame") = py::none(),
+            py::arg("next_pose") = py::none(), py::arg("next_frame") = py::none(), py::arg("time_s") = py::none(),
             "Renders one ping from pose (x, y, z, roll, pitch, yaw); frame keys the noise with the seed. "
             "Returns a new Frame, or fills `out` (a Frame of this renderer) to reuse its memory. "
             "next_pose (and next_frame, default frame + 1): the ping rendered next, which a GPU then renders "
-            "while this one's host stages run (the same bytes; faster for a sequence of poses).")
+            "while this one's host stages run (the same bytes; faster for a sequence of poses). time_s: the "
+            "ping's time, meta's time_s (as a trajectory's time column gives it to the CLI).")
         .def(
             "flow",
             [](py::object self, std::shared_ptr<FrameObject> from, std::shared_ptr<FrameObject> to) {

@@ -157,6 +157,25 @@ def test_scene_scale_and_asset_root_are_the_clis(tmp_path):
     assert plain.render(POSE, frame=0).meta["config"]["scene"]["scale"] == 0.5  # what was applied
 
 
+def test_a_trajectorys_time_column_is_time_s(tmp_path, renderer):
+    # A trajectory with a time column gives meta.json a time_s; render(time_s=) gives frame.meta the
+    # same key at the same place.
+    poses = tmp_path / "timed.csv"
+    poses.write_text("t,x,y,z,roll,pitch,yaw\n100.5," + ",".join(str(v) for v in POSE) + "\n")
+    args = [CLI, "render", "--scene", SCENE, "--backend", "cpu", "--seed", "9", "--trajectory", str(poses),
+            "--save", "polar", "--out", str(tmp_path / "run")]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    assert subprocess.run(args, capture_output=True, text=True).returncode == 0
+    folder = next((tmp_path / "run").glob("frame_*"))
+    meta = json.loads((folder / "meta.json").read_text())
+    frame = renderer.render(POSE, frame=meta["frame_index"], time_s=100.5)
+    assert meta["time_s"] == 100.5 and frame.meta["time_s"] == 100.5
+    assert list(frame.meta) == [key for key in meta if key != "files"]
+    assert np.array_equal(frame.polar, np.load(folder / "polar.npy"))
+    assert "time_s" not in renderer.render(POSE, frame=0).meta
+
+
 def test_render_seed_is_that_renders_only(renderer):
     a = renderer.render(POSE, frame=3).polar
     renderer.render(POSE, frame=3, seed=10)
