@@ -20,6 +20,7 @@
 #include "cli/dataset_h5.h"
 #include "cli/inputs.h"
 #include "host/meta_fields.h"
+#include "host/scene_framing.h"
 #include "vksonar/vksonar.h"
 
 namespace fs = std::filesystem;
@@ -158,50 +159,20 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
 // A scene far out of proportion with the range window is most often in other units: one warning
 // naming the likely mistake and the key that fixes it.
 void warn_if_unit_mistake(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
-    const double size = scene.bounds().diagonal_m(), window = config.range_max_m;
-    if (size <= 0.0 || !(window > 0.0)) return;
-    char line[400];
-    if (size > 200.0 * window && size > 5000.0)
-        std::snprintf(line, sizeof line,
-                      "%s is %.0f m across, %.0f times range_max (%.0f m): if it was modelled in millimetres "
-                      "(centimetres), --set scene.scale=0.001 (0.01) brings it to metres",
-                      scene_path.c_str(), size, size / window, window);
-    else if (size < window / 1000.0)
-        std::snprintf(line, sizeof line,
-                      "%s is %.3g m across, a %.0fth of range_max (%.0f m): if it was modelled in kilometres, "
-                      "--set scene.scale=1000 brings it to metres",
-                      scene_path.c_str(), size, window / size, window);
-    else
-        return;
-    std::fprintf(stderr, "warning: %s\n", line);
+    const std::string line = host::unit_mistake_warning(scene, config, scene_path, "--set scene.scale=", "");
+    if (!line.empty()) std::fprintf(stderr, "warning: %s\n", line.c_str());
 }
 
-// --pose frame: the sonar looks along +x at the bounding box's centre from the distance where the
-// box's width fills the horizontal field of view (not nearer than range_min, not farther than the
-// middle of the range window, so a box larger than the window shows its middle), pitched down by half
-// the vertical beamwidth (as sonars are usually mounted) and raised so that this pitch hits the centre.
+// --pose frame (host::frame_pose), said on stderr.
 Pose pose_framing(const Scene& scene, const SonarConfig& config, const std::string& scene_path) {
-    const SceneBounds b = scene.bounds();
-    if (b.empty) throw BadInput("--pose frame: " + scene_path + " has nothing to frame");
-    constexpr double kPi = 3.14159265358979323846;
-    const double cx = 0.5 * (b.min_m[0] + b.max_m[0]), cy = 0.5 * (b.min_m[1] + b.max_m[1]);
-    const double cz = 0.5 * (b.min_m[2] + b.max_m[2]);
-    const double half_width = 0.5 * std::max(b.max_m[1] - b.min_m[1], 1e-3);
-    const double half_depth = 0.5 * (b.max_m[0] - b.min_m[0]);
-    const double half_fov = 0.5 * std::min(config.hfov_deg, 170.0) * kPi / 180.0;
-    const double fit = std::max(half_width / std::tan(half_fov), config.range_min_m * 1.05) + half_depth;
-    const double distance = std::min(fit, 0.5 * (config.range_min_m + config.range_max_m));
-    const double pitch = 0.5 * std::min(config.vfov_deg, 60.0) * kPi / 180.0;
     Pose pose;
-    pose.x_m = cx - distance;
-    pose.y_m = cy;
-    pose.z_m = cz + distance * std::tan(pitch);
-    pose.pitch_deg = pitch * 180.0 / kPi;
-    const double far = std::hypot(distance + half_depth, pose.z_m - b.min_m[2]);
+    bool whole = false;
+    if (!host::frame_pose(scene, config, pose, whole))
+        throw BadInput("--pose frame: " + scene_path + " has nothing to frame");
     std::fprintf(stderr, "vksonar: --pose frame: %.3f,%.3f,%.3f,0,%.2f,0 (%s)\n", pose.x_m, pose.y_m, pose.z_m,
                  pose.pitch_deg,
-                 far > config.range_max_m ? "the box reaches beyond range_max: its middle is framed"
-                                          : "the whole box lies inside the range window");
+                 whole ? "the whole box lies inside the range window"
+                       : "the box reaches beyond range_max: its middle is framed");
     return pose;
 }
 

@@ -27,6 +27,7 @@
 #include "host/boxes.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
+#include "host/scene_framing.h"
 #include "scene/scene_data.h"
 #include "vksonar/vksonar.h"
 
@@ -603,6 +604,9 @@ PYBIND11_MODULE(vksonar, m) {
                  r->renderer = take(Renderer::create(*r->context, resolved, r->scene->scene, options));
                  for (const ModelValidity& v : r->renderer.validity())
                      if (!v.ok) warn(v.warning()); // the CLI's warning lines (also renderer.validity())
+                 const std::string unit_mistake = host::unit_mistake_warning(
+                     r->scene->scene, resolved, r->scene->path.value_or("the scene"), "Scene.load(path, scale=", ")");
+                 if (!unit_mistake.empty()) warn(unit_mistake);
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->class_names = r->scene->scene.classes();
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
@@ -693,6 +697,17 @@ PYBIND11_MODULE(vksonar, m) {
                 return std::string(renderer_plan(r.renderer).line_array ? "line_array" : "planar");
             },
             "The beam geometry as resolved (meta.json beam_geometry.used): 'line_array' or 'planar'.")
+        .def(
+            "frame_pose",
+            [](const RendererObject& r) {
+                Pose p;
+                bool whole = false;
+                if (!host::frame_pose(r.scene->scene, r.renderer.config(), p, whole))
+                    throw py::value_error("frame_pose: the scene has nothing to frame");
+                return py::make_tuple(p.x_m, p.y_m, p.z_m, p.roll_deg, p.pitch_deg, p.yaw_deg);
+            },
+            "The CLI's --pose frame: a pose (x, y, z, roll, pitch, yaw) looking along +x at the scene's "
+            "bounding box, its width filling the fan, pitched down by half the vertical beamwidth.")
         .def("validity", [](const RendererObject& r) {
             py::list out;
             for (const ModelValidity& v : r.renderer.validity())

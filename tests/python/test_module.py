@@ -176,6 +176,34 @@ def test_a_trajectorys_time_column_is_time_s(tmp_path, renderer):
     assert "time_s" not in renderer.render(POSE, frame=0).meta
 
 
+def test_frame_pose_is_the_clis_pose_frame(tmp_path):
+    args = [CLI, "render", "--scene", SCENE, "--backend", "cpu", "--seed", "9", "--pose", "frame", "--save", "polar",
+            "--out", str(tmp_path)]
+    for key, value in KEYS.items():
+        args += ["--set", f"{key}={value}"]
+    run = subprocess.run(args, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    pose = json.loads((tmp_path / "meta.json").read_text())["pose"]
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9)
+    framed = renderer.frame_pose()
+    assert framed == (pose["x_m"], pose["y_m"], pose["z_m"], pose["roll_deg"], pose["pitch_deg"], pose["yaw_deg"])
+    assert np.array_equal(renderer.render(framed, frame=0).polar, np.load(tmp_path / "polar.npy"))
+
+
+def test_a_scene_in_other_units_gets_the_clis_warning(tmp_path):
+    # The CLI warns about a scene thousands of times the range window ("--set scene.scale=0.001 ...");
+    # Python says the same, with the Scene.load argument that fixes it.
+    run = subprocess.run([CLI, "render", "--scene", SCENE, "--backend", "cpu", "--set", "scene.scale=1000",
+                          "--set", "bins=64", "--set", "beams=48", "--save", "polar", "--out", str(tmp_path)],
+                         capture_output=True, text=True)
+    cli_lines = [line for line in run.stderr.splitlines() if "times range_max" in line]
+    assert run.returncode == 0 and len(cli_lines) == 1 and "--set scene.scale=0.001 (0.01)" in cli_lines[0]
+    with pytest.warns(UserWarning) as caught:
+        vksonar.Renderer(vksonar.Scene.load(SCENE, scale=1000), small_config(), backend="cpu")
+    mine = [str(w.message) for w in caught if "times range_max" in str(w.message)]
+    assert mine == [cli_lines[0][len("warning: "):].replace("--set scene.scale=0.001", "Scene.load(path, scale=0.001)")]
+
+
 def test_render_seed_is_that_renders_only(renderer):
     a = renderer.render(POSE, frame=3).polar
     renderer.render(POSE, frame=3, seed=10)
