@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "config/layers.h"
 #include "host/backend_choice.h"
 #include "vk/vulkan_context.h"
 
@@ -47,9 +48,8 @@ SonarConfig sonar_base_config(const std::string& sonar) {
     std::error_code ec;
     if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
         if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
-        auto config = apply_config_file(SonarConfig{}, sonar);
+        auto config = load_sonar_file(sonar);
         if (!config) throw BadInput(config.error().message);
-        if (config->name == SonarConfig{}.name) config->name = fs::path(sonar).stem().string();
         return config.value();
     }
     auto preset = load_preset(sonar);

@@ -19,6 +19,7 @@
 
 #include "cli/dataset_h5.h"
 #include "cli/inputs.h"
+#include "config/layers.h"
 #include "host/meta_fields.h"
 #include "host/scene_framing.h"
 #include "vksonar/vksonar.h"
@@ -453,10 +454,9 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
     // user's to know: one line each, before any frame.
     for (const std::string& warning : scene->stats().warnings)
         std::fprintf(stderr, "warning: %s\n", warning.c_str());
-    const std::string& scene_effects = scene->effects_json();
-    if (!scene_effects.empty() && scene_effects != "{}" && scene_effects != "null") {
+    if (const std::string scene_effects = scene_effects_layer(scene.value()); !scene_effects.empty()) {
         const std::string scene_origin = job.scene_path + " (scene extras vksonar.effects)";
-        auto layered = apply_config_json(preset, "{\"effects\": " + scene_effects + "}", scene_origin);
+        auto layered = apply_config_json(preset, scene_effects, scene_origin);
         if (!layered) throw BadInput(layered.error().message);
         ProblemOrigin base(preset, "--sonar " + sonar);
         base.after(layered.value(), scene_origin);

@@ -12,7 +12,6 @@
 #include <pybind11/stl.h>
 
 #include <cstdint>
-#include <filesystem>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -21,6 +20,7 @@
 #include <vector>
 
 #include "config/config_keys.h"
+#include "config/layers.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/backend_choice.h"
@@ -90,11 +90,8 @@ struct ConfigObject {
     // A sonar config file, as `--sonar FILE.json` reads it: its keys over the built-in defaults, named
     // by the file's stem unless it names itself.
     static ConfigObject from_file(const std::string& path) {
-        SonarConfig c = take(apply_config_file(SonarConfig{}, path));
-        if (c.name == SonarConfig{}.name) c.name = std::filesystem::path(path).stem().string();
-        ConfigObject o = over(c);
-        if (const std::string problem = config_keys::check_ranges(o.config); !problem.empty())
-            throw py::value_error("invalid config: " + problem);
+        ConfigObject o = over(take(load_sonar_file(path)));
+        require_ranges(o.config);
         return o;
     }
     // Keys as in a config file (nested dicts for groups, "effects": {...}), over a preset.
@@ -110,24 +107,23 @@ struct ConfigObject {
         add(Layer::key, key + "=" + (py::isinstance<py::str>(value) ? value.cast<std::string>() : json_text(value)));
     }
     void quality(const std::string& name) { add(Layer::quality, name); }
-    void validate() const {
-        if (const auto valid = config.validate(); !valid)
-            throw py::value_error("invalid config: " + valid.error().message);
-    }
     py::dict to_dict() const {
         return py::module_::import("json").attr("loads")(config_to_json(config)).cast<py::dict>();
     }
     // The config a Renderer of `scene` runs: with the scene's effect requests (its glTF
     // scenes[N].extras.vksonar.effects) over the base and under this config's own keys, as the CLI does.
     SonarConfig for_scene(const Scene& scene) const {
-        const std::string& effects = scene.effects_json();
-        if (effects.empty() || effects == "{}" || effects == "null") return config;
-        return replay(
-            take(apply_config_json(base, "{\"effects\": " + effects + "}", "the scene's extras vksonar.effects")),
-            layers);
+        const std::string effects = scene_effects_layer(scene);
+        if (effects.empty()) return config;
+        return replay(take(apply_config_json(base, effects, "the scene's extras vksonar.effects")), layers);
     }
 
 private:
+    // Each key within its own range (config_keys::check_ranges); how keys agree is the Renderer's check.
+    static void require_ranges(const SonarConfig& c) {
+        if (const std::string problem = config_keys::check_ranges(c); !problem.empty())
+            throw py::value_error("invalid config: " + problem);
+    }
     static ConfigObject over(const SonarConfig& base) {
         ConfigObject c;
         c.config = c.base = base;
@@ -138,8 +134,7 @@ private:
         std::vector<std::pair<Layer, std::string>> more = layers;
         more.emplace_back(layer, text);
         SonarConfig changed = replay(base, more);
-        if (const std::string problem = config_keys::check_ranges(changed); !problem.empty())
-            throw py::value_error("invalid config: " + problem);
+        require_ranges(changed);
         config = std::move(changed);
         layers = std::move(more);
     }
@@ -562,7 +557,11 @@ PYBIND11_MODULE(vksonar, m) {
         .def(py::init([](std::shared_ptr<SceneObject> scene, const ConfigObject& config, const std::string& backend,
                          std::uint64_t seed, const std::vector<std::string>& outputs) {
                  if (!scene) throw py::value_error("scene: None");
-                 config.validate();
+                 // The config as the CLI resolves it for this scene, checked before any device is made.
+                 SonarConfig resolved = config.for_scene(scene->scene);
+                 if (const auto valid = resolved.validate(); !valid)
+                     throw py::value_error("invalid config: " + valid.error().message);
+                 resolve_scene_keys(resolved, *scene);
                  RendererOptions options = renderer_options_from_env();
                  if (backend == "cpu")
                      options.backend = Backend::cpu;
@@ -597,10 +596,6 @@ PYBIND11_MODULE(vksonar, m) {
                  }
                  r->backend = options.backend == Backend::cpu ? "cpu" : "vulkan";
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
-                 SonarConfig resolved = config.for_scene(r->scene->scene);
-                 if (const auto valid = resolved.validate(); !valid)
-                     throw py::value_error("invalid config: " + valid.error().message);
-                 resolve_scene_keys(resolved, *r->scene);
                  r->renderer = take(Renderer::create(*r->context, resolved, r->scene->scene, options));
                  for (const ModelValidity& v : r->renderer.validity())
                      if (!v.ok) warn(v.warning()); // the CLI's warning lines (also renderer.validity())

@@ -1,0 +1,23 @@
+// Config layers both front ends (the CLI's render_job.cpp / inputs.cpp and the Python module) build the
+// same way: a sonar file as `--sonar FILE.json` reads it, and a scene's effect requests as a layer
+// (layers.cpp).
+#pragma once
+
+#include <string>
+
+#include "vksonar/config.h"
+#include "vksonar/result.h"
+#include "vksonar/scene.h"
+
+namespace vksonar {
+
+// A sonar config file: its keys over the built-in defaults (SonarConfig{}), named by the file's stem
+// unless it names itself. Errors as apply_config_file's.
+[[nodiscard]] Result<SonarConfig> load_sonar_file(const std::string& path);
+
+// The scene's effect requests (its glTF scenes[N].extras.vksonar.effects) as config JSON text,
+// {"effects": {...}}, for apply_config_json over the base and under the user's layers; empty when the
+// scene requests nothing.
+std::string scene_effects_layer(const Scene& scene);
+
+} // namespace vksonar
