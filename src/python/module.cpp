@@ -293,8 +293,7 @@ struct RendererObject {
     std::string backend;        // vulkan or cpu ("auto" resolved)
     std::string backend_reason; // meta.json "backend_reason": Renderer(backend='cpu'), or what auto saw
     std::string device;         // the Vulkan device, or "cpu" (meta.json "device")
-    std::string config_json;
-    std::string scene_hash; // meta.json "scene_fnv1a64" of the scene as the renderer took it
+    std::string scene_hash;     // meta.json "scene_fnv1a64" of the scene as the renderer took it
     // Frame.boxes: the CLI's boxes.json (host/boxes.h), its scratch kept across frames.
     host::BoxFinder box_finder;
     std::vector<host::Box> boxes;
