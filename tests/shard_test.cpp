@@ -461,6 +461,52 @@ TEST_F(Shard, MergeRefusesGapsOverlapsAndOtherRuns) {
     EXPECT_TRUE(fs::exists(dir_ / "out" / "frame_000008" / "polar.npy"));
 }
 
+// A cluster's nodes (or a requeued task on another node) may see the scene under different paths: shards
+// whose scene files hold the same content merge, and a re-run finds its frames; a scene whose content
+// changed is another run, refused naming the content hash. (identity_difference compares the path only
+// where no hash is recorded.)
+TEST_F(Shard, SceneMayMoveBetweenNodesButNotChange) {
+    const std::string scene_text = read_text(fs::path(VKSONAR_ASSET_DIR) / "scenes" / "default.gltf");
+    fs::create_directories(dir_ / "node_a");
+    fs::create_directories(dir_ / "node_b");
+    write_text(dir_ / "node_a" / "scene.gltf", scene_text);
+    write_text(dir_ / "node_b" / "seabed.gltf", scene_text);
+    // the same scene moved 1 m: another run, though its file name is node_a's
+    nlohmann::json moved = nlohmann::json::parse(scene_text);
+    for (auto& node : moved.at("nodes"))
+        if (node.contains("translation")) node["translation"][0] = node["translation"][0].get<double>() + 1.0;
+    fs::create_directories(dir_ / "node_c");
+    write_text(dir_ / "node_c" / "scene.gltf", moved.dump());
+    const auto shard = [&](const char* out, const char* index, const fs::path& scene) {
+        return run(render_args(out, {"--save", "polar", "--shard", index, "--scene", scene.string()}));
+    };
+    ASSERT_EQ(shard("p0", "0/2", dir_ / "node_a" / "scene.gltf").exit_code, 0);
+    ASSERT_EQ(shard("p1", "1/2", dir_ / "node_b" / "seabed.gltf").exit_code, 0);
+    ASSERT_EQ(shard("p1c", "1/2", dir_ / "node_c" / "scene.gltf").exit_code, 0);
+    const auto p = [&](const char* name) { return (dir_ / name).string(); };
+    const ShardRun changed = run({"merge", p("never"), p("p0"), p("p1c")});
+    EXPECT_EQ(changed.exit_code, 2) << changed.err;
+    EXPECT_EQ(changed.err_lines(), 1u) << changed.err;
+    EXPECT_NE(changed.err.find("another run than"), std::string::npos) << changed.err;
+    EXPECT_NE(changed.err.find(": scene_fnv1a64: "), std::string::npos) << changed.err;
+    EXPECT_FALSE(fs::exists(p("never")));
+    const ShardRun ok = run({"merge", p("out"), p("p0"), p("p1")});
+    ASSERT_EQ(ok.exit_code, 0) << ok.err;
+    EXPECT_EQ(read_text(dir_ / "out" / "frame_000006" / "polar.npy"),
+              read_text(dir_ / "p1" / "frame_000006" / "polar.npy"));
+    // A re-run of shard 1 seeing the scene at node_a's path finds its frames on disk.
+    fs::remove(dir_ / "p1" / "frame_000006" / "meta.json");
+    const ShardRun again = shard("p1", "1/2", dir_ / "node_a" / "scene.gltf");
+    ASSERT_EQ(again.exit_code, 0) << again.err;
+    EXPECT_NE(again.err.find("3 already on disk"), std::string::npos) << again.err;
+    // ...and one seeing the changed scene there is refused, the folder kept.
+    fs::remove(dir_ / "p1" / "frame_000006" / "meta.json");
+    const ShardRun clash = shard("p1", "1/2", dir_ / "node_c" / "scene.gltf");
+    EXPECT_EQ(clash.exit_code, 2) << clash.err;
+    EXPECT_NE(clash.err.find("scene_fnv1a64: "), std::string::npos) << clash.err;
+    EXPECT_TRUE(fs::exists(dir_ / "p1" / "frame_000005" / "meta.json"));
+}
+
 // A folder shard and an unsharded run never share a folder: an unsharded run into a shard's folder left
 // the stale shard.json beside its own frames, and merge then took frames of two runs (seeds 1 and 9 here)
 // as one; a shard into an unsharded run's folder took that run's frames as its own. Both are refused in

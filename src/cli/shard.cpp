@@ -202,11 +202,21 @@ std::string json_difference(const nlohmann::json& a, const nlohmann::json& b, co
 } // namespace
 
 std::string identity_difference(const Identity& a, const Identity& b) {
+    const auto find = [](const Identity& identity, const std::string& name) -> const std::string* {
+        for (const auto& entry : identity)
+            if (entry.first == name) return &entry.second;
+        return nullptr;
+    };
+    // Where both record the scene's content hash, the hash is compared and the path is not: a
+    // cluster's nodes, or a requeued task on another node, often see one scene file under different
+    // mount points, as they see the trajectory (compared by its hash only). Without the hash (a shard
+    // rendered before it was recorded) the path is all there is to compare.
+    const std::string *hash_a = find(a, "scene_fnv1a64"), *hash_b = find(b, "scene_fnv1a64");
+    const bool scene_by_content = hash_a && hash_b && !hash_a->empty() && !hash_b->empty();
     for (const auto& [name, value] : a) {
-        std::string other = "(absent)";
-        for (const auto& [name_b, value_b] : b)
-            if (name_b == name) other = value_b;
-        if (other == value) continue;
+        const std::string* found = find(b, name);
+        const std::string other = found ? *found : "(absent)";
+        if (other == value || (name == "scene" && found && scene_by_content)) continue;
         const nlohmann::json ja = identity_value(value), jb = identity_value(other);
         if (ja.is_object() && jb.is_object()) {
             if (std::string d = json_difference(ja, jb, name); !d.empty()) return d;
@@ -214,12 +224,8 @@ std::string identity_difference(const Identity& a, const Identity& b) {
         }
         return name + ": " + shorten(value) + " vs " + shorten(other);
     }
-    for (const auto& [name, value] : b) {
-        bool found = false;
-        for (const auto& entry : a)
-            found = found || entry.first == name;
-        if (!found) return name + ": (absent) vs " + shorten(value);
-    }
+    for (const auto& [name, value] : b)
+        if (!find(a, name)) return name + ": (absent) vs " + shorten(value);
     return {};
 }
 

@@ -80,7 +80,8 @@ std::string manifest_json(const FolderManifest& manifest);
 FolderManifest read_manifest(const std::string& dir);
 
 // The first identity entry that differs between `a` and `b`, as "NAME: A vs B" (values shortened;
-// for JSON objects the first differing key); empty when they agree.
+// for JSON objects the first differing key); empty when they agree. The scene's path is not compared
+// where both identities hold the same scene_fnv1a64 (the scene's content).
 std::string identity_difference(const Identity& a, const Identity& b);
 
 // Starts (or resumes) a shard in the output folder `dir`: when dir/shard.json is there it must be
