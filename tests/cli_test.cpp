@@ -545,8 +545,8 @@ TEST_F(Cli, PrecedencePresetSceneEffectsConfigSet) {
 
 TEST_F(Cli, SceneEffectsAndSetReachTheResolvedEffects) {
     // The resolved effects in meta.json (not only the config echo): the scene's speckle "off" beats the
-    // preset's auto, and --set beats the scene. The bundled quad's default material is Lambert, so the
-    // normals pass runs unless incidence is switched off.
+    // preset's auto, and --set beats the scene; each "why" says which layer decided. The bundled quad's default
+    // material is Lambert, so the normals pass runs unless incidence is switched off.
     std::string scene = kQuadGltf;
     const std::string from = R"("scenes": [{"nodes": [0]}])";
     scene.replace(
@@ -567,7 +567,8 @@ TEST_F(Cli, SceneEffectsAndSetReachTheResolvedEffects) {
     };
     const auto scene_only = meta_of({}, "scene_only");
     EXPECT_EQ(scene_only["effects"]["speckle"]["on"], false);
-    EXPECT_EQ(scene_only["effects"]["speckle"]["why"], "off in config");
+    // meta names the scene as what decided it (not "off in config": no config layer switched it off)
+    EXPECT_EQ(scene_only["effects"]["speckle"]["why"], "off: the scene requests it (scenes[N].extras.vksonar.effects)");
     EXPECT_EQ(scene_only["effects"]["incidence"]["on"], false);
     EXPECT_EQ(scene_only["stages_run"], (nlohmann::json{"depth", "echo", "beamform", "noise"}));
     const auto with_set = meta_of({"--set", "effects.speckle=on", "--set", "effects.incidence=auto"}, "with_set");

@@ -48,6 +48,7 @@
 #include "cli/render_job.h"
 #include "cli/shard.h"
 #include "cli/write_behind.h"
+#include "config/layers.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
 #include "host/boxes.h"
@@ -389,7 +390,6 @@ DatasetMeta dataset_meta(const Plan& plan, const std::string& scene, const std::
     DatasetMeta meta;
     meta.scene_hash = scene_hash;
     meta.config_json = config_to_json(plan.config);
-    meta.effects_json = host::effects_json(plan.effects.states).dump();
     meta.validity_json = host::validity_json(plan.validity).dump();
     meta.scene = scene;
     meta.backend = backend;
@@ -507,12 +507,15 @@ Renderer make_renderer(Device& device, const SonarConfig& config, const Scene& s
 
 // What the per-frame writers need (render_frame.h), made once for the whole run.
 Outputs make_outputs(const Plan& plan, const RenderJob& job, const Device& device, const host::FanRenderer& fan,
-                     LegacyState& legacy_state, const Scene& scene) {
+                     LegacyState& legacy_state, const SceneAndConfig& loaded) {
+    const Scene& scene = loaded.scene;
     legacy_state.mode = plan.config.mode;
     Outputs out(plan, job.save, fan);
     out.config_json = config_to_json(plan.config);
     out.config_parsed = nlohmann::ordered_json::parse(out.config_json);
     out.meta_plan_part = host::meta_json_plan_part(plan);
+    out.effects = host::effects_json(
+        credit_scene_requests(plan.effects.states, loaded.effects_without_scene, loaded.config.effects));
     out.scene_path = job.scene_path;
     out.scene_hash = job.scene_hash;
     out.backend = device.backend_name;
@@ -542,6 +545,7 @@ void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs
                   Writers& writers) {
     DatasetMeta meta = dataset_meta(plan, job.scene_path, job.scene_hash, outputs.backend, outputs.device, job.seed);
     meta.objects_json = outputs.objects.dump();
+    meta.effects_json = outputs.effects.dump(); // with the scene's requests named, as meta.json's
     meta.shard = job.shard;
     DatasetOptions options;
     options.polar_u16 = job.save.polar_u16;
@@ -927,7 +931,7 @@ std::optional<Interrupted> render(const Args& args) {
     const Plan& plan = renderer_plan(renderer);
     const host::FanRenderer fan(plan);
     LegacyState legacy_state;
-    Outputs outputs = make_outputs(plan, job, device, fan, legacy_state, loaded.scene);
+    Outputs outputs = make_outputs(plan, job, device, fan, legacy_state, loaded);
     // The writer thread draws a fan image a frame for .mcap and fan.png (about 5 ms here at the default,
     // more than a GPU's frame): with half the cores, where there are four or more, it shares the rows out
     // (the rest are the renderer's; a 2-core machine's cores are busy rendering).

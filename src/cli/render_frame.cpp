@@ -41,6 +41,7 @@ template <class WriteFn> void put(Outputs& out, const fs::path& path, WriteFn&& 
 // `time_s`: the trajectory's time column, or null when it has none.
 std::string extra_meta_fields(const Outputs& out, const Pose& pose, const double* time_s) {
     nlohmann::ordered_json extra;
+    extra["effects"] = out.effects; // in place of the plan's, where meta_json_text put it
     extra["vksonar_version"] = host::vksonar_version();
     extra["config"] = out.config_parsed;
     extra["scene"] = out.scene_path;

@@ -79,6 +79,8 @@ struct Outputs {
     std::string config_json;
     nlohmann::ordered_json config_parsed; // config_json parsed once (meta.json's "config" every frame)
     std::string meta_plan_part;           // host::meta_json_plan_part(plan), made once
+    // meta.json's "effects": the plan's, with what the scene requested named (credit_scene_requests)
+    nlohmann::ordered_json effects;
     std::string scene_path;
     std::string scene_hash; // scene_fnv1a64: the scene by its content (the path may mean another file later)
     std::string backend;

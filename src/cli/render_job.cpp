@@ -454,6 +454,7 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
     // user's to know: one line each, before any frame.
     for (const std::string& warning : scene->stats().warnings)
         std::fprintf(stderr, "warning: %s\n", warning.c_str());
+    const EffectsConfig effects_without_scene = config.effects;
     if (const std::string scene_effects = scene_effects_layer(scene.value()); !scene_effects.empty()) {
         const std::string scene_origin = job.scene_path + " (scene extras vksonar.effects)";
         auto layered = apply_config_json(preset, scene_effects, scene_origin);
@@ -472,7 +473,7 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
     job.scene_hash = host::scene_fnv1a64(scene.value());
     if (job.shard) job.shard->scene_hash = job.scene_hash;
     if (job.frame_pose) job.poses = {{pose_framing(scene.value(), config, job.scene_path), job.poses[0].line, 0.0}};
-    return {std::move(scene.value()), std::move(config)};
+    return {std::move(scene.value()), std::move(config), effects_without_scene};
 }
 
 } // namespace vksonar::cli

@@ -49,6 +49,8 @@ struct RenderJob {
 struct SceneAndConfig {
     Scene scene;
     SonarConfig config;
+    // The effects of the same layers without the scene's effect requests (credit_scene_requests).
+    EffectsConfig effects_without_scene;
 };
 
 Args parse_render_args(const std::vector<std::string>& argv);

@@ -4,8 +4,10 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "vksonar/config.h"
+#include "vksonar/frame.h"
 #include "vksonar/result.h"
 #include "vksonar/scene.h"
 
@@ -19,5 +21,14 @@ namespace vksonar {
 // {"effects": {...}}, for apply_config_json over the base and under the user's layers; empty when the
 // scene requests nothing.
 std::string scene_effects_layer(const Scene& scene);
+
+// The plan's effect states (meta.json's "effects") with the scene's part named: an effect whose mode
+// the scene's request decided says "off: the scene requests it (scenes[N].extras.vksonar.effects)"
+// instead of "off in config". `without_scene`: the effects of the same layers with no scene layer;
+// `with_scene`: those the renderer ran. The request decided a mode where the two differ: nothing after
+// the scene's layer overrode it. (Where they agree the config says the same, and "in config" holds; a
+// request for auto leaves the plan's "auto: ..." reason.)
+std::vector<EffectState> credit_scene_requests(std::vector<EffectState> states, const EffectsConfig& without_scene,
+                                               const EffectsConfig& with_scene);
 
 } // namespace vksonar

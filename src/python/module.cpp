@@ -294,6 +294,7 @@ struct RendererObject {
     std::string backend_reason; // meta.json "backend_reason": Renderer(backend='cpu'), or what auto saw
     std::string device;         // the Vulkan device, or "cpu" (meta.json "device")
     std::string scene_hash;     // meta.json "scene_fnv1a64" of the scene as the renderer took it
+    std::string effects_json;   // meta.json "effects": the plan's, the scene's requests named (as the CLI's)
     // Frame.boxes: the CLI's boxes.json (host/boxes.h), its scratch kept across frames.
     host::BoxFinder box_finder;
     std::vector<host::Box> boxes;
@@ -328,6 +329,7 @@ py::object frame_meta(FrameObject& f) {
     // the CLI's keys in the CLI's order (render_frame.cpp), but `legacy`, which describes the legacy
     // outputs only the CLI writes, and `files`, the files the CLI wrote before meta.json
     const py::dict config = json.attr("loads")(config_to_json(f.plan->config));
+    extra["effects"] = json.attr("loads")(r.effects_json); // in place of the plan's, as the CLI's
     extra["vksonar_version"] = host::vksonar_version();
     extra["config"] = config;
     extra["scene"] = r.scene->path ? py::object(py::str(*r.scene->path)) : py::object(py::none());
@@ -603,6 +605,9 @@ PYBIND11_MODULE(vksonar, m) {
                  if (!unit_mistake.empty()) warn(unit_mistake);
                  r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
                  r->class_names = r->scene->scene.classes();
+                 r->effects_json = host::effects_json(credit_scene_requests(renderer_plan(r->renderer).effects.states,
+                                                                            config.config.effects, resolved.effects))
+                                       .dump();
                  r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
                  return r;
              }),

@@ -106,6 +106,10 @@ def test_a_scenes_effect_requests_layer_as_in_the_cli(tmp_path):
     config.set("effects.vertical_sidelobes", "on")
     frame = vksonar.Renderer(vksonar.Scene.load(str(scene_path)), config, backend="cpu", seed=9).render(POSE, frame=0)
     assert meta["effects"]["speckle"]["on"] is False and meta["effects"]["vertical_sidelobes"]["on"] is True
+    # meta says which the scene decided: speckle (no later layer touched it), not the side lobes (--set did)
+    assert meta["effects"]["speckle"]["why"] == "off: the scene requests it (scenes[N].extras.vksonar.effects)"
+    assert meta["effects"]["vertical_sidelobes"]["why"].startswith("on in config")
+    assert meta["effects"]["ambient_noise"]["why"].startswith("auto: ")
     assert frame.meta["effects"] == meta["effects"] and frame.meta["config"] == meta["config"]
     assert np.array_equal(frame.polar, np.load(tmp_path / "cli" / "polar.npy"))
     assert config.to_dict()["effects"]["speckle"] == "auto"  # the Config itself is left as the user made it
