@@ -278,9 +278,10 @@ void resolve_scene_keys(SonarConfig& config, const SceneObject& scene) {
                                                 ": Scene.load(path, scale=" + fmt(config.scene_scale) + ")"
                                           : "built from arrays (scene.scale applies as a glTF file loads)"));
     if (!config.scene_asset_root.empty() && config.scene_asset_root != loaded.asset_root)
-        throw py::value_error("scene.asset_root = '" + config.scene_asset_root +
-                              "' in the config, but the scene was loaded with asset_root '" + loaded.asset_root +
-                              "': Scene.load(path, asset_root='" + config.scene_asset_root + "')");
+        throw py::value_error("scene.asset_root = '" + config.scene_asset_root + "' in the config, but the scene was " +
+                              (scene.path ? "loaded with asset_root '" + loaded.asset_root +
+                                                "': Scene.load(path, asset_root='" + config.scene_asset_root + "')"
+                                          : "built from arrays (scene.asset_root applies as a glTF file loads)"));
     config.scene_scale = loaded.scale;
     config.scene_asset_root = loaded.asset_root;
 }

@@ -5,6 +5,7 @@ VKSONAR_CLI at the built executable.
 """
 import json
 import os
+import re
 import struct
 import subprocess
 import threading
@@ -325,6 +326,12 @@ def test_a_scene_from_arrays_echoes_at_its_range():
         (0, 0, 0, 0, 0, 0))
     peak_bin = int(np.argmax(frame.polar.max(axis=1)))
     assert abs(frame.ranges_m[peak_bin] - 12.0) <= 20.0 / 128  # the plate's range, within a bin
+    # the config's scene.* keys apply as a glTF file loads: for arrays the message says so
+    for key, value in (("scene.scale", 2.0), ("scene.asset_root", "/tmp")):
+        keyed = vksonar.Config.from_dict({"bins": 128, "range_min": 1, "range_max": 20})
+        keyed.set(key, value)
+        with pytest.raises(ValueError, match=re.escape(key) + r".*built from arrays"):
+            vksonar.Renderer(vksonar.Scene.from_arrays(vertices, indices), keyed, backend="cpu")
     moved = np.eye(4)
     moved[0, 3] = 4.0  # the same plate 4 m further through the transform
     frame = vksonar.Renderer(vksonar.Scene.from_arrays(vertices, indices, transform=moved), config,
