@@ -167,13 +167,17 @@ std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
         const Vec3 n = cross(p[1], p[2]);
         volume6 += dot(p[0], n);
         area += 0.5 * norm(cross(sub(p[1], p[0]), sub(p[2], p[0])));
+        Key corner[3];
+        for (int i = 0; i < 3; ++i)
+            corner[i] = key({p[i][0] + centre[0], p[i][1] + centre[1], p[i][2] + centre[2]});
+        // A collapsed triangle (two corners at one vertex: a UV sphere's pole row written as quads) joins
+        // nothing: its one real edge P-Q, once each way, would make the edge its neighbours share a
+        // four-sided one, and the closed mesh an open sheet seen from both sides (+3 dB).
+        if (corner[0] == corner[1] || corner[1] == corner[2] || corner[2] == corner[0]) continue;
         for (int i = 0; i < 3; ++i) {
-            const Vec3& a = p[i];
-            const Vec3& b = p[(i + 1) % 3];
-            const Key from = key({a[0] + centre[0], a[1] + centre[1], a[2] + centre[2]});
-            const Key to = key({b[0] + centre[0], b[1] + centre[1], b[2] + centre[2]});
-            if (from == to) continue; // a degenerate edge (a pole's sliver) joins nothing
-            const double length = norm(sub(b, a));
+            const Key& from = corner[i];
+            const Key& to = corner[(i + 1) % 3];
+            const double length = norm(sub(p[(i + 1) % 3], p[i]));
             edges.push_back(from < to ? Edge{from, to, 1, length} : Edge{to, from, -1, length});
         }
     }
