@@ -89,7 +89,7 @@ RangeSpread pixel_spread(uint row, uint column, vec2 er) {
     vec2 down2 = row + 2u < params.rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
     vec2 across = row_neighbour_ranges(row, column, view_columns_of(column));
     return range_spread(kRangeKernel, up2, up, er, down, down2, across.x, across.y, params.range_min_m,
-                        params.inv_bin_width_m, params.edge_relative_jump, params.bins);
+                        params.inv_bin_width_m, params.edge_relative_jump, params.bins, params.absorption_per_bin);
 }
 
 // Each pixel's cone coordinate (sonar_kernels.h cone_coord), computed once by the plan: the CPU
@@ -475,7 +475,7 @@ void add_subpixel(uint column) {
         }
         RangeSpread spread = range_spread(kRangeKernelTent, vec2(0.0), vec2(0.0), vec2(e, range_m), vec2(0.0),
                                           vec2(0.0), 0.0, 0.0, params.range_min_m, params.inv_bin_width_m, 0.0,
-                                          params.bins);
+                                          params.bins, 0.0);
         for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
             precise float add = range_share(spread, k) * e;
             profiles[column * params.bins_padded + uint(k)] += add;
@@ -537,7 +537,7 @@ void main() {
             vec2 across = row_neighbour_ranges(row, column, view);
             RangeSpread spread = range_spread(kRangeKernel, up2, up, er, next, next2, across.x, across.y,
                                               params.range_min_m, params.inv_bin_width_m, params.edge_relative_jump,
-                                              params.bins);
+                                              params.bins, params.absorption_per_bin);
             for (int k = first_lane_bin(spread.k_first); k <= spread.k_last; k += int(kBinLanes)) {
                 precise float share = range_share(spread, k) * e;
                 profiles[base + uint(k)] += share;

@@ -129,6 +129,9 @@ VKS_CONST float kMaxFootprintBins = 256.0f; // caps the per-pixel loop; wider fo
 // a bin puts its energy into the right bin but for 1/32 of a bin either side); a pixel without any
 // neighbour on its surface (an isolated hit: no extent known) gets a bin, the tent.
 VKS_CONST float kMinFootprintBins = 0.0625f;
+// SonarParams::absorption_per_bin's cap: 0.65 dB a bin (an alpha of 32 dB/m at 1 cm bins). Past it the
+// exponents of range_spread's absorption terms over a footprint of kMaxFootprintBins could leave a float.
+VKS_CONST float kMaxAbsorptionPerBin = 0.15f;
 
 // Normal methods.
 VKS_CONST uint kNormalsSobel3 = 0u;
@@ -203,7 +206,11 @@ struct SonarParams {
     uint tier_columns; // pixel columns of each tier view (Plan::tier_columns; 0: none), after the slices
     // how far a tier view's pixel reaches from its cone coordinate (Plan::tier_cone_reach; 0: no tiers)
     float tier_cone_reach;
-    uint pad_gate2;
+    // Absorption's slope along range, two-way, per bin: 2 alpha ln(10) / 10 x bin width (0 with the effect
+    // off), at most kMaxAbsorptionPerBin. The echo stage takes absorption at each pixel's own range; the
+    // range kernel averages it over the pixel's footprint (range_spread), which a grazing seabed's reaches
+    // metres.
+    float absorption_per_bin;
 };
 #ifdef __cplusplus
 static_assert(sizeof(SonarParams) == 40 * 4, "SonarParams must match the GLSL std140 block");

@@ -307,8 +307,9 @@ std::vector<ConfigKey> make_table() {
         VKS_NUMBER("tvg_db_per_decade", tvg_db_per_decade, "dB/decade",
                    "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)",
                    closed(0, 60,
-                          "0: none; 20 (area) to 40 (point targets, two-way spherical spreading) are the spreading "
-                          "laws; 60 is past all of them")),
+                          "0: none; 20 (volume scattering), 30 (a seabed at grazing incidence, pulse-limited) and 40 "
+                          "(point targets, two-way spherical spreading) are the spreading laws; 60 is past all of "
+                          "them")),
 
         VKS_NUMBER(
             "display.db_min", db_min, "dB re 1 uPa", "Intensity shown as black (display value 0)",

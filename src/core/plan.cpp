@@ -430,6 +430,8 @@ void plan_gpu_params(Plan& p) {
     g.bin_width_m = static_cast<float>(p.bin_width_m);
     g.inv_bin_width_m = static_cast<float>(1.0 / p.bin_width_m);
     g.alpha_db_per_m = static_cast<float>(p.alpha_db_per_m);
+    g.absorption_per_bin = static_cast<float>(
+        std::min(2.0 * p.alpha_db_per_m * 0.2302585092994046 * p.bin_width_m, double(shared::kMaxAbsorptionPerBin)));
     g.vpattern_k = static_cast<float>(p.vpattern_k);
     g.vpattern_shape = shader_id(c.vertical_pattern);
     g.range_kernel = shader_id(c.range_kernel);

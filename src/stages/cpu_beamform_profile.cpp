@@ -189,7 +189,7 @@ struct SpreadVectors {
 // matches expf here), into out[0..7]. False where a pixel's bin coordinate is NaN (the caller then uses
 // the scalar kernel).
 VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_min, float ibw, float jump_rel, int bins,
-                                          Math<float>::RangeSpread* out) {
+                                          float absorption_per_bin, Math<float>::RangeSpread* out) {
     const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f), one = _mm256_set1_ps(1.0f),
                  two = _mm256_set1_ps(2.0f);
     const __m256 vibw = _mm256_set1_ps(ibw);
@@ -280,8 +280,9 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
         const __m256 cap = min8(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
         g = _mm256_and_ps(has_g, min8(max8(slope, neg8(cap)), cap));
     }
-    // inv_norm = 1 / (width sinhc_of(0.5 g width))
-    const __m256 y = _mm256_mul_ps(_mm256_mul_ps(half, g), width);
+    // inv_norm: range_spread's, with absorption averaged over the footprint (b = absorption_per_bin)
+    const __m256 vb = _mm256_set1_ps(absorption_per_bin);
+    const __m256 y = _mm256_mul_ps(_mm256_mul_ps(half, _mm256_add_ps(g, vb)), width);
     const __m256 y2 = _mm256_mul_ps(y, y);
     const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
     const __m256 middle = _mm256_add_ps(one, _mm256_mul_ps(_mm256_div_ps(y2, _mm256_set1_ps(20.0f)), inner));
@@ -291,7 +292,11 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
         const __m256 ey = exp8(y), e_minus = exp8(neg8(y));
         sinhc = select8(wide, _mm256_div_ps(_mm256_sub_ps(ey, e_minus), _mm256_mul_ps(two, y)), sinhc);
     }
-    const __m256 inv_norm = _mm256_div_ps(one, _mm256_mul_ps(width, sinhc));
+    const __m256 tilt_arg = _mm256_mul_ps(neg8(vb), _mm256_sub_ps(centre, f));
+    const __m256 tilt = exp8(min8(max8(tilt_arg, _mm256_set1_ps(-60.0f)), _mm256_set1_ps(60.0f)));
+    const __m256 inv_norm =
+        select8(_mm256_cmp_ps(g, zero, _CMP_NEQ_UQ), _mm256_div_ps(tilt, _mm256_mul_ps(width, sinhc)),
+                _mm256_div_ps(_mm256_mul_ps(tilt, sinhc), width));
     alignas(32) float lo_l[8], hi_l[8], centre_l[8], g_l[8], inv_l[8];
     alignas(32) std::int32_t first_l[8], last_l[8], origin_l[8];
     _mm256_store_ps(lo_l, lo);
@@ -321,12 +326,13 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
 
 // footprint_spread8 of lanes the caller filled one by one.
 __attribute__((target("avx2,fma"))) bool footprint_spread8(const SpreadLanes& in, float range_min, float ibw,
-                                                           float jump_rel, int bins, Math<float>::RangeSpread* out) {
+                                                           float jump_rel, int bins, float absorption_per_bin,
+                                                           Math<float>::RangeSpread* out) {
     const SpreadVectors v{_mm256_load_ps(in.e),       _mm256_load_ps(in.r),      _mm256_load_ps(in.up2_r),
                           _mm256_load_ps(in.up_r),    _mm256_load_ps(in.up_e),   _mm256_load_ps(in.down_r),
                           _mm256_load_ps(in.down2_r), _mm256_load_ps(in.down_e), _mm256_load_ps(in.left_r),
                           _mm256_load_ps(in.right_r)};
-    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, out);
+    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, absorption_per_bin, out);
 }
 
 // The (e, r) pairs of the eight pixels of row `row` from column c0 as two registers (zeros for a row
@@ -352,7 +358,7 @@ VKS_AVX2_INLINE void spread_row_lanes(const float* echo2, std::uint32_t C, std::
 __attribute__((target("avx2,fma"))) bool footprint_spread8_run(const float* echo2, std::uint32_t C, std::uint32_t R,
                                                                std::uint32_t j, std::uint32_t c0, float left_range,
                                                                float right_range, float range_min, float ibw,
-                                                               float jump_rel, int bins,
+                                                               float jump_rel, int bins, float absorption_per_bin,
                                                                Math<float>::RangeSpread* out) {
     SpreadVectors v;
     __m256 unused_e;
@@ -367,7 +373,7 @@ __attribute__((target("avx2,fma"))) bool footprint_spread8_run(const float* echo
                                _mm256_set1_ps(left_range), 0x01);
     v.right_r = _mm256_blend_ps(_mm256_permutevar8x32_ps(v.r, _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7)),
                                 _mm256_set1_ps(right_range), 0x80);
-    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, out);
+    return footprint_spread8_of(v, range_min, ibw, jump_rel, bins, absorption_per_bin, out);
 }
 #undef VKS_AVX2_INLINE
 
@@ -376,7 +382,7 @@ constexpr int kSpreadLanes = 8;
 struct SpreadLanes {
     float e[8], r[8], up2_r[8], up_e[8], up_r[8], down_e[8], down_r[8], down2_r[8], left_r[8], right_r[8];
 };
-bool footprint_spread8(const SpreadLanes&, float, float, float, int, Math<float>::RangeSpread*) {
+bool footprint_spread8(const SpreadLanes&, float, float, float, int, float, Math<float>::RangeSpread*) {
     return false;
 }
 bool footprint_shares8(const Math<float>::RangeSpread&, int, float*) {
@@ -430,7 +436,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 if (footprint_spread8_run(echo2, C, R, j, c[0], c[0] > view.first ? p[-1] : 0.0f,
                                           c[7] + 1 < view.end ? p[17] : 0.0f, range_min, inv_bin_width,
                                           static_cast<float>(plan.params.edge_relative_jump),
-                                          static_cast<int>(plan.bins), out))
+                                          static_cast<int>(plan.bins), plan.params.absorption_per_bin, out))
                     return;
             }
 #endif
@@ -455,7 +461,7 @@ void pixel_spreads(const Plan& plan, const float* echo2, std::uint32_t j, const 
                 in.right_r[l] = across.right_r;
             }
             if (footprint_spread8(in, range_min, inv_bin_width, static_cast<float>(plan.params.edge_relative_jump),
-                                  static_cast<int>(plan.bins), out))
+                                  static_cast<int>(plan.bins), plan.params.absorption_per_bin, out))
                 return;
         }
     }
@@ -625,7 +631,7 @@ void add_subpixel_returns(const Plan& plan, const SubpixelInput& in, Real* acc, 
             const Real e = static_cast<Real>(r.energy);
             const typename M::RangeSpread spread =
                 M::range_spread(shared::kRangeKernelTent, none, none, typename M::vec2(e, static_cast<Real>(r.range_m)),
-                                none, none, Real(0), Real(0), range_min, inv_bin_width, Real(0), plan.bins);
+                                none, none, Real(0), Real(0), range_min, inv_bin_width, Real(0), plan.bins, Real(0));
             for (int k = spread.k_first; k <= spread.k_last; ++k)
                 acc[static_cast<std::size_t>(c) * T + k] += M::range_share(spread, k) * e;
         }

@@ -449,7 +449,7 @@ void add_subpixel_returns(const Plan& plan, const Frame& frame, const SubpixelRe
         const double e = double(r.energy) * weight;
         const M::vec2 none(0.0);
         const M::RangeSpread spread = M::range_spread(shared::kRangeKernelTent, none, none, M::vec2(e, r.range_m), none,
-                                                      none, 0.0, 0.0, range_min, inv_bin_width, 0.0, plan.bins);
+                                                      none, 0.0, 0.0, range_min, inv_bin_width, 0.0, plan.bins, 0.0);
         const SubpixelLabel& label = labels[i];
         const double point[3] = {label.x, label.y, label.z};
         const double elevation = std::asin(std::clamp(point[2] / double(r.range_m), -1.0, 1.0));

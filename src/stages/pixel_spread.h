@@ -51,7 +51,8 @@ pixel_spread(const Plan& plan, const float* echo2, std::uint32_t j, std::uint32_
     return Math<Real>::range_spread(plan.params.range_kernel, row_echo(jj - 2), row_echo(jj - 1), vec2(e, range),
                                     row_echo(jj + 1), row_echo(jj + 2), static_cast<Real>(across.left_r),
                                     static_cast<Real>(across.right_r), range_min, inv_bin_width,
-                                    static_cast<Real>(plan.params.edge_relative_jump), plan.bins);
+                                    static_cast<Real>(plan.params.edge_relative_jump), plan.bins,
+                                    static_cast<Real>(plan.params.absorption_per_bin));
 }
 template <class Real>
 [[gnu::always_inline]] inline typename Math<Real>::RangeSpread pixel_spread(const Plan& plan, const float* echo2,
