@@ -807,6 +807,32 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
         run(with(render_args("kd", {"--save", "polar", "--set", "bins=-1"}), (dir_ / "two.csv").string())).exit_code,
         2);
     EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
+
+    // Only what a vksonar run wrote goes. A user's folder whose files merely bear a frame file's name
+    // (no vksonar meta.json beside them) keeps them; a frame folder holding a file no run writes, or a
+    // meta.json that is not a vksonar frame's, is refused in one line, nothing removed. (An audit found
+    // `--out` into such a folder deleted fan.png, depth.npy and whole frame_* folders, exit 0.)
+    fs::create_directories(dir_ / "mine");
+    write_text(dir_ / "mine" / "fan.png", "the user's");
+    write_text(dir_ / "mine" / "depth.npy", "the user's");
+    write_text(dir_ / "mine" / "meta.json", "{\"not\": \"vksonar\"}");
+    r = run(with(render_args("mine", {"--save", "polar"}), ""));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(read_text(dir_ / "mine" / "fan.png"), "the user's");
+    EXPECT_EQ(read_text(dir_ / "mine" / "depth.npy"), "the user's");
+    EXPECT_TRUE(fs::exists(dir_ / "mine" / "polar.npy"));
+    write_text(dir_ / "kd" / "frame_000002" / "notes.txt", "mine too");
+    r = run(with(render_args("kd", {"--save", "polar"}), (dir_ / "two.csv").string()));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_EQ(r.err_lines(), 1u) << r.err;
+    EXPECT_NE(r.err.find("frame_000002 holds notes.txt, which no vksonar run writes"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000003" / "meta.json"));
+    fs::remove(dir_ / "kd" / "frame_000002" / "notes.txt");
+    write_text(dir_ / "kd" / "frame_000003" / "meta.json", "{\"format\": \"something else\"}");
+    r = run(with(render_args("kd", {"--save", "polar"}), (dir_ / "two.csv").string()));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("frame_000003/meta.json is not a vksonar frame's"), std::string::npos) << r.err;
+    EXPECT_TRUE(fs::exists(dir_ / "kd" / "frame_000002" / "polar.npy"));
 }
 
 // Every file a frame writes is in frame_files.h's table, which an unsharded re-run clears OUT by (a file

@@ -27,10 +27,12 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <system_error>
 #include <utility>
 #include <vector>
@@ -241,7 +243,9 @@ public:
     // An unsharded run replaces the previous run in its folder, as a .h5 or bag is replaced whole:
     // before its first frame is written, the entries an earlier run wrote there go (frame_NNNNNN
     // folders, the files a single pose writes (frame_files.h), their leftover temporaries); no other
-    // file is touched.
+    // file is touched. What an earlier run wrote is known by its meta.json ("format":
+    // "vksonar-frame-N"): a single pose's files go only beside one, and a frame folder holding anything
+    // no run writes (the user's notes, a meta.json of something else) is refused, not removed, naming it.
     // Run once, on the write-behind thread, just before the first frame: a run that fails before it
     // leaves the earlier run as it was.
     void clear_previous_run() {
@@ -249,13 +253,30 @@ public:
         cleared_ = true;
         std::error_code ec;
         std::vector<fs::path> stale;
-        for (const auto& entry : fs::directory_iterator(dir_, ec)) {
-            std::string name = entry.path().filename().string();
+        const auto ours = [](std::string name) { // a frame file's name, or its leftover temporary's
             if (name.rfind(".~", 0) == 0) name = name.substr(2);
+            return is_frame_file(name);
+        };
+        const bool single_pose_run = written_by_vksonar(dir_ / kMetaJson);
+        for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+            const std::string name = entry.path().filename().string();
             const bool frame_folder = name.size() > 6 && name.rfind("frame_", 0) == 0 &&
                                       name.find_first_not_of("0123456789", 6) == std::string::npos &&
                                       entry.is_directory(ec) && !entry.is_symlink(ec);
-            if (frame_folder || (is_frame_file(name) && !entry.is_directory(ec))) stale.push_back(entry.path());
+            if (frame_folder) {
+                const bool has_meta = fs::exists(entry.path() / kMetaJson, ec);
+                if (has_meta && !written_by_vksonar(entry.path() / kMetaJson))
+                    throw BadInput("--out " + dir_.string() + ": " + name + "/" + std::string(kMetaJson) +
+                                   " is not a vksonar frame's; move the folder, or give another --out");
+                for (const auto& inside : fs::directory_iterator(entry.path(), ec))
+                    if (!ours(inside.path().filename().string()) || inside.is_directory(ec))
+                        throw BadInput("--out " + dir_.string() + ": " + name + " holds " +
+                                       inside.path().filename().string() +
+                                       ", which no vksonar run writes; move it, or give another --out");
+                stale.push_back(entry.path());
+            } else if (ours(name) && !entry.is_directory(ec) && (single_pose_run || name.rfind(".~", 0) == 0)) {
+                stale.push_back(entry.path());
+            }
         }
         if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
         for (const fs::path& path : stale) {
@@ -265,6 +286,13 @@ public:
     }
 
 private:
+    // A meta.json a vksonar run wrote: it starts with its "format" (host::meta_json_plan_part).
+    static bool written_by_vksonar(const fs::path& meta) {
+        std::ifstream in(meta, std::ios::binary);
+        char head[64] = {};
+        in.read(head, sizeof head - 1);
+        return std::string_view(head).find("\"format\": \"vksonar-frame-") != std::string_view::npos;
+    }
     void cleanup() {
         std::error_code ec;
         if (!created_.empty()) fs::remove_all(created_, ec);
