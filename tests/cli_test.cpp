@@ -272,7 +272,10 @@ TEST_F(Cli, BadTrajectoryLineNamesFileAndLine) {
     expect_bad_render({"--trajectory", (dir_ / "short.csv").string()}, {"short.csv:3", "6 numbers"});
     write_text(dir_ / "empty.csv", "# nothing\n");
     expect_bad_render({"--trajectory", (dir_ / "empty.csv").string()}, {"empty.csv", "no poses"});
-    expect_bad_render({"--trajectory", (dir_ / "none.csv").string()}, {"none.csv", "cannot open"});
+    expect_bad_render({"--trajectory", (dir_ / "none.csv").string()}, {"--trajectory", "none.csv", "no such file"});
+    // a folder or a FIFO is named as such (a FIFO used to block the run, /dev/zero to fill memory)
+    expect_bad_render({"--trajectory", dir_.string()}, {"--trajectory", "is a directory"});
+    expect_bad_render({"--trajectory", "/dev/zero"}, {"--trajectory /dev/zero", "is not a regular file"});
 }
 
 TEST_F(Cli, BadOptions) {

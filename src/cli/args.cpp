@@ -5,11 +5,22 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <limits>
 
 #include "config/config_keys.h"
 
 namespace vksonar::cli {
+
+void require_input_file(const std::string& what, const std::string& path) {
+    std::error_code ec;
+    const std::filesystem::file_status st = std::filesystem::status(path, ec);
+    const std::string named = (what.empty() ? "" : what + " ") + path;
+    if (!std::filesystem::exists(st)) throw BadInput(named + ": no such file");
+    if (std::filesystem::is_directory(st)) throw BadInput(named + ": is a directory, not a file");
+    if (!std::filesystem::is_regular_file(st))
+        throw BadInput(named + ": is not a regular file (a FIFO, socket or device: give a file)");
+}
 
 std::string trim(const std::string& text) {
     const auto first = text.find_first_not_of(" \t\r\n");

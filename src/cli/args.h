@@ -51,6 +51,11 @@ std::uint64_t parse_u64(const std::string& text, const std::string& what);
 // "x,y,z,roll,pitch,yaw" (metres, degrees). `what` names where the text came from.
 Pose parse_pose(const std::string& text, const std::string& what);
 
+// An input file the command reads whole: throws BadInput "WHAT PATH: no such file", ": is a directory" or
+// ": is not a regular file" (a FIFO would block the run, /dev/zero fill memory). `what` names the option
+// ("--trajectory"; empty for a positional argument).
+void require_input_file(const std::string& what, const std::string& path);
+
 // `text` without the spaces, tabs and line ends around it.
 std::string trim(const std::string& text);
 // Splits on `separator`, trimming spaces around each item.

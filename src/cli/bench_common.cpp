@@ -75,11 +75,7 @@ Setup load_setup(const Args& args) {
     Setup setup;
     setup.default_scene = !args.has("--scene");
     setup.scene_path = setup.default_scene ? find_default_scene().string() : args.value("--scene");
-    if (!setup.default_scene) {
-        std::error_code ec;
-        if (!fs::is_regular_file(setup.scene_path, ec))
-            throw BadInput("--scene " + setup.scene_path + ": no such file");
-    }
+    if (!setup.default_scene) require_input_file("--scene", setup.scene_path);
     setup.sonar_name = args.value("--sonar", "default");
     setup.preset = sonar_base_config(setup.sonar_name);
     auto scene = Scene::load_gltf(setup.scene_path);

@@ -21,6 +21,7 @@
 #include "cli/args.h"
 #include "cli/commands.h"
 #include "cli/frame_files.h"
+#include "core/json_depth.h"
 
 namespace fs = std::filesystem;
 
@@ -50,6 +51,9 @@ json read_json(const fs::path& path) {
     if (!file) throw BadInput(path.string() + ": cannot open");
     std::stringstream text;
     text << file.rdbuf();
+    if (json_nests_too_deep(text.str()))
+        throw BadInput(path.string() + ": not valid JSON (nests deeper than " + std::to_string(kMaxJsonDepth) +
+                       " levels)");
     try {
         return json::parse(text.str());
     } catch (const json::exception& e) {

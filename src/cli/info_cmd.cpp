@@ -16,6 +16,7 @@ namespace vksonar::cli {
 namespace {
 
 int scene_info(const std::string& path, const std::string& asset_root) {
+    require_input_file("", path);
     auto scene = Scene::load_gltf(path, SceneLoadOptions{asset_root});
     if (!scene) throw BadInput(scene.error().message);
     for (const std::string& warning : scene->stats().warnings)

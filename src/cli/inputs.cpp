@@ -47,7 +47,7 @@ fs::path find_default_scene() {
 SonarConfig sonar_base_config(const std::string& sonar) {
     std::error_code ec;
     if (looks_like_file(sonar) || (!sonar.empty() && fs::is_regular_file(sonar, ec) && !load_preset(sonar).ok())) {
-        if (!fs::is_regular_file(sonar, ec)) throw BadInput("--sonar " + sonar + ": no such file");
+        require_input_file("--sonar", sonar);
         auto config = load_sonar_file(sonar);
         if (!config) throw BadInput(config.error().message);
         return config.value();

@@ -46,6 +46,7 @@ template <class T> void convert(const std::vector<char>& raw, std::vector<double
 
 NpyArray read_npy(const std::string& path) {
     static_assert(sizeof(float) == 4 && sizeof(double) == 8, "IEEE floats expected");
+    require_input_file("", path);
     std::ifstream file(path, std::ios::binary);
     if (!file) throw BadInput(path + ": cannot open");
     std::vector<char> bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());

@@ -113,6 +113,7 @@ SaveSet parse_save(const std::vector<std::string>& values) {
 
 // The poses of a trajectory file, and whether it has a time column (header `t,x,y,z,roll,pitch,yaw`).
 std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed) {
+    require_input_file("--trajectory", path);
     std::ifstream file(path);
     if (!file) throw BadInput("--trajectory " + path + ": cannot open");
     std::vector<TrajectoryPose> poses;
@@ -392,10 +393,7 @@ RenderJob parse_job(const Args& args) {
     parse_options(args, job);
     job.default_scene = !args.has("--scene");
     job.scene_path = job.default_scene ? find_default_scene().string() : args.value("--scene");
-    if (!job.default_scene) {
-        std::error_code ec;
-        if (!fs::is_regular_file(job.scene_path, ec)) throw BadInput("--scene " + job.scene_path + ": no such file");
-    }
+    if (!job.default_scene) require_input_file("--scene", job.scene_path);
     read_poses(args, job);
     pick_shard(args, job);
     return job;
@@ -411,7 +409,7 @@ SonarConfig apply_user_layers(const Args& args, const SaveSet& save, SonarConfig
     if (args.has("--config")) {
         std::error_code ec;
         const std::string path = args.value("--config");
-        if (!fs::is_regular_file(path, ec)) throw BadInput("--config " + path + ": no such file");
+        require_input_file("--config", path);
         auto layered = apply_config_file(config, path);
         if (!layered) throw BadInput(layered.error().message);
         config = layered.value();

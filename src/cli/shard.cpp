@@ -12,6 +12,7 @@
 #include "cli/args.h"
 #include "cli/frame_files.h"
 #include "core/access.h"
+#include "core/json_depth.h"
 #include "scene/scene_data.h"
 
 namespace fs = std::filesystem;
@@ -279,6 +280,9 @@ FolderManifest read_manifest(const std::string& dir) {
     if (!file) throw BadInput(path.string() + ": no such file (not a shard's output folder: render it with --shard)");
     std::stringstream text;
     text << file.rdbuf();
+    if (json_nests_too_deep(text.str()))
+        throw BadInput(path.string() + ": invalid JSON (nests deeper than " + std::to_string(kMaxJsonDepth) +
+                       " levels)");
     const auto j = nlohmann::json::parse(text.str(), nullptr, false);
     if (j.is_discarded() || !j.is_object()) throw BadInput(path.string() + ": invalid JSON");
     FolderManifest m;
@@ -374,7 +378,13 @@ FrameFolderState frame_folder_check(const std::string& frame_dir) {
     if (!fs::is_regular_file(meta_path, ec)) return state;
     state.kind = FrameFolderState::damaged;
     std::ifstream in(meta_path, std::ios::binary);
-    nlohmann::json meta = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+    std::stringstream text;
+    text << in.rdbuf();
+    if (json_nests_too_deep(text.str())) {
+        state.problem = std::string(kMetaJson) + ": nests deeper than " + std::to_string(kMaxJsonDepth) + " levels";
+        return state;
+    }
+    nlohmann::json meta = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
     if (meta.is_discarded() || !meta.is_object()) {
         state.problem = std::string(kMetaJson) + ": not a JSON object";
         return state;

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "config/config_keys.h"
+#include "core/json_depth.h"
 #include "vksonar/config.h"
 
 namespace vksonar {
@@ -71,6 +72,9 @@ struct Checker {
 
 Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string& json_text,
                                       const std::string& origin) {
+    if (json_nests_too_deep(json_text))
+        return make_error(ErrorCode::parse,
+                          origin + ": invalid JSON: nests deeper than " + std::to_string(kMaxJsonDepth) + " levels");
     Json root;
     try {
         root = Json::parse(json_text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/true);

@@ -22,13 +22,14 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/json_depth.h"
+
 namespace vksonar::gltf {
 namespace {
 
 using nlohmann::json;
 
 constexpr std::size_t max_file_bytes = std::size_t(1) << 31; // tinygltf takes unsigned int sizes
-constexpr int max_json_depth = 128;
 
 std::vector<unsigned char> read_file(const std::string& path) {
     std::error_code ec;
@@ -95,26 +96,8 @@ std::size_t glb_json_chunk(std::vector<unsigned char>& bytes) {
 
 // nlohmann parses iteratively, but tinygltf converts extras recursively: cap the nesting first.
 void check_json_depth(const char* text, std::size_t size) {
-    int depth = 0;
-    bool in_string = false, escaped = false;
-    for (const char* p = text; p != text + size; ++p) {
-        const char c = *p;
-        if (in_string) {
-            if (escaped)
-                escaped = false;
-            else if (c == '\\')
-                escaped = true;
-            else if (c == '"')
-                in_string = false;
-        } else if (c == '"') {
-            in_string = true;
-        } else if (c == '{' || c == '[') {
-            if (++depth > max_json_depth)
-                fail(ErrorCode::parse, "JSON nests deeper than " + std::to_string(max_json_depth) + " levels");
-        } else if (c == '}' || c == ']') {
-            --depth;
-        }
-    }
+    if (json_nests_too_deep(std::string_view(text, size)))
+        fail(ErrorCode::parse, "JSON nests deeper than " + std::to_string(kMaxJsonDepth) + " levels");
 }
 
 // The JSON text in place (the file's bytes), without a copy.

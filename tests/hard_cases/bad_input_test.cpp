@@ -130,6 +130,16 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     expect_bad_render({"--config", (dir_ / "null.json").string()}, {"null.json", "beams"});
     write_text(dir_ / "empty.json", "");
     expect_bad_render({"--config", (dir_ / "empty.json").string()}, {"empty.json"});
+    // Nested 100,000 deep (an audit's): printing the value for the error recursed until the stack ran
+    // out (SIGSEGV, no message). Refused before parsing, as a glTF file's JSON is.
+    const std::string deep = "{\"name\": " + std::string(100000, '[') + std::string(100000, ']') + "}";
+    write_text(dir_ / "deep.json", deep);
+    expect_bad_render({"--config", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
+    expect_bad_render({"--sonar", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
+    // Files that are not files: named as what they are (they all said "no such file").
+    expect_bad_render({"--config", dir_.string()}, {"--config", "is a directory"});
+    expect_bad_render({"--config", "/dev/null"}, {"--config /dev/null", "is not a regular file"});
+    expect_bad_render({"--scene", dir_.string()}, {"--scene", "is a directory"});
 }
 
 TEST_F(BadInput, SetWithBytesThatAreNotUtf8) {

@@ -1,0 +1,38 @@
+// The nesting of JSON text from a file someone else wrote, checked before it is parsed. nlohmann parses
+// iteratively, but printing a value (dump(), for an error message or a record) and tinygltf's extras
+// conversion recurse: a config file nesting 100,000 arrays deep crashed vksonar (SIGSEGV) where one
+// line naming the file was due. No file of ours nests past a dozen levels.
+#pragma once
+
+#include <cstddef>
+#include <string_view>
+
+namespace vksonar {
+
+inline constexpr int kMaxJsonDepth = 128;
+
+// True when the text opens more than max_depth objects or arrays inside each other (brackets inside
+// strings do not count; the text need not be valid JSON).
+inline bool json_nests_too_deep(std::string_view text, int max_depth = kMaxJsonDepth) {
+    int depth = 0;
+    bool in_string = false, escaped = false;
+    for (const char c : text) {
+        if (in_string) {
+            if (escaped)
+                escaped = false;
+            else if (c == '\\')
+                escaped = true;
+            else if (c == '"')
+                in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '{' || c == '[') {
+            if (++depth > max_depth) return true;
+        } else if (c == '}' || c == ']') {
+            --depth;
+        }
+    }
+    return false;
+}
+
+} // namespace vksonar
