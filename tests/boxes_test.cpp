@@ -451,6 +451,13 @@ TEST_F(BoxesCli, BoxesJsonIsTightOnTheLabelsAndCocoMatchesIt) {
     fs::create_directories(dir_ / "a_folder");
     expect_bad_export({"coco", run_dir.string(), (dir_ / "a_folder").string()}, "a_folder: is a directory");
     expect_bad_export({"yolo", run_dir.string(), kept.string()}, "unknown format 'yolo'");
+    // OUT over a file the export reads (an audit's: written over boxes.json it broke the next export)
+    for (const char* input : {"boxes.json", "meta.json", "fan.png"}) {
+        const std::string before = read_text(run_dir / frames[1] / input);
+        expect_bad_export({"coco", run_dir.string(), (run_dir / frames[1] / input).string()},
+                          "a file of the run it reads");
+        EXPECT_EQ(read_text(run_dir / frames[1] / input), before) << input;
+    }
     expect_bad_export({"coco", run_dir.string()}, "needs RUN and OUT.json");
 
     // A run rendered without labels; a frame of a labelled run that lost its boxes.json.

@@ -242,6 +242,14 @@ int run_export(const std::vector<std::string>& argv) {
                                                            : ": no such folder"));
 
     const std::vector<FrameFolder> frames = frame_folders(run);
+    // OUT must not be a file the export reads: written over boxes.json or meta.json it breaks the run
+    // (the next export fails on it), over fan.png it loses the image the COCO file names.
+    const fs::path out_canonical = fs::weakly_canonical(out, ec);
+    for (const FrameFolder& frame : frames)
+        for (const std::string_view input : {kBoxesJson, kMetaJson, kFanPng})
+            if (!ec && fs::weakly_canonical(frame.dir / input, ec) == out_canonical)
+                throw BadInput("export coco: OUT " + out.string() + " is " + (frame.dir / input).string() +
+                               ", a file of the run it reads; write it outside the frame folders");
     std::uint64_t left_out = 0;
     const json coco = coco_document(run, frames, left_out);
     write_whole(out, coco.dump(-1, ' ', false, json::error_handler_t::replace) + "\n");
