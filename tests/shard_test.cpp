@@ -237,6 +237,25 @@ TEST_F(Shard, BagShardsMergeIntoTheUnshardedBag) {
     refused({"part0.mcap", "flipped.mcap", "part2.mcap"}, "flipped.mcap: a chunk's CRC does not match");
 }
 
+// A bag's stamps of a trajectory without a time column are frame / --rate s: a rate that puts the last
+// frame past a ROS stamp's int32 seconds, or frames less than its 1 ns step apart, is refused (an audit's:
+// 1e-10 stamped two frames 9223372036854775808 ns, 1e300 every frame 0, exit 0).
+TEST_F(Shard, BagRateOutsideRosTimeIsOneLine) {
+    const std::pair<const char*, const char*> cases[] = {{"1e-10", "past a ROS time stamp's 2147483647 s"},
+                                                         {"1e300", "less than 1 ns apart"}};
+    for (const auto& [rate, text] : cases) {
+        std::vector<std::string> args = render_args("unused", {"--rate", rate});
+        for (std::size_t i = 0; i + 1 < args.size(); ++i)
+            if (args[i] == "--out") args[i + 1] = (dir_ / "never.mcap").string();
+        const ShardRun r = run(args);
+        EXPECT_EQ(r.exit_code, 2) << rate << r.err;
+        EXPECT_EQ(r.err_lines(), 1u) << r.err;
+        EXPECT_NE(r.err.find(std::string("--rate: ") + rate), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find(text), std::string::npos) << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / "never.mcap"));
+    }
+}
+
 // More shards than frames: a shard whose block is empty writes a bag with its record and no chunk
 // (so no Schema or Channel record; /tf_static comes with a first frame). Merged, the bags are still
 // the unsharded bag byte for byte (shard 0 here is empty: topics and /tf_static come from shard 1).

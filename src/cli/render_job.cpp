@@ -281,7 +281,17 @@ void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const
     const std::string& path = args.value("--trajectory");
     if (timed && args.has("--rate"))
         throw BadInput("--rate: " + path + " has a time column, which sets the time stamps");
-    if (!timed) return;
+    if (!timed) { // frame i at i / rate s: the last one inside the range, frames at least 1 ns apart
+        const double rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
+        const double last_s = poses.empty() ? 0.0 : static_cast<double>(poses.size() - 1) / rate;
+        if (rate > 1e9)
+            throw BadInput("--rate: " + args.value("--rate") +
+                           " frames/s puts frames less than 1 ns apart, a ROS time stamp's step (at most 1e9)");
+        if (!(last_s <= 2147483647.0))
+            throw BadInput("--rate: " + args.value("--rate") + " frames/s stamps the last of " +
+                           std::to_string(poses.size()) + " frames past a ROS time stamp's 2147483647 s");
+        return;
+    }
     for (const TrajectoryPose& p : poses)
         if (!(p.time_s >= 0.0 && p.time_s <= 2147483647.0)) {
             char value[64];
