@@ -1,12 +1,17 @@
 // Command-line parsing helpers (see args.h).
 #include "cli/args.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <limits>
+#include <string>
 
 #include "config/config_keys.h"
 
@@ -20,6 +25,23 @@ void require_input_file(const std::string& what, const std::string& path) {
     if (std::filesystem::is_directory(st)) throw BadInput(named + ": is a directory, not a file");
     if (!std::filesystem::is_regular_file(st))
         throw BadInput(named + ": is not a regular file (a FIFO, socket or device: give a file)");
+}
+
+void require_writable_output(const std::string& what, const std::string& path) {
+    namespace fs = std::filesystem;
+    if (path.empty()) throw BadInput(what + ": the path is empty");
+    const fs::path target(path);
+    const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
+    std::error_code ec;
+    if (!fs::is_directory(folder, ec)) throw BadInput(what + " " + path + ": no folder " + folder.string());
+    const fs::path probe = folder / (".~" + target.filename().string() + ".probe-" + std::to_string(::getpid()));
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+    if (fd < 0 && errno != EEXIST)
+        throw BadInput(what + " " + path + ": cannot write in " + folder.string() + " (" + std::strerror(errno) + ")");
+    if (fd >= 0) {
+        ::close(fd);
+        ::unlink(probe.c_str());
+    }
 }
 
 std::string trim(const std::string& text) {

@@ -236,6 +236,7 @@ int run_export(const std::vector<std::string>& argv) {
                        std::to_string(args.positional.size() - 1) + " arguments");
     const fs::path run = args.positional[1], out = args.positional[2];
     std::error_code ec;
+    if (!fs::is_directory(out, ec)) require_writable_output("export coco: OUT", out.string());
     if (!fs::is_directory(run, ec))
         throw BadInput(run.string() + (fs::exists(run, ec) ? ": not a folder (export reads a render's frame folders, "
                                                              "written with --save fan,labels)"

@@ -220,6 +220,7 @@ int run_merge(const std::vector<std::string>& argv) {
     }
     if (args.positional.size() < 2) throw BadInput("merge: give OUT and at least one SHARD (vksonar merge --help)");
     const std::string out = args.positional[0];
+    if (out.empty()) throw BadInput("merge: OUT is empty");
     const std::vector<std::string> paths(args.positional.begin() + 1, args.positional.end());
     std::error_code ec;
     if (fs::exists(out, ec) || fs::is_symlink(out, ec))
@@ -227,6 +228,7 @@ int run_merge(const std::vector<std::string>& argv) {
     const fs::path out_folder = fs::path(out).has_parent_path() ? fs::path(out).parent_path() : fs::path(".");
     if (!fs::is_directory(out_folder, ec))
         throw BadInput("merge: OUT " + out + ": no folder " + out_folder.string() + " to write it in");
+    require_writable_output("merge: OUT", out);
     const MergeFormat* format = nullptr;
     std::string format_path;
     for (const std::string& path : paths) {

@@ -380,6 +380,7 @@ public:
         if (!fs::is_directory(folder, ec)) throw BadInput("--out " + named + ": no folder " + folder.string());
         if (fs::is_directory(target_, ec)) throw BadInput("--out " + named + ": is a directory");
         if (::access(folder.c_str(), W_OK) != 0) throw BadInput("--out " + named + ": the folder is not writable");
+        require_writable_output("--out", named);
         const std::string name = ".~" + target_.filename().string() + ".writing-" + std::to_string(::getpid());
         temporary_ = target_.has_parent_path() ? folder / name : fs::path(name);
         if (shard) lock_.emplace(target_, named);

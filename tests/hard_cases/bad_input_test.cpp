@@ -160,4 +160,33 @@ TEST_F(BadInput, NonFinitePosesAndTrajectoryValues) {
     expect_bad_render({"--trajectory", (dir_ / "extra.csv").string()}, {"extra.csv:1"});
 }
 
+// An output in a folder that takes no new file (/proc, even for root, whom access() tells yes) or an
+// empty name: exit 2 and one line naming the option and the path, not a temporary file's name (the
+// write failed later, exit 1, naming `.~x.mcap.writing-PID`).
+TEST_F(BadInput, UnwritableOutputsAreOneLineNamingTheOption) {
+    const auto expect_bad = [&](const std::vector<std::string>& args, const std::vector<std::string>& expected) {
+        const CliResult r = run(args);
+        std::string joined;
+        for (const auto& a : args)
+            joined += a + " ";
+        EXPECT_EQ(r.exit_code, 2) << joined << "\nstderr: " << r.err;
+        EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "exactly one line: " << r.err;
+        EXPECT_EQ(r.err.find(".~"), std::string::npos) << "a temporary's name: " << r.err;
+        for (const auto& text : expected)
+            EXPECT_NE(r.err.find(text), std::string::npos) << "'" << text << "' in " << r.err;
+    };
+    const std::string scene = (dir_ / "ok.gltf").string();
+    write_text(dir_ / "two.csv", "x,y,z,roll,pitch,yaw\n0,0,0,0,0,0\n0,0,0,0,0,1\n");
+    for (const char* out : {"/proc/vksonar_never.mcap", "/proc/vksonar_never.h5"})
+        expect_bad(
+            {"render", "--backend", "cpu", "--scene", scene, "--trajectory", (dir_ / "two.csv").string(), "--out", out},
+            {std::string("--out ") + out, "cannot write in /proc"});
+    expect_bad({"merge", "/proc/vksonar_never", (dir_ / "none").string()},
+               {"merge: OUT /proc/vksonar_never", "cannot write in /proc"});
+    expect_bad({"merge", "", (dir_ / "none").string()}, {"merge: OUT is empty"});
+    expect_bad({"export", "coco", dir_.string(), "/proc/vksonar_never.json"},
+               {"export coco: OUT /proc/vksonar_never.json", "cannot write in /proc"});
+    expect_bad({"export", "coco", dir_.string(), ""}, {"export coco: OUT", "empty"});
+}
+
 } // namespace
