@@ -618,6 +618,17 @@ TEST_F(Cli, BackendAutoPicksByTheDeviceAndSaysWhy) {
     const CliRun bad = run({"render", "--backend", "gpu", "--out", (dir_ / "never").string()});
     EXPECT_EQ(bad.exit_code, 2);
     EXPECT_NE(bad.err.find("--backend: 'gpu' is not a backend (auto, vulkan or cpu)"), std::string::npos) << bad.err;
+    // A device the user named (VKSONAR_DEVICE) that is not there is an error, not a quiet fall-back to
+    // the CPU (an audit's: a mistyped index on a multi-GPU machine went unnoticed, exit 0).
+    for (const char* device : {"abc", "99"}) {
+        ::setenv("VKSONAR_DEVICE", device, 1);
+        const CliRun named = run({"render", "--save", "polar", "--out", (dir_ / "never").string()});
+        ::unsetenv("VKSONAR_DEVICE");
+        EXPECT_EQ(named.exit_code, 2) << device << ": " << named.err;
+        EXPECT_EQ(named.err_lines().size(), 1u) << named.err;
+        EXPECT_NE(named.err.find("VKSONAR_DEVICE names it"), std::string::npos) << named.err;
+        EXPECT_FALSE(fs::exists(dir_ / "never"));
+    }
 }
 
 TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {

@@ -1,5 +1,6 @@
 #include "cli/inputs.h"
 
+#include <cstdlib>
 #include <system_error>
 #include <vector>
 
@@ -102,7 +103,10 @@ Context make_context(Backend backend) {
 }
 
 Context choose_backend(Backend& backend, std::string& why) {
-    return host::choose_backend(create_context_from_env(), backend, why);
+    const char* device = std::getenv("VKSONAR_DEVICE");
+    auto chosen = host::choose_backend(create_context_from_env(), device && *device, backend, why);
+    if (!chosen) throw BadInput(chosen.error().message);
+    return std::move(chosen.value());
 }
 
 } // namespace vksonar::cli

@@ -7,7 +7,10 @@
 
 namespace vksonar::host {
 
-Context choose_backend(Result<Context> vulkan, Backend& backend, std::string& why) {
+Result<Context> choose_backend(Result<Context> vulkan, bool device_named, Backend& backend, std::string& why) {
+    if (!vulkan && device_named)
+        return make_error(ErrorCode::invalid_argument,
+                          vulkan.error().message + " (VKSONAR_DEVICE names it: unset it to let --backend auto choose)");
     if (!vulkan) {
         backend = Backend::cpu;
         why = "auto: no usable Vulkan device (" + vulkan.error().message + "): the CPU backend";

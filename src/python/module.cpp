@@ -12,6 +12,7 @@
 #include <pybind11/stl.h>
 
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -586,10 +587,11 @@ PYBIND11_MODULE(vksonar, m) {
                  r->scene = std::move(scene);
                  if (backend == "auto") { // the CLI's rule (host/backend_choice.h)
                      auto vulkan_options = context_options_from_env();
+                     const char* device = std::getenv("VKSONAR_DEVICE");
                      r->context = std::make_shared<Context>(
-                         host::choose_backend(vulkan_options ? Context::create(vulkan_options.value())
-                                                             : Result<Context>(vulkan_options.error()),
-                                              options.backend, r->backend_reason));
+                         take(host::choose_backend(vulkan_options ? Context::create(vulkan_options.value())
+                                                                  : Result<Context>(vulkan_options.error()),
+                                                   device && *device, options.backend, r->backend_reason)));
                  } else {
                      r->backend_reason = "Renderer(backend='" + backend + "')";
                      r->context = std::make_shared<Context>(
