@@ -17,6 +17,9 @@ namespace {
 
 // Short description of a JSON value for error messages: the value itself, clipped.
 std::string describe(const Json& value) {
+    // JSON has no NaN or infinity (dump() writes null); they come from --set (nan, inf, 1e999)
+    if (value.is_number_float() && !std::isfinite(value.get<double>()))
+        return std::isnan(value.get<double>()) ? "nan" : (value.get<double>() > 0 ? "inf" : "-inf");
     std::string text = value.dump(-1, ' ', false, Json::error_handler_t::replace); // never throws on bad UTF-8
     if (text.size() > 40) text = text.substr(0, 37) + "...";
     return text;

@@ -119,6 +119,9 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     expect_bad_render({"--set", "range_max=inf"}, {"range_max", "inf"});
     expect_bad_render({"--set", "range_min=nan"}, {"range_min", "nan"});
     expect_bad_render({"--set", "beams=-1"}, {"beams", "-1"});
+    // a whole-number key given nan or inf names it (it said "got null", JSON's spelling of them)
+    expect_bad_render({"--set", "beams=nan"}, {"beams", "got nan"});
+    expect_bad_render({"--set", "bins=1e999"}, {"bins", "got inf"});
     expect_bad_render({"--set", "bins=1e12"}, {"bins"});
     expect_bad_render({"--set", "hfov=360.0001"}, {"hfov = 360.0001"});
     // JSON cannot spell NaN/Inf, but 1e999 overflows the parser's double (it used to escape as an
