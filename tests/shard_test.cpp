@@ -459,6 +459,10 @@ TEST_F(Shard, MergeRefusesGapsOverlapsAndOtherRuns) {
     refused({p("p0"), p("more"), p("p2")}, {"another run", "save: polar vs polar,polar_png"});
     refused({p("p0"), p("poses.csv")}, {"poses.csv", "not a shard's output"});
     refused({p("p0"), p("nothing")}, {"nothing", "no such file"});
+    // a shard.json that is JSON but no shard record: named, without nlohmann's exception tag
+    fs::create_directories(dir_ / "odd");
+    write_text(dir_ / "odd" / "shard.json", "{\"shard\": 1}");
+    refused({p("p0"), p("odd")}, {"odd/shard.json: not a shard record (key 'format' not found)"});
     // A frame folder without meta.json: the shard is incomplete.
     fs::remove(dir_ / "p2" / "frame_000007" / "meta.json");
     refused({p("p0"), p("p1"), p("p2")}, {"p2 (shard 2/3) is incomplete", "2 of 3 frames", "frame_000007"});

@@ -309,7 +309,10 @@ FolderManifest read_manifest(const std::string& dir) {
             m.identity.emplace_back(it.key(),
                                     it.value().is_string() ? it.value().get<std::string>() : it.value().dump());
     } catch (const nlohmann::json::exception& e) {
-        throw BadInput(path.string() + ": " + e.what());
+        // nlohmann's "[json.exception.out_of_range.403] key 'format' not found": the part after the tag
+        std::string what = e.what();
+        if (const auto tag = what.find("] "); tag != std::string::npos) what = what.substr(tag + 2);
+        throw BadInput(path.string() + ": not a shard record (" + what + ")");
     }
     if (m.shard.count == 0 || m.shard.index >= m.shard.count || m.shard.end < m.shard.first ||
         m.lines.size() != m.shard.end - m.shard.first)
