@@ -276,6 +276,16 @@ TEST_F(Cli, BadTrajectoryLineNamesFileAndLine) {
     // a folder or a FIFO is named as such (a FIFO used to block the run, /dev/zero to fill memory)
     expect_bad_render({"--trajectory", dir_.string()}, {"--trajectory", "is a directory"});
     expect_bad_render({"--trajectory", "/dev/zero"}, {"--trajectory /dev/zero", "is not a regular file"});
+    // A header other than six names (or seven, time first) was dropped in silence, as was a first line
+    // of words a number reads (nan); a timed file's line of six numbers blamed the wrong column count.
+    write_text(dir_ / "odd_header.csv", "a,b,c\n0,0,0,0,10,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "odd_header.csv").string()},
+                      {"odd_header.csv:1", "header 'a,b,c' has 3 columns"});
+    write_text(dir_ / "nan_first.csv", "nan,nan,nan,nan,nan,nan\n0,0,0,0,10,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "nan_first.csv").string()}, {"nan_first.csv:1", "not a finite number"});
+    write_text(dir_ / "timed_short.csv", "t,x,y,z,roll,pitch,yaw\n0,0,0,0,10,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "timed_short.csv").string()},
+                      {"timed_short.csv:2", "needs 7 numbers t,x,y,z,roll,pitch,yaw", "got 6"});
 }
 
 TEST_F(Cli, BadOptions) {
@@ -285,6 +295,7 @@ TEST_F(Cli, BadOptions) {
     expect_bad_render({"--sonr", "default"}, {"unknown option '--sonr'", "did you mean '--sonar'"});
     expect_bad_render({"--scene", (dir_ / "missing.gltf").string()}, {"missing.gltf"});
     expect_bad_render({"--set", "beams"}, {"key=value"});
+    expect_bad_render({"--save", ""}, {"--save: no output named"}); // it wrote meta.json alone
 
     const CliRun no_out = run({"render", "--scene", (dir_ / "quad.gltf").string()});
     EXPECT_EQ(no_out.exit_code, 2);

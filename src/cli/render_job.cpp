@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -89,9 +90,11 @@ SaveSet parse_save(const std::vector<std::string>& values) {
     SaveSet save;
     if (values.empty()) return save;
     save.fan = save.polar = save.polar_png = save.polar_u16 = false; // exactly what is listed
+    bool listed = false;
     for (const auto& value : values) {
         for (const auto& item : split(value, ',')) {
             if (item.empty()) continue;
+            listed = true;
             if (item == "default") {
                 save.fan = save.polar = save.polar_png = save.polar_u16 = true;
                 continue;
@@ -108,6 +111,8 @@ SaveSet parse_save(const std::vector<std::string>& values) {
             save.*(output->second) = true;
         }
     }
+    // `--save ""` (a script's empty variable) wrote meta.json alone
+    if (!listed) throw BadInput("--save: no output named (e.g. --save polar, or --save default)");
     return save;
 }
 
@@ -129,10 +134,22 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         const auto first = line.find_first_not_of(" \t");
         if (first == std::string::npos || line[first] == '#') continue;
         const std::string where = path + ":" + std::to_string(number);
-        // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw").
-        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos) {
+        // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw"),
+        // nor words a number reads ("nan,nan,..." is a pose, refused below): six names, or seven with a
+        // time first. Another header would drop a line in silence, or mislead the next line's message.
+        const std::vector<std::string> items = split(line, ',');
+        const bool all_numbers = std::all_of(items.begin(), items.end(), [](const std::string& item) {
+            char* end = nullptr;
+            std::strtod(item.c_str(), &end);
+            return !item.empty() && end == item.c_str() + item.size();
+        });
+        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos && !all_numbers) {
             seen_data = true;
             timed = header_names_time(line);
+            if (items.size() != (timed ? 7u : 6u))
+                throw BadInput(where + ": header '" + line + "' has " + std::to_string(items.size()) +
+                               " columns: expected x,y,z,roll,pitch,yaw, or t,x,y,z,roll,pitch,yaw with a time "
+                               "column (t, time or time_s)");
             continue;
         }
         seen_data = true;
@@ -140,6 +157,11 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         item.line = number;
         std::string pose_text = line;
         if (timed) {
+            if (items.size() != 7)
+                throw BadInput(where + ": '" + line +
+                               "' needs 7 numbers t,x,y,z,roll,pitch,yaw (the header names a "
+                               "time column), got " +
+                               std::to_string(items.size()));
             const std::size_t comma = line.find(',');
             const std::string time_text = line.substr(0, comma);
             item.time_s = parse_double(time_text, where + ": time");
