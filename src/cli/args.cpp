@@ -127,7 +127,9 @@ double parse_double(const std::string& text, const std::string& what) {
     errno = 0;
     char* end = nullptr;
     const double value = t.empty() ? 0.0 : std::strtod(t.c_str(), &end);
-    if (t.empty() || end != t.c_str() + t.size()) throw BadInput(what + ": '" + text + "' is not a number");
+    // (strtod reads hexadecimal too, "0x10" and "0x1p3": no number a person means here)
+    if (t.empty() || end != t.c_str() + t.size() || t.find_first_of("xX") != std::string::npos)
+        throw BadInput(what + ": '" + text + "' is not a number");
     if (!std::isfinite(value) || errno == ERANGE) throw BadInput(what + ": '" + text + "' is not a finite number");
     return value;
 }

@@ -27,7 +27,8 @@ std::pair<std::uint64_t, std::uint64_t> shard_block(std::uint64_t index, std::ui
     return {at(index), at(index + 1)};
 }
 
-std::pair<std::uint64_t, std::uint64_t> parse_shard(const std::string& text, const std::string& what) {
+std::pair<std::uint64_t, std::uint64_t> parse_shard(const std::string& given, const std::string& what) {
+    const std::string text = trim(given); // spaces around it, as every number option takes them
     const auto slash = text.find('/');
     const auto digits = [](const std::string& s) {
         return !s.empty() && s.size() <= 18 && s.find_first_not_of("0123456789") == std::string::npos;

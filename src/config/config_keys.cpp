@@ -386,11 +386,16 @@ std::vector<ConfigKey> make_table() {
 #undef VKS_EFFECT
 
 bool parse_double(const std::string& text, double& out) {
-    if (text.empty()) return false;
+    // Spaces around the number are the shell's, not the value's (" 16" and "16 " alike); hexadecimal
+    // ("0x10", "0x1p3", which strtod reads) is no config number a person means.
+    const auto first = text.find_first_not_of(" \t"), last = text.find_last_not_of(" \t");
+    if (first == std::string::npos) return false;
+    const std::string number = text.substr(first, last - first + 1);
+    if (number.find_first_of("xX") != std::string::npos) return false;
     errno = 0;
     char* end = nullptr;
-    out = std::strtod(text.c_str(), &end);
-    return end == text.c_str() + text.size();
+    out = std::strtod(number.c_str(), &end);
+    return end == number.c_str() + number.size();
 }
 
 std::string markdown_cell(std::string text) {

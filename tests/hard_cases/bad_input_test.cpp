@@ -89,8 +89,9 @@ protected:
 };
 
 TEST_F(BadInput, ValidSceneRendersSoTheFailuresBelowAreTheInputs) {
-    const CliResult r = run({"render", "--backend", "cpu", "--scene", (dir_ / "ok.gltf").string(), "--set", "bins=32",
-                             "--set", "beams=16", "--set", "display.fan_width=64", "--out", (dir_ / "out").string()});
+    // (spaces around a --set number are the shell's: " 16" and "32 " alike)
+    const CliResult r = run({"render", "--backend", "cpu", "--scene", (dir_ / "ok.gltf").string(), "--set", "bins=32 ",
+                             "--set", "beams= 16", "--set", "display.fan_width=64", "--out", (dir_ / "out").string()});
     EXPECT_EQ(r.exit_code, 0) << r.err;
     EXPECT_TRUE(fs::is_regular_file(dir_ / "out" / "polar.npy"));
 }
@@ -122,6 +123,10 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     // a whole-number key given nan or inf names it (it said "got null", JSON's spelling of them)
     expect_bad_render({"--set", "beams=nan"}, {"beams", "got nan"});
     expect_bad_render({"--set", "bins=1e999"}, {"bins", "got inf"});
+    // hexadecimal, which strtod reads, is no number a person means (beams=0x10 rendered 16 beams)
+    expect_bad_render({"--set", "beams=0x10"}, {"beams", "0x10"});
+    expect_bad_render({"--set", "frequency=0x1p20"}, {"frequency", "0x1p20"});
+    expect_bad_render({"--pose", "0x1p3,0,0,0,0,0"}, {"--pose", "0x1p3"});
     expect_bad_render({"--set", "bins=1e12"}, {"bins"});
     expect_bad_render({"--set", "hfov=360.0001"}, {"hfov = 360.0001"});
     // JSON cannot spell NaN/Inf, but 1e999 overflows the parser's double (it used to escape as an
