@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <set>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -75,9 +78,24 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
     if (json_nests_too_deep(json_text))
         return make_error(ErrorCode::parse,
                           origin + ": invalid JSON: nests deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+    // A key twice in one object ("beams": 256 ... "beams": 512, a copy-paste) would leave the last in
+    // silence (JSON keeps one): refused, naming it. Each open object's keys so far, innermost last.
+    std::vector<std::set<std::string>> open_objects;
+    std::string twice;
+    const Json::parser_callback_t keys_once = [&](int, Json::parse_event_t event, Json& parsed) {
+        if (event == Json::parse_event_t::object_start) {
+            open_objects.emplace_back();
+        } else if (event == Json::parse_event_t::object_end) {
+            if (!open_objects.empty()) open_objects.pop_back();
+        } else if (event == Json::parse_event_t::key && !open_objects.empty() && parsed.is_string()) {
+            if (!open_objects.back().insert(parsed.get<std::string>()).second && twice.empty())
+                twice = parsed.get<std::string>();
+        }
+        return true;
+    };
     Json root;
     try {
-        root = Json::parse(json_text, nullptr, /*allow_exceptions=*/true, /*ignore_comments=*/true);
+        root = Json::parse(json_text, keys_once, /*allow_exceptions=*/true, /*ignore_comments=*/true);
     } catch (const nlohmann::json::parse_error& e) {
         // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ...".
         std::string what = e.what();
@@ -91,6 +109,8 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
         if (pos != std::string::npos) what = what.substr(pos + 2);
         return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
     }
+    if (!twice.empty())
+        return make_error(ErrorCode::parse, origin + ": key '" + twice + "' is given twice in one object");
     if (!root.is_object())
         return make_error(ErrorCode::parse,
                           origin + ": expected a JSON object of config keys, got " + std::string(root.type_name()));

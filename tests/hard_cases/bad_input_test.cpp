@@ -144,6 +144,9 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     write_text(dir_ / "deep.json", deep);
     expect_bad_render({"--config", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
     expect_bad_render({"--sonar", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
+    // A key twice in one object: JSON keeps the last in silence ({"hfov": 400, "hfov": 90} rendered).
+    write_text(dir_ / "twice.json", R"({"hfov": 400, "effects": {"speckle": "off"}, "hfov": 90})");
+    expect_bad_render({"--config", (dir_ / "twice.json").string()}, {"twice.json", "key 'hfov' is given twice"});
     // Files that are not files: named as what they are (they all said "no such file").
     expect_bad_render({"--config", dir_.string()}, {"--config", "is a directory"});
     expect_bad_render({"--config", "/dev/null"}, {"--config /dev/null", "is not a regular file"});
