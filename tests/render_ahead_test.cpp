@@ -163,6 +163,13 @@ TEST_P(RenderAhead, RejectsANonFiniteNextPose) {
     EXPECT_EQ(rendered.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(rendered.error().message.find("next pose"), std::string::npos) << rendered.error().message;
     ASSERT_TRUE(r->renderer.render(Pose{}, 1, r->frame)) << "the renderer goes on";
+    // finite as a double but not as the float the view transforms hold
+    Pose far;
+    far.x_m = 1e39;
+    rendered = r->renderer.render(far, 2, r->frame);
+    ASSERT_FALSE(rendered.ok());
+    EXPECT_EQ(rendered.error().code, ErrorCode::invalid_argument);
+    ASSERT_TRUE(r->renderer.render(Pose{}, 3, r->frame)) << "the renderer goes on";
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, RenderAhead,

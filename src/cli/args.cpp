@@ -170,6 +170,9 @@ Pose parse_pose(const std::string& text, const std::string& what) {
             throw BadInput(what + ": '" + text + "': " + names[i] + " = '" + items[static_cast<std::size_t>(i)] +
                            "' is not a finite number (needs x,y,z,roll,pitch,yaw)");
         }
+        if (!std::isfinite(static_cast<float>(v[i]))) // the renderer's transforms are float
+            throw BadInput(what + ": '" + text + "': " + names[i] + " = '" + items[static_cast<std::size_t>(i)] +
+                           "' is past a float's range");
     }
     return Pose{v[0], v[1], v[2], v[3], v[4], v[5]};
 }

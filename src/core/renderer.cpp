@@ -297,9 +297,10 @@ Misfit misfit_array(const RendererImpl& impl, const Frame& frame) {
     return misfit;
 }
 
+// Finite, also as the float the view transforms hold (a pose of 1e39 m was taken and became inf there).
 bool finite_pose(const Pose& pose) {
     for (double v : {pose.x_m, pose.y_m, pose.z_m, pose.roll_deg, pose.pitch_deg, pose.yaw_deg})
-        if (!std::isfinite(v)) return false;
+        if (!std::isfinite(v) || !std::isfinite(static_cast<float>(v))) return false;
     return true;
 }
 
@@ -343,9 +344,9 @@ Result<void> backend_frame(RendererImpl& impl, const Pose& pose, std::uint64_t f
 
 Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame_index, Frame& frame,
                        const NextFrame* next) {
-    if (!finite_pose(pose)) return make_error(ErrorCode::invalid_argument, "pose: non-finite value");
+    if (!finite_pose(pose)) return make_error(ErrorCode::invalid_argument, "pose: a value not finite (in float)");
     if (next != nullptr && !finite_pose(next->pose))
-        return make_error(ErrorCode::invalid_argument, "next pose: non-finite value");
+        return make_error(ErrorCode::invalid_argument, "next pose: a value not finite (in float)");
     const Plan& p = impl.plan;
     if (const Misfit misfit = misfit_array(impl, frame); misfit.name != nullptr) {
         return make_error(ErrorCode::invalid_argument,

@@ -127,6 +127,8 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     expect_bad_render({"--set", "beams=0x10"}, {"beams", "0x10"});
     expect_bad_render({"--set", "frequency=0x1p20"}, {"frequency", "0x1p20"});
     expect_bad_render({"--pose", "0x1p3,0,0,0,0,0"}, {"--pose", "0x1p3"});
+    // finite as a double, not as the float the renderer's transforms hold
+    expect_bad_render({"--pose", "1e39,0,0,0,0,0"}, {"--pose", "x = '1e39' is past a float's range"});
     expect_bad_render({"--set", "bins=1e12"}, {"bins"});
     expect_bad_render({"--set", "hfov=360.0001"}, {"hfov = 360.0001"});
     // JSON cannot spell NaN/Inf, but 1e999 overflows the parser's double (it used to escape as an
