@@ -300,6 +300,9 @@ TEST_F(Cli, BadOptions) {
     const CliRun no_out = run({"render", "--scene", (dir_ / "quad.gltf").string()});
     EXPECT_EQ(no_out.exit_code, 2);
     EXPECT_EQ(no_out.err, "error: render: --out DIR is required\n");
+    const CliRun empty_out = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--out", ""});
+    EXPECT_EQ(empty_out.exit_code, 2);
+    EXPECT_EQ(empty_out.err, "error: render: --out is empty (a folder, FILE.h5 or FILE.mcap)\n");
 
     const CliRun unknown = run({"rendr"});
     EXPECT_EQ(unknown.exit_code, 2);

@@ -419,7 +419,8 @@ void pick_shard(const Args& args, RenderJob& job) {
 RenderJob parse_job(const Args& args) {
     if (!args.positional.empty())
         throw BadInput("render: unexpected argument '" + args.positional[0] + "' (see vksonar render --help)");
-    if (!args.has("--out") || args.value("--out").empty()) throw BadInput("render: --out DIR is required");
+    if (!args.has("--out")) throw BadInput("render: --out DIR is required");
+    if (args.value("--out").empty()) throw BadInput("render: --out is empty (a folder, FILE.h5 or FILE.mcap)");
     if (args.has("--pose") && args.has("--trajectory")) throw BadInput("render: give --pose or --trajectory, not both");
     RenderJob job;
     parse_options(args, job);
