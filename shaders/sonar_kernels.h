@@ -468,6 +468,7 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         VKS_PRECISE REAL hi = centre + REAL(0.5) * width;
         // the density's slope from the neighbours' footprints (both on this surface)
         REAL g = REAL(0);
+        bool known = false;
         bool up_side = a != REAL(0) && up2.y > REAL(0);
         bool down_side = b != REAL(0) && down2.y > REAL(0);
         if (up_side && down_side) {
@@ -475,6 +476,7 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
             VKS_PRECISE REAL w_down = REAL(0.5) * abs(r - down2.y) * inv_bin_width_m;
             // between the neighbours' footprint centres, (r + 2 r_q + r_q2) / 4 on either side
             VKS_PRECISE REAL span = (REAL(2) * (up.y - down.y) + (up2.y - down2.y)) * (REAL(0.25) * inv_bin_width_m);
+            known = footprint_slope_known(up.x, w_up, down.x, w_down, span);
             g = footprint_log_slope(up.x, w_up, down.x, w_down, span, width);
         } else if (up_side || down_side) {
             // One side only (the surface's, the view's or the depth pass's last rows): the slope between
@@ -485,7 +487,14 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
             VKS_PRECISE REAL w_q = REAL(0.5) * abs(r_q2 - r) * inv_bin_width_m;
             VKS_PRECISE REAL span =
                 ((r + REAL(2) * q.y + r_q2) * REAL(0.25) - r) * inv_bin_width_m - (column_centre - f);
+            known = footprint_slope_known(q.x, w_q, er.x, xh - xl, span);
             g = footprint_log_slope(q.x, w_q, er.x, xh - xl, span, width);
+        }
+        // Without a slope from the neighbours the surface's own density is taken flat, and the whole
+        // density falls as absorption does across the footprint: g = -b (b = absorption_per_bin; 0 with
+        // the effect off, as before).
+        if (!known) {
+            g = -absorption_per_bin;
         }
         s.lo = lo;
         s.hi = hi;
@@ -494,16 +503,14 @@ VKS_FN_INLINE RangeSpread range_spread(uint kernel, vec2 up2, vec2 up, vec2 er, 
         // The pixel's energy holds absorption at its own range f; its footprint's parts lie up to metres
         // nearer and farther (a grazing seabed: 0.9 dB a side at 900 kHz, 90 m), and the absorption it
         // averages over them is more than at f: by a factor up to 1.3 dB there, which the spread's total
-        // carries (shares summing to that factor, not to 1). With a slope g from the neighbours (they hold
-        // absorption at their ranges: g is the whole density's, the surface's own is g + b), the density
-        // is e^(g (x - c)) and its integral e^(-b (c - f)) / (width sinhc((g + b) width / 2)) of the
-        // pixel's; without (g = 0: the surface's taken flat) absorption's mean over the box,
-        // e^(-b (c - f)) sinhc(b width / 2); b = absorption_per_bin. With the effect off (b = 0) both are
-        // 1 / (width sinhc(g width / 2)), as before, bit for bit.
+        // carries (shares summing to that factor, not to 1). The density is e^(g (x - c)): g is the whole
+        // density's slope (the neighbours hold absorption at their ranges), the surface's own is g + b,
+        // and the pixel's energy is the surface's integral times absorption at f, so the density's
+        // integral is e^(-b (c - f)) / (width sinhc((g + b) width / 2)) of it. With the effect off
+        // (b = 0) this is 1 / (width sinhc(g width / 2)), as before, bit for bit.
         VKS_PRECISE REAL y = REAL(0.5) * (g + absorption_per_bin) * width;
-        REAL sinhc = sinhc_of(y);
         REAL tilt = exp(min(max(-absorption_per_bin * (centre - f), REAL(-60)), REAL(60)));
-        s.inv_norm = g != REAL(0) ? tilt / (width * sinhc) : tilt * sinhc / width;
+        s.inv_norm = tilt / (width * sinhc_of(y));
         s.k_first = max(s.origin + int(floor(lo)), 0);
         s.k_last = min(s.origin + int(floor(hi)), nb - 1);
     } else if (kernel == kRangeKernelTent) {

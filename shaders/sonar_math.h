@@ -281,8 +281,11 @@ VKS_FN REAL sinhc_of(REAL y) {
 // a flat box over a footprint of metres leaves a saw-tooth of +-0.5 dB across the bins. 0 (a flat box)
 // where a neighbour is missing or empty; |g| is capped at 1 per bin and at 8 over the footprint, so the
 // density never spans more than e^8 across a pixel.
+VKS_FN bool footprint_slope_known(REAL e_up, REAL w_up, REAL e_down, REAL w_down, REAL span) {
+    return e_up > REAL(0) && e_down > REAL(0) && w_up > REAL(0) && w_down > REAL(0) && abs(span) > REAL(0);
+}
 VKS_FN REAL footprint_log_slope(REAL e_up, REAL w_up, REAL e_down, REAL w_down, REAL span, REAL width) {
-    if (!(e_up > REAL(0) && e_down > REAL(0) && w_up > REAL(0) && w_down > REAL(0) && abs(span) > REAL(0))) {
+    if (!footprint_slope_known(e_up, w_up, e_down, w_down, span)) {
         return REAL(0);
     }
     REAL g = log((e_up * w_down) / (e_down * w_up)) / span;

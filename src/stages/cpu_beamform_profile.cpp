@@ -280,8 +280,10 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
         const __m256 cap = min8(one, _mm256_div_ps(_mm256_set1_ps(8.0f), width));
         g = _mm256_and_ps(has_g, min8(max8(slope, neg8(cap)), cap));
     }
-    // inv_norm: range_spread's, with absorption averaged over the footprint (b = absorption_per_bin)
+    // without a slope from the neighbours, absorption's (range_spread: g = -b, b = absorption_per_bin)
     const __m256 vb = _mm256_set1_ps(absorption_per_bin);
+    g = select8(has_g, g, neg8(vb));
+    // inv_norm: range_spread's, with absorption averaged over the footprint
     const __m256 y = _mm256_mul_ps(_mm256_mul_ps(half, _mm256_add_ps(g, vb)), width);
     const __m256 y2 = _mm256_mul_ps(y, y);
     const __m256 inner = _mm256_add_ps(one, _mm256_div_ps(y2, _mm256_set1_ps(42.0f)));
@@ -294,9 +296,7 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
     }
     const __m256 tilt_arg = _mm256_mul_ps(neg8(vb), _mm256_sub_ps(centre, f));
     const __m256 tilt = exp8(min8(max8(tilt_arg, _mm256_set1_ps(-60.0f)), _mm256_set1_ps(60.0f)));
-    const __m256 inv_norm =
-        select8(_mm256_cmp_ps(g, zero, _CMP_NEQ_UQ), _mm256_div_ps(tilt, _mm256_mul_ps(width, sinhc)),
-                _mm256_div_ps(_mm256_mul_ps(tilt, sinhc), width));
+    const __m256 inv_norm = _mm256_div_ps(tilt, _mm256_mul_ps(width, sinhc));
     alignas(32) float lo_l[8], hi_l[8], centre_l[8], g_l[8], inv_l[8];
     alignas(32) std::int32_t first_l[8], last_l[8], origin_l[8];
     _mm256_store_ps(lo_l, lo);
