@@ -844,6 +844,14 @@ TEST_F(Writer, AnUnshardedFolderRunReplacesTheEarlierRun) {
     EXPECT_EQ(read_text(dir_ / "mine" / "fan.png"), "the user's");
     EXPECT_EQ(read_text(dir_ / "mine" / "depth.npy"), "the user's");
     EXPECT_TRUE(fs::exists(dir_ / "mine" / "polar.npy"));
+    // a frame folder of frame-named files, no meta.json, no vksonar run beside it: someone's own
+    fs::create_directories(dir_ / "mine2" / "frame_000001");
+    write_text(dir_ / "mine2" / "frame_000001" / "fan.png", "the user's");
+    r = run(with(render_args("mine2", {"--save", "polar"}), ""));
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find("frame_000001 has no meta.json, and no vksonar run's frame lies beside it"), std::string::npos)
+        << r.err;
+    EXPECT_EQ(read_text(dir_ / "mine2" / "frame_000001" / "fan.png"), "the user's");
     write_text(dir_ / "kd" / "frame_000002" / "notes.txt", "mine too");
     r = run(with(render_args("kd", {"--save", "polar"}), (dir_ / "two.csv").string()));
     EXPECT_EQ(r.exit_code, 2) << r.err;

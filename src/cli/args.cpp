@@ -27,10 +27,10 @@ void require_input_file(const std::string& what, const std::string& path) {
         throw BadInput(named + ": is not a regular file (a FIFO, socket or device: give a file)");
 }
 
-void require_writable_output(const std::string& what, const std::string& path) {
+void require_writable_output(const std::string& what, const std::string& path, const std::string& written_at) {
     namespace fs = std::filesystem;
     if (path.empty()) throw BadInput(what + ": the path is empty");
-    const fs::path target(path);
+    const fs::path target(written_at.empty() ? path : written_at);
     const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
     std::error_code ec;
     if (!fs::is_directory(folder, ec)) throw BadInput(what + " " + path + ": no folder " + folder.string());

@@ -59,8 +59,9 @@ void require_input_file(const std::string& what, const std::string& path);
 // An output file the command will create: a name that is not empty, in a folder that exists and takes a
 // new file (a probe file is made there and removed: access() says yes to root on a read-only mount or
 // in /proc, where the write itself then failed naming a temporary file, exit 1). Throws BadInput
-// "WHAT PATH: ..." (`what` names the option or argument).
-void require_writable_output(const std::string& what, const std::string& path);
+// "WHAT PATH: ..." (`what` names the option or argument). `written_at`: where the file is made when
+// that is not PATH (PATH a symlink: the file goes beside its target); its folder is the one probed.
+void require_writable_output(const std::string& what, const std::string& path, const std::string& written_at = {});
 
 // `text` without the spaces, tabs and line ends around it.
 std::string trim(const std::string& text);

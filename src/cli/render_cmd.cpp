@@ -258,25 +258,37 @@ public:
             return is_frame_file(name);
         };
         const bool single_pose_run = written_by_vksonar(dir_ / kMetaJson);
+        // A frame folder without meta.json (a killed run's last) is an earlier run's only beside one
+        // that has it, or a single pose's: a folder of frame-named files alone is someone's own.
+        std::vector<fs::path> frame_folders;
+        bool run_seen = single_pose_run;
         for (const auto& entry : fs::directory_iterator(dir_, ec)) {
             const std::string name = entry.path().filename().string();
-            const bool frame_folder = name.size() > 6 && name.rfind("frame_", 0) == 0 &&
-                                      name.find_first_not_of("0123456789", 6) == std::string::npos &&
-                                      entry.is_directory(ec) && !entry.is_symlink(ec);
-            if (frame_folder) {
-                const bool has_meta = fs::exists(entry.path() / kMetaJson, ec);
-                if (has_meta && !written_by_vksonar(entry.path() / kMetaJson))
-                    throw BadInput("--out " + dir_.string() + ": " + name + "/" + std::string(kMetaJson) +
-                                   " is not a vksonar frame's; move the folder, or give another --out");
-                for (const auto& inside : fs::directory_iterator(entry.path(), ec))
-                    if (!ours(inside.path().filename().string()) || inside.is_directory(ec))
-                        throw BadInput("--out " + dir_.string() + ": " + name + " holds " +
-                                       inside.path().filename().string() +
-                                       ", which no vksonar run writes; move it, or give another --out");
-                stale.push_back(entry.path());
+            if (name.size() > 6 && name.rfind("frame_", 0) == 0 &&
+                name.find_first_not_of("0123456789", 6) == std::string::npos && entry.is_directory(ec) &&
+                !entry.is_symlink(ec)) {
+                frame_folders.push_back(entry.path());
+                run_seen = run_seen || written_by_vksonar(entry.path() / kMetaJson);
             } else if (ours(name) && !entry.is_directory(ec) && (single_pose_run || name.rfind(".~", 0) == 0)) {
                 stale.push_back(entry.path());
             }
+        }
+        for (const fs::path& folder : frame_folders) {
+            const std::string name = folder.filename().string();
+            const bool has_meta = fs::exists(folder / kMetaJson, ec);
+            if (has_meta && !written_by_vksonar(folder / kMetaJson))
+                throw BadInput("--out " + dir_.string() + ": " + name + "/" + std::string(kMetaJson) +
+                               " is not a vksonar frame's; move the folder, or give another --out");
+            if (!has_meta && !run_seen)
+                throw BadInput("--out " + dir_.string() + ": " + name +
+                               " has no meta.json, and no vksonar run's frame lies beside it; move it, or give "
+                               "another --out");
+            for (const auto& inside : fs::directory_iterator(folder, ec))
+                if (!ours(inside.path().filename().string()) || inside.is_directory(ec))
+                    throw BadInput("--out " + dir_.string() + ": " + name + " holds " +
+                                   inside.path().filename().string() +
+                                   ", which no vksonar run writes; move it, or give another --out");
+            stale.push_back(folder);
         }
         if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
         for (const fs::path& path : stale) {
@@ -380,7 +392,7 @@ public:
         if (!fs::is_directory(folder, ec)) throw BadInput("--out " + named + ": no folder " + folder.string());
         if (fs::is_directory(target_, ec)) throw BadInput("--out " + named + ": is a directory");
         if (::access(folder.c_str(), W_OK) != 0) throw BadInput("--out " + named + ": the folder is not writable");
-        require_writable_output("--out", named);
+        require_writable_output("--out", named, target_.string()); // where the file is made: beside a link's target
         const std::string name = ".~" + target_.filename().string() + ".writing-" + std::to_string(::getpid());
         temporary_ = target_.has_parent_path() ? folder / name : fs::path(name);
         if (shard) lock_.emplace(target_, named);

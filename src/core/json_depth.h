@@ -12,11 +12,20 @@ namespace vksonar {
 inline constexpr int kMaxJsonDepth = 128;
 
 // True when the text opens more than max_depth objects or arrays inside each other (brackets inside
-// strings do not count; the text need not be valid JSON).
+// strings and comments do not count: config files are read with // and /* */ comments, and a quote in
+// one must not hide the brackets after it; the text need not be valid JSON).
 inline bool json_nests_too_deep(std::string_view text, int max_depth = kMaxJsonDepth) {
     int depth = 0;
     bool in_string = false, escaped = false;
-    for (const char c : text) {
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        const char c = text[i];
+        if (!in_string && c == '/' && i + 1 < text.size() && (text[i + 1] == '/' || text[i + 1] == '*')) {
+            const bool line = text[i + 1] == '/';
+            const std::size_t end = line ? text.find('\n', i + 2) : text.find("*/", i + 2);
+            if (end == std::string_view::npos) break; // the comment runs to the end
+            i = line ? end : end + 1;
+            continue;
+        }
         if (in_string) {
             if (escaped)
                 escaped = false;

@@ -146,6 +146,10 @@ TEST_F(BadInput, ConfigValuesAtAndBeyondTheEdges) {
     write_text(dir_ / "deep.json", deep);
     expect_bad_render({"--config", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
     expect_bad_render({"--sonar", (dir_ / "deep.json").string()}, {"deep.json", "nests deeper than 128 levels"});
+    // a quote inside a comment (config files take them) must not hide the brackets after it
+    write_text(dir_ / "commented.json", "/* \" */ " + deep);
+    expect_bad_render({"--config", (dir_ / "commented.json").string()},
+                      {"commented.json", "nests deeper than 128 levels"});
     // A key twice in one object: JSON keeps the last in silence ({"hfov": 400, "hfov": 90} rendered).
     write_text(dir_ / "twice.json", R"({"hfov": 400, "effects": {"speckle": "off"}, "hfov": 90})");
     expect_bad_render({"--config", (dir_ / "twice.json").string()}, {"twice.json", "key 'hfov' is given twice"});
@@ -194,6 +198,11 @@ TEST_F(BadInput, UnwritableOutputsAreOneLineNamingTheOption) {
     expect_bad({"render", "--backend", "cpu", "--scene", scene, "--trajectory", (dir_ / "two.csv").string(), "--out",
                 "/proc/vksonar_never.mcap"},
                {"--out /proc/vksonar_never.mcap", "cannot write in /proc"});
+    // --out a link to such a place: the file is made beside the link's target, so that folder is probed
+    fs::create_symlink("/proc/vksonar_never.mcap", dir_ / "link.mcap");
+    expect_bad({"render", "--backend", "cpu", "--scene", scene, "--trajectory", (dir_ / "two.csv").string(), "--out",
+                (dir_ / "link.mcap").string()},
+               {"link.mcap", "cannot write in /proc"});
     expect_bad({"merge", "/proc/vksonar_never", (dir_ / "none").string()},
                {"merge: OUT /proc/vksonar_never", "cannot write in /proc"});
     expect_bad({"merge", "", (dir_ / "none").string()}, {"merge: OUT is empty"});
