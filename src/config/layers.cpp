@@ -1,7 +1,8 @@
 #include "config/layers.h"
 
 #include <filesystem>
-#include <utility>
+
+#include "config/config_keys.h"
 
 namespace vksonar {
 
@@ -13,28 +14,20 @@ Result<SonarConfig> load_sonar_file(const std::string& path) {
 
 std::vector<EffectState> credit_scene_requests(std::vector<EffectState> states, const EffectsConfig& without_scene,
                                                const EffectsConfig& with_scene) {
-    // Plan::effects' names (plan.cpp, resolve) and the EffectsConfig member each reads.
-    static constexpr std::pair<const char*, EffectMode EffectsConfig::*> kModes[] = {
-        {"incidence", &EffectsConfig::incidence},
-        {"vertical_pattern", &EffectsConfig::vertical_pattern},
-        {"vertical_sidelobes", &EffectsConfig::vertical_sidelobes},
-        {"horizontal_pattern", &EffectsConfig::horizontal_pattern},
-        {"spreading", &EffectsConfig::spreading},
-        {"absorption", &EffectsConfig::absorption},
-        {"speckle", &EffectsConfig::speckle},
-        {"ambient_noise", &EffectsConfig::ambient_noise},
-        {"tvg", &EffectsConfig::tvg}};
-    for (EffectState& state : states)
-        for (const auto& [name, mode] : kModes) {
-            if (state.name != name || without_scene.*mode == with_scene.*mode) continue;
-            // "on in config" / "off in config" and what a step added after it ("; far side lobes ...")
-            const std::string prefix = state.on ? "on in config" : "off in config";
-            if (state.why.compare(0, prefix.size(), prefix) == 0)
-                state.why = (state.on ? "on" : "off") +
-                            std::string(": the scene requests it "
-                                        "(scenes[N].extras.vksonar.effects)") +
-                            state.why.substr(prefix.size());
-        }
+    // Each effect's mode through its config key, "effects.NAME" (Plan::effects' names are the keys').
+    SonarConfig without, with;
+    without.effects = without_scene;
+    with.effects = with_scene;
+    for (EffectState& state : states) {
+        const config_keys::ConfigKey* key = config_keys::find("effects." + state.name);
+        if (key == nullptr || key->get(without) == key->get(with)) continue;
+        // "on in config" / "off in config" and what a step added after it ("; far side lobes ...")
+        const std::string prefix = state.on ? "on in config" : "off in config";
+        if (state.why.compare(0, prefix.size(), prefix) == 0)
+            state.why = (state.on ? "on" : "off") +
+                        std::string(": the scene requests it (scenes[N].extras.vksonar.effects)") +
+                        state.why.substr(prefix.size());
+    }
     return states;
 }
 
