@@ -304,6 +304,19 @@ TEST_F(Cli, BadOptions) {
     EXPECT_EQ(empty_out.exit_code, 2);
     EXPECT_EQ(empty_out.err, "error: render: --out is empty (a folder, FILE.h5 or FILE.mcap)\n");
 
+    // options that mean nothing together or here (an audit's: each was taken in silence)
+    const CliRun both = run({"presets", "--show", "default", "--keys"});
+    EXPECT_EQ(both.exit_code, 2);
+    EXPECT_NE(both.err.find("--show and --keys"), std::string::npos) << both.err;
+    const CliRun root_alone = run({"info", "--asset-root", dir_.string()});
+    EXPECT_EQ(root_alone.exit_code, 2);
+    EXPECT_NE(root_alone.err.find("info: --asset-root"), std::string::npos) << root_alone.err;
+    const CliRun soak = run({"bench", "speed", "--backend", "cpu", "--frames", "3", "--memory-frames", "5"});
+    EXPECT_EQ(soak.exit_code, 2);
+    EXPECT_NE(soak.err.find("--memory-frames 5: more than the 10 warm-up frames"), std::string::npos) << soak.err;
+    write_text(dir_ / "nul.csv", std::string("x,y,z,roll,pitch,yaw\n0,0,0") + '\0' + ",0,10,0\n");
+    expect_bad_render({"--trajectory", (dir_ / "nul.csv").string()}, {"nul.csv:2: a NUL byte"});
+
     const CliRun unknown = run({"rendr"});
     EXPECT_EQ(unknown.exit_code, 2);
     EXPECT_NE(unknown.err.find("did you mean 'render'"), std::string::npos) << unknown.err;

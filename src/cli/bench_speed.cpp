@@ -112,6 +112,11 @@ int run_bench_speed(const std::vector<std::string>& argv) {
     std::uint64_t memory_frames = 1000;
     if (args.has("--memory-frames")) memory_frames = parse_u64(args.value("--memory-frames"), "--memory-frames");
     constexpr std::uint32_t kWarmup = 10;
+    // RSS is read after the warm-up and again after M frames in all (at least those the bench renders
+    // anyway): an M within the warm-up asks for growth over no frames, and was raised in silence
+    if (memory_frames <= kWarmup)
+        throw BadInput("--memory-frames " + args.value("--memory-frames") + ": more than the " +
+                       std::to_string(kWarmup) + " warm-up frames, after which RSS is first read");
 
     Setup setup = load_setup(args);
     Context context = make_context(backend);

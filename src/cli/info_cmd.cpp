@@ -73,6 +73,9 @@ int run_info(const std::vector<std::string>& argv) {
     }
     if (args.positional.size() == 1) return scene_info(args.positional[0], args.value("--asset-root"));
     if (!args.positional.empty()) throw BadInput("info: unexpected argument '" + args.positional[1] + "'");
+    if (args.has("--asset-root"))
+        throw BadInput("info: --asset-root " + args.value("--asset-root") +
+                       " is for a scene's files: give the scene (vksonar info SCENE.gltf --asset-root DIR)");
     std::printf("vksonar %s\n", host::vksonar_version());
     ContextOptions options;
     options.enable_validation = args.has("--validation");

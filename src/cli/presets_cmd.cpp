@@ -22,6 +22,8 @@ int run_presets(const std::vector<std::string>& argv) {
         return 0;
     }
     if (!args.positional.empty()) throw BadInput("presets: unexpected argument '" + args.positional[0] + "'");
+    if (args.has("--keys") && args.has("--show"))
+        throw BadInput("presets: --show and --keys print different things: give one (--keys ignored --show)");
     if (args.has("--keys")) {
         std::fputs(config_keys::reference_markdown().c_str(), stdout);
         return 0;

@@ -134,6 +134,8 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         const auto first = line.find_first_not_of(" \t");
         if (first == std::string::npos || line[first] == '#') continue;
         const std::string where = path + ":" + std::to_string(number);
+        // (a NUL cut the line's error message short where it was printed: named here instead)
+        if (line.find('\0') != std::string::npos) throw BadInput(where + ": a NUL byte (is it a text file?)");
         // A header is the first non-comment line when it holds no number at all ("x,y,z,roll,pitch,yaw"),
         // nor words a number reads ("nan,nan,..." is a pose, refused below): six names, or seven with a
         // time first. Another header would drop a line in silence, or mislead the next line's message.
