@@ -34,14 +34,18 @@ void require_writable_output(const std::string& what, const std::string& path, c
     const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
     std::error_code ec;
     if (!fs::is_directory(folder, ec)) throw BadInput(what + " " + path + ": no folder " + folder.string());
-    const fs::path probe = folder / (".~" + target.filename().string() + ".probe-" + std::to_string(::getpid()));
+    if (const std::string why = folder_refuses_files(folder.string(), target.filename().string()); !why.empty())
+        throw BadInput(what + " " + path + ": cannot write in " + folder.string() + " (" + why + ")");
+}
+
+std::string folder_refuses_files(const std::string& folder, const std::string& name) {
+    const std::filesystem::path probe =
+        std::filesystem::path(folder) / (".~" + name + ".probe-" + std::to_string(::getpid()));
     const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
-    if (fd < 0 && errno != EEXIST)
-        throw BadInput(what + " " + path + ": cannot write in " + folder.string() + " (" + std::strerror(errno) + ")");
-    if (fd >= 0) {
-        ::close(fd);
-        ::unlink(probe.c_str());
-    }
+    if (fd < 0) return errno == EEXIST ? std::string() : std::strerror(errno);
+    ::close(fd);
+    ::unlink(probe.c_str());
+    return {};
 }
 
 std::string trim(const std::string& text) {

@@ -62,6 +62,9 @@ void require_input_file(const std::string& what, const std::string& path);
 // "WHAT PATH: ..." (`what` names the option or argument). `written_at`: where the file is made when
 // that is not PATH (PATH a symlink: the file goes beside its target); its folder is the one probed.
 void require_writable_output(const std::string& what, const std::string& path, const std::string& written_at = {});
+// Empty when `folder` takes a new file (a probe file `.~NAME.probe-PID` is made there and removed),
+// else why not (strerror). The probe both output checks use: access() says yes to root everywhere.
+std::string folder_refuses_files(const std::string& folder, const std::string& name);
 
 // `text` without the spaces, tabs and line ends around it.
 std::string trim(const std::string& text);

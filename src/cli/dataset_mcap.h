@@ -37,6 +37,7 @@ struct McapOptions {
     bool cloud = false;      // PREFIX/points
     bool instance = false;   // PREFIX/instance (the frames must carry labels: SaveFlags::labels)
     bool zstd = false;       // zstd chunk compression
+    double rate = 10.0;      // --rate: frames/s of a trajectory without a time column (frame i at i / rate s)
     std::string library;     // the MCAP header's library field
     // A shard's record and run identity (render --shard): a "vksonar_shard" Metadata record, written
     // right after the Header, that `vksonar merge` and a re-run of the shard read; empty for an

@@ -221,15 +221,10 @@ public:
                                (ec ? ec.message() : std::string("unknown error")) + ")");
             created_ = missing;
         }
-        // Root passes access(W_OK) everywhere, so probe with a real file.
-        const fs::path probe = dir / (".vksonar-probe-" + std::to_string(::getpid()));
-        std::FILE* f = std::fopen(probe.c_str(), "wb");
-        if (!f) {
+        if (const std::string why = folder_refuses_files(dir.string(), "out"); !why.empty()) {
             cleanup();
-            throw BadInput("--out " + dir.string() + ": output directory is not writable");
+            throw BadInput("--out " + dir.string() + ": output directory is not writable (" + why + ")");
         }
-        std::fclose(f);
-        fs::remove(probe, ec);
     }
     ~OutputDir() {
         if (!keep_) cleanup();
@@ -389,10 +384,10 @@ public:
         std::error_code ec;
         const std::string named = out.string();
         const fs::path folder = target_.has_parent_path() ? target_.parent_path() : fs::path(".");
-        if (!fs::is_directory(folder, ec)) throw BadInput("--out " + named + ": no folder " + folder.string());
         if (fs::is_directory(target_, ec)) throw BadInput("--out " + named + ": is a directory");
-        if (::access(folder.c_str(), W_OK) != 0) throw BadInput("--out " + named + ": the folder is not writable");
-        require_writable_output("--out", named, target_.string()); // where the file is made: beside a link's target
+        // its folder exists and takes a new file (a probe, which access() is not for root), where the file
+        // is made: beside a link's target
+        require_writable_output("--out", named, target_.string());
         const std::string name = ".~" + target_.filename().string() + ".writing-" + std::to_string(::getpid());
         temporary_ = target_.has_parent_path() ? folder / name : fs::path(name);
         if (shard) lock_.emplace(target_, named);
@@ -579,7 +574,6 @@ struct Writers {
     std::vector<std::string> damaged; // a re-run folder shard: frames whose files are not as meta.json says
     std::unique_ptr<McapDatasetWriter> bag;
     bool bag_complete = false; // a re-run shard whose bag holds its whole block already
-    double bag_rate = 10.0;    // --rate
 };
 
 void open_dataset(const RenderJob& job, const Plan& plan, const Outputs& outputs, const Args& args, DatasetFile& file,
@@ -615,8 +609,7 @@ void start_folder_manifest(const RenderJob& job, const Outputs& outputs, const O
 // count and the scene's hash, and the bag's own settings. A shard's bag records it in its shard record
 // (compared by `vksonar merge` and a re-run); an unsharded or merged bag in its run record, the same
 // entries (an unsharded run is the one shard of itself), so that the two bags stay byte-identical.
-Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& outputs, const McapOptions& bag_options,
-                      double bag_rate) {
+Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& outputs, const McapOptions& bag_options) {
     ShardRecord whole;
     whole.total = job.poses.size();
     whole.scene_hash = job.scene_hash;
@@ -624,7 +617,7 @@ Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& out
     Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
                                      save_list(job.save), job.timed, job.shard ? &*job.shard : &whole);
     char rate[32];
-    std::snprintf(rate, sizeof rate, "%.17g", bag_rate);
+    std::snprintf(rate, sizeof rate, "%.17g", bag_options.rate);
     identity.insert(identity.end(), {{"ros_prefix", bag_options.prefix},
                                      {"ros_frame", bag_options.frame},
                                      {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},
@@ -637,7 +630,7 @@ Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& out
 void resume_bag_shard(const Args& args, const RenderJob& job, const Plan& plan, const Outputs& outputs,
                       McapOptions& bag_options, const fs::path& target, Writers& writers) {
     const ShardRecord& shard = *job.shard;
-    const Identity identity = bag_identity(args, job, outputs, bag_options, writers.bag_rate);
+    const Identity identity = bag_identity(args, job, outputs, bag_options);
     bag_options.shard = shard_metadata(shard, identity, outputs.backend, outputs.device, bag_options.zstd);
     BagResume resumed = bag_shard_resume(target.string(), plan, bag_options, shard, identity);
     for (std::uint64_t k = 0; k < resumed.frames; ++k)
@@ -654,8 +647,7 @@ void open_bag(const Args& args, RenderJob& job, const Plan& plan, const Outputs&
     if (job.shard)
         resume_bag_shard(args, job, plan, outputs, bag_options, file.target(), writers);
     else
-        bag_options.run =
-            run_metadata(bag_identity(args, job, outputs, bag_options, writers.bag_rate), host::vksonar_version());
+        bag_options.run = run_metadata(bag_identity(args, job, outputs, bag_options), host::vksonar_version());
     if (!writers.bag && !writers.bag_complete) {
         // Named as OUT's target in the bag (rosbag2's metadata), written under the temporary name.
         auto created = McapDatasetWriter::create(file.target().string(), plan, bag_options, file.temporary().string());
@@ -672,7 +664,6 @@ Writers open_writers(const Args& args, RenderJob& job, const Plan& plan, const O
         open_dataset(job, plan, outputs, args, *target.file, writers);
     else if (job.shard && !job.bag)
         start_folder_manifest(job, outputs, *target.dir, writers);
-    writers.bag_rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
     if (job.bag) open_bag(args, job, plan, outputs, *target.file, writers);
     return writers;
 }
@@ -688,7 +679,7 @@ void write_bag_frame(const WriteBehind::Slot& slot, const RenderJob& job, Output
     // first frame is `first`): the stamps are ordinal / rate, in a shard's bag as in the
     // unsharded run's.
     const auto stamp_ns =
-        job.timed ? slot.time_ns : static_cast<std::uint64_t>(std::llround(slot.time_s / writers.bag_rate * 1e9));
+        job.timed ? slot.time_ns : static_cast<std::uint64_t>(std::llround(slot.time_s / bag_options.rate * 1e9));
     auto appended =
         writers.bag->append(slot.frame, slot.pose, stamp_ns, &outputs.image, u16 ? outputs.quantized.data() : nullptr);
     if (!appended) throw Failure(appended.error().message);

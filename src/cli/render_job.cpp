@@ -140,12 +140,14 @@ std::vector<TrajectoryPose> read_trajectory(const std::string& path, bool& timed
         // nor words a number reads ("nan,nan,..." is a pose, refused below): six names, or seven with a
         // time first. Another header would drop a line in silence, or mislead the next line's message.
         const std::vector<std::string> items = split(line, ',');
-        const bool all_numbers = std::all_of(items.begin(), items.end(), [](const std::string& item) {
-            char* end = nullptr;
-            std::strtod(item.c_str(), &end);
-            return !item.empty() && end == item.c_str() + item.size();
-        });
-        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos && !all_numbers) {
+        const auto all_numbers = [&items] {
+            return std::all_of(items.begin(), items.end(), [](const std::string& item) {
+                char* end = nullptr;
+                std::strtod(item.c_str(), &end);
+                return !item.empty() && end == item.c_str() + item.size();
+            });
+        };
+        if (!seen_data && poses.empty() && line.find_first_of("0123456789") == std::string::npos && !all_numbers()) {
             seen_data = true;
             timed = header_names_time(line);
             if (items.size() != (timed ? 7u : 6u))
@@ -292,8 +294,9 @@ McapOptions mcap_options(const Args& args, SaveSet& save, const std::string& pat
         throw BadInput("--ros-sonar-dtype: '" + dtype + "' (float32 or uint16)");
     options.sonar_u16 = dtype == "uint16";
     if (args.has("--rate")) {
-        const double rate = parse_double(args.value("--rate"), "--rate");
-        if (!(rate > 0.0)) throw BadInput("--rate: " + args.value("--rate") + " is not a positive rate (frames/s)");
+        options.rate = parse_double(args.value("--rate"), "--rate");
+        if (!(options.rate > 0.0))
+            throw BadInput("--rate: " + args.value("--rate") + " is not a positive rate (frames/s)");
     }
     if (args.has("--compress") && !mcap_zstd_available())
         throw BadInput("--compress: this build has no zstd for " + path + " (install libzstd-dev and rebuild)");
@@ -301,12 +304,11 @@ McapOptions mcap_options(const Args& args, SaveSet& save, const std::string& pat
 }
 
 // ROS time stamps (builtin_interfaces/Time: int32 s) hold 0 .. 2^31 - 1 s; --rate needs no time column.
-void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const Args& args) {
+void check_bag_times(const std::vector<TrajectoryPose>& poses, bool timed, const Args& args, double rate) {
     const std::string& path = args.value("--trajectory");
     if (timed && args.has("--rate"))
         throw BadInput("--rate: " + path + " has a time column, which sets the time stamps");
     if (!timed) { // frame i at i / rate s: the last one inside the range, frames at least 1 ns apart
-        const double rate = args.has("--rate") ? parse_double(args.value("--rate"), "--rate") : 10.0;
         const double last_s = poses.empty() ? 0.0 : static_cast<double>(poses.size() - 1) / rate;
         if (rate > 1e9)
             throw BadInput("--rate: " + args.value("--rate") +
@@ -384,7 +386,7 @@ void read_poses(const Args& args, RenderJob& job) {
     const std::uint64_t frame = args.has("--frame-index") ? parse_u64(args.value("--frame-index"), "--frame-index") : 0;
     if (job.trajectory) {
         job.poses = read_trajectory(args.value("--trajectory"), job.timed);
-        if (job.bag) check_bag_times(job.poses, job.timed, args);
+        if (job.bag) check_bag_times(job.poses, job.timed, args, job.bag_options->rate);
     } else if (args.has("--pose") && args.value("--pose") == "frame") {
         job.frame_pose = true;
         job.poses.push_back({Pose{}, frame});
