@@ -67,6 +67,31 @@ TEST(Api, AnEmptyRendererRefusesToRenderInsteadOfCrashing) {
     ASSERT_FALSE(r);
     EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(r.error().message.find("Renderer::create"), std::string::npos) << r.error().message;
+    // Every other call on it answers as for nothing instead of dereferencing the missing renderer (an
+    // audit's: seed(), set_seed(), config() and validity() segfaulted).
+    empty.set_seed(5);
+    EXPECT_EQ(empty.seed(), 0u);
+    EXPECT_EQ(empty.config().beams, SonarConfig{}.beams);
+    EXPECT_TRUE(empty.validity().empty());
+    std::vector<float> flow;
+    EXPECT_FALSE(empty.label_flow(frame, Pose{}, frame, Pose{}, flow));
+}
+
+TEST(Api, AnEmptyHostDepthRendererRefusesInsteadOfCrashing) {
+    HostDepthRenderer empty;
+    Frame frame = empty.make_frame();
+    EXPECT_TRUE(frame.clean.empty());
+    for (const auto& r : {empty.process(HostDepthImage{}, 0, frame), empty.record(VK_NULL_HANDLE, HostDepthImage{}),
+                          empty.read_back(0, frame)}) {
+        ASSERT_FALSE(r);
+        EXPECT_EQ(r.error().code, ErrorCode::invalid_argument);
+        EXPECT_NE(r.error().message.find("HostDepthRenderer::create"), std::string::npos) << r.error().message;
+    }
+    empty.set_seed(5);
+    EXPECT_EQ(empty.seed(), 0u);
+    EXPECT_EQ(empty.polar_buffer().buffer, VK_NULL_HANDLE);
+    EXPECT_EQ(empty.config().bins, SonarConfig{}.bins);
+    EXPECT_TRUE(empty.validity().empty());
 }
 
 TEST(Api, ValidateReturnsResult) {

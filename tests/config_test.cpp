@@ -37,6 +37,20 @@ TEST(Config, DefaultsAreValid) {
     EXPECT_TRUE(SonarConfig{}.validate().ok());
 }
 
+// An enum field holding a value none of its names has (a C++ caller's static_cast) is refused by
+// validate(), naming the key, instead of being read past the end of the names (an audit's).
+TEST(Config, AnEnumValueWithoutANameIsRefused) {
+    SonarConfig c;
+    c.horizontal_pattern = static_cast<BeamPattern>(99);
+    auto r = c.validate();
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().message, "horizontal_pattern = 99: must be one of box|sinc|hann|gaussian|chebyshev");
+    SonarConfig e;
+    e.effects.speckle = static_cast<EffectMode>(7);
+    ASSERT_FALSE(e.validate());
+    EXPECT_NE(e.validate().error().message.find("effects.speckle = 7"), std::string::npos);
+}
+
 TEST(Config, TableKeysAreUniqueAndRoundTrip) {
     std::set<std::string> names;
     for (const auto& key : config_keys::all()) {

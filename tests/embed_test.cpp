@@ -195,15 +195,22 @@ TEST_F(EmbedTest, RecordIntoHostFrameMatchesProcess) {
 
     Frame recorded = sonar->make_frame();
     EXPECT_FALSE(sonar->read_back(7, recorded).ok()) << "nothing recorded yet";
-    bool early_read_failed = false;
+    bool early_read_failed = false, early_second_refused = false;
     const std::string error = host->engine->render_depth(demo_camera(), [&](VkCommandBuffer commands) {
         auto r = sonar->record(commands, host::depth_image(*host->engine));
-        // Recorded, not yet submitted: reading back now must fail instead of returning stale data.
+        // Recorded, not yet submitted: reading back now must fail instead of returning stale data, and a
+        // second record or a process would rewrite what the recorded ping is about to use.
         early_read_failed = !sonar->read_back(7, recorded).ok();
+        auto again = sonar->record(commands, host::depth_image(*host->engine));
+        auto meanwhile = sonar->process(host::depth_image(*host->engine), 7, processed);
+        const char* why = "has not finished executing";
+        early_second_refused = !again && again.error().message.find(why) != std::string::npos && !meanwhile &&
+                               meanwhile.error().message.find(why) != std::string::npos;
         return r ? std::string() : r.error().message;
     });
     ASSERT_EQ(error, "");
     EXPECT_TRUE(early_read_failed);
+    EXPECT_TRUE(early_second_refused);
     auto read = sonar->read_back(7, recorded);
     ASSERT_TRUE(read.ok()) << read.error().message;
     EXPECT_GT(sum(recorded.clean), 0.0);

@@ -120,9 +120,10 @@ public:
     // pass, from a pool of the context's queue family) with the barriers it needs, and returns without
     // submitting: the host submits it with its own semaphores and fence, and the sonar runs inside the
     // host's frame without a CPU wait. One ping in flight: the host must have seen the previous
-    // recorded ping finish before calling record() again, and before destroying the renderer.
-    // Allocates nothing. Fails with ErrorCode::invalid_argument for a null command buffer or an image
-    // process() would refuse, ErrorCode::vulkan if a Vulkan call fails; on failure nothing is recorded.
+    // recorded ping finish before calling record() or process() again (both refuse until it has run),
+    // and before destroying the renderer. Allocates nothing. Fails with ErrorCode::invalid_argument for a
+    // null command buffer, an image process() would refuse or a recorded ping that has not run yet,
+    // ErrorCode::vulkan if a Vulkan call fails; on failure nothing is recorded.
     [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
     // After the command buffer given to record() has finished executing (the host waited for its
     // fence): copies the result to host memory and runs the host stages (noise, gain) into `frame`.

@@ -28,7 +28,7 @@ namespace vksonar {
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct AcousticMaterial {
     std::string name;
-    double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr
+    double backscatter_db = -30.0; // mu, dB re 1 m^2 per m^2 per sr; NaN: the config's default_backscatter
     enum class Model : std::uint8_t { lambert, constant, rough } model = Model::lambert;
     double rms_slope = 0.1;      // rough only: m, rms slope of the interface along one axis (0.01 to 1)
     double reflection_db = -8.0; // rough only: 10 log10 R^2 (<= 0; -8 dB is medium sand, -1 dB steel)

@@ -188,6 +188,9 @@ Result<void> SonarConfig::validate() const {
             const Json value = key.get(*this);
             if (value.is_number_float() && !std::isfinite(value.get<double>()))
                 return std::string(key.name) + " = " + format_number(value.get<double>()) + ": must be a finite number";
+            // An enum field set to a value no name has (static_cast in C++) reads as its number.
+            if (key.type == config_keys::KeyType::choice && !value.is_string())
+                return std::string(key.name) + " = " + value.dump() + ": must be one of " + key.choices;
         }
         for (std::size_t i = 0; i < beam_angles_deg.size(); ++i)
             if (!std::isfinite(beam_angles_deg[i]))

@@ -18,6 +18,7 @@ namespace detail {
 struct Access {
     static VulkanContext* vulkan(const Context& context); // null for a CPU-only context
     static const SceneData& scene(const Scene& scene);
+    static Scene copy(const Scene& scene); // the same arrays (Scene is move-only in the API)
     static const RendererImpl& renderer(const Renderer& renderer);
     static const RendererImpl& renderer(const HostDepthRenderer& renderer);
 };

@@ -185,12 +185,29 @@ Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, c
     });
 }
 
+namespace {
+// An empty renderer (default-constructed or moved from) has no plan: its calls say so, or answer as
+// for nothing (seed 0, the default config, no validity entries, an empty frame).
+constexpr const char* kEmptyRenderer =
+    "an empty renderer (default-constructed or moved from; make one with Renderer::create)";
+constexpr const char* kEmptyHostDepthRenderer =
+    "an empty renderer (default-constructed or moved from; make one with HostDepthRenderer::create)";
+const SonarConfig& default_config() {
+    static const SonarConfig defaults; // a constant, never written
+    return defaults;
+}
+const std::vector<ModelValidity>& no_validity() {
+    static const std::vector<ModelValidity> none;
+    return none;
+}
+} // namespace
+
 void Renderer::set_seed(std::uint64_t seed) {
-    impl_->options.seed = seed;
+    if (impl_) impl_->options.seed = seed;
 }
 
 std::uint64_t Renderer::seed() const {
-    return impl_->options.seed;
+    return impl_ ? impl_->options.seed : 0;
 }
 
 Frame Renderer::make_frame() const {
@@ -198,18 +215,12 @@ Frame Renderer::make_frame() const {
 }
 
 Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame& frame) {
-    if (!impl_)
-        return make_error(ErrorCode::invalid_argument,
-                          "Renderer::render: an empty renderer (default-constructed or moved from; make one with "
-                          "Renderer::create)");
+    if (!impl_) return make_error(ErrorCode::invalid_argument, std::string("Renderer::render: ") + kEmptyRenderer);
     return run_frame(*impl_, pose, frame_index, frame, nullptr);
 }
 
 Result<void> Renderer::render(const Pose& pose, std::uint64_t frame_index, Frame& frame, const NextFrame& next) {
-    if (!impl_)
-        return make_error(ErrorCode::invalid_argument,
-                          "Renderer::render: an empty renderer (default-constructed or moved from; make one with "
-                          "Renderer::create)");
+    if (!impl_) return make_error(ErrorCode::invalid_argument, std::string("Renderer::render: ") + kEmptyRenderer);
     return run_frame(*impl_, pose, frame_index, frame, &next);
 }
 
@@ -371,6 +382,16 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
+    // The axes are this renderer's, also in a frame another renderer of the same size made (the arrays
+    // have the same sizes: misfit_array; copying into them allocates nothing).
+    if (frame.beam_angles_rad.size() == p.beam_angle_rad.size())
+        std::copy(p.beam_angle_rad.begin(), p.beam_angle_rad.end(), frame.beam_angles_rad.begin());
+    else
+        frame.beam_angles_rad = p.beam_angle_rad;
+    if (frame.bin_ranges_m.size() == p.bin_range_m.size())
+        std::copy(p.bin_range_m.begin(), p.bin_range_m.end(), frame.bin_ranges_m.begin());
+    else
+        frame.bin_ranges_m = p.bin_range_m;
     const host::NoiseDraws draws{impl.speckle_draws.data(), impl.noise_draws.data()};
     host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean(),
                          impl.draws_for(frame_index) ? &draws : nullptr);
@@ -415,41 +436,50 @@ Result<HostDepthRenderer> HostDepthRenderer::create(Context& context, const Sona
 }
 
 Frame HostDepthRenderer::make_frame() const {
-    return make_frame_for(*impl_);
+    return impl_ ? make_frame_for(*impl_) : Frame{};
 }
 
 void HostDepthRenderer::set_seed(std::uint64_t seed) {
-    impl_->options.seed = seed;
+    if (impl_) impl_->options.seed = seed;
 }
 
 std::uint64_t HostDepthRenderer::seed() const {
-    return impl_->options.seed;
+    return impl_ ? impl_->options.seed : 0;
 }
 
 Result<void> HostDepthRenderer::process(const HostDepthImage& depth, std::uint64_t frame_index, Frame& frame) {
+    if (!impl_)
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("HostDepthRenderer::process: ") + kEmptyHostDepthRenderer);
     impl_->host_depth->arm_process(depth);
     return run_frame(*impl_, Pose{}, frame_index, frame, nullptr);
 }
 
 Result<void> HostDepthRenderer::record(VkCommandBuffer commands, const HostDepthImage& depth) {
+    if (!impl_)
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("HostDepthRenderer::record: ") + kEmptyHostDepthRenderer);
     return impl_->host_depth->record(commands, depth, backend_save_mask(impl_->options));
 }
 
 Result<void> HostDepthRenderer::read_back(std::uint64_t frame_index, Frame& frame) {
+    if (!impl_)
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("HostDepthRenderer::read_back: ") + kEmptyHostDepthRenderer);
     impl_->host_depth->arm_read_back();
     return run_frame(*impl_, Pose{}, frame_index, frame, nullptr);
 }
 
 GpuBufferView HostDepthRenderer::polar_buffer() const {
-    return impl_->host_depth->polar_buffer();
+    return impl_ ? impl_->host_depth->polar_buffer() : GpuBufferView{};
 }
 
 const SonarConfig& HostDepthRenderer::config() const {
-    return impl_->plan.config;
+    return impl_ ? impl_->plan.config : default_config();
 }
 
 const std::vector<ModelValidity>& HostDepthRenderer::validity() const {
-    return impl_->plan.validity;
+    return impl_ ? impl_->plan.validity : no_validity();
 }
 
 Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, const Frame& to, const Pose& to_pose,
@@ -457,6 +487,8 @@ Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, cons
     if (!impl_ || !impl_->labels)
         return make_error(ErrorCode::invalid_argument,
                           "label_flow: this renderer was made without SaveFlags::labels (RendererOptions::save_mask)");
+    if (!finite_pose(from_pose) || !finite_pose(to_pose))
+        return make_error(ErrorCode::invalid_argument, "label_flow: a pose value not finite (in float)");
     const Plan& p = impl_->plan;
     const std::size_t cells = static_cast<std::size_t>(p.bins) * p.beams;
     const std::size_t pixels = static_cast<std::size_t>(p.rows) * p.columns;
@@ -470,11 +502,11 @@ Result<void> Renderer::label_flow(const Frame& from, const Pose& from_pose, cons
 }
 
 const SonarConfig& Renderer::config() const {
-    return impl_->plan.config;
+    return impl_ ? impl_->plan.config : default_config();
 }
 
 const std::vector<ModelValidity>& Renderer::validity() const {
-    return impl_->plan.validity;
+    return impl_ ? impl_->plan.validity : no_validity();
 }
 
 RendererOptions renderer_options_from_env(RendererOptions base) {

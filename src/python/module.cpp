@@ -11,9 +11,11 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -162,17 +164,20 @@ private:
 // ---- Scene -----------------------------------------------------------------------------------------
 
 struct SceneObject {
-    Scene scene;
+    // Shared with the Renderers made from it, which render it with the GIL released: add() changes a
+    // copy once a Renderer holds it (copy on write), so a Renderer's scene never changes under it and
+    // later add()s do not reach it (as documented).
+    std::shared_ptr<Scene> scene = std::make_shared<Scene>();
     std::optional<std::string> path; // the glTF file it was loaded from (meta.json "scene"); none for arrays
     SceneLoadOptions loaded;         // the asset root and scale it was loaded with (the config's scene.* keys)
 
     static std::shared_ptr<SceneObject> load(const std::string& path, const std::string& asset_root, double scale) {
         auto s = std::make_shared<SceneObject>();
         s->loaded = SceneLoadOptions{asset_root, scale};
-        s->scene = take(Scene::load_gltf(path, s->loaded));
+        s->scene = std::make_shared<Scene>(take(Scene::load_gltf(path, s->loaded)));
         s->path = path;
         // What the loader skipped or ignored, as the CLI's warning lines (also in scene.warnings).
-        for (const std::string& w : s->scene.stats().warnings)
+        for (const std::string& w : s->scene->stats().warnings)
             warn(w);
         return s;
     }
@@ -181,8 +186,7 @@ struct SceneObject {
     // triangle indices [m, 3] (or flat), one material, drawn once with a 4x4 row-major transform;
     // `instance`: the object id its labels carry (0: none; a scene built here has no class table).
     static std::shared_ptr<SceneObject>
-    from_arrays(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices, const py::array& indices,
-                double backscatter_db,
+    from_arrays(const py::array& vertices, const py::array& indices, double backscatter_db,
                 const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
                 std::int64_t instance) {
         auto s = std::make_shared<SceneObject>();
@@ -190,34 +194,50 @@ struct SceneObject {
         return s;
     }
 
-    std::uint32_t add(const py::array_t<float, py::array::c_style | py::array::forcecast>& vertices,
-                      const py::array& indices, double backscatter_db,
+    std::uint32_t add(const py::array& vertex_array, const py::array& indices, double backscatter_db,
                       const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
                       std::int64_t instance) {
+        // Everything is checked before the scene changes: a refused add leaves no mesh or material behind.
+        const char kind = vertex_array.dtype().kind();
+        if (kind != 'f' && kind != 'i' && kind != 'u')
+            throw py::value_error("vertices: dtype " + py::str(vertex_array.dtype()).cast<std::string>() +
+                                  " is not a real number type");
+        const auto vertices = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(vertex_array);
+        if (!vertices) throw py::value_error("vertices: not convertible to float32");
         if (vertices.ndim() != 2 || vertices.shape(1) != 3)
             throw py::value_error("vertices: expected shape (n, 3), got " + shape_text(vertices));
         const std::vector<std::uint32_t> index_values = checked_indices(indices);
         if (instance < 0 || instance > 0xffff)
             throw py::value_error("instance: " + std::to_string(instance) + " is not an object id in [0, 65535]");
-        const auto mesh = take(scene.add_mesh(vertices.data(), static_cast<std::uint32_t>(vertices.shape(0)),
-                                              index_values.data(), static_cast<std::uint32_t>(index_values.size())));
         AcousticMaterial material;
         material.name = "from_arrays";
         material.backscatter_db = backscatter_db;
+        // NaN: the config's default_backscatter (as a glTF material without extras); inf is no level.
+        if (std::isinf(backscatter_db))
+            throw py::value_error("backscatter_db: " + std::to_string(backscatter_db) +
+                                  " (expected -100 to 0 dB, or nan for the config's default_backscatter)");
         if (const auto valid = material.validate(); !valid)
             throw py::value_error("backscatter_db: " + valid.error().message);
         SceneDraw draw;
-        draw.mesh = mesh;
-        draw.material = take(scene.add_material(material));
         draw.instance = static_cast<std::uint32_t>(instance);
         if (transform) {
             if (transform->ndim() != 2 || transform->shape(0) != 4 || transform->shape(1) != 4)
                 throw py::value_error("transform: expected shape (4, 4), got " + shape_text(*transform));
             for (int r = 0; r < 4; ++r)
-                for (int c = 0; c < 4; ++c)
-                    draw.world_from_local[std::size_t(c * 4 + r)] = transform->at(r, c); // column-major
+                for (int c = 0; c < 4; ++c) {
+                    const double v = transform->at(r, c);
+                    if (!std::isfinite(v) || !std::isfinite(static_cast<float>(v)))
+                        throw py::value_error("transform: entry [" + std::to_string(r) + ", " + std::to_string(c) +
+                                              "] = " + std::to_string(v) + " is not finite (in float)");
+                    draw.world_from_local[std::size_t(c * 4 + r)] = v; // column-major
+                }
         }
-        check(scene.add_draw(draw));
+        if (scene.use_count() > 1) scene = std::make_shared<Scene>(detail::Access::copy(*scene)); // a Renderer holds it
+        const auto mesh = take(scene->add_mesh(vertices.data(), static_cast<std::uint32_t>(vertices.shape(0)),
+                                               index_values.data(), static_cast<std::uint32_t>(index_values.size())));
+        draw.mesh = mesh;
+        draw.material = take(scene->add_material(material));
+        check(scene->add_draw(draw));
         return mesh;
     }
 
@@ -228,6 +248,9 @@ struct SceneObject {
         if (kind != 'i' && kind != 'u')
             throw py::value_error("indices: dtype " + py::str(indices.dtype()).cast<std::string>() +
                                   " is not an integer type");
+        const bool flat = indices.ndim() == 1, rows = indices.ndim() == 2 && indices.shape(1) == 3;
+        if (!flat && !rows)
+            throw py::value_error("indices: expected shape (m, 3) or (3 m,), got " + shape_text(indices));
         if (indices.size() % 3 != 0)
             throw py::value_error("indices: " + std::to_string(indices.size()) + " values, not whole triangles");
         const auto wide = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(indices);
@@ -289,7 +312,11 @@ void resolve_scene_keys(SonarConfig& config, const SceneObject& scene) {
 
 struct RendererObject {
     std::shared_ptr<Context> context;
-    std::shared_ptr<SceneObject> scene;
+    std::shared_ptr<SceneObject> scene;      // its path and load options (meta.json)
+    std::shared_ptr<const Scene> scene_data; // the scene as this renderer took it (SceneObject::scene)
+    // One call at a time: render() releases the GIL, and two threads on one Renderer would share its
+    // frame slots and worker pool. The second waits (without the GIL) for the first.
+    std::mutex busy;
     Renderer renderer;
     std::unique_ptr<host::FanRenderer> fan;
     std::string backend;        // vulkan or cpu ("auto" resolved)
@@ -302,6 +329,16 @@ struct RendererObject {
     std::vector<host::Box> boxes;
     std::vector<std::string> class_names; // Scene::classes() as the renderer took the scene
 };
+
+// The Renderer's lock, waited for without the GIL: the thread that holds it may be waiting for the GIL.
+std::unique_lock<std::mutex> one_call_at_a_time(RendererObject& r) {
+    std::unique_lock<std::mutex> lock(r.busy, std::try_to_lock);
+    if (!lock.owns_lock()) {
+        py::gil_scoped_release unlocked;
+        lock.lock();
+    }
+    return lock;
+}
 
 // A numpy view of `data` (shape `shape`) owned by the Python Frame `owner`; None where the frame has no
 // such array (an output not asked for). A py::object, not a py::array: None cast to an array would be
@@ -340,7 +377,7 @@ py::object frame_meta(FrameObject& f) {
     extra["pose"] = py::dict(py::arg("x_m") = f.pose.x_m, py::arg("y_m") = f.pose.y_m, py::arg("z_m") = f.pose.z_m,
                              py::arg("roll_deg") = f.pose.roll_deg, py::arg("pitch_deg") = f.pose.pitch_deg,
                              py::arg("yaw_deg") = f.pose.yaw_deg);
-    extra["objects"] = json.attr("loads")(host::objects_json(r.scene->scene).dump());
+    extra["objects"] = json.attr("loads")(host::objects_json(*r.scene_data).dump());
     extra["backend"] = r.backend;
     extra["backend_reason"] = r.backend_reason;
     extra["device"] = r.device;
@@ -380,20 +417,20 @@ PYBIND11_MODULE(vksonar, m) {
         .def("add", &SceneObject::add, py::arg("vertices"), py::arg("indices"), py::arg("backscatter_db") = -30.0,
              py::arg("transform") = py::none(), py::arg("instance") = 0,
              "Adds one more mesh, material and draw (object id `instance`); returns the mesh index.")
-        .def_property_readonly("triangles", [](const SceneObject& s) { return s.scene.stats().triangles; })
-        .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene.stats().warnings; })
+        .def_property_readonly("triangles", [](const SceneObject& s) { return s.scene->stats().triangles; })
+        .def_property_readonly("warnings", [](const SceneObject& s) { return s.scene->stats().warnings; })
         .def_property_readonly(
             "objects",
             [](const SceneObject& s) {
                 py::list out;
-                for (const SceneInstance& i : s.scene.instances())
+                for (const SceneInstance& i : s.scene->instances())
                     out.append(py::dict(py::arg("id") = i.id, py::arg("node") = i.node, py::arg("mesh") = i.mesh,
                                         py::arg("class") = i.class_name, py::arg("class_id") = i.class_id));
                 return out;
             },
             "The glTF nodes with a mesh (meta.json 'objects'): id = node index + 1, class and class_id.")
         .def_property_readonly(
-            "classes", [](const SceneObject& s) { return s.scene.classes(); },
+            "classes", [](const SceneObject& s) { return s.scene->classes(); },
             "Class names; class_id k is classes[k - 1] (0: no class).");
 
     py::class_<FrameObject, std::shared_ptr<FrameObject>>(m, "Frame", "One rendered ping. Arrays are views, no copy.")
@@ -561,7 +598,7 @@ PYBIND11_MODULE(vksonar, m) {
                          std::uint64_t seed, const std::vector<std::string>& outputs) {
                  if (!scene) throw py::value_error("scene: None");
                  // The config as the CLI resolves it for this scene, checked before any device is made.
-                 SonarConfig resolved = config.for_scene(scene->scene);
+                 SonarConfig resolved = config.for_scene(*scene->scene);
                  if (const auto valid = resolved.validate(); !valid)
                      throw py::value_error("invalid config: " + valid.error().message);
                  resolve_scene_keys(resolved, *scene);
@@ -584,6 +621,7 @@ PYBIND11_MODULE(vksonar, m) {
                          throw py::value_error("outputs: unknown '" + o + "' (depth, normals, echo, labels)");
                  }
                  auto r = std::make_shared<RendererObject>();
+                 r->scene_data = scene->scene;
                  r->scene = std::move(scene);
                  if (backend == "auto") { // the CLI's rule (host/backend_choice.h)
                      auto vulkan_options = context_options_from_env();
@@ -600,14 +638,14 @@ PYBIND11_MODULE(vksonar, m) {
                  }
                  r->backend = options.backend == Backend::cpu ? "cpu" : "vulkan";
                  r->device = options.backend == Backend::cpu ? "cpu" : r->context->device_description();
-                 r->renderer = take(Renderer::create(*r->context, resolved, r->scene->scene, options));
+                 r->renderer = take(Renderer::create(*r->context, resolved, *r->scene_data, options));
                  for (const ModelValidity& v : r->renderer.validity())
                      if (!v.ok) warn(v.warning()); // the CLI's warning lines (also renderer.validity())
                  const std::string unit_mistake = host::unit_mistake_warning(
-                     r->scene->scene, resolved, r->scene->path.value_or("the scene"), "Scene.load(path, scale=", ")");
+                     *r->scene_data, resolved, r->scene->path.value_or("the scene"), "Scene.load(path, scale=", ")");
                  if (!unit_mistake.empty()) warn(unit_mistake);
-                 r->scene_hash = host::scene_fnv1a64(r->scene->scene); // later add()s do not reach the renderer
-                 r->class_names = r->scene->scene.classes();
+                 r->scene_hash = host::scene_fnv1a64(*r->scene_data); // later add()s do not reach the renderer
+                 r->class_names = r->scene_data->classes();
                  r->effects_json = host::effects_json(credit_scene_requests(renderer_plan(r->renderer).effects.states,
                                                                             config.config.effects, resolved.effects))
                                        .dump();
@@ -630,6 +668,10 @@ PYBIND11_MODULE(vksonar, m) {
                     throw py::value_error("next_pose: needs 6 numbers x,y,z,roll,pitch,yaw (metres, degrees), got " +
                                           std::to_string(next_pose->size()));
                 if (next_frame && !next_pose) throw py::value_error("next_frame: given without next_pose");
+                if (time_s && !std::isfinite(*time_s))
+                    throw py::value_error("time_s: " + py::str(py::float_(*time_s)).cast<std::string>() +
+                                          " is not a finite time");
+                const std::unique_lock<std::mutex> lock = one_call_at_a_time(r);
                 // seed= is this render's: the Renderer's own seed comes back after it.
                 const std::uint64_t own_seed = r.renderer.seed();
                 if (seed) r.renderer.set_seed(*seed);
@@ -677,6 +719,7 @@ PYBIND11_MODULE(vksonar, m) {
                     throw py::value_error("flow: frames of another Renderer");
                 if (!renderer_plan(r.renderer).labels)
                     throw py::value_error("flow: this Renderer was made without outputs=['labels']");
+                const std::unique_lock<std::mutex> lock = one_call_at_a_time(r);
                 std::vector<float> flow;
                 check(r.renderer.label_flow(from->frame, from->pose, to->frame, to->pose, flow));
                 const std::size_t bins = from->frame.bins, beams = from->frame.beams;
@@ -691,7 +734,11 @@ PYBIND11_MODULE(vksonar, m) {
             "NaN where the cell has no label, leaves the window or is hidden (docs/labels.md).")
         .def_property_readonly("bins", [](const RendererObject& r) { return renderer_plan(r.renderer).bins; })
         .def_property_readonly("beams", [](const RendererObject& r) { return renderer_plan(r.renderer).beams; })
-        .def_property_readonly("seed", [](const RendererObject& r) { return r.renderer.seed(); })
+        .def_property_readonly("seed",
+                               [](RendererObject& r) {
+                                   const std::unique_lock<std::mutex> lock = one_call_at_a_time(r);
+                                   return r.renderer.seed(); // not a render's seed= while it runs
+                               })
         .def_property_readonly("backend", [](const RendererObject& r) { return r.backend; })
         .def_property_readonly(
             "beam_geometry",
@@ -704,7 +751,7 @@ PYBIND11_MODULE(vksonar, m) {
             [](const RendererObject& r) {
                 Pose p;
                 bool whole = false;
-                if (!host::frame_pose(r.scene->scene, r.renderer.config(), p, whole))
+                if (!host::frame_pose(*r.scene_data, r.renderer.config(), p, whole))
                     throw py::value_error("frame_pose: the scene has nothing to frame");
                 return py::make_tuple(p.x_m, p.y_m, p.z_m, p.roll_deg, p.pitch_deg, p.yaw_deg);
             },

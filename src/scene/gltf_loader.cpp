@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <optional>
 #include <string>
@@ -608,9 +609,16 @@ Result<Scene> Scene::load_gltf(const std::string& path, const SceneLoadOptions& 
         Scene scene;
         SceneData& data = *scene.data_;
         data.source_path = path;
-        if (!(options.scale > 0.0) || !std::isfinite(options.scale))
+        // A path with a NUL byte (from Python or C++; argv cannot hold one) would be opened cut short there.
+        if (path.find('\0') != std::string::npos)
             return make_error(ErrorCode::invalid_argument,
-                              path + ": scale " + std::to_string(options.scale) + " is not a positive finite number");
+                              "scene path '" + path.substr(0, path.find('\0')) + "\\0...': holds a NUL byte");
+        // The config's scene.scale range (config_keys.cpp): a unit mistake is at most km for mm.
+        if (!(options.scale >= 1e-6 && options.scale <= 1e6)) {
+            char scale[32];
+            std::snprintf(scale, sizeof scale, "%g", options.scale);
+            return make_error(ErrorCode::invalid_argument, path + ": scale " + scale + " is not in [1e-06, 1e+06]");
+        }
         {
             const tinygltf::Model model = gltf::read_model(path, options.asset_root, data.stats.warnings);
             Converter(model, data, options.scale).run();

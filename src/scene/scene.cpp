@@ -20,6 +20,12 @@ const SceneData& detail::Access::scene(const Scene& scene) {
     return *scene.data_;
 }
 
+Scene detail::Access::copy(const Scene& scene) {
+    Scene out;
+    *out.data_ = *scene.data_;
+    return out;
+}
+
 Scene::Scene() : data_(std::make_unique<SceneData>()) {}
 Scene::~Scene() = default;
 
@@ -112,9 +118,12 @@ Result<void> Scene::add_draw(const SceneDraw& draw) {
                                                            " does not exist (" + std::to_string(d.materials.size()) +
                                                            " materials)");
     for (std::size_t k = 0; k < draw.world_from_local.size(); ++k) {
-        if (!std::isfinite(draw.world_from_local[k]))
+        // Finite also as the float the depth pass's transforms hold (1e39 was taken, became inf there, and
+        // the mesh vanished without a word).
+        const double v = draw.world_from_local[k];
+        if (!std::isfinite(v) || !std::isfinite(static_cast<float>(v)))
             return make_error(ErrorCode::invalid_argument,
-                              "Scene::add_draw: world_from_local[" + std::to_string(k) + "] is NaN or Inf");
+                              "Scene::add_draw: world_from_local[" + std::to_string(k) + "] is NaN or Inf (in float)");
     }
     try {
         d.draws.push_back(draw); // (strong guarantee: unchanged if it throws)
@@ -139,8 +148,8 @@ Result<void> AcousticMaterial::validate() const {
     const std::string first_problem = [this]() -> std::string {
         // The same physical range as the config's default_backscatter (src/config/config_keys.cpp): 0 dB
         // (1 m^2 per m^2 per sr) is past a perfect Lambertian reflector (-5 dB); below -100 dB no echo
-        // reaches a display. A non-finite value stands for "the config's default" (plan.cpp).
-        if (std::isfinite(backscatter_db) && !(backscatter_db >= -100.0 && backscatter_db <= 0.0))
+        // reaches a display. NaN stands for "the config's default" (plan.cpp); +-inf is no level.
+        if (!std::isnan(backscatter_db) && !(backscatter_db >= -100.0 && backscatter_db <= 0.0))
             return "backscatter_db = " + number(backscatter_db) + " (expected -100 to 0 dB)";
         if (model != Model::rough) return {}; // the facet parameters mean nothing to the other models
         // m < 0.01 (0.6 deg) makes a mirror whose lobe no pixel grid resolves; m > 1 (45 deg) is past

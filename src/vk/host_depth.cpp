@@ -354,6 +354,7 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
         return make_error(ErrorCode::invalid_argument, "HostDepthRenderer::record: command buffer is null");
     }
     if (auto r = check_image(image); !r) return r;
+    if (auto r = refuse_while_recorded_pending("record"); !r) return r;
     Objects& o = *objects_;
     VulkanBackend& b = *o.backend;
     const VulkanContext& context = b.context_;
@@ -384,6 +385,22 @@ Result<void> HostDepthPass::record(VkCommandBuffer commands, const HostDepthImag
     o.recorded = true;
     o.recorded_mask = save_mask;
     return {};
+}
+
+// One ping in flight: record() and process() rewrite the descriptor sets and buffers a recorded ping's
+// command buffer uses, which would invalidate it (or change its results) before it runs. The ping's
+// last command sets the event; until the host's queue has run it, both are refused.
+Result<void> HostDepthPass::refuse_while_recorded_pending(const char* call) const {
+    const Objects& o = *objects_;
+    if (!o.recorded) return {};
+    const VulkanContext& context = o.backend->context_;
+    const VkResult status = context.fn.vkGetEventStatus(context.device, o.done.get());
+    if (status == VK_EVENT_SET) return {};
+    if (status != VK_EVENT_RESET) return vk_error(status, "vkGetEventStatus");
+    return make_error(ErrorCode::invalid_argument,
+                      std::string("HostDepthRenderer::") + call +
+                          ": the command buffer given to the last record() has not finished executing (one ping "
+                          "in flight: wait for the host's fence of that submission first)");
 }
 
 Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
@@ -421,6 +438,7 @@ Result<void> HostDepthPass::render(const Pose& /*pose: the host's camera is the 
     const Objects::Armed armed = std::exchange(objects_->armed, Objects::Armed::none);
     switch (armed) {
     case Objects::Armed::process:
+        if (auto r = refuse_while_recorded_pending("process"); !r) return r;
         return process(objects_->armed_image, save_mask, frame);
     case Objects::Armed::read_back:
         return read_back(save_mask, frame);

@@ -478,3 +478,87 @@ def test_visibility_lists_the_labelled_objects(labelled):
     assert [v["instance"] for v in vis] == ids
     assert all(0 <= v["hidden"] + v["outside"] <= v["pixels"] for v in vis)
     assert any(v["pixels"] > 0 for v in vis)
+
+
+# An audit's: arrays misread or half-added without a word. Index arrays of another shape than (m, 3) or
+# flat were read flat (wrong triangles); a vertex array of complex, bool or object dtype was force-cast;
+# a refused add() left its mesh and material behind; inf backscatter became the default.
+def test_scene_arrays_are_checked_before_the_scene_changes():
+    vertices = np.array([[12, -2, -2], [12, 2, -2], [12, 2, 2], [12, -2, 2]], np.float32)
+    indices = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+    for shape in ((3, 2), (2, 3, 1)):
+        with pytest.raises(ValueError, match=r"indices: expected shape \(m, 3\) or \(3 m,\)"):
+            vksonar.Scene.from_arrays(vertices, np.zeros(shape, np.uint32))
+    for dtype in (np.complex64, bool, object):
+        with pytest.raises(ValueError, match="vertices: dtype .* is not a real number type"):
+            vksonar.Scene.from_arrays(vertices.astype(dtype), indices)
+    with pytest.raises(ValueError, match="backscatter_db"):
+        vksonar.Scene.from_arrays(vertices, indices, backscatter_db=float("inf"))
+    huge = np.eye(4)
+    huge[0, 3] = 1e39  # finite as a double, inf as the float the depth pass holds
+    scene = vksonar.Scene.from_arrays(vertices, indices)
+    before = scene.triangles
+    for bad in (dict(backscatter_db=5.0), dict(transform=huge), dict(instance=70000)):
+        with pytest.raises(ValueError):
+            scene.add(vertices, indices, **bad)
+    assert scene.triangles == before
+    assert scene.add(vertices, indices) == 1  # the second mesh: nothing was left behind
+    # nan: the config's default_backscatter; integer vertices are converted
+    vksonar.Scene.from_arrays(vertices.astype(np.int32), indices.ravel(), backscatter_db=float("nan"))
+
+
+def test_a_renderer_keeps_its_scene_while_it_grows_and_renders_on_another_thread():
+    vertices = np.array([[12, -2, -2], [12, 2, -2], [12, 2, 2], [12, -2, 2]], np.float32)
+    indices = np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+    config = vksonar.Config.from_dict({"bins": 128, "range_min": 1, "range_max": 20})
+    scene = vksonar.Scene.from_arrays(vertices, indices)
+    renderer = vksonar.Renderer(scene, config, backend="cpu")
+    first = renderer.render((0, 0, 0, 0, 0, 0)).polar.copy()
+    hash_before = renderer.render((0, 0, 0, 0, 0, 0)).meta["scene_fnv1a64"]
+    stop = threading.Event()
+
+    def grow():  # a segfault before: add() reallocated the arrays the render was reading
+        while not stop.is_set():
+            scene.add(vertices + np.float32(1.0), indices)
+
+    thread = threading.Thread(target=grow)
+    thread.start()
+    try:
+        for _ in range(40):
+            assert np.array_equal(renderer.render((0, 0, 0, 0, 0, 0)).polar, first)
+    finally:
+        stop.set()
+        thread.join()
+    assert scene.triangles > 2
+    frame = renderer.render((0, 0, 0, 0, 0, 0))
+    assert frame.meta["scene_fnv1a64"] == hash_before and np.array_equal(frame.polar, first)
+
+
+def test_one_renderer_on_two_threads_takes_turns():
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9)
+    expect = renderer.render(POSE, frame=0).polar.copy()
+    errors = []
+
+    def work():
+        try:
+            for _ in range(15):
+                if not np.array_equal(renderer.render(POSE, frame=0).polar, expect):
+                    errors.append("a frame differs")
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(repr(e))
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert not any(t.is_alive() for t in threads), "a render hung"
+    assert errors == []
+
+
+def test_time_s_must_be_finite():
+    renderer = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu")
+    for bad in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="time_s"):
+            renderer.render(POSE, time_s=bad)
+    assert renderer.render(POSE, time_s=1.5).meta["time_s"] == 1.5
