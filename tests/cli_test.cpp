@@ -147,7 +147,8 @@ TEST_F(Cli, LabelsRefuseNodeIdsPastSixteenBits) {
     doc["scenes"][0]["nodes"] = {65535};
     write_text(dir_ / "far_node.gltf", doc.dump());
     const std::vector<std::string> scene = {
-        "--scene", (dir_ / "far_node.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set", "beams=16"};
+        "--scene", (dir_ / "far_node.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set", "beams=16",
+        "--set",   "horizontal_beamwidth=9"};
     std::vector<std::string> labelled = scene;
     labelled.insert(labelled.end(), {"--save", "labels"});
     expect_bad_render(labelled, {"labels: node 65535 (unnamed) has instance id 65536; labels hold ids up to 65535"});
@@ -177,7 +178,8 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     auto render = [&](const std::string& name, const std::vector<std::string>& sets) {
         std::vector<std::string> args = {
             "render",  "--backend", "cpu",      "--scene", (dir_ / "quad.gltf").string(), "--set",
-            "bins=32", "--set",     "beams=16", "--set",   "display.fan_width=64"};
+            "bins=32", "--set",     "beams=16", "--set",   "display.fan_width=64",        "--set",
+            "hfov=16"}; // 16 beams 1 deg apart sample the 1 deg beam (beam_sampling)
         for (const auto& s : sets) {
             args.push_back("--set");
             args.push_back(s);
@@ -192,7 +194,7 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     EXPECT_EQ(inside.err, "");
     const auto meta = nlohmann::json::parse(read_text(dir_ / "inside" / "meta.json"));
     ASSERT_TRUE(meta["validity"].is_array());
-    ASSERT_EQ(meta["validity"].size(), 2u) << meta["validity"].dump();
+    ASSERT_EQ(meta["validity"].size(), 3u) << meta["validity"].dump(); // + beam_sampling
     for (const auto& entry : meta["validity"]) {
         EXPECT_EQ(entry["ok"], true) << entry.dump();
         for (const char* field : {"model", "key", "value", "domain", "action"})
@@ -206,7 +208,7 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     EXPECT_EQ(lines[0].rfind("warning: francois_garrison: frequency = 3e+06 ", 0), 0u) << lines[0];
     EXPECT_EQ(lines[1].rfind("warning: far_field_beam_pattern: range_min = 1 ", 0), 0u) << lines[1];
     const auto list = nlohmann::json::parse(read_text(dir_ / "outside" / "meta.json"))["validity"];
-    ASSERT_EQ(list.size(), 2u);
+    ASSERT_EQ(list.size(), 3u);
     EXPECT_EQ(list[0]["model"], "francois_garrison");
     EXPECT_EQ(list[0]["ok"], false);
     EXPECT_EQ(list[0]["key"], "frequency");
@@ -446,9 +448,9 @@ TEST_F(Cli, BenchDispatch) {
         EXPECT_NE(typo.err.find("did you mean '--frames'"), std::string::npos) << typo.err;
     }
     // --labels: the labels stage in every frame, with its own row
-    const CliRun labels =
-        run({"bench", "speed", "--backend", "cpu", "--frames", "3", "--memory-frames", "12", "--labels", "--scene",
-             (dir_ / "quad.gltf").string(), "--set", "bins=64", "--set", "beams=48"});
+    const CliRun labels = run({"bench", "speed", "--backend", "cpu", "--frames", "3", "--memory-frames", "12",
+                               "--labels", "--scene", (dir_ / "quad.gltf").string(), "--set", "bins=64", "--set",
+                               "beams=48", "--set", "horizontal_beamwidth=3"});
     EXPECT_EQ(labels.exit_code, 0) << labels.err;
     EXPECT_NE(labels.out.find("| labels |"), std::string::npos) << labels.out;
     const CliRun extra = run({"bench", "accuracy", "extra"});
@@ -491,8 +493,9 @@ TEST_F(Cli, AssetRootThatIsNotUtf8StillRenders) {
     fs::create_directories(root);
     fs::copy_file(dir_ / "quad.gltf", root / "quad.gltf");
     const fs::path out = dir_ / "out";
-    const CliRun r = run({"render", "--scene", (root / "quad.gltf").string(), "--asset-root", root.string(),
-                          "--backend", "cpu", "--set", "bins=64", "--set", "beams=48", "--out", out.string()});
+    const CliRun r =
+        run({"render", "--scene", (root / "quad.gltf").string(), "--asset-root", root.string(), "--backend", "cpu",
+             "--set", "bins=64", "--set", "beams=48", "--set", "horizontal_beamwidth=3", "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto meta = nlohmann::json::parse(read_text(out / "meta.json"));
     const std::string written = meta["config"]["scene"]["asset_root"].get<std::string>();
@@ -510,6 +513,8 @@ TEST_F(Cli, RenderWritesEveryOutput) {
                           "bins=64",
                           "--set",
                           "beams=48",
+                          "--set",
+                          "horizontal_beamwidth=3",
                           "--set",
                           "display.fan_width=128",
                           "--set",
@@ -583,9 +588,19 @@ TEST_F(Cli, SceneEffectsAndSetReachTheResolvedEffects) {
         scene.find(from), from.size(),
         R"("scenes": [{"nodes": [0], "extras": {"vksonar": {"effects": {"speckle": "off", "incidence": "off"}}}}])");
     write_text(dir_ / "extras.gltf", scene);
-    const std::vector<std::string> common = {
-        "render",  "--scene", (dir_ / "extras.gltf").string(), "--backend", "cpu", "--set", "beams=16", "--set",
-        "bins=32", "--set",   "display.fan_width=64"};
+    const std::vector<std::string> common = {"render",
+                                             "--scene",
+                                             (dir_ / "extras.gltf").string(),
+                                             "--backend",
+                                             "cpu",
+                                             "--set",
+                                             "beams=16",
+                                             "--set",
+                                             "horizontal_beamwidth=9",
+                                             "--set",
+                                             "bins=32",
+                                             "--set",
+                                             "display.fan_width=64"};
     auto meta_of = [&](std::vector<std::string> args, const std::string& name) {
         args.insert(args.begin(), common.begin(), common.end());
         const fs::path out = dir_ / name;
@@ -662,13 +677,12 @@ TEST_F(Cli, TrajectoryWritesOneDirectoryPerLine) {
     write_text(dir_ / "poses.csv", "x,y,z,roll,pitch,yaw\n# comment\n0,0,0,0,0,0\n0.5,0,0,0,0,5\n");
     const fs::path out = dir_ / "traj";
     const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
-                          "--set", "beams=16", "--set", "display.fan_width=64", "--trajectory",
-                          (dir_ / "poses.csv").string(), "--out", out.string()});
+                          "--set", "beams=16", "--set", "horizontal_beamwidth=9", "--set", "display.fan_width=64",
+                          "--trajectory", (dir_ / "poses.csv").string(), "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
-    // Progress must only be shown on a terminal: stderr holds the far-field warning and nothing else.
-    ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
-    EXPECT_EQ(r.err_lines()[0].rfind("warning: far_field_beam_pattern: ", 0), 0u) << r.err;
-    EXPECT_EQ(r.err.find("frame"), std::string::npos) << r.err;
+    // Progress must only be shown on a terminal: stderr holds nothing (a 9 deg beam's far field starts
+    // at 6 cm: no model warning either).
+    EXPECT_EQ(r.err, "");
     EXPECT_TRUE(fs::is_regular_file(out / "frame_000003" / "polar.npy"));
     EXPECT_TRUE(fs::is_regular_file(out / "frame_000004" / "meta.json"));
     EXPECT_FALSE(fs::exists(out / "frame_000001"));
@@ -686,6 +700,7 @@ TEST_F(Cli, FrameIndexRendersATrajectoryFrameAlone) {
                                              "--seed",    "77",
                                              "--set",     "bins=32",
                                              "--set",     "beams=16",
+                                             "--set",     "horizontal_beamwidth=9",
                                              "--save",    "polar"};
     auto args = [&](std::vector<std::string> more) {
         std::vector<std::string> all = {"render"};
@@ -718,9 +733,21 @@ TEST_F(Cli, FrameIndexRendersATrajectoryFrameAlone) {
 TEST_F(Cli, SaveWritesExactlyWhatIsListed) {
     auto files_of = [&](const std::vector<std::string>& save) {
         const fs::path out = dir_ / ("save_" + std::to_string(save.size()) + (save.empty() ? "" : save[0]));
-        std::vector<std::string> args = {
-            "render",   "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu",       "--set", "bins=32", "--set",
-            "beams=16", "--set",   "display.fan_width=64",        "--out",     out.string()};
+        std::vector<std::string> args = {"render",
+                                         "--scene",
+                                         (dir_ / "quad.gltf").string(),
+                                         "--backend",
+                                         "cpu",
+                                         "--set",
+                                         "bins=32",
+                                         "--set",
+                                         "beams=16",
+                                         "--set",
+                                         "horizontal_beamwidth=9",
+                                         "--set",
+                                         "display.fan_width=64",
+                                         "--out",
+                                         out.string()};
         for (const std::string& item : save) {
             args.push_back("--save");
             args.push_back(item);
@@ -749,8 +776,8 @@ TEST_F(Cli, TrajectoryFramesAreWrittenWholeAndInOrder) {
         poses += std::to_string(0.1 * i) + ",0,0,0,0," + std::to_string(i) + "\n";
     write_text(dir_ / "poses.csv", poses);
     const std::vector<std::string> common = {
-        "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set", "beams=16", "--save",
-        "polar"};
+        "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu",  "--set", "bins=32", "--set", "beams=16",
+        "--set",   "horizontal_beamwidth=9",      "--save",    "polar"};
     std::vector<std::string> args = {"render", "--trajectory", (dir_ / "poses.csv").string(), "--out",
                                      (dir_ / "traj").string()};
     args.insert(args.end(), common.begin(), common.end());
@@ -779,7 +806,7 @@ TEST_F(Cli, AWriteErrorStopsTheTrajectoryAndKeepsWhatWasWritten) {
     write_text(dir_ / "traj" / "frame_000004", "a file where frame 4's folder goes");
     const CliRun r = run({"render", "--trajectory", (dir_ / "poses.csv").string(), "--out", (dir_ / "traj").string(),
                           "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set",
-                          "beams=16", "--save", "polar", "--set", "range_min=6"});
+                          "beams=16", "--set", "horizontal_beamwidth=9", "--save", "polar", "--set", "range_min=6"});
     EXPECT_NE(r.exit_code, 0);
     ASSERT_EQ(r.err_lines().size(), 1u) << r.err;
     EXPECT_NE(r.err.find("frame_000004"), std::string::npos) << r.err;
@@ -817,11 +844,9 @@ TEST_F(Cli, InfoScaleAndFramingForAStrangersScene) {
         << harbour.out;
 
     // The quad as if modelled in millimetres (x 1000: 11.7 km across): one warning naming the fix.
-    const std::vector<std::string> common = {"render",    "--scene",     (dir_ / "quad.gltf").string(),
-                                             "--backend", "cpu",         "--set",
-                                             "bins=32",   "--set",       "beams=16",
-                                             "--set",     "range_min=6", "--save",
-                                             "polar"};
+    const std::vector<std::string> common = {
+        "render",   "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu",         "--set",  "bins=32", "--set",
+        "beams=16", "--set",   "horizontal_beamwidth=9",      "--set",     "range_min=6", "--save", "polar"};
     auto with = [&](std::vector<std::string> extra, const char* out) {
         std::vector<std::string> args = common;
         args.insert(args.end(), extra.begin(), extra.end());
@@ -871,9 +896,9 @@ TEST_F(Cli, BenchLoadTimesEachForm) {
 
 TEST_F(Cli, QualityPresetSetsTheAccuracyKnobsAndSetStillWins) {
     const fs::path out = dir_ / "accurate";
-    const CliRun r =
-        run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32", "--set",
-             "beams=16", "--quality", "accurate", "--set", "accuracy.rows_per_vfov=96", "--out", out.string()});
+    const CliRun r = run({"render", "--scene", (dir_ / "quad.gltf").string(), "--backend", "cpu", "--set", "bins=32",
+                          "--set", "beams=16", "--set", "horizontal_beamwidth=9", "--quality", "accurate", "--set",
+                          "accuracy.rows_per_vfov=96", "--out", out.string()});
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const auto accuracy = nlohmann::json::parse(read_text(out / "meta.json"))["config"]["accuracy"];
     EXPECT_EQ(accuracy["pixels_per_beam"], 4.0); // from the quality preset

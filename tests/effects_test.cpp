@@ -577,9 +577,15 @@ TEST_P(EffectsTest, AmbientNoiseRaisesEmptyBinsToTheNoiseLevel) {
     auto b = render_once(GetParam(), off, scene, {}, SaveFlags::none, 3);
     ASSERT_TRUE(a && b);
     EXPECT_TRUE(same_bits(a->frame.clean, b->frame.clean));
-    const double noise = std::pow(10.0, (on.noise_level_db - on.directivity_index_db) / 10.0);
+    // The default sonar is a line array: a beam steered to theta is a cone 1 / cos(theta) wider in sine
+    // space and hears that much more of the sea, DI_j = DI + 10 log10(cos theta_j).
+    const NoiseTerms terms = on.noise_terms();
+    const std::uint32_t beams = a->frame.beams;
+    ASSERT_EQ(a->frame.beam_angles_rad.size(), beams);
     double n = 0, total = 0, below = 0, signal_cells = 0;
     for (std::size_t i = 0; i < a->frame.clean.size(); ++i) {
+        const double di = terms.directivity_index_db + 10.0 * std::log10(std::cos(a->frame.beam_angles_rad[i % beams]));
+        const double noise = std::pow(10.0, (terms.noise_level_db - di) / 10.0);
         if (a->frame.clean[i] == 0.0f) {
             EXPECT_EQ(b->frame.intensity[i], 0.0f) << "off: an empty cell stays exactly 0";
             ASSERT_GT(a->frame.intensity[i], 0.0f);
@@ -594,12 +600,12 @@ TEST_P(EffectsTest, AmbientNoiseRaisesEmptyBinsToTheNoiseLevel) {
     }
     ASSERT_GT(n, 100000.0);
     ASSERT_GT(signal_cells, 100.0);
-    // Ambient noise power N = 10^((NL - DI)/10) times Exp(1): mean N, P(below N) = 1 - 1/e.
+    // Ambient noise power N_j = 10^((NL - DI_j)/10) times Exp(1): mean N_j, P(below N_j) = 1 - 1/e.
     // 5 standard errors: sd(mean) = 1/sqrt(n), sd(fraction) = sqrt(p (1 - p) / n).
     EXPECT_NEAR(total / n, 1.0, 5.0 / std::sqrt(n));
     const double p = 1.0 - std::exp(-1.0);
     EXPECT_NEAR(below / n, p, 5.0 * std::sqrt(p * (1 - p) / n));
-    // The display shows the floor: NL - DI = 40 dB is below db_min = 60 dB, so off and on both map
+    // The display shows the floor: NL - DI_j = 50-54 dB is below db_min = 60 dB, so off and on both map
     // empty cells to 0 there; the floor is in the intensity, which is what polar.npy holds.
 }
 

@@ -114,6 +114,31 @@ TEST_P(FarSidelobes, ScanMatchesTheWholeFansConvolution) {
     EXPECT_LT(far.max_db, 3.0);
 }
 
+// A gaussian pattern has no side lobes: it falls below -100 dB within the kernel's reach (3 beamwidths:
+// exp(-ln 2 (2 x 3)^2) = -108 dB), and beyond it there is nothing to carry. A bright plate (+-0.9 deg at
+// 20 deg) then leaves the beams 6 deg and more from it dark, where the far grid's coarse cells read -91 dB
+// under the plate's peak (-65 dB at 3-6 beamwidths, an audit found; the pattern there is below -100 dB).
+TEST_P(FarSidelobes, AGaussianPatternLeavesNoSkirt) {
+    Scene scene;
+    add_quad(scene, 10.0 * std::cos(20 * kDeg), 10.0 * std::sin(20 * kDeg), -1.0, 0.3, 1.0, 0.0, 20.0);
+    SonarConfig config = far_config(0.5);
+    config.horizontal_pattern = BeamPattern::gaussian;
+    auto r = render_once(GetParam(), config, scene);
+    ASSERT_TRUE(r);
+    EXPECT_EQ(renderer_plan(r->renderer).far_cells, 0u);
+    const Frame& f = r->frame;
+    double peak = 0, far = 0;
+    for (std::uint32_t k = 0; k < f.bins; ++k)
+        for (std::uint32_t j = 0; j < f.beams; ++j) {
+            const double v = f.clean[std::size_t(k) * f.beams + j];
+            peak = std::max(peak, v);
+            if (std::abs(f.beam_angles_rad[j] - 20 * kDeg) > 6 * kDeg) far = std::max(far, v);
+        }
+    ASSERT_GT(peak, 0.0);
+    EXPECT_LT(far, 1e-10 * peak) << "the brightest beam 6 deg from the plate, " << 10 * std::log10(far / peak)
+                                 << " dB under its peak";
+}
+
 TEST(FarSidelobesPlan, OnlyWhereTheKernelStopsShortOfTheFan) {
     Scene scene = wall_and_plate();
     auto plan_of = [&](const SonarConfig& config) {
@@ -129,6 +154,15 @@ TEST(FarSidelobesPlan, OnlyWhereTheKernelStopsShortOfTheFan) {
     SonarConfig off = far_config(0.5);
     off.effects.horizontal_pattern = EffectMode::off;
     EXPECT_EQ(plan_of(off), 0u);
+    // Patterns without side lobes have none to carry; hann's are carried.
+    for (const BeamPattern shape : {BeamPattern::gaussian, BeamPattern::box, BeamPattern::hann}) {
+        SonarConfig shaped = far_config(0.5);
+        shaped.horizontal_pattern = shape;
+        if (shape == BeamPattern::hann)
+            EXPECT_GT(plan_of(shaped), 1u);
+        else
+            EXPECT_EQ(plan_of(shaped), 0u);
+    }
     // Cells as narrow as half the reach, capped: 130 deg of sine span over 1.5-beamwidth cells.
     const SonarConfig config = far_config(0.5);
     const double span = 2 * std::sin(0.5 * config.hfov_deg * kDeg);

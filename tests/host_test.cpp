@@ -208,6 +208,7 @@ TEST(HostNoise, AmbientFloorMeanIsNoiseLevel) {
     p.effects.speckle = true;
     p.config.noise_level_db = 70;
     p.config.directivity_index_db = 20;
+    resolve_noise_floor(p);
     Frame f = test_frame(p); // clean = 0 everywhere
     host::noise_and_gain(p, 11, 3, f);
     const double noise = std::pow(10.0, (70.0 - 20.0) / 10.0);
@@ -229,6 +230,29 @@ TEST(HostNoise, AmbientFloorMeanIsNoiseLevel) {
     EXPECT_NE(f.intensity, g.intensity);
 }
 
+// A line array's beam steered to theta is a cone whose width in sine space is the broadside beam's: in
+// angle it is 1 / cos(theta) wider, its solid angle too, so it hears that much more isotropic noise:
+// DI(theta) = DI + 10 log10(cos theta). Each beam's mean over its bins, against that.
+TEST(HostNoise, ALineArraysSteeredBeamsHearMoreOfTheSea) {
+    Plan p = test_plan(64, 4096, 130, 0.5, 40);
+    p.line_array = true;
+    p.effects.ambient_noise = true;
+    p.config.noise_level_db = 70;
+    p.config.directivity_index_db = 20;
+    resolve_noise_floor(p);
+    Frame f = test_frame(p);
+    host::noise_and_gain(p, 11, 3, f);
+    for (std::uint32_t j = 0; j < p.beams; ++j) {
+        const double theta = p.beam_angle_rad[j];
+        const double expect = std::pow(10.0, (70.0 - (20.0 + 10.0 * std::log10(std::cos(theta)))) / 10.0);
+        double sum = 0;
+        for (std::uint32_t k = 0; k < p.bins; ++k)
+            sum += f.intensity[std::size_t(k) * p.beams + j];
+        // Exp(1) over 4096 bins: relative SE 1/64; 5 SE. At the fan's edge (64.5 deg) the floor is 3.6 dB up.
+        EXPECT_NEAR(sum / p.bins / expect, 1.0, 5.0 / 64.0) << "beam " << j << " at " << theta << " rad";
+    }
+}
+
 // The default noise (Rayleigh speckle + ambient noise) runs a float, vectorized loop; every cell must
 // equal the model evaluated in double from the same draws, to the float path's four roundings
 // (source * clean, * speckle, + noise * draw, * gain: <= 4 x 2^-24 relative, 3e-7 allowed), with
@@ -243,6 +267,7 @@ TEST(HostNoise, DefaultFloatPathEqualsTheModelInDouble) {
     p.config.noise_level_db = 60;
     p.config.directivity_index_db = 20;
     p.config.tvg_db_per_decade = 40;
+    resolve_noise_floor(p);
     Frame f = test_frame(p);
     for (std::size_t i = 0; i < f.clean.size(); ++i)
         f.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17)); // 1e-22 .. 1e-6
@@ -291,6 +316,7 @@ TEST(HostNoise, DrawsMadeAheadAndTheCopiedScanGiveTheSameBytes) {
         p.effects.tvg = true;
         p.config.speckle = c.model;
         p.config.noise_level_db = 60;
+        resolve_noise_floor(p);
         ASSERT_TRUE(host::noise_draws_ahead(p));
         Frame made_here = test_frame(p);
         for (std::size_t i = 0; i < made_here.clean.size(); ++i)

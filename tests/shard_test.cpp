@@ -96,6 +96,8 @@ protected:
                                          "--set",
                                          "beams=16",
                                          "--set",
+                                         "horizontal_beamwidth=9",
+                                         "--set",
                                          "range_min=6",
                                          "--set",
                                          "display.fan_width=64",
@@ -440,7 +442,10 @@ TEST_F(Shard, MergeRefusesGapsOverlapsAndOtherRuns) {
         ASSERT_EQ(run(render_args("p" + std::to_string(i), {"--save", "polar", "--shard", std::to_string(i) + "/3"}))
                       .exit_code,
                   0);
-    ASSERT_EQ(run(render_args("other", {"--save", "polar", "--shard", "1/3", "--set", "beams=24"})).exit_code, 0);
+    ASSERT_EQ(run(render_args("other", {"--save", "polar", "--shard", "1/3", "--set", "beams=24", "--set",
+                                        "horizontal_beamwidth=6"}))
+                  .exit_code,
+              0);
     ASSERT_EQ(run(render_args("more", {"--save", "polar,polar_png", "--shard", "1/3"})).exit_code, 0);
     const auto p = [&](const char* name) { return (dir_ / name).string(); };
     auto refused = [&](const std::vector<std::string>& shards, const std::vector<std::string>& expected) {
@@ -899,6 +904,8 @@ TEST_F(Writer, EveryFileAFrameWritesIsInTheFrameFileTable) {
                                          "bins=32",
                                          "--set",
                                          "beams=16",
+                                         "--set",
+                                         "horizontal_beamwidth=9",
                                          "--save",
                                          save,
                                          "--trajectory",

@@ -67,8 +67,17 @@ enum class IntermediatePrecision : std::uint8_t { fp32, fp16 };
 // step by step (docs/legacy.md); legacy modes still run the depth pass and the physical chain.
 enum class SonarMode : std::uint8_t { physical, uuv_legacy, gtri_legacy };
 
+// The noise terms of the sonar equation, resolved (SonarConfig::noise_terms).
+struct NoiseTerms {
+    double noise_level_db = 0;       // NL, dB re 1 uPa, in the receive band
+    double band_hz = 0;              // the receive band B it is summed over (centred on the frequency)
+    double directivity_index_db = 0; // DI of the broadside beam (a line array's steered beams: less)
+    // NL - DI: the broadside beam's noise floor, dB re 1 uPa.
+    double floor_db() const { return noise_level_db - directivity_index_db; }
+};
+
 // Every parameter of one sonar; the defaults are the `default` preset's. A plain value, copied by
-// whatever takes it (Renderer::create validates its copy). Its two member functions are pure.
+// whatever takes it (Renderer::create validates its copy). Its member functions are pure.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct SonarConfig {
     std::string name = "default";
@@ -93,8 +102,10 @@ struct SonarConfig {
 
     // Sonar equation (README "The model"). Levels in dB re 1 uPa (at 1 m for SL).
     double source_level_db = 210.0;
-    double noise_level_db = 60.0;
-    double directivity_index_db = 20.0;
+    double noise_level_db = -1.0;          // < 0: "auto", the sea's noise spectrum over the receive band
+    double directivity_index_db = -1.0;    // < 0: "auto", from the receive patterns (broadside beam)
+    double wind_speed_mps = 5.0;           // for the auto noise level (Wenz/Coates wind term)
+    double shipping_activity = 0.5;        // 0..1, for the auto noise level (the shipping term)
     double default_backscatter_db = -30.0; // materials whose extras say nothing
     double absorption_db_per_m = -1.0;     // < 0: Francois-Garrison from the water below
     double temperature_c = 10.0;
@@ -155,6 +166,11 @@ struct SonarConfig {
     // range resolution c / 2B, rounded to the nearest integer and at least 1 (the bins then tile the
     // window exactly, within half a bin of c / 2B each). Meaningful for a config that validates.
     std::uint32_t range_bins() const;
+
+    // The sonar equation's noise terms as the renderer uses them, "auto" resolved (README "The model"):
+    // the ambient noise level in the receive band and the broadside beam's directivity index. Meaningful
+    // for a config that validates.
+    NoiseTerms noise_terms() const;
 };
 
 // Loading: presets are embedded in the library; files are JSON. Errors are one line naming file, key

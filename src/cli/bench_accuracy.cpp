@@ -229,7 +229,9 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
         base_sets.emplace_back(quiet);
     const SonarConfig base = layered_config(setup, base_sets);
     const double source = std::pow(10.0, base.source_level_db / 10.0);
-    const double floor = std::pow(10.0, (base.noise_level_db - base.directivity_index_db) / 10.0);
+    // The broadside beam's floor NL - DI (the lowest of the beams'), "auto" resolved.
+    const double floor_db = base.noise_terms().floor_db();
+    const double floor = std::pow(10.0, floor_db / 10.0);
 
     std::unique_ptr<Context> vulkan_context;
     std::string vulkan_note;
@@ -267,8 +269,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
     // An empty reference would print a table of zero errors that reads like a perfect score.
     if (compare(reference, reference, source, floor).cells == 0)
         throw BadInput("bench accuracy: no cell of the reference frame is above the noise floor (NL - DI = " +
-                       fmt(base.noise_level_db - base.directivity_index_db, 1) +
-                       " dB): nothing is in view; check --scene, --pose and --sonar");
+                       fmt(floor_db, 1) + " dB): nothing is in view; check --scene, --pose and --sonar");
     // Converged? Refine each of the reference's grid knobs once more and print how far it moves.
     {
         // As many slices as the pixel grid may have over the azimuths it covers: the fan, or with the
@@ -421,7 +422,7 @@ int run_bench_accuracy(const std::vector<std::string>& argv) {
 
     std::printf("\n## vksonar bench accuracy (reference: CPU double at the highest settings; noise off; errors "
                 "over cells above NL - DI = %s dB)\n\n",
-                fmt(base.noise_level_db - base.directivity_index_db, 1).c_str());
+                fmt(floor_db, 1).c_str());
     std::printf("Errors in dB, RMSE / max |error|: vs the reference (side-lobe kernel %s beamwidths), then vs a "
                 "reference with the row's own side-lobe kernel width (isolates the other knobs).\n\n",
                 kReferenceSidelobe);

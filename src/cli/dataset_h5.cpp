@@ -308,7 +308,8 @@ public:
              count("seed", meta.seed) && text("config", meta.config_json) && text("effects", meta.effects_json) &&
              text("validity", meta.validity_json) && text("beam_geometry", plan.line_array ? "line_array" : "planar") &&
              text("beam_geometry_why", plan.beam_geometry_why) && text("objects", meta.objects_json) &&
-             text("scene", meta.scene) && text("backend", meta.backend) && text("device", meta.device) &&
+             text("noise", host::noise_json(plan).dump()) && text("scene", meta.scene) &&
+             text("backend", meta.backend) && text("device", meta.device) &&
              text("vksonar_version", host::vksonar_version()) &&
              (meta.scene_hash.empty() || text("scene_fnv1a64", meta.scene_hash)) && count("frames_written", 0) &&
              count("complete", 0);

@@ -115,15 +115,22 @@ template <class E> std::string set_enum_value(E& field, const Json& v) {
     return "expected one of " + choices_text<E>() + ", got " + describe(v);
 }
 
+// A value outside the enum's names (a C++ caller's static_cast) reads as its number, which validate()
+// refuses (a choice key must read as one of its names).
+template <class E> Json enum_json(E value) {
+    const auto index = static_cast<std::size_t>(value);
+    if (index >= EnumNames<E>::names.size()) return static_cast<std::uint64_t>(index);
+    return EnumNames<E>::names[index];
+}
 template <class E, E SonarConfig::*M> Json get_enum(const SonarConfig& c) {
-    return EnumNames<E>::names[static_cast<std::size_t>(c.*M)];
+    return enum_json(c.*M);
 }
 template <class E, E SonarConfig::*M> std::string set_enum(SonarConfig& c, const Json& v) {
     return set_enum_value(c.*M, v);
 }
 
 template <EffectMode EffectsConfig::*M> Json get_effect(const SonarConfig& c) {
-    return EnumNames<EffectMode>::names[static_cast<std::size_t>(c.effects.*M)];
+    return enum_json(c.effects.*M);
 }
 template <EffectMode EffectsConfig::*M> std::string set_effect(SonarConfig& c, const Json& v) {
     if (v.is_boolean()) { // true/false read naturally in JSON files
@@ -153,20 +160,31 @@ std::string set_beam_angles(SonarConfig& c, const Json& v) {
     return {};
 }
 
-Json get_absorption(const SonarConfig& c) {
-    if (c.absorption_db_per_m < 0) return "auto";
-    return c.absorption_db_per_m;
+// A number >= 0, or "auto" (stored as -1: the plan derives the value; absorption, noise_level,
+// directivity_index).
+template <double SonarConfig::*M> Json get_number_or_auto(const SonarConfig& c) {
+    if (c.*M < 0) return "auto";
+    return c.*M;
 }
-std::string set_absorption(SonarConfig& c, const Json& v) {
+template <double SonarConfig::*M> std::string set_number_or_auto(SonarConfig& c, const Json& v, const char* unit) {
     if (v.is_string() && v.get<std::string>() == "auto") {
-        c.absorption_db_per_m = -1.0;
+        c.*M = -1.0;
         return {};
     }
-    if (!v.is_number()) return "expected a number (dB/m) or \"auto\", got " + describe(v);
+    if (!v.is_number()) return std::string("expected a number (") + unit + ") or \"auto\", got " + describe(v);
     const double x = v.get<double>();
-    if (x < 0) return "expected a number >= 0 (dB/m) or \"auto\", got " + describe(v);
-    c.absorption_db_per_m = x;
+    if (x < 0) return std::string("expected a number >= 0 (") + unit + ") or \"auto\", got " + describe(v);
+    c.*M = x;
     return {};
+}
+std::string set_absorption(SonarConfig& c, const Json& v) {
+    return set_number_or_auto<&SonarConfig::absorption_db_per_m>(c, v, "dB/m");
+}
+std::string set_noise_level(SonarConfig& c, const Json& v) {
+    return set_number_or_auto<&SonarConfig::noise_level_db>(c, v, "dB re 1 uPa");
+}
+std::string set_directivity_index(SonarConfig& c, const Json& v) {
+    return set_number_or_auto<&SonarConfig::directivity_index_db>(c, v, "dB");
 }
 
 // ---- the table ---------------------------------------------------------------------------------
@@ -258,14 +276,25 @@ std::vector<ConfigKey> make_table() {
                    closed(100, 260,
                           "below 100 dB no echo clears the sea's noise; the loudest sonars reach about 240 dB, and "
                           "near 260 dB the water cavitates and linear acoustics fails")),
-        VKS_NUMBER("noise_level", noise_level_db, "dB re 1 uPa", "Ambient noise level NL",
-                   closed(0, 180,
-                          "0 dB is below the thermal noise of any sonar band; storms, rain, shipping and snapping "
-                          "shrimp stay well below 180 dB")),
-        VKS_NUMBER("directivity_index", directivity_index_db, "dB", "Receive directivity index DI",
-                   closed(0, 80,
-                          "0 dB: an omnidirectional receiver; 80 dB: past a 1 m x 1 m aperture at 3 MHz (4 pi A / "
-                          "lambda^2 = 77 dB)")),
+        ConfigKey{"noise_level", KeyType::number_or_auto, "dB re 1 uPa", "",
+                  "Ambient noise level NL in the receive band, or \"auto\": the sea's noise spectrum (thermal, "
+                  "wind, shipping, turbulence) over the band f +- B/2 (B = bandwidth, else c / 2 x the bin width)",
+                  &get_number_or_auto<&SonarConfig::noise_level_db>, &set_noise_level,
+                  closed(0, 180,
+                         "0 dB is below the thermal noise of any sonar band; storms, rain, shipping and snapping "
+                         "shrimp stay well below 180 dB")},
+        ConfigKey{"directivity_index", KeyType::number_or_auto, "dB", "",
+                  "Receive directivity index DI of the broadside beam, or \"auto\": 4 pi over the receive "
+                  "pattern's solid angle (horizontal x vertical pattern); line_array beams steered to theta "
+                  "lose 10 log10(1 / cos theta)",
+                  &get_number_or_auto<&SonarConfig::directivity_index_db>, &set_directivity_index,
+                  closed(0, 80,
+                         "0 dB: an omnidirectional receiver; 80 dB: past a 1 m x 1 m aperture at 3 MHz (4 pi A / "
+                         "lambda^2 = 77 dB)")},
+        VKS_NUMBER("wind_speed", wind_speed_mps, "m/s", "Wind speed over the sea (for auto noise_level)",
+                   closed(0, 50, "calm to past hurricane force (Beaufort 12 begins at 32.7 m/s)")),
+        VKS_NUMBER("shipping", shipping_activity, "", "Shipping activity 0 (none) to 1 (heavy) (for auto noise_level)",
+                   closed(0, 1, "the range of the Wenz/Coates shipping term's activity factor")),
         VKS_NUMBER("default_backscatter", default_backscatter_db, "dB",
                    "Backscatter strength of materials whose glTF extras say nothing",
                    closed(-100, 0,
@@ -273,7 +302,7 @@ std::vector<ConfigKey> make_table() {
                           "no echo reaches a display")),
         ConfigKey{"absorption", KeyType::number_or_auto, "dB/m", "",
                   "One-way absorption, or \"auto\" for Francois-Garrison from frequency and the water below",
-                  &get_absorption, &set_absorption,
+                  &get_number_or_auto<&SonarConfig::absorption_db_per_m>, &set_absorption,
                   closed(0, 100, "no loss to three times Francois-Garrison at 10 MHz (about 30 dB/m)")},
         VKS_NUMBER("temperature", temperature_c, "degC", "Water temperature (for auto absorption)",
                    closed(-2.5, 40,

@@ -32,35 +32,6 @@ constexpr float kEdgeRelativeJump = 0.05f;
 // plan stops it at the last beam anyway); weights are beams x (2 K + 1) floats.
 constexpr std::uint32_t kMaxSidelobeHalfTaps = 2047;
 
-// Beam centre table, port first (strictly decreasing azimuth).
-Result<std::vector<double>> beam_table(const SonarConfig& c) {
-    std::vector<double> angles;
-    const double half = 0.5 * c.hfov_deg * kDegToRad;
-    if (!c.beam_angles_deg.empty()) {
-        angles.reserve(c.beam_angles_deg.size());
-        for (double a : c.beam_angles_deg)
-            angles.push_back(a * kDegToRad);
-        for (std::size_t j = 1; j < angles.size(); ++j) {
-            if (!(angles[j] < angles[j - 1])) {
-                return make_error(ErrorCode::invalid_argument,
-                                  "config: beam_angles must be strictly decreasing (port first); entry " +
-                                      std::to_string(j) + " = " + fmt(c.beam_angles_deg[j]));
-            }
-        }
-        return angles;
-    }
-    angles.resize(c.beams);
-    for (std::uint32_t j = 0; j < c.beams; ++j) {
-        const double t = 1.0 - (2.0 * j + 1.0) / c.beams; // +1 - 1/N .. -1 + 1/N: centres of N sectors
-        if (c.beam_spacing == BeamSpacing::equisine && c.hfov_deg <= 180.0) {
-            angles[j] = std::asin(t * std::sin(half));
-        } else {
-            angles[j] = t * half;
-        }
-    }
-    return angles;
-}
-
 void resolve(bool& on, EffectMode mode, bool auto_value, const char* name, const std::string& auto_why,
              std::vector<EffectState>& states) {
     if (mode == EffectMode::automatic) {
@@ -109,6 +80,34 @@ Result<void> check_memory(const Plan& p) {
 }
 
 } // namespace
+
+Result<std::vector<double>> beam_table(const SonarConfig& c) {
+    std::vector<double> angles;
+    const double half = 0.5 * c.hfov_deg * kDegToRad;
+    if (!c.beam_angles_deg.empty()) {
+        angles.reserve(c.beam_angles_deg.size());
+        for (double a : c.beam_angles_deg)
+            angles.push_back(a * kDegToRad);
+        for (std::size_t j = 1; j < angles.size(); ++j) {
+            if (!(angles[j] < angles[j - 1])) {
+                return make_error(ErrorCode::invalid_argument,
+                                  "config: beam_angles must be strictly decreasing (port first); entry " +
+                                      std::to_string(j) + " = " + fmt(c.beam_angles_deg[j]));
+            }
+        }
+        return angles;
+    }
+    angles.resize(c.beams);
+    for (std::uint32_t j = 0; j < c.beams; ++j) {
+        const double t = 1.0 - (2.0 * j + 1.0) / c.beams; // +1 - 1/N .. -1 + 1/N: centres of N sectors
+        if (c.beam_spacing == BeamSpacing::equisine && c.hfov_deg <= 180.0) {
+            angles[j] = std::asin(t * std::sin(half));
+        } else {
+            angles[j] = t * half;
+        }
+    }
+    return angles;
+}
 
 std::uint32_t ResolvedEffects::shader_flags() const {
     std::uint32_t f = 0;
@@ -218,20 +217,7 @@ namespace {
 
 // Step, first: the beam geometry the config asks for, where it can hold.
 void plan_beam_geometry(Plan& p) {
-    const SonarConfig& c = p.config;
-    p.line_array = false;
-    if (c.beam_geometry == BeamGeometry::planar) {
-        p.beam_geometry_why = "planar in config";
-    } else if (c.mode != SonarMode::physical) {
-        p.beam_geometry_why = "planar: the legacy modes reproduce their plugins' planar beams";
-    } else if (c.hfov_deg >= 180.0) {
-        p.beam_geometry_why = "planar: a fan of " + fmt(c.hfov_deg) +
-                              " deg has no single array axis (hfov < 180 for "
-                              "line_array)";
-    } else {
-        p.line_array = true;
-        p.beam_geometry_why = "line_array in config";
-    }
+    p.line_array = resolves_to_line_array(p.config, &p.beam_geometry_why);
 }
 
 // Step: the range window: bin width, the echo stage's gate, bin centres.
@@ -503,7 +489,13 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     // folds its few edge columns into the edge beams).
     plan_column_tables(p, host_grid != nullptr ? 0.5 * config.hfov_deg * kDegToRad
                                                : std::numeric_limits<double>::infinity());
-    plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only);
+    // Far side lobes only for a pattern that has side lobes: a gaussian or box pattern falls away
+    // monotonically, and the far grid's coarse cells would smear its steep skirt out over beamwidths (a
+    // gaussian read -65 dB at 3-6 beamwidths, where it is below -100 dB).
+    const bool has_sidelobes =
+        config.horizontal_pattern != BeamPattern::gaussian && config.horizontal_pattern != BeamPattern::box;
+    plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only && has_sidelobes);
+    resolve_noise_floor(p);
     plan_gpu_params(p);
     plan_subpixel(p, scene);
     if (p.subpixel_capacity > 0) {

@@ -109,6 +109,12 @@ struct Plan {
     double vpattern_k = 0, vpattern_halfwidth_rad = 0, vpattern_chebyshev_a = 0;
     double hpattern_k = 0, hpattern_halfwidth_rad = 0, hpattern_chebyshev_a = 0;
     double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
+    // The noise floor (noise_floor.cpp): NL and the broadside DI, each beam's floor NL - DI_j in dB (a
+    // line array's steered beams hear more of the sea), and 10^(floor / 10) as the noise stage adds it
+    // (0 with ambient_noise off).
+    NoiseTerms noise;
+    std::vector<double> beam_floor_db;
+    std::vector<float> beam_noise;
 
     // Beamform tables over the profile columns. Column c (azimuth, or steering angle with line_array,
     // column_azimuth_rad[c]) gives weight column_weight[c] to beam column_beam[c] and
@@ -202,6 +208,24 @@ struct HostPixelGrid {
 // depth (m), pH and sound speed (m/s).
 double francois_garrison_db_per_m(double frequency_hz, double temperature_c, double salinity_ppt, double depth_m,
                                   double ph, double sound_speed_mps);
+
+// The beam centres in radians, port first (strictly decreasing): the config's table, or `beams` centres of
+// equal sectors in angle or in sine. Fails for a table that is not strictly decreasing.
+Result<std::vector<double>> beam_table(const SonarConfig& c);
+// Whether the config's beams are a line array's cones (else planar), and in `why` (if not null) the reason.
+bool resolves_to_line_array(const SonarConfig& c, std::string* why);
+// The noise terms (noise_floor.cpp; SonarConfig::noise_terms resolves "auto" with them): the sea's ambient
+// noise spectrum level at frequency_hz (dB re 1 uPa^2/Hz; Coates' fits to the Wenz curves: turbulence,
+// shipping, wind and thermal noise); that spectrum summed over frequency_hz +- band_hz / 2 (dB re 1 uPa);
+// the receive band (bandwidth, else the range bins' c / 2 dr); and the directivity index of the broadside
+// beam from the config's horizontal and vertical patterns (dB).
+double ambient_noise_spectrum_db(double frequency_hz, double wind_speed_mps, double shipping_activity);
+double band_noise_level_db(double frequency_hz, double band_hz, double wind_speed_mps, double shipping_activity);
+double receive_band_hz(const SonarConfig& c);
+double beam_directivity_index_db(const SonarConfig& c, bool line_array);
+// p.noise, p.beam_floor_db and p.beam_noise from p.config, p.effects, p.line_array and the beam table:
+// make_plan's step after the effects; again after changing any of them (tests build plans by hand).
+void resolve_noise_floor(Plan& p);
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
 double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshev_a = 0.0);

@@ -1,4 +1,4 @@
-// meta.json's "effects" and "validity" as JSON values, shared by meta.json (files.cpp) and the HDF5
+// meta.json's "effects", "validity" and "noise" as JSON values, shared by meta.json (files.cpp) and the HDF5
 // dataset's attributes (src/cli/render_cmd.cpp), so both say the same thing the same way.
 #pragma once
 
@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/plan.h"
 #include "vksonar/frame.h"
 #include "vksonar/scene.h"
 #include "vksonar/validity.h"
@@ -40,6 +41,23 @@ inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& mo
                             {"domain", v.domain},
                             {"action", v.action}});
     return validity;
+}
+
+// The noise terms as used ("auto" resolved) and each beam's floor NL - DI_j (a line array's steered
+// beams hear more of the sea; the floor is added only where effects.ambient_noise is on); null in the
+// legacy modes, whose images keep their plugins' own constants.
+inline nlohmann::ordered_json noise_json(const Plan& plan) {
+    const SonarConfig& cfg = plan.config;
+    if (cfg.mode != SonarMode::physical) return nullptr;
+    nlohmann::ordered_json floors = nlohmann::ordered_json::array();
+    for (std::size_t j = 0; j < plan.beams && j < plan.beam_floor_db.size(); ++j)
+        floors.push_back(plan.beam_floor_db[j]);
+    return {{"noise_level_db", plan.noise.noise_level_db},
+            {"noise_level", cfg.noise_level_db < 0.0 ? "auto: the sea's spectrum over the band" : "config"},
+            {"band_hz", plan.noise.band_hz},
+            {"directivity_index_db", plan.noise.directivity_index_db},
+            {"directivity_index", cfg.directivity_index_db < 0.0 ? "auto: from the beam patterns" : "config"},
+            {"floor_db_by_beam", std::move(floors)}};
 }
 
 // The scene's objects and classes (SceneInstance): {"instances": [{"id", "node", "mesh", "class",

@@ -60,10 +60,8 @@ struct RowDraws {
 };
 RowDraws row_draws_of(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
-    const double noise =
-        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
     const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
-    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && noise > 0.0};
+    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && plan.effects.ambient_noise};
 }
 
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
@@ -147,13 +145,13 @@ namespace {
 // The default path's cells of one row: intensity = (SL clean speckle + noise) gain, in float and
 // branch-free so that it vectorizes (no array overlaps another); within 2 ulps of the double path.
 [[gnu::always_inline]] inline void combine_row(const float* __restrict clean, const float* __restrict speckle,
-                                               const float* __restrict noise, float source, float noise_level,
-                                               float gain, std::size_t count, float* __restrict stored,
-                                               float* __restrict intensity) {
+                                               const float* __restrict noise, float source,
+                                               const float* __restrict noise_level, float gain, std::size_t count,
+                                               float* __restrict stored, float* __restrict intensity) {
     for (std::size_t c = 0; c < count; ++c) {
         // NaN or negative echo energy would poison the frame: treat it as no echo.
         const float signal = clean[c] > 0.0f ? source * clean[c] * speckle[c] : 0.0f;
-        const float value = (signal + noise_level * noise[c]) * gain;
+        const float value = (signal + noise_level[c] * noise[c]) * gain;
         stored[c] = value <= FLT_MAX ? value : FLT_MAX; // +inf
         intensity[c] = stored[c];
     }
@@ -173,8 +171,10 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const std::size_t beams = plan.beams;
 
     const double source = std::pow(10.0, cfg.source_level_db / 10.0);
-    const double noise =
-        plan.effects.ambient_noise ? std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db) / 10.0) : 0.0;
+    // Each beam's noise floor 10^((NL - DI_j) / 10), 0 with the effect off (plan_noise_floor).
+    assert(!plan.effects.ambient_noise || plan.beam_noise.size() >= beams);
+    const float* beam_noise = plan.beam_noise.data();
+    const bool noise = plan.effects.ambient_noise && plan.beam_noise.size() >= beams;
     const bool speckle = plan.effects.speckle;
     const SpeckleModel model = cfg.speckle;
     const double looks = cfg.speckle_looks;
@@ -192,7 +192,6 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const bool row_speckle = rows.speckle, row_noise = rows.noise;
     const bool fast_path = row_speckle && row_noise;
     const auto source_f = static_cast<float>(source);
-    const auto noise_f = static_cast<float>(noise);
     constexpr std::size_t kChunk = 256; // beams per pass: the scratch stays on the stack (no allocation)
     float speckle_draw[kChunk], noise_draw[kChunk], stored[kChunk];
 
@@ -224,7 +223,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             if (fast_path) {
                 // The defaults (Rayleigh speckle and ambient noise) in float and branch-free, so the
                 // compiler vectorizes it; within 2 ulps of the double path below.
-                combine_row(frame.clean.data() + k * beams + j0, speckle_row, noise_row, source_f, noise_f,
+                combine_row(frame.clean.data() + k * beams + j0, speckle_row, noise_row, source_f, beam_noise + j0,
                             static_cast<float>(gain), count, stored, frame.intensity.data() + k * beams + j0);
             } else {
                 for (std::size_t c = 0; c < count; ++c) {
@@ -249,9 +248,9 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                         signal *= s;
                     }
                     double intensity = signal;
-                    if (noise > 0.0)
-                        intensity +=
-                            noise * (row_noise ? double(noise_row[c]) : rng::exp1(key, beam, bin, kNoiseStream));
+                    if (noise)
+                        intensity += double(beam_noise[beam]) *
+                                     (row_noise ? double(noise_row[c]) : rng::exp1(key, beam, bin, kNoiseStream));
                     intensity *= gain;
                     if (!(intensity <= static_cast<double>(FLT_MAX))) intensity = FLT_MAX; // +inf (NaN handled above)
                     stored[c] = static_cast<float>(intensity);

@@ -384,7 +384,7 @@ TEST_P(HardCase, NothingInViewGivesZerosAndTheNoiseFloor) {
     config.effects.ambient_noise = EffectMode::on;
     auto r = render_checked(GetParam(), config, empty);
     ASSERT_TRUE(r);
-    const double floor = std::pow(10.0, (config.noise_level_db - config.directivity_index_db) / 10.0);
+    const double floor = std::pow(10.0, config.noise_terms().floor_db() / 10.0);
     const double mean = total(r->frame.intensity) / r->frame.intensity.size();
     // 8192 Exp(1) draws: standard error 1.1%; 5% is 4.5 sigma.
     EXPECT_NEAR(mean / floor, 1.0, 0.05);

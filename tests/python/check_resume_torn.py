@@ -23,7 +23,7 @@ import h5py
 import numpy as np
 
 CLI, SHIM = sys.argv[1], sys.argv[2]
-SMALL = ["--backend", "cpu", "--set", "bins=32", "--set", "beams=16", "--set", "range_min=6", "--seed", "7"]
+SMALL = ["--backend", "cpu", "--set", "bins=32", "--set", "beams=16", "--set", "horizontal_beamwidth=9", "--set", "range_min=6", "--seed", "7"]
 FRAMES = 8
 failures = []
 
@@ -119,7 +119,7 @@ with tempfile.TemporaryDirectory() as tmp:
     check(run.returncode == -9, f"the render to change was not killed: {run.returncode}")
     with h5py.File(changed, "r+") as f:
         polar = f["polar"][2]
-        polar[0, 0] += 1.0
+        polar[0, 0] = polar[0, 0] * 2.0 + 1.0  # (+1 alone is lost in the float's rounding above 2^24)
         f["polar"][2] = polar
     run = subprocess.run([CLI] + args + ["--out", changed], capture_output=True, text=True)
     warnings = [line for line in run.stderr.splitlines() if line.startswith("warning:")]

@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 
 CLI = sys.argv[1]
-SMALL = ["--backend", "cpu", "--set", "bins=64", "--set", "beams=32", "--set", "range_min=6", "--seed", "7"]
+SMALL = ["--backend", "cpu", "--set", "bins=64", "--set", "beams=32", "--set", "horizontal_beamwidth=4.5", "--set", "range_min=6", "--seed", "7"]
 failures = []
 
 

@@ -405,7 +405,7 @@ BeamformErrors beamform_errors(const Frame& g, const Plan& plan, const char* wha
     e.polar = max_relative_error(g.clean.data(), polar.data(), cells);
     // The scan in dB over the cells above the ambient noise floor (clean is relative to SL).
     const SonarConfig& cfg = plan.config;
-    const double floor = std::pow(10.0, (cfg.noise_level_db - cfg.directivity_index_db - cfg.source_level_db) / 10.0);
+    const double floor = std::pow(10.0, (cfg.noise_terms().floor_db() - cfg.source_level_db) / 10.0);
     for (std::size_t i = 0; i < cells; ++i) {
         if (!(polar[i] > floor)) continue;
         ++e.above;

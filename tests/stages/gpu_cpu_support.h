@@ -76,8 +76,7 @@ inline std::vector<float> echo_without_vertical_pattern(const Plan& plan, const 
 }
 
 inline CleanAgreement compare_clean(const SonarConfig& config, const Frame& g, const Frame& c) {
-    const double floor =
-        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+    const double floor = std::pow(10.0, (config.noise_terms().floor_db() - config.source_level_db) / 10.0);
     CleanAgreement a;
     for (std::size_t i = 0; i < g.clean.size(); ++i) {
         if (g.clean[i] < floor && c.clean[i] < floor) continue;
