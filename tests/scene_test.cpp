@@ -623,7 +623,14 @@ const BadCase bad_cases[] = {
     {"short_buffer.gltf", ErrorCode::parse, "POSITION accessor 0: count 4"},
     {"view_past_buffer.gltf", ErrorCode::parse, "past the end of buffer 0"},
     {"huge_count.gltf", ErrorCode::parse, "count 4294967295"},
-    {"negative_count.gltf", ErrorCode::parse, "count"},
+    {"negative_count.gltf", ErrorCode::parse, "accessors[1].count = -3: must be an integer >= 0"},
+    // What tinygltf took without a word (an audit's): a negative offset read as 0, a translation of
+    // strings ignored, a glTF 1.0 file read as 2.0, a matrix one number short.
+    {"negative_byte_offset.gltf", ErrorCode::parse, "bufferViews[1].byteOffset = -4: must be an integer >= 0"},
+    {"translation_not_numbers.gltf", ErrorCode::parse,
+     "nodes[0].translation = [\"x\",0,0]: must be an array of 3 numbers"},
+    {"asset_version_1.gltf", ErrorCode::unsupported, "asset.version = \"1.0\": vksonar reads glTF 2.x"},
+    {"matrix_15_numbers.gltf", ErrorCode::parse, "nodes[0].matrix = "},
     {"index_out_of_range.gltf", ErrorCode::parse, "index 2 = 7 is out of range"},
     {"missing_position.gltf", ErrorCode::parse, "missing POSITION"},
     {"nan_position.gltf", ErrorCode::parse, "mesh 0 primitive 0: POSITION accessor 0 has NaN at vertex 1"},

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -114,6 +115,97 @@ json parse_json(const unsigned char* bytes, std::size_t size) {
         if (what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos) what = what.substr(bracket + 2);
         fail(ErrorCode::parse, "invalid JSON: " + one_line(what));
     }
+}
+
+// The numbers tinygltf takes without a word where the file is wrong: a negative byteOffset read as 0, a
+// translation of strings ignored, a glTF 1.0 file read as 2.0. Checked on the JSON (the spec's types:
+// indices and offsets integers >= 0, node transforms arrays of 3, 4, 3 and 16 numbers) so that such a
+// file fails naming the field and value instead of loading as something else.
+std::string value_text(const json& v) {
+    return one_line(v.dump(-1, ' ', false, json::error_handler_t::replace), 60);
+}
+void require_count(const json& object, const char* key, const std::string& where) {
+    if (!object.is_object() || !object.contains(key)) return;
+    const json& v = object[key];
+    const bool whole =
+        v.is_number_unsigned() || (v.is_number_integer() && v.get<std::int64_t>() >= 0) ||
+        (v.is_number_float() && v.get<double>() >= 0.0 && std::floor(v.get<double>()) == v.get<double>());
+    if (!whole)
+        fail(ErrorCode::parse,
+             (where.empty() ? "" : where + ".") + key + " = " + value_text(v) + ": must be an integer >= 0");
+}
+void require_counts(const json& object, const char* key, const std::string& where) {
+    if (!object.is_object() || !object.contains(key)) return;
+    const json& list = object[key];
+    if (!list.is_array()) fail(ErrorCode::parse, where + "." + key + " = " + value_text(list) + ": must be an array");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+        const json holder = {{"entry", list[i]}};
+        require_count(holder, "entry", where + "." + key + "[" + std::to_string(i) + "]");
+    }
+}
+void require_numbers(const json& object, const char* key, std::size_t count, const std::string& where) {
+    if (!object.is_object() || !object.contains(key)) return;
+    const json& v = object[key];
+    bool ok = v.is_array() && v.size() == count;
+    for (std::size_t i = 0; ok && i < count; ++i)
+        ok = v[i].is_number();
+    if (!ok)
+        fail(ErrorCode::parse,
+             where + "." + key + " = " + value_text(v) + ": must be an array of " + std::to_string(count) + " numbers");
+}
+// Each entry of the top-level array `name` (objects), checked by `check(entry, "name[i]")`.
+template <class Check> void each(const json& doc, const char* name, Check&& check) {
+    if (!doc.contains(name)) return;
+    const json& list = doc[name];
+    if (!list.is_array()) fail(ErrorCode::parse, std::string(name) + ": must be an array");
+    for (std::size_t i = 0; i < list.size(); ++i) {
+        const std::string where = std::string(name) + "[" + std::to_string(i) + "]";
+        if (!list[i].is_object()) fail(ErrorCode::parse, where + ": must be an object");
+        check(list[i], where);
+    }
+}
+
+void check_structure(const json& doc) {
+    if (doc.contains("asset") && doc["asset"].is_object() && doc["asset"].contains("version")) {
+        const json& version = doc["asset"]["version"];
+        if (!version.is_string() || version.get<std::string>().rfind("2.", 0) != 0)
+            fail(ErrorCode::unsupported, "asset.version = " + value_text(version) + ": vksonar reads glTF 2.x");
+    }
+    require_count(doc, "scene", "");
+    each(doc, "scenes", [](const json& scene, const std::string& where) { require_counts(scene, "nodes", where); });
+    each(doc, "nodes", [](const json& node, const std::string& where) {
+        require_count(node, "mesh", where);
+        require_counts(node, "children", where);
+        require_numbers(node, "translation", 3, where);
+        require_numbers(node, "rotation", 4, where);
+        require_numbers(node, "scale", 3, where);
+        require_numbers(node, "matrix", 16, where);
+    });
+    each(doc, "meshes", [](const json& mesh, const std::string& where) {
+        if (!mesh.contains("primitives")) return;
+        const json& primitives = mesh["primitives"];
+        if (!primitives.is_array()) fail(ErrorCode::parse, where + ".primitives: must be an array");
+        for (std::size_t p = 0; p < primitives.size(); ++p) {
+            const std::string at = where + ".primitives[" + std::to_string(p) + "]";
+            const json& primitive = primitives[p];
+            if (!primitive.is_object()) fail(ErrorCode::parse, at + ": must be an object");
+            for (const char* key : {"indices", "material", "mode"})
+                require_count(primitive, key, at);
+            if (primitive.contains("attributes") && primitive["attributes"].is_object())
+                for (const auto& attribute : primitive["attributes"].items())
+                    require_count(primitive["attributes"], attribute.key().c_str(), at + ".attributes");
+        }
+    });
+    each(doc, "accessors", [](const json& accessor, const std::string& where) {
+        for (const char* key : {"bufferView", "byteOffset", "count", "componentType"})
+            require_count(accessor, key, where);
+    });
+    each(doc, "bufferViews", [](const json& view, const std::string& where) {
+        for (const char* key : {"buffer", "byteOffset", "byteLength", "byteStride"})
+            require_count(view, key, where);
+    });
+    each(doc, "buffers",
+         [](const json& buffer, const std::string& where) { require_count(buffer, "byteLength", where); });
 }
 
 // What vksonar does with each glTF extension (README, "glTF extensions"). A sonar reads geometry
@@ -492,6 +584,7 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
     { // the parsed JSON is freed before tinygltf parses the text again
         const std::size_t json_length = binary ? glb_json_chunk(bytes) : bytes.size();
         json doc = parse_json(bytes.data() + (binary ? 20 : 0), json_length);
+        check_structure(doc);
         check_extensions(doc, warnings);
         files = check_external_buffers(doc, base_dir, asset_root);
         meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
