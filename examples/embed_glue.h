@@ -131,7 +131,7 @@ inline Comparison compare_clean(const vksonar::Frame& a, const vksonar::Frame& b
                                 double db_tolerance) {
     Comparison c;
     const double floor =
-        std::pow(10.0, (config.noise_level_db - config.directivity_index_db - config.source_level_db) / 10.0);
+        std::pow(10.0, (config.noise_terms().floor_db() - config.source_level_db) / 10.0); // "auto" resolved
     for (std::size_t i = 0; i < a.clean.size() && i < b.clean.size(); ++i) {
         if (a.clean[i] < floor && b.clean[i] < floor) continue;
         ++c.above;

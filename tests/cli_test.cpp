@@ -200,6 +200,20 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
         for (const char* field : {"model", "key", "value", "domain", "action"})
             EXPECT_TRUE(entry.contains(field)) << field;
     }
+    // The noise terms as used: NL the water's thermal noise -15 + 20 log10(f / 1 kHz) dB/Hz over the
+    // bins' band c / 2 dr (750 kHz: wind and shipping add < 0.01 dB), and each beam's floor NL - DI_j
+    // with DI_j = DI + 10 log10(cos theta_j) (a line array's steered beams; 16 beams over 16 deg).
+    const auto& noise = meta["noise"];
+    const double band = 1500.0 / (2.0 * meta["bin_width_m"].get<double>());
+    EXPECT_NEAR(noise["band_hz"].get<double>(), band, 1e-6 * band);
+    EXPECT_NEAR(noise["noise_level_db"].get<double>(), -15.0 + 20.0 * std::log10(750.0) + 10.0 * std::log10(band),
+                0.05);
+    ASSERT_EQ(noise["floor_db_by_beam"].size(), 16u);
+    for (std::size_t j = 0; j < 16; ++j) {
+        const double di = noise["directivity_index_db"].get<double>() +
+                          10.0 * std::log10(std::cos(meta["beam_angles_rad"][j].get<double>()));
+        EXPECT_NEAR(noise["floor_db_by_beam"][j].get<double>(), noise["noise_level_db"].get<double>() - di, 1e-9);
+    }
     // Outside two domains: one warning line per model, and the list says which.
     const CliRun outside = render("outside", {"range_min=1", "frequency=3e6"});
     ASSERT_EQ(outside.exit_code, 0) << outside.err;

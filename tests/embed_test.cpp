@@ -307,6 +307,53 @@ VkResult submit(VkQueue queue, VkCommandBuffer commands, VkSemaphore wait, VkPip
     return vkQueueSubmit(queue, 1, &info, fence);
 }
 
+// One ping in flight: a recorded ping that has not run blocks record() and process() (they would rewrite
+// what it uses); a recording the host drops without submitting is let go with discard_recorded(), after
+// which process() runs and read_back() says nothing was recorded. The dropped command buffer is freed
+// unsubmitted, as a host would on a swapchain rebuild.
+TEST_F(EmbedTest, ADroppedRecordingIsDiscarded) {
+    auto host = make_host(demo_engine_options());
+    ASSERT_TRUE(host);
+    host::Engine& engine = *host->engine;
+    auto context = Context::adopt(host::host_vulkan(engine));
+    ASSERT_TRUE(context.ok()) << context.error().message;
+    auto sonar = HostDepthRenderer::create(*context, host::demo_config(), host::depth_desc(host->options));
+    ASSERT_TRUE(sonar.ok()) << sonar.error().message;
+    Frame expected = sonar->make_frame(), frame = sonar->make_frame();
+    ASSERT_TRUE(sonar->process(host::depth_image(engine), 5, expected).ok());
+
+    HostFrame f;
+    f.device = engine.device();
+    VkCommandPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    pool_info.queueFamilyIndex = engine.queue_family();
+    ASSERT_EQ(vkCreateCommandPool(f.device, &pool_info, nullptr, &f.pool), VK_SUCCESS);
+    VkCommandBufferAllocateInfo allocate{};
+    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    allocate.commandPool = f.pool;
+    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    allocate.commandBufferCount = 1;
+    ASSERT_EQ(vkAllocateCommandBuffers(f.device, &allocate, &f.sonar_commands), VK_SUCCESS);
+    VkCommandBufferBeginInfo begin{};
+    begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    ASSERT_EQ(vkBeginCommandBuffer(f.sonar_commands, &begin), VK_SUCCESS);
+    ASSERT_TRUE(sonar->record(f.sonar_commands, host::depth_image(engine)).ok());
+    ASSERT_EQ(vkEndCommandBuffer(f.sonar_commands), VK_SUCCESS);
+    auto blocked = sonar->process(host::depth_image(engine), 5, frame);
+    ASSERT_FALSE(blocked);
+    EXPECT_NE(blocked.error().message.find("discard_recorded()"), std::string::npos) << blocked.error().message;
+    vkFreeCommandBuffers(f.device, f.pool, 1, &f.sonar_commands); // dropped, never submitted
+    f.sonar_commands = VK_NULL_HANDLE;
+    sonar->discard_recorded();
+    auto processed = sonar->process(host::depth_image(engine), 5, frame);
+    ASSERT_TRUE(processed.ok()) << processed.error().message;
+    EXPECT_EQ(frame.clean, expected.clean);
+    auto read = sonar->read_back(5, frame);
+    ASSERT_FALSE(read);
+    EXPECT_NE(read.error().message.find("nothing was recorded"), std::string::npos) << read.error().message;
+    EXPECT_EQ(host->messages.load(), 0u);
+}
+
 // One host frame of three submissions chained by semaphores, with no CPU wait between them:
 // the engine's depth pass (signals depth_done) -> vksonar's work recorded by HostDepthRenderer::record into the
 // host's command buffer (waits depth_done, signals sonar_done) -> the host's "display" pass, which

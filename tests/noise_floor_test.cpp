@@ -112,6 +112,19 @@ TEST(NoiseFloor, AutoNoiseLevelIsThermalNoiseOverTheReceiveBand) {
     SonarConfig fixed = config;
     fixed.noise_level_db = 60.0;
     EXPECT_EQ(fixed.noise_terms().noise_level_db, 60.0);
+
+    // Bins finer than a 1 kHz pulse can resolve (0.5-40 m in 512 bins: c / 2 dr = 9.7 kHz) ask for a band
+    // below 0 Hz: the band is at most 0 .. 2 f, and the sum starts at f / 10, where the turbulence and
+    // shipping terms stay finite (a review's: NaN noise, every cell FLT_MAX). Likewise a band of exactly 2 f.
+    SonarConfig fine = config;
+    fine.frequency_hz = 1000.0;
+    ASSERT_TRUE(fine.validate());
+    EXPECT_EQ(fine.noise_terms().band_hz, 2000.0);
+    EXPECT_TRUE(std::isfinite(fine.noise_terms().noise_level_db));
+    fine.bandwidth_hz = 2000.0;
+    ASSERT_TRUE(fine.validate());
+    EXPECT_TRUE(std::isfinite(fine.noise_terms().noise_level_db));
+    EXPECT_LT(fine.noise_terms().noise_level_db, 120.0);
 }
 
 } // namespace

@@ -125,6 +125,10 @@ public:
     // null command buffer, an image process() would refuse or a recorded ping that has not run yet,
     // ErrorCode::vulkan if a Vulkan call fails; on failure nothing is recorded.
     [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& depth);
+    // The command buffer given to the last record() will never run: the host freed or reset it without
+    // submitting it (a swapchain rebuild, a frame it dropped). record() and process() go on; read_back()
+    // then says nothing was recorded. Only for a command buffer that was never submitted.
+    void discard_recorded();
     // After the command buffer given to record() has finished executing (the host waited for its
     // fence): copies the result to host memory and runs the host stages (noise, gain) into `frame`.
     // Fails with ErrorCode::invalid_argument, without touching `frame`'s arrays (its stage lists, times

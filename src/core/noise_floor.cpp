@@ -71,21 +71,25 @@ double ambient_noise_spectrum_db(double frequency_hz, double wind_speed_mps, dou
 }
 
 double receive_band_hz(const SonarConfig& c) {
-    if (c.bandwidth_hz > 0.0) return c.bandwidth_hz;
-    // A receiver matched to bins of width dr passes the band c / 2 dr (the range resolution's).
+    if (c.bandwidth_hz > 0.0) return c.bandwidth_hz; // validate(): at most 2 f
+    // A receiver matched to bins of width dr passes the band c / 2 dr (the range resolution's); bins finer
+    // than a quarter wavelength ask for more than the band 0 .. 2 f any pulse at f has: at most that.
     const double bin_width = (c.range_max_m - c.range_min_m) / std::max<std::uint32_t>(c.range_bins(), 1);
-    return c.sound_speed_mps / (2.0 * bin_width);
+    return std::min(c.sound_speed_mps / (2.0 * bin_width), 2.0 * c.frequency_hz);
 }
 
 double band_noise_level_db(double frequency_hz, double band_hz, double wind_speed_mps, double shipping_activity) {
     // The spectrum summed over f +- B/2 (thermal noise grows as f^2: over a band as wide as 2 f the sum is
-    // 1.25 dB above B times the level at f).
-    const double low = frequency_hz - 0.5 * band_hz;
+    // 1.25 dB above B times the level at f). A band reaching down to 0 Hz starts at f / 10 instead: the
+    // turbulence and shipping terms grow without bound towards 0 Hz, and a receiver's front end filters
+    // there (the thermal part of such a band loses 0.04 %).
+    const double low = std::max(frequency_hz - 0.5 * band_hz, 0.1 * frequency_hz);
+    const double high = frequency_hz + 0.5 * band_hz;
     const double power = integrate(
         [&](double f) {
             return std::pow(10.0, ambient_noise_spectrum_db(f, wind_speed_mps, shipping_activity) / 10.0);
         },
-        low, low + band_hz, 256);
+        low, high, 256);
     return 10.0 * std::log10(power);
 }
 
@@ -120,7 +124,7 @@ double beam_directivity_index_db(const SonarConfig& c, bool line_array) {
 
 void resolve_noise_floor(Plan& p) {
     const SonarConfig& c = p.config;
-    p.noise = c.noise_terms();
+    p.noise = c.noise_terms(); // finite for every config that validates (noise_floor_test.cpp)
     p.beam_noise.assign(p.beams, 0.0f);
     p.beam_floor_db.assign(p.beams, p.noise.floor_db());
     for (std::uint32_t j = 0; j < p.beams; ++j) {

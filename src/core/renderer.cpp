@@ -275,6 +275,7 @@ Frame make_frame_for(const RendererImpl& impl) {
 struct Misfit {
     const char* name = nullptr;
     std::size_t size = 0, expected = 0;
+    bool count = false; // a count (Frame::bins, beams), not an array's size
 };
 
 Misfit misfit_array(const RendererImpl& impl, const Frame& frame) {
@@ -286,6 +287,11 @@ Misfit misfit_array(const RendererImpl& impl, const Frame& frame) {
     auto check = [&](const char* name, std::size_t size, std::size_t expected) {
         if (misfit.name == nullptr && size != expected) misfit = Misfit{name, size, expected};
     };
+    // The shape, not only the cell count: a 32 x 16 frame must not pass for a 16 x 32 one.
+    if (frame.bins != p.bins) misfit = Misfit{"bins", frame.bins, p.bins, true};
+    if (misfit.name == nullptr && frame.beams != p.beams) misfit = Misfit{"beams", frame.beams, p.beams, true};
+    check("beam_angles_rad", frame.beam_angles_rad.size(), p.beams);
+    check("bin_ranges_m", frame.bin_ranges_m.size(), p.bins);
     check("clean", frame.clean.size(), cells);
     if (any(mask & SaveFlags::depth)) {
         check("depth", frame.depth.size(), pixels);
@@ -362,7 +368,8 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     if (const Misfit misfit = misfit_array(impl, frame); misfit.name != nullptr) {
         return make_error(ErrorCode::invalid_argument,
                           std::string("render: frame was not made by this renderer's make_frame() (Frame::") +
-                              misfit.name + " has " + std::to_string(misfit.size) + " elements, this renderer's " +
+                              misfit.name + (misfit.count ? " is " : " has ") + std::to_string(misfit.size) +
+                              (misfit.count ? "" : " elements") + ", this renderer's " +
                               std::to_string(misfit.expected) + ")");
     }
     // Each render reports its own stages: the frame is reused, so the lists start empty (clear keeps
@@ -382,16 +389,10 @@ Result<void> run_frame(RendererImpl& impl, const Pose& pose, std::uint64_t frame
     const auto t0 = std::chrono::steady_clock::now();
     frame.frame_index = frame_index;
     frame.seed = impl.options.seed;
-    // The axes are this renderer's, also in a frame another renderer of the same size made (the arrays
-    // have the same sizes: misfit_array; copying into them allocates nothing).
-    if (frame.beam_angles_rad.size() == p.beam_angle_rad.size())
-        std::copy(p.beam_angle_rad.begin(), p.beam_angle_rad.end(), frame.beam_angles_rad.begin());
-    else
-        frame.beam_angles_rad = p.beam_angle_rad;
-    if (frame.bin_ranges_m.size() == p.bin_range_m.size())
-        std::copy(p.bin_range_m.begin(), p.bin_range_m.end(), frame.bin_ranges_m.begin());
-    else
-        frame.bin_ranges_m = p.bin_range_m;
+    // The axes are this renderer's, also in a frame another renderer of the same shape made (misfit_array
+    // checked their sizes: copying into them allocates nothing).
+    std::copy_n(p.beam_angle_rad.begin(), p.beams, frame.beam_angles_rad.begin());
+    std::copy_n(p.bin_range_m.begin(), p.bins, frame.bin_ranges_m.begin());
     const host::NoiseDraws draws{impl.speckle_draws.data(), impl.noise_draws.data()};
     host::noise_and_gain(p, impl.options.seed, frame_index, frame, impl.workers.get(), impl.backend->pending_clean(),
                          impl.draws_for(frame_index) ? &draws : nullptr);
@@ -460,6 +461,10 @@ Result<void> HostDepthRenderer::record(VkCommandBuffer commands, const HostDepth
         return make_error(ErrorCode::invalid_argument,
                           std::string("HostDepthRenderer::record: ") + kEmptyHostDepthRenderer);
     return impl_->host_depth->record(commands, depth, backend_save_mask(impl_->options));
+}
+
+void HostDepthRenderer::discard_recorded() {
+    if (impl_) impl_->host_depth->discard_recorded();
 }
 
 Result<void> HostDepthRenderer::read_back(std::uint64_t frame_index, Frame& frame) {

@@ -274,7 +274,7 @@ std::string meta_json_plan_part(const Plan& plan) {
     m["sound_speed_mps"] = cfg.sound_speed_mps;
     m["tx_beamwidths_rad"] = std::move(tx);
     m["rx_beamwidths_rad"] = std::move(rx);
-    if (json noise = noise_json(plan); !noise.is_null()) m["noise"] = std::move(noise); // legacy: none
+    m["noise"] = noise_json(plan);
     std::string text = m.dump(2, ' ', false, json::error_handler_t::replace);
     text.resize(text.size() - 2); // the closing "\n}": the frame's fields follow
     return text;

@@ -44,11 +44,10 @@ inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& mo
 }
 
 // The noise terms as used ("auto" resolved) and each beam's floor NL - DI_j (a line array's steered
-// beams hear more of the sea; the floor is added only where effects.ambient_noise is on); null in the
-// legacy modes, whose images keep their plugins' own constants.
+// beams hear more of the sea; the floor is added only where effects.ambient_noise is on). In every mode:
+// the legacy modes' polar scan is the physical chain's too (their own images keep their constants).
 inline nlohmann::ordered_json noise_json(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
-    if (cfg.mode != SonarMode::physical) return nullptr;
     nlohmann::ordered_json floors = nlohmann::ordered_json::array();
     for (std::size_t j = 0; j < plan.beams && j < plan.beam_floor_db.size(); ++j)
         floors.push_back(plan.beam_floor_db[j]);

@@ -61,7 +61,9 @@ struct RowDraws {
 RowDraws row_draws_of(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
     const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
-    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && plan.effects.ambient_noise};
+    // (ambient noise needs each beam's level: resolve_noise_floor; a plan without them adds none)
+    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh,
+            rows && plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams};
 }
 
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no

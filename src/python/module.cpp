@@ -186,7 +186,7 @@ struct SceneObject {
     // triangle indices [m, 3] (or flat), one material, drawn once with a 4x4 row-major transform;
     // `instance`: the object id its labels carry (0: none; a scene built here has no class table).
     static std::shared_ptr<SceneObject>
-    from_arrays(const py::array& vertices, const py::array& indices, double backscatter_db,
+    from_arrays(const py::object& vertices, const py::object& indices, double backscatter_db,
                 const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
                 std::int64_t instance) {
         auto s = std::make_shared<SceneObject>();
@@ -194,10 +194,15 @@ struct SceneObject {
         return s;
     }
 
-    std::uint32_t add(const py::array& vertex_array, const py::array& indices, double backscatter_db,
+    std::uint32_t add(const py::object& vertex_input, const py::object& index_input, double backscatter_db,
                       const std::optional<py::array_t<double, py::array::c_style | py::array::forcecast>>& transform,
                       std::int64_t instance) {
         // Everything is checked before the scene changes: a refused add leaves no mesh or material behind.
+        // Arrays or anything numpy takes (nested lists), as np.asarray reads them.
+        const py::array vertex_array = py::array::ensure(vertex_input);
+        const py::array indices = py::array::ensure(index_input);
+        if (!vertex_array) throw py::value_error("vertices: not an array of numbers");
+        if (!indices) throw py::value_error("indices: not an array of integers");
         const char kind = vertex_array.dtype().kind();
         if (kind != 'f' && kind != 'i' && kind != 'u')
             throw py::value_error("vertices: dtype " + py::str(vertex_array.dtype()).cast<std::string>() +
@@ -671,6 +676,7 @@ PYBIND11_MODULE(vksonar, m) {
                 if (time_s && !std::isfinite(*time_s))
                     throw py::value_error("time_s: " + py::str(py::float_(*time_s)).cast<std::string>() +
                                           " is not a finite time");
+                if (out && out->renderer.ptr() != self.ptr()) throw py::value_error("out: a Frame of another Renderer");
                 const std::unique_lock<std::mutex> lock = one_call_at_a_time(r);
                 // seed= is this render's: the Renderer's own seed comes back after it.
                 const std::uint64_t own_seed = r.renderer.seed();
@@ -678,8 +684,6 @@ PYBIND11_MODULE(vksonar, m) {
                 if (!out) {
                     out = std::make_shared<FrameObject>();
                     out->frame = r.renderer.make_frame();
-                } else if (out->renderer.ptr() != self.ptr()) {
-                    throw py::value_error("out: a Frame of another Renderer");
                 }
                 out->plan = &renderer_plan(r.renderer);
                 out->renderer = self;

@@ -400,7 +400,8 @@ Result<void> HostDepthPass::refuse_while_recorded_pending(const char* call) cons
     return make_error(ErrorCode::invalid_argument,
                       std::string("HostDepthRenderer::") + call +
                           ": the command buffer given to the last record() has not finished executing (one ping "
-                          "in flight: wait for the host's fence of that submission first)");
+                          "in flight: wait for the host's fence of that submission first; one that will never be "
+                          "submitted: discard_recorded())");
 }
 
 Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
@@ -427,6 +428,10 @@ Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
 void HostDepthPass::arm_process(const HostDepthImage& image) {
     objects_->armed = Objects::Armed::process;
     objects_->armed_image = image;
+}
+
+void HostDepthPass::discard_recorded() {
+    objects_->recorded = false;
 }
 
 void HostDepthPass::arm_read_back() {

@@ -41,6 +41,8 @@ public:
     [[nodiscard]] Result<void> record(VkCommandBuffer commands, const HostDepthImage& image, SaveFlags save_mask);
     // After the command buffer given to record() has finished: copies the readback out (as process).
     [[nodiscard]] Result<void> read_back(SaveFlags save_mask, Frame& frame);
+    // HostDepthRenderer::discard_recorded: the last recording will never run.
+    void discard_recorded();
     // ErrorCode::invalid_argument while a recorded ping has not run yet (`call` names the caller).
     [[nodiscard]] Result<void> refuse_while_recorded_pending(const char* call) const;
     GpuBufferView polar_buffer() const;

@@ -89,6 +89,8 @@ with tempfile.TemporaryDirectory() as tmp:
         meta = json.load(open(os.path.join(folder, "frame_000002", "meta.json")))
         check(f.attrs["beam_geometry"] == meta["beam_geometry"]["used"] == "line_array"
               and f.attrs["beam_geometry_why"] == meta["beam_geometry"]["why"], "beam_geometry as meta.json")
+        noise = json.loads(f.attrs["noise"])
+        check(noise == meta["noise"] and len(noise["floor_db_by_beam"]) == 32, "noise as meta.json")
         objects = json.loads(f.attrs["objects"])
         check(objects == meta["objects"] and [c["name"] for c in objects["classes"]][:2] == ["seabed", "piling"],
               "objects as meta.json")

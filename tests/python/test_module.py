@@ -503,8 +503,9 @@ def test_scene_arrays_are_checked_before_the_scene_changes():
             scene.add(vertices, indices, **bad)
     assert scene.triangles == before
     assert scene.add(vertices, indices) == 1  # the second mesh: nothing was left behind
-    # nan: the config's default_backscatter; integer vertices are converted
+    # nan: the config's default_backscatter; integer vertices are converted, nested lists too
     vksonar.Scene.from_arrays(vertices.astype(np.int32), indices.ravel(), backscatter_db=float("nan"))
+    assert vksonar.Scene.from_arrays(vertices.tolist(), indices.tolist()).triangles == 2
 
 
 def test_a_renderer_keeps_its_scene_while_it_grows_and_renders_on_another_thread():
