@@ -151,6 +151,8 @@ std::string set_beam_angles(SonarConfig& c, const Json& v) {
     angles.reserve(v.size());
     for (std::size_t i = 0; i < v.size(); ++i) {
         if (!v[i].is_number()) return "entry " + std::to_string(i) + " is not a number: " + describe(v[i]);
+        if (!std::isfinite(v[i].get<double>())) // as every number key (NaN from Python or C++)
+            return "entry " + std::to_string(i) + " is not a finite number: " + describe(v[i]);
         angles.push_back(v[i].get<double>());
     }
     c.beam_angles_deg = std::move(angles);

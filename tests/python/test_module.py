@@ -563,3 +563,9 @@ def test_time_s_must_be_finite():
         with pytest.raises(ValueError, match="time_s"):
             renderer.render(POSE, time_s=bad)
     assert renderer.render(POSE, time_s=1.5).meta["time_s"] == 1.5
+
+
+def test_a_beam_table_entry_must_be_finite_when_set():
+    config = small_config()
+    with pytest.raises(ValueError, match="beam_angles.*entry 1 is not a finite number"):
+        config.set("beam_angles", [10.0, float("nan"), -10.0])
