@@ -209,6 +209,13 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     EXPECT_NEAR(noise["noise_level_db"].get<double>(), -15.0 + 20.0 * std::log10(750.0) + 10.0 * std::log10(band),
                 0.05);
     ASSERT_EQ(noise["floor_db_by_beam"].size(), 16u);
+    // A line array's beam is as wide in sine at every steering angle: in angle asin(u + s) - asin(u - s),
+    // s = sin(bw / 2), u = sin(theta) (meta's rx_beamwidths_rad, as the bag's ping_info).
+    for (std::size_t j = 0; j < 16; ++j) {
+        const double u = std::sin(meta["beam_angles_rad"][j].get<double>()),
+                     s = std::sin(0.5 * 3.14159265358979323846 / 180.0);
+        EXPECT_NEAR(meta["rx_beamwidths_rad"][j].get<double>(), std::asin(u + s) - std::asin(u - s), 1e-12);
+    }
     for (std::size_t j = 0; j < 16; ++j) {
         const double di = noise["directivity_index_db"].get<double>() +
                           10.0 * std::log10(std::cos(meta["beam_angles_rad"][j].get<double>()));

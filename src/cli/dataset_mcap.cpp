@@ -7,6 +7,7 @@
 
 #include "cli/mcap_writer.h"
 #include "cli/ros_msgs.h"
+#include "host/meta_fields.h"
 
 namespace vksonar::cli {
 namespace {
@@ -89,7 +90,9 @@ public:
         sonar_.frequency = static_cast<float>(plan_.config.frequency_hz);
         sonar_.sound_speed = static_cast<float>(plan_.config.sound_speed_mps);
         sonar_.tx_beamwidths.assign(beams, static_cast<float>(plan_.config.vfov_deg * kDegToRad));
-        sonar_.rx_beamwidths.assign(beams, static_cast<float>(plan_.config.horizontal_beamwidth_deg * kDegToRad));
+        sonar_.rx_beamwidths.resize(beams); // a line array's beams widen off broadside (meta_fields.h)
+        for (std::size_t j = 0; j < beams; ++j)
+            sonar_.rx_beamwidths[j] = static_cast<float>(host::rx_beamwidth_rad(plan_, j));
         for (std::size_t j = 0; j < beams; ++j) {
             const double a = plan_.beam_angle_rad[j];
             sonar_.beam_directions.insert(sonar_.beam_directions.end(), {0.0, -std::sin(a), std::cos(a)});

@@ -25,6 +25,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -616,8 +617,16 @@ Identity bag_identity(const Args& args, const RenderJob& job, const Outputs& out
     if (job.trajectory) whole.trajectory_hash = file_fnv1a64(args.value("--trajectory"));
     Identity identity = run_identity(outputs.config_json, job.seed, job.scene_path, outputs.backend,
                                      save_list(job.save), job.timed, job.shard ? &*job.shard : &whole);
+    // One --pose: its --frame-index keys the noise (a trajectory's are its line numbers), so the record
+    // that is to render the bag again holds it.
+    if (!job.trajectory && job.poses.size() == 1)
+        identity.emplace_back("frame_index", std::to_string(job.poses[0].line));
+    // The shortest text that reads back as the same double (29.97, not 29.969999999999999).
     char rate[32];
-    std::snprintf(rate, sizeof rate, "%.17g", bag_options.rate);
+    for (int digits = 6; digits <= 17; ++digits) {
+        std::snprintf(rate, sizeof rate, "%.*g", digits, bag_options.rate);
+        if (std::strtod(rate, nullptr) == bag_options.rate) break;
+    }
     identity.insert(identity.end(), {{"ros_prefix", bag_options.prefix},
                                      {"ros_frame", bag_options.frame},
                                      {"ros_sonar_dtype", bag_options.sonar_u16 ? "uint16" : "float32"},

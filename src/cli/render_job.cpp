@@ -282,17 +282,27 @@ McapOptions mcap_options(const Args& args, SaveSet& save, const std::string& pat
         return true;
     };
     if (options.prefix == "/") options.prefix.clear();
+    // ROS 2 names: tokens of letters, digits and _, none starting with a digit (ros2 bag play refuses
+    // /1abc); tf2 frame ids may start with a digit, but not be the world frame the bag's /tf hangs from.
+    bool digit_token = false;
+    for (std::size_t i = 0; i + 1 < options.prefix.size(); ++i)
+        digit_token |= options.prefix[i] == '/' && std::isdigit(static_cast<unsigned char>(options.prefix[i + 1]));
     if (!options.prefix.empty() && (options.prefix[0] != '/' || !valid_name(options.prefix, true) ||
-                                    options.prefix.find("//") != std::string::npos))
+                                    options.prefix.find("//") != std::string::npos || digit_token))
         throw BadInput("--ros-prefix: '" + options.prefix +
-                       "' is not a ROS topic namespace (/name/..., letters, digits, _)");
+                       "' is not a ROS topic namespace (/name/..., letters, digits, _; no name starts with a digit)");
     options.frame = args.value("--ros-frame", options.frame);
-    if (!valid_name(options.frame, false) || std::isdigit(static_cast<unsigned char>(options.frame[0])))
+    if (!valid_name(options.frame, false))
         throw BadInput("--ros-frame: '" + options.frame + "' is not a frame id (letters, digits, _)");
+    if (options.frame == options.world_frame)
+        throw BadInput("--ros-frame: '" + options.frame + "' is the world frame the bag's /tf places the sonar in");
     const std::string dtype = args.value("--ros-sonar-dtype", "float32");
     if (dtype != "float32" && dtype != "uint16")
         throw BadInput("--ros-sonar-dtype: '" + dtype + "' (float32 or uint16)");
     options.sonar_u16 = dtype == "uint16";
+    if (args.has("--ros-sonar-dtype") && !options.sonar_image)
+        throw BadInput(
+            "--ros-sonar-dtype: the sonar_image topic it sets comes with --save polar, which is not asked for");
     if (args.has("--rate")) {
         options.rate = parse_double(args.value("--rate"), "--rate");
         if (!(options.rate > 0.0))

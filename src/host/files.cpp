@@ -259,7 +259,7 @@ std::string meta_json_plan_part(const Plan& plan) {
         angles.push_back(a);
         directions.push_back({{"x", 0.0}, {"y", -std::sin(a)}, {"z", std::cos(a)}});
         tx.push_back(cfg.vfov_deg * kDegToRad);
-        rx.push_back(cfg.horizontal_beamwidth_deg * kDegToRad);
+        rx.push_back(rx_beamwidth_rad(plan, j)); // a line array's beams widen off broadside
     }
     m["beam_angles_rad"] = std::move(angles);
     m["beam_directions"] = std::move(directions);

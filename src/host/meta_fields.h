@@ -2,6 +2,8 @@
 // dataset's attributes (src/cli/render_cmd.cpp), so both say the same thing the same way.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -41,6 +43,17 @@ inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& mo
                             {"domain", v.domain},
                             {"action", v.action}});
     return validity;
+}
+
+// Beam j's horizontal -3 dB width in angle: the configured width, or for a line array's beam steered to
+// theta, whose width is constant in sine, asin(sin theta + s) - asin(sin theta - s) with s = sin(bw / 2)
+// (about bw / cos theta; 2.4 times the broadside width at 65 deg). meta.json's and the bag's
+// rx_beamwidths.
+inline double rx_beamwidth_rad(const Plan& plan, std::size_t j) {
+    const double bw = plan.config.horizontal_beamwidth_deg * 3.14159265358979323846 / 180.0;
+    if (!plan.line_array || j >= plan.beam_angle_rad.size()) return bw;
+    const double s = std::sin(0.5 * bw), u = std::sin(plan.beam_angle_rad[j]);
+    return std::asin(std::min(u + s, 1.0)) - std::asin(std::max(u - s, -1.0));
 }
 
 // The noise terms as used ("auto" resolved) and each beam's floor NL - DI_j (a line array's steered

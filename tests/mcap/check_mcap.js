@@ -311,6 +311,13 @@ async function main() {
       `${name} bag: vksonar_run record ${records.length ? [...r.entries()].map(([k, v]) => `${k}=${v.slice(0, 40)}`).join(" ") : "missing"}`);
   }
   for (const part of parts) check((await runRecords(await readIndexed(part))).length === 0, `${part}: a run record in a shard's bag`);
+  // One --pose: its --frame-index keys the noise, so the run record that renders the bag again holds it
+  // (an audit's: it was missing); a rate reads back as written (29.97, not 29.969999999999999).
+  render(["--pose", "1,0,0,0,10,3", "--frame-index", "7", "--rate", "29.97", "--out", file("single.mcap"),
+    "--save", "polar", ...SMALL]);
+  const single = await runRecords(await readIndexed(file("single.mcap")));
+  check(single.length === 1 && single[0].get("frame_index") === "7" && single[0].get("rate") === "29.97",
+    `single pose bag: vksonar_run ${single.length ? [...single[0].entries()].map(([k, v]) => `${k}=${v.slice(0, 30)}`).join(" ") : "missing"}`);
   console.log(`shards: 3 bags merged into ${merged.messages.length} messages, ${merged.bytes.length} bytes, ` +
     `identical to the unsharded bag: ${bytesEqual(merged.bytes, whole.bytes)}`);
 
@@ -332,6 +339,14 @@ async function main() {
     "--rate with a time column");
   bad(["--out", file("depth.mcap"), "--save", "depth", ...SMALL], ["--save depth"], "--save depth");
   bad(["--out", file("prefix.mcap"), "--ros-prefix", "no slash", ...SMALL], ["--ros-prefix"], "bad prefix");
+  // ROS 2 refuses a name token that starts with a digit (ros2 bag play could not publish it); tf2 takes a
+  // frame id that does, but not the world frame as the sonar's (a world -> world transform); a sonar dtype
+  // with no sonar_image topic to set means nothing.
+  bad(["--out", file("digit.mcap"), "--ros-prefix", "/auv/1st", ...SMALL], ["--ros-prefix", "digit"], "digit prefix");
+  bad(["--out", file("world.mcap"), "--ros-frame", "world", ...SMALL], ["--ros-frame", "world frame"], "world frame");
+  bad(["--out", file("dtype.mcap"), "--save", "fan", "--ros-sonar-dtype", "uint16", ...SMALL], ["--ros-sonar-dtype"],
+    "dtype without polar");
+  render(["--out", file("digit_frame.mcap"), "--ros-frame", "2nd_sonar", "--save", "polar", ...SMALL]);
   for (const f of ["badtime.mcap", "negative.mcap", "rate2.mcap", "depth.mcap", "prefix.mcap"])
     check(!fs.existsSync(file(f)), `no file left after a refusal: ${f}`);
 
