@@ -293,6 +293,25 @@ struct HostFrame {
     }
 };
 
+// The host's command pool on the engine's queue family and its sonar (and display) command buffers.
+VkResult make_commands(HostFrame& f, const host::Engine& engine, bool display) {
+    f.device = engine.device();
+    VkCommandPoolCreateInfo pool_info{};
+    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    pool_info.queueFamilyIndex = engine.queue_family();
+    if (const VkResult r = vkCreateCommandPool(f.device, &pool_info, nullptr, &f.pool); r != VK_SUCCESS) return r;
+    VkCommandBufferAllocateInfo allocate{};
+    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    allocate.commandPool = f.pool;
+    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    allocate.commandBufferCount = display ? 2 : 1;
+    VkCommandBuffer buffers[2] = {};
+    const VkResult r = vkAllocateCommandBuffers(f.device, &allocate, buffers);
+    f.sonar_commands = buffers[0];
+    f.display_commands = buffers[1];
+    return r;
+}
+
 VkResult submit(VkQueue queue, VkCommandBuffer commands, VkSemaphore wait, VkPipelineStageFlags wait_stage,
                 VkSemaphore signal, VkFence fence) {
     VkSubmitInfo info{};
@@ -323,17 +342,7 @@ TEST_F(EmbedTest, ADroppedRecordingIsDiscarded) {
     ASSERT_TRUE(sonar->process(host::depth_image(engine), 5, expected).ok());
 
     HostFrame f;
-    f.device = engine.device();
-    VkCommandPoolCreateInfo pool_info{};
-    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    pool_info.queueFamilyIndex = engine.queue_family();
-    ASSERT_EQ(vkCreateCommandPool(f.device, &pool_info, nullptr, &f.pool), VK_SUCCESS);
-    VkCommandBufferAllocateInfo allocate{};
-    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    allocate.commandPool = f.pool;
-    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    allocate.commandBufferCount = 1;
-    ASSERT_EQ(vkAllocateCommandBuffers(f.device, &allocate, &f.sonar_commands), VK_SUCCESS);
+    ASSERT_EQ(make_commands(f, engine, false), VK_SUCCESS);
     VkCommandBufferBeginInfo begin{};
     begin.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     ASSERT_EQ(vkBeginCommandBuffer(f.sonar_commands, &begin), VK_SUCCESS);
@@ -373,20 +382,7 @@ TEST_F(EmbedTest, SemaphoreChainedFrameMatchesProcess) {
     ASSERT_EQ(polar.size, VkDeviceSize(processed.clean.size()) * sizeof(float));
 
     HostFrame f;
-    f.device = engine.device();
-    VkCommandPoolCreateInfo pool_info{};
-    pool_info.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    pool_info.queueFamilyIndex = engine.queue_family();
-    ASSERT_EQ(vkCreateCommandPool(f.device, &pool_info, nullptr, &f.pool), VK_SUCCESS);
-    VkCommandBufferAllocateInfo allocate{};
-    allocate.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    allocate.commandPool = f.pool;
-    allocate.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    allocate.commandBufferCount = 2;
-    VkCommandBuffer buffers[2] = {};
-    ASSERT_EQ(vkAllocateCommandBuffers(f.device, &allocate, buffers), VK_SUCCESS);
-    f.sonar_commands = buffers[0];
-    f.display_commands = buffers[1];
+    ASSERT_EQ(make_commands(f, engine, true), VK_SUCCESS);
     VkSemaphoreCreateInfo semaphore_info{};
     semaphore_info.sType = VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO;
     ASSERT_EQ(vkCreateSemaphore(f.device, &semaphore_info, nullptr, &f.depth_done), VK_SUCCESS);

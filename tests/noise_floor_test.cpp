@@ -6,24 +6,15 @@
 
 #include <cmath>
 
+#include "test_support.h" // sinc_half_power_x: the tests' own half-power constant
 #include "vksonar/config.h"
 
 namespace {
 
 using namespace vksonar;
+using vksonar::testing::sinc_half_power_x;
 
 constexpr double kPi = 3.14159265358979323846;
-
-// x where sinc(x)^2 = 1/2, by bisection.
-double sinc_half_power_x() {
-    double lo = 0.1, hi = 3.0;
-    for (int i = 0; i < 200; ++i) {
-        const double m = 0.5 * (lo + hi);
-        const double s = std::sin(m) / m;
-        (s * s > 0.5 ? lo : hi) = m;
-    }
-    return 0.5 * (lo + hi);
-}
 
 double sinc2(double x) {
     if (std::abs(x) < 1e-9) return 1.0;
