@@ -128,8 +128,9 @@ void resolve_noise_floor(Plan& p) {
     p.beam_noise.assign(p.beams, 0.0f);
     p.beam_floor_db.assign(p.beams, p.noise.floor_db());
     for (std::uint32_t j = 0; j < p.beams; ++j) {
-        // A line array's beam steered to theta is a cone 1 / cos(theta) wider in sine space: its solid
-        // angle grows by that and DI falls by 10 log10(1 / cos theta) (never below an omnidirectional 0 dB).
+        // A line array's beam steered to theta is a cone as wide in sine as at broadside, so 1 / cos(theta)
+        // wider in angle: its solid angle grows by that and DI falls by 10 log10(1 / cos theta) (never below
+        // an omnidirectional 0 dB).
         const double di = p.line_array ? std::max(p.noise.directivity_index_db +
                                                       10.0 * std::log10(std::max(std::cos(p.beam_angle_rad[j]), 1e-6)),
                                                   0.0)
