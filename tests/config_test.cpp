@@ -51,6 +51,18 @@ TEST(Config, AnEnumValueWithoutANameIsRefused) {
     EXPECT_NE(e.validate().error().message.find("effects.speckle = 7"), std::string::npos);
 }
 
+// One key spelled dotted and nested in one file: the later value would win in silence (stop 54's sweep).
+TEST(Config, AKeyDottedAndNestedInOneFileIsRefused) {
+    auto r = apply_config_json(SonarConfig{}, R"({"display.db_min": 50, "display": {"db_min": 70}})", "f.json");
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.error().message,
+              "f.json: key 'display.db_min' is given twice (dotted and nested: one value would be lost)");
+    auto ok = apply_config_json(SonarConfig{}, R"({"display.db_min": 50, "display": {"db_max": 150}})", "f.json");
+    ASSERT_TRUE(ok) << ok.error().message;
+    EXPECT_EQ(ok->db_min, 50.0);
+    EXPECT_EQ(ok->db_max, 150.0);
+}
+
 TEST(Config, TableKeysAreUniqueAndRoundTrip) {
     std::set<std::string> names;
     for (const auto& key : config_keys::all()) {

@@ -23,12 +23,17 @@ std::string unknown_key_message(const std::string& name) {
     return "unknown key '" + name + "' (did you mean '" + config_keys::closest(name) + "'?)";
 }
 
-// Applies the members of `object` (whose keys are relative to `prefix`) to `config`.
+// Applies the members of `object` (whose keys are relative to `prefix`) to `config`. `applied`: the
+// dotted names set so far in this file: one key spelled dotted and nested ("display.db_min" beside
+// "display": {"db_min"}) would leave the later in silence, as a key twice in one object would.
 // Returns an empty string or the first problem, naming the dotted key.
-std::string apply_object(SonarConfig& config, const Json& object, const std::string& prefix) {
+std::string apply_object(SonarConfig& config, const Json& object, const std::string& prefix,
+                         std::set<std::string>& applied) {
     for (auto it = object.begin(); it != object.end(); ++it) {
         const std::string name = prefix + it.key();
         if (const auto* key = config_keys::find(name)) {
+            if (!applied.insert(name).second)
+                return "key '" + name + "' is given twice (dotted and nested: one value would be lost)";
             std::string problem = key->set(config, it.value());
             if (!problem.empty()) return "key '" + name + "': " + problem;
             continue;
@@ -36,7 +41,7 @@ std::string apply_object(SonarConfig& config, const Json& object, const std::str
         if (config_keys::is_group(name)) {
             if (!it.value().is_object())
                 return "key '" + name + "': expected an object of " + name + ".* keys, got " + it.value().dump();
-            std::string problem = apply_object(config, it.value(), name + ".");
+            std::string problem = apply_object(config, it.value(), name + ".", applied);
             if (!problem.empty()) return problem;
             continue;
         }
@@ -115,7 +120,8 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
         return make_error(ErrorCode::parse,
                           origin + ": expected a JSON object of config keys, got " + std::string(root.type_name()));
     SonarConfig config = base;
-    std::string problem = apply_object(config, root, "");
+    std::set<std::string> applied;
+    std::string problem = apply_object(config, root, "", applied);
     if (!problem.empty()) return make_error(ErrorCode::invalid_argument, origin + ": " + problem);
     return config;
 }
