@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/angles.h"
 #include "core/plan.h"
 #include "vksonar/frame.h"
 #include "vksonar/scene.h"
@@ -50,7 +51,7 @@ inline nlohmann::ordered_json validity_json(const std::vector<ModelValidity>& mo
 // (about bw / cos theta; 2.4 times the broadside width at 65 deg). meta.json's and the bag's
 // rx_beamwidths.
 inline double rx_beamwidth_rad(const Plan& plan, std::size_t j) {
-    const double bw = plan.config.horizontal_beamwidth_deg * 3.14159265358979323846 / 180.0;
+    const double bw = plan.config.horizontal_beamwidth_deg * kDegToRad;
     if (!plan.line_array || j >= plan.beam_angle_rad.size()) return bw;
     const double s = std::sin(0.5 * bw), u = std::sin(plan.beam_angle_rad[j]);
     return std::asin(std::min(u + s, 1.0)) - std::asin(std::max(u - s, -1.0));

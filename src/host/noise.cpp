@@ -173,7 +173,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const std::size_t beams = plan.beams;
 
     const double source = std::pow(10.0, cfg.source_level_db / 10.0);
-    // Each beam's noise floor 10^((NL - DI_j) / 10), 0 with the effect off (plan_noise_floor).
+    // Each beam's noise floor 10^((NL - DI_j) / 10), 0 with the effect off (resolve_noise_floor).
     assert(!plan.effects.ambient_noise || plan.beam_noise.size() >= beams);
     const float* beam_noise = plan.beam_noise.data();
     const bool noise = plan.effects.ambient_noise && plan.beam_noise.size() >= beams;
