@@ -1,13 +1,14 @@
-// Stage 4c, horizontal beam pattern / side lobes (docs/pipeline.md §4): convolution along beams,
-// polar[k * beams + j] = sum_t sidelobe_weight[j * taps + t] * B(bin k, beam j - K + t), taps in
-// increasing t. Runs only when the horizontal-pattern effect is on.
+// Stage 4c, horizontal beam pattern / side lobes (docs/pipeline.md §4): the near kernel over the range
+// profiles' columns, polar[k * beams + j] = sum_t weight[j * taps + t] * profile(bin k, column
+// begin_j + t), taps in increasing t: each column weighted by the pattern at its own direction's
+// separation from the beam (Plan::near_column_*). Runs only when the horizontal-pattern effect is on.
 //
-// An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
-// that resample.comp writes) and a workgroup a run of kBeamsPerInvocation beams, so the weight loads
-// are uniform and each B load brings four bins. The invocation walks the source beams of its run
-// once, in increasing order, and adds each to every output it reaches; each output still sums its
-// taps in increasing t. The run length is a compile-time constant so the loop over the accumulators
-// unrolls and they stay in registers.
+// An invocation owns four consecutive range bins (one vec4 of the bin-fastest profiles that
+// profile.comp writes) and a workgroup a run of kBeamsPerInvocation beams, so the weight loads are
+// uniform and each profile load brings four bins. The invocation walks the source columns of its run
+// once, in increasing order, and adds each to every output whose columns hold it; each output still
+// sums its taps in increasing t. The run length is a compile-time constant so the loop over the
+// accumulators unrolls and they stay in registers.
 //
 // With the far side lobes (kFarSidelobes), each output then adds its beam's share of its two cells of
 // far_sidelobe.comp's grid, which ran before: near + (share0 * cell0 + share1 * cell1).
@@ -27,7 +28,7 @@ layout(constant_id = kSpecVec4Out) const uint kVec4Out = 0u;
 layout(constant_id = kSpecFarSidelobes) const uint kFarSidelobes = 0u; // 1: add far_sidelobe.comp's cells
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
+layout(std430, binding = kBindingProfiles) readonly buffer ProfileBuffer { vec4 profiles4[]; };
 layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer { float polar[]; };
 layout(std430, binding = kBindingPolar) writeonly buffer PolarBuffer4 { vec4 polar4[]; };
 layout(std430, binding = kBindingSidelobeWeight) readonly buffer SidelobeBuffer { float sidelobe_weight[]; };
@@ -53,8 +54,8 @@ float far_entry(uint i) {
 void main() {
     uint bins = params.bins;
     int beams = int(params.beams);
-    int taps = int(params.sidelobe_taps);
-    int half_taps = (taps - 1) / 2;
+    int taps = int(params.near_column_taps);
+    int columns = int(params.profile_columns);
     uint quads = params.bins_padded / 4u;
     uint q = gl_GlobalInvocationID.x;
     int first_beam = int(gl_WorkGroupID.y * kBeamsPerInvocation);
@@ -65,26 +66,26 @@ void main() {
     for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
         sums[r] = vec4(0.0);
     }
-    // Source beams j - K + t, unwrapped; on a full circle they wrap modulo beams (K < beams / 2, so
-    // once at most), else those outside [0, beams) are skipped.
-    bool circular = params.circular != 0u;
-    int first_source = first_beam - half_taps;
-    int last_source = first_beam + int(kBeamsPerInvocation) - 1 + half_taps;
-    if (!circular) {
-        // Only the sources some weight of this run reaches (the host put them after the weights: the
-        // first and last source of each run, as exact floats); a zero weight would add exactly +0.
-        uint run_entry = uint(beams * taps) + 2u * gl_WorkGroupID.y;
-        first_source = max(max(first_source, 0), int(weight(run_entry)));
-        last_source = min(min(last_source, beams - 1), int(weight(run_entry + 1u)));
+    // The table (src/vk/vulkan_backend.cpp): the weights, then per run the first and last source column
+    // any of its beams hears, then per beam its first column (floats, exact below 2^24; unwrapped: on a
+    // full circle a column index wraps modulo the columns).
+    uint runs = (uint(beams) + kBeamsPerInvocation - 1u) / kBeamsPerInvocation;
+    uint run_entry = uint(beams * taps) + 2u * gl_WorkGroupID.y;
+    uint begin_entry = uint(beams * taps) + 2u * runs + uint(first_beam);
+    int first_source = int(weight(run_entry));
+    int last_source = int(weight(run_entry + 1u));
+    int begin[kBeamsPerInvocation];
+    for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
+        begin[r] = first_beam + int(r) < beams ? int(weight(begin_entry + r)) : 0;
     }
     for (int source = first_source; source <= last_source; ++source) {
-        int wrapped = source < 0 ? source + beams : (source >= beams ? source - beams : source);
-        vec4 b = beam_profiles4[uint(wrapped) * quads + q];
+        int wrapped = ((source % columns) + columns) % columns;
+        vec4 b = profiles4[uint(wrapped) * quads + q];
         for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
             int j = first_beam + int(r);
-            int t = source - j + half_taps;
+            int t = source - begin[r];
             if (t >= 0 && t < taps && j < beams) {
-                sums[r] += weight(uint(j * taps + t)) * b;
+                sums[r] += weight(uint(j * taps + t)) * b; // 0 past the beam's own columns: adds exactly +0
             }
         }
     }

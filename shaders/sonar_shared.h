@@ -154,7 +154,7 @@ struct SonarParams {
     uint beams;
     uint bins;
     uint effect_flags;
-    uint sidelobe_taps; // 2K+1 taps of the side-lobe kernel along beams
+    uint near_column_taps; // the near kernel's weights per beam (Plan::near_column_taps)
 
     float tan_half_h; // tan(slice width / 2): horizontal half extent of one slice, focal-normalized
     float tan_half_v; // tan(vertical coverage / 2)

@@ -251,7 +251,8 @@ TEST_P(BeamGeometryTest, NearEndfireStaysFiniteAndOnItsBeam) {
     const Plan& plan = renderer_plan(r->renderer);
     EXPECT_TRUE(plan.line_array);
     EXPECT_LE(plan.sidelobe_taps, 2u * 2047u + 1u);
-    for (float w : plan.sidelobe_weight)
+    EXPECT_LE(plan.near_column_taps, plan.profile_columns);
+    for (float w : plan.near_column_weight)
         ASSERT_TRUE(std::isfinite(w) && w >= 0.0f && w <= 1.0f);
     // The sphere alone (the seabed seen at 3 m below fills other beams): its per-beam energy at 10 m.
     const Frame& f = r->frame;

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "scene/scene_data.h"
@@ -352,44 +353,36 @@ TEST_P(EffectsTest, HorizontalPatternConvolvesBeamsWithTheArraysSidelobes) {
     EXPECT_TRUE(same_bits(fb.clean, fb.beam_profiles));
     EXPECT_FALSE(ran(fb, "sidelobe")); // no stage of that name either way: it is part of beamform
 
-    // On: polar(j) = sum over beams i within the kernel reach of b_h^2 B(i), b_h^2 the sinc^2 of a
-    // uniform line array whose two-way -3 dB width is the horizontal beamwidth, at the beams' separation
-    // in angle (planar), or in sine with line_array: b_h^2(asin(sin a_i - sin a_j)) = sinc^2(k (sin a_i -
-    // sin a_j)), within sin(reach) (docs/pipeline.md, "Beam geometry").
+    // On: polar(j) = sum over the profile columns c within the kernel reach of b_h^2 P(c), b_h^2 the sinc^2
+    // of a uniform line array whose two-way -3 dB width is the horizontal beamwidth, at the separation
+    // of the column's direction and the beam's, in sine (line_array: b_h^2(asin(sin a_c - sin a_j)) =
+    // sinc^2(k (sin a_c - sin a_j))), within sin(reach) (docs/pipeline.md, "Beam geometry", "Side
+    // lobes"). The line array's cone columns are uniform in steering angle over the fan: column c at
+    // (1 - (2c + 1) / profile_columns) hfov / 2.
+    ASSERT_TRUE(plan.line_array) << "the default sonar is a line array";
     const double hbw = plan.config.horizontal_beamwidth_deg * kDeg;
     const double reach = plan.config.sidelobe_kernel_beamwidths * hbw;
     double peak = 0;
     for (float x : fa.clean)
         peak = std::max(peak, double(x));
-    const bool line_array = plan.line_array;
-    auto separation = [&](std::size_t i, std::size_t j) {
-        const double from = plan.beam_angle_rad[i], to = plan.beam_angle_rad[j];
-        return line_array ? std::sin(from) - std::sin(to) : from - to;
-    };
-    const double reach_units = line_array ? std::sin(reach) : reach;
-    const int window = 64; // beams either side: past the reach (3 beamwidths: ~12-29 beams) everywhere
-    const int taps = 2 * window + 1;
-    std::vector<double> weight(std::size_t(fa.beams) * taps, 0.0); // beam j, offset d: weight[j * taps + d + window]
+    const std::uint32_t P = fa.profile_columns;
+    ASSERT_EQ(fa.profiles.size(), std::size_t(fa.bins) * P);
+    std::vector<double> column_sine(P);
+    for (std::uint32_t c = 0; c < P; ++c)
+        column_sine[c] = std::sin((1.0 - (2.0 * c + 1.0) / P) * 0.5 * on.hfov_deg * kDeg);
+    const double reach_units = std::sin(reach);
     for (std::uint32_t j = 0; j < fa.beams; ++j) {
-        for (int d = -window; d <= window; ++d) {
-            const std::int64_t i = std::int64_t(j) + d;
-            if (i < 0 || i >= std::int64_t(fa.beams)) continue;
-            const double sep = separation(std::size_t(i), j);
-            if (std::abs(sep) > reach_units + 1e-12) continue;
-            weight[std::size_t(j) * taps + std::size_t(d + window)] =
-                sinc_pattern(hbw, line_array ? std::asin(sep) : sep);
+        std::vector<std::pair<std::uint32_t, double>> weights; // (column, b_h^2) within the reach
+        const double sine_j = std::sin(fa.beam_angles_rad[j]);
+        for (std::uint32_t c = 0; c < P; ++c) {
+            const double sep = column_sine[c] - sine_j;
+            if (std::abs(sep) <= reach_units + 1e-12) weights.emplace_back(c, sinc_pattern(hbw, std::asin(sep)));
         }
-    }
-    for (std::uint32_t k = 0; k < fa.bins; ++k) {
-        for (std::uint32_t j = 0; j < fa.beams; ++j) {
+        for (std::uint32_t k = 0; k < fa.bins; ++k) {
             double expected = 0;
-            for (int d = -window; d <= window; ++d) {
-                const std::int64_t i = std::int64_t(j) + d;
-                if (i < 0 || i >= std::int64_t(fa.beams)) continue;
-                expected += weight[std::size_t(j) * taps + std::size_t(d + window)] *
-                            fb.beam_profiles[std::size_t(k) * fa.beams + std::size_t(i)];
-            }
-            // Float weights (rel 6e-8) and a float sum of <= 59 terms: 1e-5 relative, with a floor at
+            for (const auto& [c, w] : weights)
+                expected += w * fa.profiles[std::size_t(k) * P + c];
+            // Float weights (rel 6e-8) and a float sum of <= ~120 terms: 1e-5 relative, with a floor at
             // 1e-6 of the frame's peak for cells near the pattern's nulls (small differences of floats).
             ASSERT_NEAR(fa.clean[std::size_t(k) * fa.beams + j], expected, 1e-5 * expected + 1e-6 * peak)
                 << "bin " << k << " beam " << j;

@@ -118,40 +118,12 @@ SonarConfig inside_config() {
 
 TEST(Validity, InsideEveryDomainEveryEntryIsOk) {
     const auto list = model_validity(inside_config());
-    ASSERT_EQ(list.size(), 3u); // francois_garrison, far_field_beam_pattern, beam_sampling
+    ASSERT_EQ(list.size(), 2u); // francois_garrison, far_field_beam_pattern
     for (const auto& v : list) {
         EXPECT_TRUE(v.ok) << v.warning();
         EXPECT_EQ(v.action, "none");
         EXPECT_FALSE(v.domain.empty());
     }
-}
-
-// The beams must sample the main lobe: adjacent beams at most a beamwidth apart, in sine for a line array
-// (the default: 512 beams over 130 deg, 0.254 deg apart at broadside, for a 1 deg beam). 130 beams over
-// 130 deg are 1 deg apart in angle: planar just inside; a line array's are 1 deg apart in sine only at
-// broadside (sin 0.5 - sin -0.5 deg = 0.99998 deg), inside too. 120 beams: 1.08 deg, outside either way.
-TEST(Validity, BeamsMustSampleTheMainLobe) {
-    SonarConfig c = inside_config();
-    EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok);
-    for (const BeamGeometry geometry : {BeamGeometry::planar, BeamGeometry::line_array}) {
-        c.beam_geometry = geometry;
-        c.beams = 130;
-        EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok)
-            << find_model(model_validity(c), "beam_sampling")->domain;
-        c.beams = 120;
-        const auto v = find_model(model_validity(c), "beam_sampling");
-        EXPECT_FALSE(v->ok);
-        EXPECT_EQ(v->key, "beams");
-        EXPECT_EQ(v->value, 120.0);
-        EXPECT_NE(v->warning().find("interpolates"), std::string::npos) << v->warning();
-    }
-    // An explicit table: its widest gap decides.
-    c.beam_geometry = BeamGeometry::planar;
-    c.beam_angles_deg = {10.0, 9.5, 9.0, 7.0, 6.5};
-    c.beams = 5;
-    EXPECT_FALSE(find_model(model_validity(c), "beam_sampling")->ok);
-    c.beam_angles_deg = {10.0, 9.5, 9.0, 8.0, 7.5};
-    EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok);
 }
 
 TEST(Validity, FrancoisGarrisonFrequencyAndWater) {

@@ -402,7 +402,7 @@ void plan_gpu_params(Plan& p) {
     g.beams = p.beams;
     g.bins = p.bins;
     g.effect_flags = e.shader_flags();
-    g.sidelobe_taps = p.sidelobe_taps;
+    g.near_column_taps = p.near_column_taps;
     g.far_cells = p.far_cells;
     g.far_channels = p.far_channels;
     g.tan_half_h = static_cast<float>(p.tan_half_h);
@@ -494,7 +494,8 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     // gaussian read -65 dB at 3-6 beamwidths, where it is below -100 dB).
     const bool has_sidelobes =
         config.horizontal_pattern != BeamPattern::gaussian && config.horizontal_pattern != BeamPattern::box;
-    plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only && has_sidelobes);
+    if (auto kernel = plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only && has_sidelobes); !kernel)
+        return kernel.error();
     resolve_noise_floor(p);
     plan_gpu_params(p);
     plan_subpixel(p, scene);

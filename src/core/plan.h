@@ -125,14 +125,20 @@ struct Plan {
     std::vector<float> column_weight;       // profile_columns
     // Beam j gathers from columns [beam_column_begin[j], beam_column_end[j]).
     std::vector<std::uint32_t> beam_column_begin, beam_column_end;
-    // Side-lobe kernel along beams: polar(j) = sum_t sidelobe_weight[j * taps + t] * beam_profile(j - K + t),
-    // the horizontal pattern at the two beams' separation in angle (planar) or in sine (line_array).
-    std::uint32_t sidelobe_taps = 1;    // 2K + 1
-    std::vector<float> sidelobe_weight; // beams * taps, 0 where j - K + t is outside [0, beams)
-    // Per beam, the taps [begin, end) outside which its weights are 0 (beyond the kernel's reach, which
-    // spans fewer beams near broadside than at a line array's edges): the CPU skips the zero terms,
-    // which add exactly +0 to a sum of non-negative energies.
-    std::vector<std::uint32_t> sidelobe_tap_begin, sidelobe_tap_end;
+    // The horizontal pattern's reach in beams: the near kernel reaches K = (sidelobe_taps - 1) / 2 beams
+    // either side (the pattern out to the reach R; the far side lobes beyond, below).
+    std::uint32_t sidelobe_taps = 1; // 2K + 1
+    // The near kernel over the profile columns (docs/pipeline.md §4, "Side lobes"): beam j hears column
+    // c = near_column_begin[j] + t, t < near_column_count[j], with weight near_column_weight[j *
+    // near_column_taps + t], the horizontal pattern at the separation of the column's direction and the
+    // beam's (in angle, planar; in sine, line_array), times the share the far grid leaves. Each column is
+    // weighted at its own direction, so the main lobe and the nulls are the pattern's wherever a target
+    // falls between beams. begin is unwrapped: with circular, columns wrap modulo profile_columns. Built
+    // only with the horizontal pattern on; with no kernel (K = 0, the effect forced on) it is the tent.
+    std::uint32_t near_column_taps = 0;           // the widest beam's column count
+    std::vector<float> near_column_weight;        // beams * near_column_taps, 0 past a beam's count
+    std::vector<std::int32_t> near_column_begin;  // beams
+    std::vector<std::uint32_t> near_column_count; // beams
     // Far side lobes (docs/pipeline.md, "Side lobes"): the pattern beyond the kernel's reach R, on a
     // coarse grid of far_cells cells uniform in the separation variable (0: none). Each beam puts its
     // energy into its two nearest cells (far_beam_cell, 8 per beam: first cell, second cell, share of

@@ -205,9 +205,105 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
 
 } // namespace
 
-// Step: the side-lobe kernel along beams (its taps out to the reach; the far side lobes beyond).
-void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes) {
-    // Side-lobe kernel: weight of beam j - K + t into beam j = b_h^2 at their separation.
+namespace {
+
+// The separation variable of profile column c: its direction's angle, or with line_array its sine.
+double column_position(const Plan& p, std::uint32_t c) {
+    return p.line_array ? std::sin(p.column_azimuth_rad[c]) : p.column_azimuth_rad[c];
+}
+
+// The near kernel's table (Plan::near_column_*) with no kernel (K = 0, the effect forced on): the tent.
+void plan_near_columns_tent(Plan& p) {
+    const std::uint32_t beams = p.beams;
+    p.near_column_begin.assign(beams, 0);
+    p.near_column_count.assign(beams, 0);
+    p.near_column_taps = 1;
+    for (std::uint32_t j = 0; j < beams; ++j) {
+        p.near_column_begin[j] = static_cast<std::int32_t>(p.beam_column_begin[j]);
+        p.near_column_count[j] = p.beam_column_end[j] - p.beam_column_begin[j];
+        p.near_column_taps = std::max(p.near_column_taps, p.near_column_count[j]);
+    }
+    p.near_column_weight.assign(std::size_t(beams) * p.near_column_taps, 0.0f);
+    for (std::uint32_t j = 0; j < beams; ++j)
+        for (std::uint32_t t = 0; t < p.near_column_count[j]; ++t) {
+            const std::uint32_t c = p.beam_column_begin[j] + t;
+            const std::uint32_t share = math_f64::resample_share(p.column_beam[c], j, beams, p.circular);
+            p.near_column_weight[std::size_t(j) * p.near_column_taps + t] =
+                share == 1 ? p.column_weight[c] : (share == 2 ? 1.0f - p.column_weight[c] : 0.0f);
+        }
+}
+
+// The near kernel's table over the columns within `reach_cut` of each beam (in the separation unit),
+// weights the pattern at the separation times the near share (1 - the far grid's ramp). Zero weights at
+// either end of a beam's columns are left out (a column that feeds no beam, a null at the reach).
+void plan_near_columns(Plan& p, double reach_units, double reach_cut) {
+    const std::uint32_t beams = p.beams, columns = p.profile_columns;
+    p.near_column_begin.assign(beams, 0);
+    p.near_column_count.assign(beams, 0);
+    std::vector<float> flat;                // every beam's weights, one after another
+    std::vector<std::size_t> offset(beams); // beam j's first weight in flat
+    std::vector<float> row;
+    p.near_column_taps = 1;
+    for (std::uint32_t j = 0; j < beams; ++j) {
+        const double position = beam_position(p, j);
+        auto separation = [&](std::int64_t c) {
+            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
+            const double sep = column_position(p, wrapped) - position;
+            return p.circular ? std::remainder(sep, 2.0 * kPi) : sep;
+        };
+        // The column nearest the beam's direction (positions fall with the column index), then out
+        // either way while the columns are within reach (on a circle, never more than all of them).
+        std::int64_t lo = 0;
+        {
+            std::uint32_t a = 0, b = columns; // first column at or past the beam's position
+            while (a < b) {
+                const std::uint32_t m = (a + b) / 2;
+                if (column_position(p, m) > position)
+                    a = m + 1;
+                else
+                    b = m;
+            }
+            lo = std::min<std::int64_t>(a, columns - 1);
+            if (lo > 0 && std::abs(separation(lo - 1)) < std::abs(separation(lo))) --lo;
+        }
+        std::int64_t hi = lo; // columns [lo, hi]
+        const bool any = std::abs(separation(lo)) <= reach_cut;
+        auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
+        while (any && room() && (p.circular || lo > 0) && std::abs(separation(lo - 1)) <= reach_cut)
+            --lo;
+        while (any && room() && (p.circular || hi + 1 < std::int64_t(columns)) &&
+               std::abs(separation(hi + 1)) <= reach_cut)
+            ++hi;
+        row.clear();
+        for (std::int64_t c = lo; any && c <= hi; ++c) {
+            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
+            const double sep = separation(c);
+            const double near_share = p.far_cells > 0 ? 1.0 - far_ramp(std::abs(sep), reach_units) : 1.0;
+            const bool feeds = p.column_beam[wrapped] < beams; // a column beyond a host camera's fan feeds none
+            row.push_back(feeds ? static_cast<float>(pattern_at_separation(p, sep) * near_share) : 0.0f);
+        }
+        std::size_t first = 0, end = row.size();
+        while (first < end && row[first] == 0.0f)
+            ++first;
+        while (end > first && row[end - 1] == 0.0f)
+            --end;
+        offset[j] = flat.size();
+        flat.insert(flat.end(), row.begin() + first, row.begin() + end);
+        p.near_column_begin[j] = static_cast<std::int32_t>(lo + std::int64_t(first));
+        p.near_column_count[j] = static_cast<std::uint32_t>(end - first);
+        p.near_column_taps = std::max(p.near_column_taps, p.near_column_count[j]);
+    }
+    p.near_column_weight.assign(std::size_t(beams) * p.near_column_taps, 0.0f);
+    for (std::uint32_t j = 0; j < beams; ++j)
+        std::copy(flat.begin() + offset[j], flat.begin() + offset[j] + p.near_column_count[j],
+                  p.near_column_weight.begin() + std::size_t(j) * p.near_column_taps);
+}
+
+} // namespace
+
+// Step: the horizontal pattern's kernel: the far side lobes' grid beyond the reach, and the near kernel
+// over the profile columns within it.
+Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes) {
     p.sidelobe_taps = 2 * half_taps + 1;
     const double reach_units = sidelobe_reach(p, reach);
     // A kernel asked to reach across the fan (bench accuracy's reference) is exact everywhere it reaches.
@@ -218,35 +314,40 @@ void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool f
             if (state.name == "horizontal_pattern")
                 state.why += "; far side lobes over the fan on " + std::to_string(p.far_cells) + " cells" +
                              (p.far_channels == 3 ? " (sinc^2 crests and nulls exact)" : " (the lobes' mean level)");
-    p.sidelobe_weight.assign(static_cast<std::size_t>(p.beams) * p.sidelobe_taps, 0.0f);
-    for (std::uint32_t j = 0; j < p.beams; ++j) {
-        for (std::uint32_t t = 0; t < p.sidelobe_taps; ++t) {
-            std::int64_t src = static_cast<std::int64_t>(j) - half_taps + t;
-            if (p.circular) src = (src + p.beams) % p.beams; // half_taps < beams / 2: one wrap at most
-            if (src < 0 || src >= p.beams) continue;
-            double sep = beam_position(p, static_cast<std::uint32_t>(src)) - beam_position(p, j);
-            float w = 1.0f;
-            if (half_taps > 0) {
-                const double folded = p.circular ? std::abs(std::remainder(sep, 2.0 * kPi)) : std::abs(sep);
-                const double near_share = p.far_cells > 0 ? 1.0 - far_ramp(folded, reach_units) : 1.0;
-                w = folded <= reach_units + 1e-12 ? static_cast<float>(pattern_at_separation(p, sep) * near_share)
-                                                  : 0.0f;
-            }
-            p.sidelobe_weight[j * p.sidelobe_taps + t] = w;
-        }
+    p.near_column_taps = 0;
+    p.near_column_weight.clear();
+    p.near_column_begin.clear();
+    p.near_column_count.clear();
+    if (!p.effects.horizontal_pattern) return {};
+    if (half_taps == 0) {
+        plan_near_columns_tent(p);
+        return {};
     }
-    p.sidelobe_tap_begin.assign(p.beams, 0);
-    p.sidelobe_tap_end.assign(p.beams, 0);
-    for (std::uint32_t j = 0; j < p.beams; ++j) {
-        const float* w = p.sidelobe_weight.data() + std::size_t(j) * p.sidelobe_taps;
-        std::uint32_t begin = 0, end = p.sidelobe_taps;
-        while (begin < end && w[begin] == 0.0f)
-            ++begin;
-        while (end > begin && w[end - 1] == 0.0f)
-            --end;
-        p.sidelobe_tap_begin[j] = begin;
-        p.sidelobe_tap_end[j] = end;
+    // The reach in the separation unit, no further than K beams where K was capped (kMaxSidelobeHalfTaps;
+    // on a circle, under half of it, so that no column is heard twice).
+    double min_spacing = std::numeric_limits<double>::infinity();
+    for (std::uint32_t j = 1; j < p.beams; ++j)
+        min_spacing = std::min(min_spacing, beam_position(p, j - 1) - beam_position(p, j));
+    const bool capped = p.beams > 1 && double(half_taps) < std::floor(reach_units / min_spacing);
+    const double reach_cut = capped ? double(half_taps) * min_spacing : reach_units + 1e-12;
+    // Each beam's weights for the columns within reach (at most all of them): refused where that table
+    // alone would pass 1 GiB (thousands of beams with a kernel across the fan).
+    double min_column_spacing = std::numeric_limits<double>::infinity();
+    for (std::uint32_t c = 1; c < p.profile_columns; ++c) {
+        const double gap = column_position(p, c - 1) - column_position(p, c);
+        if (gap > 0.0) min_column_spacing = std::min(min_column_spacing, gap);
     }
+    const double widest = std::min<double>(p.profile_columns, 2.0 * reach_cut / min_column_spacing + 2.0);
+    const double table_bytes = 4.0 * p.beams * widest;
+    if (table_bytes > 1073741824.0)
+        return make_error(ErrorCode::invalid_argument,
+                          "config: the side-lobe kernel's column table would hold " +
+                              std::to_string(static_cast<long long>(table_bytes / 1048576.0)) + " MiB (" +
+                              std::to_string(p.beams) + " beams x up to " +
+                              std::to_string(static_cast<long long>(widest)) +
+                              " profile columns each); lower accuracy.sidelobe_kernel_beamwidths or beams");
+    plan_near_columns(p, reach_units, reach_cut);
+    return {};
 }
 
 } // namespace plan_steps

@@ -61,6 +61,6 @@ void plan_cone_table(Plan& p);
 // The side-lobe kernel's reach (an angle from the beam's axis) in the unit the beams are separated in.
 double sidelobe_reach(const Plan& p, double reach);
 void plan_column_tables(Plan& p, double exclude_beyond_rad);
-void plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes);
+Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes);
 
 } // namespace vksonar::plan_steps

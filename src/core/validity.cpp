@@ -142,35 +142,6 @@ ModelValidity rough_facet(std::size_t index, const AcousticMaterial& m) {
     return v;
 }
 
-// The beamform stage resamples each pixel column onto the two nearest beam centres (a tent) and then
-// spreads the pattern sampled at the beams' separations: between beam centres the response is the
-// pattern interpolated linearly. That holds while the beams sample the pattern's main lobe: adjacent
-// beams at most a beamwidth apart (in sine for a line array, whose beams are equally wide there). Beams
-// two beamwidths apart read a target midway between them 3 dB down in both, where the pattern says 18 dB.
-ModelValidity beam_sampling(const SonarConfig& c) {
-    const bool line_array = resolves_to_line_array(c, nullptr);
-    const auto table = beam_table(c);
-    double widest = 0.0;
-    if (table)
-        for (std::size_t j = 1; j < table.value().size(); ++j) {
-            const double a = table.value()[j - 1], b = table.value()[j];
-            widest = std::max(widest, line_array ? std::sin(a) - std::sin(b) : a - b);
-        }
-    const double beamwidth = c.horizontal_beamwidth_deg * kDegToRad;
-    const double widest_deg = widest / kDegToRad;
-    ModelValidity v{"beam_sampling",
-                    widest <= beamwidth * (1.0 + 1e-9),
-                    "beams",
-                    double(table ? table.value().size() : c.beams),
-                    "adjacent beams at most horizontal_beamwidth = " + fmt(c.horizontal_beamwidth_deg) + " deg apart" +
-                        (line_array ? " in sine" : "") + "; the widest gap is " + fmt(widest_deg) + " deg",
-                    "none"};
-    if (!v.ok)
-        v.action = "interpolates each beam's response linearly between beam centres: a target between two beams "
-                   "reads up to 3 dB down in both where the pattern puts it lower (add beams or widen the beam)";
-    return v;
-}
-
 } // namespace
 
 std::string ModelValidity::warning() const {
@@ -184,7 +155,6 @@ std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vecto
     if (c.absorption_db_per_m < 0.0 && c.effects.absorption != EffectMode::off) out.push_back(francois_garrison(c));
     if (c.effects.vertical_pattern != EffectMode::off || c.effects.horizontal_pattern != EffectMode::off)
         out.push_back(far_field(c));
-    if (c.mode == SonarMode::physical && c.beams > 1) out.push_back(beam_sampling(c));
     if (c.vertical_pattern == BeamPattern::chebyshev && c.effects.vertical_pattern != EffectMode::off)
         out.push_back(chebyshev("vfov", c.vfov_deg, c.vertical_sidelobe_db));
     if (c.horizontal_pattern == BeamPattern::chebyshev && c.effects.horizontal_pattern != EffectMode::off)

@@ -360,25 +360,56 @@ std::size_t far_beam_count(const Plan& plan) {
     return plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0;
 }
 
-// The side-lobe convolution's beams in groups of four, j = 4 q + lane: beamform_beams sums a group's
-// four beams as the lanes of one vector, from a copy of the bin row padded by K beams either side (zeros,
-// or the wrapped beams with plan.circular) so that every tap reads inside it. Their weights, made once
-// per plan, are stored per group tap by tap, the four beams' weights of tap t side by side:
-// [q][t][lane] (0 for the lanes past the last beam). Not made for a row of more than kMaxPaddedRow beams
-// with its padding, nor with cpu.vector_loops off: those take the scalar loop.
-constexpr std::size_t kMaxPaddedRow = 8192;
+// The near kernel's beams in groups of eight, j = 8 g + lane: beamform_beams's float loop sums a group's
+// eight beams for eight bins at once (AVX2), over the group's columns (the union of its beams'
+// columns, near_group_span), each column loaded once for the eight beams. Their weights, made once per
+// plan, are stored per group column by column, the eight beams' weights of one column side by side:
+// [g][t][lane], t < near_group_taps (0 where the column is not one of the beam's, and for the lanes
+// past the last beam: a zero weight adds exactly +0, so every beam's sum is the one over its own
+// columns). Not made with cpu.vector_loops off (the plain loop then reads the plan's table).
+constexpr std::uint32_t kNearGroup = 8;
 
-std::size_t sidelobe_group_count(const Plan& plan) {
-    if (!plan.effects.horizontal_pattern || plan.config.cpu_vector_loops == CpuVectorLoops::off) return 0;
-    const std::size_t K = (plan.sidelobe_taps - 1) / 2;
-    if (plan.beams + 2 * K + 4 > kMaxPaddedRow) return 0;
-    return (plan.beams + 3) / 4;
+std::size_t near_group_count(const Plan& plan) {
+    if (!plan.effects.horizontal_pattern || plan.near_column_begin.empty() ||
+        plan.config.cpu_vector_loops == CpuVectorLoops::off)
+        return 0;
+    return (plan.beams + kNearGroup - 1) / kNearGroup;
+}
+
+// Group g's columns: the first (unwrapped, as Plan::near_column_begin) and how many.
+struct ColumnSpan {
+    std::int64_t first = 0;
+    std::uint32_t count = 0;
+};
+ColumnSpan near_group_span(const Plan& plan, std::size_t g) {
+    std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
+    for (std::size_t j = g * kNearGroup; j < std::min<std::size_t>((g + 1) * kNearGroup, plan.beams); ++j) {
+        if (plan.near_column_count[j] == 0) continue;
+        lo = std::min<std::int64_t>(lo, plan.near_column_begin[j]);
+        hi = std::max<std::int64_t>(hi, std::int64_t(plan.near_column_begin[j]) + plan.near_column_count[j]);
+    }
+    return lo < hi ? ColumnSpan{lo, static_cast<std::uint32_t>(hi - lo)} : ColumnSpan{};
+}
+
+std::uint32_t near_group_taps(const Plan& plan) {
+    std::uint32_t taps = 0;
+    for (std::size_t g = 0; g < near_group_count(plan); ++g)
+        taps = std::max(taps, near_group_span(plan, g).count);
+    return taps;
+}
+
+// Column c of the range profiles, wrapped on a full circle (Plan::near_column_begin is unwrapped).
+inline std::uint32_t wrap_column(std::int64_t c, std::uint32_t columns, bool circular) {
+    if (!circular) return static_cast<std::uint32_t>(c);
+    const std::int64_t n = columns;
+    return static_cast<std::uint32_t>((c % n + n) % n);
 }
 
 } // namespace
 
 std::size_t resample_weight_count(const Plan& plan) {
-    return column_weight_count(plan) + far_beam_count(plan) + sidelobe_group_count(plan) * 4 * plan.sidelobe_taps;
+    return column_weight_count(plan) + far_beam_count(plan) +
+           near_group_count(plan) * std::size_t(near_group_taps(plan)) * kNearGroup;
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -402,49 +433,45 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
         }
     }
     weights += far_beam_count(plan);
-    const std::uint32_t taps = plan.sidelobe_taps;
-    for (std::size_t q = 0; q < sidelobe_group_count(plan); ++q)
-        for (std::uint32_t t = 0; t < taps; ++t)
-            for (std::uint32_t l = 0; l < 4; ++l) {
-                const std::size_t j = 4 * q + l;
-                *weights++ = j < plan.beams ? static_cast<Real>(plan.sidelobe_weight[j * taps + t]) : Real(0);
+    const std::uint32_t group_taps = near_group_taps(plan);
+    for (std::size_t g = 0; g < near_group_count(plan); ++g) {
+        const ColumnSpan span = near_group_span(plan, g);
+        for (std::uint32_t t = 0; t < group_taps; ++t)
+            for (std::uint32_t l = 0; l < kNearGroup; ++l) {
+                const std::size_t j = g * kNearGroup + l;
+                Real w = Real(0);
+                if (j < plan.beams && t < span.count) {
+                    const std::int64_t own = span.first + t - plan.near_column_begin[j]; // the beam's own tap
+                    if (own >= 0 && own < std::int64_t(plan.near_column_count[j]))
+                        w = static_cast<Real>(plan.near_column_weight[j * plan.near_column_taps + std::size_t(own)]);
+                }
+                *weights++ = w;
             }
+    }
 }
 
 namespace {
 
 #if defined(__x86_64__) && defined(__GNUC__)
-// The side-lobe sums of one run of four groups (16 beams) for one or two bin rows (row1 null: one), as
-// beamform_beams's float loop makes them, two groups per AVX register: lanes 0-3 group g, 4-7 group
-// g + 1, each lane the same products added in the same (increasing t) order, no FMA in this target, so
-// the same floats. sums[r][4 g + l]: row r, beam j0 + 4 g + l; row0, row1 at the run's first beam
-// (padded rows: beam j0 + 4 g + l takes row[t + 4 g + l]).
-__attribute__((target("avx2"))) void sidelobe_run8(const float* wq, std::uint32_t taps, const float* row0,
-                                                   const float* row1, std::uint32_t t_begin, std::uint32_t t_end,
-                                                   float (&sums)[2][16]) {
-    __m256 s0a = _mm256_setzero_ps(), s0b = s0a, s1a = s0a, s1b = s0a; // row r, groups 0-1 (a) and 2-3 (b)
-    // group g's weights at tap t: w[g][t]; groups g and g + 1 side by side in one register
-    const float* w0 = wq + std::size_t(t_begin) * 4;
-    const std::size_t group = std::size_t(taps) * 4;
-    for (std::uint32_t t = t_begin; t < t_end; ++t, w0 += 4) {
-        const __m256 wa = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(w0)), _mm_loadu_ps(w0 + group), 1);
-        const __m256 wb =
-            _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(w0 + 2 * group)), _mm_loadu_ps(w0 + 3 * group), 1);
-        s0a = _mm256_add_ps(s0a, _mm256_mul_ps(wa, _mm256_loadu_ps(row0 + t)));
-        s0b = _mm256_add_ps(s0b, _mm256_mul_ps(wb, _mm256_loadu_ps(row0 + t + 8)));
-        if (row1 != nullptr) { // the same in every iteration: the compiler unswitches the loop
-            s1a = _mm256_add_ps(s1a, _mm256_mul_ps(wa, _mm256_loadu_ps(row1 + t)));
-            s1b = _mm256_add_ps(s1b, _mm256_mul_ps(wb, _mm256_loadu_ps(row1 + t + 8)));
-        }
+// The near kernel of one group of eight beams for eight bins (acc_k0: bin k0 of column 0), as
+// beamform_beams's float loop makes them: beam 8 g + b's sum in register b, one lane per bin, each the
+// same products added in the same (increasing column) order, no FMA in this target: the same floats.
+// sums[r][b]: bin k0 + r, beam 8 g + b.
+__attribute__((target("avx2"))) void near_group8(const float* wg, ColumnSpan span, const float* acc_k0, std::size_t T,
+                                                 std::uint32_t columns, bool circular, float (&sums)[8][8]) {
+    __m256 s[8];
+    for (__m256& x : s)
+        x = _mm256_setzero_ps();
+    for (std::uint32_t t = 0; t < span.count; ++t, wg += kNearGroup) {
+        const std::uint32_t c = wrap_column(span.first + t, columns, circular);
+        const __m256 x = _mm256_loadu_ps(acc_k0 + std::size_t(c) * T);
+        for (std::uint32_t b = 0; b < kNearGroup; ++b)
+            s[b] = _mm256_add_ps(s[b], _mm256_mul_ps(_mm256_set1_ps(wg[b]), x));
     }
-    _mm256_storeu_ps(sums[0], s0a);
-    _mm256_storeu_ps(sums[0] + 8, s0b);
-    _mm256_storeu_ps(sums[1], s1a);
-    _mm256_storeu_ps(sums[1] + 8, s1b);
+    store_transposed8(s, &sums[0][0], kNearGroup);
 }
 #else
-void sidelobe_run8(const float*, std::uint32_t, const float*, const float*, std::uint32_t, std::uint32_t,
-                   float (&)[2][16]) {}
+void near_group8(const float*, ColumnSpan, const float*, std::size_t, std::uint32_t, bool, float (&)[8][8]) {}
 #endif
 
 } // namespace
@@ -454,28 +481,25 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
     using M = Math<Real>;
     const std::uint32_t beams = plan.beams;
+    // The tent: the far side lobes' input, and with the pattern off the scan itself.
     resample_bins<Real>(plan, acc, resample_w, beam_profiles, bin_begin, bin_end);
-
-    // sidelobe: polar(j) = sum_t weight[j][t] B(j - K + t), or a copy when the pattern is off.
     if (!plan.effects.horizontal_pattern) {
         std::copy(beam_profiles + std::size_t(bin_begin) * beams, beam_profiles + std::size_t(bin_end) * beams,
                   polar + std::size_t(bin_begin) * beams);
         return;
     }
-    const std::uint32_t taps = plan.sidelobe_taps;
-    const std::int64_t K = (static_cast<std::int64_t>(taps) - 1) / 2;
-    const std::int64_t nb = beams;
-    const float* weights = plan.sidelobe_weight.data();
-    const std::uint32_t* tap_begin = plan.sidelobe_tap_begin.data();
-    const std::uint32_t* tap_end = plan.sidelobe_tap_end.data();
-    // Far side lobes (plan.h far_cells), kFarRows bins at a time (far_sidelobe_rows); each output adds
-    // far_sidelobe_level of its two cells (sidelobe.comp).
+    // The near kernel over the columns (Plan::near_column_*): polar(j) = sum_t w[j][t] profile(begin_j + t),
+    // then plus the far side lobes (plan.h far_cells) of kFarRows bins at a time (far_sidelobe_rows), each
+    // output adding far_sidelobe_level of its two cells (sidelobe.comp).
     const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
+    const std::uint32_t columns = plan.profile_columns, taps = plan.near_column_taps;
+    const std::size_t T = profile_column_stride(plan);
     FarRows<Real> far;
     std::uint32_t far_first = bin_begin;                           // the first bin of the batch `far` holds
     const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
-    const Real* group_weights = far_beam + far_beam_count(plan);   // sidelobe_group_count's weights
-    const std::size_t groups = sidelobe_group_count(plan);
+    const Real* group_weights = far_beam + far_beam_count(plan);   // near_group_count's weights
+    const std::size_t groups = near_group_count(plan);
+    const std::uint32_t group_taps = groups > 0 ? near_group_taps(plan) : 0;
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
         if (cells == 0) return Real(0);
         const Real* f = far_beam + std::size_t(j) * kFarBeamValues;
@@ -487,148 +511,53 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                    f[kFarS1] * static_cast<Real>(far.level[(m * cells + c1) * kFarRows + r]);
         return M::far_sidelobe_level(typename M::vec4(f[kFarCos], f[kFarSin], Real(0), Real(0)), l[0], l[1], l[2]);
     };
-    auto empty_row = [&](const float* row) { return std::all_of(row, row + beams, [](float b) { return b == 0.0f; }); };
-    using V = typename Lanes4<Real>::type;
-    float padded[2][kMaxPaddedRow]; // padded[r][i]: beam i - K of the r-th row of a pair
-    const bool avx2 = use_avx2(plan.config);
-    for (std::uint32_t k = bin_begin; k < bin_end;) {
-        if (cells > 0 && (k == bin_begin || k - far_first == kFarRows)) {
-            far_first = k;
-            const std::uint32_t rows = std::min(kFarRows, bin_end - k);
-            far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k, rows, far);
-            if constexpr (std::is_same_v<Real, float>) {
-                if (groups > 0) // the group loop below adds its sums to these
-                    far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows,
-                                         polar + std::size_t(k) * beams);
-            }
-        }
-        const float* B = beam_profiles + static_cast<std::size_t>(k) * beams;
-        // An empty bin row stays exactly 0 (every term would add +0 to a +0 sum).
-        if (empty_row(B)) {
-            std::fill(polar + static_cast<std::size_t>(k) * beams, polar + static_cast<std::size_t>(k + 1) * beams,
-                      0.0f);
-            ++k;
+    const bool avx2 = std::is_same_v<Real, float> && groups > 0 && use_avx2(plan.config);
+    for (std::uint32_t k0 = bin_begin; k0 < bin_end; k0 += kFarRows) {
+        const std::uint32_t rows = std::min(kFarRows, bin_end - k0);
+        float* out = polar + std::size_t(k0) * beams;
+        const float* B = beam_profiles + std::size_t(k0) * beams;
+        // Bins whose columns are all empty stay exactly 0 (every term would add +0 to a +0 sum, and the
+        // far cells hold no energy): the tent's beams are 0 exactly where every column is.
+        if (std::all_of(B, B + std::size_t(rows) * beams, [](float b) { return b == 0.0f; })) {
+            std::fill(out, out + std::size_t(rows) * beams, 0.0f);
             continue;
         }
-        if (groups > 0) {
-            // Two bin rows at a time where the next one has energy too (and its far side lobes are in the
-            // same batch): each weight is read once for both rows, and the eight sums in flight hide the
-            // adds' latency. Every beam, four groups (16 beams) at a time: each beam's sum is one lane,
-            // still in increasing t, over the taps where any beam of the groups has a weight, from the
-            // padded row (a zero weight, or a zero beyond the fan's edge, adds exactly +0: the same sums
-            // as the scalar loop below, which leaves those terms out). Rows never mix: the same sums as
-            // one row at a time.
-            const bool pair = k + 1 < bin_end && (cells == 0 || k + 1 - far_first < kFarRows) && !empty_row(B + beams);
-            const std::uint32_t rows = pair ? 2 : 1;
-            for (std::uint32_t r = 0; r < rows; ++r) {
-                // padded[r][K + b] = beam b for b in [-K, nb + K + 4): the beams themselves, then the
-                // padding either side (the wrapped beams with plan.circular, where K < nb / 2, else zeros)
-                const float* row = B + std::size_t(r) * beams;
-                float* out = padded[r] + K;
-                std::memcpy(out, row, sizeof(float) * beams);
-                for (std::int64_t b = -K; b < 0; ++b)
-                    out[b] = plan.circular ? row[b + nb] : 0.0f;
-                for (std::int64_t b = nb; b < nb + K + 4; ++b)
-                    out[b] = plan.circular ? row[(b + nb) % nb] : 0.0f;
-            }
-            for (std::size_t q0 = 0; q0 < groups; q0 += 4) {
-                const std::size_t n = std::min<std::size_t>(4, groups - q0);
-                const std::size_t j0 = 4 * q0, j_end = std::min<std::size_t>(j0 + 4 * n, beams);
-                std::uint32_t t_begin = taps, t_end = 0;
-                for (std::size_t i = j0; i < j_end; ++i) {
-                    t_begin = std::min(t_begin, tap_begin[i]);
-                    t_end = std::max(t_end, tap_end[i]);
-                }
-                const Real* wq = group_weights + q0 * 4 * taps;
-                V s[2][4] = {};
-                // s[r][g] += w(g, t) * row r's beams j0 + 4 g + t - K .. + 3 (out parameters: a double V is
-                // an AVX-sized value)
-                auto load = [&](V& x, std::uint32_t r, std::size_t g, std::uint32_t t) {
-                    const float* src = padded[r] + j0 + t + 4 * g; // beam j0 + 4 g + l takes src[l]
-                    if constexpr (std::is_same_v<Real, float>) {
-                        std::memcpy(&x, src, sizeof x);
-                    } else {
-                        for (std::uint32_t l = 0; l < 4; ++l)
-                            x[l] = static_cast<Real>(src[l]);
-                    }
-                };
-                auto mac = [&](std::uint32_t rows_used, std::size_t g, std::uint32_t t) {
-                    V w, x;
-                    std::memcpy(&w, wq + (g * taps + t) * 4, sizeof w);
-                    load(x, 0, g, t);
-                    s[0][g] += w * x;
-                    if (rows_used == 2) {
-                        load(x, 1, g, t);
-                        s[1][g] += w * x;
-                    }
-                };
-                if (std::is_same_v<Real, float> && n == 4 && avx2) {
-                    if constexpr (std::is_same_v<Real, float>) {
-                        float sums[2][16];
-                        sidelobe_run8(wq, taps, padded[0] + j0, rows == 2 ? padded[1] + j0 : nullptr, t_begin, t_end,
-                                      sums);
-                        std::memcpy(s, sums, sizeof sums);
-                    }
-                } else if (n == 4 && rows == 2) {
-                    for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                        mac(2, 0, t);
-                        mac(2, 1, t);
-                        mac(2, 2, t);
-                        mac(2, 3, t);
-                    }
-                } else if (n == 4) {
-                    for (std::uint32_t t = t_begin; t < t_end; ++t) {
-                        mac(1, 0, t);
-                        mac(1, 1, t);
-                        mac(1, 2, t);
-                        mac(1, 3, t);
-                    }
-                } else {
-                    for (std::uint32_t t = t_begin; t < t_end; ++t)
-                        for (std::size_t g = 0; g < n; ++g)
-                            mac(rows, g, t);
-                }
-                for (std::uint32_t r = 0; r < rows; ++r) {
-                    float* out = polar + static_cast<std::size_t>(k + r) * beams;
-                    if constexpr (std::is_same_v<Real, float>) {
-                        if (cells > 0) { // the far side lobes are in out already (far_values_into_rows)
-                            for (std::size_t jj = j0; jj < j_end; ++jj)
-                                out[jj] = s[r][(jj - j0) / 4][(jj - j0) % 4] + out[jj];
-                            continue;
+        far_first = k0;
+        if (cells > 0) far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k0, rows, far);
+        if constexpr (std::is_same_v<Real, float>) {
+            if (avx2 && rows == kFarRows) {
+                if (cells > 0) far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows, out);
+                for (std::size_t g = 0; g < groups; ++g) {
+                    float sums[8][8];
+                    near_group8(group_weights + g * group_taps * kNearGroup, near_group_span(plan, g), acc + k0, T,
+                                columns, plan.circular, sums);
+                    const std::size_t j0 = g * kNearGroup, j_end = std::min<std::size_t>(j0 + kNearGroup, beams);
+                    for (std::uint32_t r = 0; r < kFarRows; ++r)
+                        for (std::size_t j = j0; j < j_end; ++j) {
+                            float& cell = out[std::size_t(r) * beams + j];
+                            cell = cells > 0 ? sums[r][j - j0] + cell : sums[r][j - j0]; // near + far
                         }
-                    }
-                    for (std::size_t jj = j0; jj < j_end; ++jj) {
-                        const std::size_t g = (jj - j0) / 4, l = (jj - j0) % 4;
-                        out[jj] = static_cast<float>(s[r][g][l] + far_at(static_cast<std::int64_t>(jj), k + r));
-                    }
                 }
-            }
-            k += rows;
-            continue;
-        }
-        float* out = polar + static_cast<std::size_t>(k) * beams;
-        std::int64_t j = 0;
-        while (j < nb) {
-            const float* w = weights + static_cast<std::size_t>(j) * taps;
-            if (plan.circular) { // source j - K + t modulo beams (plan.circular: K < beams / 2)
-                Real sum = Real(0);
-                for (std::int64_t t = 0; t < static_cast<std::int64_t>(taps); ++t)
-                    sum += static_cast<Real>(w[t]) * static_cast<Real>(B[(j - K + t + nb) % nb]);
-                out[j] = static_cast<float>(sum + far_at(j, k));
-                ++j;
                 continue;
             }
-            // Taps whose source beam j - K + t lies in [0, beams) and whose weight is not 0, in increasing t.
-            const std::int64_t first = std::max<std::int64_t>(std::max<std::int64_t>(0, K - j), tap_begin[j]);
-            const std::int64_t end = std::min<std::int64_t>(std::min<std::int64_t>(taps, nb + K - j), tap_end[j]);
-            const float* src = B + (j - K);
-            Real sum = Real(0);
-            for (std::int64_t t = first; t < end; ++t)
-                sum += static_cast<Real>(w[t]) * static_cast<Real>(src[t]);
-            out[j] = static_cast<float>(sum + far_at(j, k));
-            ++j;
         }
-        ++k;
+        // Each beam's rows side by side: kFarRows independent sums, each over the beam's columns in
+        // increasing order (the profiles rounded to float first: the values they hold).
+        for (std::uint32_t j = 0; j < beams; ++j) {
+            Real sum[kFarRows] = {};
+            const float* w = plan.near_column_weight.data() + std::size_t(j) * taps;
+            for (std::uint32_t t = 0; t < plan.near_column_count[j]; ++t) {
+                const Real wt = static_cast<Real>(w[t]);
+                const Real* column =
+                    acc +
+                    std::size_t(wrap_column(std::int64_t(plan.near_column_begin[j]) + t, columns, plan.circular)) * T +
+                    k0;
+                for (std::uint32_t r = 0; r < rows; ++r)
+                    sum[r] += wt * static_cast<Real>(static_cast<float>(column[r]));
+            }
+            for (std::uint32_t r = 0; r < rows; ++r)
+                out[std::size_t(r) * beams + j] = static_cast<float>(sum[r] + far_at(j, k0 + r));
+        }
     }
 }
 

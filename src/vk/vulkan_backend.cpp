@@ -372,26 +372,27 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     const std::uint32_t materials_vec4s = uniform_vec4s(bytes_of(materials));
     const std::uint32_t column_table_vec4s = uniform_vec4s(bytes_of(column_table));
     const std::uint32_t beam_table_vec4s = uniform_vec4s(bytes_of(beam_table));
-    // The side-lobe table: the weights, then per run of shape_.beams_per_invocation beams the first and last
-    // source beam any of its weights reaches (as floats, exact below 2^24, within [0, beams)):
-    // sidelobe.comp loops over those sources only. A line array's kernel spans the most beams at the fan's edges; near
-    // broadside most of its taps are 0, and a zero weight adds exactly +0, so skipping them changes no bit.
-    std::vector<float> sidelobe_table = plan_.sidelobe_weight;
-    for (std::uint32_t first = 0; first < plan_.beams; first += shape_.beams_per_invocation) {
+    // The near kernel's table (Plan::near_column_*): the weights, then per run of shape_.beams_per_invocation
+    // beams the first and last source column any of its beams hears, then each beam's first column (as
+    // floats, exact below 2^24; unwrapped, as the plan keeps them): sidelobe.comp loops over the run's
+    // columns only, and a zero weight adds exactly +0, so the columns a beam does not hear change no bit.
+    std::vector<float> sidelobe_table = plan_.near_column_weight;
+    if (sidelobe_table.empty()) sidelobe_table.push_back(0.0f); // the pattern off: no side-lobe pass
+    const bool near_kernel = !plan_.near_column_begin.empty();
+    for (std::uint32_t first = 0; first < plan_.beams && near_kernel; first += shape_.beams_per_invocation) {
         const std::uint32_t end = std::min(first + shape_.beams_per_invocation, plan_.beams);
-        const std::int64_t half_taps = (std::int64_t(plan_.sidelobe_taps) - 1) / 2;
         std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
         for (std::uint32_t j = first; j < end; ++j) {
-            if (plan_.sidelobe_tap_begin[j] >= plan_.sidelobe_tap_end[j]) continue;
-            lo = std::min(lo, std::int64_t(j) - half_taps + plan_.sidelobe_tap_begin[j]);
-            hi = std::max(hi, std::int64_t(j) - half_taps + plan_.sidelobe_tap_end[j] - 1);
+            if (plan_.near_column_count[j] == 0) continue;
+            lo = std::min<std::int64_t>(lo, plan_.near_column_begin[j]);
+            hi = std::max<std::int64_t>(hi, std::int64_t(plan_.near_column_begin[j]) + plan_.near_column_count[j] - 1);
         }
-        if (lo > hi) lo = hi = first; // no weight at all (cannot happen: the centre tap is 1)
-        lo = std::clamp<std::int64_t>(lo, 0, plan_.beams - 1);
-        hi = std::clamp<std::int64_t>(hi, 0, plan_.beams - 1);
+        if (lo > hi) lo = 0, hi = -1; // no beam of the run hears a column: an empty loop
         sidelobe_table.push_back(static_cast<float>(lo));
         sidelobe_table.push_back(static_cast<float>(hi));
     }
+    for (std::uint32_t j = 0; j < plan_.beams && near_kernel; ++j)
+        sidelobe_table.push_back(static_cast<float>(plan_.near_column_begin[j]));
     const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(sidelobe_table));
     // The far side lobes' table, as far_sidelobe.comp reads it: beam cells, cell spans, weights.
     std::vector<float> far_table = plan_.far_beam_cell;

@@ -159,7 +159,6 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
     double total = 0;
     const std::vector<float> echo2 = random_echo(plan, &total);
     const BeamformOut o = run_beamform<Real>(plan, echo2);
-    const std::int64_t K = (plan.sidelobe_taps - 1) / 2;
     // The far side lobes (plan.h far_cells) from their definition: each beam's two cell shares
     // (first cell 1 - s, second s); with the phase channels (a line array's sinc^2) the cells also
     // take the energy times cos and sin of the beam's phase 2k u; each channel is convolved with
@@ -194,12 +193,12 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
                                                                 : 0.0;
                 B += w * o.profiles[std::size_t(k) * plan.columns + c];
             }
-            double P = 0;
-            for (std::uint32_t t = 0; t < plan.sidelobe_taps; ++t) {
-                const std::int64_t src = std::int64_t(j) - K + t;
-                if (src < 0 || src >= std::int64_t(plan.beams)) continue;
-                P += double(plan.sidelobe_weight[j * plan.sidelobe_taps + t]) *
-                     o.beams[std::size_t(k) * plan.beams + src];
+            double P = 0; // the near kernel: every column the plan gives beam j, by its weight
+            for (std::uint32_t t = 0; t < plan.near_column_count[j]; ++t) {
+                const std::int64_t c = plan.near_column_begin[j] + std::int64_t(t);
+                ASSERT_TRUE(c >= 0 && c < std::int64_t(plan.columns));
+                P += double(plan.near_column_weight[j * plan.near_column_taps + t]) *
+                     o.profiles[std::size_t(k) * plan.columns + std::size_t(c)];
             }
             double level = 0;
             for (std::uint32_t m = 0; m < plan.far_channels; ++m)
@@ -208,14 +207,108 @@ TYPED_TEST(CpuBeamform, ResampleAndSidelobeFollowTheirFormulas) {
             P += std::max(level, 0.0);
             const double gotB = o.beams[std::size_t(k) * plan.beams + j],
                          gotP = o.polar[std::size_t(k) * plan.beams + j];
-            // Sums of <= ~10 positive float terms (the far cells: a few dozen, each stored once in
-            // float): float arithmetic is good to ~1e-6 relative.
+            // Sums of positive float terms (the resample's ~4, the near kernel's ~25 columns, the far
+            // cells' few dozen, each stored once in float): float arithmetic is good to ~1e-6 relative.
             EXPECT_NEAR(gotB, B, 2e-6 * B + 1e-30);
             EXPECT_NEAR(gotP, P, 2e-6 * P + 1e-30);
             if (P > 0) max_rel = std::max(max_rel, std::abs(gotP - P) / P);
         }
     }
     this->RecordProperty("max_rel_sidelobe", std::to_string(max_rel));
+}
+// The near kernel weighs each profile column by the horizontal pattern at its own direction (docs/pipeline.md
+// §4, "Side lobes"): one column's unit profile in bin k gives beam j exactly b_h^2 at their separation,
+// wherever the column falls between beams. The pattern is the test's own: the sinc^2 of a uniform line
+// array whose two-way -3 dB width is the beamwidth, at the separation in sine (line_array, columns
+// uniform in steering angle: column c at (1 - (2c + 1) / columns) hfov / 2) or in angle (planar, the
+// pixel columns' azimuths as the depth pass renders them). Far side lobes off, so that the kernel's
+// taps are the whole pattern out to the reach (3 beamwidths) and 0 beyond. Bin k holds column k's
+// impulse (a third of the columns, those within +-2 beams of five steering angles), so every beam of
+// a bin hears one column. Cases: the default 512 x 1 deg line array, a planar fan, and 65 beams 2 deg
+// apart with 1 deg beams (the tent put a target midway between two such beams 3 dB down in both, where
+// the pattern says 18 dB).
+TYPED_TEST(CpuBeamform, NearKernelIsThePatternAtEachColumnsDirection) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    struct Case {
+        const char* name;
+        BeamGeometry geometry;
+        std::uint32_t beams;
+    };
+    for (const Case& kase : {Case{"line_array", BeamGeometry::line_array, 512},
+                             Case{"planar", BeamGeometry::planar, 512}, Case{"sparse", BeamGeometry::line_array, 65}}) {
+        SonarConfig config; // the default sonar: 130 x 20 deg, 1 deg sinc beams
+        config.beam_geometry = kase.geometry;
+        config.beams = kase.beams;
+        config.far_sidelobe_cell = 0.0;
+        config.effects.horizontal_pattern = EffectMode::on;
+        const Plan plan = plan_for(config, b.scene);
+        ASSERT_EQ(plan.line_array, kase.geometry == BeamGeometry::line_array);
+        ASSERT_EQ(plan.far_cells, 0u);
+        const std::uint32_t columns = plan.profile_columns, beams = plan.beams;
+        const double hbw = config.horizontal_beamwidth_deg * kDeg;
+        const double reach = config.sidelobe_kernel_beamwidths * hbw;
+        const double half = 0.5 * config.hfov_deg * kDeg;
+        auto beam_angle = [&](std::uint32_t j) { return (1.0 - (2.0 * j + 1.0) / beams) * half; };
+        auto column_angle = [&](std::uint32_t c) {
+            if (plan.line_array) return (1.0 - (2.0 * c + 1.0) / columns) * half;
+            return plan.column_azimuth_rad[c]; // planar: the pixel grid's own azimuths (checked elsewhere)
+        };
+        auto pattern = [&](double sep) { // sep: in sine (line array) or angle (planar)
+            const double angle = plan.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+            const double x = testing::sinc_half_power_x() * std::sin(angle) / std::sin(0.5 * hbw);
+            if (std::abs(x) < 1e-12) return 1.0;
+            return (std::sin(x) / x) * (std::sin(x) / x);
+        };
+        // The impulses: columns within +-2 beams of these steering angles, one bin each.
+        std::vector<std::uint32_t> impulse_columns;
+        for (double steer_deg : {0.0, 20.0, -40.0, 55.0, -63.0}) {
+            const double steer = steer_deg * kDeg;
+            for (std::uint32_t c = 0; c < columns; ++c)
+                if (std::abs(column_angle(c) - steer) <= 2.0 * config.hfov_deg * kDeg / beams)
+                    impulse_columns.push_back(c);
+        }
+        ASSERT_LE(impulse_columns.size(), std::size_t(plan.bins));
+        const std::size_t T = cpu::profile_column_stride(plan);
+        std::vector<Real> acc(cpu::beamform_accumulator_count(plan), Real(0));
+        for (std::size_t i = 0; i < impulse_columns.size(); ++i)
+            acc[impulse_columns[i] * T + i] = Real(1);
+        std::vector<Real> weights(std::max<std::size_t>(cpu::resample_weight_count(plan), 1));
+        cpu::resample_weights<Real>(plan, weights.data());
+        std::vector<float> beam_profiles(std::size_t(plan.bins) * beams), polar(std::size_t(plan.bins) * beams);
+        cpu::beamform_beams<Real>(plan, acc.data(), weights.data(), beam_profiles.data(), polar.data(), 0, plan.bins);
+        double worst_main_lobe_db = 0, worst = 0;
+        std::size_t checked = 0;
+        for (std::size_t i = 0; i < impulse_columns.size(); ++i) {
+            const std::uint32_t c = impulse_columns[i];
+            for (std::uint32_t j = 0; j < beams; ++j) {
+                const double sep = plan.line_array ? std::sin(column_angle(c)) - std::sin(beam_angle(j))
+                                                   : column_angle(c) - beam_angle(j);
+                const double reach_units = plan.line_array ? std::sin(reach) : reach;
+                const double got = polar[i * beams + j];
+                if (std::abs(sep) > reach_units * (1 + 1e-6)) {
+                    ASSERT_EQ(got, 0.0) << kase.name << " column " << c << " beam " << j << ": beyond the reach";
+                    continue;
+                }
+                if (std::abs(std::abs(sep) - reach_units) < 1e-6 * reach_units) continue; // on the reach: either
+                const double expected = pattern(sep);
+                // One product of a float weight and 1: the pattern rounded to float (6e-8 relative), and the
+                // separation of two float-free doubles: 1e-6 relative plus 1e-9 near the nulls.
+                ASSERT_NEAR(got, expected, 1e-6 * expected + 1e-9)
+                    << kase.name << " column " << c << " (" << column_angle(c) / kDeg << " deg) beam " << j << " ("
+                    << beam_angle(j) / kDeg << " deg)";
+                worst = std::max(worst, std::abs(got - expected));
+                if (expected > 0.5)
+                    worst_main_lobe_db = std::max(worst_main_lobe_db, std::abs(testing::to_db(got / expected)));
+                ++checked;
+            }
+        }
+        std::printf("[near kernel] %-10s %zu columns, %zu cells within the reach: worst %.2g absolute, %.2g dB in "
+                    "the main lobe's upper half\n",
+                    kase.name, impulse_columns.size(), checked, worst, worst_main_lobe_db);
+        EXPECT_GT(checked, 100u);
+    }
 }
 
 // Backend
