@@ -233,10 +233,12 @@ void plan_near_columns_tent(Plan& p) {
         }
 }
 
-// The near kernel's table over the columns within `reach_cut` of each beam (in the separation unit),
-// weights the pattern at the separation times the near share (1 - the far grid's ramp). Zero weights at
-// either end of a beam's columns are left out (a column that feeds no beam, a null at the reach).
-void plan_near_columns(Plan& p, double reach_units, double reach_cut) {
+// The near kernel's table over the columns within the reach of each beam (reach_units, in the separation
+// unit) and within offset_cut beams of it (by the column's fractional beam index, the tent's position;
+// wrapped on a circle): weights the pattern at the separation times the near share (1 - the far grid's
+// ramp). Zero weights at either end of a beam's columns are left out (a column that feeds no beam, a
+// null at the reach).
+void plan_near_columns(Plan& p, double reach_units, double offset_cut) {
     const std::uint32_t beams = p.beams, columns = p.profile_columns;
     p.near_column_begin.assign(beams, 0);
     p.near_column_count.assign(beams, 0);
@@ -267,12 +269,20 @@ void plan_near_columns(Plan& p, double reach_units, double reach_cut) {
             if (lo > 0 && std::abs(separation(lo - 1)) < std::abs(separation(lo))) --lo;
         }
         std::int64_t hi = lo; // columns [lo, hi]
-        const bool any = std::abs(separation(lo)) <= reach_cut;
+        auto in_kernel = [&](std::int64_t c) {
+            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
+            double beams_away = 0.0; // between the column's tent position and beam j
+            if (p.column_beam[wrapped] < beams) {
+                beams_away = std::abs(p.column_beam[wrapped] + (1.0 - p.column_weight[wrapped]) - j);
+                if (p.circular) beams_away = std::min(beams_away, beams - beams_away);
+            }
+            return std::abs(separation(c)) <= reach_units + 1e-12 && beams_away <= offset_cut;
+        };
+        const bool any = in_kernel(lo);
         auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
-        while (any && room() && (p.circular || lo > 0) && std::abs(separation(lo - 1)) <= reach_cut)
+        while (any && room() && (p.circular || lo > 0) && in_kernel(lo - 1))
             --lo;
-        while (any && room() && (p.circular || hi + 1 < std::int64_t(columns)) &&
-               std::abs(separation(hi + 1)) <= reach_cut)
+        while (any && room() && (p.circular || hi + 1 < std::int64_t(columns)) && in_kernel(hi + 1))
             ++hi;
         row.clear();
         for (std::int64_t c = lo; any && c <= hi; ++c) {
@@ -323,21 +333,19 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
         plan_near_columns_tent(p);
         return {};
     }
-    // The reach in the separation unit, no further than K beams where K was capped (kMaxSidelobeHalfTaps;
-    // on a circle, under half of it, so that no column is heard twice).
-    double min_spacing = std::numeric_limits<double>::infinity();
-    for (std::uint32_t j = 1; j < p.beams; ++j)
-        min_spacing = std::min(min_spacing, beam_position(p, j - 1) - beam_position(p, j));
-    const bool capped = p.beams > 1 && double(half_taps) < std::floor(reach_units / min_spacing);
-    const double reach_cut = capped ? double(half_taps) * min_spacing : reach_units + 1e-12;
-    // Each beam's weights for the columns within reach (at most all of them): refused where that table
-    // alone would pass 1 GiB (thousands of beams with a kernel across the fan).
+    // The reach in the separation unit, and no further than K + 1 beams (K = half_taps: the kernel's reach
+    // over the beam spacing, capped at kMaxSidelobeHalfTaps, and on a circle under half of it so that no
+    // column is heard twice; a column up to a beam past K lies within the reach where it was not capped).
+    const double offset_cut = double(half_taps) + 1.0;
+    // Each beam's weights for the columns within reach (at most all of them; bounded here by the densest
+    // columns): refused where that table alone would pass 1 GiB (thousands of beams with a kernel across
+    // the fan).
     double min_column_spacing = std::numeric_limits<double>::infinity();
     for (std::uint32_t c = 1; c < p.profile_columns; ++c) {
         const double gap = column_position(p, c - 1) - column_position(p, c);
         if (gap > 0.0) min_column_spacing = std::min(min_column_spacing, gap);
     }
-    const double widest = std::min<double>(p.profile_columns, 2.0 * reach_cut / min_column_spacing + 2.0);
+    const double widest = std::min<double>(p.profile_columns, 2.0 * reach_units / min_column_spacing + 2.0);
     const double table_bytes = 4.0 * p.beams * widest;
     if (table_bytes > 1073741824.0)
         return make_error(ErrorCode::invalid_argument,
@@ -346,7 +354,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
                               std::to_string(p.beams) + " beams x up to " +
                               std::to_string(static_cast<long long>(widest)) +
                               " profile columns each); lower accuracy.sidelobe_kernel_beamwidths or beams");
-    plan_near_columns(p, reach_units, reach_cut);
+    plan_near_columns(p, reach_units, offset_cut);
     return {};
 }
 

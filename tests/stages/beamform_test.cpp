@@ -311,6 +311,29 @@ TYPED_TEST(CpuBeamform, NearKernelIsThePatternAtEachColumnsDirection) {
     }
 }
 
+// A kernel asked to reach across the fan (bench accuracy's reference: 1000 beamwidths) hears every column
+// from every beam, also where the beams' table caps its reach in beams (K = beams - 1) and a line array's
+// beams lie closer in sine at the edges than at broadside; on a full circle every column once.
+TEST(NearKernel, AKernelAcrossTheFanHearsEveryColumnOnce) {
+    SceneBuilder b;
+    b.material(-20.0);
+    for (const double hfov : {130.0, 360.0}) {
+        SonarConfig config;
+        config.hfov_deg = hfov;
+        config.beams = 128;
+        config.sidelobe_kernel_beamwidths = 1000.0;
+        const Plan plan = plan_for(config, b.scene);
+        ASSERT_EQ(plan.far_cells, 0u);
+        ASSERT_EQ(plan.near_column_begin.size(), plan.beams);
+        for (std::uint32_t j = 0; j < plan.beams; ++j) {
+            // zero weights at either end are left out: a null may fall on the first or last column
+            const std::uint32_t count = plan.near_column_count[j];
+            EXPECT_GE(count + 2, plan.profile_columns) << "hfov " << hfov << " beam " << j;
+            EXPECT_LE(count, plan.profile_columns) << "hfov " << hfov << " beam " << j;
+        }
+    }
+}
+
 // Backend
 
 // A seabed tilted down ahead, a box on it and a wall behind: every stage has work to do.
