@@ -79,7 +79,7 @@ void main() {
         begin[r] = first_beam + int(r) < beams ? int(weight(begin_entry + r)) : 0;
     }
     for (int source = first_source; source <= last_source; ++source) {
-        int wrapped = ((source % columns) + columns) % columns;
+        int wrapped = source < 0 ? source + columns : (source >= columns ? source - columns : source); // in (-columns, 2 columns)
         vec4 b = profiles4[uint(wrapped) * quads + q];
         for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
             int j = first_beam + int(r);

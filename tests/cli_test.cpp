@@ -194,7 +194,7 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     EXPECT_EQ(inside.err, "");
     const auto meta = nlohmann::json::parse(read_text(dir_ / "inside" / "meta.json"));
     ASSERT_TRUE(meta["validity"].is_array());
-    ASSERT_EQ(meta["validity"].size(), 2u) << meta["validity"].dump();
+    ASSERT_EQ(meta["validity"].size(), 3u) << meta["validity"].dump(); // + beam_sampling
     for (const auto& entry : meta["validity"]) {
         EXPECT_EQ(entry["ok"], true) << entry.dump();
         for (const char* field : {"model", "key", "value", "domain", "action"})
@@ -229,7 +229,7 @@ TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {
     EXPECT_EQ(lines[0].rfind("warning: francois_garrison: frequency = 3e+06 ", 0), 0u) << lines[0];
     EXPECT_EQ(lines[1].rfind("warning: far_field_beam_pattern: range_min = 1 ", 0), 0u) << lines[1];
     const auto list = nlohmann::json::parse(read_text(dir_ / "outside" / "meta.json"))["validity"];
-    ASSERT_EQ(list.size(), 2u);
+    ASSERT_EQ(list.size(), 3u);
     EXPECT_EQ(list[0]["model"], "francois_garrison");
     EXPECT_EQ(list[0]["ok"], false);
     EXPECT_EQ(list[0]["key"], "frequency");

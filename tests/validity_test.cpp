@@ -118,12 +118,65 @@ SonarConfig inside_config() {
 
 TEST(Validity, InsideEveryDomainEveryEntryIsOk) {
     const auto list = model_validity(inside_config());
-    ASSERT_EQ(list.size(), 2u); // francois_garrison, far_field_beam_pattern
+    ASSERT_EQ(list.size(), 3u); // francois_garrison, far_field_beam_pattern, beam_sampling
     for (const auto& v : list) {
         EXPECT_TRUE(v.ok) << v.warning();
         EXPECT_EQ(v.action, "none");
         EXPECT_FALSE(v.domain.empty());
     }
+}
+
+// Beams further apart than a beamwidth: with the horizontal pattern on the near kernel weighs each column by
+// the pattern at its own direction, so a target between two beams reads what the pattern says (ok); with
+// the pattern off, or a kernel shorter than the beam spacing (K = 0), the scan is the tent between beam
+// centres, which holds only while adjacent beams are at most a beamwidth apart (in sine for a line array).
+// 120 beams over 130 deg: 1.08 deg apart for a 1 deg beam.
+TEST(Validity, SparseBeamsNeedThePatternPerColumn) {
+    SonarConfig c = inside_config();
+    EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok);
+    for (const BeamGeometry geometry : {BeamGeometry::planar, BeamGeometry::line_array}) {
+        c.beam_geometry = geometry;
+        c.beams = 120;
+        c.effects.horizontal_pattern = EffectMode::automatic;
+        EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok) << "the near kernel runs";
+        c.effects.horizontal_pattern = EffectMode::off;
+        const auto v = find_model(model_validity(c), "beam_sampling");
+        EXPECT_FALSE(v->ok);
+        EXPECT_EQ(v->key, "beams");
+        EXPECT_EQ(v->value, 120.0);
+        EXPECT_NE(v->warning().find("interpolates"), std::string::npos) << v->warning();
+        c.beams = 130; // 1 deg apart (in sine only at broadside for the line array: 0.99998 deg)
+        EXPECT_TRUE(find_model(model_validity(c), "beam_sampling")->ok);
+        // A kernel shorter than the beam spacing (0.4 beamwidths against 1.08 deg apart; a line array's
+        // beams, 0.46 deg apart in sine at its edges, too): K = 0, the tent.
+        c.beams = 120;
+        c.effects.horizontal_pattern = EffectMode::automatic;
+        c.sidelobe_kernel_beamwidths = 0.4;
+        const auto tent = find_model(model_validity(c), "beam_sampling");
+        EXPECT_FALSE(tent->ok);
+        EXPECT_NE(tent->warning().find("interpolates"), std::string::npos) << tent->warning();
+        if (geometry == BeamGeometry::line_array) {
+            // 0.5 beamwidths reaches the edge beams' neighbours (K = 1) but not a target midway between
+            // two broadside beams (0.54 deg out): past the kernel's reach.
+            c.sidelobe_kernel_beamwidths = 0.5;
+            const auto short_kernel = find_model(model_validity(c), "beam_sampling");
+            EXPECT_FALSE(short_kernel->ok);
+            EXPECT_NE(short_kernel->warning().find("sidelobe_kernel_beamwidths"), std::string::npos)
+                << short_kernel->warning();
+        }
+        c.sidelobe_kernel_beamwidths = 3.0;
+    }
+    // The plan's own answer: the same config planned, with the pattern on and off.
+    SceneData scene;
+    c.beam_geometry = BeamGeometry::planar;
+    c.beams = 65; // 2 deg apart
+    auto on = make_plan(c, scene);
+    ASSERT_TRUE(on.ok()) << on.error().message;
+    EXPECT_TRUE(find_model(on.value().validity, "beam_sampling")->ok);
+    c.effects.horizontal_pattern = EffectMode::off;
+    auto off = make_plan(c, scene);
+    ASSERT_TRUE(off.ok()) << off.error().message;
+    EXPECT_FALSE(find_model(off.value().validity, "beam_sampling")->ok);
 }
 
 TEST(Validity, FrancoisGarrisonFrequencyAndWater) {

@@ -14,7 +14,8 @@ namespace vksonar {
 // One model the frame uses and whether the config keeps it inside its domain.
 // Thread-safety: a plain value: safe to read from many threads at once, to write from one.
 struct ModelValidity {
-    std::string model;  // "francois_garrison", "far_field_beam_pattern", "chebyshev_large_array", "rough_facet"
+    std::string model;  // "francois_garrison", "far_field_beam_pattern", "beam_sampling", "chebyshev_large_array",
+                        // "rough_facet"
     bool ok = true;     // the config lies inside the model's domain
     std::string key;    // the key that decides (the first one outside the domain when !ok)
     double value = 0.0; // its value
@@ -28,7 +29,9 @@ struct ModelValidity {
 
 // The models a config (and the scene's materials) uses, each checked against its domain, in a fixed
 // order: francois_garrison (absorption auto), far_field_beam_pattern (a beam pattern effect not off),
-// chebyshev_large_array (per chebyshev pattern), rough_facet (per rough material, incidence not off).
+// beam_sampling (the physical mode, more than one beam; judged from the config's side-lobe kernel reach:
+// the plan's own entry also knows when the main-lobe-only rule shortens it), chebyshev_large_array (per
+// chebyshev pattern), rough_facet (per rough material, incidence not off).
 // Meaningful for a config that validates. Pure: returns a new vector, may be called from any thread.
 [[nodiscard]] std::vector<ModelValidity> model_validity(const SonarConfig& config,
                                                         const std::vector<AcousticMaterial>& materials = {});

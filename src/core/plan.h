@@ -155,7 +155,7 @@ struct Plan {
     std::vector<std::uint32_t> far_cell_beams; // far_cells * 2: the beams [first, end) that feed cell c
     std::vector<float> far_weight;             // 2 * far_cells - 1
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
-    // +-180 deg seam. Then column_beam[c] + 1 and the side-lobe source j - K + t wrap modulo beams,
+    // +-180 deg seam. Then column_beam[c] + 1 wraps modulo beams and a beam's near columns modulo profile_columns,
     // and seam columns split their energy between beam beams-1 and beam 0 (docs/pipeline.md §4).
     bool circular = false;
 
@@ -220,6 +220,10 @@ double francois_garrison_db_per_m(double frequency_hz, double temperature_c, dou
 Result<std::vector<double>> beam_table(const SonarConfig& c);
 // Whether the config's beams are a line array's cones (else planar), and in `why` (if not null) the reason.
 bool resolves_to_line_array(const SonarConfig& c, std::string* why);
+// The beam_sampling validity entry (validity.cpp) with the plan's own answer to whether the near kernel
+// weighs each column by the pattern (per_column: the horizontal pattern on and K >= 1) and how far it
+// reaches (in angle, or in sine for a line array).
+ModelValidity beam_sampling_validity(const SonarConfig& c, bool per_column, double reach_units);
 // The noise terms (noise_floor.cpp; SonarConfig::noise_terms resolves "auto" with them): the sea's ambient
 // noise spectrum level at frequency_hz (dB re 1 uPa^2/Hz; Coates' fits to the Wenz curves: turbulence,
 // shipping, wind and thermal noise); that spectrum summed over frequency_hz +- band_hz / 2 (dB re 1 uPa);

@@ -1,6 +1,6 @@
 // make_plan's steps for the beams (plan_steps.h): which beams each profile column feeds (the resample's
-// tent on the beam table), and the side-lobe kernel along beams: its taps out to the kernel's reach and
-// the far side lobes' cells beyond it.
+// tent on the beam table), and the horizontal pattern's kernel: each beam's weights over the profile
+// columns out to the kernel's reach (the near kernel), and the far side lobes' cells beyond it.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -212,33 +212,14 @@ double column_position(const Plan& p, std::uint32_t c) {
     return p.line_array ? std::sin(p.column_azimuth_rad[c]) : p.column_azimuth_rad[c];
 }
 
-// The near kernel's table (Plan::near_column_*) with no kernel (K = 0, the effect forced on): the tent.
-void plan_near_columns_tent(Plan& p) {
-    const std::uint32_t beams = p.beams;
-    p.near_column_begin.assign(beams, 0);
-    p.near_column_count.assign(beams, 0);
-    p.near_column_taps = 1;
-    for (std::uint32_t j = 0; j < beams; ++j) {
-        p.near_column_begin[j] = static_cast<std::int32_t>(p.beam_column_begin[j]);
-        p.near_column_count[j] = p.beam_column_end[j] - p.beam_column_begin[j];
-        p.near_column_taps = std::max(p.near_column_taps, p.near_column_count[j]);
-    }
-    p.near_column_weight.assign(std::size_t(beams) * p.near_column_taps, 0.0f);
-    for (std::uint32_t j = 0; j < beams; ++j)
-        for (std::uint32_t t = 0; t < p.near_column_count[j]; ++t) {
-            const std::uint32_t c = p.beam_column_begin[j] + t;
-            const std::uint32_t share = math_f64::resample_share(p.column_beam[c], j, beams, p.circular);
-            p.near_column_weight[std::size_t(j) * p.near_column_taps + t] =
-                share == 1 ? p.column_weight[c] : (share == 2 ? 1.0f - p.column_weight[c] : 0.0f);
-        }
-}
-
 // The near kernel's table over the columns within the reach of each beam (reach_units, in the separation
 // unit) and within offset_cut beams of it (by the column's fractional beam index, the tent's position;
 // wrapped on a circle): weights the pattern at the separation times the near share (1 - the far grid's
-// ramp). Zero weights at either end of a beam's columns are left out (a column that feeds no beam, a
-// null at the reach).
-void plan_near_columns(Plan& p, double reach_units, double offset_cut) {
+// ramp). With `tent` (no kernel, K = 0, the effect forced on) the columns within a beam of it instead,
+// weighed by the tent (1 - their distance in beams: the resample's own shares, so the pass gives B).
+// Zero weights at either end of a beam's columns are left out (a null at the reach); columns that feed
+// no beam (beyond a host camera's fan) are never in a kernel.
+void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent) {
     const std::uint32_t beams = p.beams, columns = p.profile_columns;
     p.near_column_begin.assign(beams, 0);
     p.near_column_count.assign(beams, 0);
@@ -269,14 +250,17 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut) {
             if (lo > 0 && std::abs(separation(lo - 1)) < std::abs(separation(lo))) --lo;
         }
         std::int64_t hi = lo; // columns [lo, hi]
-        auto in_kernel = [&](std::int64_t c) {
+        // Beams between the column's tent position and beam j (-1: the column feeds no beam).
+        auto beams_away = [&](std::int64_t c) {
             const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
-            double beams_away = 0.0; // between the column's tent position and beam j
-            if (p.column_beam[wrapped] < beams) {
-                beams_away = std::abs(p.column_beam[wrapped] + (1.0 - p.column_weight[wrapped]) - j);
-                if (p.circular) beams_away = std::min(beams_away, beams - beams_away);
-            }
-            return std::abs(separation(c)) <= reach_units + 1e-12 && beams_away <= offset_cut;
+            if (p.column_beam[wrapped] >= beams) return -1.0;
+            double d = std::abs(p.column_beam[wrapped] + (1.0 - p.column_weight[wrapped]) - j);
+            return p.circular ? std::min(d, beams - d) : d;
+        };
+        auto in_kernel = [&](std::int64_t c) {
+            const double d = beams_away(c);
+            if (d < 0.0) return false;
+            return tent ? d < 1.0 : std::abs(separation(c)) <= reach_units + 1e-12 && d <= offset_cut;
         };
         const bool any = in_kernel(lo);
         auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
@@ -286,11 +270,13 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut) {
             ++hi;
         row.clear();
         for (std::int64_t c = lo; any && c <= hi; ++c) {
-            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
+            if (tent) {
+                row.push_back(static_cast<float>(std::max(1.0 - beams_away(c), 0.0)));
+                continue;
+            }
             const double sep = separation(c);
             const double near_share = p.far_cells > 0 ? 1.0 - far_ramp(std::abs(sep), reach_units) : 1.0;
-            const bool feeds = p.column_beam[wrapped] < beams; // a column beyond a host camera's fan feeds none
-            row.push_back(feeds ? static_cast<float>(pattern_at_separation(p, sep) * near_share) : 0.0f);
+            row.push_back(static_cast<float>(pattern_at_separation(p, sep) * near_share));
         }
         std::size_t first = 0, end = row.size();
         while (first < end && row[first] == 0.0f)
@@ -330,7 +316,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
     p.near_column_count.clear();
     if (!p.effects.horizontal_pattern) return {};
     if (half_taps == 0) {
-        plan_near_columns_tent(p);
+        plan_near_columns(p, reach_units, 0.0, true);
         return {};
     }
     // The reach in the separation unit, and no further than K + 1 beams (K = half_taps: the kernel's reach
@@ -354,7 +340,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
                               std::to_string(p.beams) + " beams x up to " +
                               std::to_string(static_cast<long long>(widest)) +
                               " profile columns each); lower accuracy.sidelobe_kernel_beamwidths or beams");
-    plan_near_columns(p, reach_units, offset_cut);
+    plan_near_columns(p, reach_units, offset_cut, false);
     return {};
 }
 

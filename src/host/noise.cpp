@@ -58,12 +58,15 @@ constexpr std::uint32_t kBinBlock = 32;
 struct RowDraws {
     bool speckle = false, noise = false;
 };
+// Whether the plan adds ambient noise: the effect on and each beam's level present (resolve_noise_floor;
+// a plan without them adds none).
+bool adds_ambient_noise(const Plan& plan) {
+    return plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
+}
 RowDraws row_draws_of(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
     const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
-    // (ambient noise needs each beam's level: resolve_noise_floor; a plan without them adds none)
-    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh,
-            rows && plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams};
+    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && adds_ambient_noise(plan)};
 }
 
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
@@ -176,7 +179,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     // Each beam's noise floor 10^((NL - DI_j) / 10), 0 with the effect off (resolve_noise_floor).
     assert(!plan.effects.ambient_noise || plan.beam_noise.size() >= beams);
     const float* beam_noise = plan.beam_noise.data();
-    const bool noise = plan.effects.ambient_noise && plan.beam_noise.size() >= beams;
+    const bool noise = adds_ambient_noise(plan);
     const bool speckle = plan.effects.speckle;
     const SpeckleModel model = cfg.speckle;
     const double looks = cfg.speckle_looks;

@@ -1,6 +1,7 @@
 // CPU reference of the beamform stage's second pass (docs/pipeline.md §4): the range profiles
-// (cpu_beamform_profile.cpp) resampled from their columns onto the beam table, then the side lobes along
-// beams: the sampled pattern's kernel near each beam and the far side lobes beyond its reach. Every
+// (cpu_beamform_profile.cpp) resampled from their columns onto the beam table (the tent: the far side
+// lobes' input, and the scan with the pattern off), then the horizontal pattern: each beam's near kernel
+// over the profile columns within its reach, and the far side lobes beyond it. Every
 // output cell is computed by one loop iteration with sums in increasing index order, so the result is
 // deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
@@ -9,6 +10,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
 #endif

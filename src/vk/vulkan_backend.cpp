@@ -147,6 +147,18 @@ Result<void> VulkanBackend::init() {
                               " columns), past the device's limit of " + std::to_string(limits.maxStorageBufferRange) +
                               " bytes (lower bins or accuracy.pixels_per_beam, or use --backend cpu)");
     }
+    // The near side-lobe kernel's weights (Plan::near_column_weight): a beam's columns within the reach,
+    // up to every column for a kernel across the fan.
+    const std::uint64_t near_bytes =
+        (std::uint64_t(plan_.near_column_weight.size()) + 3u * plan_.beams) * sizeof(float);
+    if (near_bytes > limits.maxStorageBufferRange) {
+        return make_error(ErrorCode::unsupported,
+                          "vulkan backend: the side-lobe kernel's column table would hold " +
+                              std::to_string(near_bytes) + " bytes (" + std::to_string(plan_.beams) + " beams x " +
+                              std::to_string(plan_.near_column_taps) + " columns), past the device's limit of " +
+                              std::to_string(limits.maxStorageBufferRange) +
+                              " bytes (lower accuracy.sidelobe_kernel_beamwidths, or use --backend cpu)");
+    }
     if (auto r = create_scene_buffers(); !r) return r;
     if (auto r = create_depth_pass(); !r) return r;
     if (auto r = create_compute(); !r) return r;
@@ -592,7 +604,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     const bool force_gather = options_.resample == ResampleMethod::gather;
     ResampleSpecialization resample;
     resample.beams_per_invocation = shape_.beams_per_invocation;
-    resample.beam_major_out = sidelobes_ ? 1u : 0u; // the side-lobe pass's input layout
+    resample.beam_major_out = sidelobes_ ? 1u : 0u; // far_sidelobe.comp's input layout
     resample.walk = !force_gather && resample_can_walk(plan_, shape_.beams_per_invocation) ? 1u : 0u;
     resample.uniform_tables = both_uniform(column_table_vec4s, beam_table_vec4s);
     resample.column_vec4s = resample.uniform_tables ? column_table_vec4s : 1u;

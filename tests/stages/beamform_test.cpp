@@ -311,6 +311,34 @@ TYPED_TEST(CpuBeamform, NearKernelIsThePatternAtEachColumnsDirection) {
     }
 }
 
+// The horizontal pattern forced on with no kernel (a reach short of the next beam: K = 0) is the tent: the
+// scan is the resampled beam profiles, and each beam's columns are the tent's few (also on a full circle,
+// where the resample's seam beams gather from both ends of the pixel grid).
+TYPED_TEST(CpuBeamform, ThePatternWithNoKernelIsTheTent) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    for (const double hfov : {40.0, 360.0}) {
+        SonarConfig config = small_config();
+        config.hfov_deg = hfov;
+        config.beams = hfov > 180.0 ? 64 : 32;
+        config.sidelobe_kernel_beamwidths = 0.1; // 0.2 deg against beams 1.25 or 5.6 deg apart
+        config.effects.horizontal_pattern = EffectMode::on;
+        const Plan plan = plan_for(config, b.scene);
+        ASSERT_TRUE(plan.effects.horizontal_pattern);
+        ASSERT_EQ(plan.sidelobe_taps, 1u);
+        ASSERT_EQ(plan.circular, hfov > 180.0);
+        EXPECT_LE(plan.near_column_taps, 4u * plan.columns / plan.beams) << "hfov " << hfov;
+        double total = 0;
+        const std::vector<float> echo2 = random_echo(plan, &total);
+        const BeamformOut o = run_beamform<Real>(plan, echo2);
+        // The same terms, the tent's weights stored as floats and a seam beam's columns summed from the
+        // seam on (the resample sums them in index order): float sums of <= 4 terms, 2e-6 relative.
+        for (std::size_t i = 0; i < o.polar.size(); ++i)
+            ASSERT_NEAR(o.polar[i], o.beams[i], 2e-6 * o.beams[i]) << "hfov " << hfov << " cell " << i;
+    }
+}
+
 // A kernel asked to reach across the fan (bench accuracy's reference: 1000 beamwidths) hears every column
 // from every beam, also where the beams' table caps its reach in beams (K = beams - 1) and a line array's
 // beams lie closer in sine at the edges than at broadside; on a full circle every column once.
