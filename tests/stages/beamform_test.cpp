@@ -591,6 +591,25 @@ TEST(BeamformGpuCpuParts, EachPartMatchesOnTheSameInput) {
         {"tent range kernel", [](SonarConfig& c) { c.range_kernel = RangeKernel::tent; }},
         {"planar beams", [](SonarConfig& c) { c.beam_geometry = BeamGeometry::planar; }},
         {"vertical side lobes off", [](SonarConfig& c) { c.effects.vertical_sidelobes = EffectMode::off; }},
+        // The near kernel's columns wrapped across the seam, runs of beams whose columns span both ends.
+        {"a full circle (the near kernel's columns wrap)",
+         [](SonarConfig& c) {
+             c.hfov_deg = 360.0;
+             c.beams = 256;
+             c.horizontal_beamwidth_deg = 3.0;
+         }},
+        // Beams 2 deg apart with 1 deg beams (the columns follow the beamwidth: many a beam), no far grid.
+        {"sparse beams, the kernel to the fan's edges",
+         [](SonarConfig& c) {
+             c.beams = 65;
+             c.sidelobe_kernel_beamwidths = 1000.0;
+         }},
+        {"the pattern forced on with no kernel (the tent's weights)",
+         [](SonarConfig& c) {
+             c.beams = 65;
+             c.sidelobe_kernel_beamwidths = 0.1;
+             c.effects.horizontal_pattern = EffectMode::on;
+         }},
     };
     const SceneCase scene = bundled_scenes().front();
     for (const auto& [what, change] : parts) {
