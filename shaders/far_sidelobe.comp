@@ -2,14 +2,15 @@
 // side-lobe kernel's reach, on a coarse grid of cells uniform in the beams' separation variable
 // (Plan::far_cells). Two passes of this shader run before sidelobe.comp, which adds each beam's
 // share of its two cells:
-//   kFarPass 0 (deposit):  far_energy[m][c] = sum over the beams [first, end) of cell c, in increasing
-//                          order, of far_deposit_weight(beam j, c, m) * B(j);
+//   kFarPass 0 (deposit):  far_energy[m][c] = sum over the profile columns [first, end) of cell c, in
+//                          increasing order, of far_deposit_weight(column i, c, m) * profile(i), each
+//                          column at its own direction (Plan::far_column_cell);
 //   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
 // for each channel m < far_channels (sonar_kernels.h, Plan::far_channels); kFarPass 2 the same sums, a
 // workgroup row per output cell (DeviceShape::far_cell_groups: a GPU, where one row per channel left
 // a few hundred lanes busy, each summing cells^2 terms: 0.10 ms on an H100).
-// An invocation owns four consecutive range bins (one vec4 of the beam-major B[j * bins_padded + k]
-// that resample.comp writes); a deposit workgroup one (channel, cell) (y = m * cells + c), a convolve
+// An invocation owns four consecutive range bins (one vec4 of the bin-fastest profiles that
+// profile.comp writes); a deposit workgroup one (channel, cell) (y = m * cells + c), a convolve
 // workgroup one channel (y = m). Every table load is the same for the whole workgroup: one scalar
 // load from the uniform view on lavapipe (src/vk/pipelines.h says why).
 // The CPU backend (src/stages/cpu_beamform.cpp) makes the same sums in the same order.
@@ -25,9 +26,10 @@ layout(local_size_x = kWorkgroupSize) in;
 layout(constant_id = kSpecFarPass) const uint kFarPass = 0u;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
-layout(std430, binding = kBindingBeamProfiles) readonly buffer BeamProfileBuffer { vec4 beam_profiles4[]; };
-// Plan::far_beam_cell (8 per beam), then Plan::far_cell_beams as floats (2 per cell, exact below
-// 2^24), then Plan::far_weight (2 cells - 1); and the same as a uniform block where it fits.
+layout(std430, binding = kBindingProfiles) readonly buffer ProfileBuffer { vec4 profiles4[]; };
+// Plan::far_beam_cell (8 per beam), Plan::far_column_cell (8 per profile column), then
+// Plan::far_cell_columns as floats (2 per cell, exact below 2^24), then Plan::far_weight (2 cells - 1);
+// and the same as a uniform block where it fits.
 layout(std430, binding = kBindingFarTable) readonly buffer FarTableBuffer { float far_table[]; };
 layout(constant_id = kSpecUniformTables) const uint kUniformTables = 0u;
 layout(constant_id = kSpecTableVec4s0) const uint kFarTableVec4s = 1u;
@@ -48,16 +50,18 @@ void main() {
     if (q >= quads || m >= params.far_channels) {
         return;
     }
-    uint spans = 8u * params.beams;
+    uint column_cells = 8u * params.beams;
+    uint spans = column_cells + 8u * params.profile_columns;
     uint channel_base = m * cells;
     precise vec4 sum = vec4(0.0); // no fused multiply-add: the CPU rounds each product
     if (kFarPass == 0u) {
         uint end = uint(table(spans + 2u * c + 1u));
-        for (uint j = uint(table(spans + 2u * c)); j < end; ++j) {
-            uint i = 8u * j;
+        for (uint column = uint(table(spans + 2u * c)); column < end; ++column) {
+            uint i = column_cells + 8u * column;
             vec4 cell = vec4(table(i), table(i + 1u), table(i + 2u), table(i + 3u));
             vec4 phase = vec4(table(i + 4u), table(i + 5u), table(i + 6u), table(i + 7u));
-            sum += far_deposit_weight(cell, phase, c, m) * beam_profiles4[j * quads + q];
+            // a column that feeds no beam has no cell here: its weight is 0 and adds exactly +0
+            sum += far_deposit_weight(cell, phase, c, m) * profiles4[column * quads + q];
         }
         far_energy4[(channel_base + c) * quads + q] = sum;
         return;

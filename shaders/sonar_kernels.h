@@ -665,7 +665,8 @@ VKS_FN REAL far_cell_share(vec4 beam_cell, uint c) {
 }
 
 // Beam j's weight into channel `channel` of cell c: its share, times 1 (channel 0) or its phase's
-// cosine (1) or sine (2), beam_phase = (cos 2k u_j, sin 2k u_j, 0, 0) (Plan::far_beam_cell[8 j + 4 ...]).
+// cosine (1) or sine (2), beam_phase = (cos 2k u_j, sin 2k u_j, 0, 0) (Plan::far_beam_cell[8 j + 4 ...];
+// the deposit passes a profile column's, Plan::far_column_cell).
 VKS_FN REAL far_deposit_weight(vec4 beam_cell, vec4 beam_phase, uint c, uint channel) {
     REAL share = far_cell_share(beam_cell, c);
     if (channel == 1u) {

@@ -140,10 +140,12 @@ struct Plan {
     std::vector<std::int32_t> near_column_begin;  // beams
     std::vector<std::uint32_t> near_column_count; // beams
     // Far side lobes (docs/pipeline.md, "Side lobes"): the pattern beyond the kernel's reach R, on a
-    // coarse grid of far_cells cells uniform in the separation variable (0: none). Each beam puts its
-    // energy into its two nearest cells (far_beam_cell, 8 per beam: first cell, second cell, share of
-    // the second, 0, then the beam's phase cos 2k u, sin 2k u, 0, 0), the cells are convolved with
-    // far_weight, and each beam reads its two cells back with the same shares. far_channels is 3 for a
+    // coarse grid of far_cells cells uniform in the separation variable (0: none). Each profile column
+    // puts its energy into its two nearest cells (far_column_cell, 8 per column: first cell, second
+    // cell, share of the second, 0, then the column's phase cos 2k u, sin 2k u, 0, 0; a column that feeds
+    // no beam has both cells = far_cells, none), the cells are convolved with far_weight, and each beam
+    // reads its two cells back with its own shares and phase (far_beam_cell, 8 per beam, the same layout).
+    // far_channels is 3 for a
     // line array's sinc^2 (the energy, and the energy times cos and sin of the phase: the pattern's
     // crests and nulls are exact, only its smooth envelope goes on the grid), else 1 (the lobes' mean).
     // far_weight[far_cells - 1 + a - b] is cell b's weight into cell a: the envelope (or the pattern)
@@ -151,9 +153,10 @@ struct Plan {
     // pattern times one minus the same ramp.
     std::uint32_t far_cells = 0;
     std::uint32_t far_channels = 1;
-    std::vector<float> far_beam_cell;          // beams * 8
-    std::vector<std::uint32_t> far_cell_beams; // far_cells * 2: the beams [first, end) that feed cell c
-    std::vector<float> far_weight;             // 2 * far_cells - 1
+    std::vector<float> far_beam_cell;            // beams * 8
+    std::vector<float> far_column_cell;          // profile_columns * 8
+    std::vector<std::uint32_t> far_cell_columns; // far_cells * 2: the columns [first, end) that feed cell c
+    std::vector<float> far_weight;               // 2 * far_cells - 1
     // hfov = 360 deg: the fan is a full circle, beam beams-1 and beam 0 are neighbours across the
     // +-180 deg seam. Then column_beam[c] + 1 wraps modulo beams and a beam's near columns modulo profile_columns,
     // and seam columns split their energy between beam beams-1 and beam 0 (docs/pipeline.md §4).

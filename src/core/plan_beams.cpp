@@ -123,13 +123,19 @@ double beam_position(const Plan& p, std::uint32_t j) {
     return p.line_array ? std::sin(p.beam_angle_rad[j]) : p.beam_angle_rad[j];
 }
 
+// The separation variable of profile column c: its direction's angle, or with line_array its sine.
+double column_position(const Plan& p, std::uint32_t c) {
+    return p.line_array ? std::sin(p.column_azimuth_rad[c]) : p.column_azimuth_rad[c];
+}
+
 // Step: the far side lobes' grid (Plan::far_cells), when the kernel stops short of the fan. The cells
 // are as narrow as far_sidelobe_cell * reach, and at most kMaxFarCells.
 void plan_far_sidelobes(Plan& p, double reach_units) {
     p.far_cells = 0;
     p.far_channels = 1;
     p.far_beam_cell.clear();
-    p.far_cell_beams.clear();
+    p.far_column_cell.clear();
+    p.far_cell_columns.clear();
     p.far_weight.clear();
     const double cell_fraction = p.config.far_sidelobe_cell;
     if (!(cell_fraction > 0.0) || p.beams < 2 || !(reach_units > 0.0)) return;
@@ -153,37 +159,51 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
     // energy times each beam's cos 2k u and sin 2k u). Other patterns keep the lobes' mean (one channel).
     const bool phased = p.line_array && shader_id(p.config.horizontal_pattern) == shared::kPatternSinc;
     p.far_channels = phased ? 3u : 1u;
-    // Each beam's two cells and the share of the second: position x = (first beam's position - its own) / step.
-    p.far_beam_cell.assign(std::size_t(p.beams) * 8, 0.0f);
-    std::vector<std::uint32_t> first(cells, p.beams), last(cells, 0);
-    for (std::uint32_t j = 0; j < p.beams; ++j) {
-        double x = (beam_position(p, 0) - beam_position(p, j)) / step;
+    // Each beam's and each column's two cells and the share of the second: position x = (first beam's
+    // position - its own) / step; its phase 2k u with the phase channels. Columns deposit (each at its own
+    // direction, as the near kernel weighs them), beams read back.
+    auto place = [&](double position, float* entry) {
+        double x = (beam_position(p, 0) - position) / step;
         if (p.circular) x = std::fmod(std::fmod(x, double(cells)) + cells, double(cells));
-        auto c0 = static_cast<std::uint32_t>(std::floor(x));
+        auto c0 = static_cast<std::uint32_t>(std::max(std::floor(x), 0.0));
         if (p.circular)
             c0 %= cells;
         else
             c0 = std::min(c0, cells - 2);
         const std::uint32_t c1 = p.circular ? (c0 + 1) % cells : c0 + 1;
-        const float share = static_cast<float>(std::clamp(x - c0, 0.0, 1.0)); // c0 = floor(x) but at the last cell
-        p.far_beam_cell[8 * j + 0] = static_cast<float>(c0);
-        p.far_beam_cell[8 * j + 1] = static_cast<float>(c1);
-        p.far_beam_cell[8 * j + 2] = share;
+        entry[0] = static_cast<float>(c0);
+        entry[1] = static_cast<float>(c1);
+        entry[2] = static_cast<float>(std::clamp(x - c0, 0.0, 1.0)); // c0 = floor(x) but at the ends
         if (phased) {
-            const double phase = 2.0 * p.hpattern_k * beam_position(p, j);
-            p.far_beam_cell[8 * j + 4] = static_cast<float>(std::cos(phase));
-            p.far_beam_cell[8 * j + 5] = static_cast<float>(std::sin(phase));
+            const double phase = 2.0 * p.hpattern_k * position;
+            entry[4] = static_cast<float>(std::cos(phase));
+            entry[5] = static_cast<float>(std::sin(phase));
         }
+        return std::pair<std::uint32_t, std::uint32_t>(c0, c1);
+    };
+    p.far_beam_cell.assign(std::size_t(p.beams) * 8, 0.0f);
+    for (std::uint32_t j = 0; j < p.beams; ++j)
+        place(beam_position(p, j), p.far_beam_cell.data() + 8 * std::size_t(j));
+    const std::uint32_t columns = p.profile_columns;
+    p.far_column_cell.assign(std::size_t(columns) * 8, 0.0f);
+    std::vector<std::uint32_t> first(cells, columns), last(cells, 0);
+    for (std::uint32_t col = 0; col < columns; ++col) {
+        float* entry = p.far_column_cell.data() + 8 * std::size_t(col);
+        if (p.column_beam[col] >= p.beams) { // beyond a host camera's fan: no cell
+            entry[0] = entry[1] = static_cast<float>(cells);
+            continue;
+        }
+        const auto [c0, c1] = place(column_position(p, col), entry);
         for (std::uint32_t c : {c0, c1}) {
-            first[c] = std::min(first[c], j);
-            last[c] = std::max(last[c], j);
+            first[c] = std::min(first[c], col);
+            last[c] = std::max(last[c], col);
         }
     }
-    p.far_cell_beams.assign(std::size_t(cells) * 2, 0);
+    p.far_cell_columns.assign(std::size_t(cells) * 2, 0);
     for (std::uint32_t c = 0; c < cells; ++c) {
-        if (first[c] > last[c]) continue; // no beam feeds it
-        p.far_cell_beams[2 * c] = first[c];
-        p.far_cell_beams[2 * c + 1] = last[c] + 1;
+        if (first[c] > last[c]) continue; // no column feeds it
+        p.far_cell_columns[2 * c] = first[c];
+        p.far_cell_columns[2 * c + 1] = last[c] + 1;
     }
     // far_weight: cell b into cell a depends on a - b only; the pattern (phased: its smooth part
     // 1 / (2 (k du)^2)) times the ramp, averaged over one cell by the midpoint rule.
@@ -206,11 +226,6 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
 } // namespace
 
 namespace {
-
-// The separation variable of profile column c: its direction's angle, or with line_array its sine.
-double column_position(const Plan& p, std::uint32_t c) {
-    return p.line_array ? std::sin(p.column_azimuth_rad[c]) : p.column_azimuth_rad[c];
-}
 
 // The near kernel's table over the columns within the reach of each beam (reach_units, in the separation
 // unit) and within offset_cut beams of it (by the column's fractional beam index, the tent's position;

@@ -153,14 +153,16 @@ template <class Real> struct FarRows {
     std::array<float, 3 * shared::kMaxFarCells * kFarRows> level; // the convolved cells, same layout
 };
 
-template <class Real> typename Math<Real>::vec4 far_table_vec4(const Plan& plan, std::int64_t j, std::size_t offset) {
-    const float* b = plan.far_beam_cell.data() + 8 * j + offset;
+template <class Real>
+typename Math<Real>::vec4 far_table_vec4(const std::vector<float>& table, std::int64_t j, std::size_t offset) {
+    const float* b = table.data() + 8 * j + offset;
     return typename Math<Real>::vec4(b[0], b[1], b[2], b[3]);
 }
 
-// A beam's far side-lobe values, as the kernels compute them from Plan::far_beam_cell, made once per plan
-// (after the resample weights): its two cells c0, c1, their shares s0, s1 (far_cell_share), its phase
-// (cos, sin), and per channel m its deposit weights into c0 and c1 (far_deposit_weight).
+// A beam's (or a profile column's) far side-lobe values, as the kernels compute them from Plan::far_beam_cell
+// (far_column_cell), made once per plan (after the resample weights): its two cells c0, c1, their shares s0,
+// s1 (far_cell_share), its phase (cos, sin), and per channel m its deposit weights into c0 and c1
+// (far_deposit_weight). Beams read their cells back, columns deposit into them.
 constexpr std::size_t kFarBeamValues = 12;
 enum FarBeam : std::size_t { kFarC0, kFarC1, kFarS0, kFarS1, kFarCos, kFarSin, kFarDeposit };
 
@@ -201,17 +203,19 @@ void far_convolve(const float* w, const double* energy, const std::uint16_t* liv
     far_convolve_cells<double>(w, energy, live, n, base, cells, level);
 }
 
-// far_sidelobe_rows's deposit: each beam's energy in the batch's rows (bins k0 + r, r < rows) into its two
-// cells per channel, scattered per beam with the rows side by side: each cell still takes its beams in
-// increasing order in every row (the shader gathers per cell). A beam of zero energy in a row adds exactly
-// +-0 there, which leaves the sum as it is (a sum that starts at +0 is never -0). The sums of the two
-// cells the last beam fed are held in registers (per channel) and written back when a beam feeds another
-// cell: the same additions in the same order, without a load and store per addition (consecutive beams
-// share cells). The channel count is a constant, so that they stay in registers. energy: FarRows::energy,
-// zeroed.
+// far_sidelobe_rows's deposit: each profile column's energy in the batch's rows (bins k0 + r, r < rows; the
+// accumulators rounded to float, the values the profiles hold) into its two cells per channel, scattered
+// per column with the rows side by side: each cell still takes its columns in increasing order in every
+// row (the shader gathers per cell). A column of zero energy in a row adds exactly +-0 there, which leaves
+// the sum as it is (a sum that starts at +0 is never -0); a column with no cell (beyond a host camera's
+// fan: c0 = cells) adds nothing (the shader adds 0 times it). The sums of the two cells the last column
+// fed are held in registers (per channel) and written back when a column feeds another cell: the same
+// additions in the same order, without a load and store per addition (consecutive columns share cells).
+// The channel count is a constant, so that they stay in registers. far_column: FarBeam values per column;
+// acc_k0: bin k0 of column 0 (columns T apart). energy: FarRows::energy, zeroed.
 template <class Real, std::uint32_t kChannels>
-[[gnu::always_inline]] inline void far_deposit_rows(const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
-                                                    std::uint32_t rows, std::uint32_t beams, std::uint32_t cells,
+[[gnu::always_inline]] inline void far_deposit_rows(const Real* far_column, const Real* acc_k0, std::size_t T,
+                                                    std::uint32_t rows, std::uint32_t columns, std::uint32_t cells,
                                                     Real* energy_cells) {
     using V = typename FarLanes<Real>::type; // the batch's rows, lane r: bin k0 + r
     constexpr std::uint32_t kNone = ~0u;
@@ -221,16 +225,18 @@ template <class Real, std::uint32_t kChannels>
     auto store = [](Real* p, const V& v) { std::memcpy(p, &v, sizeof v); };
     std::uint32_t ca = kNone, cb = kNone; // the cells held: ca in sa, cb in sb
     V sa[kChannels] = {}, sb[kChannels] = {};
-    for (std::uint32_t i = 0; i < beams; ++i) {
+    for (std::uint32_t i = 0; i < columns; ++i) {
         V energy = {};
         bool any = false;
+        const Real* column = acc_k0 + std::size_t(i) * T;
         for (std::uint32_t r = 0; r < rows; ++r) {
-            energy[r] = static_cast<Real>(beam_profiles[static_cast<std::size_t>(k0 + r) * beams + i]);
+            energy[r] = static_cast<Real>(static_cast<float>(column[r]));
             any = any || energy[r] != Real(0);
         }
         if (!any) continue;
-        const Real* f = far_beam + std::size_t(i) * kFarBeamValues;
+        const Real* f = far_column + std::size_t(i) * kFarBeamValues;
         const auto c0 = static_cast<std::uint32_t>(f[kFarC0]), c1 = static_cast<std::uint32_t>(f[kFarC1]);
+        if (c0 >= cells) continue;  // no cell
         if (c0 != ca || c1 != cb) { // c0 != c1 (plan_far_sidelobes)
             V na[kChannels], nb[kChannels];
             for (std::uint32_t m = 0; m < kChannels; ++m) {
@@ -266,34 +272,35 @@ template <class Real, std::uint32_t kChannels>
 }
 // far_deposit_rows with the plan's channel count (3 or 1) as the constant.
 template <class Real>
-[[gnu::always_inline]] inline void
-far_deposit_channels(const Real* far_beam, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
-                     std::uint32_t beams, std::uint32_t cells, std::uint32_t channels, Real* energy_cells) {
+[[gnu::always_inline]] inline void far_deposit_channels(const Real* far_column, const Real* acc_k0, std::size_t T,
+                                                        std::uint32_t rows, std::uint32_t columns, std::uint32_t cells,
+                                                        std::uint32_t channels, Real* energy_cells) {
     if (channels == 3)
-        far_deposit_rows<Real, 3>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+        far_deposit_rows<Real, 3>(far_column, acc_k0, T, rows, columns, cells, energy_cells);
     else
-        far_deposit_rows<Real, 1>(far_beam, beam_profiles, k0, rows, beams, cells, energy_cells);
+        far_deposit_rows<Real, 1>(far_column, acc_k0, T, rows, columns, cells, energy_cells);
 }
 // In float also as an AVX2 build, where a batch's eight rows are one register and the six sums held
 // (three channels) no longer spill: the same operations.
-__attribute__((target_clones("avx2", "default"))) void far_deposit(const float* far_beam, const float* beam_profiles,
-                                                                   std::uint32_t k0, std::uint32_t rows,
-                                                                   std::uint32_t beams, std::uint32_t cells,
+__attribute__((target_clones("avx2", "default"))) void far_deposit(const float* far_column, const float* acc_k0,
+                                                                   std::size_t T, std::uint32_t rows,
+                                                                   std::uint32_t columns, std::uint32_t cells,
                                                                    std::uint32_t channels, float* energy_cells) {
-    far_deposit_channels<float>(far_beam, beam_profiles, k0, rows, beams, cells, channels, energy_cells);
+    far_deposit_channels<float>(far_column, acc_k0, T, rows, columns, cells, channels, energy_cells);
 }
-void far_deposit(const double* far_beam, const float* beam_profiles, std::uint32_t k0, std::uint32_t rows,
-                 std::uint32_t beams, std::uint32_t cells, std::uint32_t channels, double* energy_cells) {
-    far_deposit_channels<double>(far_beam, beam_profiles, k0, rows, beams, cells, channels, energy_cells);
+void far_deposit(const double* far_column, const double* acc_k0, std::size_t T, std::uint32_t rows,
+                 std::uint32_t columns, std::uint32_t cells, std::uint32_t channels, double* energy_cells) {
+    far_deposit_channels<double>(far_column, acc_k0, T, rows, columns, cells, channels, energy_cells);
 }
 
 template <class Real>
-void far_sidelobe_rows(const Plan& plan, const Real* far_beam, const float* beam_profiles, std::uint32_t k0,
-                       std::uint32_t rows, FarRows<Real>& far) {
-    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels, beams = plan.beams;
+void far_sidelobe_rows(const Plan& plan, const Real* far_column, const Real* acc, std::uint32_t k0, std::uint32_t rows,
+                       FarRows<Real>& far) {
+    const std::uint32_t cells = plan.far_cells, channels = plan.far_channels;
     const std::size_t used = std::size_t(channels) * cells * kFarRows;
     std::fill(far.energy.begin(), far.energy.begin() + used, Real(0));
-    far_deposit(far_beam, beam_profiles, k0, rows, beams, cells, channels, far.energy.data());
+    far_deposit(far_column, acc + k0, profile_column_stride(plan), rows, plan.profile_columns, cells, channels,
+                far.energy.data());
     // Cells with no energy in any of the rows are left out of the convolution: each would add exactly
     // +-0 to sums that start at +0 (the weights are finite).
     std::array<std::uint16_t, 3 * shared::kMaxFarCells> live;
@@ -358,8 +365,9 @@ std::size_t column_weight_count(const Plan& plan) {
     return n;
 }
 
+// The FarBeam values of every beam, then of every profile column.
 std::size_t far_beam_count(const Plan& plan) {
-    return plan.far_cells > 0 ? std::size_t(plan.beams) * kFarBeamValues : 0;
+    return plan.far_cells > 0 ? (std::size_t(plan.beams) + plan.profile_columns) * kFarBeamValues : 0;
 }
 
 // The near kernel's beams in groups of eight, j = 8 g + lane: beamform_beams's float loop sums a group's
@@ -419,10 +427,14 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     for (std::uint32_t j = 0; j < plan.beams; ++j)
         for (std::uint32_t c = plan.beam_column_begin[j]; c < plan.beam_column_end[j]; ++c)
             *weights++ = resample_weight<Real>(plan, j, c);
-    for (std::uint32_t j = 0; j < plan.beams && plan.far_cells > 0; ++j) { // FarBeam, the values the kernels give
-        const typename M::vec4 bc = far_table_vec4<Real>(plan, j, 0), phase = far_table_vec4<Real>(plan, j, 4);
+    const std::size_t far_entries = plan.far_cells > 0 ? std::size_t(plan.beams) + plan.profile_columns : 0;
+    for (std::size_t e = 0; e < far_entries; ++e) { // FarBeam, the values the kernels give: beams, then columns
+        const bool beam = e < plan.beams;
+        const std::vector<float>& table = beam ? plan.far_beam_cell : plan.far_column_cell;
+        const std::int64_t i = beam ? std::int64_t(e) : std::int64_t(e - plan.beams);
+        const typename M::vec4 bc = far_table_vec4<Real>(table, i, 0), phase = far_table_vec4<Real>(table, i, 4);
         const auto c0 = static_cast<std::uint32_t>(bc.x), c1 = static_cast<std::uint32_t>(bc.y);
-        Real* f = weights + std::size_t(j) * kFarBeamValues;
+        Real* f = weights + e * kFarBeamValues;
         f[0] = static_cast<Real>(c0);
         f[1] = static_cast<Real>(c1);
         f[2] = M::far_cell_share(bc, c0);
@@ -497,9 +509,10 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
     const std::uint32_t columns = plan.profile_columns, taps = plan.near_column_taps;
     const std::size_t T = profile_column_stride(plan);
     FarRows<Real> far;
-    std::uint32_t far_first = bin_begin;                           // the first bin of the batch `far` holds
-    const Real* far_beam = resample_w + column_weight_count(plan); // FarBeam values per beam
-    const Real* group_weights = far_beam + far_beam_count(plan);   // near_group_count's weights
+    std::uint32_t far_first = bin_begin;                                     // the first bin of the batch `far` holds
+    const Real* far_beam = resample_w + column_weight_count(plan);           // FarBeam values per beam
+    const Real* far_column = far_beam + std::size_t(beams) * kFarBeamValues; // and per profile column
+    const Real* group_weights = far_beam + far_beam_count(plan);             // near_group_count's weights
     const std::size_t groups = near_group_count(plan);
     const std::uint32_t group_taps = groups > 0 ? near_group_taps(plan) : 0;
     auto far_at = [&](std::int64_t j, std::uint32_t k) -> Real {
@@ -525,7 +538,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
             continue;
         }
         far_first = k0;
-        if (cells > 0) far_sidelobe_rows<Real>(plan, far_beam, beam_profiles, k0, rows, far);
+        if (cells > 0) far_sidelobe_rows<Real>(plan, far_column, acc, k0, rows, far);
         if constexpr (std::is_same_v<Real, float>) {
             if (avx2 && rows == kFarRows) {
                 if (cells > 0) far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows, out);

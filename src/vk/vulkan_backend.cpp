@@ -406,10 +406,12 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     for (std::uint32_t j = 0; j < plan_.beams && near_kernel; ++j)
         sidelobe_table.push_back(static_cast<float>(plan_.near_column_begin[j]));
     const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(sidelobe_table));
-    // The far side lobes' table, as far_sidelobe.comp reads it: beam cells, cell spans, weights.
+    // The far side lobes' table, as far_sidelobe.comp and sidelobe.comp read it: beam cells (read back),
+    // column cells (deposit), cell spans of columns, weights.
     std::vector<float> far_table = plan_.far_beam_cell;
-    for (std::uint32_t beam : plan_.far_cell_beams)
-        far_table.push_back(static_cast<float>(beam)); // exact: beams < 2^24
+    far_table.insert(far_table.end(), plan_.far_column_cell.begin(), plan_.far_column_cell.end());
+    for (std::uint32_t column : plan_.far_cell_columns)
+        far_table.push_back(static_cast<float>(column)); // exact: columns < 2^24
     far_table.insert(far_table.end(), plan_.far_weight.begin(), plan_.far_weight.end());
     if (far_table.empty()) far_table.assign(4, 0.0f);
     const std::uint32_t far_table_vec4s = uniform_vec4s(bytes_of(far_table));
