@@ -5,8 +5,9 @@
 // for the group) and every profile load brings four bins. On a CPU device each non-uniform load is a
 // scalar load per lane: four bins per load is what makes this pass cheap there.
 //
-// Output: beam-major B[j * bins_padded + k] (vec4 stores) when the side-lobe pass follows, else the
-// public range-major B[k * beams + j], which is then the polar scan itself.
+// Output: beam-major B[j * bins_padded + k] (vec4 stores) when the side-lobe pass follows (then only read
+// back, as Frame::beam_profiles: the side-lobe passes read the profile columns), else the public
+// range-major B[k * beams + j], which is then the polar scan itself.
 //
 // Two ways to walk the columns, the same sums in the same order (src/vk/resample_walk.cpp):
 // - gather: each beam sums its own span of columns, so a column that feeds two beams is loaded twice;

@@ -1,7 +1,7 @@
 // CPU reference of the beamform stage's second pass (docs/pipeline.md §4): the range profiles
-// (cpu_beamform_profile.cpp) resampled from their columns onto the beam table (the tent: the far side
-// lobes' input, and the scan with the pattern off), then the horizontal pattern: each beam's near kernel
-// over the profile columns within its reach, and the far side lobes beyond it. Every
+// (cpu_beamform_profile.cpp) resampled from their columns onto the beam table (the tent: the scan with the
+// pattern off), then the horizontal pattern: each beam's near kernel over the profile columns within its
+// reach, and the far side lobes (the columns on a coarse grid) beyond it. Every
 // output cell is computed by one loop iteration with sums in increasing index order, so the result is
 // deterministic (bit-identical run to run). Sums accumulate in Real; storage is float.
 #include <algorithm>
@@ -495,7 +495,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     std::uint32_t bin_begin, std::uint32_t bin_end) {
     using M = Math<Real>;
     const std::uint32_t beams = plan.beams;
-    // The tent: the far side lobes' input, and with the pattern off the scan itself.
+    // The tent: Frame::beam_profiles, the empty-bin test below, and with the pattern off the scan itself.
     resample_bins<Real>(plan, acc, resample_w, beam_profiles, bin_begin, bin_end);
     if (!plan.effects.horizontal_pattern) {
         std::copy(beam_profiles + std::size_t(bin_begin) * beams, beam_profiles + std::size_t(bin_end) * beams,

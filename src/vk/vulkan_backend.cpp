@@ -606,7 +606,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
     const bool force_gather = options_.resample == ResampleMethod::gather;
     ResampleSpecialization resample;
     resample.beams_per_invocation = shape_.beams_per_invocation;
-    resample.beam_major_out = sidelobes_ ? 1u : 0u; // far_sidelobe.comp's input layout
+    resample.beam_major_out = sidelobes_ ? 1u : 0u; // only read back then (Frame::beam_profiles)
     resample.walk = !force_gather && resample_can_walk(plan_, shape_.beams_per_invocation) ? 1u : 0u;
     resample.uniform_tables = both_uniform(column_table_vec4s, beam_table_vec4s);
     resample.column_vec4s = resample.uniform_tables ? column_table_vec4s : 1u;

@@ -531,7 +531,7 @@ void VulkanBackend::copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_
         const std::uint32_t padded = gpu_params_.bins_padded;
         transpose_out(profiles_region_, plan_.profile_columns, plan_.bins, padded,
                       sized(frame.profiles, std::size_t(plan_.bins) * plan_.profile_columns));
-        if (sidelobes_) { // beam-major, padded: the far side lobes' input layout
+        if (sidelobes_) { // beam-major, padded (resample.comp's layout when the side-lobe pass follows)
             transpose_out(beam_profiles_region_, plan_.beams, plan_.bins, padded, sized(frame.beam_profiles, cells));
         } else {
             copy_out(beam_profiles_region_, sized(frame.beam_profiles, cells));
