@@ -142,9 +142,9 @@ void resample_bins(const Plan& plan, const Real* acc, const Real* weights, float
         block(std::integral_constant<std::uint32_t, 1>());
 }
 
-// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each beam's energy into its
-// two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
-// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over beams, then cells, in
+// Far side lobes (plan.h far_cells), for kFarRows range bins at a time: each profile column's energy into
+// its two cells per channel (far_deposit_weight), rounded to float as far_sidelobe.comp stores it, then
+// the cells convolved with far_weight. Every (channel, cell, bin) sum runs over columns, then cells, in
 // increasing order, as the shader's; the bins side by side are independent sums (vectorized).
 constexpr std::uint32_t kFarRows = 8;
 
@@ -437,6 +437,10 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
         Real* f = weights + e * kFarBeamValues;
         f[0] = static_cast<Real>(c0);
         f[1] = static_cast<Real>(c1);
+        if (c0 >= plan.far_cells) { // a column with no cell (beyond a host camera's fan): every weight 0
+            std::fill(f + 2, f + kFarBeamValues, Real(0));
+            continue;
+        }
         f[2] = M::far_cell_share(bc, c0);
         f[3] = M::far_cell_share(bc, c1);
         f[4] = phase.x;

@@ -90,7 +90,8 @@ inline std::size_t profile_column_stride(const Plan& plan) {
     return plan.bins + 16u;
 }
 // The resample's weights, beam after beam, each beam's columns in increasing order, then (with far side
-// lobes) each beam's far side-lobe cells, shares and deposit weights, then (with the horizontal pattern and
+// lobes) each beam's and then each profile column's far side-lobe cells, shares and deposit weights (beams
+// read the cells back, columns deposit into them), then (with the horizontal pattern and
 // cpu.vector_loops) the near kernel's weights by groups of eight beams (a function of the plan alone:
 // filled once).
 std::size_t resample_weight_count(const Plan& plan);
