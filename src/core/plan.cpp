@@ -383,12 +383,9 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
     resolve(e.tvg, c.effects.tvg, false, "tvg", "raw received levels; turn on for display gain", e.states);
     // What the echo stage applies and TVG compensates: nothing when the effect is off (plan.h).
     p.alpha_db_per_m = e.absorption ? alpha : 0.0;
-    p.validity = model_validity(c, scene.materials);
-    // beam_sampling as the plan resolved it: model_validity judges the kernel's reach from the config alone,
-    // before the main-lobe-only rule above may shorten it below the beam spacing.
-    for (ModelValidity& v : p.validity)
-        if (v.model == "beam_sampling")
-            v = beam_sampling_validity(c, e.horizontal_pattern && half_taps > 0, sidelobe_reach(p, reach));
+    // beam_sampling with the kernel as resolved here (the main-lobe-only rule above may shorten it below the
+    // beam spacing).
+    p.validity = model_validity(c, scene.materials, e.horizontal_pattern && half_taps > 0, sidelobe_reach(p, reach));
 
     return e.horizontal_pattern ? half_taps : 0;
 }

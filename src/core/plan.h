@@ -3,6 +3,7 @@
 // stage needs. Both backends read the same Plan, so they cannot disagree about geometry.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -218,15 +219,37 @@ struct HostPixelGrid {
 double francois_garrison_db_per_m(double frequency_hz, double temperature_c, double salinity_ppt, double depth_m,
                                   double ph, double sound_speed_mps);
 
+// The profile columns that beams [first_beam, end_beam) hear through the near kernel, together: the first
+// (unwrapped, as Plan::near_column_begin) and how many (0: none). A run of beams walks them once (the
+// GPU's runs, the CPU's groups).
+struct NearColumnSpan {
+    std::int64_t first = 0;
+    std::uint32_t count = 0;
+};
+inline NearColumnSpan near_column_span(const Plan& p, std::uint32_t first_beam, std::uint32_t end_beam) {
+    std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
+    for (std::uint32_t j = first_beam; j < end_beam && j < p.near_column_count.size(); ++j) {
+        if (p.near_column_count[j] == 0) continue;
+        lo = std::min<std::int64_t>(lo, p.near_column_begin[j]);
+        hi = std::max<std::int64_t>(hi, std::int64_t(p.near_column_begin[j]) + p.near_column_count[j]);
+    }
+    return lo < hi ? NearColumnSpan{lo, static_cast<std::uint32_t>(hi - lo)} : NearColumnSpan{};
+}
+
 // The beam centres in radians, port first (strictly decreasing): the config's table, or `beams` centres of
 // equal sectors in angle or in sine. Fails for a table that is not strictly decreasing.
 Result<std::vector<double>> beam_table(const SonarConfig& c);
 // Whether the config's beams are a line array's cones (else planar), and in `why` (if not null) the reason.
 bool resolves_to_line_array(const SonarConfig& c, std::string* why);
-// The beam_sampling validity entry (validity.cpp) with the plan's own answer to whether the near kernel
-// weighs each column by the pattern (per_column: the horizontal pattern on and K >= 1) and how far it
-// reaches (in angle, or in sine for a line array).
-ModelValidity beam_sampling_validity(const SonarConfig& c, bool per_column, double reach_units);
+// The side-lobe kernel's reach `reach` (an angle from the beam's axis) in the unit the beams are
+// separated in: the angle (planar), or its sine (line_array: the pattern is a function of
+// sin(theta') - sin(theta)). plan_steps::sidelobe_reach for a plan.
+double sidelobe_reach_units(bool line_array, double reach);
+// model_validity (validity.h) with the plan's own near kernel for beam_sampling: whether it weighs each
+// column by the pattern (the horizontal pattern on and K >= 1) and how far it reaches (sidelobe_reach);
+// model_validity(config) judges both from the config alone, before the main-lobe-only rule.
+std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials,
+                                          bool near_kernel, double near_reach_units);
 // The noise terms (noise_floor.cpp; SonarConfig::noise_terms resolves "auto" with them): the sea's ambient
 // noise spectrum level at frequency_hz (dB re 1 uPa^2/Hz; Coates' fits to the Wenz curves: turbulence,
 // shipping, wind and thermal noise); that spectrum summed over frequency_hz +- band_hz / 2 (dB re 1 uPa);

@@ -14,6 +14,13 @@
 
 namespace vksonar {
 
+double sidelobe_reach_units(bool line_array, double reach) {
+    if (!line_array) return reach;
+    // Two beams' sines differ by up to 2 (a fan's two edges): past a quarter turn the reach goes on
+    // growing, continuously, to 2 at half a turn.
+    return reach <= 0.5 * kPi ? std::sin(reach) : 1.0 + std::sin(std::min(reach - 0.5 * kPi, 0.5 * kPi));
+}
+
 void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
     const std::vector<double>& b = p.beam_angle_rad;
     const std::uint32_t columns = static_cast<std::uint32_t>(p.column_azimuth_rad.size()); // profile columns
@@ -67,14 +74,8 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad) {
 
 namespace plan_steps {
 
-// The side-lobe kernel's reach `reach` (an angle from the beam's axis) in the unit the beams are
-// separated in: the angle (planar), or its sine (line_array: the pattern is a function of
-// sin(theta') - sin(theta)).
 double sidelobe_reach(const Plan& p, double reach) {
-    if (!p.line_array) return reach;
-    // Two beams' sines differ by up to 2 (a fan's two edges): past a quarter turn the reach goes on
-    // growing, continuously, to 2 at half a turn.
-    return reach <= 0.5 * kPi ? std::sin(reach) : 1.0 + std::sin(std::min(reach - 0.5 * kPi, 0.5 * kPi));
+    return sidelobe_reach_units(p.line_array, reach);
 }
 
 // Step: which beams each pixel column feeds (tent on the beam table). Columns at |azimuth| beyond
@@ -242,11 +243,12 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
     std::vector<std::size_t> offset(beams); // beam j's first weight in flat
     std::vector<float> row;
     p.near_column_taps = 1;
+    // An unwrapped column index as a column (on a circle the indices wrap; elsewhere they stay in range).
+    auto wrap = [&](std::int64_t c) { return static_cast<std::uint32_t>((c % columns + columns) % columns); };
     for (std::uint32_t j = 0; j < beams; ++j) {
         const double position = beam_position(p, j);
         auto separation = [&](std::int64_t c) {
-            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
-            const double sep = column_position(p, wrapped) - position;
+            const double sep = column_position(p, wrap(c)) - position;
             return p.circular ? std::remainder(sep, 2.0 * kPi) : sep;
         };
         // The column nearest the beam's direction (positions fall with the column index), then out
@@ -267,7 +269,7 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
         std::int64_t hi = lo; // columns [lo, hi]
         // Beams between the column's tent position and beam j (-1: the column feeds no beam).
         auto beams_away = [&](std::int64_t c) {
-            const auto wrapped = static_cast<std::uint32_t>((c % columns + columns) % columns);
+            const std::uint32_t wrapped = wrap(c);
             if (p.column_beam[wrapped] >= beams) return -1.0;
             double d = std::abs(p.column_beam[wrapped] + (1.0 - p.column_weight[wrapped]) - j);
             return p.circular ? std::min(d, beams - d) : d;

@@ -143,6 +143,13 @@ ModelValidity rough_facet(std::size_t index, const AcousticMaterial& m) {
     return v;
 }
 
+// The near kernel as beam_sampling judges it: whether it weighs each column by the pattern, and its reach
+// in the separation unit (angle, or sine for a line array).
+struct NearKernel {
+    bool per_column = false;
+    double reach_units = 0.0;
+};
+
 // With the horizontal pattern on and a kernel that reaches past the next beam, the beamform stage weighs
 // each profile column by the pattern at its own direction (the near kernel, docs/pipeline.md §4): a target
 // between two beams reads what the pattern says, as long as the kernel reaches it (half the widest gap).
@@ -150,21 +157,32 @@ ModelValidity rough_facet(std::size_t index, const AcousticMaterial& m) {
 // resampled onto their two nearest beams (a tent), so between beam centres the response is interpolated
 // linearly. Either holds while the beams sample the main lobe: adjacent beams at most a beamwidth apart
 // (in sine for a line array, whose beams are equally wide there). Beams two beamwidths apart read a target
-// midway between them 3 dB down in both with the tent, where the pattern says 18 dB. per_column: whether
-// the near kernel runs; reach_units: its reach in the separation unit (angle, or sine for a line array).
-ModelValidity beam_sampling(const SonarConfig& c, bool per_column, double reach_units) {
+// midway between them 3 dB down in both with the tent, where the pattern says 18 dB. kernel: the plan's,
+// or null to judge it from the config (plan.cpp's K >= 1 from the nearest gap, before the main-lobe-only
+// rule).
+ModelValidity beam_sampling(const SonarConfig& c, const NearKernel* kernel) {
     const bool line_array = resolves_to_line_array(c, nullptr);
     const auto table = beam_table(c);
-    double widest = 0.0;
+    double widest = 0.0, nearest = std::numeric_limits<double>::infinity();
     if (table)
         for (std::size_t j = 1; j < table.value().size(); ++j) {
             const double a = table.value()[j - 1], b = table.value()[j];
-            widest = std::max(widest, line_array ? std::sin(a) - std::sin(b) : a - b);
+            const double gap = line_array ? std::sin(a) - std::sin(b) : a - b;
+            widest = std::max(widest, gap);
+            nearest = std::min(nearest, gap);
         }
+    NearKernel from_config;
+    if (kernel == nullptr) {
+        from_config.reach_units =
+            sidelobe_reach_units(line_array, c.sidelobe_kernel_beamwidths * c.horizontal_beamwidth_deg * kDegToRad);
+        from_config.per_column = c.effects.horizontal_pattern != EffectMode::off && from_config.reach_units >= nearest;
+        kernel = &from_config;
+    }
+    const bool per_column = kernel->per_column;
     const double beamwidth = c.horizontal_beamwidth_deg * kDegToRad;
     const double widest_deg = widest / kDegToRad;
     ModelValidity v{"beam_sampling",
-                    widest <= beamwidth * (1.0 + 1e-9) || (per_column && reach_units >= 0.5 * widest),
+                    widest <= beamwidth * (1.0 + 1e-9) || (per_column && kernel->reach_units >= 0.5 * widest),
                     "beams",
                     double(table ? table.value().size() : c.beams),
                     "adjacent beams at most horizontal_beamwidth = " + fmt(c.horizontal_beamwidth_deg) + " deg apart" +
@@ -183,45 +201,13 @@ ModelValidity beam_sampling(const SonarConfig& c, bool per_column, double reach_
     return v;
 }
 
-// The config's side-lobe kernel reach in the separation unit (plan.cpp's, before the main-lobe-only rule)
-// and whether it reaches past the nearest beam (K >= 1).
-bool kernel_reaches_next_beam(const SonarConfig& c, double& reach_units) {
-    const bool line_array = resolves_to_line_array(c, nullptr);
-    const double reach = c.sidelobe_kernel_beamwidths * c.horizontal_beamwidth_deg * kDegToRad;
-    reach_units = line_array ? (reach <= 0.5 * kPi ? std::sin(reach) : 1.0) : reach;
-    if (c.effects.horizontal_pattern == EffectMode::off) return false;
-    const auto table = beam_table(c);
-    if (!table || table.value().size() < 2) return false;
-    double nearest = std::numeric_limits<double>::infinity();
-    for (std::size_t j = 1; j < table.value().size(); ++j) {
-        const double a = table.value()[j - 1], b = table.value()[j];
-        nearest = std::min(nearest, line_array ? std::sin(a) - std::sin(b) : a - b);
-    }
-    return reach_units >= nearest;
-}
-
-} // namespace
-
-ModelValidity beam_sampling_validity(const SonarConfig& config, bool per_column, double reach_units) {
-    return beam_sampling(config, per_column, reach_units);
-}
-
-std::string ModelValidity::warning() const {
-    std::string text =
-        model + ": " + key + " = " + fmt(value) + " is outside the model's domain (" + domain + "); vksonar " + action;
-    return detail::escape_control_chars(std::move(text)); // one line, whatever a material's name holds
-}
-
-std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials) {
+std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials,
+                                          const NearKernel* kernel) {
     std::vector<ModelValidity> out;
     if (c.absorption_db_per_m < 0.0 && c.effects.absorption != EffectMode::off) out.push_back(francois_garrison(c));
     if (c.effects.vertical_pattern != EffectMode::off || c.effects.horizontal_pattern != EffectMode::off)
         out.push_back(far_field(c));
-    if (c.mode == SonarMode::physical && c.beams > 1) {
-        double reach_units = 0.0;
-        const bool per_column = kernel_reaches_next_beam(c, reach_units);
-        out.push_back(beam_sampling(c, per_column, reach_units));
-    }
+    if (c.mode == SonarMode::physical && c.beams > 1) out.push_back(beam_sampling(c, kernel));
     if (c.vertical_pattern == BeamPattern::chebyshev && c.effects.vertical_pattern != EffectMode::off)
         out.push_back(chebyshev("vfov", c.vfov_deg, c.vertical_sidelobe_db));
     if (c.horizontal_pattern == BeamPattern::chebyshev && c.effects.horizontal_pattern != EffectMode::off)
@@ -230,6 +216,24 @@ std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vecto
         for (std::size_t i = 0; i < materials.size(); ++i)
             if (materials[i].model == AcousticMaterial::Model::rough) out.push_back(rough_facet(i, materials[i]));
     return out;
+}
+
+} // namespace
+
+std::string ModelValidity::warning() const {
+    std::string text =
+        model + ": " + key + " = " + fmt(value) + " is outside the model's domain (" + domain + "); vksonar " + action;
+    return detail::escape_control_chars(std::move(text)); // one line, whatever a material's name holds
+}
+
+std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials) {
+    return model_validity(c, materials, nullptr);
+}
+
+std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vector<AcousticMaterial>& materials,
+                                          bool near_kernel, double near_reach_units) {
+    const NearKernel kernel{near_kernel, near_reach_units};
+    return model_validity(c, materials, &kernel);
 }
 
 } // namespace vksonar

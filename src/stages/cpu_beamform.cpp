@@ -371,12 +371,13 @@ std::size_t far_beam_count(const Plan& plan) {
 }
 
 // The near kernel's beams in groups of eight, j = 8 g + lane: beamform_beams's float loop sums a group's
-// eight beams for eight bins at once (AVX2), over the group's columns (the union of its beams'
-// columns, near_group_span), each column loaded once for the eight beams. Their weights, made once per
-// plan, are stored per group column by column, the eight beams' weights of one column side by side:
-// [g][t][lane], t < near_group_taps (0 where the column is not one of the beam's, and for the lanes
-// past the last beam: a zero weight adds exactly +0, so every beam's sum is the one over its own
-// columns). Not made with cpu.vector_loops off (the plain loop then reads the plan's table).
+// eight beams for eight bins at once (AVX2), over the group's columns (the union of its beams' columns,
+// near_column_span), each column loaded once for the eight beams. Made once per plan: per group its first
+// column and column count (as Real, exact below 2^24), then its weights column by column, the eight beams'
+// weights of one column side by side: [g][t][lane], t < near_group_taps (0 where the column is not one
+// of the beam's, and for the lanes past the last beam: a zero weight adds exactly +0, so every beam's sum
+// is the one over its own columns). Not made with cpu.vector_loops off (the plain loop then reads the
+// plan's table).
 constexpr std::uint32_t kNearGroup = 8;
 
 std::size_t near_group_count(const Plan& plan) {
@@ -386,19 +387,10 @@ std::size_t near_group_count(const Plan& plan) {
     return (plan.beams + kNearGroup - 1) / kNearGroup;
 }
 
-// Group g's columns: the first (unwrapped, as Plan::near_column_begin) and how many.
-struct ColumnSpan {
-    std::int64_t first = 0;
-    std::uint32_t count = 0;
-};
-ColumnSpan near_group_span(const Plan& plan, std::size_t g) {
-    std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-    for (std::size_t j = g * kNearGroup; j < std::min<std::size_t>((g + 1) * kNearGroup, plan.beams); ++j) {
-        if (plan.near_column_count[j] == 0) continue;
-        lo = std::min<std::int64_t>(lo, plan.near_column_begin[j]);
-        hi = std::max<std::int64_t>(hi, std::int64_t(plan.near_column_begin[j]) + plan.near_column_count[j]);
-    }
-    return lo < hi ? ColumnSpan{lo, static_cast<std::uint32_t>(hi - lo)} : ColumnSpan{};
+// Group g's columns.
+NearColumnSpan near_group_span(const Plan& plan, std::size_t g) {
+    const auto first = static_cast<std::uint32_t>(g * kNearGroup);
+    return near_column_span(plan, first, first + kNearGroup);
 }
 
 std::uint32_t near_group_taps(const Plan& plan) {
@@ -406,6 +398,12 @@ std::uint32_t near_group_taps(const Plan& plan) {
     for (std::size_t g = 0; g < near_group_count(plan); ++g)
         taps = std::max(taps, near_group_span(plan, g).count);
     return taps;
+}
+
+// A group's values in the scratch: its first column and count, then its weights.
+constexpr std::size_t kNearGroupHeader = 2;
+std::size_t near_group_stride(std::uint32_t group_taps) {
+    return kNearGroupHeader + std::size_t(group_taps) * kNearGroup;
 }
 
 // Column c of the range profiles, wrapped on a full circle (Plan::near_column_begin is unwrapped).
@@ -419,7 +417,7 @@ inline std::uint32_t wrap_column(std::int64_t c, std::uint32_t columns, bool cir
 
 std::size_t resample_weight_count(const Plan& plan) {
     return column_weight_count(plan) + far_beam_count(plan) +
-           near_group_count(plan) * std::size_t(near_group_taps(plan)) * kNearGroup;
+           near_group_count(plan) * near_group_stride(near_group_taps(plan));
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -453,7 +451,9 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     weights += far_beam_count(plan);
     const std::uint32_t group_taps = near_group_taps(plan);
     for (std::size_t g = 0; g < near_group_count(plan); ++g) {
-        const ColumnSpan span = near_group_span(plan, g);
+        const NearColumnSpan span = near_group_span(plan, g);
+        *weights++ = static_cast<Real>(span.first);
+        *weights++ = static_cast<Real>(span.count);
         for (std::uint32_t t = 0; t < group_taps; ++t)
             for (std::uint32_t l = 0; l < kNearGroup; ++l) {
                 const std::size_t j = g * kNearGroup + l;
@@ -475,8 +475,9 @@ namespace {
 // beamform_beams's float loop makes them: beam 8 g + b's sum in register b, one lane per bin, each the
 // same products added in the same (increasing column) order, no FMA in this target: the same floats.
 // sums[r][b]: bin k0 + r, beam 8 g + b.
-__attribute__((target("avx2"))) void near_group8(const float* wg, ColumnSpan span, const float* acc_k0, std::size_t T,
-                                                 std::uint32_t columns, bool circular, float (&sums)[8][8]) {
+__attribute__((target("avx2"))) void near_group8(const float* wg, NearColumnSpan span, const float* acc_k0,
+                                                 std::size_t T, std::uint32_t columns, bool circular,
+                                                 float (&sums)[8][8]) {
     __m256 s[8];
     for (__m256& x : s)
         x = _mm256_setzero_ps();
@@ -489,7 +490,7 @@ __attribute__((target("avx2"))) void near_group8(const float* wg, ColumnSpan spa
     store_transposed8(s, &sums[0][0], kNearGroup);
 }
 #else
-void near_group8(const float*, ColumnSpan, const float*, std::size_t, std::uint32_t, bool, float (&)[8][8]) {}
+void near_group8(const float*, NearColumnSpan, const float*, std::size_t, std::uint32_t, bool, float (&)[8][8]) {}
 #endif
 
 } // namespace
@@ -548,8 +549,10 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                 if (cells > 0) far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows, out);
                 for (std::size_t g = 0; g < groups; ++g) {
                     float sums[8][8];
-                    near_group8(group_weights + g * group_taps * kNearGroup, near_group_span(plan, g), acc + k0, T,
-                                columns, plan.circular, sums);
+                    const float* group = group_weights + g * near_group_stride(group_taps);
+                    const NearColumnSpan span{static_cast<std::int64_t>(group[0]),
+                                              static_cast<std::uint32_t>(group[1])};
+                    near_group8(group + kNearGroupHeader, span, acc + k0, T, columns, plan.circular, sums);
                     const std::size_t j0 = g * kNearGroup, j_end = std::min<std::size_t>(j0 + kNearGroup, beams);
                     for (std::uint32_t r = 0; r < kFarRows; ++r)
                         for (std::size_t j = j0; j < j_end; ++j) {

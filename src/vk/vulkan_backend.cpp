@@ -392,16 +392,10 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     if (sidelobe_table.empty()) sidelobe_table.push_back(0.0f); // the pattern off: no side-lobe pass
     const bool near_kernel = !plan_.near_column_begin.empty();
     for (std::uint32_t first = 0; first < plan_.beams && near_kernel; first += shape_.beams_per_invocation) {
-        const std::uint32_t end = std::min(first + shape_.beams_per_invocation, plan_.beams);
-        std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-        for (std::uint32_t j = first; j < end; ++j) {
-            if (plan_.near_column_count[j] == 0) continue;
-            lo = std::min<std::int64_t>(lo, plan_.near_column_begin[j]);
-            hi = std::max<std::int64_t>(hi, std::int64_t(plan_.near_column_begin[j]) + plan_.near_column_count[j] - 1);
-        }
-        if (lo > hi) lo = 0, hi = -1; // no beam of the run hears a column: an empty loop
-        sidelobe_table.push_back(static_cast<float>(lo));
-        sidelobe_table.push_back(static_cast<float>(hi));
+        const NearColumnSpan span = near_column_span(plan_, first, first + shape_.beams_per_invocation);
+        // first and last; no column at all gives last = first - 1, an empty loop
+        sidelobe_table.push_back(static_cast<float>(span.first));
+        sidelobe_table.push_back(static_cast<float>(span.first + std::int64_t(span.count) - 1));
     }
     for (std::uint32_t j = 0; j < plan_.beams && near_kernel; ++j)
         sidelobe_table.push_back(static_cast<float>(plan_.near_column_begin[j]));
