@@ -11,7 +11,8 @@
 // accumulators unrolls and they stay in registers.
 //
 // With the far side lobes (kFarSidelobes), each output then adds its beam's share of its two cells of
-// far_sidelobe.comp's grid, which ran before: near + (share0 * cell0 + share1 * cell1).
+// far_sidelobe.comp's grid, which ran before: near + (share0 * cell0 + share1 * cell1), at least 0
+// (far_scan_cell).
 #version 450
 #extension GL_GOOGLE_include_directive : require
 #include "sonar_shared.h"
@@ -104,7 +105,7 @@ void main() {
                     l[m] = s0 * far_cells4[(m * cells + c0) * quads + q] + s1 * far_cells4[(m * cells + c1) * quads + q];
                 }
                 for (uint b = 0u; b < 4u; ++b) {
-                    sums[r][b] += far_sidelobe_level(phase, l[0][b], l[1][b], l[2][b]);
+                    sums[r][b] = far_scan_cell(sums[r][b], far_sidelobe_level(phase, l[0][b], l[1][b], l[2][b]));
                 }
             }
         }

@@ -688,6 +688,14 @@ VKS_FN REAL far_sidelobe_level(vec4 beam_phase, REAL l0, REAL l1, REAL l2) {
     return max(level, REAL(0));
 }
 
+// A scan cell with the far side lobes: the near kernel's sum plus its beam's far level. The near weights
+// are the pattern less what the grid gives the same column (Plan::near_column_weight), so with one channel
+// some are negative (the grid's mean level at the pattern's nulls): the sum is the pattern's, at least 0
+// but for rounding, which is cut here so that no scan cell is negative.
+VKS_FN REAL far_scan_cell(REAL near_sum, REAL far_level) {
+    return max(near_sum + far_level, REAL(0));
+}
+
 #undef VKS_FN
 #undef VKS_FN_INLINE
 #undef VKS_OUT

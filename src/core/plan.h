@@ -132,10 +132,10 @@ struct Plan {
     // The near kernel over the profile columns (docs/pipeline.md §4, "Side lobes"): beam j hears column
     // c = near_column_begin[j] + t, t < near_column_count[j], with weight near_column_weight[j *
     // near_column_taps + t], the horizontal pattern at the separation of the column's direction and the
-    // beam's (in angle, planar; in sine, line_array), times the share the far grid leaves. Each column is
-    // weighted at its own direction, so the main lobe and the nulls are the pattern's wherever a target
-    // falls between beams. begin is unwrapped: with circular, columns wrap modulo profile_columns. Built
-    // only with the horizontal pattern on; with no kernel (K = 0, the effect forced on) it is the tent.
+    // beam's (in angle, planar; in sine, line_array), less what the far grid gives the same column there. Each column
+    // is weighted at its own direction, so the main lobe and the nulls are the pattern's wherever a target falls
+    // between beams. begin is unwrapped: with circular, columns wrap modulo profile_columns. Built only with the
+    // horizontal pattern on; with no kernel (K = 0, the effect forced on) it is the tent.
     std::uint32_t near_column_taps = 0;           // the widest beam's column count
     std::vector<float> near_column_weight;        // beams * near_column_taps, 0 past a beam's count
     std::vector<std::int32_t> near_column_begin;  // beams
@@ -149,9 +149,9 @@ struct Plan {
     // far_channels is 3 for a
     // line array's sinc^2 (the energy, and the energy times cos and sin of the phase: the pattern's
     // crests and nulls are exact, only its smooth envelope goes on the grid), else 1 (the lobes' mean).
-    // far_weight[far_cells - 1 + a - b] is cell b's weight into cell a: the envelope (or the pattern)
-    // times a ramp from 0 at R / 2 to 1 at R, averaged over one cell; the kernel's taps carry the
-    // pattern times one minus the same ramp.
+    // far_weight[far_cells - 1 + a - b] is cell b's weight into cell a, fitted so that a column and a
+    // beam past the reach read the envelope (or the pattern's mean over a cell) through their cells'
+    // shares; within the reach the kernel's taps carry the pattern less what the grid gives.
     std::uint32_t far_cells = 0;
     std::uint32_t far_channels = 1;
     std::vector<float> far_beam_cell;            // beams * 8

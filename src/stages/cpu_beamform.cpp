@@ -557,7 +557,7 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     for (std::uint32_t r = 0; r < kFarRows; ++r)
                         for (std::size_t j = j0; j < j_end; ++j) {
                             float& cell = out[std::size_t(r) * beams + j];
-                            cell = cells > 0 ? sums[r][j - j0] + cell : sums[r][j - j0]; // near + far
+                            cell = cells > 0 ? M::far_scan_cell(sums[r][j - j0], cell) : sums[r][j - j0]; // near + far
                         }
                 }
                 continue;
@@ -578,7 +578,8 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
                     sum[r] += wt * static_cast<Real>(static_cast<float>(column[r]));
             }
             for (std::uint32_t r = 0; r < rows; ++r)
-                out[std::size_t(r) * beams + j] = static_cast<float>(sum[r] + far_at(j, k0 + r));
+                out[std::size_t(r) * beams + j] =
+                    static_cast<float>(cells > 0 ? M::far_scan_cell(sum[r], far_at(j, k0 + r)) : sum[r]);
         }
     }
 }

@@ -183,10 +183,18 @@ constexpr Dispatches echo_dispatch(const Plan& plan, const DeviceShape&) {
 // profile: shape.bin_lanes invocations per pixel column (planar) or per shape.cones_per_invocation
 // cone columns (line_array). resample, far_sidelobe and sidelobe: x = groups of 4-bin quads, y = runs of
 // shape.beams_per_invocation beams, or
-// channels x cells (far deposit), or channels (far convolve; channels x cells with shape.far_cell_groups).
+// channels x cells (far deposit), or channels (far convolve; channels x cells with far_cell_groups).
 enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convolve, sidelobe };
 constexpr bool far_sidelobes(const Plan& plan) {
     return plan.effects.horizontal_pattern && plan.far_cells > 0;
+}
+// The far convolve's per-channel form runs cells * (cells + 2) loop iterations in one invocation.
+// Lavapipe ends an invocation's loops after 65535 iterations in all (gallivm's loop limiter, shared by
+// every loop of a shader) without a word: with 255 or 256 cells the last cells were never written. Past
+// this many cells the convolve takes a workgroup row per cell (as on a GPU) on every device.
+constexpr std::uint32_t kFarCellsInOneInvocation = 240; // 240 * 242 = 58080 iterations
+constexpr bool far_cell_groups(const Plan& plan, const DeviceShape& shape) {
+    return shape.far_cell_groups || plan.far_cells > kFarCellsInOneInvocation;
 }
 constexpr std::uint64_t profile_invocations(const Plan& plan, const DeviceShape& shape) {
     const std::uint64_t units =
@@ -202,7 +210,7 @@ constexpr Dispatches beamform_dispatch(const Plan& plan, const DeviceShape& shap
     if (far_sidelobes(plan)) {
         d[far_deposit] = {"far_sidelobe.comp", bin_groups, plan.far_cells * plan.far_channels};
         d[far_convolve] = {"far_sidelobe.comp", bin_groups,
-                           shape.far_cell_groups ? plan.far_cells * plan.far_channels : plan.far_channels};
+                           far_cell_groups(plan, shape) ? plan.far_cells * plan.far_channels : plan.far_channels};
     }
     if (plan.effects.horizontal_pattern) d[sidelobe] = {"sidelobe.comp", bin_groups, beam_runs};
     return d;

@@ -625,7 +625,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         for (OwnedPipeline* pipeline : {&far_deposit_pipeline_, &far_convolve_pipeline_}) {
             if (auto r = make(*pipeline, far_sidelobe_comp_spv, sizeof(far_sidelobe_comp_spv), far.constants()); !r)
                 return r;
-            far.pass = shape_.far_cell_groups ? 2u : 1u;
+            far.pass = stage_table::far_cell_groups(plan_, shape_) ? 2u : 1u;
         }
     }
     return {};
