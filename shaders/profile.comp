@@ -38,6 +38,26 @@ layout(constant_id = kSpecSharedBins) const uint kSharedBins = 1u;
 // (constants, not uniforms: lavapipe would run the loads and stores of every kernel, src/vk/pipelines.h)
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
+// The rows [row_begin, row_end) this dispatch walks (ProfileRowBand; the host splits the rows into bands
+// where one invocation would loop more often than lavapipe lets it: src/vk/profile_bands.h). Each band
+// adds to the profiles after the one before, so every cell's additions keep their order. The walks that
+// take rows in blocks (kGatherRows) always get all of them.
+layout(push_constant, std430) uniform ProfileRowsBlock { ProfileRowBand band; };
+// The frame's status word: kStatusLoopLimit where loops_ran_out() (below).
+layout(std430, binding = kBindingStatus) buffer StatusBuffer { uint status[]; };
+
+// Whether the device ended this invocation's loops early. Lavapipe counts every loop iteration of an
+// invocation against one limit (65535) and, once it is spent, ends each loop at its next turn without a
+// word: this loop of band.loop_check (2) turns then stops after one. The bands keep the walks well within
+// the limit by an estimate (src/vk/profile_bands.h); this says when a scene beat the estimate, so that the
+// host refuses the frame instead of passing on profiles with rows missing.
+bool loops_ran_out() {
+    uint turns = 0u;
+    for (uint i = 0u; i < band.loop_check; ++i) {
+        ++turns;
+    }
+    return turns != band.loop_check;
+}
 layout(std430, binding = kBindingEcho) readonly buffer EchoBuffer { vec2 echo2[]; };
 layout(std430, binding = kBindingEcho) readonly buffer EchoHalfBuffer { uint echo_half2[]; }; // accuracy.intermediates = fp16
 
@@ -207,11 +227,12 @@ void gather_view(uint row, uint view_begin, uint view_end, inout uint first, uin
     }
 }
 
-// The first pixel column of [begin, end) on row 0 with a cone coordinate above lo (binary search).
-uint first_above(uint begin, uint end, float lo) {
+// The first pixel column of [begin, end) on the row starting at pixel row_start with a cone coordinate
+// above lo (binary search).
+uint first_above(uint row_start, uint begin, uint end, float lo) {
     while (begin < end) {
         uint mid = (begin + end) / 2u;
-        if (cone_coords[mid] > lo) {
+        if (cone_coords[row_start + mid] > lo) {
             end = mid;
         } else {
             begin = mid + 1u;
@@ -228,13 +249,14 @@ void gather_cone_columns(uint first_cone, uint end_cone) {
     uint tiers = kTierViews != 0u && width > 0u ? (params.columns - slices_end) / width : 0u;
     float lo = float(first_cone) - 1.0;
     float tier_lo = lo - params.tier_cone_reach;
-    uint first_slices = first_above(0u, slices_end, lo);
+    uint row_start = band.row_begin * params.columns; // each view's first column found on the band's first row
+    uint first_slices = first_above(row_start, 0u, slices_end, lo);
     uint first_tier[kMaxViews];
     for (uint t = 0u; t < tiers; ++t) {
         uint begin = slices_end + t * width;
-        first_tier[t] = first_above(begin, begin + width, tier_lo);
+        first_tier[t] = first_above(row_start, begin, begin + width, tier_lo);
     }
-    for (uint row = 0u; row < params.rows; ++row) {
+    for (uint row = band.row_begin; row < band.row_end; ++row) {
         gather_view(row, 0u, slices_end, first_slices, first_cone, end_cone, 0.0);
         for (uint t = 0u; t < tiers; ++t) {
             uint begin = slices_end + t * width;
@@ -337,10 +359,10 @@ void gather_block_rows(uint cone, bool owned) {
         block_profile[side * kSharedBins + k] = 0.0;
     }
     if (lane == 0u) {
-        block_first[firsts] = first_above(0u, slices_end, lo);
+        block_first[firsts] = first_above(0u, 0u, slices_end, lo);
         for (uint t = 0u; t < tiers; ++t) {
             uint begin = slices_end + t * width;
-            block_first[firsts + 1u + t] = first_above(begin, begin + width, tier_lo);
+            block_first[firsts + 1u + t] = first_above(0u, begin, begin + width, tier_lo);
         }
     }
     barrier();
@@ -491,6 +513,9 @@ void main() {
         if (kSubpixel != 0u && owned) {
             add_subpixel(unit);
         }
+        if (loops_ran_out()) {
+            atomicOr(status[0], kStatusLoopLimit);
+        }
         return;
     }
     if (kLineArray != 0u) {
@@ -498,10 +523,13 @@ void main() {
         if (first_cone < params.profile_columns) {
             uint end_cone = min(first_cone + kConesPerInvocation, params.profile_columns);
             gather_cone_columns(first_cone, end_cone);
-            if (kSubpixel != 0u) {
+            if (kSubpixel != 0u && band.row_end == params.rows) { // after the last band's pixels
                 for (uint c = first_cone; c < end_cone; ++c) {
                     add_subpixel(c);
                 }
+            }
+            if (loops_ran_out()) {
+                atomicOr(status[0], kStatusLoopLimit);
             }
         }
         return;
@@ -514,6 +542,9 @@ void main() {
         if (kSubpixel != 0u && owned) {
             add_subpixel(column);
         }
+        if (loops_ran_out()) {
+            atomicOr(status[0], kStatusLoopLimit);
+        }
         return;
     }
     if (column >= columns) {
@@ -522,13 +553,14 @@ void main() {
     uint base = column * params.bins_padded;
     uint rows = params.rows;
     // A window of five rows of this column's echo (energy, range): two above, this one, two below
-    // (range 0 = no hit or outside the image).
-    vec2 up2 = vec2(0.0);
-    vec2 up = vec2(0.0);
-    vec2 er = load_echo(column);
-    vec2 next = rows > 1u ? load_echo(columns + column) : vec2(0.0);
+    // (range 0 = no hit or outside the image), from the band's first row.
+    uint r0 = band.row_begin;
+    vec2 up2 = r0 >= 2u ? load_echo((r0 - 2u) * columns + column) : vec2(0.0);
+    vec2 up = r0 >= 1u ? load_echo((r0 - 1u) * columns + column) : vec2(0.0);
+    vec2 er = r0 < rows ? load_echo(r0 * columns + column) : vec2(0.0);
+    vec2 next = r0 + 1u < rows ? load_echo((r0 + 1u) * columns + column) : vec2(0.0);
     uvec2 view = view_columns_of(column);
-    for (uint row = 0u; row < rows; ++row) {
+    for (uint row = r0; row < band.row_end; ++row) {
         // the echo two rows down, loaded once: down2 here, down on the next row, er after that
         vec2 next2 = row + 2u < rows ? load_echo((row + 2u) * columns + column) : vec2(0.0);
         float e = er.x;
@@ -548,7 +580,10 @@ void main() {
         er = next;
         next = next2;
     }
-    if (kSubpixel != 0u) {
+    if (kSubpixel != 0u && band.row_end == rows) { // after the last band's pixels
         add_subpixel(column);
+    }
+    if (loops_ran_out()) {
+        atomicOr(status[0], kStatusLoopLimit);
     }
 }

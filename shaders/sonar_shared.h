@@ -58,7 +58,25 @@ VKS_CONST uint kBindingFarTableUniform = 21u;
 // The frame's sub-pixel returns (src/core/subpixel.h): profile.comp adds them to its columns' profiles.
 // After the uniform views, so that their numbers stay as they are.
 VKS_CONST uint kBindingSubpixel = 22u;
-VKS_CONST uint kBindingCount = 23u;
+// A frame's status word (uint), zeroed before the beamform stage and read back with the frame: a shader
+// that finds its work cut short sets a bit (kStatus*).
+VKS_CONST uint kBindingStatus = 23u;
+VKS_CONST uint kBindingCount = 24u;
+VKS_CONST uint kStatusLoopLimit = 1u; // an invocation's loops were ended early (lavapipe's loop limit)
+
+// profile.comp's push constants: the rows one dispatch walks (src/vk/profile_bands.h), and the trip count
+// of the loop it runs last to see whether the device let its loops run to the end (2, a push constant so
+// that no compiler unrolls that loop).
+struct ProfileRowBand {
+    uint row_begin;
+    uint row_end;
+    uint loop_check;
+    uint pad;
+};
+#ifdef __cplusplus
+static_assert(sizeof(ProfileRowBand) == 16, "ProfileRowBand must match the std430 push constant block");
+#endif
+
 // Set 1 of import_depth.comp: the host engine's depth image.
 VKS_CONST uint kBindingHostDepthImage = 0u;
 

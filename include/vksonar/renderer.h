@@ -38,6 +38,12 @@ enum class ResampleMethod : std::uint8_t { automatic, gather };
 // lobes; gpu: 32 invocations per column (line array: per cone column), each adding to every 32nd bin,
 // and 4 beams each, which a GPU needs to be busy. Frames are bit-identical either way.
 enum class WorkLayout : std::uint8_t { automatic, cpu_device, gpu };
+// How profile.comp walks the rows of its columns. automatic: in bands of rows, one dispatch each, sized
+// so that no invocation loops more often than lavapipe allows (it ends an invocation's loops after 65535
+// iterations in all); whole: one dispatch over every row (as before the bands: where the device ends its
+// loops early, render() then fails with ErrorCode::unsupported instead of returning a frame with rows
+// missing). Frames are bit-identical either way wherever the loops run to the end.
+enum class ProfileRows : std::uint8_t { automatic, whole };
 // How the Vulkan backend measures Frame::times. automatic: timestamp queries where the queue has
 // them, except on CPU devices (lavapipe), else host clocks around one submission per stage; host:
 // always host clocks; timestamps: timestamp queries where the queue has them, else host clocks;
@@ -68,13 +74,14 @@ struct RendererOptions {
     ResampleMethod resample = ResampleMethod::automatic;
     WorkLayout layout = WorkLayout::automatic;
     StageTiming stage_timing = StageTiming::automatic;
+    ProfileRows profile_rows = ProfileRows::automatic;
 };
 
 // The options `base` with what the environment asks for, for tools and tests; vksonar itself never
 // reads the environment. VKSONAR_HOST_THREADS=N sets host_threads (when base.host_threads is 0),
-// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather, VKSONAR_LAYOUT=cpu_device|gpu and
-// VKSONAR_STAGE_TIMING=host|timestamps|passes set the paths above; other values are ignored. Thread-safety: reads the
-// environment (std::getenv).
+// VKSONAR_TABLES=storage, VKSONAR_RESAMPLE=gather, VKSONAR_LAYOUT=cpu_device|gpu,
+// VKSONAR_STAGE_TIMING=host|timestamps|passes and VKSONAR_PROFILE_ROWS=whole set the paths above; other values are
+// ignored. Thread-safety: reads the environment (std::getenv).
 [[nodiscard]] RendererOptions renderer_options_from_env(RendererOptions base = {});
 
 // The frame a caller will render next, for Renderer::render's look-ahead.

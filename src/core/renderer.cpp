@@ -528,6 +528,7 @@ RendererOptions renderer_options_from_env(RendererOptions base) {
     if (is("VKSONAR_RESAMPLE", "gather")) base.resample = ResampleMethod::gather;
     if (is("VKSONAR_LAYOUT", "cpu_device")) base.layout = WorkLayout::cpu_device;
     if (is("VKSONAR_LAYOUT", "gpu")) base.layout = WorkLayout::gpu;
+    if (is("VKSONAR_PROFILE_ROWS", "whole")) base.profile_rows = ProfileRows::whole;
     if (is("VKSONAR_STAGE_TIMING", "host")) base.stage_timing = StageTiming::host;
     if (is("VKSONAR_STAGE_TIMING", "timestamps")) base.stage_timing = StageTiming::timestamps;
     if (is("VKSONAR_STAGE_TIMING", "passes")) base.stage_timing = StageTiming::passes;

@@ -38,6 +38,7 @@ enum Binding : std::uint32_t {
     binding_sidelobe_weight_uniform = shared::kBindingSidelobeWeightUniform,
     binding_far_table_uniform = shared::kBindingFarTableUniform,
     binding_subpixel = shared::kBindingSubpixel, // after the uniform views (sonar_shared.h)
+    binding_status = shared::kBindingStatus,
     binding_count = shared::kBindingCount,
 };
 

@@ -14,6 +14,7 @@
 #include "vk/commands.h"
 #include "vk/handles.h"
 #include "vk/pipelines.h"
+#include "vk/profile_bands.h"
 #include "vk/resample_walk.h"
 #include "vk/resources.h"
 #include "vk/vk_error.h"
@@ -312,7 +313,7 @@ Result<void> VulkanBackend::create_working_buffers() {
         std::size_t bytes;
         VkBufferUsageFlags usage;
     };
-    const std::array<Working, 9> working{{
+    const std::array<Working, 10> working{{
         {&depth_, pixels * sizeof(float), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         {&material_id_, pixels * sizeof(std::uint32_t), in | VK_BUFFER_USAGE_TRANSFER_SRC_BIT},
         // geometric: the depth pass copies its face normals in, the normals pass orients them in place
@@ -325,6 +326,7 @@ Result<void> VulkanBackend::create_working_buffers() {
         {&polar_, sidelobes_ ? cells * sizeof(float) : 16, out},
         {&far_energy_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
         {&far_cells_, far_sidelobes_ ? far_floats * sizeof(float) : 16, storage},
+        {&status_, 16, out | VK_BUFFER_USAGE_TRANSFER_DST_BIT}, // zeroed by vkCmdFillBuffer
     }};
     for (const Working& w : working) {
         auto buffer = create_buffer(context_, w.bytes, w.usage, MemoryUse::device);
@@ -461,6 +463,7 @@ Result<void> VulkanBackend::create_readback() {
     place(echo_region_, pixels * 2 * sizeof(float));
     place(profiles_region_, profile_cells * sizeof(float));
     place(beam_profiles_region_, (sidelobes_ ? padded_cells : cells) * sizeof(float));
+    place(status_region_, sizeof(std::uint32_t));
     for (Buffer& slot : readbacks_) { // slot 1: for render-ahead (start() with keep_last)
         auto readback = create_buffer(context_, readback_bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
         if (!readback) return readback.error();
@@ -481,10 +484,14 @@ Result<void> VulkanBackend::create_descriptors(const TableViews& views) {
     if (!set_layout) return set_layout.error();
     set_layout_ = std::move(set_layout.value());
     VkDescriptorSetLayout set_layout_handle = set_layout_.get();
+    // profile.comp's rows of one dispatch (profile_bands.h) are its push constants.
+    const VkPushConstantRange profile_rows{VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(shared::ProfileRowBand)};
     VkPipelineLayoutCreateInfo layout_info{};
     layout_info.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
     layout_info.setLayoutCount = 1;
     layout_info.pSetLayouts = &set_layout_handle;
+    layout_info.pushConstantRangeCount = 1;
+    layout_info.pPushConstantRanges = &profile_rows;
     VkPipelineLayout layout = VK_NULL_HANDLE;
     VKS_VK_TRY(context_.fn.vkCreatePipelineLayout(device, &layout_info, allocator, &layout));
     compute_layout_ = OwnedPipelineLayout(context_, layout);
@@ -511,7 +518,7 @@ Result<void> VulkanBackend::create_descriptors(const TableViews& views) {
         &params_,          &depth_,      &material_id_,     &normals_,    &echo_,         &profiles_,
         &beam_profiles_,   &polar_,      &slice_info_,      &materials_,  &column_table_, &beam_table_,
         &sidelobe_weight_, &cone_coord_, &far_table_,       &far_energy_, &far_cells_,    &materials_,
-        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_,  &subpixel_};
+        &column_table_,    &beam_table_, &sidelobe_weight_, &far_table_,  &subpixel_,     &status_};
     // A uniform view spans its table's vec4s, or only the first when the table is read through its
     // storage binding (the shader then declares a one-vec4 block and never reads it).
     const std::array<std::uint32_t, binding_far_table_uniform + 1 - binding_materials_uniform> uniform_views{
@@ -595,6 +602,8 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         }
     }
     if (auto r = make(profile_pipeline_, profile_comp_spv, sizeof(profile_comp_spv), profile.constants()); !r) return r;
+    profile_bands_ =
+        profile_row_bands(plan_, shape_, profile.gather_rows != 0 || options_.profile_rows == ProfileRows::whole);
     // resample.comp walks each run's columns once where that adds the same terms in the same order as
     // the gather (src/vk/resample_walk.h). ResampleMethod::gather keeps the gather (tests compare the two).
     const bool force_gather = options_.resample == ResampleMethod::gather;

@@ -185,6 +185,7 @@ private:
     Buffer slice_info_, materials_, column_table_, beam_table_, sidelobe_weight_;
     Buffer cone_coord_;                         // line_array: Plan::pixel_cone_coord (a 16-byte stand-in when planar)
     Buffer far_table_, far_energy_, far_cells_; // far side lobes (16-byte stand-ins without them)
+    Buffer status_; // the frame's status word (sonar_shared.h kBindingStatus), read back with the frame
     // subpixel_returns_'s list: written by the host into the slot's upload buffer, copied by the slot's
     // first command buffer into subpixel_ (so a frame queued behind another cannot overwrite what that
     // one reads); 16 bytes each without any
@@ -197,10 +198,12 @@ private:
     std::uint32_t read_slot_ = 0; // the slot of the frame finished last: copy_out, pending_clean
     const Buffer& readback() const { return readbacks_[read_slot_]; }
     Region polar_region_, depth_region_, material_region_, normals_region_, echo_region_, profiles_region_,
-        beam_profiles_region_;
+        beam_profiles_region_, status_region_;
 
     OwnedDescriptorSetLayout set_layout_;
     OwnedPipelineLayout compute_layout_;
+    // profile.comp's dispatches: the rows of each (profile_bands.h), at least one band
+    std::vector<shared::ProfileRowBand> profile_bands_;
     OwnedDescriptorPool descriptor_pool_;
     VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE; // freed with the pool
     shared::SonarParams gpu_params_{};                // plan_.params plus the GPU-only layout fields

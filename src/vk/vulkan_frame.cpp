@@ -116,15 +116,24 @@ void record_beamform(RecordContext& record) {
     VulkanBackend& b = record.backend;
     VkCommandBuffer commands = record.commands;
     const Functions& fn = b.context_.fn;
-    // profile.comp accumulates into zeroed profiles.
+    // profile.comp accumulates into zeroed profiles, and sets bits of a zeroed status word.
     fn.vkCmdFillBuffer(commands, b.profiles_.get(), 0, VK_WHOLE_SIZE, 0);
-    VkBufferMemoryBarrier zeroed = buffer_barrier(b.profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
-                                                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
-    pipeline_barrier(b.context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 1,
-                     &zeroed);
+    fn.vkCmdFillBuffer(commands, b.status_.get(), 0, VK_WHOLE_SIZE, 0);
+    const std::array<VkBufferMemoryBarrier, 2> zeroed{
+        buffer_barrier(b.profiles_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+                       VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT),
+        buffer_barrier(b.status_.get(), VK_ACCESS_TRANSFER_WRITE_BIT,
+                       VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT)};
+    pipeline_barrier(b.context_, commands, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                     std::uint32_t(zeroed.size()), zeroed.data());
     b.bind_compute(commands, b.profile_pipeline_.get());
-    b.dispatch(commands, record.dispatches[profile]);
-    b.compute_barrier(commands, b.profiles_);
+    // the rows in bands, one dispatch each, each adding after the one before (profile_bands.h)
+    for (const shared::ProfileRowBand& band : b.profile_bands_) {
+        fn.vkCmdPushConstants(commands, b.compute_layout_.get(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof band, &band);
+        b.dispatch(commands, record.dispatches[profile]);
+        b.compute_barrier(commands, b.profiles_);
+    }
+    b.compute_barrier(commands, b.status_);
     b.pass_timestamp(commands, "bf:profile");
 
     fn.vkCmdBindPipeline(commands, VK_PIPELINE_BIND_POINT_COMPUTE, b.resample_pipeline_.get());
@@ -222,6 +231,7 @@ void VulkanBackend::record_readback(VkCommandBuffer commands, SaveFlags save_mas
         context_.fn.vkCmdCopyBuffer(commands, source.get(), target, 1, &copy_region);
     };
     copy(sidelobes_ ? polar_ : beam_profiles_, polar_region_);
+    copy(status_, status_region_);
     for (const StageInfo& stage : kStageTable) {
         if (!any(save_mask & stage.saves) || !stage.runs(plan_)) continue; // copy_frame_out zeroes what did not run
         for_each_buffer(stage.saved, [&](StageBuffers buffer) {
@@ -460,6 +470,14 @@ Result<void> VulkanBackend::finish(Frame& frame) {
         }
     }
     read_slot_ = slot;
+    // A frame whose profiles miss rows is refused, not passed on (profile.comp loops_ran_out).
+    std::uint32_t status = 0;
+    copy_out(status_region_, &status);
+    if ((status & shared::kStatusLoopLimit) != 0)
+        return make_error(ErrorCode::unsupported,
+                          "Vulkan device: profile.comp's loops were ended before its rows were done (lavapipe ends an "
+                          "invocation's loops after 65535 iterations): the frame would miss pixels; render with "
+                          "--backend cpu, or fewer accuracy.rows_per_vfov");
     // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
         const char* name = flight.stages[i]->name;
