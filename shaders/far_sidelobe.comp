@@ -8,7 +8,7 @@
 //   kFarPass 1 (convolve): far_cells[m][a] = sum over b in increasing order of weight(a - b) * far_energy[m][b],
 // for each channel m < far_channels (sonar_kernels.h, Plan::far_channels); kFarPass 2 the same sums, a
 // workgroup row per output cell (stage_table far_cell_groups: a GPU, where one row per channel left
-// a few hundred lanes busy, each summing cells^2 terms: 0.10 ms on an H100; and any device past 240
+// a few hundred lanes busy, each summing cells^2 terms: 0.10 ms on an H100; and any device past 176
 // cells, where kFarPass 1 would loop more often than lavapipe lets an invocation loop).
 // An invocation owns four consecutive range bins (one vec4 of the bin-fastest profiles that
 // profile.comp writes); a deposit workgroup one (channel, cell) (y = m * cells + c), a convolve

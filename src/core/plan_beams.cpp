@@ -130,6 +130,42 @@ std::size_t fold_offset(std::int64_t d, std::uint32_t cells, bool circular) {
     return static_cast<std::size_t>(std::min<std::int64_t>(m, cells - m));
 }
 
+// The normal equations (normal: n x n, symmetric positive definite) solved for the unknowns `free`
+// alone, the others held at 0: Cholesky of the free rows and columns, then forward and back substitution.
+std::vector<double> solve_normal_equations(const std::vector<double>& normal, const std::vector<double>& rhs,
+                                           std::size_t n, const std::vector<std::size_t>& free) {
+    const std::size_t m = free.size();
+    std::vector<double> l(m * m, 0.0), v(m, 0.0);
+    for (std::size_t a = 0; a < m; ++a)
+        for (std::size_t b = 0; b < m; ++b)
+            l[a * m + b] = normal[free[a] * n + free[b]];
+    for (std::size_t c = 0; c < m; ++c) {
+        double d = l[c * m + c];
+        for (std::size_t k = 0; k < c; ++k)
+            d -= l[c * m + k] * l[c * m + k];
+        const double root = std::sqrt(std::max(d, 1e-300));
+        l[c * m + c] = root;
+        for (std::size_t r = c + 1; r < m; ++r) {
+            double e = l[r * m + c];
+            for (std::size_t k = 0; k < c; ++k)
+                e -= l[r * m + k] * l[c * m + k];
+            l[r * m + c] = e / root;
+        }
+    }
+    for (std::size_t r = 0; r < m; ++r) {
+        v[r] = rhs[free[r]];
+        for (std::size_t k = 0; k < r; ++k)
+            v[r] -= l[r * m + k] * v[k];
+        v[r] /= l[r * m + r];
+    }
+    for (std::size_t r = m; r-- > 0;) {
+        for (std::size_t k = r + 1; k < m; ++k)
+            v[r] -= l[k * m + r] * v[k];
+        v[r] /= l[r * m + r];
+    }
+    return v;
+}
+
 // The far grid's weight for each offset of cells (index fold_offset). A column puts its energy into its
 // two cells by the tent and a beam reads its two cells back by the tent, so a column and a beam D cells
 // apart read the weights at the three offsets around D, mixed by where each falls in its cells. Taking the
@@ -137,8 +173,9 @@ std::size_t fold_offset(std::int64_t d, std::uint32_t cells, bool circular) {
 // default; averaged over a cell, as an earlier version did, by more). So the weights are fitted: least
 // squares of the relative error over every separation from `first` (the reach, in cells) to the widest,
 // in 1/16 of a cell, and 16 places of the column in its cell (each placing the beam), by the normal
-// equations. A weight no such pair reads (within the reach) is drawn to the target by a tiny ridge term
-// (at separations under `first`, the target at `first`: finite, where a 1 / du^2 envelope is not).
+// equations, no weight below 0. A weight no such pair reads (within the reach) is drawn to the target by a
+// tiny ridge term (at separations under `first`, the target at `first`: finite, where a 1 / du^2
+// envelope is not).
 template <class Target>
 std::vector<double> fit_far_weights(std::uint32_t cells, bool circular, double first, Target target) {
     const std::size_t n = circular ? cells / 2 + 1 : cells;
@@ -181,30 +218,22 @@ std::vector<double> fit_far_weights(std::uint32_t cells, bool circular, double f
         normal[i * n + i] += ridge;
         rhs[i] += ridge;
     }
-    // Cholesky: normal = L L^T (L in normal's lower triangle), then forward and back substitution.
-    for (std::size_t c = 0; c < n; ++c) {
-        double d = normal[c * n + c];
-        for (std::size_t k = 0; k < c; ++k)
-            d -= normal[c * n + k] * normal[c * n + k];
-        const double root = std::sqrt(std::max(d, 1e-300));
-        normal[c * n + c] = root;
-        for (std::size_t r = c + 1; r < n; ++r) {
-            double e = normal[r * n + c];
-            for (std::size_t k = 0; k < c; ++k)
-                e -= normal[r * n + k] * normal[c * n + k];
-            normal[r * n + c] = e / root;
+    // No weight below 0: a negative weight makes the grid's level at some beams negative, which the
+    // read-back cuts at 0 (far_sidelobe_level), and near + far would no longer be the pattern. So the
+    // weights the solution takes negative are held at 0 and the rest solved again, until none is.
+    std::vector<double> v(n, 0.0);
+    std::vector<bool> held(n, false);
+    for (std::size_t round = 0; round <= n; ++round) {
+        std::vector<std::size_t> free;
+        for (std::size_t i = 0; i < n; ++i)
+            if (!held[i]) free.push_back(i);
+        const std::vector<double> solved = solve_normal_equations(normal, rhs, n, free);
+        bool negative = false;
+        for (std::size_t f = 0; f < free.size(); ++f) {
+            v[free[f]] = std::max(solved[f], 0.0);
+            if (solved[f] < 0.0) negative = held[free[f]] = true;
         }
-    }
-    std::vector<double> v(rhs);
-    for (std::size_t r = 0; r < n; ++r) {
-        for (std::size_t k = 0; k < r; ++k)
-            v[r] -= normal[r * n + k] * v[k];
-        v[r] /= normal[r * n + r];
-    }
-    for (std::size_t r = n; r-- > 0;) {
-        for (std::size_t k = r + 1; k < n; ++k)
-            v[r] -= normal[k * n + r] * v[k];
-        v[r] /= normal[r * n + r];
+        if (!negative) break;
     }
     for (std::size_t i = 0; i < n; ++i)
         v[i] *= scale[i];
@@ -223,7 +252,7 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
     const double cell_fraction = p.config.far_sidelobe_cell;
     if (!(cell_fraction > 0.0) || p.beams < 2 || !(reach_units > 0.0)) return;
     const double span = p.circular ? 2.0 * kPi : beam_position(p, 0) - beam_position(p, p.beams - 1);
-    if (0.5 * reach_units >= span) return; // every pair of beams is within the kernel's exact part
+    if (reach_units >= span) return; // every pair of beams is within the kernel's reach, where it is exact
     const double wanted = cell_fraction * reach_units;
     std::uint32_t cells = 0;
     double step = 0.0;
@@ -299,10 +328,13 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
             const double x = p.hpattern_k * (p.circular ? std::remainder(sep, 2.0 * kPi) : sep);
             return 0.5 / (x * x);
         }
-        constexpr int kSamples = 32; // midpoint rule over the cell
+        // the mean over a cell, or over two of the pattern's lobes (pi / k apart) where a cell is narrower:
+        // a mean level, not crests and nulls the cells would follow
+        const double window = std::max(step, 2.0 * kPi / std::max(p.hpattern_k, 1e-12));
+        constexpr int kSamples = 32; // midpoint rule
         double sum = 0.0;
         for (int i = 0; i < kSamples; ++i)
-            sum += pattern_at_separation(p, sep + ((i + 0.5) / kSamples - 0.5) * step);
+            sum += pattern_at_separation(p, sep + ((i + 0.5) / kSamples - 0.5) * window);
         return sum / kSamples;
     };
     const std::vector<double> by_offset = fit_far_weights(cells, p.circular, reach_units / step, target);
@@ -340,11 +372,11 @@ namespace {
 
 // The near kernel's table over the columns within the reach of each beam (reach_units, in the separation
 // unit) and within offset_cut beams of it (by the column's fractional beam index, the tent's position;
-// wrapped on a circle): weights the pattern at the separation times the near share (1 - the far grid's
-// ramp). With `tent` (no kernel, K = 0, the effect forced on) the columns within a beam of it instead,
-// weighed by the tent (1 - their distance in beams: the resample's own shares, so the pass gives B).
-// Zero weights at either end of a beam's columns are left out (a null at the reach); columns that feed
-// no beam (beyond a host camera's fan) are never in a kernel.
+// wrapped on a circle): weights the pattern at the separation less what the far grid gives the same
+// column at the same beam (far_grid_weight). With `tent` (no kernel, K = 0, the effect forced on) the columns within a
+// beam of it instead, weighed by the tent (1 - their distance in beams: the resample's own shares, so the pass gives
+// B). Zero weights at either end of a beam's columns are left out (a null at the reach); columns that feed no beam
+// (beyond a host camera's fan) are never in a kernel.
 void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent) {
     const std::uint32_t beams = p.beams, columns = p.profile_columns;
     p.near_column_begin.assign(beams, 0);

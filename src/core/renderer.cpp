@@ -338,7 +338,10 @@ Result<void> backend_frame(RendererImpl& impl, const Pose& pose, std::uint64_t f
     impl.started = false; // taken up, dropped or (below) replaced by the next frame
     const bool picked_up = was_started && same_pose(impl.started_pose, pose);
     if (was_started && !picked_up) { // another pose than announced: wait for that work, drop it
-        if (auto dropped = backend.finish(frame); !dropped) return dropped;
+        // (a frame the device cut short is refused with ErrorCode::unsupported: dropped anyway, it does
+        // not fail this one, which says for itself)
+        if (auto dropped = backend.finish(frame); !dropped && dropped.error().code != ErrorCode::unsupported)
+            return dropped;
     }
     if (next == nullptr && !picked_up) return backend.render(pose, mask, frame); // draws made while it works
     if (next != nullptr) {

@@ -188,11 +188,11 @@ enum BeamformDispatch : std::size_t { profile, resample, far_deposit, far_convol
 constexpr bool far_sidelobes(const Plan& plan) {
     return plan.effects.horizontal_pattern && plan.far_cells > 0;
 }
-// The far convolve's per-channel form runs cells * (cells + 2) loop iterations in one invocation.
+// The far convolve's per-channel form runs about cells * (cells + 3) loop turns in one invocation.
 // Lavapipe ends an invocation's loops after 65535 iterations in all (gallivm's loop limiter, shared by
 // every loop of a shader) without a word: with 255 or 256 cells the last cells were never written. Past
 // this many cells the convolve takes a workgroup row per cell (as on a GPU) on every device.
-constexpr std::uint32_t kFarCellsInOneInvocation = 240; // 240 * 242 = 58080 iterations
+constexpr std::uint32_t kFarCellsInOneInvocation = 176; // 176 * 179 + 2 = 31506 turns: under half the limit
 constexpr bool far_cell_groups(const Plan& plan, const DeviceShape& shape) {
     return shape.far_cell_groups || plan.far_cells > kFarCellsInOneInvocation;
 }

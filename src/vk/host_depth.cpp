@@ -345,6 +345,7 @@ Result<void> HostDepthPass::process(const HostDepthImage& image, SaveFlags save_
             frame.stages_run.emplace_back(stages[i]->host_depth_name);
         }
     }
+    if (auto r = b.frame_status(); !r) return r; // refused, not passed on with rows missing
     copy_frame_out(save_mask, frame);
     return b.add_pass_times(stage_query, frame);
 }
@@ -421,6 +422,7 @@ Result<void> HostDepthPass::read_back(SaveFlags save_mask, Frame& frame) {
     if (status != VK_EVENT_SET) return vk_error(status, "vkGetEventStatus");
     frame.times.clear();
     frame.stages_run.clear();
+    if (auto r = o.backend->frame_status(); !r) return r; // refused, not passed on with rows missing
     copy_frame_out(save_mask & o.recorded_mask, frame);
     return o.backend->add_pass_times(o.stage_query, frame);
 }

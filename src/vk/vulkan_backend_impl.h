@@ -128,6 +128,9 @@ private:
                         bool overlap = false, VkSemaphore wait_semaphore = VK_NULL_HANDLE);
     Result<void> wait(std::uint32_t slot);
     void copy_out(const Region& region, void* destination) const;
+    // The read-back frame's status word (sonar_shared.h kBindingStatus): an error where a shader found its
+    // work cut short, for render() to refuse the frame.
+    [[nodiscard]] Result<void> frame_status() const;
     // copy_clean = false: frame.clean is left to the noise stage (defer_clean, pending_clean)
     void copy_frame_out(SaveFlags save_mask, Frame& frame, bool copy_clean = true) const;
     // Copies an outer x inner float array (rows `stride` apart) out of the readback buffer as inner x outer.

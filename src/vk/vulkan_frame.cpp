@@ -290,6 +290,17 @@ void VulkanBackend::record_subpixel_upload(VkCommandBuffer commands, std::uint32
                      &copied);
 }
 
+Result<void> VulkanBackend::frame_status() const {
+    std::uint32_t status = 0;
+    copy_out(status_region_, &status);
+    if ((status & shared::kStatusLoopLimit) != 0) // profile.comp loops_ran_out
+        return make_error(ErrorCode::unsupported,
+                          "Vulkan device: profile.comp's loops were ended before its rows were done (lavapipe ends an "
+                          "invocation's loops after 65535 iterations): the frame would miss pixels; render with "
+                          "--backend cpu, or fewer accuracy.rows_per_vfov");
+    return {};
+}
+
 void VulkanBackend::copy_out(const Region& region, void* destination) const {
     std::memcpy(destination, static_cast<const char*>(readback().mapped) + region.offset, region.bytes);
 }
@@ -470,14 +481,7 @@ Result<void> VulkanBackend::finish(Frame& frame) {
         }
     }
     read_slot_ = slot;
-    // A frame whose profiles miss rows is refused, not passed on (profile.comp loops_ran_out).
-    std::uint32_t status = 0;
-    copy_out(status_region_, &status);
-    if ((status & shared::kStatusLoopLimit) != 0)
-        return make_error(ErrorCode::unsupported,
-                          "Vulkan device: profile.comp's loops were ended before its rows were done (lavapipe ends an "
-                          "invocation's loops after 65535 iterations): the frame would miss pixels; render with "
-                          "--backend cpu, or fewer accuracy.rows_per_vfov");
+    if (auto r = frame_status(); !r) return r; // refused, not passed on with rows missing
     // the readback is a transfer, not a stage of the pipeline: not reported
     for (std::uint32_t i = 0; i < stage_total; ++i) {
         const char* name = flight.stages[i]->name;
