@@ -800,6 +800,27 @@ TEST(ResampleWalk, WalkAndGatherGiveTheSameFrame) {
     }
 }
 
+// A frame in the CPU-device layout and in the GPU layout: the same bits, and not two empty frames. Returns
+// the CPU-device layout's (null where a render failed).
+std::unique_ptr<testing::Rendered> expect_layouts_agree(const SonarConfig& config, const Scene& scene,
+                                                        const Pose& pose) {
+    RendererOptions columns, lanes;
+    columns.layout = WorkLayout::cpu_device;
+    lanes.layout = WorkLayout::gpu;
+    auto a = render_once(Backend::vulkan, config, scene, pose, SaveFlags::profiles, 1, columns);
+    auto b = render_once(Backend::vulkan, config, scene, pose, SaveFlags::profiles, 1, lanes);
+    if (!a || !b) {
+        ADD_FAILURE() << "a render failed";
+        return nullptr;
+    }
+    EXPECT_EQ(a->frame.profiles, b->frame.profiles);
+    EXPECT_EQ(a->frame.clean, b->frame.clean);
+    const auto lit =
+        std::count_if(a->frame.profiles.begin(), a->frame.profiles.end(), [](float v) { return v > 0.0f; });
+    EXPECT_GT(lit, 1000); // equal frames are not two empty ones
+    return a;
+}
+
 // The beamform passes' two layouts (RendererOptions::layout): for a CPU device one invocation per
 // column walking all its bins and 16 beams per resample/sidelobe invocation (lavapipe), for a GPU 32
 // per column, each adding to every 32nd bin, and 4 beams (kGpuDeviceShape). Each output keeps one
@@ -833,17 +854,7 @@ TEST(WorkLayout, GpuLayoutGivesTheSameBitsAsCpuDeviceLayout) {
         config.pixels_per_beam = pixels_per_beam;
         Pose pose;
         pose.pitch_deg = 10.0;
-        RendererOptions columns, lanes;
-        columns.layout = WorkLayout::cpu_device;
-        lanes.layout = WorkLayout::gpu;
-        auto a = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, columns);
-        auto b = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, lanes);
-        ASSERT_TRUE(a && b);
-        EXPECT_EQ(a->frame.profiles, b->frame.profiles);
-        EXPECT_EQ(a->frame.clean, b->frame.clean);
-        const auto lit =
-            std::count_if(a->frame.profiles.begin(), a->frame.profiles.end(), [](float v) { return v > 0.0f; });
-        EXPECT_GT(lit, 1000); // equal frames are not two empty ones
+        expect_layouts_agree(config, scene.value(), pose);
     }
 }
 
@@ -895,19 +906,12 @@ TEST(WorkLayout, RowBandsKeepAnAccurateFrameWhole) {
     Pose pose;
     pose.z_m = -2.0;
     pose.pitch_deg = 15.0;
-    RendererOptions columns, lanes;
-    columns.layout = WorkLayout::cpu_device;
-    lanes.layout = WorkLayout::gpu;
-    auto a = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, columns);
-    auto b = render_once(Backend::vulkan, config, scene.value(), pose, SaveFlags::profiles, 1, lanes);
-    ASSERT_TRUE(a && b);
-    EXPECT_EQ(a->frame.profiles, b->frame.profiles);
-    EXPECT_EQ(a->frame.clean, b->frame.clean);
-    const auto lit = std::count_if(a->frame.clean.begin(), a->frame.clean.end(), [](float v) { return v > 0.0f; });
-    EXPECT_GT(lit, 1000); // equal frames are not two empty ones
+    const auto a = expect_layouts_agree(config, scene.value(), pose);
+    ASSERT_TRUE(a);
     // Every row in one dispatch (as before the bands): on lavapipe the loops run out, which profile.comp
     // reports and render() turns into an error, not a frame; a device without the limit renders it whole.
-    RendererOptions whole = columns;
+    RendererOptions whole;
+    whole.layout = WorkLayout::cpu_device;
     whole.profile_rows = ProfileRows::whole;
     whole.backend = Backend::vulkan;
     auto renderer = Renderer::create(*testing::vulkan_context(), config, scene.value(), whole);
