@@ -183,7 +183,8 @@ TEST(FarSidelobesPlan, OnlyWhereTheKernelStopsShortOfTheFan) {
 // longer the pattern. A review of the unconstrained fit found it up to 23 dB off within the reach on a
 // 6-cell circle, and pairs past the reach reading 0 with a 256-cell chebyshev grid and the legacy planar
 // presets. Here every weight is at least 0 over such configurations, and on the circle (the test's own
-// sinc^2 of a planar fan, x = X sin(separation) / sin(beamwidth / 2), the separation wrapped) every column
+// sinc^2 of a planar fan, x = X sin(separation) / sin(beamwidth / 2), the separation wrapped, and 0 from
+// 90 deg on: the beam's aperture is baffled) every column
 // within a beam's kernel hears the pattern from its near weight plus the grid (deposit, convolve, read
 // back: the tables' definition, docs/pipeline.md "Side lobes").
 TEST(FarSidelobesPlan, WeightsAreNeverNegativeAndTheKernelPlusTheGridIsThePattern) {
@@ -241,7 +242,10 @@ TEST(FarSidelobesPlan, WeightsAreNeverNegativeAndTheKernelPlusTheGridIsThePatter
                                 plan.far_weight[cells - 1 + a - b];
                 const double sep = std::remainder(plan.column_azimuth_rad[col] - plan.beam_angle_rad[j], 2.0 * kPi);
                 const double x = x_per_sine * std::sin(sep);
-                const double pattern = std::abs(x) < 1e-12 ? 1.0 : (std::sin(x) / x) * (std::sin(x) / x);
+                // nothing from behind a beam's baffled aperture (90 deg or more from it)
+                const double pattern = std::abs(sep) >= 0.5 * kPi ? 0.0
+                                       : std::abs(x) < 1e-12      ? 1.0
+                                                                  : (std::sin(x) / x) * (std::sin(x) / x);
                 const double near = plan.near_column_weight[std::size_t(j) * plan.near_column_taps + t];
                 // float weights (6e-8 of the larger of near and grid) and the pattern's float rounding
                 const double err = std::abs(near + grid - pattern);
@@ -254,6 +258,51 @@ TEST(FarSidelobesPlan, WeightsAreNeverNegativeAndTheKernelPlusTheGridIsThePatter
             "[far weights] %s: %u cells, %zu kernel pairs, near + grid - pattern within %.2g of the largest term\n",
             kase.name, cells, checked, worst);
         EXPECT_GT(checked, 10000u);
+    }
+}
+
+// A planar fan's beam is formed by a baffled aperture facing along it: nothing reaches it from behind.
+// Written in sin(separation), the pattern gave a source 180 deg from a beam the response of one on its
+// axis: on a 360-degree fan a plate at 0 deg lit the beam at 180 deg at 0 dB with the kernel over the
+// whole fan (bench accuracy's reference) and -5.4 dB through the far grid. Now the beams 120 deg and
+// more from the plate hear nothing through the kernel and less than -100 dB through the grid, while
+// the beams 20-60 deg away still hear its side lobes.
+TEST(HorizontalPattern, APlanarBeamHearsNothingFromBehindIt) {
+    Scene scene;
+    add_quad(scene, 8.0, 0.0, 0.0, 0.6, 0.6, -10.0);
+    for (const double reach_beamwidths : {1000.0, 3.0}) {
+        SonarConfig config = quiet_config();
+        config.hfov_deg = 360.0;
+        config.beams = 256;
+        config.horizontal_beamwidth_deg = 3.0;
+        config.beam_geometry = BeamGeometry::planar;
+        config.effects.horizontal_pattern = EffectMode::on;
+        config.sidelobe_kernel_beamwidths = reach_beamwidths;
+        auto r = render_once(Backend::cpu, config, scene);
+        ASSERT_TRUE(r);
+        const Plan& plan = renderer_plan(r->renderer);
+        ASSERT_TRUE(plan.circular);
+        EXPECT_EQ(plan.far_cells > 0, reach_beamwidths < 100.0);
+        std::vector<double> energy(plan.beams, 0.0);
+        for (std::uint32_t k = 0; k < plan.bins; ++k)
+            for (std::uint32_t j = 0; j < plan.beams; ++j)
+                energy[j] += r->frame.clean[std::size_t(k) * plan.beams + j];
+        const auto peak = std::max_element(energy.begin(), energy.end());
+        ASSERT_GT(*peak, 0.0);
+        double behind = 0.0, beside = 0.0;
+        for (std::uint32_t j = 0; j < plan.beams; ++j) {
+            const double away = std::abs(std::remainder(plan.beam_angle_rad[j], 2.0 * kPi)) / kDeg; // plate at 0
+            if (away >= 120.0) behind = std::max(behind, energy[j] / *peak);
+            if (away >= 20.0 && away <= 60.0) beside = std::max(beside, energy[j] / *peak);
+        }
+        std::printf("[behind] reach %g beamwidths: beams >= 120 deg away %.1f dB, 20-60 deg away up to %.1f dB\n",
+                    reach_beamwidths, 10 * std::log10(std::max(behind, 1e-300)), 10 * std::log10(beside));
+        if (reach_beamwidths > 100.0) {
+            EXPECT_EQ(behind, 0.0);
+        } else {
+            EXPECT_LT(behind, 1e-10);
+        }
+        EXPECT_GT(beside, 1e-6) << "the side lobes still reach the beams beside the plate";
     }
 }
 

@@ -106,6 +106,11 @@ namespace {
 double pattern_at_separation(const Plan& p, double sep) {
     const std::uint32_t hshape = shader_id(p.config.horizontal_pattern);
     if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
+    // A planar fan's beam is formed by an aperture facing along it, baffled: it hears nothing from behind
+    // (a separation of 90 deg or more). Written in sin(separation), the pattern would give a source
+    // behind the beam the response of one in front (a full-strength ghost, 180 deg from each target, on a
+    // fan wider than 180 deg).
+    if (!p.line_array && std::abs(sep) >= 0.5 * kPi) return 0.0;
     if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)
         return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
     const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
