@@ -181,7 +181,9 @@ TEST(FarSidelobesPlan, OnlyWhereTheKernelStopsShortOfTheFan) {
 // The far grid's weights are fitted with none below 0 (plan_beams.cpp fit_far_weights): a negative
 // weight makes the grid's level at some beam negative, the read-back cuts it at 0, and near + far is no
 // longer the pattern. A review of the unconstrained fit found it up to 23 dB off within the reach on a
-// 6-cell circle, and pairs past the reach reading 0 with a 256-cell chebyshev grid and the legacy planar
+// 6-cell circle (whose grid the 90-degree baffle now leaves empty; this 20-cell one still gets a negative
+// weight without the floor, as does the planar chebyshev), and pairs past the reach reading 0 with a
+// 256-cell chebyshev grid and the legacy planar
 // presets. Here every weight is at least 0 over such configurations, and on the circle (the test's own
 // sinc^2 of a planar fan, x = X sin(separation) / sin(beamwidth / 2), the separation wrapped, and 0 from
 // 90 deg on: the beam's aperture is baffled) every column
@@ -194,7 +196,10 @@ TEST(FarSidelobesPlan, WeightsAreNeverNegativeAndTheKernelPlusTheGridIsThePatter
         std::vector<std::string> keys;
     };
     const std::vector<Case> cases{
-        {"6-cell circle", "default", {"hfov=360", "beams=256", "accuracy.sidelobe_kernel_beamwidths=140"}},
+        {"20-cell circle",
+         "default",
+         {"hfov=360", "beams=256", "horizontal_beamwidth=3", "beam_geometry=planar",
+          "accuracy.sidelobe_kernel_beamwidths=20", "accuracy.far_sidelobe_cell=0.3"}},
         {"256-cell chebyshev", "default", {"horizontal_pattern=chebyshev", "accuracy.far_sidelobe_cell=0.01"}},
         {"planar chebyshev",
          "default",
@@ -220,7 +225,7 @@ TEST(FarSidelobesPlan, WeightsAreNeverNegativeAndTheKernelPlusTheGridIsThePatter
         ASSERT_GT(plan.far_cells, 0u) << kase.name;
         const float lowest = *std::min_element(plan.far_weight.begin(), plan.far_weight.end());
         EXPECT_GE(lowest, 0.0f) << kase.name;
-        if (std::string(kase.name) != "6-cell circle") continue;
+        if (std::string(kase.name) != "20-cell circle") continue;
         ASSERT_TRUE(plan.circular);
         ASSERT_EQ(plan.far_channels, 1u);
         const std::uint32_t cells = plan.far_cells, columns = plan.profile_columns;

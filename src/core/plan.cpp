@@ -181,7 +181,10 @@ double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshe
 HorizontalLobes horizontal_lobes(std::uint32_t shape, double k, double half_width_rad, double chebyshev_a_value,
                                  double reach_rad) {
     // Walk out from the axis in steps of 1/200 of the reach: the first local minimum is the first
-    // null, the largest value beyond it the strongest side lobe (none for monotone patterns).
+    // null, the largest value beyond it the strongest side lobe (none for monotone patterns). Not past
+    // 90 deg: nothing reaches a beam from behind its baffled aperture (plan_beams.cpp
+    // pattern_at_separation), where the pattern in sin(a) would mirror its main lobe.
+    reach_rad = std::min(reach_rad, 0.5 * kPi);
     HorizontalLobes lobes;
     constexpr int kSteps = 2000;
     double previous = math_f64::pattern_power(shape, k, half_width_rad, chebyshev_a_value, 0.0);

@@ -258,6 +258,7 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
     if (!(cell_fraction > 0.0) || p.beams < 2 || !(reach_units > 0.0)) return;
     const double span = p.circular ? 2.0 * kPi : beam_position(p, 0) - beam_position(p, p.beams - 1);
     if (reach_units >= span) return; // every pair of beams is within the kernel's reach, where it is exact
+    if (!p.line_array && reach_units >= 0.5 * kPi) return; // past 90 deg the pattern is 0: nothing to carry
     const double wanted = cell_fraction * reach_units;
     std::uint32_t cells = 0;
     double step = 0.0;
