@@ -350,26 +350,28 @@ void plan_far_sidelobes(Plan& p, double reach_units) {
 }
 
 // What the far grid gives beam j from a unit of energy in profile column c, as the backends compute it
-// from plan_far_sidelobes' float tables (deposit into the column's two cells, convolve, read back with the
-// beam's two cells and phase), in double.
+// from plan_far_sidelobes' float tables, by the same kernels (sonar_kernels.h), in double: the column's
+// deposit into its two cells per channel (far_deposit_weight), convolved (far_weight), read back with the
+// beam's two cells' shares (far_cell_share) and phase (far_sidelobe_level).
 double far_grid_weight(const Plan& p, std::uint32_t c, std::uint32_t j) {
+    using math_f64::vec4;
     const std::uint32_t cells = p.far_cells;
     const float* column = p.far_column_cell.data() + 8 * std::size_t(c);
     const float* beam = p.far_beam_cell.data() + 8 * std::size_t(j);
     if (static_cast<std::uint32_t>(column[0]) >= cells) return 0.0; // the column feeds no cell
-    const std::uint32_t column_cells[2] = {static_cast<std::uint32_t>(column[0]),
-                                           static_cast<std::uint32_t>(column[1])};
-    const double column_shares[2] = {1.0 - double(column[2]), double(column[2])};
-    const std::uint32_t beam_cells[2] = {static_cast<std::uint32_t>(beam[0]), static_cast<std::uint32_t>(beam[1])};
-    const double beam_shares[2] = {1.0 - double(beam[2]), double(beam[2])};
-    double weight = 0.0;
-    for (int a = 0; a < 2; ++a)
-        for (int b = 0; b < 2; ++b)
-            weight += beam_shares[a] * column_shares[b] *
-                      double(p.far_weight[std::size_t(cells - 1 + std::int64_t(beam_cells[a]) - column_cells[b])]);
-    if (p.far_channels == 3) // l0 - cos l1 - sin l2 of a single column: its weight times 1 - cos(phase difference)
-        weight *= 1.0 - double(column[4]) * double(beam[4]) - double(column[5]) * double(beam[5]);
-    return weight;
+    const vec4 column_cell(column[0], column[1], column[2], column[3]);
+    const vec4 column_phase(column[4], column[5], column[6], column[7]);
+    const vec4 beam_cell(beam[0], beam[1], beam[2], beam[3]), beam_phase(beam[4], beam[5], beam[6], beam[7]);
+    double level[3] = {0.0, 0.0, 0.0};
+    for (std::uint32_t m = 0; m < p.far_channels; ++m)
+        for (const float a : {beam[0], beam[1]})
+            for (const float b : {column[0], column[1]}) {
+                const auto read = static_cast<std::uint32_t>(a), deposit = static_cast<std::uint32_t>(b);
+                level[m] += math_f64::far_cell_share(beam_cell, read) *
+                            math_f64::far_deposit_weight(column_cell, column_phase, deposit, m) *
+                            double(p.far_weight[std::size_t(cells - 1 + std::int64_t(read) - deposit)]);
+            }
+    return math_f64::far_sidelobe_level(beam_phase, level[0], level[1], level[2]);
 }
 
 } // namespace
