@@ -27,6 +27,8 @@ layout(constant_id = kSpecPerInvocation) const uint kBeamsPerInvocation = 16u; /
 // lanes once per store instruction, so 16 vec4 stores cost a quarter of 64 scalar ones).
 layout(constant_id = kSpecVec4Out) const uint kVec4Out = 0u;
 layout(constant_id = kSpecFarSidelobes) const uint kFarSidelobes = 0u; // 1: add far_sidelobe.comp's cells
+// Focus bands (Plan::near_bands): more than 1, each bin reads its band's weights, one lane at a time.
+layout(constant_id = kSpecNearBands) const uint kNearBands = 1u;
 
 layout(std140, binding = kBindingParams) uniform ParamsBlock { SonarParams params; };
 layout(std430, binding = kBindingProfiles) readonly buffer ProfileBuffer { vec4 profiles4[]; };
@@ -67,12 +69,21 @@ void main() {
     for (uint r = 0u; r < kBeamsPerInvocation; ++r) {
         sums[r] = vec4(0.0);
     }
-    // The table (src/vk/vulkan_backend.cpp): the weights, then per run the first and last source column
-    // any of its beams hears, then per beam its first column (floats, exact below 2^24; unwrapped: on a
-    // full circle a column index wraps modulo the columns).
+    // The table (src/vk/vulkan_backend.cpp): the weights (every band's), then per run the first and last
+    // source column any of its beams hears, then per beam its first column, then with focus bands each
+    // bin's band (floats, exact below 2^24; unwrapped: on a full circle a column index wraps modulo the
+    // columns).
     uint runs = (uint(beams) + kBeamsPerInvocation - 1u) / kBeamsPerInvocation;
-    uint run_entry = uint(beams * taps) + 2u * gl_WorkGroupID.y;
-    uint begin_entry = uint(beams * taps) + 2u * runs + uint(first_beam);
+    uint weights = kNearBands * uint(beams * taps);
+    uint run_entry = weights + 2u * gl_WorkGroupID.y;
+    uint begin_entry = weights + 2u * runs + uint(first_beam);
+    uvec4 band_offset = uvec4(0u);
+    if (kNearBands > 1u) {
+        uint band_entry = weights + 2u * runs + uint(beams) + 4u * q;
+        for (uint i = 0u; i < 4u; ++i) {
+            band_offset[i] = uint(weight(band_entry + i)) * uint(beams * taps);
+        }
+    }
     int first_source = int(weight(run_entry));
     int last_source = int(weight(run_entry + 1u));
     int begin[kBeamsPerInvocation];
@@ -86,7 +97,14 @@ void main() {
             int j = first_beam + int(r);
             int t = source - begin[r];
             if (t >= 0 && t < taps && j < beams) {
-                sums[r] += weight(uint(j * taps + t)) * b; // 0 past the beam's own columns: adds exactly +0
+                uint i = uint(j * taps + t);
+                if (kNearBands > 1u) {
+                    vec4 w = vec4(weight(band_offset.x + i), weight(band_offset.y + i), weight(band_offset.z + i),
+                                  weight(band_offset.w + i));
+                    sums[r] += w * b;
+                } else {
+                    sums[r] += weight(i) * b; // 0 past the beam's own columns: adds exactly +0
+                }
             }
         }
     }

@@ -106,6 +106,7 @@ VKS_CONST uint kSpecBinLanes = 18u;      // profile: invocations sharing one col
 VKS_CONST uint kSpecGatherRows = 19u;    // profile, line_array on a GPU: 1 = a block of rows' pixels at once
 VKS_CONST uint kSpecRowCandidates = 20u; // profile: the most pixels one row gives one cone column (host-counted)
 VKS_CONST uint kSpecSharedBins = 21u;    // profile: bins_padded, the shared accumulators' length
+VKS_CONST uint kSpecNearBands = 22u;     // sidelobe: Plan::near_bands, the focus bands of the near kernel's weights
 
 // Effect bits (SonarParams.effect_flags and the shaders' specialization constant 0).
 VKS_CONST uint kEffectIncidence = 1u << 0;         // Lambert cos(theta) term; needs the normals pass

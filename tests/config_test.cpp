@@ -304,6 +304,29 @@ TEST(Validate, NamesFieldAndValue) {
 
 // docs/pipeline.md, "Frames and grids": bins derived from the bandwidth, delta r = c / 2B (0.2-60 m at 30 kHz: 2.5 cm,
 // 2392 bins).
+// beam_focus fixed or none defocuses the aperture (src/core/plan_focus.cpp): sinc and hann have an aperture
+// weighting to defocus, the other shapes none; the legacy modes have no horizontal pattern.
+TEST(Validate, BeamFocusNeedsAKnownApertureAndThePhysicalMode) {
+    auto problem = [](const std::string& json) {
+        auto c = apply_config_json(SonarConfig{}, json, "focus.json");
+        if (!c.ok()) return c.error().message;
+        auto v = c->validate();
+        return v.ok() ? std::string() : v.error().message;
+    };
+    EXPECT_EQ(problem(R"({"beam_focus": "fixed", "horizontal_pattern": "chebyshev"})"),
+              "beam_focus = fixed: needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar knows), "
+              "not chebyshev");
+    EXPECT_EQ(problem(R"({"beam_focus": "none", "horizontal_pattern": "gaussian"})"),
+              "beam_focus = none: needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar knows), "
+              "not gaussian");
+    EXPECT_EQ(problem(R"({"beam_focus": "none", "mode": "uuv-legacy"})"),
+              "beam_focus = none: needs mode physical (the legacy modes have no horizontal pattern to blur)");
+    EXPECT_NE(problem(R"({"focus_range": 0})").find("focus_range = 0: must be in (0, 100000] m"), std::string::npos);
+    EXPECT_NE(problem(R"({"beam_focus": "sharp"})").find("beam_focus"), std::string::npos);
+    EXPECT_EQ(problem(R"({"beam_focus": "fixed", "horizontal_pattern": "hann", "focus_range": 3})"), "");
+    EXPECT_EQ(problem(R"({"beam_focus": "dynamic", "horizontal_pattern": "box"})"), "");
+}
+
 TEST(Validate, BandwidthDerivesTheRangeBins) {
     SonarConfig c;
     c.range_min_m = 0.2;

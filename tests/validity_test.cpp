@@ -227,6 +227,17 @@ TEST(Validity, FarFieldDistanceOfTheImpliedAperture) {
     EXPECT_FALSE(v->ok);
     EXPECT_EQ(v->key, "range_min");
     EXPECT_NE(v->domain.find("5.154 m"), std::string::npos) << v->domain;
+    EXPECT_NE(v->action.find("beam_focus"), std::string::npos) << v->action;
+    // Out of focus (beam_focus none or fixed) the horizontal pattern is the aperture's at each range: only
+    // the vertical aperture is left, 0.886 lambda / 20 deg = 5.1 mm, far field from 13 mm.
+    for (BeamFocus focus : {BeamFocus::none, BeamFocus::fixed}) {
+        c.beam_focus = focus;
+        v = find_model(model_validity(c), "far_field_beam_pattern");
+        ASSERT_TRUE(v);
+        EXPECT_TRUE(v->ok) << v->domain;
+        EXPECT_NE(v->domain.find("vfov"), std::string::npos) << v->domain;
+    }
+    c.beam_focus = BeamFocus::dynamic;
     // Without beam patterns the model is not used.
     c.effects.horizontal_pattern = EffectMode::off;
     c.effects.vertical_pattern = EffectMode::off;

@@ -45,6 +45,11 @@ enum class BeamSpacing : std::uint8_t { equiangular, equisine };
 // of one azimuth and its pattern a function of the azimuth difference, as an acoustic lens (ARIS) forms
 // it and as the legacy plugins do. A fan of 180 degrees or more has no single array axis: planar.
 enum class BeamGeometry : std::uint8_t { line_array, planar };
+// Where the receive beams are focused (docs/pipeline.md, "Focus"). dynamic: at every range (a beamformer
+// that focuses as the echo comes in, the far-field pattern everywhere); fixed: at focus_range (an acoustic
+// lens, ARIS/DIDSON: sharp there, blurred nearer and further); none: at infinity (an unfocused array, blurred
+// inside its far-field distance L^2 / lambda).
+enum class BeamFocus : std::uint8_t { dynamic, fixed, none };
 // Speckle on the intensity (host stage 5): rayleigh (Exp(1) intensity), gamma (Gamma(L, 1/L) with L =
 // speckle_looks), gaussian (the legacy |N(1, sigma)|).
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
@@ -115,8 +120,10 @@ struct SonarConfig {
 
     BeamPattern vertical_pattern = BeamPattern::sinc;
     BeamPattern horizontal_pattern = BeamPattern::sinc;
-    double vertical_sidelobe_db = -30.0;   // chebyshev only: the equal side-lobe level, dB re the main lobe
-    double horizontal_sidelobe_db = -30.0; // chebyshev only: likewise for the horizontal pattern
+    BeamFocus beam_focus = BeamFocus::dynamic; // the horizontal pattern's focus (sinc and hann patterns)
+    double focus_range_m = 10.0;               // beam_focus fixed: the range the beams are focused at
+    double vertical_sidelobe_db = -30.0;       // chebyshev only: the equal side-lobe level, dB re the main lobe
+    double horizontal_sidelobe_db = -30.0;     // chebyshev only: likewise for the horizontal pattern
 
     // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
     SpeckleModel speckle = SpeckleModel::rayleigh;

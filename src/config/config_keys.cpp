@@ -37,6 +37,9 @@ template <> struct EnumNames<BeamSpacing> {
 template <> struct EnumNames<BeamGeometry> {
     static constexpr std::array<const char*, 2> names{"line_array", "planar"};
 };
+template <> struct EnumNames<BeamFocus> {
+    static constexpr std::array<const char*, 3> names{"dynamic", "fixed", "none"};
+};
 template <> struct EnumNames<SpeckleModel> {
     static constexpr std::array<const char*, 3> names{"rayleigh", "gamma", "gaussian"};
 };
@@ -329,6 +332,12 @@ std::vector<ConfigKey> make_table() {
         VKS_NUMBER("horizontal_sidelobe_db", horizontal_sidelobe_db, "dB",
                    "Side-lobe level of a chebyshev horizontal pattern (all equal), re the main lobe, -100 to -10",
                    closed(-100, -10, "as vertical_sidelobe_db")),
+        VKS_ENUM("beam_focus", BeamFocus, beam_focus, "dynamic|fixed|none",
+                 "Where the receive beams are focused: at every range (the far-field pattern everywhere), at "
+                 "focus_range (an acoustic lens), or at infinity (an unfocused array); fixed and none blur the "
+                 "horizontal pattern inside the array's far-field distance (sinc and hann patterns)"),
+        VKS_NUMBER("focus_range", focus_range_m, "m", "beam_focus fixed: the range the beams are focused at",
+                   open_low(0, 1e5, "in front of the array; 100 km as range_max")),
 
         VKS_ENUM("speckle", SpeckleModel, speckle, "rayleigh|gamma|gaussian",
                  "Speckle model: Exp(1) intensity, Gamma(L, 1/L), or legacy |N(1, sigma)|"),

@@ -136,10 +136,19 @@ struct Plan {
     // is weighted at its own direction, so the main lobe and the nulls are the pattern's wherever a target falls
     // between beams. begin is unwrapped: with circular, columns wrap modulo profile_columns. Built only with the
     // horizontal pattern on; with no kernel (K = 0, the effect forced on) it is the tent.
+    // With beam_focus fixed or none the pattern depends on range (docs/pipeline.md, "Focus"): the weights
+    // come in near_bands bands, bin k reading band near_band_of_bin[k] at near_column_weight[(band * beams
+    // + j) * near_column_taps + t]; the columns [begin, begin + count) are every band's.
     std::uint32_t near_column_taps = 0;           // the widest beam's column count
-    std::vector<float> near_column_weight;        // beams * near_column_taps, 0 past a beam's count
+    std::vector<float> near_column_weight;        // near_bands * beams * near_column_taps, 0 past a beam's count
     std::vector<std::int32_t> near_column_begin;  // beams
     std::vector<std::uint32_t> near_column_count; // beams
+    // The focus bands (plan_focus.cpp): band b's pattern is the aperture's defocused by the quadratic phase
+    // near_band_phase[b] at its ends (radians; a line array's beam steered to theta by cos^2 theta of it).
+    // One band of phase 0 (the far-field pattern) with beam_focus dynamic, or with no near kernel.
+    std::uint32_t near_bands = 1;
+    std::vector<std::uint32_t> near_band_of_bin; // bins
+    std::vector<double> near_band_phase;         // near_bands
     // Far side lobes (docs/pipeline.md, "Side lobes"): the pattern beyond the kernel's reach R, on a
     // coarse grid of far_cells cells uniform in the separation variable (0: none). Each profile column
     // puts its energy into its two nearest cells (far_column_cell, 8 per column: first cell, second

@@ -5,10 +5,12 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "core/angles.h"
+#include "core/plan_focus.h"
 #include "core/plan_steps.h"
 #include "core/sonar_math.hpp"
 
@@ -115,6 +117,26 @@ double pattern_at_separation(const Plan& p, double sep) {
         return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
     const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
     return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle);
+}
+
+// The pattern of beam j in focus band b (plan_focus.cpp) at separation `sep`: the far-field pattern in a
+// band of phase 0, else the aperture's defocused by the band's phase (a line array's beam steered to theta
+// by cos^2 theta of it: its aperture seen from there is shorter).
+double pattern_in_band(const Plan& p, const DefocusedPattern* defocused, std::uint32_t b, std::uint32_t j, double sep) {
+    const double phase = p.near_band_phase[b];
+    if (phase == 0.0 || defocused == nullptr) return pattern_at_separation(p, sep);
+    if (p.circular) sep = std::remainder(sep, 2.0 * kPi);
+    if (!p.line_array && std::abs(sep) >= 0.5 * kPi) return 0.0; // baffled, as pattern_at_separation
+    const double steering = p.line_array ? std::cos(p.beam_angle_rad[j]) : 1.0;
+    const double u = p.line_array ? sep : std::sin(sep);
+    return defocused->power(p.hpattern_k * u, phase * steering * steering);
+}
+
+// One band of phase 0: the far-field pattern at every bin.
+void reset_focus_bands(Plan& p) {
+    p.near_bands = 1;
+    p.near_band_of_bin.assign(p.bins, 0);
+    p.near_band_phase.assign(1, 0.0);
 }
 
 // The separation variable of beam j: its angle, or with line_array its sine.
@@ -387,6 +409,12 @@ namespace {
 // (beyond a host camera's fan) are never in a kernel.
 void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent) {
     const std::uint32_t beams = p.beams, columns = p.profile_columns;
+    if (tent) reset_focus_bands(p); // the tent is no pattern to defocus
+    const std::uint32_t bands = p.near_bands;
+    std::unique_ptr<DefocusedPattern> defocused;
+    if (p.near_band_phase.back() > 0.0)
+        defocused =
+            std::make_unique<DefocusedPattern>(shader_id(p.config.horizontal_pattern), p.near_band_phase.back());
     p.near_column_begin.assign(beams, 0);
     p.near_column_count.assign(beams, 0);
     std::vector<float> flat;                // every beam's weights, one after another
@@ -435,32 +463,48 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             --lo;
         while (any && room() && (p.circular || hi + 1 < std::int64_t(columns)) && in_kernel(hi + 1))
             ++hi;
-        row.clear();
+        // One row per band, side by side: row[b * width + (c - lo)].
+        const std::size_t width = any ? std::size_t(hi - lo + 1) : 0;
+        row.assign(width * bands, 0.0f);
         for (std::int64_t c = lo; any && c <= hi; ++c) {
             if (tent) {
-                row.push_back(static_cast<float>(std::max(1.0 - beams_away(c), 0.0)));
+                row[std::size_t(c - lo)] = static_cast<float>(std::max(1.0 - beams_away(c), 0.0));
                 continue;
             }
             // The pattern less what the far grid already gives this column at this beam: within the reach
             // the two add up to the pattern exactly, whatever the grid's cells make of it.
             const double far = p.far_cells > 0 ? far_grid_weight(p, wrap(c), j) : 0.0;
-            row.push_back(static_cast<float>(pattern_at_separation(p, separation(c)) - far));
+            for (std::uint32_t b = 0; b < bands; ++b)
+                row[b * width + std::size_t(c - lo)] =
+                    static_cast<float>(pattern_in_band(p, defocused.get(), b, j, separation(c)) - far);
         }
-        std::size_t first = 0, end = row.size();
-        while (first < end && row[first] == 0.0f)
+        // Zero weights at both ends of every band are left out.
+        auto zero_column = [&](std::size_t i) {
+            for (std::uint32_t b = 0; b < bands; ++b)
+                if (row[b * width + i] != 0.0f) return false;
+            return true;
+        };
+        std::size_t first = 0, end = width;
+        while (first < end && zero_column(first))
             ++first;
-        while (end > first && row[end - 1] == 0.0f)
+        while (end > first && zero_column(end - 1))
             --end;
         offset[j] = flat.size();
-        flat.insert(flat.end(), row.begin() + first, row.begin() + end);
+        for (std::uint32_t b = 0; b < bands; ++b)
+            flat.insert(flat.end(), row.begin() + b * width + first, row.begin() + b * width + end);
         p.near_column_begin[j] = static_cast<std::int32_t>(lo + std::int64_t(first));
         p.near_column_count[j] = static_cast<std::uint32_t>(end - first);
         p.near_column_taps = std::max(p.near_column_taps, p.near_column_count[j]);
     }
-    p.near_column_weight.assign(std::size_t(beams) * p.near_column_taps, 0.0f);
-    for (std::uint32_t j = 0; j < beams; ++j)
-        std::copy(flat.begin() + offset[j], flat.begin() + offset[j] + p.near_column_count[j],
-                  p.near_column_weight.begin() + std::size_t(j) * p.near_column_taps);
+    const std::size_t taps = p.near_column_taps;
+    p.near_column_weight.assign(std::size_t(bands) * beams * taps, 0.0f);
+    for (std::uint32_t b = 0; b < bands; ++b)
+        for (std::uint32_t j = 0; j < beams; ++j) {
+            const std::size_t count = p.near_column_count[j];
+            const auto from = flat.begin() + std::ptrdiff_t(offset[j] + b * count);
+            std::copy(from, from + std::ptrdiff_t(count),
+                      p.near_column_weight.begin() + std::ptrdiff_t((std::size_t(b) * beams + j) * taps));
+        }
 }
 
 } // namespace
@@ -482,7 +526,10 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
     p.near_column_weight.clear();
     p.near_column_begin.clear();
     p.near_column_count.clear();
-    if (!p.effects.horizontal_pattern) return {};
+    if (!p.effects.horizontal_pattern) {
+        reset_focus_bands(p);
+        return {};
+    }
     if (half_taps == 0) {
         plan_near_columns(p, reach_units, 0.0, true);
         return {};
@@ -500,15 +547,24 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
         if (gap > 0.0) min_column_spacing = std::min(min_column_spacing, gap);
     }
     const double widest = std::min<double>(p.profile_columns, 2.0 * reach_units / min_column_spacing + 2.0);
-    const double table_bytes = 4.0 * p.beams * widest;
+    const double table_bytes = 4.0 * p.beams * widest * p.near_bands;
     if (table_bytes > 1073741824.0)
         return make_error(ErrorCode::invalid_argument,
                           "config: the side-lobe kernel's column table would hold " +
                               std::to_string(static_cast<long long>(table_bytes / 1048576.0)) + " MiB (" +
                               std::to_string(p.beams) + " beams x up to " +
-                              std::to_string(static_cast<long long>(widest)) +
-                              " profile columns each); lower accuracy.sidelobe_kernel_beamwidths or beams");
+                              std::to_string(static_cast<long long>(widest)) + " profile columns each" +
+                              (p.near_bands > 1 ? ", in " + std::to_string(p.near_bands) + " focus bands" : "") +
+                              "); lower accuracy.sidelobe_kernel_beamwidths or beams");
     plan_near_columns(p, reach_units, offset_cut, false);
+    if (p.near_band_phase.back() > 0.0) // meta.json and Frame::effects say how far out of focus it goes
+        for (EffectState& state : p.effects.states)
+            if (state.name == "horizontal_pattern")
+                state.why += "; focused " +
+                             (p.config.beam_focus == BeamFocus::fixed ? "at " + fmt(p.config.focus_range_m) + " m"
+                                                                      : std::string("at infinity")) +
+                             ": " + std::to_string(p.near_bands) + " focus bands, defocus up to " +
+                             fmt(p.near_band_phase.back()) + " rad";
     return {};
 }
 

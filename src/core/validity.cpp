@@ -79,7 +79,9 @@ ModelValidity far_field(const SonarConfig& c) {
     const double lambda = c.sound_speed_mps / c.frequency_hz;
     double aperture = 0.0;
     const char* which = "horizontal_beamwidth";
-    if (c.effects.horizontal_pattern != EffectMode::off)
+    // With beam_focus fixed or none the horizontal pattern is the aperture's at each range (plan_focus.cpp):
+    // only the vertical aperture is left to the far-field rule.
+    if (c.effects.horizontal_pattern != EffectMode::off && c.beam_focus == BeamFocus::dynamic)
         aperture = 0.886 * lambda / (c.horizontal_beamwidth_deg * kDegToRad);
     if (c.effects.vertical_pattern != EffectMode::off) {
         const double vertical = 0.886 * lambda / (c.vfov_deg * kDegToRad);
@@ -98,7 +100,10 @@ ModelValidity far_field(const SonarConfig& c) {
                     "none"};
     if (!v.ok)
         v.action = "uses the far-field pattern at every range: nearer than " + fmt(distance) +
-                   " m an unfocused array's beam is wider than modelled (a focusing or lens sonar's is not)";
+                   " m an unfocused array's beam is wider than modelled (a focusing or lens sonar's is not)" +
+                   std::string(std::string(which) == "horizontal_beamwidth"
+                                   ? "; set beam_focus none (unfocused) or fixed with focus_range (a lens) to model it"
+                                   : "");
     return v;
 }
 

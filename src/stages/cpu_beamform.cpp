@@ -381,7 +381,8 @@ std::size_t far_beam_count(const Plan& plan) {
 constexpr std::uint32_t kNearGroup = 8;
 
 std::size_t near_group_count(const Plan& plan) {
-    if (!plan.effects.horizontal_pattern || plan.near_column_begin.empty() ||
+    // Focus bands (Plan::near_bands) weigh each bin by its own band: the loop over beams below.
+    if (!plan.effects.horizontal_pattern || plan.near_column_begin.empty() || plan.near_bands > 1 ||
         plan.config.cpu_vector_loops == CpuVectorLoops::off)
         return 0;
     return (plan.beams + kNearGroup - 1) / kNearGroup;
@@ -565,17 +566,22 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
         }
         // Each beam's rows side by side: kFarRows independent sums, each over the beam's columns in
         // increasing order (the profiles rounded to float first: the values they hold).
+        // With focus bands each bin reads its own band's weights (Plan::near_band_of_bin).
+        const std::size_t band_stride = std::size_t(beams) * taps;
+        std::size_t band_offset[kFarRows] = {};
+        for (std::uint32_t r = 0; r < rows && plan.near_bands > 1; ++r)
+            band_offset[r] = plan.near_band_of_bin[k0 + r] * band_stride;
         for (std::uint32_t j = 0; j < beams; ++j) {
             Real sum[kFarRows] = {};
             const float* w = plan.near_column_weight.data() + std::size_t(j) * taps;
             for (std::uint32_t t = 0; t < plan.near_column_count[j]; ++t) {
-                const Real wt = static_cast<Real>(w[t]);
                 const Real* column =
                     acc +
                     std::size_t(wrap_column(std::int64_t(plan.near_column_begin[j]) + t, columns, plan.circular)) * T +
                     k0;
                 for (std::uint32_t r = 0; r < rows; ++r)
-                    sum[r] += wt * static_cast<Real>(static_cast<float>(column[r]));
+                    sum[r] +=
+                        static_cast<Real>(w[band_offset[r] + t]) * static_cast<Real>(static_cast<float>(column[r]));
             }
             for (std::uint32_t r = 0; r < rows; ++r)
                 out[std::size_t(r) * beams + j] =

@@ -157,13 +157,15 @@ struct SidelobeSpecialization {
     std::uint32_t weight_vec4s = 1;
     std::uint32_t far_sidelobes = 0; // Plan::far_cells > 0
     std::uint32_t far_table_vec4s = 1;
-    std::array<SpecConstant, 6> constants() const {
+    std::uint32_t near_bands = 1; // Plan::near_bands
+    std::array<SpecConstant, 7> constants() const {
         return {{{shared::kSpecPerInvocation, beams_per_invocation},
                  {shared::kSpecVec4Out, vec4_out},
                  {shared::kSpecUniformTables, uniform_tables},
                  {shared::kSpecTableVec4s0, weight_vec4s},
                  {shared::kSpecFarSidelobes, far_sidelobes},
-                 {shared::kSpecTableVec4s1, far_table_vec4s}}};
+                 {shared::kSpecTableVec4s1, far_table_vec4s},
+                 {shared::kSpecNearBands, near_bands}}};
     }
 };
 struct FarSidelobeSpecialization {

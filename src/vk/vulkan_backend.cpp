@@ -401,6 +401,9 @@ Result<VulkanBackend::TableViews> VulkanBackend::upload_tables() {
     }
     for (std::uint32_t j = 0; j < plan_.beams && near_kernel; ++j)
         sidelobe_table.push_back(static_cast<float>(plan_.near_column_begin[j]));
+    if (near_kernel && plan_.near_bands > 1) // each bin's focus band, the padding bins band 0
+        for (std::uint32_t k = 0; k < gpu_params_.bins_padded; ++k)
+            sidelobe_table.push_back(k < plan_.bins ? static_cast<float>(plan_.near_band_of_bin[k]) : 0.0f);
     const std::uint32_t sidelobe_vec4s = uniform_vec4s(bytes_of(sidelobe_table));
     // The far side lobes' table, as far_sidelobe.comp and sidelobe.comp read it: beam cells (read back),
     // column cells (deposit), cell spans of columns, weights.
@@ -623,6 +626,7 @@ Result<void> VulkanBackend::create_compute_pipelines(const TableViews& views) {
         sidelobe.uniform_tables = both_uniform(sidelobe_vec4s, far_table_vec4s);
         sidelobe.weight_vec4s = sidelobe.uniform_tables ? sidelobe_vec4s : 1u;
         sidelobe.far_sidelobes = far_sidelobes_ ? 1u : 0u;
+        sidelobe.near_bands = plan_.near_bands;
         sidelobe.far_table_vec4s = sidelobe.uniform_tables ? far_table_vec4s : 1u;
         if (auto r = make(sidelobe_pipeline_, sidelobe_comp_spv, sizeof(sidelobe_comp_spv), sidelobe.constants()); !r)
             return r;

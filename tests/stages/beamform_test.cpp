@@ -739,6 +739,13 @@ TEST(BeamformGpuCpuParts, EachPartMatchesOnTheSameInput) {
              c.sidelobe_kernel_beamwidths = 0.5;
              c.far_sidelobe_cell = 0.2;
          }},
+        // beam_focus none: every bin reads its focus band's weights (a lane at a time on the GPU, the loop
+        // over beams on the CPU), 40 bands over 0.5-8 m, the kernel 2 phi + 3 pi wide.
+        {"focus bands (an unfocused array)",
+         [](SonarConfig& c) {
+             c.beam_focus = BeamFocus::none;
+             c.range_max_m = 8.0;
+         }},
         {"the pattern forced on with no kernel (the tent's weights)",
          [](SonarConfig& c) {
              c.beams = 65;
@@ -754,6 +761,9 @@ TEST(BeamformGpuCpuParts, EachPartMatchesOnTheSameInput) {
         ASSERT_TRUE(p) << what;
         if (std::strstr(what, "256 cells") != nullptr) {
             EXPECT_EQ(renderer_plan(p->gpu->renderer).far_cells, shared::kMaxFarCells);
+        }
+        if (std::strstr(what, "focus") != nullptr) {
+            EXPECT_GT(renderer_plan(p->gpu->renderer).near_bands, 10u);
         }
         expect_beamform_agrees(beamform_errors(p->gpu->frame, renderer_plan(p->gpu->renderer), what), what);
     }

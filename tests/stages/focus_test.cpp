@@ -1,0 +1,189 @@
+// The horizontal pattern out of focus (docs/pipeline.md, "Focus"; src/core/plan_focus.cpp): beam_focus none
+// or fixed defocuses the aperture by the quadratic phase phi = pi L^2 / (4 lambda) |1/r - 1/F| (cos^2 of a
+// line array's steering angle) that a beam not focused at the echo's range leaves across it. The references
+// here integrate the aperture themselves (Simpson, in double) from the beamwidth alone.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <cstdint>
+#include <cstdio>
+#include <vector>
+
+#include "cpu_stage_support.h"
+#include "test_support.h"
+
+namespace vksonar {
+namespace {
+
+using namespace stage_testing;
+
+// |A(x, phi)|^2 of a uniform (hann: raised-cosine) aperture over s in [-1, 1], normalised to 1 at
+// x = phi = 0: composite Simpson on 2000 panels. The phase turns at most x + 2 phi < 60 rad over the
+// aperture here, 0.06 rad a panel: Simpson's error is below 1e-7 of the peak.
+double aperture_power(bool hann, double x, double phi) {
+    const int n = 2000;
+    const double h = 2.0 / n;
+    std::complex<double> sum = 0.0;
+    double norm = 0.0;
+    for (int i = 0; i <= n; ++i) {
+        const double s = -1.0 + i * h;
+        const double w =
+            (i == 0 || i == n ? 1.0 : (i % 2 == 1 ? 4.0 : 2.0)) * (hann ? 0.5 * (1.0 + std::cos(kPi * s)) : 1.0);
+        sum += w * std::polar(1.0, x * s - phi * s * s);
+        norm += w;
+    }
+    return std::norm(sum / norm);
+}
+
+// The x at which the far-field power pattern is one half (the -3 dB beamwidth's half), by bisection.
+double half_power_x(bool hann) {
+    double lo = 0.5, hi = 3.5;
+    for (int i = 0; i < 200; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        (aperture_power(hann, mid, 0.0) > 0.5 ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+struct FocusCase {
+    const char* name;
+    BeamGeometry geometry;
+    BeamPattern pattern;
+    BeamFocus focus;
+    double focus_range_m;
+};
+
+// A unit impulse in single profile columns (near broadside and near 40 deg) at bins across the range
+// window, every beam within the kernel's reach against the aperture's defocused pattern at the bin's own
+// range (no far grid: the kernel carries the whole pattern).
+// - Against the pattern at the bin's band's phase (Plan::near_band_phase): the table's rows (linear between
+//   rows 0.02 rad apart) and its cubic in x, then a float weight. Measured at most 1.2e-5 of the peak (the
+//   nearest row alone gave 2.5e-3); 5e-5 allowed.
+// - Against the pattern at the bin's own phase: the bands are up to half a step away (0.05 rad, or 3 %).
+//   Measured at most 0.019 of the peak, and the main lobe's energy (the sum over the beams within 2 phi + pi
+//   of the column) within 0.008 dB; 0.04 and 0.05 dB allowed.
+// - The far-field pattern is 29 to 54 dB off at the same cells (asserted above 6 dB, so the test fails with
+//   focus ignored).
+template <class Real> class CpuFocus : public ::testing::Test {};
+TYPED_TEST_SUITE(CpuFocus, Precisions);
+
+TYPED_TEST(CpuFocus, AnImpulseOutOfFocusHearsTheDefocusedAperture) {
+    using Real = TypeParam;
+    SceneBuilder b;
+    b.material(-20.0);
+    for (const FocusCase& kase :
+         {FocusCase{"line array, unfocused", BeamGeometry::line_array, BeamPattern::sinc, BeamFocus::none, 10.0},
+          FocusCase{"line array, hann, focused at 2 m", BeamGeometry::line_array, BeamPattern::hann, BeamFocus::fixed,
+                    2.0},
+          FocusCase{"planar, focused at 3 m", BeamGeometry::planar, BeamPattern::sinc, BeamFocus::fixed, 3.0}}) {
+        SonarConfig config; // the default sonar: 750 kHz, 130 x 20 deg, 512 beams of 1 deg
+        config.beam_geometry = kase.geometry;
+        config.horizontal_pattern = kase.pattern;
+        config.beam_focus = kase.focus;
+        config.focus_range_m = kase.focus_range_m;
+        config.range_min_m = 0.5;
+        config.range_max_m = 8.0;
+        config.far_sidelobe_cell = 0.0;
+        config.effects.horizontal_pattern = EffectMode::on;
+        const Plan plan = plan_for(config, b.scene);
+        ASSERT_EQ(plan.far_cells, 0u);
+        ASSERT_GT(plan.near_bands, 10u) << kase.name;
+        const bool hann = kase.pattern == BeamPattern::hann;
+        const std::uint32_t columns = plan.profile_columns, beams = plan.beams;
+        const double hbw = config.horizontal_beamwidth_deg * kDeg, half = 0.5 * config.hfov_deg * kDeg;
+        const double k = half_power_x(hann) / std::sin(0.5 * hbw);
+        const double lambda = config.sound_speed_mps / config.frequency_hz, aperture = k * lambda / kPi;
+        const double inverse_focus = kase.focus == BeamFocus::fixed ? 1.0 / kase.focus_range_m : 0.0;
+        auto own_phase = [&](std::uint32_t bin) {
+            const double r = config.range_min_m + (bin + 0.5) * (config.range_max_m - config.range_min_m) / plan.bins;
+            return kPi * aperture * aperture / (4.0 * lambda) * std::abs(1.0 / r - inverse_focus);
+        };
+        auto beam_angle = [&](std::uint32_t j) { return (1.0 - (2.0 * j + 1.0) / beams) * half; };
+        auto column_angle = [&](std::uint32_t c) {
+            if (plan.line_array) return (1.0 - (2.0 * c + 1.0) / columns) * half;
+            return plan.column_azimuth_rad[c]; // planar: the pixel grid's own azimuths (checked elsewhere)
+        };
+        // x of column c at beam j, and the share of phi there (cos^2 of a line array's steering angle);
+        // planar beams hear nothing from 90 deg on.
+        auto x_and_share = [&](std::uint32_t c, std::uint32_t j, double& share) {
+            share = plan.line_array ? std::cos(beam_angle(j)) * std::cos(beam_angle(j)) : 1.0;
+            return k * (plan.line_array ? std::sin(column_angle(c)) - std::sin(beam_angle(j))
+                                        : std::sin(column_angle(c) - beam_angle(j)));
+        };
+        // Impulses: one column near each steering angle, at every 9th bin (they do not share a bin).
+        std::vector<std::uint32_t> impulse_columns;
+        for (double steer_deg : {0.1, 39.5}) {
+            std::uint32_t best = 0;
+            for (std::uint32_t c = 0; c < columns; ++c)
+                if (std::abs(column_angle(c) - steer_deg * kDeg) < std::abs(column_angle(best) - steer_deg * kDeg))
+                    best = c;
+            impulse_columns.push_back(best);
+        }
+        const std::size_t T = cpu::profile_column_stride(plan);
+        std::vector<Real> acc(cpu::beamform_accumulator_count(plan), Real(0));
+        std::vector<std::pair<std::uint32_t, std::uint32_t>> impulses; // (column, bin)
+        for (std::uint32_t bin = 3; bin < plan.bins; bin += 9) {
+            const std::uint32_t c = impulse_columns[impulses.size() % impulse_columns.size()];
+            acc[c * T + bin] = Real(1);
+            impulses.emplace_back(c, bin);
+        }
+        std::vector<Real> weights(std::max<std::size_t>(cpu::resample_weight_count(plan), 1));
+        cpu::resample_weights<Real>(plan, weights.data());
+        std::vector<float> beam_profiles(std::size_t(plan.bins) * beams), polar(std::size_t(plan.bins) * beams);
+        cpu::beamform_beams<Real>(plan, acc.data(), weights.data(), beam_profiles.data(), polar.data(), 0, plan.bins);
+
+        double worst_band = 0, worst_own = 0, worst_lobe_db = 0, worst_far_field_db = 0;
+        std::size_t checked = 0;
+        for (const auto& [c, bin] : impulses) {
+            const double band_phase = plan.near_band_phase[plan.near_band_of_bin[bin]];
+            const double phase = own_phase(bin);
+            ASSERT_LE(std::abs(band_phase - phase), std::max(0.05, 0.031 * phase) + 1e-9)
+                << kase.name << " bin " << bin;
+            double got_lobe = 0, own_lobe = 0;
+            for (std::uint32_t j = 0; j < beams; ++j) {
+                double share = 1.0;
+                const double x = x_and_share(c, j, share);
+                const double got = polar[std::size_t(bin) * beams + j];
+                if (!plan.line_array && std::abs(column_angle(c) - beam_angle(j)) >= 0.5 * kPi) {
+                    ASSERT_EQ(got, 0.0);
+                    continue;
+                }
+                // Within the kernel's reach in x: 2 phi + 3 pi of the most defocused band, and at least the
+                // configured reach; beyond it nothing (no far grid here).
+                const std::int64_t begin = plan.near_column_begin[j];
+                const bool in_kernel = std::int64_t(c) >= begin && std::int64_t(c) < begin + plan.near_column_count[j];
+                if (!in_kernel) {
+                    ASSERT_EQ(got, 0.0) << kase.name;
+                    continue;
+                }
+                const double at_band = aperture_power(hann, x, band_phase * share);
+                const double at_own = aperture_power(hann, x, phase * share);
+                worst_band = std::max(worst_band, std::abs(got - at_band));
+                worst_own = std::max(worst_own, std::abs(got - at_own));
+                if (std::abs(x) <= 2.0 * phase * share + kPi) {
+                    got_lobe += got;
+                    own_lobe += at_own;
+                    const double far_field = aperture_power(hann, x, 0.0);
+                    if (at_own > 0.1)
+                        worst_far_field_db =
+                            std::max(worst_far_field_db, std::abs(::vksonar::testing::to_db(far_field / at_own)));
+                }
+                ++checked;
+            }
+            worst_lobe_db = std::max(worst_lobe_db, std::abs(::vksonar::testing::to_db(got_lobe / own_lobe)));
+        }
+        std::printf("[focus] %-34s %u bands, %zu cells: worst %.2g of the peak at the band's phase, %.2g at the "
+                    "bin's own; main lobe energy within %.3f dB; the far-field pattern %.1f dB off\n",
+                    kase.name, plan.near_bands, checked, worst_band, worst_own, worst_lobe_db, worst_far_field_db);
+        EXPECT_GT(checked, 1000u) << kase.name;
+        EXPECT_LE(worst_band, 5e-5) << kase.name;
+        EXPECT_LE(worst_own, 0.04) << kase.name;
+        EXPECT_LE(worst_lobe_db, 0.05) << kase.name;
+        EXPECT_GT(worst_far_field_db, 6.0) << kase.name;
+    }
+}
+
+} // namespace
+} // namespace vksonar
