@@ -381,8 +381,7 @@ std::size_t far_beam_count(const Plan& plan) {
 constexpr std::uint32_t kNearGroup = 8;
 
 std::size_t near_group_count(const Plan& plan) {
-    // Focus bands (Plan::near_bands) weigh each bin by its own band: the loop over beams below.
-    if (!plan.effects.horizontal_pattern || plan.near_column_begin.empty() || plan.near_bands > 1 ||
+    if (!plan.effects.horizontal_pattern || plan.near_column_begin.empty() ||
         plan.config.cpu_vector_loops == CpuVectorLoops::off)
         return 0;
     return (plan.beams + kNearGroup - 1) / kNearGroup;
@@ -416,9 +415,10 @@ inline std::uint32_t wrap_column(std::int64_t c, std::uint32_t columns, bool cir
 
 } // namespace
 
+// With focus bands (Plan::near_bands) every band has its groups, one band after another.
 std::size_t resample_weight_count(const Plan& plan) {
     return column_weight_count(plan) + far_beam_count(plan) +
-           near_group_count(plan) * near_group_stride(near_group_taps(plan));
+           std::size_t(plan.near_bands) * near_group_count(plan) * near_group_stride(near_group_taps(plan));
 }
 
 template <class Real> void resample_weights(const Plan& plan, Real* weights) {
@@ -451,22 +451,25 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     }
     weights += far_beam_count(plan);
     const std::uint32_t group_taps = near_group_taps(plan);
-    for (std::size_t g = 0; g < near_group_count(plan); ++g) {
-        const NearColumnSpan span = near_group_span(plan, g);
-        *weights++ = static_cast<Real>(span.first);
-        *weights++ = static_cast<Real>(span.count);
-        for (std::uint32_t t = 0; t < group_taps; ++t)
-            for (std::uint32_t l = 0; l < kNearGroup; ++l) {
-                const std::size_t j = g * kNearGroup + l;
-                Real w = Real(0);
-                if (j < plan.beams && t < span.count) {
-                    const std::int64_t own = span.first + t - plan.near_column_begin[j]; // the beam's own tap
-                    if (own >= 0 && own < std::int64_t(plan.near_column_count[j]))
-                        w = static_cast<Real>(plan.near_column_weight[j * plan.near_column_taps + std::size_t(own)]);
+    for (std::uint32_t band = 0; band < plan.near_bands; ++band)
+        for (std::size_t g = 0; g < near_group_count(plan); ++g) {
+            const NearColumnSpan span = near_group_span(plan, g);
+            *weights++ = static_cast<Real>(span.first);
+            *weights++ = static_cast<Real>(span.count);
+            const float* band_weights =
+                plan.near_column_weight.data() + std::size_t(band) * plan.beams * plan.near_column_taps;
+            for (std::uint32_t t = 0; t < group_taps; ++t)
+                for (std::uint32_t l = 0; l < kNearGroup; ++l) {
+                    const std::size_t j = g * kNearGroup + l;
+                    Real w = Real(0);
+                    if (j < plan.beams && t < span.count) {
+                        const std::int64_t own = span.first + t - plan.near_column_begin[j]; // the beam's own tap
+                        if (own >= 0 && own < std::int64_t(plan.near_column_count[j]))
+                            w = static_cast<Real>(band_weights[j * plan.near_column_taps + std::size_t(own)]);
+                    }
+                    *weights++ = w;
                 }
-                *weights++ = w;
-            }
-    }
+        }
 }
 
 namespace {
@@ -545,12 +548,18 @@ void beamform_beams(const Plan& plan, const Real* acc, const Real* resample_w, f
         }
         far_first = k0;
         if (cells > 0) far_sidelobe_rows<Real>(plan, far_column, acc, k0, rows, far);
+        // The AVX2 groups take eight bins of one focus band (the loop over beams below mixes bands).
+        // (a fixed focus's bands are not monotonic in range: every bin is looked at).
+        const std::uint32_t band = plan.near_bands > 1 ? plan.near_band_of_bin[k0] : 0;
+        bool one_band = true;
+        for (std::uint32_t r = 1; r < rows && plan.near_bands > 1; ++r)
+            one_band = one_band && plan.near_band_of_bin[k0 + r] == band;
         if constexpr (std::is_same_v<Real, float>) {
-            if (avx2 && rows == kFarRows) {
+            if (avx2 && rows == kFarRows && one_band) {
                 if (cells > 0) far_values_into_rows(far_beam, far.level.data(), channels, cells, beams, rows, out);
                 for (std::size_t g = 0; g < groups; ++g) {
                     float sums[8][8];
-                    const float* group = group_weights + g * near_group_stride(group_taps);
+                    const float* group = group_weights + (band * groups + g) * near_group_stride(group_taps);
                     const NearColumnSpan span{static_cast<std::int64_t>(group[0]),
                                               static_cast<std::uint32_t>(group[1])};
                     near_group8(group + kNearGroupHeader, span, acc + k0, T, columns, plan.circular, sums);
