@@ -320,7 +320,7 @@ TEST(Validate, BeamFocusNeedsAKnownApertureAndThePhysicalMode) {
               "beam_focus = none: needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar knows), "
               "not gaussian");
     EXPECT_EQ(problem(R"({"beam_focus": "none", "mode": "uuv-legacy"})"),
-              "beam_focus = none: needs mode physical (the legacy modes have no horizontal pattern to blur)");
+              "beam_focus = none: needs mode physical (the legacy modes reproduce their plugins' images)");
     EXPECT_NE(problem(R"({"focus_range": 0})").find("focus_range = 0: must be in (0, 100000] m"), std::string::npos);
     EXPECT_NE(problem(R"({"beam_focus": "sharp"})").find("beam_focus"), std::string::npos);
     EXPECT_EQ(problem(R"({"beam_focus": "fixed", "horizontal_pattern": "hann", "focus_range": 3})"), "");

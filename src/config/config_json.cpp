@@ -248,18 +248,18 @@ Result<void> SonarConfig::validate() const {
 
         // A focus other than dynamic defocuses the aperture (plan_focus.cpp): it needs the aperture's
         // weighting, which sinc (uniform) and hann have; chebyshev's ideal line source ends in impulses, and
-        // box and gaussian are no aperture. The legacy modes have no horizontal pattern to blur.
+        // box and gaussian are no aperture. The legacy modes reproduce their plugins, which have no focus.
         if (c.problem.empty() && beam_focus != BeamFocus::dynamic) {
             const std::string focus =
                 std::string("beam_focus = ") + (beam_focus == BeamFocus::fixed ? "fixed" : "none");
             const char* pattern_names[] = {"box", "sinc", "hann", "gaussian", "chebyshev"};
-            if (horizontal_pattern != BeamPattern::sinc && horizontal_pattern != BeamPattern::hann)
+            if (mode != SonarMode::physical)
+                c.problem = focus + ": needs mode physical (the legacy modes reproduce their plugins' images)";
+            else if (horizontal_pattern != BeamPattern::sinc && horizontal_pattern != BeamPattern::hann)
                 c.problem = focus +
                             ": needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar "
                             "knows), not " +
                             pattern_names[static_cast<int>(horizontal_pattern)];
-            else if (mode != SonarMode::physical)
-                c.problem = focus + ": needs mode physical (the legacy modes have no horizontal pattern to blur)";
         }
         // The uuv plugin projects one pinhole depth image; a sliced depth pass has no single focal length.
         if (c.problem.empty() && mode == SonarMode::uuv_legacy)

@@ -347,10 +347,6 @@ std::uint32_t plan_effects(Plan& p, const SceneData& scene, bool any_angle_depen
                         " dB display window: main lobe only";
         }
     }
-    // Out of focus the main lobe spreads over x = +-2 phi (plan_focus.cpp): the kernel reaches past it
-    // (the far grid beyond carries the far-field lobes, which the defocused ones approach out there).
-    if (const double focus_units = focus_reach_units(p); focus_units > 0.0)
-        reach = std::max(reach, std::asin(std::min(focus_units, 1.0)));
     std::uint32_t half_taps = 0;
     p.circular = c.hfov_deg >= 360.0 && p.beams > 1;
     if (p.beams > 1) {
@@ -490,7 +486,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     plan_range_window(p);
     plan_clip_planes(p);
     plan_horizontal_pattern(p);
-    plan_focus_bands(p);
+    if (auto bands = plan_focus_bands(p); !bands) return bands.error();
     bool any_angle_dependent = false;
     if (auto materials = plan_materials(p, scene, any_angle_dependent); !materials) return materials.error();
     double reach = 0.0;

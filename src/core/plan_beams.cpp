@@ -412,7 +412,8 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
     if (tent) reset_focus_bands(p); // the tent is no pattern to defocus
     const std::uint32_t bands = p.near_bands;
     std::unique_ptr<DefocusedPattern> defocused;
-    if (p.near_band_phase.back() > 0.0)
+    const bool out_of_focus = p.near_band_phase.back() > 0.0; // else one band of the far-field pattern
+    if (out_of_focus)
         defocused =
             std::make_unique<DefocusedPattern>(shader_id(p.config.horizontal_pattern), p.near_band_phase.back());
     p.near_column_begin.assign(beams, 0);
@@ -452,10 +453,25 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             double d = std::abs(p.column_beam[wrapped] + (1.0 - p.column_weight[wrapped]) - j);
             return p.circular ? std::min(d, beams - d) : d;
         };
+        // Out of focus a band keeps its own pattern out to focus_reach_x of its phase (plan_focus.h), past the
+        // configured reach where that is further; the far grid's far-field lobes take over beyond.
+        auto x_of = [&](double sep) {
+            return p.hpattern_k * (p.line_array ? std::abs(sep) : std::sin(std::min(std::abs(sep), 0.5 * kPi)));
+        };
+        const double steering = p.line_array ? std::cos(p.beam_angle_rad[j]) : 1.0;
+        auto band_reach_x = [&](std::uint32_t b) {
+            return out_of_focus ? focus_reach_x(p.near_band_phase[b] * steering * steering) : 0.0;
+        };
+        const double widest_x = tent ? 0.0 : band_reach_x(bands - 1); // the bands' phases increase
+        auto in_configured = [&](std::int64_t c, double d) {
+            return std::abs(separation(c)) <= reach_units + 1e-12 && d <= offset_cut;
+        };
         auto in_kernel = [&](std::int64_t c) {
             const double d = beams_away(c);
             if (d < 0.0) return false;
-            return tent ? d < 1.0 : std::abs(separation(c)) <= reach_units + 1e-12 && d <= offset_cut;
+            if (tent) return d < 1.0;
+            const double sep = separation(c);
+            return in_configured(c, d) || (x_of(sep) <= widest_x && (p.line_array || std::abs(sep) < 0.5 * kPi));
         };
         const bool any = in_kernel(lo);
         auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
@@ -474,9 +490,11 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             // The pattern less what the far grid already gives this column at this beam: within the reach
             // the two add up to the pattern exactly, whatever the grid's cells make of it.
             const double far = p.far_cells > 0 ? far_grid_weight(p, wrap(c), j) : 0.0;
+            const bool configured = in_configured(c, beams_away(c));
             for (std::uint32_t b = 0; b < bands; ++b)
-                row[b * width + std::size_t(c - lo)] =
-                    static_cast<float>(pattern_in_band(p, defocused.get(), b, j, separation(c)) - far);
+                if (configured || x_of(separation(c)) <= band_reach_x(b))
+                    row[b * width + std::size_t(c - lo)] =
+                        static_cast<float>(pattern_in_band(p, defocused.get(), b, j, separation(c)) - far);
         }
         // Zero weights at both ends of every band are left out.
         auto zero_column = [&](std::size_t i) {
@@ -546,16 +564,21 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
         const double gap = column_position(p, c - 1) - column_position(p, c);
         if (gap > 0.0) min_column_spacing = std::min(min_column_spacing, gap);
     }
-    const double widest = std::min<double>(p.profile_columns, 2.0 * reach_units / min_column_spacing + 2.0);
+    // Out of focus the most defocused band reaches further (plan_focus.h focus_reach_x).
+    const double focus_units =
+        p.near_band_phase.back() > 0.0 ? std::min(focus_reach_x(p.near_band_phase.back()) / p.hpattern_k, 1.0) : 0.0;
+    const double kernel_units = std::max(reach_units, p.line_array ? focus_units : std::asin(focus_units));
+    const double widest = std::min<double>(p.profile_columns, 2.0 * kernel_units / min_column_spacing + 2.0);
     const double table_bytes = 4.0 * p.beams * widest * p.near_bands;
     if (table_bytes > 1073741824.0)
-        return make_error(ErrorCode::invalid_argument,
-                          "config: the side-lobe kernel's column table would hold " +
-                              std::to_string(static_cast<long long>(table_bytes / 1048576.0)) + " MiB (" +
-                              std::to_string(p.beams) + " beams x up to " +
-                              std::to_string(static_cast<long long>(widest)) + " profile columns each" +
-                              (p.near_bands > 1 ? ", in " + std::to_string(p.near_bands) + " focus bands" : "") +
-                              "); lower accuracy.sidelobe_kernel_beamwidths or beams");
+        return make_error(
+            ErrorCode::invalid_argument,
+            "config: the side-lobe kernel's column table would hold " +
+                std::to_string(static_cast<long long>(table_bytes / 1048576.0)) + " MiB (" + std::to_string(p.beams) +
+                " beams x up to " + std::to_string(static_cast<long long>(widest)) + " profile columns each" +
+                (p.near_bands > 1 ? ", in " + std::to_string(p.near_bands) + " focus bands" : "") + "); " +
+                (p.near_bands > 1 ? "raise range_min, or move focus_range into the range window"
+                                  : "lower accuracy.sidelobe_kernel_beamwidths or beams"));
     plan_near_columns(p, reach_units, offset_cut, false);
     if (p.near_band_phase.back() > 0.0) // meta.json and Frame::effects say how far out of focus it goes
         for (EffectState& state : p.effects.states)

@@ -12,6 +12,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
+#include <string>
 
 #include "core/angles.h"
 #include "core/plan_steps.h"
@@ -67,19 +69,34 @@ double focus_phase_per_inverse_metre(const Plan& p) {
     return kPi * aperture * aperture / (4.0 * lambda);
 }
 
-void plan_focus_bands(Plan& p) {
+Result<void> plan_focus_bands(Plan& p) {
     p.near_bands = 1;
     p.near_band_of_bin.assign(p.bins, 0);
     p.near_band_phase.assign(1, 0.0);
     const SonarConfig& c = p.config;
-    if (c.beam_focus == BeamFocus::dynamic || p.bins == 0) return;
+    if (c.beam_focus == BeamFocus::dynamic || p.bins == 0) return {};
     const double scale = focus_phase_per_inverse_metre(p);
     const double inverse_focus = c.beam_focus == BeamFocus::fixed ? 1.0 / c.focus_range_m : 0.0;
     std::vector<double> phase(p.bins);
-    double phase_max = 0.0;
+    double phase_max = 0.0, worst_range = 0.0;
     for (std::uint32_t k = 0; k < p.bins; ++k) {
         phase[k] = scale * std::abs(1.0 / p.bin_range_m[k] - inverse_focus);
-        phase_max = std::max(phase_max, phase[k]);
+        if (!(phase[k] <= phase_max)) { // NaN and infinity too
+            phase_max = phase[k];
+            worst_range = p.bin_range_m[k];
+        }
+    }
+    if (!(phase_max <= kMaxFocusPhase)) {
+        const bool fixed = c.beam_focus == BeamFocus::fixed;
+        return make_error(ErrorCode::invalid_argument,
+                          std::string("config: beam_focus = ") + (fixed ? "fixed" : "none") +
+                              ": the defocus phase pi L^2 / (4 lambda) |1/r - 1/F| reaches " + fmt(phase_max) +
+                              " rad at r = " + fmt(worst_range) +
+                              " m (L = " + fmt(p.hpattern_k * c.sound_speed_mps / c.frequency_hz / kPi) + " m" +
+                              (fixed ? ", focus_range = " + fmt(c.focus_range_m) + " m" : std::string()) +
+                              "), past the " + fmt(kMaxFocusPhase) + " rad vksonar tabulates: " +
+                              (fixed ? "keep the range window nearer focus_range, or set focus_range further"
+                                     : "raise range_min to " + fmt(scale / kMaxFocusPhase) + " m"));
     }
     std::vector<double> ladder{0.0};
     while (ladder.back() < phase_max)
@@ -103,19 +120,27 @@ void plan_focus_bands(Plan& p) {
     p.near_bands = static_cast<std::uint32_t>(p.near_band_phase.size());
     for (std::uint32_t k = 0; k < p.bins; ++k)
         p.near_band_of_bin[k] = band_of_rung[rung[k]];
+    return {};
 }
 
-double focus_reach_units(const Plan& p) {
-    const double phase_max = p.near_band_phase.empty() ? 0.0 : p.near_band_phase.back();
-    if (phase_max <= 0.0) return 0.0;
-    return (2.0 * phase_max + 3.0 * kPi) / p.hpattern_k;
+double focus_reach_x(double phase) {
+    return kTailPhases * phase + 3.0 * kPi;
+}
+
+double DefocusedPattern::row_phase(std::uint32_t row) {
+    return row <= kLinearRows ? row * kRowStep : kLinearRows * kRowStep * std::pow(kRowRatio, row - kLinearRows);
+}
+
+double DefocusedPattern::row_at(double phi) {
+    if (phi <= kLinearRows * kRowStep) return phi / kRowStep;
+    return kLinearRows + std::log(phi / (kLinearRows * kRowStep)) / std::log(kRowRatio);
 }
 
 DefocusedPattern::DefocusedPattern(std::uint32_t shape, double phi_max) : shape_(shape) {
     phi_max = std::max(phi_max, 0.0);
     x_max_ = 2.0 * phi_max + kTail;
-    rows_ = static_cast<std::uint32_t>(std::ceil(phi_max / kRowStep)) + 2; // at least two
-    samples_ = static_cast<std::uint32_t>(std::ceil(x_max_ / kXStep)) + 3;
+    rows_ = static_cast<std::uint32_t>(std::ceil(row_at(phi_max))) + 2; // at least two
+    samples_ = static_cast<std::uint32_t>(std::ceil(x_max_ / kXStep)) + 4;
     // exp(i (x s - phi s^2)) turns through at most x_max + 2 phi_max radians over [0, 1]: Gauss-Legendre
     // with 0.7 nodes a radian and 24 more is exact to rounding there.
     const auto nodes = static_cast<std::uint32_t>(std::ceil(0.7 * (x_max_ + 2.0 * phi_max))) + 24;
@@ -135,7 +160,7 @@ DefocusedPattern::DefocusedPattern(std::uint32_t shape, double phi_max) : shape_
     table_.resize(std::size_t(rows_) * samples_);
     std::vector<double> re(nodes), im(nodes);
     for (std::uint32_t row = 0; row < rows_; ++row) {
-        const double phi = row * kRowStep;
+        const double phi = row_phase(row);
         for (std::uint32_t n = 0; n < nodes; ++n) {
             re[n] = w[n] / norm * std::cos(phi * s[n] * s[n]);
             im[n] = -w[n] / norm * std::sin(phi * s[n] * s[n]);
@@ -157,17 +182,25 @@ double DefocusedPattern::power(double x, double phi) const {
     phi = std::max(phi, 0.0);
     if (x >= x_max_) {
         if (shape_ != shared::kPatternSinc) return far_field_power(shape_, x);
-        // The two ends' waves (integration by parts, the next term 2 phi / (x - 2 phi)^2 of these):
-        // |A|^2 = (1/a^2 + 1/b^2 - 2 cos 2x / (a b)) / 4, a = x - 2 phi, b = x + 2 phi; sin^2 x / x^2 at phi = 0.
-        const double a = x - 2.0 * phi, b = x + 2.0 * phi;
-        return 0.25 * (1.0 / (a * a) + 1.0 / (b * b) - 2.0 * std::cos(2.0 * x) / (a * b));
+        // Past the geometric shadow (x - 2 phi >= kTail) the aperture's two ends alone, by parts:
+        // int e^{i psi} ds = [e^{i psi} (-i/p + 2 phi/p^3 + 12 i phi^2/p^5 - 120 phi^3/p^7)] at s = +-1, with
+        // psi = x s - phi s^2 and p = psi' = x - 2 phi s; each term (2n + 1) 2 phi / p^2 of the one before
+        // (at most 0.39 here, at 64 rad), the first left out about 1e-3 of the sum. sin x / x at phi = 0.
+        auto ends = [&](double p) {
+            const double p2 = p * p, p3 = p2 * p, p5 = p3 * p2, p7 = p5 * p2;
+            return std::complex<double>(2.0 * phi / p3 - 120.0 * phi * phi * phi / p7,
+                                        -1.0 / p + 12.0 * phi * phi / p5);
+        };
+        const std::complex<double> a =
+            0.5 * (std::polar(1.0, x - phi) * ends(x - 2.0 * phi) - std::polar(1.0, -x - phi) * ends(x + 2.0 * phi));
+        return std::norm(a);
     }
     // Linear between the two rows about phi, Catmull-Rom through four samples about x in each.
-    const double rows_at = std::min(phi / kRowStep, double(rows_ - 1));
+    const double rows_at = std::min(row_at(phi), double(rows_ - 1));
     const auto row = std::min(static_cast<std::uint32_t>(rows_at), rows_ - 2);
-    const double g = rows_at - row;
+    const double g = std::clamp((phi - row_phase(row)) / (row_phase(row + 1) - row_phase(row)), 0.0, 1.0);
     const double t = x / kXStep + 1.0;
-    const auto i = static_cast<std::uint32_t>(t);
+    const auto i = std::min(static_cast<std::uint32_t>(t), samples_ - 3); // samples i - 1 .. i + 2
     const double f = t - i;
     auto at_row = [&](std::uint32_t r) { // Catmull-Rom through v[0..3] at f between v[1] and v[2]
         const double* v = table_.data() + std::size_t(r) * samples_ + i - 1;

@@ -75,13 +75,14 @@ ModelValidity francois_garrison(const SonarConfig& c) {
 // radians) implies the aperture of a uniform line array, L = 0.886 lambda / theta; the pattern holds
 // beyond about L^2 / lambda. (theta is the two-way width: the one-way width of the same array is up to
 // sqrt(2) wider, so L and the distance are upper estimates: a warning errs on the safe side.)
-ModelValidity far_field(const SonarConfig& c) {
+// focus_modelled: beam_focus fixed or none, and a near kernel that applies it (plan_focus.cpp).
+ModelValidity far_field(const SonarConfig& c, bool focus_modelled) {
     const double lambda = c.sound_speed_mps / c.frequency_hz;
     double aperture = 0.0;
     const char* which = "horizontal_beamwidth";
     // With beam_focus fixed or none the horizontal pattern is the aperture's at each range (plan_focus.cpp):
     // only the vertical aperture is left to the far-field rule.
-    if (c.effects.horizontal_pattern != EffectMode::off && c.beam_focus == BeamFocus::dynamic)
+    if (c.effects.horizontal_pattern != EffectMode::off && !focus_modelled)
         aperture = 0.886 * lambda / (c.horizontal_beamwidth_deg * kDegToRad);
     if (c.effects.vertical_pattern != EffectMode::off) {
         const double vertical = 0.886 * lambda / (c.vfov_deg * kDegToRad);
@@ -99,11 +100,13 @@ ModelValidity far_field(const SonarConfig& c) {
                         " = " + fmt(aperture) + " m, lambda = " + fmt(lambda) + " m)",
                     "none"};
     if (!v.ok)
-        v.action = "uses the far-field pattern at every range: nearer than " + fmt(distance) +
-                   " m an unfocused array's beam is wider than modelled (a focusing or lens sonar's is not)" +
-                   std::string(std::string(which) == "horizontal_beamwidth"
-                                   ? "; set beam_focus none (unfocused) or fixed with focus_range (a lens) to model it"
-                                   : "");
+        v.action =
+            "uses the far-field pattern at every range: nearer than " + fmt(distance) +
+            " m an unfocused array's beam is wider than modelled (a focusing or lens sonar's is not)" +
+            std::string(std::string(which) == "horizontal_beamwidth" && c.mode == SonarMode::physical &&
+                                (c.horizontal_pattern == BeamPattern::sinc || c.horizontal_pattern == BeamPattern::hann)
+                            ? "; set beam_focus none (unfocused) or fixed with focus_range (a lens) to model it"
+                            : "");
     return v;
 }
 
@@ -211,7 +214,7 @@ std::vector<ModelValidity> model_validity(const SonarConfig& c, const std::vecto
     std::vector<ModelValidity> out;
     if (c.absorption_db_per_m < 0.0 && c.effects.absorption != EffectMode::off) out.push_back(francois_garrison(c));
     if (c.effects.vertical_pattern != EffectMode::off || c.effects.horizontal_pattern != EffectMode::off)
-        out.push_back(far_field(c));
+        out.push_back(far_field(c, c.beam_focus != BeamFocus::dynamic && (kernel == nullptr || kernel->per_column)));
     if (c.mode == SonarMode::physical && c.beams > 1) out.push_back(beam_sampling(c, kernel));
     if (c.vertical_pattern == BeamPattern::chebyshev && c.effects.vertical_pattern != EffectMode::off)
         out.push_back(chebyshev("vfov", c.vfov_deg, c.vertical_sidelobe_db));

@@ -450,25 +450,36 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
         }
     }
     weights += far_beam_count(plan);
+    // A focus band's columns past its own reach weigh 0 (plan_beams.cpp): its groups leave them out, so a
+    // band near focus costs what the configured reach does.
     const std::uint32_t group_taps = near_group_taps(plan);
     for (std::uint32_t band = 0; band < plan.near_bands; ++band)
         for (std::size_t g = 0; g < near_group_count(plan); ++g) {
             const NearColumnSpan span = near_group_span(plan, g);
-            *weights++ = static_cast<Real>(span.first);
-            *weights++ = static_cast<Real>(span.count);
             const float* band_weights =
                 plan.near_column_weight.data() + std::size_t(band) * plan.beams * plan.near_column_taps;
+            auto weight = [&](std::uint32_t t, std::uint32_t l) {
+                const std::size_t j = g * kNearGroup + l;
+                if (j >= plan.beams || t >= span.count) return Real(0);
+                const std::int64_t own = span.first + t - plan.near_column_begin[j]; // the beam's own tap
+                if (own < 0 || own >= std::int64_t(plan.near_column_count[j])) return Real(0);
+                return static_cast<Real>(band_weights[j * plan.near_column_taps + std::size_t(own)]);
+            };
+            auto any_weight = [&](std::uint32_t t) {
+                for (std::uint32_t l = 0; l < kNearGroup; ++l)
+                    if (weight(t, l) != Real(0)) return true;
+                return false;
+            };
+            std::uint32_t first = 0, end = span.count;
+            while (plan.near_bands > 1 && first < end && !any_weight(first))
+                ++first;
+            while (plan.near_bands > 1 && end > first && !any_weight(end - 1))
+                --end;
+            *weights++ = static_cast<Real>(span.first + std::int64_t(first));
+            *weights++ = static_cast<Real>(end - first);
             for (std::uint32_t t = 0; t < group_taps; ++t)
-                for (std::uint32_t l = 0; l < kNearGroup; ++l) {
-                    const std::size_t j = g * kNearGroup + l;
-                    Real w = Real(0);
-                    if (j < plan.beams && t < span.count) {
-                        const std::int64_t own = span.first + t - plan.near_column_begin[j]; // the beam's own tap
-                        if (own >= 0 && own < std::int64_t(plan.near_column_count[j]))
-                            w = static_cast<Real>(band_weights[j * plan.near_column_taps + std::size_t(own)]);
-                    }
-                    *weights++ = w;
-                }
+                for (std::uint32_t l = 0; l < kNearGroup; ++l)
+                    *weights++ = t < end - first ? weight(first + t, l) : Real(0);
         }
 }
 

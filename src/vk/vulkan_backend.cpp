@@ -150,15 +150,20 @@ Result<void> VulkanBackend::init() {
     }
     // The near side-lobe kernel's weights (Plan::near_column_weight): a beam's columns within the reach,
     // up to every column for a kernel across the fan.
-    const std::uint64_t near_bytes =
-        (std::uint64_t(plan_.near_column_weight.size()) + 3u * plan_.beams) * sizeof(float);
+    const std::uint64_t near_bytes = (std::uint64_t(plan_.near_column_weight.size()) + 3u * plan_.beams +
+                                      (plan_.near_bands > 1 ? bins_padded : 0u)) *
+                                     sizeof(float);
     if (near_bytes > limits.maxStorageBufferRange) {
         return make_error(ErrorCode::unsupported,
                           "vulkan backend: the side-lobe kernel's column table would hold " +
                               std::to_string(near_bytes) + " bytes (" + std::to_string(plan_.beams) + " beams x " +
-                              std::to_string(plan_.near_column_taps) + " columns), past the device's limit of " +
-                              std::to_string(limits.maxStorageBufferRange) +
-                              " bytes (lower accuracy.sidelobe_kernel_beamwidths, or use --backend cpu)");
+                              std::to_string(plan_.near_column_taps) + " columns" +
+                              (plan_.near_bands > 1 ? " x " + std::to_string(plan_.near_bands) + " focus bands" : "") +
+                              "), past the device's limit of " + std::to_string(limits.maxStorageBufferRange) +
+                              (plan_.near_bands > 1 ? " bytes (raise range_min or move focus_range into the range "
+                                                      "window, or use --backend cpu)"
+                                                    : " bytes (lower accuracy.sidelobe_kernel_beamwidths, or use "
+                                                      "--backend cpu)"));
     }
     if (auto r = create_scene_buffers(); !r) return r;
     if (auto r = create_depth_pass(); !r) return r;

@@ -740,7 +740,7 @@ TEST(BeamformGpuCpuParts, EachPartMatchesOnTheSameInput) {
              c.far_sidelobe_cell = 0.2;
          }},
         // beam_focus none: every bin reads its focus band's weights (a lane at a time on the GPU, the loop
-        // over beams on the CPU), 40 bands over 0.5-8 m, the kernel 2 phi + 3 pi wide.
+        // over beams on the CPU, the AVX2 groups over each band's own columns), 40 bands over 0.5-8 m.
         {"focus bands (an unfocused array)",
          [](SonarConfig& c) {
              c.beam_focus = BeamFocus::none;
