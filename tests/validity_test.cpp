@@ -237,7 +237,18 @@ TEST(Validity, FarFieldDistanceOfTheImpliedAperture) {
         EXPECT_TRUE(v->ok) << v->domain;
         EXPECT_NE(v->domain.find("vfov"), std::string::npos) << v->domain;
     }
+    // ... but where no near kernel applies the focus (the horizontal pattern resolved off, one beam, the
+    // tent) the plan keeps the far-field pattern, and the warning stays.
+    c.beam_focus = BeamFocus::none;
+    v = find_model(model_validity(c, {}, false, 0.0), "far_field_beam_pattern");
+    ASSERT_TRUE(v);
+    EXPECT_FALSE(v->ok);
+    EXPECT_TRUE(find_model(model_validity(c, {}, true, 0.05), "far_field_beam_pattern")->ok);
+    // The remedy is named only where it applies: not for a chebyshev pattern, nor in a legacy mode.
     c.beam_focus = BeamFocus::dynamic;
+    c.horizontal_pattern = BeamPattern::chebyshev;
+    EXPECT_EQ(find_model(model_validity(c), "far_field_beam_pattern")->action.find("beam_focus"), std::string::npos);
+    c.horizontal_pattern = BeamPattern::sinc;
     // Without beam patterns the model is not used.
     c.effects.horizontal_pattern = EffectMode::off;
     c.effects.vertical_pattern = EffectMode::off;
