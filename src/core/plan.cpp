@@ -486,12 +486,12 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     plan_range_window(p);
     plan_clip_planes(p);
     plan_horizontal_pattern(p);
-    if (auto bands = plan_focus_bands(p); !bands) return bands.error();
     bool any_angle_dependent = false;
     if (auto materials = plan_materials(p, scene, any_angle_dependent); !materials) return materials.error();
     double reach = 0.0;
     bool main_lobe_only = false;
     const std::uint32_t half_taps = plan_effects(p, scene, any_angle_dependent, reach, main_lobe_only);
+    if (auto bands = plan_focus_bands(p, p.effects.horizontal_pattern && half_taps > 0); !bands) return bands.error();
     // A host camera may see beyond the sonar's fan: those columns feed no beam (make_plan's own grid
     // folds its few edge columns into the edge beams).
     plan_column_tables(p, host_grid != nullptr ? 0.5 * config.hfov_deg * kDegToRad

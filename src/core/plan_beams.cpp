@@ -471,7 +471,8 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             if (d < 0.0) return false;
             if (tent) return d < 1.0;
             const double sep = separation(c);
-            return in_configured(c, d) || (x_of(sep) <= widest_x && (p.line_array || std::abs(sep) < 0.5 * kPi));
+            return in_configured(c, d) ||
+                   (out_of_focus && x_of(sep) <= widest_x && (p.line_array || std::abs(sep) < 0.5 * kPi));
         };
         const bool any = in_kernel(lo);
         auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
@@ -492,7 +493,7 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             const double far = p.far_cells > 0 ? far_grid_weight(p, wrap(c), j) : 0.0;
             const bool configured = in_configured(c, beams_away(c));
             for (std::uint32_t b = 0; b < bands; ++b)
-                if (configured || x_of(separation(c)) <= band_reach_x(b))
+                if (configured || (out_of_focus && x_of(separation(c)) <= band_reach_x(b)))
                     row[b * width + std::size_t(c - lo)] =
                         static_cast<float>(pattern_in_band(p, defocused.get(), b, j, separation(c)) - far);
         }

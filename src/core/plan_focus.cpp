@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <limits>
 #include <string>
 
 #include "core/angles.h"
@@ -69,12 +70,12 @@ double focus_phase_per_inverse_metre(const Plan& p) {
     return kPi * aperture * aperture / (4.0 * lambda);
 }
 
-Result<void> plan_focus_bands(Plan& p) {
+Result<void> plan_focus_bands(Plan& p, bool near_kernel) {
     p.near_bands = 1;
     p.near_band_of_bin.assign(p.bins, 0);
     p.near_band_phase.assign(1, 0.0);
     const SonarConfig& c = p.config;
-    if (c.beam_focus == BeamFocus::dynamic || p.bins == 0) return {};
+    if (c.beam_focus == BeamFocus::dynamic || !near_kernel || p.bins == 0) return {};
     const double scale = focus_phase_per_inverse_metre(p);
     const double inverse_focus = c.beam_focus == BeamFocus::fixed ? 1.0 / c.focus_range_m : 0.0;
     std::vector<double> phase(p.bins);
@@ -87,16 +88,24 @@ Result<void> plan_focus_bands(Plan& p) {
         }
     }
     if (!(phase_max <= kMaxFocusPhase)) {
+        // The remedy on the worst bin's side of the focus: nearer than F the phase falls as r grows (range_min
+        // up to where it is kMaxFocusPhase); beyond F it grows towards scale / F (range_max down).
         const bool fixed = c.beam_focus == BeamFocus::fixed;
+        const double allowed = kMaxFocusPhase / scale; // |1/r - 1/F| at most this
+        std::string remedy;
+        if (!fixed || worst_range < c.focus_range_m)
+            remedy = "raise range_min to " + fmt(1.0 / (inverse_focus + allowed)) + " m" +
+                     (fixed ? " (or set focus_range nearer)" : "");
+        else
+            remedy = "lower range_max to " + fmt(1.0 / (inverse_focus - allowed)) + " m (or set focus_range further)";
+        if (!(phase_max < std::numeric_limits<double>::infinity())) remedy = "set focus_range within the range window";
         return make_error(ErrorCode::invalid_argument,
                           std::string("config: beam_focus = ") + (fixed ? "fixed" : "none") +
                               ": the defocus phase pi L^2 / (4 lambda) |1/r - 1/F| reaches " + fmt(phase_max) +
                               " rad at r = " + fmt(worst_range) +
                               " m (L = " + fmt(p.hpattern_k * c.sound_speed_mps / c.frequency_hz / kPi) + " m" +
                               (fixed ? ", focus_range = " + fmt(c.focus_range_m) + " m" : std::string()) +
-                              "), past the " + fmt(kMaxFocusPhase) + " rad vksonar tabulates: " +
-                              (fixed ? "keep the range window nearer focus_range, or set focus_range further"
-                                     : "raise range_min to " + fmt(scale / kMaxFocusPhase) + " m"));
+                              "), past the " + fmt(kMaxFocusPhase) + " rad vksonar tabulates: " + remedy);
     }
     std::vector<double> ladder{0.0};
     while (ladder.back() < phase_max)

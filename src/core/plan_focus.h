@@ -17,10 +17,10 @@ double focus_phase_per_inverse_metre(const Plan& p);
 // 750 kHz reaches it at 6 cm, the ARIS's 0.25 deg at 3 MHz at 25 cm.
 constexpr double kMaxFocusPhase = 64.0;
 
-// Step (after plan_range_window and plan_horizontal_pattern): the focus bands of the range bins,
-// Plan::near_band_of_bin and near_band_phase. One band of phase 0 with beam_focus dynamic; an error where
-// a bin's phase passes kMaxFocusPhase.
-Result<void> plan_focus_bands(Plan& p);
+// Step (after plan_effects): the focus bands of the range bins, Plan::near_band_of_bin and near_band_phase.
+// One band of phase 0 with beam_focus dynamic or no near kernel to apply them (near_kernel: the horizontal
+// pattern on, with a kernel past the tent); an error where a bin's phase passes kMaxFocusPhase.
+Result<void> plan_focus_bands(Plan& p, bool near_kernel);
 
 // How far out in x a band of phase phi keeps its own pattern (docs/pipeline.md "Focus"): kTailPhases phi +
 // 3 pi. The defocused lobes fall as the aperture ends' waves, |A|^2 ~ (1/(x - 2 phi)^2 + 1/(x + 2 phi)^2) / 4,

@@ -238,9 +238,49 @@ TEST(DefocusedPattern, APhasePastTheTableIsAPlanErrorNamingTheRange) {
     plan = make_plan(config, b.scene);
     ASSERT_FALSE(plan.ok());
     EXPECT_NE(plan.error().message.find("beam_focus = fixed"), std::string::npos) << plan.error().message;
+    // The remedy on the worst bin's side of the focus: nearer than F raise range_min, beyond F lower range_max.
+    config.range_min_m = 0.01;
+    config.bins = 4096;
+    config.focus_range_m = 2.0;
+    plan = make_plan(config, b.scene);
+    ASSERT_FALSE(plan.ok());
+    EXPECT_NE(plan.error().message.find("raise range_min to 0.061"), std::string::npos) << plan.error().message;
     config.range_min_m = 0.5;
+    config.bins = 512;
+    config.focus_range_m = 0.04;
+    plan = make_plan(config, b.scene);
+    ASSERT_FALSE(plan.ok());
+    EXPECT_NE(plan.error().message.find("lower range_max to 0.10"), std::string::npos) << plan.error().message;
     config.focus_range_m = 2.0;
     EXPECT_TRUE(make_plan(config, b.scene).ok());
+    // Where no near kernel applies the focus (the horizontal pattern off), nothing is tabulated or refused.
+    config.range_min_m = 0.01;
+    config.effects.horizontal_pattern = EffectMode::off;
+    plan = make_plan(config, b.scene);
+    ASSERT_TRUE(plan.ok()) << plan.error().message;
+    EXPECT_EQ(plan->near_bands, 1u);
+}
+
+// A second review: the focus reach (x = 7 phi + 3 pi) compared 0 <= 0 for a box pattern (its pattern
+// constant is 0) and took every column into a dynamic plan's kernel. The near kernel of a box stops at the
+// configured reach: every beam's columns within it (in sine, the line array).
+TEST(NearKernel, ABoxKernelStopsAtTheConfiguredReach) {
+    SceneBuilder b;
+    b.material(-20.0);
+    SonarConfig config;
+    config.horizontal_pattern = BeamPattern::box;
+    config.horizontal_beamwidth_deg = 3.0;
+    config.sidelobe_kernel_beamwidths = 0.4;
+    config.effects.horizontal_pattern = EffectMode::on;
+    const Plan plan = plan_for(config, b.scene);
+    ASSERT_FALSE(plan.near_column_begin.empty());
+    const double reach = std::sin(0.4 * 3.0 * kDeg);
+    for (std::uint32_t j = 0; j < plan.beams; ++j)
+        for (std::uint32_t t = 0; t < plan.near_column_count[j]; ++t) {
+            const std::uint32_t c = static_cast<std::uint32_t>(plan.near_column_begin[j] + std::int32_t(t));
+            const double sep = std::sin(plan.column_azimuth_rad[c]) - std::sin(plan.beam_angle_rad[j]);
+            ASSERT_LE(std::abs(sep), reach * (1 + 1e-9)) << "beam " << j << " column " << c;
+        }
 }
 
 } // namespace
