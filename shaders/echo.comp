@@ -87,6 +87,7 @@ EchoConstants echo_constants(PixelView view, uint width) {
     k.vpattern_k = params.vpattern_k;
     k.vpattern_halfwidth_rad = params.vpattern_halfwidth_rad;
     k.vpattern_chebyshev_a = params.vpattern_chebyshev_a;
+    k.element_k = params.element_k;
     return k;
 }
 

@@ -94,6 +94,23 @@ VKS_FN REAL view_elevation_sin(REAL u, REAL v, PixelView view) {
     return (view.forward.z + u * view.right.z + v * view.down.z) / sqrt(REAL(1) + u * u + v * v);
 }
 
+// The sine of the angle from broadside along a line array (the sonar's y axis, port) of the ray through
+// (u, v) of a view: its y over its length, the steering angle's sine of the cone it lies on.
+VKS_FN REAL view_axis_sin(REAL u, REAL v, PixelView view) {
+    return (view.forward.y + u * view.right.y + v * view.down.y) / sqrt(REAL(1) + u * u + v * v);
+}
+
+// A line array's element pattern (docs/pipeline.md "Element factor"): an element element_width
+// wavelengths wide along the array hears the direction of sine `axis_sin` along it with power
+// sinc^2(pi element_width axis_sin) (element_k = pi element_width); 1 with element_k = 0.
+VKS_FN REAL element_power(REAL element_k, REAL axis_sin) {
+    if (element_k == REAL(0)) {
+        return REAL(1);
+    }
+    REAL a = sinc_of(element_k * axis_sin);
+    return a * a;
+}
+
 // Whether the ray through (u, v) lies in the view's azimuth wedge (a tier view: the wedges of a band
 // split its azimuths, each direction in exactly one: the starboard edge in, the port edge out); always
 // true for a slice, whose side planes hold its azimuths.
@@ -289,6 +306,7 @@ struct EchoConstants {
     REAL vpattern_k;
     REAL vpattern_halfwidth_rad;
     REAL vpattern_chebyshev_a;
+    REAL element_k; // SonarParams::element_k: pi element_width / lambda-units; 0: point elements
 };
 
 // Which of the echo equation's terms a pipeline carries (the effect bits and the scene's materials).
@@ -318,7 +336,7 @@ VKS_FN REAL elevation_gated(REAL power, REAL sin_e, PixelView view) {
 // elevation band, and a tier view's azimuth wedge); 1 with the effect off (the pixel grid is then the
 // beam, as the legacy plugins have it). A function of the pixel's place in the grid alone, which the
 // CPU backend reads from a table made once (cpu_echo.cpp). k.pixel_dv is the view's row height.
-VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v, PixelView view) {
+VKS_FN REAL pixel_vertical_pattern(EchoConstants k, EchoTerms terms, REAL u, REAL v, PixelView view) {
     REAL vertical = REAL(1);
     if (terms.vertical_pattern && terms.vertical_shape == kPatternBox) {
         // a slice's (box and gaussian patterns have no side lobes: no tier views)
@@ -349,6 +367,16 @@ VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL 
             return REAL(0);
         }
         return REAL(0.5) * (elevation_gated(upper, upper_sin, view) + elevation_gated(lower, lower_sin, view));
+    }
+    return vertical;
+}
+
+// The pixel's pattern power: the vertical pattern's (pixel_vertical_pattern), times a line array's
+// element pattern at the pixel's centre (element_power; it changes by a few 1e-4 across a pixel).
+VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v, PixelView view) {
+    REAL vertical = pixel_vertical_pattern(k, terms, u, v, view);
+    if (k.element_k != REAL(0)) {
+        vertical = vertical * element_power(k.element_k, view_axis_sin(u, v, view));
     }
     return vertical;
 }
@@ -611,9 +639,10 @@ VKS_FN REAL cone_extent_share(REAL x, REAL lo, REAL hi, int c, int count) {
 // sub-pixel object lies on one ray, not across a pixel's height: the pattern at that ray, where
 // pixel_vertical_power averages it over a row. No gate here: the host lists a piece only in the view
 // whose cell (elevation band, tier wedge) holds its ray, so each direction counts once as a pixel's does.
-VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e) {
+VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e, REAL axis_sin) {
+    REAL element = element_power(k.element_k, axis_sin); // a line array's element pattern, as a pixel's
     if (!terms.vertical_pattern) {
-        return REAL(1);
+        return element;
     }
     REAL p;
     if (terms.vertical_shape == kPatternBox || terms.vertical_shape == kPatternGaussian) {
@@ -622,7 +651,7 @@ VKS_FN REAL ray_vertical_power(EchoConstants k, EchoTerms terms, REAL sin_e) {
     } else {
         p = aperture_pattern_power(terms.vertical_shape, k.vpattern_k, k.vpattern_chebyshev_a, sin_e);
     }
-    return p;
+    return p * element;
 }
 
 // The echo (relative to SL) of a flat piece of surface of `area` m^2 at slant range r whose normal

@@ -230,9 +230,15 @@ struct SonarParams {
     // range kernel averages it over the pixel's footprint (range_spread), which a grazing seabed's reaches
     // metres.
     float absorption_per_bin;
+    // A line array's elements' own pattern (SonarConfig::element_width): each pixel's echo times
+    // sinc^2(element_k u), u its direction's sine along the array (pixel_vertical_power); 0: none.
+    float element_k;
+    uint element_pad0;
+    uint element_pad1;
+    uint element_pad2;
 };
 #ifdef __cplusplus
-static_assert(sizeof(SonarParams) == 40 * 4, "SonarParams must match the GLSL std140 block");
+static_assert(sizeof(SonarParams) == 44 * 4, "SonarParams must match the GLSL std140 block");
 #endif
 
 // Per-view table (uniform block of kMaxViews, std140): one entry per view of the depth pass, which

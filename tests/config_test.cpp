@@ -327,6 +327,24 @@ TEST(Validate, BeamFocusNeedsAKnownApertureAndThePhysicalMode) {
     EXPECT_EQ(problem(R"({"beam_focus": "dynamic", "horizontal_pattern": "box"})"), "");
 }
 
+// element_width is a line array's: refused where the beams resolve planar, and outside [0, 2].
+TEST(Validate, ElementWidthNeedsALineArray) {
+    auto problem = [](const std::string& json) {
+        auto c = apply_config_json(SonarConfig{}, json, "element.json");
+        if (!c.ok()) return c.error().message;
+        auto v = c->validate();
+        return v.ok() ? std::string() : v.error().message;
+    };
+    const std::string rule = ": needs a line array (beam_geometry line_array, mode physical, hfov < 180): the "
+                             "elements lie along its axis";
+    EXPECT_EQ(problem(R"({"element_width": 0.5, "beam_geometry": "planar"})"), "element_width = 0.5" + rule);
+    EXPECT_EQ(problem(R"({"element_width": 0.5, "hfov": 200})"), "element_width = 0.5" + rule);
+    EXPECT_EQ(problem(R"({"element_width": 0.5, "mode": "gtri-legacy"})"), "element_width = 0.5" + rule);
+    EXPECT_NE(problem(R"({"element_width": 3})").find("element_width = 3: must be in [0, 2]"), std::string::npos);
+    EXPECT_EQ(problem(R"({"element_width": 0.5})"), "");
+    EXPECT_EQ(problem(R"({"element_width": 0, "beam_geometry": "planar"})"), "");
+}
+
 TEST(Validate, BandwidthDerivesTheRangeBins) {
     SonarConfig c;
     c.range_min_m = 0.2;

@@ -122,8 +122,9 @@ struct SonarConfig {
     BeamPattern horizontal_pattern = BeamPattern::sinc;
     BeamFocus beam_focus = BeamFocus::dynamic; // the horizontal pattern's focus (sinc and hann patterns)
     double focus_range_m = 10.0;               // beam_focus fixed: the range the beams are focused at
-    double vertical_sidelobe_db = -30.0;       // chebyshev only: the equal side-lobe level, dB re the main lobe
-    double horizontal_sidelobe_db = -30.0;     // chebyshev only: likewise for the horizontal pattern
+    double element_width = 0.0;            // a line array's element width along it, in wavelengths (0: point elements)
+    double vertical_sidelobe_db = -30.0;   // chebyshev only: the equal side-lobe level, dB re the main lobe
+    double horizontal_sidelobe_db = -30.0; // chebyshev only: likewise for the horizontal pattern
 
     // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
     SpeckleModel speckle = SpeckleModel::rayleigh;

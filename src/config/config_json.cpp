@@ -261,6 +261,13 @@ Result<void> SonarConfig::validate() const {
                             "knows), not " +
                             pattern_names[static_cast<int>(horizontal_pattern)];
         }
+        // The element pattern is a line array's: its elements lie along one axis (a planar beam's aperture
+        // faces along the beam, and the legacy modes reproduce their plugins).
+        if (c.problem.empty() && element_width > 0.0 &&
+            !(beam_geometry == BeamGeometry::line_array && mode == SonarMode::physical && hfov_deg < 180.0))
+            c.fail("element_width", element_width,
+                   "needs a line array (beam_geometry line_array, mode physical, hfov < 180): the elements lie "
+                   "along its axis");
         // The uuv plugin projects one pinhole depth image; a sliced depth pass has no single focal length.
         if (c.problem.empty() && mode == SonarMode::uuv_legacy)
             c.check(

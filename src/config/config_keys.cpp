@@ -336,6 +336,12 @@ std::vector<ConfigKey> make_table() {
                  "Where the receive beams are focused: at every range (the far-field pattern everywhere), at "
                  "focus_range (an acoustic lens), or at infinity (an unfocused array); fixed and none blur the "
                  "horizontal pattern inside the array's far-field distance (sinc and hann patterns)"),
+        VKS_NUMBER("element_width", element_width, "wavelengths",
+                   "A line array's element width along the array: every echo times the element's pattern "
+                   "sinc^2(pi element_width sin theta), theta from broadside; 0: point elements (none)",
+                   closed(0, 2,
+                          "0: point elements; a 130 deg fan steered without grating lobes needs elements at most "
+                          "0.53 wavelengths apart, and an element 2 wavelengths wide hears nothing past 30 deg")),
         VKS_NUMBER("focus_range", focus_range_m, "m", "beam_focus fixed: the range the beams are focused at",
                    open_low(0, 1e5, "in front of the array; 100 km as range_max")),
 

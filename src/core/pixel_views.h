@@ -57,7 +57,8 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              g.alpha_db_per_m,
              g.vpattern_k,
              g.vpattern_halfwidth_rad,
-             g.vpattern_chebyshev_a};
+             g.vpattern_chebyshev_a,
+             g.element_k};
     } else {
         k = {pv.tan_half_h,
              pv.tan_half_v,
@@ -70,7 +71,8 @@ template <class Real> typename Math<Real>::EchoConstants echo_constants(const Pl
              plan.alpha_db_per_m,
              plan.vpattern_k,
              plan.vpattern_halfwidth_rad,
-             plan.vpattern_chebyshev_a};
+             plan.vpattern_chebyshev_a,
+             plan.element_k};
     }
     k.pixel_du = Real(2) * k.tan_half_h / static_cast<Real>(view_columns(plan, view));
     k.pixel_dv = Real(2) * k.tan_half_v / static_cast<Real>(plan.rows);

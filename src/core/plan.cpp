@@ -265,6 +265,7 @@ void plan_horizontal_pattern(Plan& p) {
         c.horizontal_pattern == BeamPattern::chebyshev ? chebyshev_a(c.horizontal_sidelobe_db) : 0.0;
     p.hpattern_k = pattern_constant(c.horizontal_pattern, hbw, p.hpattern_chebyshev_a);
     p.hpattern_halfwidth_rad = 0.5 * hbw;
+    p.element_k = p.line_array && c.mode == SonarMode::physical ? kPi * c.element_width : 0.0;
 }
 
 // Step: the acoustic materials as uploaded. any_angle_dependent: a drawn material depends on incidence.
@@ -425,6 +426,7 @@ void plan_gpu_params(Plan& p) {
     g.absorption_per_bin = static_cast<float>(
         std::min(2.0 * p.alpha_db_per_m * 0.2302585092994046 * p.bin_width_m, double(shared::kMaxAbsorptionPerBin)));
     g.vpattern_k = static_cast<float>(p.vpattern_k);
+    g.element_k = static_cast<float>(p.element_k);
     g.vpattern_shape = shader_id(c.vertical_pattern);
     g.range_kernel = shader_id(c.range_kernel);
     g.normal_method = shader_id(c.normal_method);

@@ -109,6 +109,9 @@ struct Plan {
     // Beam patterns.
     double vpattern_k = 0, vpattern_halfwidth_rad = 0, vpattern_chebyshev_a = 0;
     double hpattern_k = 0, hpattern_halfwidth_rad = 0, hpattern_chebyshev_a = 0;
+    // A line array's element pattern sinc^2(element_k u) on every echo (SonarConfig::element_width; u the
+    // direction's sine along the array): pi element_width, 0 without it (planar beams, the legacy modes).
+    double element_k = 0;
     double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
     // The noise floor (noise_floor.cpp): NL and the broadside DI, each beam's floor NL - DI_j in dB (a
     // line array's steered beams hear more of the sea), and 10^(floor / 10) as the noise stage adds it

@@ -445,7 +445,7 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
         const double cos_incidence = facing > 0 ? -c : (facing < 0 ? c : std::abs(c));
         if (!(cos_incidence > 0)) return true; // faces away: the object's own front hides it
         const double energy = M::facet_echo(k, terms, mat, area, std::min(cos_incidence, 1.0), r,
-                                            M::ray_vertical_power(k, terms, q[2] / r));
+                                            M::ray_vertical_power(k, terms, q[2] / r, q[1] / r));
         if (!(energy > 0)) return true;
         // Its pixel: in the view whose cell holds its direction (the elevation band, a tier view's azimuth
         // wedge: each direction in one view, as the pixels' vertical power counts it), or with the vertical

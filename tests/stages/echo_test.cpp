@@ -254,14 +254,36 @@ TEST(CpuEcho, BadRoughParameterFromTheEngineApiIsRefused) {
         << plan.error().message;
 }
 
+// The element pattern scales the sea's noise in beam j as it scales an echo from the beam's direction
+// (src/core/noise_floor.cpp): each beam's floor falls by 10 log10 sinc^2(pi w sin theta_j), the SNR stays.
+// The beams' angles from the config's equi-angular table; to rounding (1e-9 dB).
+TEST(ElementPattern, EachBeamsNoiseFloorFallsWithItsElementPower) {
+    SceneBuilder b;
+    b.material(-20.0);
+    SonarConfig plain, element;
+    element.element_width = 0.5;
+    const Plan a = plan_for(plain, b.scene), e = plan_for(element, b.scene);
+    ASSERT_EQ(a.beams, e.beams);
+    const double half = 0.5 * plain.hfov_deg * kDeg;
+    for (std::uint32_t j = 0; j < a.beams; ++j) {
+        const double theta = (1.0 - (2.0 * j + 1.0) / a.beams) * half;
+        const double x = kPi * 0.5 * std::sin(theta);
+        const double power = x == 0.0 ? 1.0 : (std::sin(x) / x) * (std::sin(x) / x);
+        ASSERT_NEAR(e.beam_floor_db[j] - a.beam_floor_db[j], 10.0 * std::log10(power), 1e-9) << "beam " << j;
+    }
+    // At the fan's edge (64.9 deg) the floor is 3.16 dB down.
+    EXPECT_NEAR(e.beam_floor_db[0] - a.beam_floor_db[0], -3.155, 0.005);
+}
+
 // ---- GPU vs CPU (tests/stages/gpu_cpu_support.h; tolerances: tests/tolerances.h) ------------------
 
 using namespace ::vksonar::testing;
 
 class EchoGpuCpu : public GpuCpuScene {};
 
-TEST_P(EchoGpuCpu, MatchesOnTheSameInput) {
-    auto p = render_pair(GetParam().file, quiet_config(), GetParam().pose, kSaveAll);
+// The GPU's echo against the CPU's from the GPU's own depth, materials and normals.
+void expect_echo_agrees(const SceneCase& scene, const SonarConfig& config, const char* what) {
+    auto p = render_pair(scene.file, config, scene.pose, kSaveAll);
     ASSERT_TRUE(p);
     const Frame& g = p->gpu->frame;
     const Plan& plan = renderer_plan(p->gpu->renderer);
@@ -285,9 +307,21 @@ TEST_P(EchoGpuCpu, MatchesOnTheSameInput) {
         max_rel_echo = std::max(max_rel_echo, std::abs(a - b) / std::max(std::abs(b), floor));
         max_range_diff = std::max(max_range_diff, static_cast<double>(std::abs(g.echo[2 * i + 1] - echo[2 * i + 1])));
     }
-    std::printf("[echo] max rel %.2e, max range diff %.2e m\n", max_rel_echo, max_range_diff);
-    EXPECT_LE(max_rel_echo, kEchoRelTol);
-    EXPECT_LE(max_range_diff, kRangeAbsTolM);
+    std::printf("[echo] %s: max rel %.2e, max range diff %.2e m\n", what, max_rel_echo, max_range_diff);
+    EXPECT_LE(max_rel_echo, kEchoRelTol) << what;
+    EXPECT_LE(max_range_diff, kRangeAbsTolM) << what;
+}
+
+TEST_P(EchoGpuCpu, MatchesOnTheSameInput) {
+    expect_echo_agrees(GetParam(), quiet_config(), GetParam().file.c_str());
+}
+
+// A line array's element pattern (element_width; every pixel times sinc^2 of its direction's sine along
+// the array, the sine from the view's basis in float on the GPU): the same tolerances.
+TEST(EchoGpuCpuParts, TheElementPatternMatches) {
+    SonarConfig config = quiet_config();
+    config.element_width = 0.5;
+    expect_echo_agrees(bundled_scenes().front(), config, "element_width 0.5");
 }
 
 INSTANTIATE_TEST_SUITE_P(BundledScenes, EchoGpuCpu, ::testing::ValuesIn(bundled_scenes()), scene_name);
