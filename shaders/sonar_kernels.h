@@ -94,10 +94,11 @@ VKS_FN REAL view_elevation_sin(REAL u, REAL v, PixelView view) {
     return (view.forward.z + u * view.right.z + v * view.down.z) / sqrt(REAL(1) + u * u + v * v);
 }
 
-// The sine of the angle from broadside along a line array (the sonar's y axis, port) of the ray through
-// (u, v) of a view: its y over its length, the steering angle's sine of the cone it lies on.
-VKS_FN REAL view_axis_sin(REAL u, REAL v, PixelView view) {
-    return (view.forward.y + u * view.right.y + v * view.down.y) / sqrt(REAL(1) + u * u + v * v);
+// The cosine along the array axis (the sonar's y axis, port) of pixel (u, v)'s direction in a view
+// (pixel_ray): sin(theta) = cos(elevation) sin(azimuth), without an angle; theta is the steering angle of
+// the line array's cone the ray lies on (the cone columns, "Beam geometry" below; the element pattern).
+VKS_FN REAL array_axis_cosine(REAL u, REAL v, PixelView view) {
+    return pixel_ray(u, v, view).y / sqrt(REAL(1) + u * u + v * v);
 }
 
 // A line array's element pattern (docs/pipeline.md "Element factor"): an element element_width
@@ -306,7 +307,7 @@ struct EchoConstants {
     REAL vpattern_k;
     REAL vpattern_halfwidth_rad;
     REAL vpattern_chebyshev_a;
-    REAL element_k; // SonarParams::element_k: pi element_width / lambda-units; 0: point elements
+    REAL element_k; // SonarParams::element_k: pi element_width (in wavelengths); 0: point elements
 };
 
 // Which of the echo equation's terms a pipeline carries (the effect bits and the scene's materials).
@@ -376,7 +377,7 @@ VKS_FN REAL pixel_vertical_pattern(EchoConstants k, EchoTerms terms, REAL u, REA
 VKS_FN REAL pixel_vertical_power(EchoConstants k, EchoTerms terms, REAL u, REAL v, PixelView view) {
     REAL vertical = pixel_vertical_pattern(k, terms, u, v, view);
     if (k.element_k != REAL(0)) {
-        vertical = vertical * element_power(k.element_k, view_axis_sin(u, v, view));
+        vertical = vertical * element_power(k.element_k, array_axis_cosine(u, v, view));
     }
     return vertical;
 }
@@ -576,11 +577,7 @@ VKS_FN_INLINE REAL range_share(RangeSpread s, int k) {
 // the two cone columns nearest its own theta, so a column of pixels (one azimuth) bends towards
 // broadside as its elevation grows (docs/pipeline.md, "Beam geometry").
 
-// The cosine along the array axis of pixel (u, v)'s direction in a view (pixel_ray):
-// sin(theta) = cos(elevation) sin(azimuth), without an angle.
-VKS_FN REAL array_axis_cosine(REAL u, REAL v, PixelView view) {
-    return pixel_ray(u, v, view).y / sqrt(REAL(1) + u * u + v * v);
-}
+// array_axis_cosine (above, with the element pattern) gives a pixel its theta.
 
 // A pixel's coordinate on the cone columns from its axis cosine: column c is centred at c, the fan's
 // port edge (theta = half_fov_rad) at -0.5. Increases with the pixel column along a row (towards

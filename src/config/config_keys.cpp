@@ -341,7 +341,7 @@ std::vector<ConfigKey> make_table() {
                    "sinc^2(pi element_width sin theta), theta from broadside; 0: point elements (none)",
                    closed(0, 2,
                           "0: point elements; a 130 deg fan steered without grating lobes needs elements at most "
-                          "0.53 wavelengths apart, and an element 2 wavelengths wide hears nothing past 30 deg")),
+                          "0.52 wavelengths apart, and an element 2 wavelengths wide has its first null at 30 deg")),
         VKS_NUMBER("focus_range", focus_range_m, "m", "beam_focus fixed: the range the beams are focused at",
                    open_low(0, 1e5, "in front of the array; 100 km as range_max")),
 

@@ -114,7 +114,8 @@ struct Plan {
     double element_k = 0;
     double alpha_db_per_m = 0; // one-way absorption actually used (0 if the effect is off)
     // The noise floor (noise_floor.cpp): NL and the broadside DI, each beam's floor NL - DI_j in dB (a
-    // line array's steered beams hear more of the sea), and 10^(floor / 10) as the noise stage adds it
+    // line array's steered beams hear more of the sea; plus the element pattern's 10 log10 sinc^2 at the
+    // beam with element_width), and 10^(floor / 10) as the noise stage adds it
     // (0 with ambient_noise off).
     NoiseTerms noise;
     std::vector<double> beam_floor_db;

@@ -58,8 +58,9 @@ inline double rx_beamwidth_rad(const Plan& plan, std::size_t j) {
 }
 
 // The noise terms as used ("auto" resolved) and each beam's floor NL - DI_j (a line array's steered
-// beams hear more of the sea; the floor is added only where effects.ambient_noise is on). In every mode:
-// the legacy modes' polar scan is the physical chain's too (their own images keep their constants).
+// beams hear more of the sea; with element_width, plus the element pattern's power at the beam; the floor is added only
+// where effects.ambient_noise is on). In every mode: the legacy modes' polar scan is the physical chain's too (their
+// own images keep their constants).
 inline nlohmann::ordered_json noise_json(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
     nlohmann::ordered_json floors = nlohmann::ordered_json::array();

@@ -319,6 +319,8 @@ TEST_P(EchoGpuCpu, MatchesOnTheSameInput) {
 // A line array's element pattern (element_width; every pixel times sinc^2 of its direction's sine along
 // the array, the sine from the view's basis in float on the GPU): the same tolerances.
 TEST(EchoGpuCpuParts, TheElementPatternMatches) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
     SonarConfig config = quiet_config();
     config.element_width = 0.5;
     expect_echo_agrees(bundled_scenes().front(), config, "element_width 0.5");
