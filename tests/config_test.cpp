@@ -21,6 +21,14 @@ SonarConfig apply_json(const SonarConfig& base, const std::string& json) {
     return result.ok() ? result.value() : base;
 }
 
+// The first problem of a JSON config: its parse's, else validate()'s; "" where it validates.
+std::string json_problem(const std::string& json) {
+    auto c = apply_config_json(SonarConfig{}, json, "test.json");
+    if (!c.ok()) return c.error().message;
+    auto v = c->validate();
+    return v.ok() ? std::string() : v.error().message;
+}
+
 std::string apply_error(const std::string& json) {
     auto result = apply_config_json(SonarConfig{}, json, "test.json");
     EXPECT_FALSE(result.ok()) << json;
@@ -307,12 +315,7 @@ TEST(Validate, NamesFieldAndValue) {
 // beam_focus fixed or none defocuses the aperture (src/core/plan_focus.cpp): sinc and hann have an aperture
 // weighting to defocus, the other shapes none; the legacy modes have no horizontal pattern.
 TEST(Validate, BeamFocusNeedsAKnownApertureAndThePhysicalMode) {
-    auto problem = [](const std::string& json) {
-        auto c = apply_config_json(SonarConfig{}, json, "focus.json");
-        if (!c.ok()) return c.error().message;
-        auto v = c->validate();
-        return v.ok() ? std::string() : v.error().message;
-    };
+    const auto problem = json_problem;
     EXPECT_EQ(problem(R"({"beam_focus": "fixed", "horizontal_pattern": "chebyshev"})"),
               "beam_focus = fixed: needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar knows), "
               "not chebyshev");
@@ -329,12 +332,7 @@ TEST(Validate, BeamFocusNeedsAKnownApertureAndThePhysicalMode) {
 
 // element_width is a line array's: refused where the beams resolve planar, and outside [0, 2].
 TEST(Validate, ElementWidthNeedsALineArray) {
-    auto problem = [](const std::string& json) {
-        auto c = apply_config_json(SonarConfig{}, json, "element.json");
-        if (!c.ok()) return c.error().message;
-        auto v = c->validate();
-        return v.ok() ? std::string() : v.error().message;
-    };
+    const auto problem = json_problem;
     const std::string rule = ": needs a line array (beam_geometry line_array, mode physical, hfov < 180): the "
                              "elements lie along its axis";
     EXPECT_EQ(problem(R"({"element_width": 0.5, "beam_geometry": "planar"})"), "element_width = 0.5" + rule);
