@@ -101,7 +101,7 @@ VKS_FN REAL array_axis_cosine(REAL u, REAL v, PixelView view) {
     return pixel_ray(u, v, view).y / sqrt(REAL(1) + u * u + v * v);
 }
 
-// A line array's element pattern (docs/pipeline.md "Element factor"): an element element_width
+// A line array's element pattern (docs/pipeline.md §3, "element factor"): an element element_width
 // wavelengths wide along the array hears the direction of sine `axis_sin` along it with power
 // sinc^2(pi element_width axis_sin) (element_k = pi element_width); 1 with element_k = 0.
 VKS_FN REAL element_power(REAL element_k, REAL axis_sin) {

@@ -12,6 +12,7 @@
 
 #include "config/config_keys.h"
 #include "core/json_depth.h"
+#include "core/plan.h" // resolves_to_line_array
 #include "vksonar/config.h"
 
 namespace vksonar {
@@ -249,22 +250,21 @@ Result<void> SonarConfig::validate() const {
         // A focus other than dynamic defocuses the aperture (plan_focus.cpp): it needs the aperture's
         // weighting, which sinc (uniform) and hann have; chebyshev's ideal line source ends in impulses, and
         // box and gaussian are no aperture. The legacy modes reproduce their plugins, which have no focus.
+        // A choice key's value as its name (the key table's own).
+        auto name_of = [this](const char* key) { return config_keys::find(key)->get(*this).get<std::string>(); };
         if (c.problem.empty() && beam_focus != BeamFocus::dynamic) {
-            const std::string focus =
-                std::string("beam_focus = ") + (beam_focus == BeamFocus::fixed ? "fixed" : "none");
-            const char* pattern_names[] = {"box", "sinc", "hann", "gaussian", "chebyshev"};
+            const std::string focus = "beam_focus = " + name_of("beam_focus");
             if (mode != SonarMode::physical)
                 c.problem = focus + ": needs mode physical (the legacy modes reproduce their plugins' images)";
             else if (horizontal_pattern != BeamPattern::sinc && horizontal_pattern != BeamPattern::hann)
                 c.problem = focus +
                             ": needs horizontal_pattern sinc or hann (an aperture whose weighting vksonar "
                             "knows), not " +
-                            pattern_names[static_cast<int>(horizontal_pattern)];
+                            name_of("horizontal_pattern");
         }
         // The element pattern is a line array's: its elements lie along one axis (a planar beam's aperture
         // faces along the beam, and the legacy modes reproduce their plugins).
-        if (c.problem.empty() && element_width > 0.0 &&
-            !(beam_geometry == BeamGeometry::line_array && mode == SonarMode::physical && hfov_deg < 180.0))
+        if (c.problem.empty() && element_width > 0.0 && !resolves_to_line_array(*this, nullptr))
             c.fail("element_width", element_width,
                    "needs a line array (beam_geometry line_array, mode physical, hfov < 180): the elements lie "
                    "along its axis");

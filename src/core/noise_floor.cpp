@@ -138,11 +138,9 @@ void resolve_noise_floor(Plan& p) {
         p.beam_floor_db[j] = p.noise.noise_level_db - di;
         // The element pattern scales the sea's noise in beam j as it does an echo from the beam's direction
         // (the pattern is broad against the beam's): the floor falls with it, and the SNR stays.
-        if (p.element_k > 0.0) {
-            const double x = p.element_k * std::sin(p.beam_angle_rad[j]);
-            const double element = x == 0.0 ? 1.0 : (std::sin(x) / x) * (std::sin(x) / x);
-            p.beam_floor_db[j] += 10.0 * std::log10(std::max(element, 1e-30));
-        }
+        if (p.element_k > 0.0)
+            p.beam_floor_db[j] +=
+                10.0 * std::log10(std::max(math_f64::element_power(p.element_k, std::sin(p.beam_angle_rad[j])), 1e-30));
         if (p.effects.ambient_noise) p.beam_noise[j] = static_cast<float>(std::pow(10.0, p.beam_floor_db[j] / 10.0));
     }
 }

@@ -104,8 +104,10 @@ namespace {
 // The horizontal power pattern at separation `sep` of two beams in the side-lobe kernel's unit: the
 // angle, or with line_array its sine. A line array's aperture patterns are functions of
 // sin(theta') - sin(theta) over its whole range [-2, 2]; the others (box, gaussian) are read at the
-// angle whose sine it is (at most 90 degrees).
-double pattern_at_separation(const Plan& p, double sep) {
+// angle whose sine it is (at most 90 degrees). With a defocus `phase` > 0 (plan_focus.cpp) the aperture's
+// pattern defocused by it.
+double pattern_at_separation(const Plan& p, double sep, const DefocusedPattern* defocused = nullptr,
+                             double phase = 0.0) {
     const std::uint32_t hshape = shader_id(p.config.horizontal_pattern);
     if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
     // A planar fan's beam is formed by an aperture facing along it, baffled: it hears nothing from behind
@@ -113,30 +115,19 @@ double pattern_at_separation(const Plan& p, double sep) {
     // behind the beam the response of one in front (a full-strength ghost, 180 deg from each target, on a
     // fan wider than 180 deg).
     if (!p.line_array && std::abs(sep) >= 0.5 * kPi) return 0.0;
+    if (defocused != nullptr && phase > 0.0)
+        return defocused->power(p.hpattern_k * (p.line_array ? sep : std::sin(sep)), phase);
     if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)
         return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
     const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
     return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle);
 }
 
-// The pattern of beam j in focus band b (plan_focus.cpp) at separation `sep`: the far-field pattern in a
-// band of phase 0, else the aperture's defocused by the band's phase (a line array's beam steered to theta
-// by cos^2 theta of it: its aperture seen from there is shorter).
+// The pattern of beam j in focus band b at separation `sep`: the band's phase, a line array's beam steered
+// to theta taking cos^2 theta of it (its aperture seen from there is shorter).
 double pattern_in_band(const Plan& p, const DefocusedPattern* defocused, std::uint32_t b, std::uint32_t j, double sep) {
-    const double phase = p.near_band_phase[b];
-    if (phase == 0.0 || defocused == nullptr) return pattern_at_separation(p, sep);
-    if (p.circular) sep = std::remainder(sep, 2.0 * kPi);
-    if (!p.line_array && std::abs(sep) >= 0.5 * kPi) return 0.0; // baffled, as pattern_at_separation
     const double steering = p.line_array ? std::cos(p.beam_angle_rad[j]) : 1.0;
-    const double u = p.line_array ? sep : std::sin(sep);
-    return defocused->power(p.hpattern_k * u, phase * steering * steering);
-}
-
-// One band of phase 0: the far-field pattern at every bin.
-void reset_focus_bands(Plan& p) {
-    p.near_bands = 1;
-    p.near_band_of_bin.assign(p.bins, 0);
-    p.near_band_phase.assign(1, 0.0);
+    return pattern_at_separation(p, sep, defocused, p.near_band_phase[b] * steering * steering);
 }
 
 // The separation variable of beam j: its angle, or with line_array its sine.
@@ -409,11 +400,11 @@ namespace {
 // (beyond a host camera's fan) are never in a kernel.
 void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent) {
     const std::uint32_t beams = p.beams, columns = p.profile_columns;
-    if (tent) reset_focus_bands(p); // the tent is no pattern to defocus
+    // One band of phase 0 with the tent (plan_focus_bands: no kernel to apply a focus).
     const std::uint32_t bands = p.near_bands;
     std::unique_ptr<DefocusedPattern> defocused;
-    const bool out_of_focus = p.near_band_phase.back() > 0.0; // else one band of the far-field pattern
-    if (out_of_focus)
+    const bool defocus = out_of_focus(p);
+    if (defocus)
         defocused =
             std::make_unique<DefocusedPattern>(shader_id(p.config.horizontal_pattern), p.near_band_phase.back());
     p.near_column_begin.assign(beams, 0);
@@ -460,9 +451,9 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
         };
         const double steering = p.line_array ? std::cos(p.beam_angle_rad[j]) : 1.0;
         auto band_reach_x = [&](std::uint32_t b) {
-            return out_of_focus ? focus_reach_x(p.near_band_phase[b] * steering * steering) : 0.0;
+            return defocus ? focus_reach_x(p.near_band_phase[b] * steering * steering) : 0.0;
         };
-        const double widest_x = tent ? 0.0 : band_reach_x(bands - 1); // the bands' phases increase
+        const double widest_x = band_reach_x(bands - 1); // the bands' phases increase
         auto in_configured = [&](std::int64_t c, double d) {
             return std::abs(separation(c)) <= reach_units + 1e-12 && d <= offset_cut;
         };
@@ -472,7 +463,7 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             if (tent) return d < 1.0;
             const double sep = separation(c);
             return in_configured(c, d) ||
-                   (out_of_focus && x_of(sep) <= widest_x && (p.line_array || std::abs(sep) < 0.5 * kPi));
+                   (defocus && x_of(sep) <= widest_x && (p.line_array || std::abs(sep) < 0.5 * kPi));
         };
         const bool any = in_kernel(lo);
         auto room = [&] { return p.circular ? hi - lo + 1 < std::int64_t(columns) : true; };
@@ -491,11 +482,12 @@ void plan_near_columns(Plan& p, double reach_units, double offset_cut, bool tent
             // The pattern less what the far grid already gives this column at this beam: within the reach
             // the two add up to the pattern exactly, whatever the grid's cells make of it.
             const double far = p.far_cells > 0 ? far_grid_weight(p, wrap(c), j) : 0.0;
+            const double sep = separation(c), x = x_of(sep);
             const bool configured = in_configured(c, beams_away(c));
             for (std::uint32_t b = 0; b < bands; ++b)
-                if (configured || (out_of_focus && x_of(separation(c)) <= band_reach_x(b)))
+                if (configured || (defocus && x <= band_reach_x(b)))
                     row[b * width + std::size_t(c - lo)] =
-                        static_cast<float>(pattern_in_band(p, defocused.get(), b, j, separation(c)) - far);
+                        static_cast<float>(pattern_in_band(p, defocused.get(), b, j, sep) - far);
         }
         // Zero weights at both ends of every band are left out.
         auto zero_column = [&](std::size_t i) {
@@ -545,10 +537,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
     p.near_column_weight.clear();
     p.near_column_begin.clear();
     p.near_column_count.clear();
-    if (!p.effects.horizontal_pattern) {
-        reset_focus_bands(p);
-        return {};
-    }
+    if (!p.effects.horizontal_pattern) return {};
     if (half_taps == 0) {
         plan_near_columns(p, reach_units, 0.0, true);
         return {};
@@ -567,7 +556,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
     }
     // Out of focus the most defocused band reaches further (plan_focus.h focus_reach_x).
     const double focus_units =
-        p.near_band_phase.back() > 0.0 ? std::min(focus_reach_x(p.near_band_phase.back()) / p.hpattern_k, 1.0) : 0.0;
+        out_of_focus(p) ? std::min(focus_reach_x(p.near_band_phase.back()) / p.hpattern_k, 1.0) : 0.0;
     const double kernel_units = std::max(reach_units, p.line_array ? focus_units : std::asin(focus_units));
     const double widest = std::min<double>(p.profile_columns, 2.0 * kernel_units / min_column_spacing + 2.0);
     const double table_bytes = 4.0 * p.beams * widest * p.near_bands;
@@ -581,7 +570,7 @@ Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach
                 (p.near_bands > 1 ? "raise range_min, or move focus_range into the range window"
                                   : "lower accuracy.sidelobe_kernel_beamwidths or beams"));
     plan_near_columns(p, reach_units, offset_cut, false);
-    if (p.near_band_phase.back() > 0.0) // meta.json and Frame::effects say how far out of focus it goes
+    if (out_of_focus(p)) // meta.json and Frame::effects say how far out of focus it goes
         for (EffectState& state : p.effects.states)
             if (state.name == "horizontal_pattern")
                 state.why += "; focused " +

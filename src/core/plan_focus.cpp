@@ -18,6 +18,7 @@
 
 #include "core/angles.h"
 #include "core/plan_steps.h"
+#include "core/sonar_math.hpp"
 
 namespace vksonar::plan_steps {
 
@@ -51,15 +52,6 @@ void gauss_legendre(std::uint32_t n, std::vector<double>& node, std::vector<doub
         node[i] = 0.5 * (1.0 - z);
         weight[i] = 1.0 / ((1.0 - z * z) * dp * dp); // 2 / ((1 - z^2) P'^2), halved for [0, 1]
     }
-}
-
-double far_field_power(std::uint32_t shape, double x) {
-    double amp = x == 0.0 ? 1.0 : std::sin(x) / x;
-    if (shape == shared::kPatternHann) {
-        const double t = x / kPi, den = 1.0 - t * t;
-        amp = std::abs(den) < 1e-9 ? 0.5 : amp / den;
-    }
-    return amp * amp;
 }
 
 } // namespace
@@ -190,7 +182,7 @@ double DefocusedPattern::power(double x, double phi) const {
     x = std::abs(x);
     phi = std::max(phi, 0.0);
     if (x >= x_max_) {
-        if (shape_ != shared::kPatternSinc) return far_field_power(shape_, x);
+        if (shape_ != shared::kPatternSinc) return math_f64::aperture_pattern_power(shape_, 1.0, 0.0, x);
         // Past the geometric shadow (x - 2 phi >= kTail) the aperture's two ends alone, by parts:
         // int e^{i psi} ds = [e^{i psi} (-i/p + 2 phi/p^3 + 12 i phi^2/p^5 - 120 phi^3/p^7)] at s = +-1, with
         // psi = x s - phi s^2 and p = psi' = x - 2 phi s; each term (2n + 1) 2 phi / p^2 of the one before

@@ -22,6 +22,11 @@ constexpr double kMaxFocusPhase = 64.0;
 // pattern on, with a kernel past the tent); an error where a bin's phase passes kMaxFocusPhase.
 Result<void> plan_focus_bands(Plan& p, bool near_kernel);
 
+// Whether the plan's bands defocus the pattern (else one band of phase 0: the far-field pattern).
+inline bool out_of_focus(const Plan& p) {
+    return p.near_band_phase.back() > 0.0;
+}
+
 // How far out in x a band of phase phi keeps its own pattern (docs/pipeline.md "Focus"): kTailPhases phi +
 // 3 pi. The defocused lobes fall as the aperture ends' waves, |A|^2 ~ (1/(x - 2 phi)^2 + 1/(x + 2 phi)^2) / 4,
 // within 1.1 dB of the far field's 1 / (2 x^2) from x = 7 phi on: past it the far grid's far-field lobes

@@ -74,7 +74,7 @@ using vec4 = glm::dvec4;
     VKS_FORWARD(ns, pixel_vertical_power) VKS_FORWARD(ns, depth_slant_range) VKS_FORWARD(ns, echo_at_range)     \
     VKS_FORWARD(ns, range_share) VKS_FORWARD(ns, array_axis_cosine) VKS_FORWARD(ns, cone_coord)                   \
     VKS_FORWARD(ns, cone_share) VKS_FORWARD(ns, cone_extent_low) VKS_FORWARD(ns, cone_extent_high) VKS_FORWARD(ns, cone_extent_share) VKS_FORWARD(ns, far_cell_share) VKS_FORWARD(ns, far_deposit_weight) VKS_FORWARD(ns, far_sidelobe_level) VKS_FORWARD(ns, far_scan_cell) \
-    VKS_FORWARD(ns, ray_vertical_power) VKS_FORWARD(ns, facet_echo) VKS_FORWARD(ns, subpixel_visible)
+    VKS_FORWARD(ns, ray_vertical_power) VKS_FORWARD(ns, element_power) VKS_FORWARD(ns, facet_echo) VKS_FORWARD(ns, subpixel_visible)
 #define VKS_FORWARD(ns, fn) template <class... A> [[gnu::always_inline]] static inline decltype(auto) fn(A&&... a) { return ns::fn(static_cast<A&&>(a)...); }
 template <class Real> struct Math;
 template <> struct Math<float> { VKS_MATH_TABLE(math_f32) };

@@ -451,7 +451,8 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
     }
     weights += far_beam_count(plan);
     // A focus band's columns past its own reach weigh 0 (plan_beams.cpp): its groups leave them out, so a
-    // band near focus costs what the configured reach does.
+    // band near focus costs what the configured reach does. (With one band nothing is left out: the plan
+    // already drops a beam's zero weights at its ends.)
     const std::uint32_t group_taps = near_group_taps(plan);
     for (std::uint32_t band = 0; band < plan.near_bands; ++band)
         for (std::size_t g = 0; g < near_group_count(plan); ++g) {
@@ -471,9 +472,9 @@ template <class Real> void resample_weights(const Plan& plan, Real* weights) {
                 return false;
             };
             std::uint32_t first = 0, end = span.count;
-            while (plan.near_bands > 1 && first < end && !any_weight(first))
+            while (first < end && !any_weight(first))
                 ++first;
-            while (plan.near_bands > 1 && end > first && !any_weight(end - 1))
+            while (end > first && !any_weight(end - 1))
                 --end;
             *weights++ = static_cast<Real>(span.first + std::int64_t(first));
             *weights++ = static_cast<Real>(end - first);
