@@ -95,15 +95,16 @@ VKS_FN REAL sinc_of(REAL x) {
 // beyond it: side lobes of exactly 1 / R, the first null at x = sqrt(A^2 + (pi/2)^2).
 // The aperture patterns (sinc, hann, chebyshev) depend on the angle only through sin(a): their power
 // from sin_a, for callers that have the sine as a ratio (view_elevation_sin) and need no arctangent.
-VKS_FN REAL aperture_pattern_power(uint shape, REAL k, REAL chebyshev_a, REAL sin_a) {
+// aperture_pattern_amplitude is the signed amplitude (the aperture's Fourier transform, 1 on axis), whose
+// square the power is; the noise stage's grain filter (core/plan_grain.cpp) needs its sign.
+VKS_FN REAL aperture_pattern_amplitude(uint shape, REAL k, REAL chebyshev_a, REAL sin_a) {
     REAL x = k * sin_a;
     if (shape == kPatternChebyshev) {
         // (A - x)(A + x), not A^2 - x^2: near x = A (the edge of the main lobe, and past it towards the
         // first null) the squares cancel and float would lose most of the difference's digits.
         REAL d = (chebyshev_a - x) * (chebyshev_a + x);
         REAL amp_cheb = d >= REAL(0) ? cosh(sqrt(d)) : cos(sqrt(-d));
-        amp_cheb = amp_cheb / cosh(chebyshev_a);
-        return amp_cheb * amp_cheb;
+        return amp_cheb / cosh(chebyshev_a);
     }
     REAL amp = sinc_of(x);
     if (shape == kPatternHann) {                   // sinc(x) / (1 - (x/pi)^2), removable singularity at x = pi
@@ -115,6 +116,11 @@ VKS_FN REAL aperture_pattern_power(uint shape, REAL k, REAL chebyshev_a, REAL si
             amp = amp / den;
         }
     }
+    return amp;
+}
+
+VKS_FN REAL aperture_pattern_power(uint shape, REAL k, REAL chebyshev_a, REAL sin_a) {
+    REAL amp = aperture_pattern_amplitude(shape, k, chebyshev_a, sin_a);
     return amp * amp;
 }
 

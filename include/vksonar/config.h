@@ -53,6 +53,12 @@ enum class BeamFocus : std::uint8_t { dynamic, fixed, none };
 // Speckle on the intensity (host stage 5): rayleigh (Exp(1) intensity), gamma (Gamma(L, 1/L) with L =
 // speckle_looks), gaussian (the legacy |N(1, sigma)|).
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
+// How speckle and ambient noise vary from beam to beam (docs/pipeline.md §5, "Grain"). pattern: as the
+// receive beams correlate them (neighbouring beams overlap and hear the same scatterers and the same
+// element noise: grains about a beamwidth wide; Rayleigh speckle and ambient noise, the gamma and gaussian
+// speckle models stay per cell); none: every cell drawn on its own, as earlier builds drew them (grains one
+// beam wide however finely the beams sample the fan).
+enum class BeamCorrelation : std::uint8_t { pattern, none };
 // How a pixel's echo is spread over range bins: the nearest bin, split between the two nearest, or over
 // the pixel's own range extent, at least one bin (README "Accuracy and what it costs").
 enum class RangeKernel : std::uint8_t { nearest, tent, footprint };
@@ -128,9 +134,10 @@ struct SonarConfig {
 
     // Noise (host stage 5). Noise uses a counter-based RNG keyed by (seed, frame, beam, bin).
     SpeckleModel speckle = SpeckleModel::rayleigh;
-    double speckle_looks = 1.0;          // L for the gamma model
-    double speckle_gaussian_sigma = 0.1; // for the legacy gaussian model: |N(1, sigma)|
-    double tvg_db_per_decade = 20.0;     // TVG = k log10 r + 2 alpha r
+    double speckle_looks = 1.0;                                  // L for the gamma model
+    double speckle_gaussian_sigma = 0.1;                         // for the legacy gaussian model: |N(1, sigma)|
+    BeamCorrelation beam_correlation = BeamCorrelation::pattern; // speckle and noise grain across beams
+    double tvg_db_per_decade = 20.0;                             // TVG = k log10 r + 2 alpha r
 
     // Display (host stage 6).
     double db_min = 60.0;  // dB re 1 uPa mapped to 0

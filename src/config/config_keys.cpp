@@ -43,6 +43,7 @@ template <> struct EnumNames<BeamFocus> {
 template <> struct EnumNames<SpeckleModel> {
     static constexpr std::array<const char*, 3> names{"rayleigh", "gamma", "gaussian"};
 };
+template <> struct EnumNames<BeamCorrelation> { static constexpr std::array<const char*, 2> names{"pattern", "none"}; };
 template <> struct EnumNames<RangeKernel> {
     static constexpr std::array<const char*, 3> names{"nearest", "tent", "footprint"};
 };
@@ -353,6 +354,10 @@ std::vector<ConfigKey> make_table() {
                    closed(0, 10,
                           "0: no speckle; far above 1, |N(1, sigma)| is a half-normal gain, not speckle (the legacy "
                           "plugin uses 0.1)")),
+        VKS_ENUM("beam_correlation", BeamCorrelation, beam_correlation, "pattern|none",
+                 "Speckle and ambient noise from beam to beam: correlated as the receive beams' overlap correlates "
+                 "them (pattern: grains about a beamwidth wide; Rayleigh speckle and the noise), or drawn per "
+                 "cell (none: as earlier builds)"),
         VKS_NUMBER("tvg_db_per_decade", tvg_db_per_decade, "dB/decade",
                    "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)",
                    closed(0, 60,

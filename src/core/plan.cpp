@@ -506,6 +506,7 @@ Result<Plan> make_plan(const SonarConfig& config, const SceneData& scene, const 
     if (auto kernel = plan_sidelobe_kernel(p, half_taps, reach, !main_lobe_only && has_sidelobes); !kernel)
         return kernel.error();
     resolve_noise_floor(p);
+    plan_grain(p);
     plan_gpu_params(p);
     plan_subpixel(p, scene);
     if (p.subpixel_capacity > 0) {

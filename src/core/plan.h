@@ -120,6 +120,25 @@ struct Plan {
     NoiseTerms noise;
     std::vector<double> beam_floor_db;
     std::vector<float> beam_noise;
+    // The grain of speckle and ambient noise across beams (plan_grain.cpp; docs/pipeline.md §5, "Grain"):
+    // white complex noise on grain_cells points grain_step apart in the beams' separation variable (angle,
+    // or sine with line_array), and beam j's field the sum of the points within its reach, each weighted by
+    // the receive amplitude pattern at its offset (unit sum of squares per beam, so each cell's draw stays
+    // Exp(1)). The beams go in chunks [grain_chunk[c], grain_chunk[c + 1]) whose points fit the noise
+    // stage's scratch: the chunk's points are grain_chunk_low[c] + i (unwrapped: on a circle, modulo
+    // grain_cells) for i < grain_chunk_point[c + 1] - grain_chunk_point[c], and point i (numbered from
+    // grain_chunk_point[c] on) feeds the chunk's beams [first, end) = grain_point_beams[2 i], [2 i + 1] (from
+    // the chunk's first beam) with the weights from grain_weight[grain_point_weight[i]] on: the noise stage
+    // adds each point into a run of beams, a vector loop without gathers. grain_taps: the most points a beam
+    // takes (0: every cell is drawn on its own, and grain_why says why).
+    std::uint32_t grain_cells = 0, grain_taps = 0;
+    double grain_step = 0;
+    std::vector<std::uint32_t> grain_chunk, grain_chunk_point;
+    std::vector<std::int32_t> grain_chunk_low;
+    std::vector<std::uint32_t> grain_point_beams, grain_point_weight;
+    std::vector<float> grain_weight;
+    std::vector<float> grain_phase; // cos and sin of 2 pi i / kGrainPhases, interleaved: a draw's phase
+    std::string grain_why;
 
     // Beamform tables over the profile columns. Column c (azimuth, or steering angle with line_array,
     // column_azimuth_rad[c]) gives weight column_weight[c] to beam column_beam[c] and
@@ -275,6 +294,12 @@ double beam_directivity_index_db(const SonarConfig& c, bool line_array);
 // p.noise, p.beam_floor_db and p.beam_noise from p.config, p.effects, p.line_array and the beam table:
 // make_plan's step after the effects; again after changing any of them (tests build plans by hand).
 void resolve_noise_floor(Plan& p);
+// The grain tables (Plan::grain_*) from p.config, p.line_array, the horizontal pattern's constants and the
+// beam table: make_plan's step after the noise floor.
+void plan_grain(Plan& p);
+// Plan::grain_phase's phases; the noise stage's scratch per chunk of beams: at most kGrainChunkBeams beams
+// and kGrainChunkPoints grid points (a beam's own taps always fit).
+constexpr std::uint32_t kGrainPhases = 4096, kGrainChunkBeams = 256, kGrainChunkPoints = 1024;
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
 double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshev_a = 0.0);

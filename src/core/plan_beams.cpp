@@ -99,6 +99,15 @@ void plan_column_tables(Plan& p, double exclude_beyond_rad) {
     assign_columns_to_beams(p, exclude_beyond_rad);
 }
 
+bool separation_in_front(const Plan& p, double& sep) {
+    if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
+    // A planar fan's beam is formed by an aperture facing along it, baffled: it hears nothing from behind
+    // (a separation of 90 deg or more). Written in sin(separation), the pattern would give a source
+    // behind the beam the response of one in front (a full-strength ghost, 180 deg from each target, on a
+    // fan wider than 180 deg).
+    return p.line_array || std::abs(sep) < 0.5 * kPi;
+}
+
 namespace {
 
 // The horizontal power pattern at separation `sep` of two beams in the side-lobe kernel's unit: the
@@ -109,12 +118,7 @@ namespace {
 double pattern_at_separation(const Plan& p, double sep, const DefocusedPattern* defocused = nullptr,
                              double phase = 0.0) {
     const std::uint32_t hshape = shader_id(p.config.horizontal_pattern);
-    if (p.circular) sep = std::remainder(sep, 2.0 * kPi); // into [-pi, pi]
-    // A planar fan's beam is formed by an aperture facing along it, baffled: it hears nothing from behind
-    // (a separation of 90 deg or more). Written in sin(separation), the pattern would give a source
-    // behind the beam the response of one in front (a full-strength ghost, 180 deg from each target, on a
-    // fan wider than 180 deg).
-    if (!p.line_array && std::abs(sep) >= 0.5 * kPi) return 0.0;
+    if (!separation_in_front(p, sep)) return 0.0;
     if (defocused != nullptr && phase > 0.0)
         return defocused->power(p.hpattern_k * (p.line_array ? sep : std::sin(sep)), phase);
     if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)

@@ -60,6 +60,9 @@ void plan_cone_table(Plan& p);
 // plan_beams.cpp
 // The side-lobe kernel's reach (an angle from the beam's axis) in the unit the beams are separated in.
 double sidelobe_reach(const Plan& p, double reach);
+// A separation between two directions as the patterns take it (in place): on a full circle into [-pi, pi];
+// false where a planar fan's baffled aperture hears nothing (90 deg or more off its axis).
+bool separation_in_front(const Plan& p, double& sep);
 void plan_column_tables(Plan& p, double exclude_beyond_rad);
 Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes);
 

@@ -66,7 +66,20 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     nlohmann::ordered_json floors = nlohmann::ordered_json::array();
     for (std::size_t j = 0; j < plan.beams && j < plan.beam_floor_db.size(); ++j)
         floors.push_back(plan.beam_floor_db[j]);
-    return {{"noise_level_db", plan.noise.noise_level_db},
+    // the grain across beams (plan_grain.cpp): what it applies to, or why every cell is drawn alone
+    std::string grain = plan.grain_why;
+    if (plan.grain_taps > 0) {
+        grain = std::string(cfg.speckle == SpeckleModel::rayleigh ? "speckle and ambient noise"
+                                                                  : "ambient noise (the gamma and gaussian speckle "
+                                                                    "models are drawn per cell)") +
+                " correlated across beams as the receive pattern overlaps them";
+    }
+    return {{"beam_correlation", cfg.beam_correlation == BeamCorrelation::pattern ? "pattern" : "none"},
+            {"grain", grain},
+            {"grain_step", plan.grain_step},
+            {"grain_step_unit", plan.line_array ? "sine" : "rad"},
+            {"grain_taps", plan.grain_taps},
+            {"noise_level_db", plan.noise.noise_level_db},
             {"noise_level", cfg.noise_level_db < 0.0 ? "auto: the sea's spectrum over the band" : "config"},
             {"band_hz", plan.noise.band_hz},
             {"directivity_index_db", plan.noise.directivity_index_db},

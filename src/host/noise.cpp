@@ -18,6 +18,10 @@ namespace {
 constexpr std::uint32_t kSpeckleStream = 0;
 constexpr std::uint32_t kNoiseStream = 64;
 static_assert(kSpeckleStream + kGammaStreams <= kNoiseStream, "speckle streams overlap the noise stream");
+// The grain's grid points (Plan::grain_*), keyed by (point, bin): two streams each (power, phase), apart from
+// the cells' so that beam_correlation none and pattern never share a draw.
+constexpr std::uint32_t kSpeckleGrainStream = 96;
+constexpr std::uint32_t kNoiseGrainStream = 98;
 
 constexpr float kMinIntensityF = 1e-30f; // dB floor guard: 10 log10(1e-30) = -300 dB, far below any window
 constexpr double kMinTvgRange = 1e-3;    // m; TVG's log10(r) at r -> 0
@@ -69,6 +73,50 @@ RowDraws row_draws_of(const Plan& plan) {
     return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && adds_ambient_noise(plan)};
 }
 
+// The grained draws (Plan::grain_*; docs/pipeline.md §5, "Grain") of the beams of chunk c, [grain_chunk[c],
+// grain_chunk[c + 1]), in bin `bin`, into out[0, count): the chunk's grid points as complex normals of unit
+// power (power Exp(1) from one hash, phase from another), each added into the run of beams it feeds (so
+// every beam sums its points in increasing order, whatever the vector width), and each beam's draw its
+// field's power: Exp(1) in every cell, correlated between beams as their patterns overlap. Inlined into
+// each build of its callers, whose loops it vectorizes with them.
+[[gnu::always_inline]] inline void grain_draws(const Plan& plan, const rng::FrameKey& key, std::uint32_t bin,
+                                               std::uint32_t stream, std::size_t c, float* out) {
+    const std::uint32_t count = plan.grain_chunk[c + 1] - plan.grain_chunk[c];
+    const std::uint32_t p0 = plan.grain_chunk_point[c], points = plan.grain_chunk_point[c + 1] - p0;
+    const std::int64_t cells = plan.grain_cells;
+    std::int64_t m = std::int64_t(plan.grain_chunk_low[c]) % cells; // on a circle the points wrap
+    if (m < 0) m += cells;
+    std::uint32_t point[kGrainChunkPoints]; // the wrap in a loop of its own: the draws' loop then vectorizes
+    for (std::uint32_t i = 0; i < points; ++i) {
+        point[i] = static_cast<std::uint32_t>(m);
+        if (++m == cells) m = 0;
+    }
+    float re[kGrainChunkPoints], im[kGrainChunkPoints];
+    const float* phases = plan.grain_phase.data();
+    for (std::uint32_t i = 0; i < points; ++i) {
+        const float amplitude = std::sqrt(rng::exp1_cell32(key, point[i], bin, stream));
+        const std::uint32_t phase = rng::hash_cell32(key, point[i], bin, stream + 1) >> 20; // kGrainPhases = 2^12
+        re[i] = amplitude * phases[2 * phase];
+        im[i] = amplitude * phases[2 * phase + 1];
+    }
+    float field_re[kGrainChunkBeams], field_im[kGrainChunkBeams];
+    for (std::uint32_t q = 0; q < count; ++q)
+        field_re[q] = field_im[q] = 0.0f;
+    const std::uint32_t* runs = plan.grain_point_beams.data() + 2 * std::size_t(p0);
+    const std::uint32_t* weight_at = plan.grain_point_weight.data() + p0;
+    for (std::uint32_t i = 0; i < points; ++i) {
+        const std::uint32_t first = runs[2 * i], end = runs[2 * i + 1];
+        const float* w = plan.grain_weight.data() + weight_at[i] - first;
+        const float point_re = re[i], point_im = im[i];
+        for (std::uint32_t q = first; q < end; ++q) {
+            field_re[q] += w[q] * point_re;
+            field_im[q] += w[q] * point_im;
+        }
+    }
+    for (std::uint32_t q = 0; q < count; ++q)
+        out[q] = field_re[q] * field_re[q] + field_im[q] * field_im[q];
+}
+
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
 // FMA in either). The tests stay outside the loops: inside them (0c6d6d4) they kept the loops from being
 // vectorized, 2.0 -> 4.4 ms on one thread here, and on an H100's host the draws outlasted the GPU's
@@ -76,8 +124,17 @@ RowDraws row_draws_of(const Plan& plan) {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 __attribute__((target_clones("avx512f", "avx2", "default")))
 #endif
-void draw_bin(const rng::FrameKey& key, RowDraws rows, std::uint32_t beams, std::uint32_t bin, float* speckle,
+void draw_bin(const Plan& plan, const rng::FrameKey& key, RowDraws rows, std::uint32_t bin, float* speckle,
               float* noise) {
+    const std::uint32_t beams = plan.beams;
+    if (plan.grain_taps > 0) {
+        for (std::size_t c = 0; c + 1 < plan.grain_chunk.size(); ++c) {
+            const std::uint32_t b0 = plan.grain_chunk[c];
+            if (rows.speckle) grain_draws(plan, key, bin, kSpeckleGrainStream, c, speckle + b0);
+            if (rows.noise) grain_draws(plan, key, bin, kNoiseGrainStream, c, noise + b0);
+        }
+        return;
+    }
     if (rows.speckle) {
         for (std::uint32_t beam = 0; beam < beams; ++beam)
             speckle[beam] = rng::exp1_cell32(key, beam, bin, kSpeckleStream);
@@ -110,7 +167,7 @@ void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index
         const std::uint32_t beams = t.plan->beams;
         const std::uint32_t end = std::min<std::uint32_t>((b + 1) * kBinBlock, t.plan->bins);
         for (std::uint32_t bin = b * kBinBlock; bin < end; ++bin)
-            draw_bin(t.key, t.rows, beams, bin, t.draws.speckle + std::size_t(bin) * beams,
+            draw_bin(*t.plan, t.key, t.rows, bin, t.draws.speckle + std::size_t(bin) * beams,
                      t.draws.noise + std::size_t(bin) * beams);
     };
     const std::uint32_t blocks = (plan.bins + kBinBlock - 1) / kBinBlock;
@@ -197,7 +254,8 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const bool row_speckle = rows.speckle, row_noise = rows.noise;
     const bool fast_path = row_speckle && row_noise;
     const auto source_f = static_cast<float>(source);
-    constexpr std::size_t kChunk = 256; // beams per pass: the scratch stays on the stack (no allocation)
+    constexpr std::size_t kChunk = kGrainChunkBeams; // beams per pass: the scratch stays on the stack
+    const bool grain = plan.grain_taps > 0;
     float speckle_draw[kChunk], noise_draw[kChunk], stored[kChunk];
 
     for (std::size_t k = bin_begin; k < bin_end; ++k) {
@@ -207,20 +265,26 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             gain = std::pow(10.0, (cfg.tvg_db_per_decade * std::log10(r) + 2.0 * plan.alpha_db_per_m * r) / 10.0);
         }
         const auto bin = static_cast<std::uint32_t>(k);
-        for (std::size_t j0 = 0; j0 < beams; j0 += kChunk) {
-            const std::size_t count = std::min(kChunk, beams - j0);
+        // chunks of at most kChunk beams: the grain's (plan_grain), else kChunk at a time
+        std::size_t count = 0;
+        for (std::size_t j0 = 0, chunk = 0; j0 < beams; j0 += count, ++chunk) {
+            count = grain ? plan.grain_chunk[chunk + 1] - j0 : std::min(kChunk, beams - j0);
             const auto beam0 = static_cast<std::uint32_t>(j0);
             // the draws made ahead (noise_draws: the same values), else made here
             const float* speckle_row = speckle_draw; // the row's draws: made ahead (noise_draws), else here
             const float* noise_row = noise_draw;
             if (row_speckle && draws != nullptr) {
                 speckle_row = draws->speckle + k * beams + j0;
+            } else if (row_speckle && grain) {
+                grain_draws(plan, key, bin, kSpeckleGrainStream, chunk, speckle_draw);
             } else if (row_speckle) {
                 for (std::size_t c = 0; c < count; ++c)
                     speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
             }
             if (row_noise && draws != nullptr) {
                 noise_row = draws->noise + k * beams + j0;
+            } else if (row_noise && grain) {
+                grain_draws(plan, key, bin, kNoiseGrainStream, chunk, noise_draw);
             } else if (row_noise) {
                 for (std::size_t c = 0; c < count; ++c)
                     noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);

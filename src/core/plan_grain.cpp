@@ -1,0 +1,188 @@
+// The grain of speckle and ambient noise across beams (docs/pipeline.md §5, "Grain"): the tables the noise
+// stage (src/host/noise.cpp) filters its white draws with.
+//
+// A beam hears the scatterers, and the elements' noise, through its receive pattern; two beams whose patterns
+// overlap hear much the same, so their speckle and noise are correlated. Beam j's complex field is
+// z_j = sum over directions u of a(u - u_j) c(u), with a the receive amplitude pattern and c white; the
+// intensity correlation of two beams is then |rho(u_j - u_j')|^2, rho the aperture's |w|^2 transformed and
+// normalized (for an unshaded array sinc itself). A defocus (beam_focus) multiplies w by a phase that both
+// beams share, so the grain is the focused one at every range.
+//
+// The white field is drawn on a grid in u (the angle, or the sine for a line array). The aperture patterns
+// are band-limited (a product of two has its spectrum within |s| < 2 in x = k u), so a sum of products over a
+// grid finer than pi in x is their integral exactly, and where the grid lies against the beams does not
+// matter. Each beam takes the grid points within
+// the main lobe and two side lobes each side; the truncation leaves the intensity correlation within 0.035
+// of the untruncated one at every lag (an unshaded array; less with shading).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "core/angles.h"
+#include "core/plan.h"
+#include "core/plan_steps.h"
+#include "core/sonar_math.hpp"
+
+namespace vksonar {
+
+using namespace plan_steps;
+
+namespace {
+
+// The receive amplitude pattern at separation `sep` (pattern_at_separation's power, as the signed
+// amplitude whose square it is: the aperture patterns' sign changes from lobe to lobe).
+double amplitude_at_separation(const Plan& p, double sep) {
+    if (!separation_in_front(p, sep)) return 0.0;
+    const std::uint32_t shape = shader_id(p.config.horizontal_pattern);
+    if (shape != shared::kPatternBox && shape != shared::kPatternGaussian)
+        return math_f64::aperture_pattern_amplitude(shape, p.hpattern_k, p.hpattern_chebyshev_a,
+                                                    p.line_array ? sep : std::sin(sep));
+    const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+    return std::sqrt(
+        math_f64::pattern_power(shape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle));
+}
+
+// The grid's step and each beam's reach, in the separation's unit.
+struct GrainGrid {
+    double step = 0, reach = 0;
+};
+
+GrainGrid grain_grid(const Plan& p) {
+    const double half_bw = 0.5 * p.config.horizontal_beamwidth_deg * kDegToRad;
+    switch (p.config.horizontal_pattern) {
+    case BeamPattern::box: // amplitude 1 within the half width: steps fine enough to show its triangle
+        return {0.25 * half_bw, half_bw};
+    case BeamPattern::gaussian: // power exp(-k a^2), to -40 dB
+        return {0.5 * half_bw, std::sqrt(std::log(1e4) / p.hpattern_k)};
+    default:
+        break;
+    }
+    // The aperture patterns in x = k u (planar: u the angle's sine): steps of 0.8 pi, inside the band limit
+    // pi with a margin for the truncation (the same correlations as steps of a -3 dB half width, 1.39 for
+    // sinc, within 0.002, at 9 taps a beam instead of 15), to the first null and two side lobes beyond it
+    // (each about pi wide).
+    const double k = p.hpattern_k;
+    const double a = p.hpattern_chebyshev_a;
+    const double first_null = p.config.horizontal_pattern == BeamPattern::hann ? 2.0 * kPi
+                              : p.config.horizontal_pattern == BeamPattern::chebyshev
+                                  ? std::sqrt(a * a + 0.25 * kPi * kPi)
+                                  : kPi;
+    const double step_x = 0.8 * kPi, reach_x = first_null + 2.0 * kPi;
+    if (p.line_array) return {step_x / k, reach_x / k};
+    return {std::asin(std::min(step_x / k, 1.0)), std::asin(std::min(reach_x / k, 1.0))};
+}
+
+void no_grain(Plan& p, std::string why) {
+    p.grain_cells = p.grain_taps = 0;
+    p.grain_step = 0;
+    p.grain_chunk.clear();
+    p.grain_chunk_point.clear();
+    p.grain_chunk_low.clear();
+    p.grain_point_beams.clear();
+    p.grain_point_weight.clear();
+    p.grain_weight.clear();
+    p.grain_phase.clear();
+    p.grain_why = std::move(why);
+}
+
+} // namespace
+
+void plan_grain(Plan& p) {
+    const SonarConfig& c = p.config;
+    if (c.beam_correlation == BeamCorrelation::none)
+        return no_grain(p, "beam_correlation none: every cell drawn alone");
+    if (p.beams < 2) return no_grain(p, "one beam");
+    // the noise stage's row draws hash (beam or grid point, bin) in one 32-bit word
+    constexpr std::uint32_t kMaxIndex = 1u << 16;
+    if (p.beams >= kMaxIndex || p.bins >= kMaxIndex)
+        return no_grain(p, "beams or bins 65536 or more: every cell drawn alone");
+    const GrainGrid grid = grain_grid(p);
+    const std::uint32_t beams = p.beams;
+    std::vector<double> position(beams);
+    for (std::uint32_t j = 0; j < beams; ++j)
+        position[j] = p.line_array ? std::sin(p.beam_angle_rad[j]) : p.beam_angle_rad[j];
+    double step = grid.step, origin = 0.0;
+    std::uint32_t cells = 0;
+    if (p.circular) {
+        const double around = std::ceil(2.0 * kPi / step);
+        if (around >= kMaxIndex) return no_grain(p, "65536 grid points or more: every cell drawn alone");
+        cells = static_cast<std::uint32_t>(around);
+        step = 2.0 * kPi / cells;
+        origin = -kPi;
+    } else {
+        origin = *std::min_element(position.begin(), position.end()) - grid.reach;
+    }
+    // the points within reach of a beam: at most 2 reach / step + 1 of them, from its first on
+    const auto taps = static_cast<std::uint32_t>(std::floor(2.0 * grid.reach / step)) + 2;
+    if (taps > kGrainChunkPoints) return no_grain(p, "the pattern's reach is too many grid steps");
+    // each beam's first point and its taps' weights (beam-major), normalized
+    std::vector<std::int32_t> first(beams);
+    std::vector<double> weight(std::size_t(taps) * beams, 0.0);
+    std::int64_t last_point = 0;
+    for (std::uint32_t j = 0; j < beams; ++j) {
+        const double first_point = std::ceil((position[j] - grid.reach - origin) / step);
+        first[j] = static_cast<std::int32_t>(first_point);
+        double* w = weight.data() + std::size_t(j) * taps;
+        double sum_squares = 0.0;
+        for (std::uint32_t t = 0; t < taps; ++t) {
+            const double offset = position[j] - (origin + (first_point + t) * step);
+            if (std::abs(offset) > grid.reach) continue;
+            w[t] = amplitude_at_separation(p, offset);
+            sum_squares += w[t] * w[t];
+        }
+        const double norm = sum_squares > 0.0 ? 1.0 / std::sqrt(sum_squares) : 0.0;
+        for (std::uint32_t t = 0; t < taps; ++t)
+            w[t] *= norm;
+        last_point = std::max<std::int64_t>(last_point, std::int64_t(first_point) + taps);
+    }
+    if (!p.circular) {
+        if (last_point >= kMaxIndex) return no_grain(p, "65536 grid points or more: every cell drawn alone");
+        cells = static_cast<std::uint32_t>(last_point);
+    }
+    // Chunks of consecutive beams whose points fit the noise stage's scratch. The beams' positions fall
+    // strictly (beam_table), so their first points never rise: the beams a point feeds are a run.
+    p.grain_chunk.assign(1, 0);
+    for (std::uint32_t j = 1; j < beams; ++j) {
+        const std::uint32_t b0 = p.grain_chunk.back();
+        if (j - b0 >= kGrainChunkBeams || std::int64_t(first[b0]) + taps - first[j] > std::int64_t(kGrainChunkPoints))
+            p.grain_chunk.push_back(j);
+    }
+    p.grain_chunk.push_back(beams);
+    p.grain_chunk_point.assign(1, 0);
+    p.grain_chunk_low.clear();
+    p.grain_point_beams.clear();
+    p.grain_point_weight.clear();
+    p.grain_weight.clear();
+    for (std::size_t chunk = 0; chunk + 1 < p.grain_chunk.size(); ++chunk) {
+        const std::uint32_t b0 = p.grain_chunk[chunk], b1 = p.grain_chunk[chunk + 1];
+        const std::int32_t low = first[b1 - 1], end = first[b0] + std::int32_t(taps);
+        p.grain_chunk_low.push_back(low);
+        std::uint32_t run_first = b1, run_end = b1; // the run of beams point m feeds: first <= m < first + taps
+        for (std::int32_t m = low; m < end; ++m) {
+            while (run_first > b0 && first[run_first - 1] <= m)
+                --run_first;
+            while (run_end > run_first && first[run_end - 1] + std::int32_t(taps) <= m)
+                --run_end;
+            p.grain_point_beams.push_back(run_first - b0);
+            p.grain_point_beams.push_back(run_end - b0);
+            p.grain_point_weight.push_back(static_cast<std::uint32_t>(p.grain_weight.size()));
+            for (std::uint32_t q = run_first; q < run_end; ++q)
+                p.grain_weight.push_back(
+                    static_cast<float>(weight[std::size_t(q) * taps + std::uint32_t(m - first[q])]));
+        }
+        p.grain_chunk_point.push_back(p.grain_chunk_point.back() + std::uint32_t(end - low));
+    }
+    p.grain_phase.resize(2 * std::size_t(kGrainPhases));
+    for (std::uint32_t i = 0; i < kGrainPhases; ++i) {
+        const double phase = 2.0 * kPi * i / kGrainPhases;
+        p.grain_phase[2 * i] = static_cast<float>(std::cos(phase));
+        p.grain_phase[2 * i + 1] = static_cast<float>(std::sin(phase));
+    }
+    p.grain_cells = cells;
+    p.grain_taps = taps;
+    p.grain_step = step;
+    p.grain_why.clear();
+}
+
+} // namespace vksonar

@@ -1,0 +1,291 @@
+// The grain of speckle and ambient noise across beams (beam_correlation pattern; src/core/plan_grain.cpp, the
+// noise stage's grain_draws). Two beams that overlap hear much the same scatterers and element noise: for
+// complex normal fields their intensity correlation is |rho|^2, rho the normalized transform of the
+// aperture's |w|^2 at their separation. The references are that closed form (sinc^2 for an unshaded
+// aperture) or Simpson's rule over the aperture (hann), with the pattern constant from the test's own
+// bisection of the -3 dB point: none of it from the code under test.
+//
+// Tolerances: the plan truncates each beam's filter after two side lobes, which moves the correlation by up
+// to 0.035 at some lag (the design's budget; the test's own Python model of the truncation gave 0.034); the
+// estimate over N = bins x frames samples of an exponential pair has a standard error near 1.5 / sqrt(N),
+// 0.006 at 65536 samples, and each check averages several pairs. 0.05 holds both with room; drawing every
+// cell on its own (the grain ignored) misses by 0.3 to 0.9 at lags 1-4, and a grain twice too wide or too
+// narrow by more than 0.1 at lag 2 or 4.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "core/plan.h"
+#include "host/host_stages.h"
+#include "host/workers.h"
+#include "scene/scene_data.h"
+#include "test_support.h"
+
+using namespace vksonar;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kDeg = kPi / 180.0;
+constexpr std::uint32_t kFrames = 16;
+
+Plan grain_plan(const SonarConfig& config) {
+    auto plan = make_plan(config, SceneData{});
+    EXPECT_TRUE(plan) << plan.error().message;
+    return plan ? std::move(plan.value()) : Plan{};
+}
+
+SonarConfig grain_config() {
+    SonarConfig c = vksonar::testing::quiet_config();
+    c.bins = 4096; // samples per frame for the statistics
+    c.effects.speckle = EffectMode::on;
+    c.effects.ambient_noise = EffectMode::on;
+    return c;
+}
+
+// The draws of frames 0 .. kFrames - 1 as the renderer makes them (noise_draws), frame after frame: speckle and
+// ambient noise, bins * beams each.
+struct Draws {
+    std::vector<float> speckle, noise;
+};
+Draws draws_of(const Plan& p) {
+    const std::size_t cells = std::size_t(p.bins) * p.beams;
+    Draws d;
+    d.speckle.resize(cells * kFrames);
+    d.noise.resize(cells * kFrames);
+    host::Workers workers(2);
+    for (std::uint32_t f = 0; f < kFrames; ++f)
+        host::noise_draws(p, 7, f, {d.speckle.data() + f * cells, d.noise.data() + f * cells}, &workers);
+    return d;
+}
+
+// Pearson's correlation of beam a of one field and beam b of another over every bin of every frame.
+double correlation(const Plan& p, const std::vector<float>& field_a, std::uint32_t a, const std::vector<float>& field_b,
+                   std::uint32_t b) {
+    const std::size_t rows = field_a.size() / p.beams;
+    double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+    for (std::size_t r = 0; r < rows; ++r) {
+        const double x = field_a[r * p.beams + a], y = field_b[r * p.beams + b];
+        sa += x;
+        sb += y;
+        saa += x * x;
+        sbb += y * y;
+        sab += x * y;
+    }
+    const double n = double(rows);
+    const double cov = sab / n - sa / n * (sb / n);
+    return cov / std::sqrt((saa / n - sa / n * (sa / n)) * (sbb / n - sb / n * (sb / n)));
+}
+double correlation(const Plan& p, const std::vector<float>& field, std::uint32_t a, std::uint32_t b) {
+    return correlation(p, field, a, field, b);
+}
+
+// x where a power pattern falls to one half, by bisection on [lo, hi] (power falling there).
+template <class F> double half_power_x(F&& power, double lo, double hi) {
+    for (int i = 0; i < 200; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        (power(mid) > 0.5 ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+// The normalized transform of an aperture weighting's square, rho(x) = int w^2 cos(x s) ds / int w^2 over
+// s in [-1, 1] (Simpson, 2000 panels), and its power pattern |int w cos(x s) ds / int w|^2 for the bisection.
+template <class W> double aperture_integral(W&& w, double x, int power_of_w) {
+    constexpr int n = 2000;
+    double sum = 0;
+    for (int i = 0; i <= n; ++i) {
+        const double s = -1.0 + 2.0 * i / n;
+        const double f = std::pow(w(s), power_of_w) * std::cos(x * s);
+        sum += f * (i == 0 || i == n ? 1.0 : (i % 2 ? 4.0 : 2.0));
+    }
+    return sum * (2.0 / n) / 3.0;
+}
+
+// How a pattern correlates two beams: the intensity correlation at a separation in x = k u units.
+struct Aperture {
+    const char* name;
+    double (*weight)(double s);
+};
+double uniform_weight(double) {
+    return 1.0;
+}
+double hann_weight(double s) {
+    return 1.0 + std::cos(kPi * s);
+}
+
+double expected_correlation(const Aperture& a, double x) {
+    const double rho = aperture_integral(a.weight, x, 2) / aperture_integral(a.weight, 0.0, 2);
+    return rho * rho;
+}
+// The pattern constant k = x3 / sin(bw / 2) of an aperture (the plan's definition of the beamwidth).
+double pattern_k(const Aperture& a, double beamwidth_rad) {
+    const double norm = aperture_integral(a.weight, 0.0, 1);
+    const double x3 = half_power_x(
+        [&](double x) {
+            const double amp = aperture_integral(a.weight, x, 1) / norm;
+            return amp * amp;
+        },
+        0.0, 3.0);
+    return x3 / std::sin(0.5 * beamwidth_rad);
+}
+
+// The mean correlation of beam pairs (j, j + lag), j from `from` on, `pairs` of them, against each pair's own
+// expectation at its separation (sine with a line array, else the angle's sine).
+struct LagCheck {
+    double measured = 0, expected = 0;
+};
+LagCheck check_lag(const Plan& p, const std::vector<float>& draws, const Aperture& a, double k, std::uint32_t from,
+                   std::uint32_t lag, std::uint32_t pairs) {
+    LagCheck out;
+    for (std::uint32_t j = from; j < from + pairs; ++j) {
+        const double t1 = p.beam_angle_rad[j], t2 = p.beam_angle_rad[j + lag];
+        const double separation = p.line_array ? std::sin(t1) - std::sin(t2) : std::sin(t1 - t2);
+        out.measured += correlation(p, draws, j, j + lag) / pairs;
+        out.expected += expected_correlation(a, k * separation) / pairs;
+    }
+    return out;
+}
+
+} // namespace
+
+TEST(Grain, NeighbouringBeamsCorrelateAsTheirAperturesOverlap) {
+    const Aperture uniform{"unshaded", uniform_weight}, hann{"hann", hann_weight};
+    struct Case {
+        const char* name;
+        BeamPattern pattern;
+        const Aperture* aperture;
+        BeamGeometry geometry;
+        double hfov_deg;
+        std::uint32_t beams;
+    };
+    const Case cases[] = {
+        {"line array, sinc (the default)", BeamPattern::sinc, &uniform, BeamGeometry::line_array, 130.0, 512},
+        {"line array, hann", BeamPattern::hann, &hann, BeamGeometry::line_array, 130.0, 512},
+        {"planar, sinc", BeamPattern::sinc, &uniform, BeamGeometry::planar, 90.0, 256},
+    };
+    for (const Case& kase : cases) {
+        SCOPED_TRACE(kase.name);
+        SonarConfig c = grain_config();
+        c.horizontal_pattern = kase.pattern;
+        c.beam_geometry = kase.geometry;
+        c.hfov_deg = kase.hfov_deg;
+        c.beams = kase.beams;
+        const Plan p = grain_plan(c);
+        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        ASSERT_EQ(p.line_array, kase.geometry == BeamGeometry::line_array);
+        const double k = pattern_k(*kase.aperture, c.horizontal_beamwidth_deg * kDeg);
+        const Draws d = draws_of(p);
+        // near broadside, and (line array) near 55 deg, where a beam is 1.7 times wider in angle
+        std::vector<std::uint32_t> starts{p.beams / 2 - 10};
+        if (p.line_array) starts.push_back(std::uint32_t(p.beams * 0.08));
+        for (const std::uint32_t from : starts) {
+            for (const std::uint32_t lag : {1u, 2u, 4u, 8u}) {
+                for (const std::vector<float>* field : {&d.speckle, &d.noise}) {
+                    const LagCheck got = check_lag(p, *field, *kase.aperture, k, from, lag, 12);
+                    EXPECT_NEAR(got.measured, got.expected, 0.05)
+                        << "beams from " << from << " (" << p.beam_angle_rad[from] / kDeg << " deg), lag " << lag
+                        << (field == &d.speckle ? ", speckle" : ", noise");
+                }
+            }
+        }
+        // speckle and noise are drawn apart: uncorrelated, cell by cell
+        double cross = 0;
+        for (std::uint32_t j = p.beams / 2 - 10; j < p.beams / 2 + 10; ++j)
+            cross += correlation(p, d.speckle, j, d.noise, j) / 20;
+        EXPECT_NEAR(cross, 0.0, 0.01);
+    }
+}
+
+TEST(Grain, NoneDrawsEveryCellOnItsOwn) {
+    SonarConfig c = grain_config();
+    c.beam_correlation = BeamCorrelation::none;
+    const Plan p = grain_plan(c);
+    EXPECT_EQ(p.grain_taps, 0u);
+    EXPECT_NE(p.grain_why.find("beam_correlation none"), std::string::npos) << p.grain_why;
+    const Draws d = draws_of(p);
+    for (std::uint32_t j = p.beams / 2 - 10; j < p.beams / 2 + 10; ++j)
+        EXPECT_NEAR(correlation(p, d.speckle, j, j + 1), 0.0, 0.03) << "beam " << j;
+}
+
+// Each beam's weights have unit sum of squares and its points are unit-power complex normals, so every cell is
+// Exp(1): mean 1 and variance 1, P(> 3) = e^-3, at broadside and at the fan's edges (where a beam's taps reach
+// past the others' and the normalization differs).
+TEST(Grain, EachCellStaysExponential) {
+    SonarConfig c = grain_config();
+    const Plan p = grain_plan(c);
+    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    const Draws d = draws_of(p);
+    for (const std::uint32_t j : {0u, 1u, p.beams / 2, p.beams - 1}) {
+        for (const std::vector<float>* field : {&d.speckle, &d.noise}) {
+            const std::size_t rows = field->size() / p.beams;
+            double sum = 0, sum_squares = 0, above = 0;
+            for (std::size_t r = 0; r < rows; ++r) {
+                const double v = (*field)[r * p.beams + j];
+                sum += v;
+                sum_squares += v * v;
+                above += v > 3.0 ? 1.0 : 0.0;
+            }
+            const double n = double(rows), mean = sum / n, var = sum_squares / n - mean * mean;
+            // 5 standard errors (the rows are independent: bins and frames are drawn apart)
+            EXPECT_NEAR(mean, 1.0, 5.0 / std::sqrt(n)) << "beam " << j;
+            EXPECT_NEAR(var, 1.0, 5.0 * std::sqrt(8.0 / n))
+                << "beam " << j; // Var(X^2) = 24 - 4 = 20 -> SE of var ~ sqrt(8/n)
+            const double tail = std::exp(-3.0);
+            EXPECT_NEAR(above / n, tail, 5.0 * std::sqrt(tail * (1 - tail) / n)) << "beam " << j;
+        }
+    }
+}
+
+// A full circle (planar, 360 deg): the first and the last beam are neighbours across the seam and correlate as
+// any two neighbours do.
+TEST(Grain, AFullCircleWrapsAtTheSeam) {
+    SonarConfig c = grain_config();
+    c.hfov_deg = 360.0;
+    c.beams = 720;
+    c.horizontal_beamwidth_deg = 1.5;
+    const Plan p = grain_plan(c);
+    ASSERT_TRUE(p.circular);
+    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    const Draws d = draws_of(p);
+    const double k = pattern_k({"unshaded", uniform_weight}, c.horizontal_beamwidth_deg * kDeg);
+    const double expected = expected_correlation({"unshaded", uniform_weight}, k * std::sin(0.5 * kDeg));
+    double seam = correlation(p, d.speckle, p.beams - 1, 0), inside = 0;
+    for (std::uint32_t j = 300; j < 310; ++j)
+        inside += correlation(p, d.speckle, j, j + 1) / 10;
+    EXPECT_NEAR(inside, expected, 0.05);
+    EXPECT_NEAR(seam, expected, 0.05);
+    EXPECT_GT(expected, 0.5); // a half-degree step under a 1.5 deg beam: the check has something to find
+}
+
+// The renderer makes the draws ahead of the stage (noise_draws) or the stage makes its own: the same bytes with
+// the grain, on one thread or three.
+TEST(Grain, DrawsMadeAheadEqualTheStagesOwn) {
+    SonarConfig c = grain_config();
+    c.bins = 200;
+    const Plan p = grain_plan(c);
+    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    ASSERT_TRUE(host::noise_draws_ahead(p));
+    Frame here;
+    here.beams = p.beams;
+    here.bins = p.bins;
+    const std::size_t cells = std::size_t(p.beams) * p.bins;
+    here.clean.assign(cells, 1e-12f);
+    here.intensity.assign(cells, 0.0f);
+    here.display.assign(cells, 0.0f);
+    Frame ahead = here;
+    host::noise_and_gain(p, 3, 9, here);
+    for (std::uint32_t threads : {1u, 3u}) {
+        host::Workers workers(threads);
+        std::vector<float> speckle(cells), noise(cells);
+        const host::NoiseDraws draws{speckle.data(), noise.data()};
+        host::noise_draws(p, 3, 9, draws, &workers);
+        host::noise_and_gain(p, 3, 9, ahead, &workers, nullptr, &draws);
+        EXPECT_EQ(std::memcmp(ahead.intensity.data(), here.intensity.data(), cells * sizeof(float)), 0) << threads;
+    }
+}
