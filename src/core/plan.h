@@ -125,17 +125,18 @@ struct Plan {
     // or sine with line_array), and beam j's field the sum of the points within its reach, each weighted by
     // the receive amplitude pattern at its offset (unit sum of squares per beam, so each cell's draw stays
     // Exp(1)). The beams go in chunks [grain_chunk[c], grain_chunk[c + 1]) whose points fit the noise
-    // stage's scratch: the chunk's points are grain_chunk_low[c] + i (unwrapped: on a circle, modulo
-    // grain_cells) for i < grain_chunk_point[c + 1] - grain_chunk_point[c], and point i (numbered from
-    // grain_chunk_point[c] on) feeds the chunk's beams [first, end) = grain_point_beams[2 i], [2 i + 1] (from
-    // the chunk's first beam) with the weights from grain_weight[grain_point_weight[i]] on: the noise stage
-    // adds each point into a run of beams, a vector loop without gathers. grain_taps: the most points a beam
-    // takes (0: every cell is drawn on its own, and grain_why says why).
+    // stage's scratch: chunk c's points are grain_chunk_low[c] + i (unwrapped: on a circle, modulo
+    // grain_cells) for i < grain_chunk_points[c]. Its beams go in blocks of kGrainLanes (the last one
+    // padded), blocks [grain_chunk_block[c], grain_chunk_block[c + 1]): block b takes the chunk's points
+    // [grain_block_points[2 b], [2 b + 1]) with kGrainLanes weights each from grain_weight[grain_block_weight[b]]
+    // on (0 for a beam the point does not reach, and for the padding), so the noise stage sums a block's
+    // beams side by side in registers, each over its points in increasing order. grain_taps: the most
+    // points a beam takes (0: every cell is drawn on its own, and grain_why says why).
     std::uint32_t grain_cells = 0, grain_taps = 0;
     double grain_step = 0;
-    std::vector<std::uint32_t> grain_chunk, grain_chunk_point;
+    std::vector<std::uint32_t> grain_chunk, grain_chunk_points, grain_chunk_block;
     std::vector<std::int32_t> grain_chunk_low;
-    std::vector<std::uint32_t> grain_point_beams, grain_point_weight;
+    std::vector<std::uint32_t> grain_block_points, grain_block_weight;
     std::vector<float> grain_weight;
     std::vector<float> grain_phase; // cos and sin of 2 pi i / kGrainPhases, interleaved: a draw's phase
     std::string grain_why;
@@ -299,7 +300,8 @@ void resolve_noise_floor(Plan& p);
 void plan_grain(Plan& p);
 // Plan::grain_phase's phases; the noise stage's scratch per chunk of beams: at most kGrainChunkBeams beams
 // and kGrainChunkPoints grid points (a beam's own taps always fit).
-constexpr std::uint32_t kGrainPhases = 4096, kGrainChunkBeams = 256, kGrainChunkPoints = 1024;
+// kGrainLanes: the beams of a block, summed side by side.
+constexpr std::uint32_t kGrainPhases = 4096, kGrainChunkBeams = 256, kGrainChunkPoints = 1024, kGrainLanes = 16;
 
 // Pattern constant k for a power pattern that is 0.5 at +-beamwidth/2 (see pattern_power in sonar_math.h).
 double pattern_constant(BeamPattern shape, double beamwidth_rad, double chebyshev_a = 0.0);

@@ -77,10 +77,11 @@ void no_grain(Plan& p, std::string why) {
     p.grain_cells = p.grain_taps = 0;
     p.grain_step = 0;
     p.grain_chunk.clear();
-    p.grain_chunk_point.clear();
+    p.grain_chunk_points.clear();
+    p.grain_chunk_block.clear();
     p.grain_chunk_low.clear();
-    p.grain_point_beams.clear();
-    p.grain_point_weight.clear();
+    p.grain_block_points.clear();
+    p.grain_block_weight.clear();
     p.grain_weight.clear();
     p.grain_phase.clear();
     p.grain_why = std::move(why);
@@ -141,7 +142,8 @@ void plan_grain(Plan& p) {
         cells = static_cast<std::uint32_t>(last_point);
     }
     // Chunks of consecutive beams whose points fit the noise stage's scratch. The beams' positions fall
-    // strictly (beam_table), so their first points never rise: the beams a point feeds are a run.
+    // strictly (beam_table), so their first points never rise: a run of beams takes the points from its
+    // last beam's first to its first beam's last.
     p.grain_chunk.assign(1, 0);
     for (std::uint32_t j = 1; j < beams; ++j) {
         const std::uint32_t b0 = p.grain_chunk.back();
@@ -149,29 +151,35 @@ void plan_grain(Plan& p) {
             p.grain_chunk.push_back(j);
     }
     p.grain_chunk.push_back(beams);
-    p.grain_chunk_point.assign(1, 0);
+    p.grain_chunk_points.clear();
+    p.grain_chunk_block.assign(1, 0);
     p.grain_chunk_low.clear();
-    p.grain_point_beams.clear();
-    p.grain_point_weight.clear();
+    p.grain_block_points.clear();
+    p.grain_block_weight.clear();
     p.grain_weight.clear();
     for (std::size_t chunk = 0; chunk + 1 < p.grain_chunk.size(); ++chunk) {
         const std::uint32_t b0 = p.grain_chunk[chunk], b1 = p.grain_chunk[chunk + 1];
-        const std::int32_t low = first[b1 - 1], end = first[b0] + std::int32_t(taps);
+        const std::int32_t low = first[b1 - 1];
         p.grain_chunk_low.push_back(low);
-        std::uint32_t run_first = b1, run_end = b1; // the run of beams point m feeds: first <= m < first + taps
-        for (std::int32_t m = low; m < end; ++m) {
-            while (run_first > b0 && first[run_first - 1] <= m)
-                --run_first;
-            while (run_end > run_first && first[run_end - 1] + std::int32_t(taps) <= m)
-                --run_end;
-            p.grain_point_beams.push_back(run_first - b0);
-            p.grain_point_beams.push_back(run_end - b0);
-            p.grain_point_weight.push_back(static_cast<std::uint32_t>(p.grain_weight.size()));
-            for (std::uint32_t q = run_first; q < run_end; ++q)
-                p.grain_weight.push_back(
-                    static_cast<float>(weight[std::size_t(q) * taps + std::uint32_t(m - first[q])]));
+        p.grain_chunk_points.push_back(std::uint32_t(first[b0] + std::int32_t(taps) - low));
+        // each block's points: from its last beam's first to its first beam's last
+        for (std::uint32_t q0 = b0; q0 < b1; q0 += kGrainLanes) {
+            const std::uint32_t q1 = std::min(q0 + kGrainLanes, b1);
+            const std::int32_t m_begin = first[q1 - 1], m_end = first[q0] + std::int32_t(taps);
+            p.grain_block_points.push_back(std::uint32_t(m_begin - low));
+            p.grain_block_points.push_back(std::uint32_t(m_end - low));
+            p.grain_block_weight.push_back(static_cast<std::uint32_t>(p.grain_weight.size()));
+            for (std::int32_t m = m_begin; m < m_end; ++m) {
+                for (std::uint32_t l = 0; l < kGrainLanes; ++l) {
+                    const std::uint32_t q = q0 + l;
+                    const bool reaches = q < q1 && first[q] <= m && m < first[q] + std::int32_t(taps);
+                    p.grain_weight.push_back(
+                        reaches ? static_cast<float>(weight[std::size_t(q) * taps + std::uint32_t(m - first[q])])
+                                : 0.0f);
+                }
+            }
         }
-        p.grain_chunk_point.push_back(p.grain_chunk_point.back() + std::uint32_t(end - low));
+        p.grain_chunk_block.push_back(static_cast<std::uint32_t>(p.grain_block_weight.size()));
     }
     p.grain_phase.resize(2 * std::size_t(kGrainPhases));
     for (std::uint32_t i = 0; i < kGrainPhases; ++i) {

@@ -73,16 +73,21 @@ RowDraws row_draws_of(const Plan& plan) {
     return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && adds_ambient_noise(plan)};
 }
 
+// A block's kGrainLanes beams side by side (GCC's vector extension: one AVX-512 register, two AVX2 ones or
+// four SSE2 ones, lane by lane the same operations).
+typedef float GrainLanes __attribute__((vector_size(kGrainLanes * sizeof(float))));
+
 // The grained draws (Plan::grain_*; docs/pipeline.md §5, "Grain") of the beams of chunk c, [grain_chunk[c],
 // grain_chunk[c + 1]), in bin `bin`, into out[0, count): the chunk's grid points as complex normals of unit
-// power (power Exp(1) from one hash, phase from another), each added into the run of beams it feeds (so
-// every beam sums its points in increasing order, whatever the vector width), and each beam's draw its
-// field's power: Exp(1) in every cell, correlated between beams as their patterns overlap. Inlined into
-// each build of its callers, whose loops it vectorizes with them.
+// power (power Exp(1) from one hash, phase from another); each block of kGrainLanes beams sums its points'
+// weighted values side by side in registers (every beam over its points in increasing order, whatever the
+// vector width; a weight of 0 adds an exact 0), and each beam's draw is its field's power: Exp(1) in every
+// cell, correlated between beams as their patterns overlap. Inlined into each build of its callers, whose
+// loops it vectorizes with them.
 [[gnu::always_inline]] inline void grain_draws(const Plan& plan, const rng::FrameKey& key, std::uint32_t bin,
                                                std::uint32_t stream, std::size_t c, float* out) {
     const std::uint32_t count = plan.grain_chunk[c + 1] - plan.grain_chunk[c];
-    const std::uint32_t p0 = plan.grain_chunk_point[c], points = plan.grain_chunk_point[c + 1] - p0;
+    const std::uint32_t points = plan.grain_chunk_points[c]; // <= kGrainChunkPoints (plan_grain)
     const std::int64_t cells = plan.grain_cells;
     std::int64_t m = std::int64_t(plan.grain_chunk_low[c]) % cells; // on a circle the points wrap
     if (m < 0) m += cells;
@@ -99,22 +104,23 @@ RowDraws row_draws_of(const Plan& plan) {
         re[i] = amplitude * phases[2 * phase];
         im[i] = amplitude * phases[2 * phase + 1];
     }
-    float field_re[kGrainChunkBeams], field_im[kGrainChunkBeams];
-    for (std::uint32_t q = 0; q < count; ++q)
-        field_re[q] = field_im[q] = 0.0f;
-    const std::uint32_t* runs = plan.grain_point_beams.data() + 2 * std::size_t(p0);
-    const std::uint32_t* weight_at = plan.grain_point_weight.data() + p0;
-    for (std::uint32_t i = 0; i < points; ++i) {
-        const std::uint32_t first = runs[2 * i], end = runs[2 * i + 1];
-        const float* w = plan.grain_weight.data() + weight_at[i] - first;
-        const float point_re = re[i], point_im = im[i];
-        for (std::uint32_t q = first; q < end; ++q) {
-            field_re[q] += w[q] * point_re;
-            field_im[q] += w[q] * point_im;
+    const std::uint32_t block_begin = plan.grain_chunk_block[c], block_end = plan.grain_chunk_block[c + 1];
+    for (std::uint32_t b = block_begin; b < block_end; ++b) {
+        const std::uint32_t q0 = (b - block_begin) * kGrainLanes;
+        const float* w = plan.grain_weight.data() + plan.grain_block_weight[b];
+        GrainLanes field_re = {}, field_im = {};
+        for (std::uint32_t i = plan.grain_block_points[2 * b]; i < plan.grain_block_points[2 * b + 1];
+             ++i, w += kGrainLanes) {
+            GrainLanes weight;
+            std::memcpy(&weight, w, sizeof weight);
+            field_re += weight * re[i];
+            field_im += weight * im[i];
         }
+        const GrainLanes power = field_re * field_re + field_im * field_im;
+        const std::uint32_t lanes = std::min(kGrainLanes, count - q0);
+        for (std::uint32_t l = 0; l < lanes; ++l)
+            out[q0 + l] = power[l];
     }
-    for (std::uint32_t q = 0; q < count; ++q)
-        out[q] = field_re[q] * field_re[q] + field_im[q] * field_im[q];
 }
 
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
