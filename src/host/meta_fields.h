@@ -66,13 +66,19 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     nlohmann::ordered_json floors = nlohmann::ordered_json::array();
     for (std::size_t j = 0; j < plan.beams && j < plan.beam_floor_db.size(); ++j)
         floors.push_back(plan.beam_floor_db[j]);
-    // the grain across beams (plan_grain.cpp): what it applies to, or why every cell is drawn alone
+    // the grain across beams (plan_grain.cpp): what it applies to (what the noise stage draws in rows), or
+    // why every cell is drawn alone
     std::string grain = plan.grain_why;
     if (plan.grain_taps > 0) {
-        grain = std::string(cfg.speckle == SpeckleModel::rayleigh ? "speckle and ambient noise"
-                                                                  : "ambient noise (the gamma and gaussian speckle "
-                                                                    "models are drawn per cell)") +
-                " correlated across beams as the receive pattern overlaps them";
+        const bool speckle = plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh;
+        const bool noise = plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
+        grain =
+            speckle && noise ? "speckle and ambient noise correlated across beams as the receive pattern overlaps them"
+            : speckle        ? "speckle correlated across beams as the receive pattern overlaps them"
+            : noise          ? "ambient noise correlated across beams as the receive pattern overlaps them" +
+                          std::string(
+                              plan.effects.speckle ? " (the gamma and gaussian speckle models are drawn per cell)" : "")
+                    : "nothing to draw: speckle and ambient noise are off";
     }
     return {{"beam_correlation", cfg.beam_correlation == BeamCorrelation::pattern ? "pattern" : "none"},
             {"grain", grain},
