@@ -11,9 +11,11 @@
 // The white field is drawn on a grid in u (the angle, or the sine for a line array). The aperture patterns
 // are band-limited (a product of two has its spectrum within |s| < 2 in x = k u), so a sum of products over a
 // grid finer than pi in x is their integral exactly, and where the grid lies against the beams does not
-// matter. Each beam takes the grid points within
-// the main lobe and two side lobes each side; the truncation leaves the intensity correlation within 0.04
-// of the untruncated one at every lag for an unshaded array, and within 1e-4 with hann shading.
+// matter. Each beam takes the grid points within the main lobe and two side lobes each side; the
+// truncation leaves the intensity correlation within 0.04 of the untruncated one at every lag for an
+// unshaded array, and within 1e-4 with hann shading. A pattern that ends abruptly (a box, or a planar fan's
+// baffle) is not band-limited: it takes finer steps, and its end cells are weighed by their part inside
+// (point_weight).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -43,21 +45,31 @@ double amplitude_at_separation(const Plan& p, double sep) {
         math_f64::pattern_power(shape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle));
 }
 
-// The grid's step and each beam's reach, in the separation's unit.
+// The grid's step, each beam's reach, and the half width of the pattern's support where it ends abruptly (a
+// box's edge, a planar fan's baffle at 90 deg; infinity where it fades), in the separation's unit.
 struct GrainGrid {
-    double step = 0, reach = 0;
+    double step = 0, reach = 0, support = std::numeric_limits<double>::infinity();
 };
 
 GrainGrid grain_grid(const Plan& p) {
     const double half_bw = 0.5 * p.config.horizontal_beamwidth_deg * kDegToRad;
     // A planar fan's aperture is baffled (separation_in_front): nothing reaches it from 90 deg off its axis or
-    // more, and on a full circle a reach past that would take a point into a beam twice.
-    const double baffle = p.line_array ? std::numeric_limits<double>::infinity() : 0.5 * kPi;
+    // more, and on a full circle a reach past that would take a point into a beam twice. A pattern cut there
+    // is not band-limited: its steps are at most pi / 32 (and the cut cells weighed by their part inside).
+    const double baffle = 0.5 * kPi;
+    // (A cut support's reach takes in the half cell that straddles it.)
+    const auto baffled = [&](GrainGrid g) {
+        if (p.line_array || g.reach < baffle) return g;
+        const double step = std::min(g.step, kPi / 32.0);
+        return GrainGrid{step, baffle + 0.5 * step, baffle};
+    };
     switch (p.config.horizontal_pattern) {
-    case BeamPattern::box: // amplitude 1 within the half width: steps fine enough to show its triangle
-        return {0.25 * half_bw, std::min(half_bw, baffle)};
+    case BeamPattern::box: { // amplitude 1 within the half width (its edge cells weighed by their part inside)
+        const double step = half_bw / 16.0;
+        return baffled({step, half_bw + 0.5 * step, half_bw});
+    }
     case BeamPattern::gaussian: // power exp(-k a^2), to -40 dB
-        return {0.5 * half_bw, std::min(std::sqrt(std::log(1e4) / p.hpattern_k), baffle)};
+        return baffled({0.5 * half_bw, std::sqrt(std::log(1e4) / p.hpattern_k)});
     default:
         break;
     }
@@ -74,7 +86,21 @@ GrainGrid grain_grid(const Plan& p) {
                                   : kPi;
     const double step_x = 0.8 * kPi, reach_x = first_null + 2.0 * kPi;
     if (p.line_array) return {step_x / k, reach_x / k};
-    return {step_x / k, std::min(std::asin(std::min(reach_x / k, 1.0)), baffle)};
+    return baffled({step_x / k, reach_x >= k ? baffle : std::asin(reach_x / k)});
+}
+
+// Point weight at `offset` from a beam: the amplitude there, or for a cell the support's end cuts (step wide,
+// centred on the point), the amplitude at the middle of its part inside times that part's share of the cell
+// (so that a beam's weights change smoothly as it moves past the grid, and two beams never share them all).
+double point_weight(const Plan& p, const GrainGrid& grid, double step, double offset) {
+    const double lo = offset - 0.5 * step, hi = offset + 0.5 * step;
+    if (lo >= -grid.support && hi <= grid.support) return amplitude_at_separation(p, offset);
+    const double in_lo = std::max(lo, -grid.support), in_hi = std::min(hi, grid.support);
+    if (!(in_hi > in_lo)) return 0.0;
+    // just inside the support's end: the amplitude there, not the zero past a baffle
+    const double middle =
+        std::clamp(0.5 * (in_lo + in_hi), -grid.support * (1.0 - 1e-12), grid.support * (1.0 - 1e-12));
+    return amplitude_at_separation(p, middle) * (in_hi - in_lo) / step;
 }
 
 void no_grain(Plan& p, std::string why) {
@@ -139,7 +165,7 @@ void plan_grain(Plan& p) {
         for (std::uint32_t t = 0; t < taps; ++t) {
             const double offset = position[j] - (origin + (first_point + t) * step);
             if (std::abs(offset) > grid.reach) continue;
-            w[t] = amplitude_at_separation(p, offset);
+            w[t] = point_weight(p, grid, step, offset);
             sum_squares += w[t] * w[t];
         }
         const double norm = sum_squares > 0.0 ? 1.0 / std::sqrt(sum_squares) : 0.0;

@@ -67,24 +67,29 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     for (std::size_t j = 0; j < plan.beams && j < plan.beam_floor_db.size(); ++j)
         floors.push_back(plan.beam_floor_db[j]);
     // the grain across beams (plan_grain.cpp): what it applies to (what the noise stage draws in rows), or
-    // why every cell is drawn alone
+    // why every cell is drawn alone; the grid's step and taps only where something is grained
+    const bool grained_speckle = plan.grain_taps > 0 && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh;
+    const bool grained_noise =
+        plan.grain_taps > 0 && plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
     std::string grain = plan.grain_why;
-    if (plan.grain_taps > 0) {
-        const bool speckle = plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh;
-        const bool noise = plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
-        grain =
-            speckle && noise ? "speckle and ambient noise correlated across beams as the receive pattern overlaps them"
-            : speckle        ? "speckle correlated across beams as the receive pattern overlaps them"
-            : noise          ? "ambient noise correlated across beams as the receive pattern overlaps them" +
-                          std::string(
-                              plan.effects.speckle ? " (the gamma and gaussian speckle models are drawn per cell)" : "")
-                    : "nothing to draw: speckle and ambient noise are off";
+    if (grained_speckle || grained_noise) {
+        grain = std::string(grained_speckle && grained_noise ? "speckle and ambient noise"
+                            : grained_speckle                ? "speckle"
+                                                             : "ambient noise") +
+                " correlated across beams as the receive pattern overlaps them";
+        if (!grained_speckle && plan.effects.speckle)
+            grain += " (the gamma and gaussian speckle models are drawn per cell)";
+    } else if (plan.grain_taps > 0) {
+        grain = plan.effects.speckle ? "nothing grained: the gamma and gaussian speckle models are drawn per cell, "
+                                       "and ambient noise is off"
+                                     : "nothing grained: speckle and ambient noise are off";
     }
+    const bool grained = grained_speckle || grained_noise;
     return {{"beam_correlation", cfg.beam_correlation == BeamCorrelation::pattern ? "pattern" : "none"},
             {"grain", grain},
-            {"grain_step", plan.grain_step},
-            {"grain_step_unit", plan.line_array ? "sine" : "rad"},
-            {"grain_taps", plan.grain_taps},
+            {"grain_grid_step", grained ? plan.grain_step : 0.0},
+            {"grain_grid_step_unit", plan.line_array ? "sine" : "rad"},
+            {"grain_taps", grained ? plan.grain_taps : 0u},
             {"noise_level_db", plan.noise.noise_level_db},
             {"noise_level", cfg.noise_level_db < 0.0 ? "auto: the sea's spectrum over the band" : "config"},
             {"band_hz", plan.noise.band_hz},
