@@ -50,6 +50,18 @@ SonarConfig grain_config() {
     return c;
 }
 
+// grain_config's fan with another pattern, geometry, width, beamwidth and beam count.
+SonarConfig fan_config(BeamPattern pattern, BeamGeometry geometry, double hfov_deg, double beamwidth_deg,
+                       std::uint32_t beams) {
+    SonarConfig c = grain_config();
+    c.horizontal_pattern = pattern;
+    c.beam_geometry = geometry;
+    c.hfov_deg = hfov_deg;
+    c.horizontal_beamwidth_deg = beamwidth_deg;
+    c.beams = beams;
+    return c;
+}
+
 // The draws of frames 0 .. kFrames - 1 as the renderer makes them (noise_draws), frame after frame: speckle and
 // ambient noise, bins * beams each.
 struct Draws {
@@ -196,13 +208,8 @@ TEST(Grain, NeighbouringBeamsCorrelateAsTheirAperturesOverlap) {
     };
     for (const Case& kase : cases) {
         SCOPED_TRACE(kase.name);
-        SonarConfig c = grain_config();
-        c.horizontal_pattern = kase.pattern;
-        c.beam_geometry = kase.geometry;
+        SonarConfig c = fan_config(kase.pattern, kase.geometry, kase.hfov_deg, bw / kDeg, kase.beams);
         c.beam_spacing = kase.spacing;
-        c.hfov_deg = kase.hfov_deg;
-        c.beams = kase.beams;
-        c.horizontal_beamwidth_deg = bw / kDeg;
         const Plan p = grain_plan(c);
         ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
         ASSERT_EQ(p.line_array, kase.geometry == BeamGeometry::line_array);
@@ -288,12 +295,8 @@ TEST(Grain, PatternsThatEndAbruptlyCorrelateSmoothly) {
     const Aperture uniform{"unshaded", uniform_weight};
     for (const Case& kase : cases) {
         SCOPED_TRACE(kase.name);
-        SonarConfig c = grain_config();
-        c.horizontal_pattern = kase.pattern;
-        c.beam_geometry = BeamGeometry::planar;
-        c.hfov_deg = kase.hfov_deg;
-        c.horizontal_beamwidth_deg = kase.beamwidth_deg;
-        c.beams = kase.beams;
+        const SonarConfig c =
+            fan_config(kase.pattern, BeamGeometry::planar, kase.hfov_deg, kase.beamwidth_deg, kase.beams);
         const Plan p = grain_plan(c);
         ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
         const double bw = kase.beamwidth_deg * kDeg;
@@ -353,14 +356,9 @@ TEST(Grain, EveryBeamsDrawsHaveMeanOne) {
     };
     for (const Case& kase : cases) {
         SCOPED_TRACE(kase.name);
-        SonarConfig c = grain_config();
+        SonarConfig c = fan_config(kase.pattern, kase.geometry, kase.hfov_deg, kase.beamwidth_deg, kase.beams);
         c.bins = 1024;
-        c.horizontal_pattern = kase.pattern;
-        c.beam_geometry = kase.geometry;
-        c.hfov_deg = kase.hfov_deg;
-        c.horizontal_beamwidth_deg = kase.beamwidth_deg;
         c.horizontal_sidelobe_db = kase.sidelobe_db;
-        c.beams = kase.beams;
         const Plan p = grain_plan(c);
         ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
         if (kase.several_chunks) {
@@ -387,10 +385,7 @@ TEST(Grain, EveryBeamsDrawsHaveMeanOne) {
 // A full circle (planar, 360 deg): the first and the last beam are neighbours across the seam and correlate as
 // any two neighbours do.
 TEST(Grain, AFullCircleWrapsAtTheSeam) {
-    SonarConfig c = grain_config();
-    c.hfov_deg = 360.0;
-    c.beams = 720;
-    c.horizontal_beamwidth_deg = 1.5;
+    const SonarConfig c = fan_config(BeamPattern::sinc, BeamGeometry::planar, 360.0, 1.5, 720);
     const Plan p = grain_plan(c);
     ASSERT_TRUE(p.circular);
     ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
