@@ -25,6 +25,7 @@
 #include "core/plan.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
+#include "host/rng.h"
 #include "host/workers.h"
 #include "scene/scene_data.h"
 #include "test_support.h"
@@ -465,4 +466,73 @@ TEST(Grain, MetaSaysWhatIsGrained) {
     c.beam_correlation = BeamCorrelation::none;
     EXPECT_EQ(host::noise_json(grain_plan(c))["grain"].get<std::string>(),
               "beam_correlation none: every cell drawn alone");
+}
+
+// The stage's sums against the tables' meaning (Plan::grain_*, plan.h), evaluated here in double: each
+// beam's field is the sum over its block's points of the point's weight for that beam's lane times the point's
+// complex normal, drawn from the counter-based RNG as the noise stage documents it (power -log(u) from the
+// 24-bit draw of stream 96, phase 2 pi i / 4096 from the top 12 bits of stream 97; docs/pipeline.md "Grain").
+// A beam or lane mixed up in the stage, a point taken from the wrong chunk or a wrong wrap on a circle breaks
+// it at once. The draws are O(1) (mean 1): a float field of at most a few dozen products of O(1) terms is off
+// by a few 1e-7 at most (the phase table's floats, fast_logf's 1e-7, the sums' roundings), its power by
+// about twice that times |z|: within 1e-5 of the double one, relative where it exceeds 1. A mixed-up beam
+// is off by O(1).
+TEST(Grain, TheStagesSumsAreTheTablesInDouble) {
+    struct Case {
+        const char* name;
+        SonarConfig config;
+    };
+    SonarConfig line_array = grain_config();
+    line_array.bins = 16;
+    line_array.beams = 509; // odd: the last block is partial
+    SonarConfig circle = fan_config(BeamPattern::sinc, BeamGeometry::planar, 360.0, 0.2, 1210);
+    circle.bins = 16;
+    SonarConfig box = fan_config(BeamPattern::box, BeamGeometry::planar, 130.0, 3.0, 333);
+    box.bins = 16;
+    for (const Case& kase : {Case{"line array, 509 beams", line_array}, Case{"circle, 1210 beams", circle},
+                             Case{"planar box, 333 beams", box}}) {
+        SCOPED_TRACE(kase.name);
+        const Plan p = grain_plan(kase.config);
+        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        const std::size_t cells = std::size_t(p.beams) * p.bins;
+        std::vector<float> speckle(cells), noise(cells);
+        host::noise_draws(p, 21, 4, {speckle.data(), noise.data()}, nullptr);
+        const host::rng::FrameKey key = host::rng::frame_key(21, 4);
+        double worst = 0;
+        for (std::uint32_t bin = 0; bin < p.bins; ++bin) {
+            for (std::size_t c = 0; c + 1 < p.grain_chunk.size(); ++c) {
+                const std::uint32_t b0 = p.grain_chunk[c], count = p.grain_chunk[c + 1] - b0;
+                const auto point_value = [&](std::uint32_t i, double& re, double& im) {
+                    const std::int64_t cells_around = p.grain_cells;
+                    const auto m = static_cast<std::uint32_t>(
+                        ((std::int64_t(p.grain_chunk_low[c]) + i) % cells_around + cells_around) % cells_around);
+                    const double u =
+                        (double(host::rng::hash_cell32(key, m, bin, 96) >> 8) + 0.5) / 16777216.0; // 24 bits
+                    const double amplitude = std::sqrt(-std::log(u));
+                    const double phase = 2.0 * kPi * double(host::rng::hash_cell32(key, m, bin, 97) >> 20) / 4096.0;
+                    re = amplitude * std::cos(phase);
+                    im = amplitude * std::sin(phase);
+                };
+                for (std::uint32_t b = p.grain_chunk_block[c]; b < p.grain_chunk_block[c + 1]; ++b) {
+                    const std::uint32_t q0 = (b - p.grain_chunk_block[c]) * kGrainLanes;
+                    const std::uint32_t begin = p.grain_block_points[2 * b], end = p.grain_block_points[2 * b + 1];
+                    ASSERT_LE(end, p.grain_chunk_points[c]);
+                    for (std::uint32_t l = 0; l < kGrainLanes && q0 + l < count; ++l) {
+                        double field_re = 0, field_im = 0;
+                        for (std::uint32_t i = begin; i < end; ++i) {
+                            const double w = p.grain_weight[p.grain_block_weight[b] + (i - begin) * kGrainLanes + l];
+                            double re, im;
+                            point_value(i, re, im);
+                            field_re += w * re;
+                            field_im += w * im;
+                        }
+                        const double expected = field_re * field_re + field_im * field_im;
+                        const double got = speckle[std::size_t(bin) * p.beams + b0 + q0 + l];
+                        worst = std::max(worst, std::abs(got - expected) / std::max(expected, 1.0));
+                    }
+                }
+            }
+        }
+        EXPECT_LT(worst, 1e-5);
+    }
 }
