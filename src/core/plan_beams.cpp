@@ -108,6 +108,15 @@ bool separation_in_front(const Plan& p, double& sep) {
     return p.line_array || std::abs(sep) < 0.5 * kPi;
 }
 
+double separation_angle(const Plan& p, double sep) {
+    return p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
+}
+
+double aperture_amplitude(const Plan& p, double sep) {
+    return math_f64::aperture_pattern_amplitude(shader_id(p.config.horizontal_pattern), p.hpattern_k,
+                                                p.hpattern_chebyshev_a, p.line_array ? sep : std::sin(sep));
+}
+
 namespace {
 
 // The horizontal power pattern at separation `sep` of two beams in the side-lobe kernel's unit: the
@@ -121,10 +130,11 @@ double pattern_at_separation(const Plan& p, double sep, const DefocusedPattern* 
     if (!separation_in_front(p, sep)) return 0.0;
     if (defocused != nullptr && phase > 0.0)
         return defocused->power(p.hpattern_k * (p.line_array ? sep : std::sin(sep)), phase);
-    if (p.line_array && hshape != shared::kPatternBox && hshape != shared::kPatternGaussian)
-        return math_f64::aperture_pattern_power(hshape, p.hpattern_k, p.hpattern_chebyshev_a, sep);
-    const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
-    return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle);
+    if (hshape == shared::kPatternBox || hshape == shared::kPatternGaussian)
+        return math_f64::pattern_power(hshape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a,
+                                       separation_angle(p, sep));
+    const double amplitude = aperture_amplitude(p, sep);
+    return amplitude * amplitude;
 }
 
 // The pattern of beam j in focus band b at separation `sep`: the band's phase, a line array's beam steered

@@ -37,12 +37,9 @@ namespace {
 double amplitude_at_separation(const Plan& p, double sep) {
     if (!separation_in_front(p, sep)) return 0.0;
     const std::uint32_t shape = shader_id(p.config.horizontal_pattern);
-    if (shape != shared::kPatternBox && shape != shared::kPatternGaussian)
-        return math_f64::aperture_pattern_amplitude(shape, p.hpattern_k, p.hpattern_chebyshev_a,
-                                                    p.line_array ? sep : std::sin(sep));
-    const double angle = p.line_array ? std::asin(std::clamp(sep, -1.0, 1.0)) : sep;
-    return std::sqrt(
-        math_f64::pattern_power(shape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a, angle));
+    if (shape != shared::kPatternBox && shape != shared::kPatternGaussian) return aperture_amplitude(p, sep);
+    return std::sqrt(math_f64::pattern_power(shape, p.hpattern_k, p.hpattern_halfwidth_rad, p.hpattern_chebyshev_a,
+                                             separation_angle(p, sep)));
 }
 
 // The grid's step, each beam's reach, and the half width of the pattern's support where it ends abruptly (a

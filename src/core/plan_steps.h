@@ -63,6 +63,11 @@ double sidelobe_reach(const Plan& p, double reach);
 // A separation between two directions as the patterns take it (in place): on a full circle into [-pi, pi];
 // false where a planar fan's baffled aperture hears nothing (90 deg or more off its axis).
 bool separation_in_front(const Plan& p, double& sep);
+// The angle a separation stands for (a line array's sine's arcsine), where box and gaussian patterns are read.
+double separation_angle(const Plan& p, double sep);
+// An aperture pattern's (sinc, hann, chebyshev) signed amplitude at a separation in front: its argument the
+// separation (line array) or its sine (planar). The power pattern is its square; the grain filters with it.
+double aperture_amplitude(const Plan& p, double sep);
 void plan_column_tables(Plan& p, double exclude_beyond_rad);
 Result<void> plan_sidelobe_kernel(Plan& p, std::uint32_t half_taps, double reach, bool far_sidelobes);
 

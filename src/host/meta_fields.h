@@ -11,6 +11,7 @@
 
 #include "core/angles.h"
 #include "core/plan.h"
+#include "host/host_stages.h"
 #include "vksonar/frame.h"
 #include "vksonar/scene.h"
 #include "vksonar/validity.h"
@@ -68,9 +69,8 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
         floors.push_back(plan.beam_floor_db[j]);
     // the grain across beams (plan_grain.cpp): what it applies to (what the noise stage draws in rows), or
     // why every cell is drawn alone; the grid's step and taps only where something is grained
-    const bool grained_speckle = plan.grain_taps > 0 && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh;
-    const bool grained_noise =
-        plan.grain_taps > 0 && plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
+    const RowDraws rows = row_draws_of(plan);
+    const bool grained_speckle = plan.grain_taps > 0 && rows.speckle, grained_noise = plan.grain_taps > 0 && rows.noise;
     std::string grain = plan.grain_why;
     if (grained_speckle || grained_noise) {
         grain = std::string(grained_speckle && grained_noise ? "speckle and ambient noise"

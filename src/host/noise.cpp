@@ -55,23 +55,21 @@ void copy_and_noise_bins(const NoiseTask& t, std::size_t bin_begin, std::size_t 
 // so the split changes nothing in the output.
 constexpr std::uint32_t kBinBlock = 32;
 
-// The Rayleigh speckle and ambient noise draws of one frame (the defaults; noise_draws_ahead), the same
-// values as noise_bins makes in its fast path.
-// Which rows of draws noise_bins makes (and noise_draws makes ahead): Rayleigh speckle's and ambient
-// noise's, each where its effect is on, through the 32-bit row path.
-struct RowDraws {
-    bool speckle = false, noise = false;
-};
 // Whether the plan adds ambient noise: the effect on and each beam's level present (resolve_noise_floor;
 // a plan without them adds none).
 bool adds_ambient_noise(const Plan& plan) {
     return plan.effects.ambient_noise && plan.beam_noise.size() >= plan.beams;
 }
+
+} // namespace
+
 RowDraws row_draws_of(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
     const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
     return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && adds_ambient_noise(plan)};
 }
+
+namespace {
 
 // A block's kGrainLanes beams side by side (GCC's vector extension: one AVX-512 register, two AVX2 ones or
 // four SSE2 ones, lane by lane the same operations).
