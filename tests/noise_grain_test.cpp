@@ -212,7 +212,7 @@ TEST(Grain, NeighbouringBeamsCorrelateAsTheirAperturesOverlap) {
         SonarConfig c = fan_config(kase.pattern, kase.geometry, kase.hfov_deg, bw / kDeg, kase.beams);
         c.beam_spacing = kase.spacing;
         const Plan p = grain_plan(c);
-        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
         ASSERT_EQ(p.line_array, kase.geometry == BeamGeometry::line_array);
         const Draws d = draws_of(p);
         // near broadside, and (line array) near 55 deg, where a beam is 1.7 times wider in angle
@@ -240,8 +240,8 @@ TEST(Grain, NoneDrawsEveryCellOnItsOwn) {
     SonarConfig c = grain_config();
     c.beam_correlation = BeamCorrelation::none;
     const Plan p = grain_plan(c);
-    EXPECT_EQ(p.grain_taps, 0u);
-    EXPECT_NE(p.grain_why.find("beam_correlation none"), std::string::npos) << p.grain_why;
+    EXPECT_EQ(p.grain.taps, 0u);
+    EXPECT_NE(p.grain.why.find("beam_correlation none"), std::string::npos) << p.grain.why;
     const Draws d = draws_of(p);
     for (std::uint32_t j = p.beams / 2 - 10; j < p.beams / 2 + 10; ++j)
         EXPECT_NEAR(correlation(p, d.speckle, j, j + 1), 0.0, 0.03) << "beam " << j;
@@ -253,7 +253,7 @@ TEST(Grain, NoneDrawsEveryCellOnItsOwn) {
 TEST(Grain, EachCellStaysExponential) {
     SonarConfig c = grain_config();
     const Plan p = grain_plan(c);
-    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
     const Draws d = draws_of(p);
     for (const std::uint32_t j : {0u, 1u, p.beams / 2, p.beams - 1}) {
         for (const std::vector<float>* field : {&d.speckle, &d.noise}) {
@@ -299,7 +299,7 @@ TEST(Grain, PatternsThatEndAbruptlyCorrelateSmoothly) {
         const SonarConfig c =
             fan_config(kase.pattern, BeamGeometry::planar, kase.hfov_deg, kase.beamwidth_deg, kase.beams);
         const Plan p = grain_plan(c);
-        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
         const double bw = kase.beamwidth_deg * kDeg;
         const double k = kase.pattern == BeamPattern::sinc ? pattern_k(uniform, bw) : 0.0;
         const double support = kase.pattern == BeamPattern::box ? 0.5 * bw : 0.5 * kPi;
@@ -361,9 +361,9 @@ TEST(Grain, EveryBeamsDrawsHaveMeanOne) {
         c.bins = 1024;
         c.horizontal_sidelobe_db = kase.sidelobe_db;
         const Plan p = grain_plan(c);
-        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
         if (kase.several_chunks) {
-            EXPECT_GT(p.grain_chunk.size(), 2u);
+            EXPECT_GT(p.grain.chunk.size(), 2u);
         }
         const Draws d = draws_of(p);
         const double n = double(d.speckle.size() / p.beams);
@@ -389,7 +389,7 @@ TEST(Grain, AFullCircleWrapsAtTheSeam) {
     const SonarConfig c = fan_config(BeamPattern::sinc, BeamGeometry::planar, 360.0, 1.5, 720);
     const Plan p = grain_plan(c);
     ASSERT_TRUE(p.circular);
-    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
     const Draws d = draws_of(p);
     const double k = pattern_k({"unshaded", uniform_weight}, c.horizontal_beamwidth_deg * kDeg);
     const double expected = expected_correlation({"unshaded", uniform_weight}, k * std::sin(0.5 * kDeg));
@@ -411,8 +411,8 @@ TEST(Grain, DrawsMadeAheadEqualTheStagesOwn) {
     c.beams = 1210; // chunks of 256 and a last one of 186 beams: a partial block of 16
     c.horizontal_beamwidth_deg = 0.2;
     const Plan planned = grain_plan(c);
-    ASSERT_GT(planned.grain_taps, 0u) << planned.grain_why;
-    ASSERT_GT(planned.grain_chunk.size(), 3u);
+    ASSERT_GT(planned.grain.taps, 0u) << planned.grain.why;
+    ASSERT_GT(planned.grain.chunk.size(), 3u);
     struct Case {
         bool speckle, ambient_noise;
         SpeckleModel model;
@@ -452,10 +452,10 @@ TEST(Grain, MetaSaysWhatIsGrained) {
     SonarConfig c = grain_config();
     c.bins = 64;
     Plan p = grain_plan(c);
-    ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+    ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
     const auto text = [&] { return host::noise_json(p)["grain"].get<std::string>(); };
     EXPECT_EQ(text(), "speckle and ambient noise correlated across beams as the receive pattern overlaps them");
-    EXPECT_EQ(host::noise_json(p)["grain_taps"].get<std::uint32_t>(), p.grain_taps);
+    EXPECT_EQ(host::noise_json(p)["grain_taps"].get<std::uint32_t>(), p.grain.taps);
     p.config.speckle = SpeckleModel::gamma;
     EXPECT_EQ(text(), "ambient noise correlated across beams as the receive pattern overlaps them (the gamma and "
                       "gaussian speckle models are drawn per cell)");
@@ -493,19 +493,19 @@ TEST(Grain, TheStagesSumsAreTheTablesInDouble) {
                              Case{"planar box, 333 beams", box}}) {
         SCOPED_TRACE(kase.name);
         const Plan p = grain_plan(kase.config);
-        ASSERT_GT(p.grain_taps, 0u) << p.grain_why;
+        ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
         const std::size_t cells = std::size_t(p.beams) * p.bins;
         std::vector<float> speckle(cells), noise(cells);
         host::noise_draws(p, 21, 4, {speckle.data(), noise.data()}, nullptr);
         const host::rng::FrameKey key = host::rng::frame_key(21, 4);
         double worst = 0;
         for (std::uint32_t bin = 0; bin < p.bins; ++bin) {
-            for (std::size_t c = 0; c + 1 < p.grain_chunk.size(); ++c) {
-                const std::uint32_t b0 = p.grain_chunk[c], count = p.grain_chunk[c + 1] - b0;
+            for (std::size_t c = 0; c + 1 < p.grain.chunk.size(); ++c) {
+                const std::uint32_t b0 = p.grain.chunk[c], count = p.grain.chunk[c + 1] - b0;
                 const auto point_value = [&](std::uint32_t i, double& re, double& im) {
-                    const std::int64_t cells_around = p.grain_cells;
+                    const std::int64_t cells_around = p.grain.cells;
                     const auto m = static_cast<std::uint32_t>(
-                        ((std::int64_t(p.grain_chunk_low[c]) + i) % cells_around + cells_around) % cells_around);
+                        ((std::int64_t(p.grain.chunk_low[c]) + i) % cells_around + cells_around) % cells_around);
                     const double u =
                         (double(host::rng::hash_cell32(key, m, bin, 96) >> 8) + 0.5) / 16777216.0; // 24 bits
                     const double amplitude = std::sqrt(-std::log(u));
@@ -513,14 +513,14 @@ TEST(Grain, TheStagesSumsAreTheTablesInDouble) {
                     re = amplitude * std::cos(phase);
                     im = amplitude * std::sin(phase);
                 };
-                for (std::uint32_t b = p.grain_chunk_block[c]; b < p.grain_chunk_block[c + 1]; ++b) {
-                    const std::uint32_t q0 = (b - p.grain_chunk_block[c]) * kGrainLanes;
-                    const std::uint32_t begin = p.grain_block_points[2 * b], end = p.grain_block_points[2 * b + 1];
-                    ASSERT_LE(end, p.grain_chunk_points[c]);
+                for (std::uint32_t b = p.grain.chunk_block[c]; b < p.grain.chunk_block[c + 1]; ++b) {
+                    const std::uint32_t q0 = (b - p.grain.chunk_block[c]) * kGrainLanes;
+                    const std::uint32_t begin = p.grain.block_points[2 * b], end = p.grain.block_points[2 * b + 1];
+                    ASSERT_LE(end, p.grain.chunk_points[c]);
                     for (std::uint32_t l = 0; l < kGrainLanes && q0 + l < count; ++l) {
                         double field_re = 0, field_im = 0;
                         for (std::uint32_t i = begin; i < end; ++i) {
-                            const double w = p.grain_weight[p.grain_block_weight[b] + (i - begin) * kGrainLanes + l];
+                            const double w = p.grain.weight[p.grain.block_weight[b] + (i - begin) * kGrainLanes + l];
                             double re, im;
                             point_value(i, re, im);
                             field_re += w * re;

@@ -49,6 +49,28 @@ struct ViewGeometry {
     double wedge_start[2] = {1, 0}, wedge_end[2] = {1, 0}; // (cos, sin) of the wedge's edges
 };
 
+// The grain of speckle and ambient noise across beams (plan_grain.cpp; docs/pipeline.md §5, "Grain"):
+// white complex noise on `cells` points `step` apart in the beams' separation variable (angle, or sine with
+// Plan::line_array), and beam j's field the sum of the points within its reach, each weighted by the receive
+// amplitude pattern at its offset (unit sum of squares per beam, so each cell's draw stays Exp(1)). The beams
+// go in chunks [chunk[c], chunk[c + 1]) whose points fit the noise stage's scratch: chunk c's points are
+// chunk_low[c] + i (unwrapped: on a circle, modulo cells) for i < chunk_points[c]. Its beams go in blocks of
+// kGrainLanes (the last one padded), blocks [chunk_block[c], chunk_block[c + 1]): block b takes the chunk's
+// points [block_points[2 b], [2 b + 1]) with kGrainLanes weights each from weight[block_weight[b]] on (0 for a
+// beam the point does not reach, and for the padding), so the noise stage sums a block's beams side by side in
+// registers, each over its points in increasing order. taps: the most points a beam takes (0: every cell is
+// drawn on its own, and `why` says why). A default-constructed one is "no grain".
+struct GrainTables {
+    std::uint32_t cells = 0, taps = 0;
+    double step = 0;
+    std::vector<std::uint32_t> chunk, chunk_points, chunk_block;
+    std::vector<std::int32_t> chunk_low;
+    std::vector<std::uint32_t> block_points, block_weight;
+    std::vector<float> weight;
+    std::vector<float> phase; // cos and sin of 2 pi i / kGrainPhases, interleaved: a draw's phase
+    std::string why;
+};
+
 struct Plan {
     SonarConfig config; // the validated config this plan was made from
 
@@ -120,26 +142,8 @@ struct Plan {
     NoiseTerms noise;
     std::vector<double> beam_floor_db;
     std::vector<float> beam_noise;
-    // The grain of speckle and ambient noise across beams (plan_grain.cpp; docs/pipeline.md §5, "Grain"):
-    // white complex noise on grain_cells points grain_step apart in the beams' separation variable (angle,
-    // or sine with line_array), and beam j's field the sum of the points within its reach, each weighted by
-    // the receive amplitude pattern at its offset (unit sum of squares per beam, so each cell's draw stays
-    // Exp(1)). The beams go in chunks [grain_chunk[c], grain_chunk[c + 1]) whose points fit the noise
-    // stage's scratch: chunk c's points are grain_chunk_low[c] + i (unwrapped: on a circle, modulo
-    // grain_cells) for i < grain_chunk_points[c]. Its beams go in blocks of kGrainLanes (the last one
-    // padded), blocks [grain_chunk_block[c], grain_chunk_block[c + 1]): block b takes the chunk's points
-    // [grain_block_points[2 b], [2 b + 1]) with kGrainLanes weights each from grain_weight[grain_block_weight[b]]
-    // on (0 for a beam the point does not reach, and for the padding), so the noise stage sums a block's
-    // beams side by side in registers, each over its points in increasing order. grain_taps: the most
-    // points a beam takes (0: every cell is drawn on its own, and grain_why says why).
-    std::uint32_t grain_cells = 0, grain_taps = 0;
-    double grain_step = 0;
-    std::vector<std::uint32_t> grain_chunk, grain_chunk_points, grain_chunk_block;
-    std::vector<std::int32_t> grain_chunk_low;
-    std::vector<std::uint32_t> grain_block_points, grain_block_weight;
-    std::vector<float> grain_weight;
-    std::vector<float> grain_phase; // cos and sin of 2 pi i / kGrainPhases, interleaved: a draw's phase
-    std::string grain_why;
+    // The grain of speckle and ambient noise across beams (GrainTables above; plan_grain.cpp).
+    GrainTables grain;
 
     // Beamform tables over the profile columns. Column c (azimuth, or steering angle with line_array,
     // column_azimuth_rad[c]) gives weight column_weight[c] to beam column_beam[c] and
@@ -295,10 +299,10 @@ double beam_directivity_index_db(const SonarConfig& c, bool line_array);
 // p.noise, p.beam_floor_db and p.beam_noise from p.config, p.effects, p.line_array and the beam table:
 // make_plan's step after the effects; again after changing any of them (tests build plans by hand).
 void resolve_noise_floor(Plan& p);
-// The grain tables (Plan::grain_*) from p.config, p.line_array, the horizontal pattern's constants and the
+// The grain tables (Plan::grain) from p.config, p.line_array, the horizontal pattern's constants and the
 // beam table: make_plan's step after the noise floor.
 void plan_grain(Plan& p);
-// Plan::grain_phase's phases; the noise stage's scratch per chunk of beams: at most kGrainChunkBeams beams
+// Plan::grain.phase's phases; the noise stage's scratch per chunk of beams: at most kGrainChunkBeams beams
 // and kGrainChunkPoints grid points (a beam's own taps always fit).
 // kGrainLanes: the beams of a block, summed side by side.
 constexpr std::uint32_t kGrainPhases = 4096, kGrainChunkBeams = 256, kGrainChunkPoints = 1024, kGrainLanes = 16;

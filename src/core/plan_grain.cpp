@@ -101,17 +101,8 @@ double point_weight(const Plan& p, const GrainGrid& grid, double step, double of
 }
 
 void no_grain(Plan& p, std::string why) {
-    p.grain_cells = p.grain_taps = 0;
-    p.grain_step = 0;
-    p.grain_chunk.clear();
-    p.grain_chunk_points.clear();
-    p.grain_chunk_block.clear();
-    p.grain_chunk_low.clear();
-    p.grain_block_points.clear();
-    p.grain_block_weight.clear();
-    p.grain_weight.clear();
-    p.grain_phase.clear();
-    p.grain_why = std::move(why);
+    p.grain = GrainTables{};
+    p.grain.why = std::move(why);
 }
 
 } // namespace
@@ -177,53 +168,53 @@ void plan_grain(Plan& p) {
     // Chunks of consecutive beams whose points fit the noise stage's scratch. The beams' positions fall
     // strictly (beam_table), so their first points never rise: a run of beams takes the points from its
     // last beam's first to its first beam's last.
-    p.grain_chunk.assign(1, 0);
+    p.grain.chunk.assign(1, 0);
     for (std::uint32_t j = 1; j < beams; ++j) {
-        const std::uint32_t b0 = p.grain_chunk.back();
+        const std::uint32_t b0 = p.grain.chunk.back();
         if (j - b0 >= kGrainChunkBeams || std::int64_t(first[b0]) + taps - first[j] > std::int64_t(kGrainChunkPoints))
-            p.grain_chunk.push_back(j);
+            p.grain.chunk.push_back(j);
     }
-    p.grain_chunk.push_back(beams);
-    p.grain_chunk_points.clear();
-    p.grain_chunk_block.assign(1, 0);
-    p.grain_chunk_low.clear();
-    p.grain_block_points.clear();
-    p.grain_block_weight.clear();
-    p.grain_weight.clear();
-    for (std::size_t chunk = 0; chunk + 1 < p.grain_chunk.size(); ++chunk) {
-        const std::uint32_t b0 = p.grain_chunk[chunk], b1 = p.grain_chunk[chunk + 1];
+    p.grain.chunk.push_back(beams);
+    p.grain.chunk_points.clear();
+    p.grain.chunk_block.assign(1, 0);
+    p.grain.chunk_low.clear();
+    p.grain.block_points.clear();
+    p.grain.block_weight.clear();
+    p.grain.weight.clear();
+    for (std::size_t chunk = 0; chunk + 1 < p.grain.chunk.size(); ++chunk) {
+        const std::uint32_t b0 = p.grain.chunk[chunk], b1 = p.grain.chunk[chunk + 1];
         const std::int32_t low = first[b1 - 1];
-        p.grain_chunk_low.push_back(low);
-        p.grain_chunk_points.push_back(std::uint32_t(first[b0] + std::int32_t(taps) - low));
+        p.grain.chunk_low.push_back(low);
+        p.grain.chunk_points.push_back(std::uint32_t(first[b0] + std::int32_t(taps) - low));
         // each block's points: from its last beam's first to its first beam's last
         for (std::uint32_t q0 = b0; q0 < b1; q0 += kGrainLanes) {
             const std::uint32_t q1 = std::min(q0 + kGrainLanes, b1);
             const std::int32_t m_begin = first[q1 - 1], m_end = first[q0] + std::int32_t(taps);
-            p.grain_block_points.push_back(std::uint32_t(m_begin - low));
-            p.grain_block_points.push_back(std::uint32_t(m_end - low));
-            p.grain_block_weight.push_back(static_cast<std::uint32_t>(p.grain_weight.size()));
+            p.grain.block_points.push_back(std::uint32_t(m_begin - low));
+            p.grain.block_points.push_back(std::uint32_t(m_end - low));
+            p.grain.block_weight.push_back(static_cast<std::uint32_t>(p.grain.weight.size()));
             for (std::int32_t m = m_begin; m < m_end; ++m) {
                 for (std::uint32_t l = 0; l < kGrainLanes; ++l) {
                     const std::uint32_t q = q0 + l;
                     const bool reaches = q < q1 && first[q] <= m && m < first[q] + std::int32_t(taps);
-                    p.grain_weight.push_back(
+                    p.grain.weight.push_back(
                         reaches ? static_cast<float>(weight[std::size_t(q) * taps + std::uint32_t(m - first[q])])
                                 : 0.0f);
                 }
             }
         }
-        p.grain_chunk_block.push_back(static_cast<std::uint32_t>(p.grain_block_weight.size()));
+        p.grain.chunk_block.push_back(static_cast<std::uint32_t>(p.grain.block_weight.size()));
     }
-    p.grain_phase.resize(2 * std::size_t(kGrainPhases));
+    p.grain.phase.resize(2 * std::size_t(kGrainPhases));
     for (std::uint32_t i = 0; i < kGrainPhases; ++i) {
         const double phase = 2.0 * kPi * i / kGrainPhases;
-        p.grain_phase[2 * i] = static_cast<float>(std::cos(phase));
-        p.grain_phase[2 * i + 1] = static_cast<float>(std::sin(phase));
+        p.grain.phase[2 * i] = static_cast<float>(std::cos(phase));
+        p.grain.phase[2 * i + 1] = static_cast<float>(std::sin(phase));
     }
-    p.grain_cells = cells;
-    p.grain_taps = taps;
-    p.grain_step = step;
-    p.grain_why.clear();
+    p.grain.cells = cells;
+    p.grain.taps = taps;
+    p.grain.step = step;
+    p.grain.why.clear();
 }
 
 } // namespace vksonar

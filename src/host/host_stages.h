@@ -43,7 +43,7 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
 // GPU renders (StageBackend::set_gpu_overlap), and noise_and_gain then only reads them.
 bool noise_draws_ahead(const Plan& plan);
 // Which rows of draws the noise stage makes (and noise_draws makes ahead): Rayleigh speckle's and ambient
-// noise's, each where its effect is on, through the 32-bit row path; with Plan::grain_taps > 0 these are the
+// noise's, each where its effect is on, through the 32-bit row path; with Plan::grain.taps > 0 these are the
 // rows the grain correlates across beams (meta.json noise.grain says so from this).
 struct RowDraws {
     bool speckle = false, noise = false;

@@ -70,8 +70,8 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     // the grain across beams (plan_grain.cpp): what it applies to (what the noise stage draws in rows), or
     // why every cell is drawn alone; the grid's step and taps only where something is grained
     const RowDraws rows = row_draws_of(plan);
-    const bool grained_speckle = plan.grain_taps > 0 && rows.speckle, grained_noise = plan.grain_taps > 0 && rows.noise;
-    std::string grain = plan.grain_why;
+    const bool grained_speckle = plan.grain.taps > 0 && rows.speckle, grained_noise = plan.grain.taps > 0 && rows.noise;
+    std::string grain = plan.grain.why;
     if (grained_speckle || grained_noise) {
         grain = std::string(grained_speckle && grained_noise ? "speckle and ambient noise"
                             : grained_speckle                ? "speckle"
@@ -79,7 +79,7 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
                 " correlated across beams as the receive pattern overlaps them";
         if (!grained_speckle && plan.effects.speckle)
             grain += " (the gamma and gaussian speckle models are drawn per cell)";
-    } else if (plan.grain_taps > 0) {
+    } else if (plan.grain.taps > 0) {
         grain = plan.effects.speckle ? "nothing grained: the gamma and gaussian speckle models are drawn per cell, "
                                        "and ambient noise is off"
                                      : "nothing grained: speckle and ambient noise are off";
@@ -87,9 +87,9 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     const bool grained = grained_speckle || grained_noise;
     return {{"beam_correlation", cfg.beam_correlation == BeamCorrelation::pattern ? "pattern" : "none"},
             {"grain", grain},
-            {"grain_grid_step", grained ? plan.grain_step : 0.0},
+            {"grain_grid_step", grained ? plan.grain.step : 0.0},
             {"grain_grid_step_unit", plan.line_array ? "sine" : "rad"},
-            {"grain_taps", grained ? plan.grain_taps : 0u},
+            {"grain_taps", grained ? plan.grain.taps : 0u},
             {"noise_level_db", plan.noise.noise_level_db},
             {"noise_level", cfg.noise_level_db < 0.0 ? "auto: the sea's spectrum over the band" : "config"},
             {"band_hz", plan.noise.band_hz},

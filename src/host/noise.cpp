@@ -18,7 +18,7 @@ namespace {
 constexpr std::uint32_t kSpeckleStream = 0;
 constexpr std::uint32_t kNoiseStream = 64;
 static_assert(kSpeckleStream + kGammaStreams <= kNoiseStream, "speckle streams overlap the noise stream");
-// The grain's grid points (Plan::grain_*), keyed by (point, bin): two streams each (power, phase), apart from
+// The grain's grid points (Plan::grain), keyed by (point, bin): two streams each (power, phase), apart from
 // the cells' so that beam_correlation none and pattern never share a draw.
 constexpr std::uint32_t kSpeckleGrainStream = 96;
 constexpr std::uint32_t kNoiseGrainStream = 98;
@@ -75,8 +75,8 @@ namespace {
 // four SSE2 ones, lane by lane the same operations).
 typedef float GrainLanes __attribute__((vector_size(kGrainLanes * sizeof(float))));
 
-// The grained draws (Plan::grain_*; docs/pipeline.md §5, "Grain") of the beams of chunk c, [grain_chunk[c],
-// grain_chunk[c + 1]), in bin `bin`, into out[0, count): the chunk's grid points as complex normals of unit
+// The grained draws (Plan::grain; docs/pipeline.md §5, "Grain") of the beams of chunk c, [grain.chunk[c],
+// grain.chunk[c + 1]), in bin `bin`, into out[0, count): the chunk's grid points as complex normals of unit
 // power (power Exp(1) from one hash, phase from another); each block of kGrainLanes beams sums its points'
 // weighted values side by side in registers (every beam over its points in increasing order, whatever the
 // vector width; a weight of 0 adds an exact 0), and each beam's draw is its field's power: Exp(1) in every
@@ -84,10 +84,10 @@ typedef float GrainLanes __attribute__((vector_size(kGrainLanes * sizeof(float))
 // loops it vectorizes with them.
 [[gnu::always_inline]] inline void grain_draws(const Plan& plan, const rng::FrameKey& key, std::uint32_t bin,
                                                std::uint32_t stream, std::size_t c, float* out) {
-    const std::uint32_t count = plan.grain_chunk[c + 1] - plan.grain_chunk[c];
-    const std::uint32_t points = plan.grain_chunk_points[c]; // <= kGrainChunkPoints (plan_grain)
-    const std::int64_t cells = plan.grain_cells;
-    std::int64_t m = std::int64_t(plan.grain_chunk_low[c]) % cells; // on a circle the points wrap
+    const std::uint32_t count = plan.grain.chunk[c + 1] - plan.grain.chunk[c];
+    const std::uint32_t points = plan.grain.chunk_points[c]; // <= kGrainChunkPoints (plan_grain)
+    const std::int64_t cells = plan.grain.cells;
+    std::int64_t m = std::int64_t(plan.grain.chunk_low[c]) % cells; // on a circle the points wrap
     if (m < 0) m += cells;
     std::uint32_t point[kGrainChunkPoints]; // the wrap in a loop of its own: the draws' loop then vectorizes
     for (std::uint32_t i = 0; i < points; ++i) {
@@ -95,19 +95,19 @@ typedef float GrainLanes __attribute__((vector_size(kGrainLanes * sizeof(float))
         if (++m == cells) m = 0;
     }
     float re[kGrainChunkPoints], im[kGrainChunkPoints];
-    const float* phases = plan.grain_phase.data();
+    const float* phases = plan.grain.phase.data();
     for (std::uint32_t i = 0; i < points; ++i) {
         const float amplitude = std::sqrt(rng::exp1_cell32(key, point[i], bin, stream));
         const std::uint32_t phase = rng::hash_cell32(key, point[i], bin, stream + 1) >> 20; // kGrainPhases = 2^12
         re[i] = amplitude * phases[2 * phase];
         im[i] = amplitude * phases[2 * phase + 1];
     }
-    const std::uint32_t block_begin = plan.grain_chunk_block[c], block_end = plan.grain_chunk_block[c + 1];
+    const std::uint32_t block_begin = plan.grain.chunk_block[c], block_end = plan.grain.chunk_block[c + 1];
     for (std::uint32_t b = block_begin; b < block_end; ++b) {
         const std::uint32_t q0 = (b - block_begin) * kGrainLanes;
-        const float* w = plan.grain_weight.data() + plan.grain_block_weight[b];
+        const float* w = plan.grain.weight.data() + plan.grain.block_weight[b];
         GrainLanes field_re = {}, field_im = {};
-        for (std::uint32_t i = plan.grain_block_points[2 * b]; i < plan.grain_block_points[2 * b + 1];
+        for (std::uint32_t i = plan.grain.block_points[2 * b]; i < plan.grain.block_points[2 * b + 1];
              ++i, w += kGrainLanes) {
             GrainLanes weight;
             std::memcpy(&weight, w, sizeof weight);
@@ -131,9 +131,9 @@ __attribute__((target_clones("avx512f", "avx2", "default")))
 void draw_bin(const Plan& plan, const rng::FrameKey& key, RowDraws rows, std::uint32_t bin, float* speckle,
               float* noise) {
     const std::uint32_t beams = plan.beams;
-    if (plan.grain_taps > 0) {
-        for (std::size_t c = 0; c + 1 < plan.grain_chunk.size(); ++c) {
-            const std::uint32_t b0 = plan.grain_chunk[c];
+    if (plan.grain.taps > 0) {
+        for (std::size_t c = 0; c + 1 < plan.grain.chunk.size(); ++c) {
+            const std::uint32_t b0 = plan.grain.chunk[c];
             if (rows.speckle) grain_draws(plan, key, bin, kSpeckleGrainStream, c, speckle + b0);
             if (rows.noise) grain_draws(plan, key, bin, kNoiseGrainStream, c, noise + b0);
         }
@@ -259,7 +259,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const bool fast_path = row_speckle && row_noise;
     const auto source_f = static_cast<float>(source);
     constexpr std::size_t kChunk = kGrainChunkBeams; // beams per pass: the scratch stays on the stack
-    const bool grain = plan.grain_taps > 0;
+    const bool grain = plan.grain.taps > 0;
     float speckle_draw[kChunk], noise_draw[kChunk], stored[kChunk];
 
     for (std::size_t k = bin_begin; k < bin_end; ++k) {
@@ -272,7 +272,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
         // chunks of at most kChunk beams: the grain's (plan_grain), else kChunk at a time
         std::size_t count = 0;
         for (std::size_t j0 = 0, chunk = 0; j0 < beams; j0 += count, ++chunk) {
-            count = grain ? plan.grain_chunk[chunk + 1] - j0 : std::min(kChunk, beams - j0);
+            count = grain ? plan.grain.chunk[chunk + 1] - j0 : std::min(kChunk, beams - j0);
             const auto beam0 = static_cast<std::uint32_t>(j0);
             // the draws made ahead (noise_draws: the same values), else made here
             const float* speckle_row = speckle_draw; // the row's draws: made ahead (noise_draws), else here
