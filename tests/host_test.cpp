@@ -22,6 +22,7 @@
 #include "host/host_stages.h"
 #include "host/rng.h"
 #include "host/workers.h"
+#include "test_support.h"
 
 #if defined(__GNUC__)
 #pragma GCC diagnostic push
@@ -71,19 +72,6 @@ Plan test_plan(std::uint32_t beams, std::uint32_t bins, double hfov_deg, double 
     p.effects.tvg = false;
     p.effects.states = {{"speckle", false, "test"}, {"ambient_noise", true, "test"}};
     return p;
-}
-
-Frame test_frame(const Plan& p) {
-    Frame f;
-    f.beams = p.beams;
-    f.bins = p.bins;
-    const std::size_t n = static_cast<std::size_t>(p.beams) * p.bins;
-    f.clean.assign(n, 0.0f);
-    f.intensity.assign(n, 0.0f);
-    f.display.assign(n, 0.0f);
-    f.beam_angles_rad = p.beam_angle_rad;
-    f.bin_ranges_m = p.bin_range_m;
-    return f;
 }
 
 struct Moments {
@@ -209,7 +197,7 @@ TEST(HostNoise, AmbientFloorMeanIsNoiseLevel) {
     p.config.noise_level_db = 70;
     p.config.directivity_index_db = 20;
     resolve_noise_floor(p);
-    Frame f = test_frame(p); // clean = 0 everywhere
+    Frame f = vksonar::testing::host_stage_frame(p); // clean = 0 everywhere
     host::noise_and_gain(p, 11, 3, f);
     const double noise = std::pow(10.0, (70.0 - 20.0) / 10.0);
     double sum = 0;
@@ -223,7 +211,7 @@ TEST(HostNoise, AmbientFloorMeanIsNoiseLevel) {
     EXPECT_NEAR(sum / n / noise, 1.0, 5.0 / std::sqrt(n));
 
     // Rerun with the same key: identical; another frame index: different.
-    Frame g = test_frame(p);
+    Frame g = vksonar::testing::host_stage_frame(p);
     host::noise_and_gain(p, 11, 3, g);
     EXPECT_EQ(f.intensity, g.intensity);
     host::noise_and_gain(p, 11, 4, g);
@@ -240,7 +228,7 @@ TEST(HostNoise, ALineArraysSteeredBeamsHearMoreOfTheSea) {
     p.config.noise_level_db = 70;
     p.config.directivity_index_db = 20;
     resolve_noise_floor(p);
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     host::noise_and_gain(p, 11, 3, f);
     for (std::uint32_t j = 0; j < p.beams; ++j) {
         const double theta = p.beam_angle_rad[j];
@@ -268,7 +256,7 @@ TEST(HostNoise, DefaultFloatPathEqualsTheModelInDouble) {
     p.config.directivity_index_db = 20;
     p.config.tvg_db_per_decade = 40;
     resolve_noise_floor(p);
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     for (std::size_t i = 0; i < f.clean.size(); ++i)
         f.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17)); // 1e-22 .. 1e-6
     f.clean[7] = std::nanf("");
@@ -318,7 +306,7 @@ TEST(HostNoise, DrawsMadeAheadAndTheCopiedScanGiveTheSameBytes) {
         p.config.noise_level_db = 60;
         resolve_noise_floor(p);
         ASSERT_TRUE(host::noise_draws_ahead(p));
-        Frame made_here = test_frame(p);
+        Frame made_here = vksonar::testing::host_stage_frame(p);
         for (std::size_t i = 0; i < made_here.clean.size(); ++i)
             made_here.clean[i] = i % 3 == 0 ? 0.0f : std::pow(10.0f, -22.0f + float(i % 17));
         const std::vector<float> source = made_here.clean;
@@ -329,7 +317,7 @@ TEST(HostNoise, DrawsMadeAheadAndTheCopiedScanGiveTheSameBytes) {
             std::vector<float> speckle(source.size()), noise(source.size());
             const host::NoiseDraws draws{speckle.data(), noise.data()};
             host::noise_draws(p, seed, frame, draws, &workers);
-            Frame ahead = test_frame(p); // clean all zero: the stage copies it from `source`
+            Frame ahead = vksonar::testing::host_stage_frame(p); // clean all zero: the stage copies it from `source`
             host::noise_and_gain(p, seed, frame, ahead, &workers, source.data(), &draws);
             EXPECT_EQ(ahead.clean, source) << threads << " threads";
             EXPECT_EQ(std::memcmp(ahead.intensity.data(), made_here.intensity.data(), source.size() * sizeof(float)), 0)
@@ -349,7 +337,7 @@ TEST(HostNoise, RayleighSpeckleHasUnitMeanAndVariance) {
     p.effects.speckle = true;
     p.config.speckle = SpeckleModel::rayleigh;
     p.config.source_level_db = 0; // 10^(SL/10) = 1: intensity = clean * S
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     std::fill(f.clean.begin(), f.clean.end(), 1.0f);
     host::noise_and_gain(p, 1, 0, f);
     const Moments m = moments(f.intensity.size(), [&](std::size_t i) { return double(f.intensity[i]); });
@@ -362,7 +350,7 @@ TEST(HostNoise, GammaAndGaussianSpeckleModels) {
     Plan p = test_plan(512, 256, 130, 0.5, 40);
     p.effects.speckle = true;
     p.config.source_level_db = 0;
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     std::fill(f.clean.begin(), f.clean.end(), 1.0f);
     const double n = static_cast<double>(f.clean.size());
 
@@ -387,7 +375,7 @@ TEST(HostNoise, GammaAndGaussianSpeckleModels) {
 TEST(HostNoise, DbOfZeroIsTheFloorNeverNaN) {
     Plan p = test_plan(16, 16, 90, 1, 10);
     p.effects.speckle = true; // no ambient noise: zero echo stays exactly zero
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     f.clean[3] = std::nanf("");
     f.clean[4] = -1.0f;
     f.clean[5] = std::numeric_limits<float>::infinity();
@@ -410,7 +398,7 @@ TEST(HostNoise, DisplayWindowMapsDbMinToZeroAndDbMaxToOne) {
     p.config.source_level_db = 100;
     p.config.db_min = 60;
     p.config.db_max = 140;
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     // Received levels (dB re 1 uPa) = 100 + 10 log10(clean).
     const double levels[5] = {40, 60, 100, 140, 180};
     for (int j = 0; j < 5; ++j)
@@ -431,7 +419,7 @@ TEST(HostNoise, TvgGainFollowsLogRangePlusAbsorption) {
     p.config.tvg_db_per_decade = 20;
     p.alpha_db_per_m = 0.05;
     p.config.source_level_db = 0;
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     std::fill(f.clean.begin(), f.clean.end(), 1.0f);
     host::noise_and_gain(p, 0, 0, f);
     for (std::uint32_t k = 0; k < p.bins; ++k) {
@@ -492,7 +480,7 @@ TEST(HostColormap, GraySonarViridisGetBrighterMonotonically) {
 TEST(HostImages, PolarImageFarRangeOnTopPortOnLeft) {
     Plan p = test_plan(8, 6, 90, 1, 10);
     p.config.colormap = Colormap::gray;
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     f.display[5 * 8 + 1] = 1.0f; // far bin, port-side beam 1
     host::Image img;
     host::polar_image(p, f, img);
@@ -527,7 +515,7 @@ TEST(HostImages, FanSingleBrightCellLightsTheRightRadiusAndSide) {
     ASSERT_GT(fan.height(), 100u);
 
     // Geometry from the image itself: the full fan's top (range_max at azimuth 0) and its apex.
-    Frame full = test_frame(p);
+    Frame full = vksonar::testing::host_stage_frame(p);
     std::fill(full.display.begin(), full.display.end(), 1.0f);
     host::Image img;
     fan.render(full, img);
@@ -550,13 +538,13 @@ TEST(HostImages, FanSingleBrightCellLightsTheRightRadiusAndSide) {
 
     // A single bright cell changes exactly the pixels whose bilinear support contains it: within one
     // bin and one beam step of the cell centre.
-    Frame zero = test_frame(p);
+    Frame zero = vksonar::testing::host_stage_frame(p);
     host::Image img0;
     fan.render(zero, img0);
     const std::uint32_t bin = 60;
     for (std::uint32_t beam : {6u, 57u}) { // port, starboard
         SCOPED_TRACE("beam " + std::to_string(beam));
-        Frame f = test_frame(p);
+        Frame f = vksonar::testing::host_stage_frame(p);
         f.display[bin * p.beams + beam] = 1.0f;
         const std::uint8_t* before = img.rgb.data();
         fan.render(f, img);
@@ -600,7 +588,7 @@ TEST(HostImages, FanWiderThan180IsSquareAndCentred) {
     Plan p = test_plan(90, 50, 360, 0.5, 20);
     const host::FanRenderer fan(p);
     EXPECT_EQ(fan.width(), fan.height());
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     host::Image img0, img;
     fan.render(f, img0);
     // A ring across all beams at one bin: lit all around the centre, including behind the sonar.
@@ -655,7 +643,7 @@ TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
         Plan p = test_plan(64, 100, 120, 0.01, 40, /*equisine=*/true);
         p.config.colormap = map;
         const host::FanRenderer fan(p);
-        Frame f = test_frame(p);
+        Frame f = vksonar::testing::host_stage_frame(p);
         for (std::size_t i = 0; i < f.display.size(); ++i)
             f.display[i] = static_cast<float>((i * 37) % 101) / 80.0f - 0.1f; // [-0.1, 1.15]
         f.display[5] = std::numeric_limits<float>::quiet_NaN();
@@ -744,7 +732,7 @@ TEST(HostFiles, NpyHeaderShapeAndSize) {
 TEST(HostFiles, PlyHeaderAndSize) {
     const std::string dir = temp_dir();
     Plan p = test_plan(4, 3, 90, 1, 4);
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     f.display[1 * 4 + 0] = 0.5f; // bin 1 (r = 2.5), beam 0 (port, +33.75 deg)
     f.intensity[1 * 4 + 0] = 123.0f;
     f.display[2 * 4 + 3] = 1.0f;
@@ -781,7 +769,7 @@ TEST(HostFiles, PlyHeaderAndSize) {
 TEST(HostFiles, MetaJsonFields) {
     const std::string dir = temp_dir();
     Plan p = test_plan(3, 4, 90, 1, 5);
-    Frame f = test_frame(p);
+    Frame f = vksonar::testing::host_stage_frame(p);
     f.seed = 77;
     f.frame_index = 5;
     f.times = {{"depth", 1.5}, {"noise", 0.25}};

@@ -402,8 +402,8 @@ TEST(Grain, AFullCircleWrapsAtTheSeam) {
 }
 
 // The renderer makes the draws ahead of the stage (noise_draws) or the stage makes its own: the same bytes with
-// the grain, on one thread or three, with either draw alone and with gamma speckle beside grained noise, on a
-// full circle whose points fill several chunks.
+// the grain, on one thread or three, with either draw alone, with gamma speckle of 2.5 looks (per cell) beside
+// grained noise and with grained gamma speckle of 3 looks, on a full circle whose points fill several chunks.
 TEST(Grain, DrawsMadeAheadEqualTheStagesOwn) {
     SonarConfig c = grain_config();
     c.bins = 200;
@@ -416,23 +416,23 @@ TEST(Grain, DrawsMadeAheadEqualTheStagesOwn) {
     struct Case {
         bool speckle, ambient_noise;
         SpeckleModel model;
+        double looks;
     };
-    for (const Case& kase : {Case{true, true, SpeckleModel::rayleigh}, Case{false, true, SpeckleModel::rayleigh},
-                             Case{true, false, SpeckleModel::rayleigh}, Case{true, true, SpeckleModel::gamma}}) {
+    for (const Case& kase : {Case{true, true, SpeckleModel::rayleigh, 1}, Case{false, true, SpeckleModel::rayleigh, 1},
+                             Case{true, false, SpeckleModel::rayleigh, 1}, Case{true, true, SpeckleModel::gamma, 2.5},
+                             Case{true, true, SpeckleModel::gamma, 3}, Case{true, false, SpeckleModel::gamma, 3}}) {
         SCOPED_TRACE(std::string("speckle ") + (kase.speckle ? "on" : "off") + ", noise " +
-                     (kase.ambient_noise ? "on" : "off") + (kase.model == SpeckleModel::gamma ? ", gamma" : ""));
+                     (kase.ambient_noise ? "on" : "off") +
+                     (kase.model == SpeckleModel::gamma ? ", gamma " + std::to_string(kase.looks) : ""));
         Plan p = planned;
         p.effects.speckle = kase.speckle;
         p.effects.ambient_noise = kase.ambient_noise;
         p.config.speckle = kase.model;
+        p.config.speckle_looks = kase.looks;
         ASSERT_TRUE(host::noise_draws_ahead(p));
-        Frame here;
-        here.beams = p.beams;
-        here.bins = p.bins;
+        Frame here = vksonar::testing::host_stage_frame(p);
         const std::size_t cells = std::size_t(p.beams) * p.bins;
         here.clean.assign(cells, 1e-12f);
-        here.intensity.assign(cells, 0.0f);
-        here.display.assign(cells, 0.0f);
         Frame ahead = here;
         host::noise_and_gain(p, 3, 9, here);
         for (std::uint32_t threads : {1u, 3u}) {
@@ -446,6 +446,77 @@ TEST(Grain, DrawsMadeAheadEqualTheStagesOwn) {
     }
 }
 
+// Gamma speckle of L looks (L a whole number, at most 16) is the mean of L independent grained fields' draws:
+// Gamma(L, 1/L) in every cell (mean 1, variance 1 / L, P(> x) = e^(-L x) sum_{k < L} (L x)^k / k!), and two
+// beams correlate as one look's do (the mean of L independent pairs keeps the pair's correlation): sinc^2 of
+// the sines' difference for the default line array, the same closed form and tolerance as above. One look is
+// Rayleigh speckle's draws exactly, and a look count the grain cannot average (2.5) is drawn per cell as with
+// beam_correlation none, the same bytes.
+TEST(Grain, GammaSpeckleAveragesWholeLooksOfTheGrain) {
+    SonarConfig c = grain_config();
+    c.speckle = SpeckleModel::gamma;
+    c.speckle_looks = 3;
+    const Plan p = grain_plan(c);
+    ASSERT_GT(p.grain.taps, 0u) << p.grain.why;
+    ASSERT_EQ(host::row_draws_of(p).speckle_looks, 3u);
+    const Draws d = draws_of(p);
+    const double looks = 3, x = 2.0;
+    const double tail = std::exp(-looks * x) * (1.0 + looks * x + 0.5 * (looks * x) * (looks * x));
+    const double mu4 = 3.0 * (looks + 2.0) / (looks * looks * looks); // Gamma(L, 1/L)'s fourth central moment
+    for (const std::uint32_t j : {0u, p.beams / 2, p.beams - 1}) {
+        const std::size_t rows = d.speckle.size() / p.beams;
+        double sum = 0, sum_squares = 0, above = 0;
+        for (std::size_t r = 0; r < rows; ++r) {
+            const double v = d.speckle[r * p.beams + j];
+            sum += v;
+            sum_squares += v * v;
+            above += v > x ? 1.0 : 0.0;
+        }
+        const double n = double(rows), mean = sum / n, var = sum_squares / n - mean * mean;
+        EXPECT_NEAR(mean, 1.0, 5.0 * std::sqrt(1.0 / looks / n)) << "beam " << j;
+        EXPECT_NEAR(var, 1.0 / looks, 5.0 * std::sqrt((mu4 - 1.0 / (looks * looks)) / n)) << "beam " << j;
+        EXPECT_NEAR(above / n, tail, 5.0 * std::sqrt(tail * (1 - tail) / n)) << "beam " << j;
+    }
+    const Aperture uniform{"unshaded", uniform_weight};
+    const double k = pattern_k(uniform, c.horizontal_beamwidth_deg * kDeg);
+    const auto expected = [&](double t1, double t2) {
+        return expected_correlation(uniform, k * (std::sin(t1) - std::sin(t2)));
+    };
+    for (const std::uint32_t lag : {1u, 2u, 4u}) {
+        const LagCheck got = check_lag(p, d.speckle, expected, p.beams / 2 - 10, lag, 12);
+        EXPECT_NEAR(got.measured, got.expected, 0.05) << "lag " << lag;
+    }
+
+    // one look: Rayleigh speckle's grained draws, byte for byte
+    SonarConfig one = c;
+    one.speckle_looks = 1;
+    SonarConfig rayleigh = c;
+    rayleigh.speckle = SpeckleModel::rayleigh;
+    const Draws one_look = draws_of(grain_plan(one)), rayleigh_draws = draws_of(grain_plan(rayleigh));
+    EXPECT_EQ(std::memcmp(one_look.speckle.data(), rayleigh_draws.speckle.data(), one_look.speckle.size() * 4), 0);
+
+    // 2.5 looks: per cell, whatever beam_correlation says (noise off, so the scans hold speckle alone)
+    SonarConfig half = c;
+    half.speckle_looks = 2.5;
+    half.effects.ambient_noise = EffectMode::off;
+    half.bins = 256;
+    SonarConfig half_none = half;
+    half_none.beam_correlation = BeamCorrelation::none;
+    const Plan hp = grain_plan(half), hn = grain_plan(half_none);
+    ASSERT_GT(hp.grain.taps, 0u);
+    EXPECT_FALSE(host::row_draws_of(hp).speckle);
+    Frame grained = vksonar::testing::host_stage_frame(hp), alone = vksonar::testing::host_stage_frame(hn);
+    grained.clean.assign(grained.clean.size(), 1e-9f);
+    alone.clean = grained.clean;
+    host::noise_and_gain(hp, 5, 2, grained);
+    host::noise_and_gain(hn, 5, 2, alone);
+    EXPECT_EQ(std::memcmp(grained.intensity.data(), alone.intensity.data(), grained.intensity.size() * 4), 0);
+    double spread = 0; // and the cells are speckled (not a constant)
+    for (std::size_t i = 1; i < grained.intensity.size(); ++i)
+        spread += std::abs(grained.intensity[i] - grained.intensity[0]);
+    EXPECT_GT(spread, 0.0);
+}
+
 // meta.json's noise entry says what is grained, from what the noise stage draws in rows, and gives the grid
 // only then.
 TEST(Grain, MetaSaysWhatIsGrained) {
@@ -456,19 +527,28 @@ TEST(Grain, MetaSaysWhatIsGrained) {
     const auto text = [&] { return host::noise_json(p)["grain"].get<std::string>(); };
     EXPECT_EQ(text(), "speckle and ambient noise correlated across beams as the receive pattern overlaps them");
     EXPECT_EQ(host::noise_json(p)["grain_taps"].get<std::uint32_t>(), p.grain.taps);
-    p.config.speckle = SpeckleModel::gamma;
-    EXPECT_EQ(text(), "ambient noise correlated across beams as the receive pattern overlaps them (the gamma and "
-                      "gaussian speckle models are drawn per cell)");
+    p.config.speckle = SpeckleModel::gamma; // one look: Rayleigh's draws
+    EXPECT_EQ(text(), "speckle and ambient noise correlated across beams as the receive pattern overlaps them");
+    p.config.speckle_looks = 3;
+    EXPECT_EQ(text(), "gamma speckle (the mean of 3 grained looks) and ambient noise correlated across beams as the "
+                      "receive pattern overlaps them");
+    p.config.speckle_looks = 2.5;
+    EXPECT_EQ(text(), "ambient noise correlated across beams as the receive pattern overlaps them (gamma speckle of "
+                      "2.5 looks is drawn per cell: the grain averages a whole number of looks, at most 16)");
+    p.config.speckle_looks = 17;
+    EXPECT_NE(text().find("gamma speckle of 17.0 looks is drawn per cell"), std::string::npos) << text();
+    p.config.speckle = SpeckleModel::gaussian;
+    EXPECT_EQ(text(), "ambient noise correlated across beams as the receive pattern overlaps them (the gaussian "
+                      "speckle model is drawn per cell)");
     p.effects.ambient_noise = false;
-    EXPECT_EQ(text().rfind("nothing grained: the gamma and gaussian speckle models are drawn per cell", 0), 0u)
-        << text();
+    EXPECT_EQ(text(), "nothing grained: the gaussian speckle model is drawn per cell, and ambient noise is off");
     EXPECT_EQ(host::noise_json(p)["grain_taps"].get<std::uint32_t>(), 0u);
     c.beam_correlation = BeamCorrelation::none;
     EXPECT_EQ(host::noise_json(grain_plan(c))["grain"].get<std::string>(),
               "beam_correlation none: every cell drawn alone");
 }
 
-// The stage's sums against the tables' meaning (Plan::grain_*, plan.h), evaluated here in double: each
+// The stage's sums against the tables' meaning (Plan::grain, plan.h), evaluated here in double: each
 // beam's field is the sum over its block's points of the point's weight for that beam's lane times the point's
 // complex normal, drawn from the counter-based RNG as the noise stage documents it (power -log(u) from the
 // 24-bit draw of stream 96, phase 2 pi i / 4096 from the top 12 bits of stream 97; docs/pipeline.md "Grain").

@@ -162,6 +162,21 @@ inline SonarConfig quiet_config() {
     return config;
 }
 
+// A frame sized for the plan's scan, as the host stages take it: clean, intensity and display all 0, with the
+// plan's beam angles and bin ranges.
+inline Frame host_stage_frame(const Plan& p) {
+    Frame f;
+    f.beams = p.beams;
+    f.bins = p.bins;
+    const std::size_t n = static_cast<std::size_t>(p.beams) * p.bins;
+    f.clean.assign(n, 0.0f);
+    f.intensity.assign(n, 0.0f);
+    f.display.assign(n, 0.0f);
+    f.beam_angles_rad = p.beam_angle_rad;
+    f.bin_ranges_m = p.bin_range_m;
+    return f;
+}
+
 // Every image two frames hold, compared byte for byte (an image neither saved compares as empty), with
 // `what` in each failure.
 inline void expect_same_images(const Frame& a, const Frame& b, const std::string& what) {

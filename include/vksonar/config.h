@@ -55,9 +55,9 @@ enum class BeamFocus : std::uint8_t { dynamic, fixed, none };
 enum class SpeckleModel : std::uint8_t { rayleigh, gamma, gaussian };
 // How speckle and ambient noise vary from beam to beam (docs/pipeline.md §5, "Grain"). pattern: as the
 // receive beams correlate them (neighbouring beams overlap and hear the same scatterers and the same
-// element noise: grains about a beamwidth wide; Rayleigh speckle and ambient noise, the gamma and gaussian
-// speckle models stay per cell); none: every cell drawn on its own, as earlier builds drew them (grains one
-// beam wide however finely the beams sample the fan).
+// element noise: grains about a beamwidth wide; Rayleigh speckle, ambient noise, and gamma speckle of a whole
+// number of looks up to 16; gamma speckle of other looks and the gaussian model stay per cell); none: every cell drawn
+// on its own, as earlier builds drew them (grains one beam wide however finely the beams sample the fan).
 enum class BeamCorrelation : std::uint8_t { pattern, none };
 // How a pixel's echo is spread over range bins: the nearest bin, split between the two nearest, or over
 // the pixel's own range extent, at least one bin (README "Accuracy and what it costs").

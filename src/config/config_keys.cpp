@@ -356,8 +356,8 @@ std::vector<ConfigKey> make_table() {
                           "plugin uses 0.1)")),
         VKS_ENUM("beam_correlation", BeamCorrelation, beam_correlation, "pattern|none",
                  "Speckle and ambient noise from beam to beam: correlated as the receive beams' overlap correlates "
-                 "them (pattern: grains about a beamwidth wide; Rayleigh speckle and the noise), or drawn per "
-                 "cell (none: as earlier builds)"),
+                 "them (pattern: grains about a beamwidth wide; Rayleigh speckle, gamma speckle of a whole number "
+                 "of looks up to 16, and the noise), or drawn per cell (none: as earlier builds)"),
         VKS_NUMBER("tvg_db_per_decade", tvg_db_per_decade, "dB/decade",
                    "Time-varied gain k in k log10 r + 2 alpha r (when effects.tvg is on)",
                    closed(0, 60,

@@ -44,9 +44,14 @@ void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_in
 bool noise_draws_ahead(const Plan& plan);
 // Which rows of draws the noise stage makes (and noise_draws makes ahead): Rayleigh speckle's and ambient
 // noise's, each where its effect is on, through the 32-bit row path; with Plan::grain.taps > 0 these are the
-// rows the grain correlates across beams (meta.json noise.grain says so from this).
+// rows the grain correlates across beams (meta.json noise.grain says so from this), and gamma speckle of a
+// whole number of looks L <= kGrainMaxLooks joins them: each cell the mean of L grained fields' draws, so
+// Gamma(L, 1/L) in every cell and correlated between beams as one look is (speckle_looks = L; 1 otherwise).
+// Other gamma speckle, and the gaussian model, are drawn per cell.
+constexpr std::uint32_t kGrainMaxLooks = 16;
 struct RowDraws {
     bool speckle = false, noise = false;
+    std::uint32_t speckle_looks = 1;
 };
 RowDraws row_draws_of(const Plan& plan);
 void noise_draws(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, const NoiseDraws& draws,

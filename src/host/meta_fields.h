@@ -71,18 +71,28 @@ inline nlohmann::ordered_json noise_json(const Plan& plan) {
     // why every cell is drawn alone; the grid's step and taps only where something is grained
     const RowDraws rows = row_draws_of(plan);
     const bool grained_speckle = plan.grain.taps > 0 && rows.speckle, grained_noise = plan.grain.taps > 0 && rows.noise;
+    // why speckle that is on goes without the grain
+    std::string per_cell_speckle;
+    if (plan.effects.speckle && !grained_speckle) {
+        if (cfg.speckle == SpeckleModel::gaussian) per_cell_speckle = "the gaussian speckle model is drawn per cell";
+        if (cfg.speckle == SpeckleModel::gamma)
+            per_cell_speckle = "gamma speckle of " + nlohmann::json(cfg.speckle_looks).dump() +
+                               " looks is drawn per cell: the grain averages a whole number of looks, at most " +
+                               std::to_string(kGrainMaxLooks);
+    }
     std::string grain = plan.grain.why;
     if (grained_speckle || grained_noise) {
-        grain = std::string(grained_speckle && grained_noise ? "speckle and ambient noise"
-                            : grained_speckle                ? "speckle"
-                                                             : "ambient noise") +
+        const std::string speckle = rows.speckle_looks > 1 ? "gamma speckle (the mean of " +
+                                                                 std::to_string(rows.speckle_looks) + " grained looks)"
+                                                           : "speckle";
+        grain = (grained_speckle && grained_noise ? speckle + " and ambient noise"
+                 : grained_speckle                ? speckle
+                                                  : std::string("ambient noise")) +
                 " correlated across beams as the receive pattern overlaps them";
-        if (!grained_speckle && plan.effects.speckle)
-            grain += " (the gamma and gaussian speckle models are drawn per cell)";
+        if (!per_cell_speckle.empty()) grain += " (" + per_cell_speckle + ")";
     } else if (plan.grain.taps > 0) {
-        grain = plan.effects.speckle ? "nothing grained: the gamma and gaussian speckle models are drawn per cell, "
-                                       "and ambient noise is off"
-                                     : "nothing grained: speckle and ambient noise are off";
+        grain = per_cell_speckle.empty() ? "nothing grained: speckle and ambient noise are off"
+                                         : "nothing grained: " + per_cell_speckle + ", and ambient noise is off";
     }
     const bool grained = grained_speckle || grained_noise;
     return {{"beam_correlation", cfg.beam_correlation == BeamCorrelation::pattern ? "pattern" : "none"},

@@ -22,6 +22,9 @@ static_assert(kSpeckleStream + kGammaStreams <= kNoiseStream, "speckle streams o
 // the cells' so that beam_correlation none and pattern never share a draw.
 constexpr std::uint32_t kSpeckleGrainStream = 96;
 constexpr std::uint32_t kNoiseGrainStream = 98;
+// Gamma speckle's further looks (RowDraws::speckle_looks): look l >= 1 from streams 100 + 2 (l - 1) and the
+// next, so its first look is Rayleigh speckle's field, and one look the same draws.
+constexpr std::uint32_t kSpeckleLookStream = 100;
 
 constexpr float kMinIntensityF = 1e-30f; // dB floor guard: 10 log10(1e-30) = -300 dB, far below any window
 constexpr double kMinTvgRange = 1e-3;    // m; TVG's log10(r) at r -> 0
@@ -66,7 +69,16 @@ bool adds_ambient_noise(const Plan& plan) {
 RowDraws row_draws_of(const Plan& plan) {
     const SonarConfig& cfg = plan.config;
     const bool rows = plan.beams < rng::kMaxCell32 && plan.bins < rng::kMaxCell32;
-    return {rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh, rows && adds_ambient_noise(plan)};
+    RowDraws out{rows && plan.effects.speckle && cfg.speckle == SpeckleModel::rayleigh,
+                 rows && adds_ambient_noise(plan)};
+    // gamma speckle in rows only where it is grained: a whole number of looks, each a grained field
+    const double looks = cfg.speckle_looks;
+    if (rows && plan.effects.speckle && cfg.speckle == SpeckleModel::gamma && plan.grain.taps > 0 && looks >= 1.0 &&
+        looks <= kGrainMaxLooks && looks == std::floor(looks)) {
+        out.speckle = true;
+        out.speckle_looks = static_cast<std::uint32_t>(looks);
+    }
+    return out;
 }
 
 namespace {
@@ -121,6 +133,25 @@ typedef float GrainLanes __attribute__((vector_size(kGrainLanes * sizeof(float))
     }
 }
 
+// The speckle of chunk c in bin `bin` (grain_draws of stream kSpeckleGrainStream), or with `looks` > 1 the mean
+// of that many looks' grained draws (gamma speckle; RowDraws::speckle_looks), summed in look order and scaled by
+// 1 / looks in float, the same operations in every build.
+[[gnu::always_inline]] inline void grain_speckle(const Plan& plan, const rng::FrameKey& key, std::uint32_t bin,
+                                                 std::uint32_t looks, std::size_t c, float* out) {
+    grain_draws(plan, key, bin, kSpeckleGrainStream, c, out);
+    if (looks <= 1) return;
+    const std::uint32_t count = plan.grain.chunk[c + 1] - plan.grain.chunk[c];
+    float look[kGrainChunkBeams];
+    for (std::uint32_t l = 1; l < looks; ++l) {
+        grain_draws(plan, key, bin, kSpeckleLookStream + 2 * (l - 1), c, look);
+        for (std::uint32_t i = 0; i < count; ++i)
+            out[i] += look[i];
+    }
+    const float inverse = 1.0f / static_cast<float>(looks);
+    for (std::uint32_t i = 0; i < count; ++i)
+        out[i] *= inverse;
+}
+
 // One bin's draws, built for AVX-512, AVX2 and baseline x86-64 as noise_bins is (the same bits: no
 // FMA in either). The tests stay outside the loops: inside them (0c6d6d4) they kept the loops from being
 // vectorized, 2.0 -> 4.4 ms on one thread here, and on an H100's host the draws outlasted the GPU's
@@ -134,7 +165,7 @@ void draw_bin(const Plan& plan, const rng::FrameKey& key, RowDraws rows, std::ui
     if (plan.grain.taps > 0) {
         for (std::size_t c = 0; c + 1 < plan.grain.chunk.size(); ++c) {
             const std::uint32_t b0 = plan.grain.chunk[c];
-            if (rows.speckle) grain_draws(plan, key, bin, kSpeckleGrainStream, c, speckle + b0);
+            if (rows.speckle) grain_speckle(plan, key, bin, rows.speckle_looks, c, speckle + b0);
             if (rows.noise) grain_draws(plan, key, bin, kNoiseGrainStream, c, noise + b0);
         }
         return;
@@ -280,7 +311,7 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
             if (row_speckle && draws != nullptr) {
                 speckle_row = draws->speckle + k * beams + j0;
             } else if (row_speckle && grain) {
-                grain_draws(plan, key, bin, kSpeckleGrainStream, chunk, speckle_draw);
+                grain_speckle(plan, key, bin, rows.speckle_looks, chunk, speckle_draw);
             } else if (row_speckle) {
                 for (std::size_t c = 0; c < count; ++c)
                     speckle_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kSpeckleStream);
@@ -311,8 +342,10 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                         case SpeckleModel::rayleigh:
                             s = row_speckle ? speckle_row[c] : rng::exp1(key, beam, bin, kSpeckleStream);
                             break;
-                        case SpeckleModel::gamma:
-                            s = sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
+                        case SpeckleModel::gamma: // grained in rows (RowDraws), else per cell
+                            s = row_speckle
+                                    ? speckle_row[c]
+                                    : sample_gamma_unit_mean(looks, seed, frame_index, beam, bin, kSpeckleStream);
                             break;
                         case SpeckleModel::gaussian:
                             s = std::abs(1.0 + sigma * sample_normal01(seed, frame_index, beam, bin, kSpeckleStream));
