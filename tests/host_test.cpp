@@ -638,6 +638,20 @@ TEST(HostWorkers, DefaultCountFollowsTheAffinityMask) {
 // The fan image in bands of rows on 3 threads (the CLI's writer on a machine with 6+ cores): the same
 // bytes as on one, for every colormap (each has its own loop) and a scan with NaN and out-of-range cells.
 TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
+    // a full circle's lookup (across the seam) and its nearest cells, built alone and on threads
+    {
+        host::Workers two(2);
+        Plan circle = test_plan(90, 50, 360, 0.5, 30, /*equisine=*/false);
+        circle.config.fan_width_px = 300;
+        const host::FanRenderer alone(circle), shared(circle, &two);
+        std::vector<std::uint16_t> cells(std::size_t(circle.beams) * circle.bins), a, b;
+        for (std::size_t i = 0; i < cells.size(); ++i)
+            cells[i] = static_cast<std::uint16_t>(1 + i % 65000);
+        alone.nearest_cell(cells, a);
+        shared.nearest_cell(cells, b);
+        EXPECT_EQ(a, b);
+        EXPECT_GT(std::count_if(a.begin(), a.end(), [](std::uint16_t id) { return id != 0; }), 1000);
+    }
     host::Workers three(3);
     for (Colormap map : {Colormap::gray, Colormap::viridis, Colormap::sonar, Colormap::jet}) {
         Plan p = test_plan(64, 100, 120, 0.01, 40, /*equisine=*/true);
@@ -647,11 +661,15 @@ TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
         for (std::size_t i = 0; i < f.display.size(); ++i)
             f.display[i] = static_cast<float>((i * 37) % 101) / 80.0f - 0.1f; // [-0.1, 1.15]
         f.display[5] = std::numeric_limits<float>::quiet_NaN();
-        host::Image alone, shared;
+        host::Image alone, shared, built_shared;
         fan.render(f, alone);
         fan.render(f, shared, &three);
         ASSERT_EQ(alone.width, shared.width);
         EXPECT_EQ(alone.rgb, shared.rgb) << int(map);
+        // the lookup built on the threads, band by band: the same tables
+        const host::FanRenderer fan_built_shared(p, &three);
+        fan_built_shared.render(f, built_shared);
+        EXPECT_EQ(alone.rgb, built_shared.rgb) << int(map);
         const std::size_t middle = (std::size_t(alone.height / 2) * alone.width + alone.width / 2) * 3;
         EXPECT_FALSE(std::equal(alone.rgb.begin(), alone.rgb.begin() + 3, alone.rgb.begin() + middle))
             << "corner (background) and fan centre differ";

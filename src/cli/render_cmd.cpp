@@ -54,6 +54,7 @@
 #include "config/layers.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "core/renderer_workers.h"
 #include "host/boxes.h"
 #include "host/host_stages.h"
 #include "host/meta_fields.h"
@@ -970,7 +971,7 @@ std::optional<Interrupted> render(const Args& args) {
     Device device = open_device(job);
     Renderer renderer = make_renderer(device, loaded.config, loaded.scene, job);
     const Plan& plan = renderer_plan(renderer);
-    const host::FanRenderer fan(plan);
+    const host::FanRenderer fan(plan, renderer_workers(renderer)); // the renderer's threads, idle until its first frame
     LegacyState legacy_state;
     Outputs outputs = make_outputs(plan, job, device, fan, legacy_state, loaded);
     // The writer thread draws a fan image a frame for .mcap and fan.png (about 5 ms here at the default,

@@ -15,6 +15,7 @@
 #include "core/host_plan.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "core/renderer_workers.h"
 #include "host/host_stages.h"
 #include "host/workers.h"
 #include "scene/scene_data.h"
@@ -544,6 +545,10 @@ const Plan& renderer_plan(const Renderer& renderer) {
 
 const Plan& renderer_plan(const HostDepthRenderer& renderer) {
     return detail::Access::renderer(renderer).plan;
+}
+
+host::Workers* renderer_workers(const Renderer& renderer) {
+    return detail::Access::renderer(renderer).workers.get();
 }
 
 } // namespace vksonar

@@ -69,7 +69,9 @@ void polar_image(const Plan& plan, const Frame& frame, Image& out);
 // Cartesian fan (apex at bottom centre, or centre for hfov > 180) with range rings and bearing lines.
 class FanRenderer {
 public:
-    explicit FanRenderer(const Plan& plan); // precomputes the pixel -> (beam, bin) lookup once
+    // Precomputes the pixel -> (beam, bin) lookup once; workers: its bands of rows shared out among the
+    // threads (the same tables); null: on the caller alone.
+    explicit FanRenderer(const Plan& plan, Workers* workers = nullptr);
     // workers: rows shared out among its threads (the same bytes); null: on the caller alone.
     void render(const Frame& frame, Image& out, Workers* workers = nullptr) const;
     // A per-cell id array (bins * beams, e.g. Frame::instance) on the fan image's pixels, by the
@@ -79,7 +81,6 @@ public:
     std::uint32_t height() const;
 
 private:
-    struct Lookup;
     template <Colormap Map>
     void render_rows(const Frame& frame, Image& out, std::uint32_t row_begin, std::uint32_t row_end) const;
     std::vector<std::int32_t> beam0_, bin0_; // -1: outside the fan

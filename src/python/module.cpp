@@ -26,6 +26,7 @@
 #include "config/layers.h"
 #include "core/plan.h"
 #include "core/renderer_access.h"
+#include "core/renderer_workers.h"
 #include "host/backend_choice.h"
 #include "host/boxes.h"
 #include "host/host_stages.h"
@@ -654,7 +655,8 @@ PYBIND11_MODULE(vksonar, m) {
                  r->effects_json = host::effects_json(credit_scene_requests(renderer_plan(r->renderer).effects.states,
                                                                             config.config.effects, resolved.effects))
                                        .dump();
-                 r->fan = std::make_unique<host::FanRenderer>(renderer_plan(r->renderer));
+                 r->fan =
+                     std::make_unique<host::FanRenderer>(renderer_plan(r->renderer), renderer_workers(r->renderer));
                  return r;
              }),
              py::arg("scene"), py::arg("config") = ConfigObject::preset("default"), py::arg("backend") = "auto",
