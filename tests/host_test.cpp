@@ -21,6 +21,7 @@
 
 #include "host/host_stages.h"
 #include "host/rng.h"
+#include "host/table_interval.h"
 #include "host/workers.h"
 #include "test_support.h"
 
@@ -637,6 +638,56 @@ TEST(HostWorkers, DefaultCountFollowsTheAffinityMask) {
 
 // The fan image in bands of rows on 3 threads (the CLI's writer on a machine with 6+ cores): the same
 // bytes as on one, for every colormap (each has its own loop) and a scan with NaN and out-of-range cells.
+// The fan lookup's search (locate_in_table) walks from a hint: whatever the hint, it must find the interval a
+// plain scan finds, the last entry "before" x (below it, or above it for a decreasing table), and the same
+// fraction, for monotonic tables with equal neighbours, two entries, values on the entries and beyond the
+// ends. A walk that stopped one entry short fails at once (the hint only shortens the walk).
+TEST(HostImages, FanLookupSearchFindsThePlainScansInterval) {
+    std::uint32_t state = 2024;
+    const auto next = [&state] {
+        state = state * 1664525u + 1013904223u;
+        return state >> 8;
+    };
+    std::size_t checked = 0;
+    for (int table_index = 0; table_index < 400; ++table_index) {
+        const std::size_t n = 1 + next() % 40;
+        const bool decreasing = next() % 2 == 0;
+        std::vector<double> table(n);
+        double v = -5.0 + 0.01 * (next() % 1000);
+        for (std::size_t i = 0; i < n; ++i) {
+            table[i] = v;
+            const double step = next() % 5 == 0 ? 0.0 : 0.001 * (1 + next() % 900); // some equal neighbours
+            v += decreasing ? -step : step;
+        }
+        std::int32_t hint = static_cast<std::int32_t>(next() % 60) - 10; // also negative and past the end
+        for (int q = 0; q < 60; ++q) {
+            const double x =
+                next() % 4 == 0 ? table[next() % n]
+                                : table.front() + (table.back() - table.front()) * (-0.2 + 1.4e-6 * (next() % 1000000));
+            const auto before = [decreasing](double a, double b) { return decreasing ? a > b : a < b; };
+            std::int32_t want_i0 = 0;
+            float want_t = 0.0f;
+            if (n > 1 && before(table[0], x) && before(x, table[n - 1])) {
+                std::size_t lo = 0;
+                for (std::size_t i = 0; i < n; ++i)
+                    if (before(table[i], x)) lo = i;
+                want_i0 = static_cast<std::int32_t>(lo);
+                const double span = table[lo + 1] - table[lo];
+                want_t = span != 0.0 ? static_cast<float>(std::clamp((x - table[lo]) / span, 0.0, 1.0)) : 0.0f;
+            } else if (n > 1 && !before(x, table[n - 1]) && before(table[0], x)) {
+                want_i0 = static_cast<std::int32_t>(n - 1);
+            }
+            std::int32_t i0 = -7;
+            float t = -1.0f;
+            host::locate_in_table(table, n, x, decreasing, i0, t, hint);
+            ASSERT_EQ(i0, want_i0) << "table " << table_index << ", n " << n << ", x " << x;
+            ASSERT_EQ(t, want_t) << "table " << table_index << ", x " << x;
+            ++checked;
+        }
+    }
+    EXPECT_EQ(checked, 400u * 60u);
+}
+
 TEST(HostImages, FanOnSeveralThreadsGivesTheSameBytes) {
     // a full circle's lookup (across the seam) and its nearest cells, built alone and on threads
     {

@@ -486,6 +486,12 @@ TEST(Grain, GammaSpeckleAveragesWholeLooksOfTheGrain) {
         const LagCheck got = check_lag(p, d.speckle, expected, p.beams / 2 - 10, lag, 12);
         EXPECT_NEAR(got.measured, got.expected, 0.05) << "lag " << lag;
     }
+    // the looks are drawn apart from the ambient noise's field: uncorrelated, cell by cell (a look drawn from
+    // the noise's streams would correlate about 1 / sqrt(3) = 0.58 with it)
+    double cross = 0;
+    for (std::uint32_t j = p.beams / 2 - 10; j < p.beams / 2 + 10; ++j)
+        cross += correlation(p, d.speckle, j, d.noise, j) / 20;
+    EXPECT_NEAR(cross, 0.0, 0.01);
 
     // one look: Rayleigh speckle's grained draws, byte for byte
     SonarConfig one = c;

@@ -6,7 +6,7 @@
 #include "vksonar/renderer.h"
 
 namespace vksonar {
-// The renderer's host-stage threads, for work between its renders (the fan's lookup as a run starts); null
-// for a moved-from renderer. Not while a render() runs.
+// The host-stage threads of a renderer that Renderer::create made (not a moved-from one), for work between
+// its renders (the fan's lookup as a run starts). Not while a render() runs.
 host::Workers* renderer_workers(const Renderer& renderer);
 } // namespace vksonar

@@ -39,8 +39,8 @@ struct NoiseDraws {
 void noise_and_gain(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index, Frame& frame,
                     Workers* workers = nullptr, const float* clean_source = nullptr, const NoiseDraws* draws = nullptr);
 // The random draws of a frame depend on its seed and index alone, not on its scan: where it has rows of
-// them (Rayleigh speckle, ambient noise or both; noise_draws_ahead), the renderer makes them while the
-// GPU renders (StageBackend::set_gpu_overlap), and noise_and_gain then only reads them.
+// them (Rayleigh or grained gamma speckle, ambient noise or both; noise_draws_ahead), the renderer makes
+// them while the GPU renders (StageBackend::set_gpu_overlap), and noise_and_gain then only reads them.
 bool noise_draws_ahead(const Plan& plan);
 // Which rows of draws the noise stage makes (and noise_draws makes ahead): Rayleigh speckle's and ambient
 // noise's, each where its effect is on, through the 32-bit row path; with Plan::grain.taps > 0 these are the

@@ -5,6 +5,7 @@
 
 #include "core/angles.h"
 #include "host/host_stages.h"
+#include "host/table_interval.h"
 #include "host/workers.h"
 
 namespace vksonar::host {
@@ -31,43 +32,6 @@ inline void put(Image& out, std::size_t pixel, Rgb8 c) {
 
 inline float finite_or_zero(float v) {
     return std::isfinite(v) ? v : 0.0f;
-}
-
-// Interval of a sorted table containing x: returns i0 and t with x = table[i0] + t (table[i0+1] - table[i0]),
-// clamped to the ends (t = 0 at either end). `decreasing` selects the order of the table. `hint`: where the
-// search starts, and where the interval found is left for the next one.
-void locate(const std::vector<double>& table, std::size_t n, double x, bool decreasing, std::int32_t& i0, float& t,
-            std::int32_t& hint) {
-    if (n <= 1) {
-        i0 = 0;
-        t = 0.0f;
-        return;
-    }
-    auto before = [decreasing](double a, double b) { return decreasing ? a > b : a < b; };
-    if (!before(table[0], x)) { // x at or before the first entry
-        i0 = 0;
-        t = 0.0f;
-        return;
-    }
-    if (!before(x, table[n - 1])) { // x at or past the last entry
-        i0 = static_cast<std::int32_t>(n - 1);
-        t = 0.0f;
-        return;
-    }
-    // The one lo with table[lo] before x and x not after table[lo + 1] (the table is monotonic, so "before x"
-    // holds for a run of entries from the first on): walked to from `hint`, the previous pixel's, which a
-    // neighbouring pixel's lies within a step or two of (a binary search from scratch found the same lo, at
-    // a mispredicted branch a halving).
-    std::size_t lo = std::min<std::size_t>(static_cast<std::size_t>(std::max(hint, 0)), n - 2);
-    while (lo > 0 && !before(table[lo], x))
-        --lo;
-    while (lo + 2 < n && before(table[lo + 1], x))
-        ++lo;
-    hint = static_cast<std::int32_t>(lo);
-    const std::size_t hi = lo + 1;
-    const double span = table[hi] - table[lo];
-    i0 = static_cast<std::int32_t>(lo);
-    t = span != 0.0 ? static_cast<float>(std::clamp((x - table[lo]) / span, 0.0, 1.0)) : 0.0f;
 }
 
 // A "nice" ring spacing (1, 2, 2.5 or 5 x 10^k) giving about 4-5 rings up to range_max.
@@ -176,10 +140,10 @@ FanRenderer::FanRenderer(const Plan& plan, Workers* workers) {
     const double outside_m = (rmax + line_m) * (1.0 + 1e-9);
     nearest_.assign(npix, -1);
 
-    // The pixels of rows [row_begin, row_end): each a pure function of its position (locate's hints only
+    // The pixels of rows [row_begin, row_end): each a pure function of its position (the search hints only
     // shorten its walks), so the bands of rows can go to any thread.
     const auto build_rows = [&](std::uint32_t row_begin, std::uint32_t row_end) {
-        std::int32_t beam_hint = 0, bin_hint = 0; // locate's, from pixel to pixel
+        std::int32_t beam_hint = 0, bin_hint = 0; // locate_in_table's, from pixel to pixel
         for (std::uint32_t py = row_begin; py < row_end; ++py) {
             for (std::uint32_t px = 0; px < w; ++px) {
                 const std::size_t p = static_cast<std::size_t>(py) * w + px;
@@ -224,9 +188,9 @@ FanRenderer::FanRenderer(const Plan& plan, Workers* workers) {
                     j0 = static_cast<std::int32_t>(beams_ - 1);
                     jt = gap > 0.0 ? static_cast<float>((plan.beam_angle_rad.back() - az) / gap) : 0.0f;
                 } else {
-                    locate(plan.beam_angle_rad, beams_, az, /*decreasing=*/true, j0, jt, beam_hint);
+                    locate_in_table(plan.beam_angle_rad, beams_, az, /*decreasing=*/true, j0, jt, beam_hint);
                 }
-                locate(plan.bin_range_m, bins_, r, /*decreasing=*/false, k0, kt, bin_hint);
+                locate_in_table(plan.bin_range_m, bins_, r, /*decreasing=*/false, k0, kt, bin_hint);
                 beam0_[p] = j0;
                 beam_t_[p] = std::clamp(jt, 0.0f, 1.0f);
                 bin0_[p] = k0;

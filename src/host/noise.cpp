@@ -25,6 +25,7 @@ constexpr std::uint32_t kNoiseGrainStream = 98;
 // Gamma speckle's further looks (RowDraws::speckle_looks): look l >= 1 from streams 100 + 2 (l - 1) and the
 // next, so its first look is Rayleigh speckle's field, and one look the same draws.
 constexpr std::uint32_t kSpeckleLookStream = 100;
+static_assert(kSpeckleLookStream >= kNoiseGrainStream + 2, "gamma's looks would draw the noise's field");
 
 constexpr float kMinIntensityF = 1e-30f; // dB floor guard: 10 log10(1e-30) = -300 dB, far below any window
 constexpr double kMinTvgRange = 1e-3;    // m; TVG's log10(r) at r -> 0
@@ -282,9 +283,9 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
     const auto db_min_f = static_cast<float>(cfg.db_min);
     const auto inv_db_span_f = static_cast<float>(inv_db_span);
 
-    // Rayleigh speckle and ambient noise (the defaults) draw a row of cells at a time through the
-    // vectorizable 32-bit path; the other speckle models and huge grids take the scalar 64-bit one.
-    // (row_draws_of: the rule the draws made ahead follow too)
+    // Rayleigh speckle and ambient noise (the defaults), and grained gamma speckle, draw a row of cells at a
+    // time through the vectorizable 32-bit path; the other speckle models and huge grids take the scalar
+    // 64-bit one. (row_draws_of: the rule the draws made ahead follow too)
     const RowDraws rows = row_draws_of(plan);
     const bool row_speckle = rows.speckle, row_noise = rows.noise;
     const bool fast_path = row_speckle && row_noise;
@@ -325,8 +326,8 @@ void noise_bins(const Plan& plan, std::uint64_t seed, std::uint64_t frame_index,
                     noise_draw[c] = rng::exp1_cell32(key, beam0 + std::uint32_t(c), bin, kNoiseStream);
             }
             if (fast_path) {
-                // The defaults (Rayleigh speckle and ambient noise) in float and branch-free, so the
-                // compiler vectorizes it; within 2 ulps of the double path below.
+                // Speckle and ambient noise both in rows (the defaults, or grained gamma speckle) in float
+                // and branch-free, so the compiler vectorizes it; within 2 ulps of the double path below.
                 combine_row(frame.clean.data() + k * beams + j0, speckle_row, noise_row, source_f, beam_noise + j0,
                             static_cast<float>(gain), count, stored, frame.intensity.data() + k * beams + j0);
             } else {
