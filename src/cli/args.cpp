@@ -34,6 +34,13 @@ void require_writable_output(const std::string& what, const std::string& path, c
     const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
     std::error_code ec;
     if (!fs::is_directory(folder, ec)) throw BadInput(what + " " + path + ": no folder " + folder.string());
+    // A FIFO, socket or device there (or a link to one) is not a file this run may replace: the rename that
+    // publishes the output would put a regular file in its place (/dev/full, a pipe a reader waits on).
+    for (const fs::path& existing : {fs::path(path), target}) {
+        const fs::file_status st = fs::status(existing, ec);
+        if (fs::exists(st) && !fs::is_regular_file(st) && !fs::is_directory(st))
+            throw BadInput(what + " " + path + ": is not a regular file (a FIFO, socket or device): not replacing it");
+    }
     if (const std::string why = folder_refuses_files(folder.string(), target.filename().string()); !why.empty())
         throw BadInput(what + " " + path + ": cannot write in " + folder.string() + " (" + why + ")");
 }

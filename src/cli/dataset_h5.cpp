@@ -47,6 +47,8 @@ bool hdf5_available() {
     return false;
 }
 
+void skip_hdf5_exit_cleanup() {}
+
 Result<std::unique_ptr<DatasetWriter>> DatasetWriter::create(const std::string& path, const Plan&, const DatasetMeta&,
                                                              const DatasetOptions&, const std::string&) {
     return make_error(ErrorCode::unsupported,
@@ -66,6 +68,10 @@ Result<DatasetInfo> read_dataset_info(const std::string& path) {
 
 bool hdf5_available() {
     return true;
+}
+
+void skip_hdf5_exit_cleanup() {
+    H5dont_atexit();
 }
 
 namespace {

@@ -69,6 +69,11 @@ Result<DatasetInfo> read_dataset_info(const std::string& path);
 
 // True when this build can write HDF5 (Debian's libhdf5-dev was found at configure time).
 bool hdf5_available();
+// For a process that exits after its datasets (the CLI), before any other HDF5 call: no HDF5 clean-up at
+// exit. A writer whose flush failed (a full disk, a file size limit) could not close its file, and HDF5
+// 1.10's exit handler closed it again and crashed (H5F__close_cb, SIGSEGV after the run's one-line error);
+// the writers close every file they finish themselves, and an abandoned one is removed.
+void skip_hdf5_exit_cleanup();
 
 class DatasetWriter {
 public:

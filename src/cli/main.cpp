@@ -9,6 +9,7 @@
 
 #include "cli/args.h"
 #include "cli/commands.h"
+#include "cli/dataset_h5.h"
 #include "host/meta_fields.h"
 #include "vksonar/result.h"
 
@@ -68,6 +69,7 @@ std::string one_line(std::string text) {
 
 int main(int argc, char** argv) {
     using namespace vksonar::cli;
+    skip_hdf5_exit_cleanup(); // before any HDF5 call (dataset_h5.h)
     try {
         return dispatch(std::vector<std::string>(argv + 1, argv + argc));
     } catch (const BadInput& e) {

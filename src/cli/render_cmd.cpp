@@ -730,6 +730,7 @@ void clear_frame_folder(const fs::path& dir) {
 void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Outputs& outputs, OutputDir& out_dir) {
     if (!job.shard) out_dir.clear_previous_run(); // a shard resumes the frames its folder holds
     fs::path dir = out_dir.path();
+    bool made = false; // this run made the frame's folder
     if (job.trajectory) {
         // The run's folder was made once (OutputDir); a frame's folder is made in it, never the path
         // to it again: a folder removed during the run stops it with one line instead of being made
@@ -738,15 +739,37 @@ void write_folder_frame(const WriteBehind::Slot& slot, const RenderJob& job, Out
         if (!fs::is_directory(out_dir.path(), ec))
             throw Failure("--out " + out_dir.path().string() + ": the output folder is gone (removed during the run)");
         dir /= frame_dir_name(slot.line);
-        const bool made = fs::create_directory(dir, ec);
+        made = fs::create_directory(dir, ec);
         if (ec) throw Failure("cannot create " + dir.string() + ": " + ec.message());
         // A shard's frame folder that is already there is one the re-run found damaged or cut off:
         // its files go first, so it ends up holding exactly this frame's files (a file the earlier
         // run left that this one does not write would otherwise stay, and merge refuse the frame).
         if (!made && job.shard) clear_frame_folder(dir);
     }
-    write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
-                job.save.flow ? &slot.flow : nullptr); // meta.json last: done
+    // An unsharded trajectory's frame that fails half written goes again (its folder holds part of it), and the
+    // error says what OUT holds: the frames before it, each whole (with none, OutputDir removes the run's
+    // folder). A shard keeps its folder for the re-run, which redoes a frame without meta.json.
+    const auto leaves = [&](const std::exception& failed) {
+        std::string what = failed.what();
+        if (!job.trajectory || job.shard || !made) return what;
+        std::error_code ec;
+        fs::remove_all(dir, ec);
+        std::size_t before = 0;
+        while (job.first + before < job.poses.size() && job.poses[job.first + before].line != slot.line)
+            ++before;
+        if (before == 0 || job.first + before == job.poses.size()) return what;
+        return what + "; " + out_dir.path().string() + " holds this run's first " + std::to_string(before) +
+               " frames, each whole (" + frame_dir_name(job.poses[job.first].line) + " to " +
+               frame_dir_name(job.poses[job.first + before - 1].line) + ")";
+    };
+    try {
+        write_frame(outputs, dir, slot.frame, slot.pose, job.timed ? &slot.time_s : nullptr,
+                    job.save.flow ? &slot.flow : nullptr); // meta.json last: done
+    } catch (const BadInput& e) {
+        throw BadInput(leaves(e));
+    } catch (const Failure& e) {
+        throw Failure(leaves(e));
+    }
 }
 
 // The write-behind thread's function. Once a whole frame is on disk the output is kept (only this

@@ -13,9 +13,14 @@ Checks, each of which can fail:
   - a run killed half way leaves a readable file under its temporary name (.~NAME.writing-PID) and
     no file at OUT: frames_written whole frames, equal to the same frames of an uninterrupted run,
     and complete = 0;
-  - what a dataset cannot hold is refused with one line (exit 2) and no file is left.
+  - what a dataset cannot hold is refused with one line (exit 2) and no file is left;
+  - a write that fails (a file size limit, as a full disk fails it) ends the run with one line, exit 1 and
+    no crash (HDF5's exit handler used to crash on the file it could not close): no file at OUT and no
+    temporary; a frame-folder run keeps only its whole frames and says which;
+  - a FIFO (or a link to one) at OUT is refused, exit 2, and stays a FIFO.
 """
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -231,6 +236,67 @@ with tempfile.TemporaryDirectory() as tmp:
     check("--compress" in run.stderr, f"--compress without .h5: {run.stderr}")
     run = render(["--out", os.path.join(tmp, "no_such_folder", "x.h5")] + SMALL, expect=2)
     check("no_such_folder" in run.stderr, f"missing folder named: {run.stderr}")
+
+
+
+def limited_to(size):
+    """A preexec_fn: writes past `size` bytes fail with EFBIG instead of killing the process (SIGXFSZ)."""
+    def apply():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
+    return apply
+
+
+with tempfile.TemporaryDirectory() as tmp:
+    # A failed write: one line, exit 1, no crash, nothing left at OUT.
+    poses = os.path.join(tmp, "poses.csv")
+    with open(poses, "w") as f:
+        f.write("\n".join(f"{0.1 * i},0,0,0,10,0" for i in range(5)) + "\n")
+    whole = os.path.join(tmp, "whole.h5")
+    render(["--trajectory", poses, "--out", whole] + SMALL)
+    whole_size = os.path.getsize(whole)
+    os.remove(whole)
+    # at the first write, and half way through the run
+    for name, limit in (("full.h5", 1024), ("full_later.h5", whole_size // 2)):
+        out = os.path.join(tmp, name)
+        run = subprocess.run([CLI, "render", "--trajectory", poses, "--out", out] + SMALL, capture_output=True,
+                             text=True, preexec_fn=limited_to(limit))
+        errors = [line for line in run.stderr.splitlines() if line.startswith("error:")]
+        check(run.returncode == 1, f"{name}: a failed write exits 1, not {run.returncode}: {run.stderr}")
+        check(len(errors) == 1 and "cannot write" in errors[0], f"{name}: one error line: {run.stderr}")
+        check(not os.path.exists(out), f"{name}: nothing at OUT after a failed write")
+        check(not [f for f in os.listdir(tmp) if f.startswith(".~")], f"{name}: no temporary left: {os.listdir(tmp)}")
+
+    # A frame-folder run whose third frame fails: the first two stay whole, the third is gone, and the
+    # error says so. Facing away (yaw 180) the fan is dark and its PNG small; facing the scene it is not.
+    facing = os.path.join(tmp, "facing.csv")
+    with open(facing, "w") as f:
+        f.write("0,0,0,0,10,180\n0,0,0,0,10,180\n0,0,0,0,10,0\n0,0,0,0,10,180\n")
+    quiet = ["--set", "effects.speckle=off", "--set", "effects.ambient_noise=off", "--save", "fan"]
+    sizes = os.path.join(tmp, "sizes")
+    render(["--trajectory", facing, "--out", sizes] + quiet + SMALL)
+    png = [os.path.getsize(os.path.join(sizes, f"frame_00000{i}", "fan.png")) for i in range(1, 5)]
+    check(png[2] > max(png[0], png[1], png[3]) + 4096, f"the lit frame's fan is the largest file: {png}")
+    folder = os.path.join(tmp, "cut")
+    run = subprocess.run([CLI, "render", "--trajectory", facing, "--out", folder] + quiet + SMALL,
+                         capture_output=True, text=True, preexec_fn=limited_to((png[2] + max(png[0], png[1])) // 2))
+    check(run.returncode == 1, f"folder: exit {run.returncode}: {run.stderr}")
+    check(sorted(os.listdir(folder)) == ["frame_000001", "frame_000002"], f"folder holds: {os.listdir(folder)}")
+    for frame in ("frame_000001", "frame_000002"):
+        check(sorted(os.listdir(os.path.join(folder, frame))) == ["fan.png", "meta.json"], f"{frame} whole")
+    check("holds this run's first 2 frames, each whole (frame_000001 to frame_000002)" in run.stderr,
+          f"the error says what OUT holds: {run.stderr}")
+
+    # A FIFO at OUT, or a link to one: refused, and left a FIFO (the rename used to put a file in its place).
+    fifo = os.path.join(tmp, "pipe.h5")
+    os.mkfifo(fifo)
+    link = os.path.join(tmp, "link.h5")
+    os.symlink(fifo, link)
+    for out in (fifo, link):
+        run = render(["--out", out] + SMALL, expect=2)
+        check("not a regular file" in run.stderr, f"a FIFO at OUT named: {run.stderr}")
+    import stat
+    check(stat.S_ISFIFO(os.stat(fifo).st_mode), "the FIFO is still a FIFO")
 
 if failures:
     print(f"{len(failures)} check(s) failed")
