@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "config/config_keys.h"
+#include "core/json_depth.h"
 #include "vksonar/config.h"
 
 namespace vksonar {
@@ -69,6 +70,31 @@ TEST(Config, AKeyDottedAndNestedInOneFileIsRefused) {
     ASSERT_TRUE(ok) << ok.error().message;
     EXPECT_EQ(ok->db_min, 50.0);
     EXPECT_EQ(ok->db_max, 150.0);
+}
+
+// A file of many thousands of keys is no config: refused during the parse at the key past kMaxConfigKeys
+// (an outside audit's 2-million-key file ran for hours: the ordered objects' inserts are quadratic), in
+// one object or spread over many; at the limit the parse goes on to the keys' own check.
+TEST(Config, AFileOfManyThousandKeysIsRefusedWhileParsing) {
+    const auto keys_json = [](std::size_t objects, std::size_t keys_each) {
+        std::string text = "{";
+        for (std::size_t o = 0; o < objects; ++o) {
+            text += (o ? ",\"o" : "\"o") + std::to_string(o) + "\": {";
+            for (std::size_t k = 0; k < keys_each; ++k)
+                text += (k ? ",\"k" : "\"k") + std::to_string(k) + "\": 1";
+            text += "}";
+        }
+        return text + "}";
+    };
+    for (const auto& [objects, keys_each] : {std::pair<std::size_t, std::size_t>{1, 200000}, {500, 400}}) {
+        const auto r = apply_config_json(SonarConfig{}, keys_json(objects, keys_each), "k.json");
+        ASSERT_FALSE(r);
+        EXPECT_EQ(r.error().message, "k.json: invalid JSON: more than " + std::to_string(kMaxConfigKeys) +
+                                         " keys (a config has a few hundred)");
+    }
+    const auto at_limit = apply_config_json(SonarConfig{}, keys_json(1, kMaxConfigKeys - 1), "k.json");
+    ASSERT_FALSE(at_limit);
+    EXPECT_EQ(at_limit.error().message.rfind("k.json: unknown key 'o0'", 0), 0u) << at_limit.error().message;
 }
 
 TEST(Config, TableKeysAreUniqueAndRoundTrip) {

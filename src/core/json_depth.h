@@ -10,6 +10,9 @@
 namespace vksonar {
 
 inline constexpr int kMaxJsonDepth = 128;
+// The most keys a config file may hold, all its objects together (apply_config_json): the default preset
+// has about 200, and the ordered objects' inserts cost time quadratic in an object's keys.
+inline constexpr std::size_t kMaxConfigKeys = 8192;
 
 // True when the text opens more than max_depth objects or arrays inside each other (brackets inside
 // strings and comments do not count: config files are read with // and /* */ comments, and a quote in
