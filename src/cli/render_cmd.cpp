@@ -288,10 +288,31 @@ public:
             stale.push_back(folder);
         }
         if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
+        // All or nothing: every earlier file and frame folder is first renamed aside (a hidden name in the same
+        // folder), and put back if one cannot be, so that a failure leaves the earlier run whole; only then are
+        // they removed, and one that cannot be stays aside, named in the error, with none of the earlier frames
+        // left under their names (a folder of a few of them looked like a whole run).
+        std::vector<std::pair<fs::path, fs::path>> aside;
         for (const fs::path& path : stale) {
-            fs::remove_all(path, ec);
-            if (ec) throw Failure("cannot remove " + path.string() + " (an earlier run's): " + ec.message());
+            const fs::path hidden = dir_ / (".~earlier-" + std::to_string(::getpid()) + "-" + path.filename().string());
+            fs::rename(path, hidden, ec);
+            if (ec) {
+                const std::string why = ec.message();
+                for (auto it = aside.rbegin(); it != aside.rend(); ++it)
+                    fs::rename(it->second, it->first, ec);
+                throw Failure("cannot remove " + path.string() + " (an earlier run's): " + why +
+                              "; the earlier run is left as it was");
+            }
+            aside.emplace_back(path, hidden);
         }
+        std::string failed;
+        for (const auto& [path, hidden] : aside) {
+            fs::remove_all(hidden, ec);
+            if (ec && failed.empty())
+                failed = "cannot remove " + hidden.string() + " (an earlier run's " + path.filename().string() +
+                         ", moved aside): " + ec.message();
+        }
+        if (!failed.empty()) throw Failure(failed + "; none of the earlier run's frames is left in " + dir_.string());
     }
 
 private:
