@@ -615,6 +615,7 @@ const BadCase bad_cases[] = {
     {"empty.gltf", ErrorCode::parse, "empty"},
     {"top_level_array.gltf", ErrorCode::parse, "not an object"},
     {"deep_nesting.gltf", ErrorCode::parse, "nests deeper"},
+    {"duplicate_key.gltf", ErrorCode::parse, "member 'nodes' is given twice in one object"},
     {"bad_magic.glb", ErrorCode::parse, "magic"},
     {"json_named_glb.glb", ErrorCode::parse, "magic"},
     {"truncated.glb", ErrorCode::parse, "truncated"},

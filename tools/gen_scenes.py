@@ -522,6 +522,8 @@ def bad_corpus():
     put_bytes("empty.gltf", b"")
     put_bytes("top_level_array.gltf", b"[1, 2, 3]\n")
     put_bytes("deep_nesting.gltf", (text[:-2] + ', "extras": ' + "[" * 5000 + "]" * 5000 + "}\n").encode())
+    # a second "nodes" member (JSON would keep the last in silence)
+    put_bytes("duplicate_key.gltf", (text[:-2] + ', "nodes": [{"mesh": 0, "translation": [1000, 0, 0]}]}\n').encode())
 
     g, roots = triangle_gltf()
     glb = g.glb_bytes(roots)
