@@ -270,6 +270,16 @@ TEST_F(Cli, MalformedPose) {
     expect_bad_render({"--pose", "1,2,3,4,5,inf"}, {"--pose"});
 }
 
+// An asset root that is no folder is the user's to fix (exit 2), whichever scene, named as it was given.
+TEST_F(Cli, AnAssetRootThatIsNoFolderIsBadInput) {
+    const std::string missing = (dir_ / "no_such_root").string();
+    expect_bad_render({"--asset-root", missing, "--set", "range_min=6"}, {"--asset-root " + missing, "not a folder"});
+    expect_bad_render({"--set", "scene.asset_root=" + missing, "--set", "range_min=6"},
+                      {"scene.asset_root = " + missing, "not a folder"});
+    const CliRun bundled = run({"render", "--backend", "cpu", "--asset-root", missing, "--out", (dir_ / "o").string()});
+    EXPECT_EQ(bundled.exit_code, 2) << bundled.err; // was 1: the bundled scene's load failing
+}
+
 TEST_F(Cli, UnwritableOutputDirectory) {
     expect_bad_render({"--out", "/proc/vksonar_out"}, {"/proc/vksonar_out"});
     EXPECT_FALSE(fs::exists("/proc/vksonar_out"));

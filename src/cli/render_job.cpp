@@ -490,6 +490,10 @@ SceneAndConfig load_scene_and_config(const Args& args, RenderJob& job) {
     const SonarConfig preset = sonar_base_config(sonar);
     SonarConfig config = apply_user_layers(args, job.save, preset, "--sonar " + sonar);
     const std::string asset_root = args.value("--asset-root", config.scene_asset_root);
+    // the user's folder, whatever the scene (the bundled one's load failing is ours: exit 1)
+    if (std::error_code ec; !asset_root.empty() && !fs::is_directory(asset_root, ec))
+        throw BadInput((args.has("--asset-root") ? "--asset-root " : "scene.asset_root = ") + asset_root +
+                       ": not a folder" + (ec ? " (" + ec.message() + ")" : std::string()));
     auto scene = Scene::load_gltf(job.scene_path, SceneLoadOptions{asset_root, config.scene_scale});
     if (!scene) {
         if (job.default_scene) throw Failure(scene.error().message);
