@@ -555,6 +555,26 @@ TEST(SceneGlb, EveryTruncationFailsCleanly) {
     }
 }
 
+// A node whose transform flattens its mesh (a zero scale) loads, and says that nothing of it is drawn.
+TEST(SceneGlb, AZeroScaleIsAWarning) {
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
+    ASSERT_TRUE(doc["nodes"].is_array() && !doc["nodes"].empty());
+    std::size_t with_mesh = 0;
+    while (with_mesh < doc["nodes"].size() && !doc["nodes"][with_mesh].contains("mesh"))
+        ++with_mesh;
+    ASSERT_LT(with_mesh, doc["nodes"].size());
+    doc["nodes"][with_mesh].erase("matrix");
+    doc["nodes"][with_mesh]["scale"] = {0.0, 0.0, 0.0};
+    const std::string path = temp_path("zero_scale.gltf");
+    const std::string text = doc.dump();
+    write_bytes(path, std::vector<char>(text.begin(), text.end()));
+    const Scene scene = load_ok(path);
+    const auto& w = scene.stats().warnings;
+    const std::string expected = "node " + std::to_string(with_mesh) + ": its transform flattens its meshes";
+    EXPECT_TRUE(std::any_of(w.begin(), w.end(), [&](const std::string& s) { return s.find(expected) != s.npos; }))
+        << (w.empty() ? std::string("no warnings") : w.front());
+}
+
 TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {
     nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
     doc.erase("scenes");
@@ -616,6 +636,10 @@ const BadCase bad_cases[] = {
     {"top_level_array.gltf", ErrorCode::parse, "not an object"},
     {"deep_nesting.gltf", ErrorCode::parse, "nests deeper"},
     {"duplicate_key.gltf", ErrorCode::parse, "member 'nodes' is given twice in one object"},
+    // node transforms glTF forbids or no scene has (an audit's): taken in silence before
+    {"matrix_and_translation.gltf", ErrorCode::parse, "nodes[0]: has both a matrix and translation / rotation / scale"},
+    {"projective_matrix.gltf", ErrorCode::parse, "node 0: matrix is not affine: its last row is 0.5 0 0 1"},
+    {"translation_past_float.gltf", ErrorCode::parse, "node 0: its world transform reaches 1e+39"},
     {"bad_magic.glb", ErrorCode::parse, "magic"},
     {"json_named_glb.glb", ErrorCode::parse, "magic"},
     {"truncated.glb", ErrorCode::parse, "truncated"},

@@ -552,6 +552,19 @@ def bad_corpus():
     doc["accessors"][1]["count"] = -3
     put("negative_count.gltf", doc)
 
+    # node transforms glTF does not allow, or no scene has: a matrix beside translation (tinygltf kept the
+    # matrix), a projective matrix (last row not 0 0 0 1), a translation past float range
+    g, doc = base()
+    doc["nodes"][0]["matrix"] = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+    doc["nodes"][0]["translation"] = [1, 0, 0]
+    put("matrix_and_translation.gltf", doc)
+    g, doc = base()
+    doc["nodes"][0]["matrix"] = [1, 0, 0, 0.5, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]
+    put("projective_matrix.gltf", doc)
+    g, doc = base()
+    doc["nodes"][0]["translation"] = [1e39, 0, 0]
+    put("translation_past_float.gltf", doc)
+
     g, _ = triangle_gltf()
     g.accessors.clear(), g.views.clear(), g.buf.clear()
     g.meshes[0]["primitives"] = [g.primitive([(0, 0, 0), (1, 0, 0), (0, 1, 0)], None, None, flat=[0, 1, 7])]

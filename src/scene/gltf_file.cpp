@@ -201,6 +201,11 @@ void check_structure(const json& doc) {
         require_numbers(node, "rotation", 4, where);
         require_numbers(node, "scale", 3, where);
         require_numbers(node, "matrix", 16, where);
+        // glTF: a matrix or translation / rotation / scale, not both (tinygltf keeps the matrix in silence)
+        if (node.is_object() && node.contains("matrix") &&
+            (node.contains("translation") || node.contains("rotation") || node.contains("scale")))
+            fail(ErrorCode::parse, where + ": has both a matrix and translation / rotation / scale (glTF allows one "
+                                           "or the other)");
     });
     each(doc, "meshes", [](const json& mesh, const std::string& where) {
         if (!mesh.contains("primitives")) return;

@@ -220,12 +220,44 @@ private:
             if (!std::isfinite(x)) fail(ErrorCode::parse, where + " has a NaN or Inf value");
     }
 
+    // A node's world transform (column-major): every entry within kMaxWorldEntry (a translation of 1e39
+    // rendered as float infinities in silence, 1e300 failed later naming no file), and a warning where it
+    // flattens its meshes (a zero matrix or scale: nothing of them is drawn).
+    static constexpr double kMaxWorldEntry = 1e12; // m (or m per unit): far past any scene, far inside float
+    void check_world(const Mat4& world, const std::string& where, bool has_mesh) {
+        for (double v : world) {
+            if (std::abs(v) <= kMaxWorldEntry) continue;
+            char text[32];
+            std::snprintf(text, sizeof text, "%g", v);
+            fail(ErrorCode::parse, where + ": its world transform reaches " + text +
+                                       " (more than 1e12: no scene is that large; a unit or export mistake?)");
+        }
+        if (!has_mesh) return;
+        const double det = world[0] * (world[5] * world[10] - world[9] * world[6]) -
+                           world[4] * (world[1] * world[10] - world[9] * world[2]) +
+                           world[8] * (world[1] * world[6] - world[5] * world[2]);
+        if (det == 0.0 && !flat_warned_) {
+            flat_warned_ = true;
+            warn(where + ": its transform flattens its meshes (a zero scale or matrix): they are drawn as nothing");
+        }
+    }
+    bool flat_warned_ = false;
+
     static Mat4 local_matrix(const tinygltf::Node& node, const std::string& where) {
         if (!node.matrix.empty()) {
             if (node.matrix.size() != 16)
                 fail(ErrorCode::parse,
                      where + ": matrix has " + std::to_string(node.matrix.size()) + " values (expected 16)");
             check_finite(node.matrix, where + ": matrix");
+            // an affine transform (glTF's matrices decompose into translation, rotation and scale): its last
+            // row 0 0 0 1; a projective one would divide every vertex by a w the depth pass never sees
+            for (int k = 0; k < 4; ++k) {
+                if (std::abs(node.matrix[std::size_t(4 * k + 3)] - (k == 3 ? 1.0 : 0.0)) <= 1e-6) continue;
+                char row[128];
+                std::snprintf(row, sizeof row, "%g %g %g %g", node.matrix[3], node.matrix[7], node.matrix[11],
+                              node.matrix[15]);
+                fail(ErrorCode::parse, where + ": matrix is not affine: its last row is " + row + ", not 0 0 0 1");
+            }
             Mat4 m;
             std::copy(node.matrix.begin(), node.matrix.end(), m.begin());
             return m;
@@ -285,6 +317,7 @@ private:
             seen[std::size_t(item.node)] = 1;
             const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
             const Mat4 world = multiply(item.parent, local_matrix(node, where));
+            check_world(world, where, node.mesh >= 0);
             if (node.skin >= 0) warn(where + ": skin ignored (drawn in its bind pose)");
             if (node.mesh >= 0 && !node.weights.empty())
                 warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
