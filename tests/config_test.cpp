@@ -12,6 +12,7 @@
 #include "config/config_keys.h"
 #include "core/json_depth.h"
 #include "vksonar/config.h"
+#include "vksonar/result.h"
 
 namespace vksonar {
 namespace {
@@ -161,6 +162,24 @@ TEST(Config, UnknownKeySuggestsClosest) {
 TEST(Config, ControlCharactersInAKeyAreEscaped) {
     EXPECT_EQ(apply_error(R"({"hf\nov\u0001": 90})").rfind("test.json: unknown key 'hf\\nov\\x01'", 0), 0u);
     EXPECT_EQ(override_error("hf\tov=3").rfind("--set hf\\tov=3: unknown key 'hf\\tov'", 0), 0u);
+}
+
+// Bytes that are not UTF-8 (a Latin-1 or UTF-16 file's, echoed by the JSON parser's "last read") come out
+// as \xNN, so that a message is one line of UTF-8 (an audit's grep took such a line for binary); well-formed
+// UTF-8 in any script is kept. Overlong forms, surrogates and cut-off sequences are not well-formed.
+TEST(Config, BytesThatAreNotUtf8AreEscapedInMessages) {
+    using vksonar::detail::escape_control_chars;
+    EXPECT_EQ(escape_control_chars("caf\xe9"), "caf\\xe9");                      // Latin-1
+    EXPECT_EQ(escape_control_chars("\xff\xfe{"), "\\xff\\xfe{");                 // a UTF-16 BOM
+    EXPECT_EQ(escape_control_chars("caf\xc3\xa9 \xe4\xb8\xad \xf0\x9f\x98\x80"), // é, 中, an emoji: kept
+              "caf\xc3\xa9 \xe4\xb8\xad \xf0\x9f\x98\x80");
+    EXPECT_EQ(escape_control_chars("\xc0\xaf"), "\\xc0\\xaf");                   // overlong '/'
+    EXPECT_EQ(escape_control_chars("\xed\xa0\x80"), "\\xed\\xa0\\x80");          // a surrogate
+    EXPECT_EQ(escape_control_chars("a\xe4\xb8"), "a\\xe4\\xb8");                 // cut off at the end
+    EXPECT_EQ(escape_control_chars("\xf4\x90\x80\x80"), "\\xf4\\x90\\x80\\x80"); // past U+10FFFF
+    const std::string latin1 = apply_error("{\"name\": \"caf\xe9\"}");
+    EXPECT_NE(latin1.find("\\xe9"), std::string::npos) << latin1;
+    EXPECT_EQ(latin1.find('\xe9'), std::string::npos) << latin1;
 }
 
 TEST(Config, WrongTypesNameKeyAndValue) {

@@ -70,19 +70,57 @@ private:
 };
 
 namespace detail {
+// The length of the well-formed UTF-8 sequence of 2 to 4 bytes at text[at] (no overlong form, no
+// surrogate, at most U+10FFFF), or 0.
+inline std::string::size_type utf8_sequence_at(const std::string& text, std::string::size_type at) {
+    const auto lead = static_cast<unsigned char>(text[at]);
+    std::string::size_type n = 0;
+    unsigned code = 0;
+    if (lead >= 0xc2 && lead <= 0xdf) {
+        n = 2, code = lead & 0x1fu;
+    } else if (lead >= 0xe0 && lead <= 0xef) {
+        n = 3, code = lead & 0x0fu;
+    } else if (lead >= 0xf0 && lead <= 0xf4) {
+        n = 4, code = lead & 0x07u;
+    } else {
+        return 0;
+    }
+    if (text.size() - at < n) return 0;
+    for (std::string::size_type i = 1; i < n; ++i) {
+        const auto next = static_cast<unsigned char>(text[at + i]);
+        if ((next & 0xc0u) != 0x80u) return 0;
+        code = code << 6 | (next & 0x3fu);
+    }
+    if ((n == 3 && code < 0x800) || (n == 4 && (code < 0x10000 || code > 0x10ffff)) ||
+        (code >= 0xd800 && code <= 0xdfff))
+        return 0;
+    return n;
+}
+
 // Messages quote names and values taken from the input (a glTF material name, a JSON key, a URI), and
-// those may hold a newline or other control characters. Escape them C-style so that a message stays
-// one printable line whatever the input held.
+// those may hold a newline or other control characters, or bytes that are not UTF-8 (a Latin-1 or UTF-16
+// file). Escape them C-style (\n, \xNN) so that a message stays one printable line of UTF-8 whatever the
+// input held; well-formed UTF-8 (a name in any script) is kept as it is.
 inline std::string escape_control_chars(std::string text) {
     std::string::size_type at = 0;
-    while (at < text.size() && static_cast<unsigned char>(text[at]) >= 0x20 && text[at] != 0x7f)
+    while (at < text.size() && static_cast<unsigned char>(text[at]) >= 0x20 &&
+           static_cast<unsigned char>(text[at]) < 0x7f)
         ++at;
     if (at == text.size()) return text; // the common case: nothing to escape, no copy
     std::string out = text.substr(0, at);
     static const char hex[] = "0123456789abcdef";
     for (; at < text.size(); ++at) {
         const auto c = static_cast<unsigned char>(text[at]);
-        if (c >= 0x20 && c != 0x7f) {
+        if (c >= 0x80) {
+            if (const std::string::size_type n = utf8_sequence_at(text, at); n > 0) {
+                out.append(text, at, n);
+                at += n - 1;
+            } else {
+                out += "\\x";
+                out += hex[c >> 4];
+                out += hex[c & 15];
+            }
+        } else if (c >= 0x20 && c != 0x7f) {
             out += static_cast<char>(c);
         } else if (c == '\n') {
             out += "\\n";
