@@ -455,6 +455,11 @@ TEST_F(Cli, CompareRefusesCraftedNpyHeaders) {
          "more than 2^64 elements"},
         {"overflow_bytes.npy", "{'descr': '<f8', 'fortran_order': False, 'shape': (2147483648, 2147483648), }", "",
          "more than 2^64 data bytes"},
+        // (an audit's: a dict without its closing brace was read)
+        {"unclosed_dict.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 3), ", std::string(12, '\0'),
+         "not one {...} dict"},
+        {"after_dict.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 3), } x", std::string(12, '\0'),
+         "not one {...} dict"},
     };
     for (const Case& c : cases) {
         write_npy_raw(dir_ / c.file, c.dict, c.data);

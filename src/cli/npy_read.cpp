@@ -67,6 +67,11 @@ NpyArray read_npy(const std::string& path) {
     }
     if (bytes.size() < offset + header_length) throw BadInput(path + ": truncated .npy header");
     const std::string header(bytes.data() + offset, header_length);
+    // The header is one Python dict literal, padded with spaces and ended by a newline: '{' first, its '}'
+    // last before the padding (a header cut short, or one with anything after its dict, is no .npy's).
+    const std::size_t dict_end = header.find_last_not_of(" \n");
+    if (header.empty() || header.front() != '{' || dict_end == std::string::npos || header[dict_end] != '}')
+        throw BadInput(path + ": malformed .npy header (not one {...} dict)");
 
     NpyArray array;
     std::string descr = dict_value(header, "descr", path);
