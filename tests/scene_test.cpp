@@ -645,6 +645,9 @@ const BadCase bad_cases[] = {
     {"truncated.glb", ErrorCode::parse, "truncated"},
     {"bin_chunk_overrun.glb", ErrorCode::parse, "BIN chunk"},
     {"glb_version1.glb", ErrorCode::unsupported, "version 1"},
+    // (an audit's: it blamed a "BIN chunk length 1952805747", read from the JSON text)
+    {"glb_json_length_short.glb", ErrorCode::parse, "GLB JSON chunk length 4 does not end where a chunk starts"},
+    {"uri_bad_percent.gltf", ErrorCode::parse, "has a '%' not followed by two hex digits"},
     {"short_buffer.gltf", ErrorCode::parse, "POSITION accessor 0: count 4"},
     {"view_past_buffer.gltf", ErrorCode::parse, "past the end of buffer 0"},
     {"huge_count.gltf", ErrorCode::parse, "count 4294967295"},

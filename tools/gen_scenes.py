@@ -535,6 +535,9 @@ def bad_corpus():
     struct.pack_into("<I", over, 20 + json_len, len(glb))  # BIN chunk claims more than the file
     put_bytes("bin_chunk_overrun.glb", bytes(over))
     put_bytes("glb_version1.glb", glb[:4] + struct.pack("<I", 1) + glb[8:])
+    short_json = bytearray(glb)
+    struct.pack_into("<I", short_json, 12, 4)  # the JSON chunk's length cut to 4: JSON text follows it
+    put_bytes("glb_json_length_short.glb", bytes(short_json))
 
     g, doc = base()
     doc["accessors"][0]["count"] = 4  # 3 vertices in the buffer
@@ -564,6 +567,10 @@ def bad_corpus():
     g, doc = base()
     doc["nodes"][0]["translation"] = [1e39, 0, 0]
     put("translation_past_float.gltf", doc)
+
+    g, doc = base()
+    doc["buffers"][0]["uri"] = "tri%zz.bin"  # not an escape: it used to read as a NUL byte
+    put("uri_bad_percent.gltf", doc)
 
     g, _ = triangle_gltf()
     g.accessors.clear(), g.views.clear(), g.buf.clear()

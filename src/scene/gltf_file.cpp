@@ -90,8 +90,13 @@ std::size_t glb_json_chunk(std::vector<unsigned char>& bytes) {
     if (bin_start < length) {
         if (bin_start + 8 > length) fail(ErrorCode::parse, "GLB BIN chunk header is truncated");
         const std::uint64_t bin_length = read_u32_le(&bytes[bin_start]);
-        if (bin_start + 8 + bin_length > length)
+        if (bin_start + 8 + bin_length > length) {
+            // a chunk that is no BIN chunk there is most likely JSON text: the JSON chunk's length is wrong
+            if (read_u32_le(&bytes[bin_start + 4]) != 0x004E4942u)
+                fail(ErrorCode::parse, "GLB JSON chunk length " + std::to_string(json_length) +
+                                           " does not end where a chunk starts (what follows is no BIN chunk header)");
             fail(ErrorCode::parse, "GLB BIN chunk length " + std::to_string(bin_length) + " exceeds the file");
+        }
     }
     bytes.resize(static_cast<std::size_t>(length));
     return static_cast<std::size_t>(json_length);
@@ -428,6 +433,11 @@ ExternalFiles check_external_buffers(const json& doc, const std::string& base_di
         if (uri_it == buffer.end() || !uri_it->is_string()) continue;
         const std::string uri = uri_it->get<std::string>();
         if (uri.empty() || uri.rfind("data:", 0) == 0) continue; // a GLB's BIN chunk, or embedded data
+        // a '%' starts an escape of two hex digits ("%20"); another was decoded as a NUL and named as one
+        for (std::size_t at = uri.find('%'); at != std::string::npos; at = uri.find('%', at + 1))
+            if (at + 2 >= uri.size() || !std::isxdigit(static_cast<unsigned char>(uri[at + 1])) ||
+                !std::isxdigit(static_cast<unsigned char>(uri[at + 2])))
+                fail(ErrorCode::parse, refusal(i, uri, "has a '%' not followed by two hex digits (a space is %20)"));
         const std::string decoded = url_decode(uri);
         if (decoded.find('\0') != std::string::npos) fail(ErrorCode::parse, refusal(i, uri, "holds a NUL byte"));
         if (has_scheme(decoded))
