@@ -280,6 +280,16 @@ TEST_F(Cli, AnAssetRootThatIsNoFolderIsBadInput) {
     EXPECT_EQ(bundled.exit_code, 2) << bundled.err; // was 1: the bundled scene's load failing
 }
 
+// Paths that are wrong in ways "no such file" or "no folder" misnamed (an audit's): a loop of symbolic
+// links, and a file where OUT's folder should be.
+TEST_F(Cli, PathsSayWhatIsWrongWithThem) {
+    fs::create_symlink(dir_ / "loop_b.gltf", dir_ / "loop_a.gltf");
+    fs::create_symlink(dir_ / "loop_a.gltf", dir_ / "loop_b.gltf");
+    expect_bad_render({"--scene", (dir_ / "loop_a.gltf").string()}, {"loop_a.gltf: a loop of symbolic links"});
+    write_text(dir_ / "a_file", "x");
+    expect_bad_render({"--out", (dir_ / "a_file" / "x.h5").string()}, {"a_file is not a folder"});
+}
+
 TEST_F(Cli, UnwritableOutputDirectory) {
     expect_bad_render({"--out", "/proc/vksonar_out"}, {"/proc/vksonar_out"});
     EXPECT_FALSE(fs::exists("/proc/vksonar_out"));

@@ -21,6 +21,7 @@ void require_input_file(const std::string& what, const std::string& path) {
     std::error_code ec;
     const std::filesystem::file_status st = std::filesystem::status(path, ec);
     const std::string named = (what.empty() ? "" : what + " ") + path;
+    if (ec == std::errc::too_many_symbolic_link_levels) throw BadInput(named + ": a loop of symbolic links");
     if (!std::filesystem::exists(st)) throw BadInput(named + ": no such file");
     if (std::filesystem::is_directory(st)) throw BadInput(named + ": is a directory, not a file");
     if (!std::filesystem::is_regular_file(st))
@@ -33,7 +34,10 @@ void require_writable_output(const std::string& what, const std::string& path, c
     const fs::path target(written_at.empty() ? path : written_at);
     const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
     std::error_code ec;
-    if (!fs::is_directory(folder, ec)) throw BadInput(what + " " + path + ": no folder " + folder.string());
+    if (!fs::is_directory(folder, ec))
+        throw BadInput(
+            what + " " + path + ": " +
+            (fs::exists(folder, ec) ? folder.string() + " is not a folder" : "no folder " + folder.string()));
     // A FIFO, socket or device there (or a link to one) is not a file this run may replace: the rename that
     // publishes the output would put a regular file in its place (/dev/full, a pipe a reader waits on).
     for (const fs::path& existing : {fs::path(path), target}) {
