@@ -648,6 +648,7 @@ const BadCase bad_cases[] = {
     // (an audit's: it blamed a "BIN chunk length 1952805747", read from the JSON text)
     {"glb_json_length_short.glb", ErrorCode::parse, "GLB JSON chunk length 4 does not end where a chunk starts"},
     {"uri_bad_percent.gltf", ErrorCode::parse, "has a '%' not followed by two hex digits"},
+    {"uri_empty.gltf", ErrorCode::parse, "buffer 0 uri is empty"},
     {"short_buffer.gltf", ErrorCode::parse, "POSITION accessor 0: count 4"},
     {"view_past_buffer.gltf", ErrorCode::parse, "past the end of buffer 0"},
     {"huge_count.gltf", ErrorCode::parse, "count 4294967295"},
@@ -665,7 +666,7 @@ const BadCase bad_cases[] = {
     {"inf_position.gltf", ErrorCode::parse, "Inf at vertex 1"},
     {"missing_bin.gltf", ErrorCode::io, "missing.bin"},
     {"wrong_size_bin.gltf", ErrorCode::parse, "wrong_size.bin"},
-    {"bad_data_uri.gltf", ErrorCode::parse, "decode"},
+    {"bad_data_uri.gltf", ErrorCode::parse, "byteLength 46 is more than its data uri holds (42 bytes)"},
     // (a primitive whose stream is not one: refused by name without libdraco, as not Draco with it)
     {"draco_required.gltf", gltf::draco_available() ? ErrorCode::parse : ErrorCode::unsupported,
      gltf::draco_available() ? "KHR_draco_mesh_compression: the stream is not a Draco triangle mesh"

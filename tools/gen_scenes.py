@@ -572,6 +572,10 @@ def bad_corpus():
     doc["buffers"][0]["uri"] = "tri%zz.bin"  # not an escape: it used to read as a NUL byte
     put("uri_bad_percent.gltf", doc)
 
+    g, doc = base()
+    doc["buffers"][0]["uri"] = ""  # tinygltf's own words were "'uri' is missing ... File not found :"
+    put("uri_empty.gltf", doc)
+
     g, _ = triangle_gltf()
     g.accessors.clear(), g.views.clear(), g.buf.clear()
     g.meshes[0]["primitives"] = [g.primitive([(0, 0, 0), (1, 0, 0), (0, 1, 0)], None, None, flat=[0, 1, 7])]

@@ -432,7 +432,30 @@ ExternalFiles check_external_buffers(const json& doc, const std::string& base_di
         const auto uri_it = buffer.find("uri");
         if (uri_it == buffer.end() || !uri_it->is_string()) continue;
         const std::string uri = uri_it->get<std::string>();
-        if (uri.empty() || uri.rfind("data:", 0) == 0) continue; // a GLB's BIN chunk, or embedded data
+        if (uri.empty())
+            fail(ErrorCode::parse,
+                 "buffer " + std::to_string(i) +
+                     " uri is empty (name the buffer's file, or leave uri out for a GLB's BIN chunk)");
+        if (uri.rfind("data:", 0) == 0) {
+            // embedded base64: its bytes must hold byteLength (tinygltf said only "Failed to decode 'uri'")
+            const std::size_t comma = uri.find(',');
+            const auto length_it = buffer.find("byteLength");
+            if (comma != std::string::npos && comma >= 7 && uri.compare(comma - 7, 7, ";base64") == 0 &&
+                length_it != buffer.end() && length_it->is_number_unsigned()) {
+                const std::size_t text = uri.size() - comma - 1, rest = text % 4;
+                std::size_t padding = 0;
+                while (padding < 2 && text > padding && uri[uri.size() - 1 - padding] == '=')
+                    ++padding;
+                // 3 bytes a 4 characters, less the padding; unpadded, 2 or 3 characters left over hold 1 or 2
+                const std::uint64_t holds = text / 4 * 3 - (rest == 0 ? padding : 0) + (rest > 1 ? rest - 1 : 0);
+                if (length_it->get<std::uint64_t>() > holds)
+                    fail(ErrorCode::parse, "buffer " + std::to_string(i) + " byteLength " +
+                                               std::to_string(length_it->get<std::uint64_t>()) +
+                                               " is more than its data uri holds (" + std::to_string(holds) +
+                                               " bytes)");
+            }
+            continue;
+        }
         // a '%' starts an escape of two hex digits ("%20"); another was decoded as a NUL and named as one
         for (std::size_t at = uri.find('%'); at != std::string::npos; at = uri.find('%', at + 1))
             if (at + 2 >= uri.size() || !std::isxdigit(static_cast<unsigned char>(uri[at + 1])) ||
