@@ -12,6 +12,7 @@
 
 #include "config/config_keys.h"
 #include "core/json_depth.h"
+#include "core/json_member_names.h"
 #include "core/plan.h" // resolves_to_line_array
 #include "vksonar/config.h"
 
@@ -84,25 +85,15 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
     if (json_nests_too_deep(json_text))
         return make_error(ErrorCode::parse,
                           origin + ": invalid JSON: nests deeper than " + std::to_string(kMaxJsonDepth) + " levels");
-    // A key twice in one object ("beams": 256 ... "beams": 512, a copy-paste) would leave the last in
-    // silence (JSON keeps one): refused, naming it. Each open object's keys so far, innermost last.
-    std::vector<std::set<std::string>> open_objects;
-    std::string twice;
-    // A config has a few hundred keys; an object of many thousands is no config, and the ordered object's
-    // inserts (a search each) would take time quadratic in them (80000 keys: 4.5 s, 2 million: hours):
-    // refused at the key past the limit, during the parse.
+    // A key twice in one object would leave the last in silence: refused, naming it (MemberNames). A config
+    // has a few hundred keys; an object of many thousands is no config, and the ordered object's inserts (a
+    // search each) would take time quadratic in them (80000 keys: 4.5 s, 2 million: hours): refused at the
+    // key past the limit, during the parse.
     struct TooManyKeys {};
-    std::size_t keys = 0;
+    MemberNames names;
     const Json::parser_callback_t keys_once = [&](int, Json::parse_event_t event, Json& parsed) {
-        if (event == Json::parse_event_t::key && ++keys > kMaxConfigKeys) throw TooManyKeys{};
-        if (event == Json::parse_event_t::object_start) {
-            open_objects.emplace_back();
-        } else if (event == Json::parse_event_t::object_end) {
-            if (!open_objects.empty()) open_objects.pop_back();
-        } else if (event == Json::parse_event_t::key && !open_objects.empty() && parsed.is_string()) {
-            if (!open_objects.back().insert(parsed.get<std::string>()).second && twice.empty())
-                twice = parsed.get<std::string>();
-        }
+        names.on(event, parsed);
+        if (names.keys() > kMaxConfigKeys) throw TooManyKeys{};
         return true;
     };
     Json root;
@@ -124,8 +115,8 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
         if (pos != std::string::npos) what = what.substr(pos + 2);
         return make_error(ErrorCode::parse, origin + ": invalid JSON: " + what);
     }
-    if (!twice.empty())
-        return make_error(ErrorCode::parse, origin + ": key '" + twice + "' is given twice in one object");
+    if (!names.twice().empty())
+        return make_error(ErrorCode::parse, origin + ": key '" + names.twice() + "' is given twice in one object");
     if (!root.is_object())
         return make_error(ErrorCode::parse,
                           origin + ": expected a JSON object of config keys, got " + std::string(root.type_name()));

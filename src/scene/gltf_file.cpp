@@ -16,7 +16,6 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <set>
 #include <vector>
 
 #include <fcntl.h>
@@ -26,6 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/json_depth.h"
+#include "core/json_member_names.h"
 
 namespace vksonar::gltf {
 namespace {
@@ -112,27 +112,17 @@ void check_json_depth(const char* text, std::size_t size) {
 json parse_json(const unsigned char* bytes, std::size_t size) {
     const char* text = reinterpret_cast<const char*>(bytes);
     check_json_depth(text, size);
-    // A member name twice in one object (a merge or hand edit gone wrong: a second "nodes" array) would leave
-    // the last in silence, JSON keeping one; glTF's JSON asks for unique names, and the config loader
-    // refuses them too. Each open object's names so far, innermost last.
-    std::vector<std::set<std::string>> open_objects;
-    std::string twice;
-    const json::parser_callback_t names_once = [&](int, json::parse_event_t event, json& parsed) {
-        if (event == json::parse_event_t::object_start) {
-            open_objects.emplace_back();
-        } else if (event == json::parse_event_t::object_end) {
-            if (!open_objects.empty()) open_objects.pop_back();
-        } else if (event == json::parse_event_t::key && !open_objects.empty() && parsed.is_string()) {
-            if (!open_objects.back().insert(parsed.get<std::string>()).second && twice.empty())
-                twice = parsed.get<std::string>();
-        }
-        return true;
+    // A member name twice in one object (a merge or hand edit gone wrong: a second "nodes" array): glTF's
+    // JSON asks for unique names, and JSON would keep the last in silence (MemberNames).
+    MemberNames names;
+    const json::parser_callback_t names_once = [&names](int, json::parse_event_t event, json& parsed) {
+        return names.on(event, parsed);
     };
     try {
         json doc = json::parse(text, text + size, names_once);
-        if (!twice.empty())
-            fail(ErrorCode::parse,
-                 "invalid JSON: member '" + one_line(twice, 60) + "' is given twice in one object (one would be lost)");
+        if (!names.twice().empty())
+            fail(ErrorCode::parse, "invalid JSON: member '" + one_line(names.twice(), 60) +
+                                       "' is given twice in one object (one would be lost)");
         if (!doc.is_object()) fail(ErrorCode::parse, "top level JSON value is not an object");
         return doc;
     } catch (const json::parse_error& e) {
