@@ -90,8 +90,8 @@ TEST(Config, AFileOfManyThousandKeysIsRefusedWhileParsing) {
     for (const auto& [objects, keys_each] : {std::pair<std::size_t, std::size_t>{1, 200000}, {500, 400}}) {
         const auto r = apply_config_json(SonarConfig{}, keys_json(objects, keys_each), "k.json");
         ASSERT_FALSE(r);
-        EXPECT_EQ(r.error().message, "k.json: invalid JSON: more than " + std::to_string(kMaxConfigKeys) +
-                                         " keys (a config has a few hundred)");
+        EXPECT_EQ(r.error().message,
+                  "k.json: more than " + std::to_string(kMaxConfigKeys) + " keys (a config has a few hundred)");
     }
     const auto at_limit = apply_config_json(SonarConfig{}, keys_json(1, kMaxConfigKeys - 1), "k.json");
     ASSERT_FALSE(at_limit);
@@ -177,6 +177,15 @@ TEST(Config, BytesThatAreNotUtf8AreEscapedInMessages) {
     EXPECT_EQ(escape_control_chars("\xed\xa0\x80"), "\\xed\\xa0\\x80");          // a surrogate
     EXPECT_EQ(escape_control_chars("a\xe4\xb8"), "a\\xe4\\xb8");                 // cut off at the end
     EXPECT_EQ(escape_control_chars("\xf4\x90\x80\x80"), "\\xf4\\x90\\x80\\x80"); // past U+10FFFF
+    // well-formed, but breaking or reordering a line (a reviewer's: Python's splitlines() split at U+2028)
+    EXPECT_EQ(escape_control_chars("a\xc2\x85"
+                                   "b\xe2\x80\xa8"
+                                   "c\xe2\x80\xa9"
+                                   "d\xe2\x80\xae"
+                                   "e\xe2\x81\xa6"
+                                   "f"),
+              "a\\u0085b\\u2028c\\u2029d\\u202ee\\u2066f");
+    EXPECT_EQ(escape_control_chars("\xc2\xa0\xe2\x80\xa7\xe2\x80\xaf"), "\xc2\xa0\xe2\x80\xa7\xe2\x80\xaf"); // kept
     const std::string latin1 = apply_error("{\"name\": \"caf\xe9\"}");
     EXPECT_NE(latin1.find("\\xe9"), std::string::npos) << latin1;
     EXPECT_EQ(latin1.find('\xe9'), std::string::npos) << latin1;

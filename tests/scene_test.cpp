@@ -386,10 +386,13 @@ void append_u32(std::vector<char>& out, std::uint32_t v) {
 }
 
 // Packs plane_10m.gltf + plane_10m.bin into a GLB, as an exporter would.
-std::vector<char> make_plane_glb() {
+// with_empty_uri: the BIN chunk's buffer with "uri": "" (against the spec, which leaves uri out; tinygltf and
+// earlier builds read it as the BIN chunk)
+std::vector<char> make_plane_glb(bool with_empty_uri = false) {
     nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
     std::vector<char> bin = read_bytes(test_file("scenes/plane_10m.bin"));
     doc["buffers"][0].erase("uri");
+    if (with_empty_uri) doc["buffers"][0]["uri"] = "";
     std::string text = doc.dump();
     while (text.size() % 4)
         text += ' ';
@@ -553,6 +556,41 @@ TEST(SceneGlb, EveryTruncationFailsCleanly) {
         EXPECT_NE(r.error().message.find("plane_truncated.glb"), std::string::npos) << r.error().message;
         EXPECT_EQ(r.error().message.find('\n'), std::string::npos) << r.error().message;
     }
+}
+
+// What the audit's checks must not refuse (a reviewer's): a GLB whose BIN buffer says "uri": "", and a matrix
+// beside default translation / rotation / scale; a matrix beside a translation that moves it is refused.
+TEST(SceneGlb, LenientWhereNothingIsAmbiguous) {
+    const std::string glb_path = temp_path("plane_empty_uri.glb");
+    write_bytes(glb_path, make_plane_glb(/*with_empty_uri=*/true));
+    const Scene glb = load_ok(glb_path);
+    EXPECT_EQ(scene_data(glb).positions, scene_data(load_ok(test_file("scenes/plane_10m.gltf"))).positions);
+
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
+    doc["buffers"][0]["uri"] = (std::filesystem::path(test_file("scenes/plane_10m.bin"))).filename().string();
+    auto& node = doc["nodes"][0];
+    node.erase("translation");
+    node.erase("rotation");
+    node.erase("scale");
+    node["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    node["translation"] = {0, 0, 0};
+    node["rotation"] = {0, 0, 0, 1};
+    node["scale"] = {1, 1, 1};
+    const std::string path = temp_path("matrix_and_trs.gltf"); // beside a copy of its buffer
+    write_bytes((std::filesystem::path(path).parent_path() / doc["buffers"][0]["uri"].get<std::string>()).string(),
+                read_bytes(test_file("scenes/plane_10m.bin")));
+    const auto load_text = [&](const nlohmann::json& d) {
+        const std::string text = d.dump();
+        write_bytes(path, std::vector<char>(text.begin(), text.end()));
+        return Scene::load_gltf(path);
+    };
+    const Result<Scene> defaults = load_text(doc);
+    EXPECT_TRUE(defaults.ok()) << (defaults.ok() ? "" : defaults.error().message);
+    node["translation"] = {1, 0, 0};
+    const Result<Scene> moved = load_text(doc);
+    ASSERT_FALSE(moved.ok());
+    EXPECT_NE(moved.error().message.find("has both a matrix and translation"), std::string::npos)
+        << moved.error().message;
 }
 
 // A node whose transform flattens its mesh (a zero scale) loads, and says that nothing of it is drawn.

@@ -71,11 +71,11 @@ private:
 
 namespace detail {
 // The length of the well-formed UTF-8 sequence of 2 to 4 bytes at text[at] (no overlong form, no
-// surrogate, at most U+10FFFF), or 0.
-inline std::string::size_type utf8_sequence_at(const std::string& text, std::string::size_type at) {
+// surrogate, at most U+10FFFF), or 0; `code` its code point.
+inline std::string::size_type utf8_sequence_at(const std::string& text, std::string::size_type at, unsigned& code) {
     const auto lead = static_cast<unsigned char>(text[at]);
     std::string::size_type n = 0;
-    unsigned code = 0;
+    code = 0;
     if (lead >= 0xc2 && lead <= 0xdf) {
         n = 2, code = lead & 0x1fu;
     } else if (lead >= 0xe0 && lead <= 0xef) {
@@ -100,7 +100,9 @@ inline std::string::size_type utf8_sequence_at(const std::string& text, std::str
 // Messages quote names and values taken from the input (a glTF material name, a JSON key, a URI), and
 // those may hold a newline or other control characters, or bytes that are not UTF-8 (a Latin-1 or UTF-16
 // file). Escape them C-style (\n, \xNN) so that a message stays one printable line of UTF-8 whatever the
-// input held; well-formed UTF-8 (a name in any script) is kept as it is.
+// input held; well-formed UTF-8 (a name in any script) is kept as it is, but for the code points that break
+// or reorder a line (C1 controls U+0080-U+009F, U+2028/U+2029, the bidi embeddings, overrides and isolates
+// U+202A-U+202E, U+2066-U+2069), written \uNNNN.
 inline std::string escape_control_chars(std::string text) {
     std::string::size_type at = 0;
     while (at < text.size() && static_cast<unsigned char>(text[at]) >= 0x20 &&
@@ -112,8 +114,16 @@ inline std::string escape_control_chars(std::string text) {
     for (; at < text.size(); ++at) {
         const auto c = static_cast<unsigned char>(text[at]);
         if (c >= 0x80) {
-            if (const std::string::size_type n = utf8_sequence_at(text, at); n > 0) {
-                out.append(text, at, n);
+            unsigned code = 0;
+            if (const std::string::size_type n = utf8_sequence_at(text, at, code); n > 0) {
+                if (code <= 0x9f || code == 0x2028 || code == 0x2029 || (code >= 0x202a && code <= 0x202e) ||
+                    (code >= 0x2066 && code <= 0x2069)) {
+                    out += "\\u";
+                    for (int shift = 12; shift >= 0; shift -= 4)
+                        out += hex[(code >> shift) & 15];
+                } else {
+                    out.append(text, at, n);
+                }
                 at += n - 1;
             } else {
                 out += "\\x";

@@ -258,12 +258,15 @@ public:
         // A frame folder without meta.json (a killed run's last) is an earlier run's only beside one
         // that has it, or a single pose's: a folder of frame-named files alone is someone's own.
         std::vector<fs::path> frame_folders;
+        std::vector<fs::path> set_aside; // an earlier clearing's leftovers (below): removed as we go, if we can
         bool run_seen = single_pose_run;
         for (const auto& entry : fs::directory_iterator(dir_, ec)) {
             const std::string name = entry.path().filename().string();
-            if (name.size() > 6 && name.rfind("frame_", 0) == 0 &&
-                name.find_first_not_of("0123456789", 6) == std::string::npos && entry.is_directory(ec) &&
-                !entry.is_symlink(ec)) {
+            if (name.rfind(kSetAside, 0) == 0) {
+                set_aside.push_back(entry.path());
+            } else if (name.size() > 6 && name.rfind("frame_", 0) == 0 &&
+                       name.find_first_not_of("0123456789", 6) == std::string::npos && entry.is_directory(ec) &&
+                       !entry.is_symlink(ec)) {
                 frame_folders.push_back(entry.path());
                 run_seen = run_seen || written_by_vksonar(entry.path() / kMetaJson);
             } else if (ours(name) && !entry.is_directory(ec) && (single_pose_run || name.rfind(".~", 0) == 0)) {
@@ -288,20 +291,38 @@ public:
             stale.push_back(folder);
         }
         if (ec) throw Failure("--out " + dir_.string() + ": cannot list the folder: " + ec.message());
+        for (const fs::path& leftover : set_aside)
+            fs::remove_all(leftover, ec);
         // All or nothing: every earlier file and frame folder is first renamed aside (a hidden name in the same
-        // folder), and put back if one cannot be, so that a failure leaves the earlier run whole; only then are
-        // they removed, and one that cannot be stays aside, named in the error, with none of the earlier frames
-        // left under their names (a folder of a few of them looked like a whole run).
+        // folder, new to it), and put back if one cannot be, so that a failure leaves the earlier run whole; only
+        // then are they removed, and one that cannot be stays aside, named in the error (the next clearing tries
+        // it again), with none of the earlier frames left under their names (a folder of a few of them looked
+        // like a whole run). Where a folder cannot be renamed at all (an overlay filesystem's lower layer:
+        // EXDEV), each is removed where it is, as before.
         std::vector<std::pair<fs::path, fs::path>> aside;
+        std::uint64_t serial = 0;
         for (const fs::path& path : stale) {
-            const fs::path hidden = dir_ / (".~earlier-" + std::to_string(::getpid()) + "-" + path.filename().string());
+            fs::path hidden;
+            do {
+                hidden = dir_ / (std::string(kSetAside) + std::to_string(::getpid()) + "-" + std::to_string(serial++) +
+                                 "-" + path.filename().string());
+            } while (fs::exists(fs::symlink_status(hidden, ec)));
             fs::rename(path, hidden, ec);
+            if (ec == std::errc::cross_device_link) {
+                put_back(aside);
+                aside.clear();
+                remove_in_place(stale);
+                return;
+            }
             if (ec) {
                 const std::string why = ec.message();
-                for (auto it = aside.rbegin(); it != aside.rend(); ++it)
-                    fs::rename(it->second, it->first, ec);
+                const std::size_t stranded = put_back(aside);
                 throw Failure("cannot remove " + path.string() + " (an earlier run's): " + why +
-                              "; the earlier run is left as it was");
+                              (stranded == 0 ? "; the earlier run is left as it was"
+                                             : "; " + std::to_string(stranded) +
+                                                   " of its files could not be put back "
+                                                   "and are in " +
+                                                   dir_.string() + " as " + kSetAside + "*"));
             }
             aside.emplace_back(path, hidden);
         }
@@ -316,6 +337,27 @@ public:
     }
 
 private:
+    static constexpr const char* kSetAside = ".~earlier-"; // clear_previous_run's hidden names: .~earlier-PID-N-NAME
+
+    // Renames each (path, hidden) of `aside` back, last first; how many could not be.
+    static std::size_t put_back(const std::vector<std::pair<fs::path, fs::path>>& aside) {
+        std::size_t stranded = 0;
+        std::error_code ec;
+        for (auto it = aside.rbegin(); it != aside.rend(); ++it) {
+            fs::rename(it->second, it->first, ec);
+            if (ec) ++stranded;
+        }
+        return stranded;
+    }
+    // Removes each of `stale` where it is (no rename: EXDEV), stopping at the first that cannot be.
+    static void remove_in_place(const std::vector<fs::path>& stale) {
+        std::error_code ec;
+        for (const fs::path& path : stale) {
+            fs::remove_all(path, ec);
+            if (ec) throw Failure("cannot remove " + path.string() + " (an earlier run's): " + ec.message());
+        }
+    }
+
     // A meta.json a vksonar run wrote: it starts with its "format" (host::meta_json_plan_part).
     static bool written_by_vksonar(const fs::path& meta) {
         std::ifstream in(meta, std::ios::binary);

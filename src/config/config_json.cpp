@@ -100,7 +100,7 @@ Result<SonarConfig> apply_config_json(const SonarConfig& base, const std::string
     try {
         root = Json::parse(json_text, keys_once, /*allow_exceptions=*/true, /*ignore_comments=*/true);
     } catch (const TooManyKeys&) {
-        return make_error(ErrorCode::parse, origin + ": invalid JSON: more than " + std::to_string(kMaxConfigKeys) +
+        return make_error(ErrorCode::parse, origin + ": more than " + std::to_string(kMaxConfigKeys) +
                                                 " keys (a config has a few hundred)");
     } catch (const nlohmann::json::parse_error& e) {
         // nlohmann's message starts with "[json.exception.parse_error.101] parse error at line 3, column 5: ...".

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <map>
 #include <vector>
 
@@ -196,9 +197,20 @@ void check_structure(const json& doc) {
         require_numbers(node, "rotation", 4, where);
         require_numbers(node, "scale", 3, where);
         require_numbers(node, "matrix", 16, where);
-        // glTF: a matrix or translation / rotation / scale, not both (tinygltf keeps the matrix in silence)
+        // glTF: a matrix or translation / rotation / scale, not both (tinygltf keeps the matrix in silence).
+        // Default ones beside a matrix (0 0 0, 0 0 0 1, 1 1 1: some exporters write them) change nothing.
+        const auto non_default = [&node](const char* key, std::initializer_list<double> identity) {
+            if (!node.contains(key)) return false;
+            const json& v = node[key];
+            if (!v.is_array() || v.size() != identity.size()) return true;
+            std::size_t k = 0;
+            for (double expected : identity)
+                if (!v[k].is_number() || v[k++].get<double>() != expected) return true;
+            return false;
+        };
         if (node.is_object() && node.contains("matrix") &&
-            (node.contains("translation") || node.contains("rotation") || node.contains("scale")))
+            (non_default("translation", {0, 0, 0}) || non_default("rotation", {0, 0, 0, 1}) ||
+             non_default("scale", {1, 1, 1})))
             fail(ErrorCode::parse, where + ": has both a matrix and translation / rotation / scale (glTF allows one "
                                            "or the other)");
     });
@@ -406,7 +418,8 @@ std::string refusal(std::size_t index, const std::string& uri, const std::string
 }
 
 // Every external buffer of `doc`, checked before tinygltf reads any (see ExternalFiles).
-ExternalFiles check_external_buffers(const json& doc, const std::string& base_dir, const std::string& asset_root) {
+ExternalFiles check_external_buffers(const json& doc, const std::string& base_dir, const std::string& asset_root,
+                                     bool binary) {
     ExternalFiles files;
     const auto buffers = doc.find("buffers");
     if (buffers == doc.end() || !buffers->is_array()) return files; // tinygltf reports what is wrong
@@ -422,10 +435,10 @@ ExternalFiles check_external_buffers(const json& doc, const std::string& base_di
         const auto uri_it = buffer.find("uri");
         if (uri_it == buffer.end() || !uri_it->is_string()) continue;
         const std::string uri = uri_it->get<std::string>();
-        if (uri.empty())
-            fail(ErrorCode::parse,
-                 "buffer " + std::to_string(i) +
-                     " uri is empty (name the buffer's file, or leave uri out for a GLB's BIN chunk)");
+        if (uri.empty()) {
+            if (binary) continue; // tinygltf takes it as the BIN chunk, as an absent uri (which the spec asks for)
+            fail(ErrorCode::parse, "buffer " + std::to_string(i) + " uri is empty (name the buffer's file)");
+        }
         if (uri.rfind("data:", 0) == 0) {
             // embedded base64: its bytes must hold byteLength (tinygltf said only "Failed to decode 'uri'")
             const std::size_t comma = uri.find(',');
@@ -635,7 +648,7 @@ tinygltf::Model read_model(const std::string& path, const std::string& asset_roo
         json doc = parse_json(bytes.data() + (binary ? 20 : 0), json_length);
         check_structure(doc);
         check_extensions(doc, warnings);
-        files = check_external_buffers(doc, base_dir, asset_root);
+        files = check_external_buffers(doc, base_dir, asset_root, binary);
         meshopt = prepare_meshopt(doc); // edits doc only where the file uses the extension
         draco = prepare_draco(doc);     // likewise
         if (!meshopt.empty() || !draco.empty()) bytes = with_json(bytes, binary, doc.dump());
