@@ -5,26 +5,11 @@
 #include <cmath>
 
 #include "core/angles.h"
+#include "core/mat4.h"
 #include "core/plan.h"
 #include "scene/scene_data.h"
 
 namespace vksonar {
-
-// Column-major 4x4 in double.
-using Mat4 = std::array<double, 16>;
-
-Mat4 multiply(const Mat4& a, const Mat4& b) {
-    Mat4 r{};
-    for (int col = 0; col < 4; ++col) {
-        for (int row = 0; row < 4; ++row) {
-            double s = 0;
-            for (int k = 0; k < 4; ++k)
-                s += a[k * 4 + row] * b[col * 4 + k];
-            r[col * 4 + row] = s;
-        }
-    }
-    return r;
-}
 
 // sonar_from_world = inverse of [R | t] with R = Rz(yaw) Ry(pitch) Rx(roll).
 Mat4 sonar_from_world(const Pose& pose) {

@@ -334,8 +334,6 @@ void assign_columns_to_beams(Plan& p, double exclude_beyond_rad = std::numeric_l
 // The sonar frame from the world (column-major 4 x 4, double): the inverse of the pose's
 // [Rz(yaw) Ry(pitch) Rx(roll) | x y z]. Shared by the depth pass and the labels' flow.
 std::array<double, 16> sonar_from_world(const Pose& pose);
-// a b of two column-major 4 x 4 matrices in double (the depth pass's and the sub-pixel returns' transforms).
-std::array<double, 16> multiply(const std::array<double, 16>& a, const std::array<double, 16>& b);
 
 void compose_depth_draws(const Plan& plan, const SceneData& scene, const Pose& pose,
                          std::vector<shared::DepthPush>& out);

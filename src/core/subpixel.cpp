@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "core/angles.h"
+#include "core/mat4.h"
 #include "core/pixel_views.h"
 #include "core/plan.h"
 #include "core/sonar_math.hpp"
@@ -225,11 +226,6 @@ std::int32_t mesh_facing(const SceneData& scene, const MeshRange& mesh) {
     if (!loops) holes = whole * whole / (4 * kPi);
     if (holes > 0.01 * area || !(std::abs(volume6) > 2 * holes * radius)) return 0; // 6 x (1/3) A r
     return volume6 > 0 ? 1 : -1;
-}
-
-double determinant3(const std::array<double, 16>& m) {
-    return m[0] * (m[5] * m[10] - m[9] * m[6]) - m[4] * (m[1] * m[10] - m[9] * m[2]) +
-           m[8] * (m[1] * m[6] - m[5] * m[2]);
 }
 
 // The pixel's sides (focal-normalized, at the image centre; towards a slice's edges a pixel is smaller, by

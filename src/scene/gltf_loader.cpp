@@ -14,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/mat4.h"
 #include "scene/gltf_accessors.h"
 #include "scene/gltf_draco.h"
 #include "scene/gltf_file.h"
@@ -28,23 +29,6 @@ using gltf::fail;
 using gltf::LoadFailure;
 using gltf::one_line;
 using nlohmann::json;
-using Mat4 = std::array<double, 16>; // column-major, m[col * 4 + row]
-
-Mat4 identity() {
-    return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-}
-
-Mat4 multiply(const Mat4& a, const Mat4& b) {
-    Mat4 c{};
-    for (int col = 0; col < 4; ++col)
-        for (int row = 0; row < 4; ++row) {
-            double s = 0;
-            for (int k = 0; k < 4; ++k)
-                s += a[k * 4 + row] * b[col * 4 + k];
-            c[col * 4 + row] = s;
-        }
-    return c;
-}
 
 // glTF +Y up -> world +Z up: world = (x, -z, y), a +90 deg rotation about x.
 const Mat4& world_from_gltf() {
@@ -233,10 +217,7 @@ private:
                                        " (more than 1e12: no scene is that large; a unit or export mistake?)");
         }
         if (!has_mesh) return;
-        const double det = world[0] * (world[5] * world[10] - world[9] * world[6]) -
-                           world[4] * (world[1] * world[10] - world[9] * world[2]) +
-                           world[8] * (world[1] * world[6] - world[5] * world[2]);
-        if (det == 0.0 && !flat_warned_) {
+        if (determinant3(world) == 0.0 && !flat_warned_) {
             flat_warned_ = true;
             warn(where + ": its transform flattens its meshes (a zero scale or matrix): they are drawn as nothing");
         }
@@ -286,7 +267,7 @@ private:
                              1 - 2 * (y * y + z * z), 2 * (x * y + z * w),     2 * (x * z - y * w),
                              2 * (x * y - z * w),     1 - 2 * (x * x + z * z), 2 * (y * z + x * w),
                              2 * (x * z + y * w),     2 * (y * z - x * w),     1 - 2 * (x * x + y * y)};
-        Mat4 m = identity();
+        Mat4 m = identity4();
         for (int col = 0; col < 3; ++col)
             for (int row = 0; row < 3; ++row)
                 m[col * 4 + row] = r[col * 3 + row] * s[col];
