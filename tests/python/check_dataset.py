@@ -295,8 +295,16 @@ with tempfile.TemporaryDirectory() as tmp:
     for out in (fifo, link):
         run = render(["--out", out] + SMALL, expect=2)
         check("not a regular file" in run.stderr, f"a FIFO at OUT named: {run.stderr}")
+    # export and merge write through the same check: a FIFO at their OUT is refused and left as it was.
+    fifo_json = os.path.join(tmp, "pipe.json")
+    os.mkfifo(fifo_json)
+    run = subprocess.run([CLI, "export", "coco", plain, fifo_json], capture_output=True, text=True)
+    check(run.returncode == 2 and "not a regular file" in run.stderr, f"export coco to a FIFO: {run.returncode} {run.stderr}")
+    run = subprocess.run([CLI, "merge", fifo, plain], capture_output=True, text=True)
+    check(run.returncode == 2 and "exists" in run.stderr, f"merge to a FIFO: {run.returncode} {run.stderr}")
     import stat
-    check(stat.S_ISFIFO(os.stat(fifo).st_mode), "the FIFO is still a FIFO")
+    for path in (fifo, fifo_json):
+        check(stat.S_ISFIFO(os.stat(path).st_mode), f"{path} is still a FIFO")
 
 if failures:
     print(f"{len(failures)} check(s) failed")
