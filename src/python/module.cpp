@@ -367,6 +367,23 @@ py::object fan_labels(py::object self, bool instance) {
     return view(out, {fan.height(), fan.width()}, self);
 }
 
+// render(out=frame): the arrays made on first read (polar_u16, depth, fan, instance_fan, class_fan) that
+// were read before are made again from the new frame, into their own buffers (the same size: no new
+// memory), so a numpy view taken from an earlier render of this Frame shows this one, as the frame's own
+// arrays' views do. Those not read yet stay unmade until they are.
+void rebuild_read_arrays(FrameObject& f, const host::FanRenderer& fan) {
+    f.u16_ready = !f.u16.empty();
+    if (f.u16_ready) host::quantize_display(f.frame, f.u16);
+    f.range_ready = !f.range.empty() && !f.frame.depth.empty();
+    if (f.range_ready) host::depth_to_view_range(*f.plan, f.frame, f.range);
+    f.fan_ready = !f.fan_image.rgb.empty();
+    if (f.fan_ready) fan.render(f.frame, f.fan_image);
+    f.instance_fan_ready = !f.instance_fan.empty() && !f.frame.instance.empty();
+    if (f.instance_fan_ready) fan.nearest_cell(f.frame.instance, f.instance_fan);
+    f.class_fan_ready = !f.class_fan.empty() && !f.frame.object_class.empty();
+    if (f.class_fan_ready) fan.nearest_cell(f.frame.object_class, f.class_fan);
+}
+
 py::object frame_meta(FrameObject& f) {
     const py::module_ json = py::module_::import("json");
     py::dict extra;
@@ -691,6 +708,7 @@ PYBIND11_MODULE(vksonar, m) {
                 out->renderer = self;
                 out->pose = Pose{pose[0], pose[1], pose[2], pose[3], pose[4], pose[5]};
                 out->time_s = time_s;
+                // (a failed render leaves every derived array to be made again on its next read)
                 out->u16_ready = out->range_ready = out->fan_ready = false;
                 out->instance_fan_ready = out->class_fan_ready = false;
                 Result<void> rendered;
@@ -704,6 +722,7 @@ PYBIND11_MODULE(vksonar, m) {
                     } else {
                         rendered = r.renderer.render(out->pose, frame_index, out->frame);
                     }
+                    if (rendered) rebuild_read_arrays(*out, *r.fan);
                 }
                 if (seed) r.renderer.set_seed(own_seed);
                 check(rendered);

@@ -243,6 +243,28 @@ def test_numpy_layouts_are_views_that_outlive_the_next_render(renderer):
     assert reused is other and np.array_equal(other.polar, kept)
 
 
+def test_out_overwrites_every_array_already_read(renderer):
+    # The arrays made on first read (polar_u16, depth, fan, instance_fan, class_fan) were left showing the
+    # earlier render of a reused Frame while polar and the labels moved on: a dataset loop holding both
+    # wrote one ping's labels beside another's image.
+    labels = vksonar.Renderer(vksonar.Scene.load(SCENE), small_config(), backend="cpu", seed=9,
+                              outputs=["labels", "depth"])
+    other_pose = (3.0, 1.0, 0.0, 0.0, 10.0, 30.0)
+    names = ("polar", "polar_u16", "depth", "fan", "instance", "instance_fan", "class_fan")
+    frame = labels.render(POSE, frame=0)
+    held = {name: getattr(frame, name) for name in names}
+    before = {name: array.copy() for name, array in held.items()}
+    fresh = labels.render(other_pose, frame=5)
+    assert labels.render(other_pose, frame=5, out=frame) is frame
+    for name in names:
+        assert not np.array_equal(before[name], getattr(fresh, name)), name  # the poses' arrays differ
+        assert np.array_equal(held[name], getattr(fresh, name)), name  # the view held shows the new render
+        assert np.shares_memory(held[name], getattr(frame, name)), name  # in the same memory
+    unread = labels.render(other_pose, frame=5)  # a reused Frame's arrays not read yet: made on their read
+    labels.render(POSE, frame=0, out=unread)
+    assert np.array_equal(unread.fan, before["fan"]) and np.array_equal(unread.polar_u16, before["polar_u16"])
+
+
 def test_seed_and_frame_index_key_the_noise(renderer):
     a = renderer.render(POSE, frame=3).polar
     b = renderer.render(POSE, frame=3, seed=9).polar
