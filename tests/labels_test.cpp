@@ -556,6 +556,46 @@ TEST_P(LabelBackendTest, FlowOfAForwardMove) {
     EXPECT_LT(worst_beam, 1e-3);
 }
 
+// Flow on a full circle (360 deg, 720 beams 0.5 deg apart), turning 4 deg to port: a sphere behind the sonar
+// at azimuth 179 deg moves to 183 deg, across the seam between the last beam and the first. d_beam is the
+// short way round, -8 beams here, not the +712 of the beam coordinates' plain difference; computed here as
+// the change of each point's azimuth under the turn, wrapped into (-180, 180].
+TEST_P(LabelBackendTest, FlowTakesTheShortWayRoundAFullCircle) {
+    SonarConfig config = labels_config(BeamGeometry::planar);
+    config.hfov_deg = 360.0;
+    config.beams = 720;
+    Scene scene;
+    const Point3 centre = at(10.0, 179.0, 0.0);
+    add_sphere(scene, centre.x, centre.y, centre.z, 0.3, 64, -10.0, kSphereId);
+    Pose start, turned;
+    turned.yaw_deg = -4.0; // a world point's azimuth in the sonar frame grows by 4 deg
+    auto r = render_once(GetParam(), config, scene, start, SaveFlags::labels);
+    ASSERT_TRUE(r);
+    Frame next = r->renderer.make_frame();
+    ASSERT_TRUE(r->renderer.render(turned, 1, next));
+    std::vector<float> flow;
+    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, turned, flow));
+    const Frame& f = r->frame;
+    const double spacing = 360.0 / config.beams; // deg
+    std::size_t finite = 0, crossing = 0;
+    double worst_beam = 0, worst_bin = 0;
+    for (std::size_t i = 0; i < f.instance.size(); ++i) {
+        if (f.instance[i] == 0 || std::isnan(flow[2 * i + 1])) continue;
+        ++finite;
+        const double azimuth = std::atan2(f.point[3 * i + 1], f.point[3 * i]) / kDeg;
+        const double moved = std::remainder(azimuth + 4.0, 360.0); // (-180, 180]
+        crossing += azimuth > 0 && moved < 0;
+        const double d_beam = -std::remainder(moved - azimuth, 360.0) / spacing; // beams count to starboard
+        worst_beam = std::max(worst_beam, std::abs(flow[2 * i + 1] - d_beam));
+        worst_bin = std::max(worst_bin, std::abs(static_cast<double>(flow[2 * i]))); // a turn keeps every range
+    }
+    std::printf("[labels] flow on a full circle: %zu cells with flow, %zu across the seam, worst %.2e beams\n", finite,
+                crossing, worst_beam);
+    EXPECT_GT(crossing, 0u) << "no labelled point crosses the seam: the case is not tested";
+    EXPECT_LT(worst_beam, 1e-3);
+    EXPECT_LT(worst_bin, 1e-3);
+}
+
 // Flow of a frame to itself (the same pose, the same frame): every labelled cell's point is where its
 // own pixel sees it, so it has a flow, and the flow is 0. Over the bundled scene's seabed, pitched 10 deg
 // down, the vertical side lobes' tier views hold points below the main band, past the default sinc

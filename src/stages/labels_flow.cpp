@@ -64,6 +64,16 @@ double beam_coordinate(const Plan& plan, double a, const BeamBuckets& buckets) {
     return double(n - 1) + (t[n - 1] - a) / (t[n - 2] - t[n - 1]); // a <= t[n - 1]
 }
 
+// d_beam: the beam coordinate's change; on a full circle (Plan::circular) the short way round, in
+// [-beams / 2, beams / 2), as a point that crosses the seam between the last beam and the first moves by a
+// few beams, not by nearly all of them.
+inline double beam_step(const Plan& plan, double beam_from, double beam_to) {
+    const double d = beam_to - beam_from;
+    if (!plan.circular) return d;
+    const double n = static_cast<double>(plan.beams);
+    return d - n * std::floor(d / n + 0.5);
+}
+
 // The ranges a labelled point can lie at: the window, and with the tent kernel half a bin beyond either
 // end (the tent puts a pixel there into the end bin, its point at the pixel's range).
 struct PointWindow {
@@ -186,7 +196,7 @@ void flow_cell(const FlowJob& job, std::size_t i) {
     const double r = polar_coordinates(plan, q, bin_to, beam_to, *job.buckets);
     if (std::isnan(bin_to) || std::isnan(beam_to) || !visible_in(plan, *job.to, q, r, job.slant_factor)) return;
     job.flow[2 * i] = static_cast<float>(bin_to - bin_from);
-    job.flow[2 * i + 1] = static_cast<float>(beam_to - beam_from);
+    job.flow[2 * i + 1] = static_cast<float>(beam_step(plan, beam_from, beam_to));
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
@@ -353,7 +363,7 @@ VKS_AVX2 void flow_cells4(const FlowJob& job, const std::size_t (&cells)[4]) {
     for (int l = 0; l < 4; ++l) {
         if (!visible[l]) continue;
         job.flow[2 * cells[l]] = static_cast<float>(bin_to[l] - bin_from[l]);
-        job.flow[2 * cells[l] + 1] = static_cast<float>(beam_to[l] - beam_from[l]);
+        job.flow[2 * cells[l] + 1] = static_cast<float>(beam_step(plan, beam_from[l], beam_to[l]));
     }
 }
 #undef VKS_AVX2
