@@ -42,7 +42,7 @@ private:
 Context make_context(Backend backend);
 // --backend auto: Vulkan on a GPU; the CPU backend where no Vulkan device works or the only one is a
 // CPU implementation (lavapipe/llvmpipe), where the CPU backend renders as fast or faster (measured:
-// docs/benchmarks.md, "How cost grows": faster at 16 of 18 points, at most 5 % slower at the others).
+// docs/benchmarks.md, "How cost grows": faster at all 18 points, by 4 to 6x on the full frame).
 // Sets backend and why (for meta.json); never fails.
 Context choose_backend(Backend& backend, std::string& why);
 

@@ -348,7 +348,7 @@ std::vector<ConfigKey> make_table() {
 
         VKS_ENUM("speckle", SpeckleModel, speckle, "rayleigh|gamma|gaussian",
                  "Speckle model: Exp(1) intensity, Gamma(L, 1/L), or legacy |N(1, sigma)|"),
-        VKS_NUMBER("speckle_looks", speckle_looks, "", "Number of looks L of the gamma model, > 0",
+        VKS_NUMBER("speckle_looks", speckle_looks, "", "Number of looks L of the gamma model, >= 1",
                    closed(1, 1000, "at least one look (fewer is not averaging); 1000 looks leave 0.14 dB of speckle")),
         VKS_NUMBER("speckle_sigma", speckle_gaussian_sigma, "", "Sigma of the legacy gaussian model, >= 0",
                    closed(0, 10,
