@@ -110,6 +110,59 @@ TEST(Api, ValidateReturnsResult) {
     ASSERT_FALSE(bad.ok());
     EXPECT_EQ(bad.error().code, ErrorCode::invalid_argument);
     EXPECT_NE(bad.error().message.find("rms_slope"), std::string::npos) << bad.error().message;
+
+    // A model cast from a number no model has: the plan took it as Lambert, the shaders as constant.
+    material.model = static_cast<AcousticMaterial::Model>(7);
+    const Result<void> unknown = material.validate();
+    ASSERT_FALSE(unknown.ok());
+    EXPECT_NE(unknown.error().message.find("model = 7"), std::string::npos) << unknown.error().message;
+}
+
+// RendererOptions set in C++ to a number no value has: refused naming the field (a Backend of 7 ran the
+// CPU backend in silence); so are save_mask bits past labels, and a device_index below -1 (it was taken
+// as -1, the first device).
+TEST(Api, OptionsNoValueHasAreRefused) {
+    Context context = Context::cpu_only();
+    const SonarConfig config;
+    Scene scene;
+    const auto refused = [&](const RendererOptions& options, const std::string& field) {
+        auto renderer = Renderer::create(context, config, scene, options);
+        ASSERT_FALSE(renderer.ok()) << field;
+        EXPECT_EQ(renderer.error().code, ErrorCode::invalid_argument);
+        EXPECT_NE(renderer.error().message.find("RendererOptions: " + field + " = "), std::string::npos)
+            << renderer.error().message;
+    };
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    ASSERT_TRUE(Renderer::create(context, config, scene, options).ok());
+    RendererOptions backend = options;
+    backend.backend = static_cast<Backend>(7);
+    refused(backend, "backend");
+    RendererOptions tables = options;
+    tables.tables = static_cast<TableAccess>(2);
+    refused(tables, "tables");
+    RendererOptions resample = options;
+    resample.resample = static_cast<ResampleMethod>(5);
+    refused(resample, "resample");
+    RendererOptions layout = options;
+    layout.layout = static_cast<WorkLayout>(3);
+    refused(layout, "layout");
+    RendererOptions timing = options;
+    timing.stage_timing = static_cast<StageTiming>(4);
+    refused(timing, "stage_timing");
+    RendererOptions rows = options;
+    rows.profile_rows = static_cast<ProfileRows>(2);
+    refused(rows, "profile_rows");
+    RendererOptions mask = options;
+    mask.save_mask = static_cast<SaveFlags>(1u << 5);
+    refused(mask, "save_mask");
+
+    ContextOptions below;
+    below.device_index = -7;
+    auto no_context = Context::create(below);
+    ASSERT_FALSE(no_context.ok());
+    EXPECT_EQ(no_context.error().code, ErrorCode::invalid_argument);
+    EXPECT_NE(no_context.error().message.find("device_index = -7"), std::string::npos) << no_context.error().message;
 }
 
 // Handles that are never dereferenced: adopt checks HostVulkan::functions, and resolves every function

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -687,6 +688,18 @@ TEST_F(EmbedTest, MissingRequirementsGiveClearErrors) {
     auto off_centre = HostDepthRenderer::create(*context, config, shifted);
     ASSERT_FALSE(off_centre.ok());
     EXPECT_NE(off_centre.error().message.find("principal point"), std::string::npos);
+    // A NaN principal point (it passed the centre test, which a NaN fails no comparison of).
+    HostDepthDesc nan_centre = host::depth_desc(host->options);
+    nan_centre.cy_px = std::numeric_limits<double>::quiet_NaN();
+    auto no_centre = HostDepthRenderer::create(*context, config, nan_centre);
+    ASSERT_FALSE(no_centre.ok());
+    EXPECT_NE(no_centre.error().message.find("principal point"), std::string::npos) << no_centre.error().message;
+    // An encoding cast from a number no encoding has (every pixel read as no hit, in silence).
+    HostDepthDesc unknown = host::depth_desc(host->options);
+    unknown.encoding = static_cast<DepthEncoding>(9);
+    auto no_encoding = HostDepthRenderer::create(*context, config, unknown);
+    ASSERT_FALSE(no_encoding.ok());
+    EXPECT_NE(no_encoding.error().message.find("encoding = 9"), std::string::npos) << no_encoding.error().message;
     // A format that is no depth.
     HostDepthDesc colour = host::depth_desc(host->options);
     colour.format = VK_FORMAT_R8G8B8A8_UNORM;

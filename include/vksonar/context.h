@@ -109,7 +109,8 @@ public:
     // loaded through the linked loader's vkGetInstanceProcAddr (the one loader export vksonar calls).
     // Returns the context, or ErrorCode::no_device if no device is usable (the message suggests the
     // CPU backend) or device_index does not exist, ErrorCode::unsupported naming a function the loader
-    // does not resolve, ErrorCode::vulkan if a Vulkan call fails. options.vulkan == false gives
+    // does not resolve, ErrorCode::vulkan if a Vulkan call fails, ErrorCode::invalid_argument for a
+    // device_index below -1. options.vulkan == false gives
     // cpu_only(). Reads no environment variable (context_options_from_env does, for tools).
     // Thread-safety: may be called from any thread.
     [[nodiscard]] static Result<Context> create(const ContextOptions& options = {});

@@ -111,9 +111,9 @@ public:
     // Validates the config, resolves effects against the scene, builds the plan, creates every buffer,
     // pipeline and command buffer it will use and uploads the scene (submitting on the context's queue
     // and waiting). Fails with ErrorCode::invalid_argument for a config or material that does not
-    // validate (naming the key), ErrorCode::no_device for Backend::vulkan on a CPU-only context,
-    // ErrorCode::unsupported for a grid past the device's limits, an adopted queue without graphics,
-    // host memory that runs out or a host thread that cannot start (RendererOptions::host_threads),
+    // validate (naming the key) or an option no value has (naming the field), ErrorCode::no_device for Backend::vulkan
+    // on a CPU-only context, ErrorCode::unsupported for a grid past the device's limits, an adopted queue without
+    // graphics, host memory that runs out or a host thread that cannot start (RendererOptions::host_threads),
     // ErrorCode::vulkan if a Vulkan call fails. The context and scene must outlive the renderer;
     // config and options are copied. Thread-safety: may be called from any thread, also while other
     // renderers on the same context create or render.

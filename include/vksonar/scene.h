@@ -33,8 +33,8 @@ struct AcousticMaterial {
     double rms_slope = 0.1;      // rough only: m, rms slope of the interface along one axis (0.01 to 1)
     double reflection_db = -8.0; // rough only: 10 log10 R^2 (<= 0; -8 dB is medium sand, -1 dB steel)
 
-    // Checks the parameters the model uses. Returns success, or ErrorCode::invalid_argument whose
-    // message names the first problem ("rms_slope = 0 (expected 0.01 to 1)").
+    // Checks the model (one of the three) and the parameters it uses. Returns success, or
+    // ErrorCode::invalid_argument whose message names the first problem ("rms_slope = 0 (expected 0.01 to 1)").
     [[nodiscard]] Result<void> validate() const;
 };
 

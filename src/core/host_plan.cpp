@@ -45,10 +45,17 @@ Result<Plan> make_host_depth_plan(const SonarConfig& config, const HostDepthDesc
     }
     // The stages place pixel centres symmetrically about the optical axis (docs/pipeline.md); an
     // off-centre principal point would shift every ray, so it is refused rather than approximated.
-    if (std::abs(desc.cx_px - 0.5 * desc.width) > 1e-3 || std::abs(desc.cy_px - 0.5 * desc.height) > 1e-3) {
+    // (written so that a NaN fails it)
+    if (!(std::abs(desc.cx_px - 0.5 * desc.width) <= 1e-3) || !(std::abs(desc.cy_px - 0.5 * desc.height) <= 1e-3)) {
         return uncovered("principal point (" + fmt(desc.cx_px) + ", " + fmt(desc.cy_px) +
                          ") is not the image centre (" + fmt(0.5 * desc.width) + ", " + fmt(0.5 * desc.height) +
                          "); crop the image symmetrically about the principal point");
+    }
+    if (!(desc.encoding == DepthEncoding::standard_z || desc.encoding == DepthEncoding::reversed_z ||
+          desc.encoding == DepthEncoding::linear_m)) {
+        // a number no encoding has: the shader's switch would read every pixel as no hit
+        return bad("encoding = " + std::to_string(static_cast<int>(desc.encoding)) +
+                   " (expected standard_z, reversed_z or linear_m)");
     }
     if (desc.encoding != DepthEncoding::linear_m) {
         if (!(desc.near_m > 0.0) || !std::isfinite(desc.near_m)) return bad("near_m = " + fmt(desc.near_m));

@@ -127,6 +127,34 @@ Result<void> set_up_labels(RendererImpl& impl, const SceneData* scene) {
     return {};
 }
 
+// RendererOptions as set in C++: an enum cast from a number no value has would run some other path in
+// silence (a Backend of 7 ran the CPU backend), and save_mask bits past labels mean nothing.
+Result<void> check_options(const RendererOptions& o) {
+    const auto out_of = [](const char* field, unsigned value, const char* expected) {
+        return make_error(ErrorCode::invalid_argument, std::string("RendererOptions: ") + field + " = " +
+                                                           std::to_string(value) + " (expected " + expected + ")");
+    };
+    if (o.backend != Backend::vulkan && o.backend != Backend::cpu)
+        return out_of("backend", static_cast<unsigned>(o.backend), "vulkan or cpu");
+    if (o.tables != TableAccess::automatic && o.tables != TableAccess::storage)
+        return out_of("tables", static_cast<unsigned>(o.tables), "automatic or storage");
+    if (o.resample != ResampleMethod::automatic && o.resample != ResampleMethod::gather)
+        return out_of("resample", static_cast<unsigned>(o.resample), "automatic or gather");
+    if (o.layout != WorkLayout::automatic && o.layout != WorkLayout::cpu_device && o.layout != WorkLayout::gpu)
+        return out_of("layout", static_cast<unsigned>(o.layout), "automatic, cpu_device or gpu");
+    if (o.stage_timing != StageTiming::automatic && o.stage_timing != StageTiming::host &&
+        o.stage_timing != StageTiming::timestamps && o.stage_timing != StageTiming::passes)
+        return out_of("stage_timing", static_cast<unsigned>(o.stage_timing), "automatic, host, timestamps or passes");
+    if (o.profile_rows != ProfileRows::automatic && o.profile_rows != ProfileRows::whole)
+        return out_of("profile_rows", static_cast<unsigned>(o.profile_rows), "automatic or whole");
+    const auto known =
+        SaveFlags::depth | SaveFlags::normals | SaveFlags::echo | SaveFlags::profiles | SaveFlags::labels;
+    const auto mask = static_cast<std::uint32_t>(o.save_mask);
+    if ((mask & ~static_cast<std::uint32_t>(known)) != 0)
+        return out_of("save_mask", mask, "SaveFlags: depth, normals, echo, profiles, labels");
+    return {};
+}
+
 } // namespace
 
 const RendererImpl& detail::Access::renderer(const Renderer& renderer) {
@@ -145,6 +173,7 @@ Renderer& Renderer::operator=(Renderer&&) noexcept = default;
 Result<Renderer> Renderer::create(Context& context, const SonarConfig& config, const Scene& scene,
                                   const RendererOptions& options) {
     return without_exceptions<Renderer>("Renderer::create", [&]() -> Result<Renderer> {
+        if (auto checked = check_options(options); !checked) return checked.error();
         auto plan = make_plan(config, scene_data(scene));
         if (!plan) return plan.error();
         auto impl = std::make_unique<RendererImpl>();
@@ -419,6 +448,7 @@ HostDepthRenderer& HostDepthRenderer::operator=(HostDepthRenderer&&) noexcept = 
 Result<HostDepthRenderer> HostDepthRenderer::create(Context& context, const SonarConfig& config,
                                                     const HostDepthDesc& desc, const RendererOptions& options) {
     return without_exceptions<HostDepthRenderer>("HostDepthRenderer::create", [&]() -> Result<HostDepthRenderer> {
+        if (auto checked = check_options(options); !checked) return checked.error();
         if (options.backend != Backend::vulkan || !context.has_vulkan()) {
             return make_error(ErrorCode::invalid_argument,
                               "HostDepthRenderer::create: a host depth image needs the Vulkan backend and a Vulkan "

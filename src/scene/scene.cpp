@@ -151,6 +151,9 @@ Result<void> AcousticMaterial::validate() const {
         // reaches a display. NaN stands for "the config's default" (plan.cpp); +-inf is no level.
         if (!std::isnan(backscatter_db) && !(backscatter_db >= -100.0 && backscatter_db <= 0.0))
             return "backscatter_db = " + number(backscatter_db) + " (expected -100 to 0 dB)";
+        // a Model cast from a number no model has: the shaders would take it as one model, the plan as another
+        if (!(model == Model::lambert || model == Model::constant || model == Model::rough))
+            return "model = " + std::to_string(static_cast<int>(model)) + " (expected lambert, constant or rough)";
         if (model != Model::rough) return {}; // the facet parameters mean nothing to the other models
         // m < 0.01 (0.6 deg) makes a mirror whose lobe no pixel grid resolves; m > 1 (45 deg) is past
         // where the Kirchhoff approximation holds (and would make the facet term's peak unbounded).

@@ -311,6 +311,11 @@ Result<Context> Context::create(const ContextOptions& options) {
     if (!options.vulkan) {
         return cpu_only();
     }
+    if (options.device_index < -1) {
+        return make_error(ErrorCode::invalid_argument,
+                          "ContextOptions: device_index = " + std::to_string(options.device_index) +
+                              " (expected -1, the first device, or an index from 0)");
+    }
     // The messenger keeps a pointer to the VulkanContext: it lives on the heap and never moves.
     auto vulkan = std::make_unique<VulkanContext>();
     vulkan->allocator = options.allocator;
