@@ -28,7 +28,8 @@ struct WindowCount {
 } // namespace
 
 double profile_row_cost(const Plan& plan, const DeviceShape& shape, std::uint32_t row) {
-    const double bins = kProfileFootprintBins;
+    const double bins = std::min(std::max(kProfileFootprintBins, kProfileFootprintM / plan.bin_width_m),
+                                 double(shared::kMaxFootprintBins) + 2.0);
     if (!plan.line_array) return 2.0 + bins + 1.0; // the row's loop, its pixel's bins (and the loop's exit)
     const std::uint32_t slices_end = plan.slices * plan.slice_columns;
     const std::uint32_t width = plan.tier_columns;

@@ -18,9 +18,12 @@ namespace vksonar::vk {
 // The loop iterations one band may cost by profile_row_cost's estimate: half lavapipe's limit, which
 // leaves room for pixels whose range footprints span more bins than the estimate allows.
 constexpr double kProfileBandBudget = 32768.0;
-// The range bins a lit pixel's footprint is taken to span in the estimate (the default scene averages
-// about 2; a grazing seabed's far rows a few more).
+// The range bins a lit pixel's footprint is taken to span in the estimate: at least 6 (the default scene
+// averages about 2 of its 7.7 cm bins; a grazing seabed's far rows a few more), and at least what
+// kProfileFootprintM spans, as a footprint's length in metres is the geometry's, not the bins': 8192 bins
+// over 20 m (2.4 mm) put 80 and more bins under a seabed pixel, and every frame ran out of loops.
 constexpr double kProfileFootprintBins = 6.0;
+constexpr double kProfileFootprintM = 0.45; // 6 bins of the default's 7.7 cm, so its bands stay as they were
 
 // ProfileRowBand::loop_check: the turns of profile.comp's last loop, which the device cuts short where it
 // has ended the invocation's loops (loops_ran_out: the host then refuses the frame).

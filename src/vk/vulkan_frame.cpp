@@ -297,7 +297,8 @@ Result<void> VulkanBackend::frame_status() const {
         return make_error(ErrorCode::unsupported,
                           "Vulkan device: profile.comp's loops were ended before its rows were done (lavapipe ends an "
                           "invocation's loops after 65535 iterations): the frame would miss pixels; render with "
-                          "--backend cpu, or fewer accuracy.rows_per_vfov");
+                          "--backend cpu, or fewer accuracy.rows_per_vfov or range bins (each pixel's footprint spans "
+                          "more of narrower bins)");
     return {};
 }
 

@@ -942,6 +942,39 @@ TEST(WorkLayout, RowBandsKeepAnAccurateFrameWhole) {
     }
 }
 
+// The bands' estimate takes a pixel's range footprint as a length, not a count of bins: 8192 bins over a
+// 20 m window (2.4 mm) put 80 and more bins under a seabed pixel seen at 10 to 20 deg grazing, where the
+// estimate's fixed 6 bins let every frame run out of lavapipe's loops (render() refused each one). Now both
+// layouts render it, the same bits, in several bands; the default's bands are as they were (6 bins).
+TEST(WorkLayout, RowBandsFollowTheFootprintsLengthNotItsBins) {
+    VKSONAR_REQUIRE_VULKAN();
+    ValidationGuard validation;
+    Scene scene; // a flat seabed 3 m below the sonar
+    const float seabed[] = {-50, -50, -3, 50, -50, -3, 50, 50, -3, -50, 50, -3};
+    const std::uint32_t triangles[] = {0, 1, 2, 0, 2, 3};
+    auto mesh = scene.add_mesh(seabed, 4, triangles, 6);
+    ASSERT_TRUE(mesh) << mesh.error().message;
+    SceneDraw draw;
+    draw.mesh = mesh.value();
+    ASSERT_TRUE(scene.add_draw(draw));
+    SonarConfig config = quiet_config();
+    config.beams = 128;
+    config.bins = 8192;
+    config.range_max_m = 20.0;
+    auto plan = make_plan(config, scene_data(scene));
+    ASSERT_TRUE(plan) << plan.error().message;
+    const auto bands = vk::profile_row_bands(plan.value(), kCpuDeviceShape, false).size();
+    std::printf("[row bands] 8192 bins over 20 m: %u rows in %zu bands\n", plan->rows, bands);
+    EXPECT_GT(bands, 2u);
+    // the default's bins (7.7 cm) keep the estimate's 6 bins a pixel, and so their bands
+    auto default_plan = make_plan(quiet_config(), scene_data(scene));
+    ASSERT_TRUE(default_plan) << default_plan.error().message;
+    EXPECT_LE(vk::kProfileFootprintM / default_plan->bin_width_m, vk::kProfileFootprintBins);
+    Pose pose;
+    pose.pitch_deg = 10.0;
+    expect_layouts_agree(config, scene, pose);
+}
+
 // Where the walk would add different terms, the host keeps the gather: a full circle (beams 0 and
 // beams-1 gather from every column), and a span that holds a column giving its beam nothing.
 TEST(ResampleWalk, RefusedWhereTheTermsWouldDiffer) {
