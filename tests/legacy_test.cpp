@@ -310,6 +310,23 @@ TEST(LegacyUuv, SpeckleStatistics) {
 
 // ---- GTRI-based sonar ----------------------------------------------------------------------------
 
+// --quality on the uuv-legacy preset: every quality keeps its one pinhole image as wide as the 88.6 deg fan
+// (max_slice 90 from the preset, where each quality's is 60 or 15: all three refused the config before);
+// a physical config takes the quality's slices.
+TEST(LegacyUuv, EveryQualityKeepsTheOneDepthImage) {
+    auto uuv = load_preset("uuv-legacy");
+    ASSERT_TRUE(uuv) << uuv.error().message;
+    for (const char* quality : {"fast", "balanced", "accurate"}) {
+        auto applied = apply_quality(uuv.value(), quality);
+        ASSERT_TRUE(applied) << quality << ": " << applied.error().message;
+        EXPECT_EQ(applied->max_slice_deg, uuv->max_slice_deg) << quality;
+        EXPECT_TRUE(applied->validate()) << quality;
+    }
+    auto physical = apply_quality(SonarConfig{}, "accurate");
+    ASSERT_TRUE(physical) << physical.error().message;
+    EXPECT_EQ(physical->max_slice_deg, 15.0);
+}
+
 TEST(LegacyGtri, ImageSize) {
     GtriImages out;
     gtri_legacy({}, 90 * kDeg, 10.0, 1, 0, out);

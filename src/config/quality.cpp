@@ -1,5 +1,6 @@
 // Accuracy presets: named sets of the accuracy.* knobs, applied as `key=value` overrides so their
 // values go through the same checks as any user setting.
+#include <algorithm>
 #include <array>
 #include <string>
 #include <string_view>
@@ -65,6 +66,9 @@ Result<SonarConfig> apply_quality(const SonarConfig& base, const std::string& na
         if (!applied) return applied.error();
         config = applied.value();
     }
+    // uuv-legacy draws one pinhole depth image as wide as the fan (its preset's max_slice 90 holds the
+    // 88.6 deg fan): a quality's slices, narrower, would refuse every such config; it keeps the wider.
+    if (config.mode == SonarMode::uuv_legacy) config.max_slice_deg = std::max(config.max_slice_deg, base.max_slice_deg);
     return config;
 }
 
