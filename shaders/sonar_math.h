@@ -286,9 +286,12 @@ VKS_FN REAL sinhc_of(REAL y) {
 // rows are sparse (a grazing seabed: r^-5 from spreading and incidence, plus the rows' own spacing), and
 // a flat box over a footprint of metres leaves a saw-tooth of +-0.5 dB across the bins. 0 (a flat box)
 // where a neighbour is missing or empty; |g| is capped at 1 per bin and at 8 over the footprint, so the
-// density never spans more than e^8 across a pixel.
+// density never spans more than e^8 across a pixel. The ratio's two products must not underflow to 0
+// either: tiny echoes (absorption of 10 dB/m over 16 m) made 0 / 0, a NaN that the cap kept, in float on
+// the CPU (a device that flushes denormals to 0 saw no slope there).
 VKS_FN bool footprint_slope_known(REAL e_up, REAL w_up, REAL e_down, REAL w_down, REAL span) {
-    return e_up > REAL(0) && e_down > REAL(0) && w_up > REAL(0) && w_down > REAL(0) && abs(span) > REAL(0);
+    return e_up > REAL(0) && e_down > REAL(0) && w_up > REAL(0) && w_down > REAL(0) && abs(span) > REAL(0) &&
+           e_up * w_down > REAL(0) && e_down * w_up > REAL(0);
 }
 VKS_FN REAL footprint_log_slope(REAL e_up, REAL w_up, REAL e_down, REAL w_down, REAL span, REAL width) {
     if (!footprint_slope_known(e_up, w_up, e_down, w_down, span)) {

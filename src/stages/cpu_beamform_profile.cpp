@@ -258,6 +258,9 @@ VKS_AVX2_INLINE bool footprint_spread8_of(const SpreadVectors& in, float range_m
         has_g, _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(e1, zero, _CMP_GT_OQ), _mm256_cmp_ps(e2, zero, _CMP_GT_OQ)),
                              _mm256_and_ps(_mm256_cmp_ps(w1, zero, _CMP_GT_OQ), _mm256_cmp_ps(w2, zero, _CMP_GT_OQ))));
     has_g = _mm256_and_ps(has_g, _mm256_cmp_ps(abs8(slope_span), zero, _CMP_GT_OQ));
+    // (and neither product of the ratio underflowed: footprint_slope_known)
+    has_g = _mm256_and_ps(has_g, _mm256_and_ps(_mm256_cmp_ps(_mm256_mul_ps(e1, w2), zero, _CMP_GT_OQ),
+                                               _mm256_cmp_ps(_mm256_mul_ps(e2, w1), zero, _CMP_GT_OQ)));
     const int g_mask = _mm256_movemask_ps(has_g);
     __m256 g = zero;
     if (g_mask != 0) {
