@@ -172,6 +172,9 @@ TEST_F(Cli, ValuesOutsidePhysicsAreRefused) {
                       {"range-profile buffer would hold 4.29549 GB"});
     expect_bad_render({"--set", "bins=65536", "--set", "accuracy.pixels_per_beam=32"},
                       {"pixel columns needed (accuracy.pixels_per_beam = 32", "exceeds 16384"});
+    // a narrow beamwidth, not the beam count, sets the columns here: the message names it
+    expect_bad_render({"--set", "horizontal_beamwidth=0.01", "--set", "beams=16"},
+                      {"pixel columns needed", "per horizontal_beamwidth = 0.01 degrees"});
 }
 
 TEST_F(Cli, ModelsOutsideTheirDomainWarnAndMetaJsonListsThem) {

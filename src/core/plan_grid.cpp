@@ -88,10 +88,16 @@ Result<void> plan_pixel_grid(Plan& p) {
                                                            span + "; at most " + std::to_string(shared::kMaxSlices));
     }
     if (wanted_columns > kMaxColumns) {
+        // name what sets the column width: the beam spacing or, where it is finer, the beamwidth
+        const double spacing_deg = p.beams > 1 ? c.hfov_deg / p.beams : c.hfov_deg;
+        const std::string finer = c.horizontal_beamwidth_deg < spacing_deg
+                                      ? "horizontal_beamwidth = " + fmt(c.horizontal_beamwidth_deg) + " degrees"
+                                      : "the beam spacing hfov / beams = " + fmt(spacing_deg) + " degrees";
         return make_error(ErrorCode::invalid_argument,
                           "config: " + fmt(wanted_columns) +
-                              " pixel columns needed (accuracy.pixels_per_beam = " + fmt(c.pixels_per_beam) +
-                              ", beams = " + std::to_string(p.beams) + ") exceeds " + std::to_string(kMaxColumns));
+                              " pixel columns needed (accuracy.pixels_per_beam = " + fmt(c.pixels_per_beam) + " per " +
+                              finer + ", the finer of the beam spacing and the beamwidth, over " + fmt(covered_deg) +
+                              " degrees) exceeds " + std::to_string(kMaxColumns));
     }
     const std::uint32_t min_columns = 8; // a 1-beam sonar still needs a few columns for its pattern
     const std::uint32_t total = std::max(min_columns, static_cast<std::uint32_t>(wanted_columns));

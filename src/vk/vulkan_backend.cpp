@@ -128,7 +128,8 @@ Result<void> VulkanBackend::init() {
             ErrorCode::unsupported,
             "vulkan backend: depth image of " + std::to_string(plan_.columns) + " x " + std::to_string(plan_.rows) +
                 " pixels exceeds the device limit of " + std::to_string(limits.maxFramebufferWidth) + " x " +
-                std::to_string(limits.maxFramebufferHeight) + " (lower pixels_per_beam or rows_per_vfov)");
+                std::to_string(limits.maxFramebufferHeight) +
+                " (lower accuracy.pixels_per_beam or accuracy.rows_per_vfov, or render with --backend cpu)");
     }
     const std::uint64_t pixels = std::uint64_t(plan_.columns) * plan_.rows;
     if (!dispatches_fit(plan_, shape_, limits, false) || pixels * 16 > limits.maxStorageBufferRange) {
