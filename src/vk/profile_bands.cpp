@@ -27,9 +27,16 @@ struct WindowCount {
 
 } // namespace
 
+double profile_footprint_bins(const Plan& plan) {
+    const double pixel_side = std::max(2.0 * plan.tan_half_h / std::max(plan.slice_columns, 1u),
+                                       2.0 * plan.tan_half_v / std::max(plan.rows, 1u));
+    const double metres = std::max(kProfileFootprintM, kProfileFootprintGrazing * plan.config.range_max_m * pixel_side);
+    return std::min(std::max(kProfileFootprintBins, metres / plan.bin_width_m),
+                    double(shared::kMaxFootprintBins) + 2.0);
+}
+
 double profile_row_cost(const Plan& plan, const DeviceShape& shape, std::uint32_t row) {
-    const double bins = std::min(std::max(kProfileFootprintBins, kProfileFootprintM / plan.bin_width_m),
-                                 double(shared::kMaxFootprintBins) + 2.0);
+    const double bins = profile_footprint_bins(plan);
     if (!plan.line_array) return 2.0 + bins + 1.0; // the row's loop, its pixel's bins (and the loop's exit)
     const std::uint32_t slices_end = plan.slices * plan.slice_columns;
     const std::uint32_t width = plan.tier_columns;

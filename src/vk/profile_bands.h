@@ -18,12 +18,17 @@ namespace vksonar::vk {
 // The loop iterations one band may cost by profile_row_cost's estimate: half lavapipe's limit, which
 // leaves room for pixels whose range footprints span more bins than the estimate allows.
 constexpr double kProfileBandBudget = 32768.0;
-// The range bins a lit pixel's footprint is taken to span in the estimate: at least 6 (the default scene
-// averages about 2 of its 7.7 cm bins; a grazing seabed's far rows a few more), and at least what
-// kProfileFootprintM spans, as a footprint's length in metres is the geometry's, not the bins': 8192 bins
-// over 20 m (2.4 mm) put 80 and more bins under a seabed pixel, and every frame ran out of loops.
+// The range bins a lit pixel's footprint is taken to span in the estimate (profile_footprint_bins): at
+// least 6 (the default scene averages about 2 of its 7.7 cm bins; a grazing seabed's far rows a few more),
+// and at least what a footprint's length in metres spans, as that is the geometry's, not the bins':
+// kProfileFootprintM, and kProfileFootprintGrazing x range_max x the larger pixel side (a pixel's
+// footprint on a surface at 30 deg grazing). 8192 bins over 20 m (2.4 mm) put 80 and more bins under a
+// seabed pixel, and pixels 3.5 deg wide (accuracy.pixels_per_beam 0.09) their width in range across
+// the row: with 6 bins every frame of either ran out of loops.
 constexpr double kProfileFootprintBins = 6.0;
 constexpr double kProfileFootprintM = 0.45; // 6 bins of the default's 7.7 cm, so its bands stay as they were
+constexpr double kProfileFootprintGrazing = 2.0;
+[[nodiscard]] double profile_footprint_bins(const Plan& plan);
 
 // ProfileRowBand::loop_check: the turns of profile.comp's last loop, which the device cuts short where it
 // has ended the invocation's loops (loops_ran_out: the host then refuses the frame).

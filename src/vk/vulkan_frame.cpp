@@ -297,8 +297,9 @@ Result<void> VulkanBackend::frame_status() const {
         return make_error(ErrorCode::unsupported,
                           "Vulkan device: profile.comp's loops were ended before its rows were done (lavapipe ends an "
                           "invocation's loops after 65535 iterations): the frame would miss pixels; render with "
-                          "--backend cpu, or fewer accuracy.rows_per_vfov or range bins (each pixel's footprint spans "
-                          "more of narrower bins)");
+                          "--backend cpu (the same frame), or with fewer accuracy.rows_per_vfov or range bins, or a "
+                          "larger accuracy.pixels_per_beam (a pixel's range footprint spans more of narrower bins, "
+                          "and a wider pixel's more)");
     return {};
 }
 

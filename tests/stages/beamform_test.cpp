@@ -973,6 +973,16 @@ TEST(WorkLayout, RowBandsFollowTheFootprintsLengthNotItsBins) {
     Pose pose;
     pose.pitch_deg = 10.0;
     expect_layouts_agree(config, scene, pose);
+    // Pixels 2.5 deg wide (accuracy.pixels_per_beam 0.09) on the bundled scene: their footprints span their
+    // width in range across the row, which the larger pixel side now sizes (with 6 bins the frame was refused).
+    auto bundled = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
+    ASSERT_TRUE(bundled) << bundled.error().message;
+    SonarConfig wide = quiet_config();
+    wide.pixels_per_beam = 0.09;
+    RendererOptions columns;
+    columns.layout = WorkLayout::cpu_device;
+    auto rendered = render_once(Backend::vulkan, wide, bundled.value(), pose, SaveFlags::none, 1, columns);
+    EXPECT_TRUE(rendered) << "pixels_per_beam 0.09 refused";
 }
 
 // Where the walk would add different terms, the host keeps the gather: a full circle (beams 0 and
