@@ -613,6 +613,39 @@ TEST(SceneGlb, AZeroScaleIsAWarning) {
         << (w.empty() ? std::string("no warnings") : w.front());
 }
 
+// An id written as a whole-number float (0.0): tinygltf reads it as no value, so a mesh, a child, a material
+// or the indices were dropped in silence (a material's backscatter became the default's; the vertices read
+// as a plain triangle list). Refused, naming the field.
+TEST(SceneGlb, IdsWrittenAsFloatsAreRefusedNamingTheField) {
+    const nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
+    std::size_t with_mesh = 0;
+    while (with_mesh < doc["nodes"].size() && !doc["nodes"][with_mesh].contains("mesh"))
+        ++with_mesh;
+    ASSERT_LT(with_mesh, doc["nodes"].size());
+    const std::string node = "nodes[" + std::to_string(with_mesh) + "]";
+    const auto refused = [](nlohmann::json d, const std::string& field) {
+        const std::string path = temp_path("float_id.gltf");
+        const std::string text = d.dump();
+        write_bytes(path, std::vector<char>(text.begin(), text.end()));
+        const Result<Scene> loaded = Scene::load_gltf(path);
+        ASSERT_FALSE(loaded.ok()) << field;
+        EXPECT_NE(loaded.error().message.find(field + " = "), std::string::npos) << loaded.error().message;
+        EXPECT_NE(loaded.error().message.find("without a fraction"), std::string::npos) << loaded.error().message;
+    };
+    nlohmann::json mesh = doc;
+    mesh["nodes"][with_mesh]["mesh"] = mesh["nodes"][with_mesh]["mesh"].get<double>();
+    refused(mesh, node + ".mesh");
+    nlohmann::json indices = doc;
+    auto& primitive = indices["meshes"][0]["primitives"][0];
+    ASSERT_TRUE(primitive.contains("indices"));
+    primitive["indices"] = primitive["indices"].get<double>();
+    refused(indices, "meshes[0].primitives[0].indices");
+    nlohmann::json scenes = doc;
+    ASSERT_TRUE(scenes.contains("scenes"));
+    scenes["scenes"][0]["nodes"][0] = scenes["scenes"][0]["nodes"][0].get<double>();
+    refused(scenes, "scenes[0].nodes[0]");
+}
+
 TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {
     nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
     doc.erase("scenes");

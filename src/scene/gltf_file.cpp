@@ -141,24 +141,24 @@ json parse_json(const unsigned char* bytes, std::size_t size) {
 std::string value_text(const json& v) {
     return one_line(v.dump(-1, ' ', false, json::error_handler_t::replace), 60);
 }
+void require_whole(const json& v, const std::string& name) {
+    // A JSON integer: tinygltf reads a whole-number float (0.0) as no value at all, in silence for an id
+    // (a mesh, a child, a material, the indices dropped).
+    const bool whole = v.is_number_unsigned() || (v.is_number_integer() && v.get<std::int64_t>() >= 0);
+    if (!whole)
+        fail(ErrorCode::parse, name + " = " + value_text(v) + ": must be an integer >= 0" +
+                                   (v.is_number_float() ? " written without a fraction or exponent" : ""));
+}
 void require_count(const json& object, const char* key, const std::string& where) {
     if (!object.is_object() || !object.contains(key)) return;
-    const json& v = object[key];
-    const bool whole =
-        v.is_number_unsigned() || (v.is_number_integer() && v.get<std::int64_t>() >= 0) ||
-        (v.is_number_float() && v.get<double>() >= 0.0 && std::floor(v.get<double>()) == v.get<double>());
-    if (!whole)
-        fail(ErrorCode::parse,
-             (where.empty() ? "" : where + ".") + key + " = " + value_text(v) + ": must be an integer >= 0");
+    require_whole(object[key], (where.empty() ? "" : where + ".") + key);
 }
 void require_counts(const json& object, const char* key, const std::string& where) {
     if (!object.is_object() || !object.contains(key)) return;
     const json& list = object[key];
     if (!list.is_array()) fail(ErrorCode::parse, where + "." + key + " = " + value_text(list) + ": must be an array");
-    for (std::size_t i = 0; i < list.size(); ++i) {
-        const json holder = {{"entry", list[i]}};
-        require_count(holder, "entry", where + "." + key + "[" + std::to_string(i) + "]");
-    }
+    for (std::size_t i = 0; i < list.size(); ++i)
+        require_whole(list[i], where + "." + key + "[" + std::to_string(i) + "]");
 }
 void require_numbers(const json& object, const char* key, std::size_t count, const std::string& where) {
     if (!object.is_object() || !object.contains(key)) return;
@@ -191,7 +191,8 @@ void check_structure(const json& doc) {
     require_count(doc, "scene", "");
     each(doc, "scenes", [](const json& scene, const std::string& where) { require_counts(scene, "nodes", where); });
     each(doc, "nodes", [](const json& node, const std::string& where) {
-        require_count(node, "mesh", where);
+        for (const char* key : {"mesh", "skin", "camera"})
+            require_count(node, key, where);
         require_counts(node, "children", where);
         require_numbers(node, "translation", 3, where);
         require_numbers(node, "rotation", 4, where);
@@ -227,11 +228,25 @@ void check_structure(const json& doc) {
             if (primitive.contains("attributes") && primitive["attributes"].is_object())
                 for (const auto& attribute : primitive["attributes"].items())
                     require_count(primitive["attributes"], attribute.key().c_str(), at + ".attributes");
+            if (primitive.contains("targets") && primitive["targets"].is_array()) // morph targets' accessors
+                for (std::size_t t = 0; t < primitive["targets"].size(); ++t)
+                    if (primitive["targets"][t].is_object())
+                        for (const auto& attribute : primitive["targets"][t].items())
+                            require_count(primitive["targets"][t], attribute.key().c_str(),
+                                          at + ".targets[" + std::to_string(t) + "]");
         }
     });
     each(doc, "accessors", [](const json& accessor, const std::string& where) {
         for (const char* key : {"bufferView", "byteOffset", "count", "componentType"})
             require_count(accessor, key, where);
+        if (accessor.contains("sparse") && accessor["sparse"].is_object()) {
+            const json& sparse = accessor["sparse"];
+            require_count(sparse, "count", where + ".sparse");
+            for (const char* part : {"indices", "values"})
+                if (sparse.contains(part))
+                    for (const char* key : {"bufferView", "byteOffset", "componentType"})
+                        require_count(sparse[part], key, where + ".sparse." + part);
+        }
     });
     each(doc, "bufferViews", [](const json& view, const std::string& where) {
         for (const char* key : {"buffer", "byteOffset", "byteLength", "byteStride"})
