@@ -646,6 +646,77 @@ TEST(SceneGlb, IdsWrittenAsFloatsAreRefusedNamingTheField) {
     refused(scenes, "scenes[0].nodes[0]");
 }
 
+// Skins (glTF "Skins": a skinned mesh's node transform is ignored; its joints' J IBM place it). A rig whose
+// mesh node sits under a moved armature (FBX2glTF, Mixamo): the bone's J IBM is the identity, the vertices
+// stay as written (x 10 m); the node's own transform had put it at 16 m. One whose mesh node carries the
+// transform the bind baked into IBM (Blender): J IBM is that transform (x 13 m). A posed joint: drawn
+// rigidly where the first joint holds it, with a warning that says so.
+TEST(SceneGlb, ASkinnedMeshIsPlacedByItsJoints) {
+    const auto skinned = [](const nlohmann::json& nodes, const std::vector<int>& roots, const std::vector<int>& joints,
+                            const std::vector<std::array<float, 3>>& ibm_translations) {
+        nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
+        std::vector<char> bin = read_bytes(test_file("scenes/plane_10m.bin"));
+        while (bin.size() % 4)
+            bin.push_back(0);
+        const std::size_t offset = bin.size();
+        for (const auto& t : ibm_translations) { // column-major translations
+            const float m[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t[0], t[1], t[2], 1};
+            const char* bytes = reinterpret_cast<const char*>(m);
+            bin.insert(bin.end(), bytes, bytes + sizeof m);
+        }
+        doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bin.size() - offset}});
+        doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                    {"componentType", 5126},
+                                    {"count", ibm_translations.size()},
+                                    {"type", "MAT4"}});
+        doc["buffers"][0]["byteLength"] = bin.size();
+        doc["buffers"][0].erase("uri");
+        doc["nodes"] = nodes;
+        doc["scenes"][0]["nodes"] = roots;
+        doc["skins"] =
+            nlohmann::json::array({{{"joints", joints}, {"inverseBindMatrices", doc["accessors"].size() - 1}}});
+        std::string text = doc.dump();
+        while (text.size() % 4)
+            text += ' ';
+        std::vector<char> glb{'g', 'l', 'T', 'F'};
+        append_u32(glb, 2);
+        append_u32(glb, static_cast<std::uint32_t>(12 + 8 + text.size() + 8 + bin.size()));
+        append_u32(glb, static_cast<std::uint32_t>(text.size()));
+        append_u32(glb, 0x4E4F534Au);
+        glb.insert(glb.end(), text.begin(), text.end());
+        append_u32(glb, static_cast<std::uint32_t>(bin.size()));
+        append_u32(glb, 0x004E4942u);
+        glb.insert(glb.end(), bin.begin(), bin.end());
+        const std::string path = temp_path("skinned.glb");
+        write_bytes(path, glb);
+        return load_ok(path);
+    };
+    const auto warned = [](const Scene& scene, const std::string& text) {
+        const auto& w = scene.stats().warnings;
+        return std::any_of(w.begin(), w.end(), [&](const std::string& s) { return s.find(text) != s.npos; });
+    };
+    // under a moved armature: nodes 0 armature (x + 6), 1 bone, 2 the plane; IBM = the bone's world, inverted
+    const nlohmann::json armature = {{{"name", "armature"}, {"translation", {6, 0, 0}}, {"children", {1, 2}}},
+                                     {{"name", "bone"}},
+                                     {{"name", "plane"}, {"mesh", 0}, {"skin", 0}}};
+    const Scene rig = skinned(armature, {0}, {1}, {{-6, 0, 0}});
+    EXPECT_NEAR(rig.bounds().min_m[0], 10.0, 1e-6);
+    EXPECT_NEAR(rig.bounds().max_m[0], 10.0, 1e-6);
+    EXPECT_TRUE(warned(rig, "node 2: skin drawn in its bind pose"));
+    // the bind's transform in IBM: the plane's node at x + 3, its bone at x + 1, IBM = bone^-1 plane = x + 2
+    const nlohmann::json baked = {{{"name", "plane"}, {"mesh", 0}, {"skin", 0}, {"translation", {3, 0, 0}}},
+                                  {{"name", "bone"}, {"translation", {1, 0, 0}}}};
+    const Scene blender = skinned(baked, {0, 1}, {1}, {{2, 0, 0}});
+    EXPECT_NEAR(blender.bounds().min_m[0], 13.0, 1e-6);
+    // posed: a second joint (the armature) whose J IBM differs from the bone's, which has moved up 1 m
+    nlohmann::json posed = armature;
+    posed[1]["translation"] = {0, 1, 0}; // glTF y: the world's z
+    const Scene moved = skinned(posed, {0}, {1, 0}, {{-6, 0, 0}, {-6, 0, 0}});
+    EXPECT_NEAR(moved.bounds().min_m[0], 10.0, 1e-6);
+    EXPECT_NEAR(moved.bounds().min_m[2], -2.0 + 1.0, 1e-6);
+    EXPECT_TRUE(warned(moved, "skin drawn rigidly where its first joint holds it"));
+}
+
 TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {
     nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
     doc.erase("scenes");

@@ -287,6 +287,14 @@ private:
         std::vector<Item> stack;
         for (auto it = roots.rbegin(); it != roots.rend(); ++it)
             stack.push_back({*it, scaled(world_from_gltf(), scale_)});
+        // Every node's world, for the joints of skinned meshes (drawn after the walk: a joint may come later).
+        std::vector<Mat4> world_of(model_.nodes.size(), identity4());
+        struct Skinned {
+            int node;
+            std::uint32_t id;
+            std::string where;
+        };
+        std::vector<Skinned> skinned;
         while (!stack.empty()) {
             const Item item = stack.back();
             stack.pop_back();
@@ -298,11 +306,13 @@ private:
             seen[std::size_t(item.node)] = 1;
             const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
             const Mat4 world = multiply(item.parent, local_matrix(node, where));
+            world_of[std::size_t(item.node)] = world;
             check_world(world, where, node.mesh >= 0);
-            if (node.skin >= 0) warn(where + ": skin ignored (drawn in its bind pose)");
             if (node.mesh >= 0 && !node.weights.empty())
                 warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
-            if (node.mesh >= 0) {
+            if (node.mesh >= 0 && node.skin >= 0) {
+                skinned.push_back({item.node, add_instance(item.node, where), where});
+            } else if (node.mesh >= 0) {
                 const std::uint32_t id = add_instance(item.node, where);
                 const std::vector<Mat4> instances = instance_matrices(node, where);
                 if (instances.empty()) add_draws(node.mesh, world, id, where);
@@ -313,6 +323,56 @@ private:
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
                 stack.push_back({*c, world});
         }
+        for (const Skinned& s : skinned) {
+            const tinygltf::Node& node = model_.nodes[std::size_t(s.node)];
+            add_draws(node.mesh, skinned_placement(node.skin, world_of, seen, s.where), s.id, s.where);
+        }
+    }
+
+    // A skinned mesh's placement (glTF "Skins": the node's own transform is ignored; a vertex goes through
+    // sum_i w_i J_i IBM_i, J_i its joints' worlds). vksonar draws meshes rigidly, through one matrix: the
+    // first joint's J IBM. In the bind pose every joint's J IBM is the same matrix (the mesh's placement
+    // when it was bound), so this is exact there; a posed skeleton is drawn in that placement, not
+    // deformed, with a warning.
+    Mat4 skinned_placement(int skin_index, const std::vector<Mat4>& world_of, const std::vector<char>& seen,
+                           const std::string& where) {
+        const std::string skin_where = where + ": skin " + std::to_string(skin_index);
+        if (skin_index < 0 || std::size_t(skin_index) >= model_.skins.size())
+            fail(ErrorCode::parse, skin_where + " does not exist (" + std::to_string(model_.skins.size()) + " skins)");
+        const tinygltf::Skin& skin = model_.skins[std::size_t(skin_index)];
+        if (skin.joints.empty()) fail(ErrorCode::parse, skin_where + " has no joints");
+        std::vector<double> inverse_bind;
+        if (skin.inverseBindMatrices >= 0) {
+            inverse_bind = gltf::read_accessor(model_, skin.inverseBindMatrices, skin_where + " inverseBindMatrices");
+            check_finite(inverse_bind, skin_where + " inverseBindMatrices");
+            if (inverse_bind.size() != 16 * skin.joints.size())
+                fail(ErrorCode::parse, skin_where + " inverseBindMatrices holds " +
+                                           std::to_string(inverse_bind.size() / 16) + " matrices for " +
+                                           std::to_string(skin.joints.size()) + " joints");
+        }
+        const auto joint_matrix = [&](std::size_t j) {
+            const int joint = skin.joints[j];
+            if (joint < 0 || std::size_t(joint) >= model_.nodes.size() || !seen[std::size_t(joint)])
+                fail(ErrorCode::parse, skin_where + ": joint " + std::to_string(joint) + " is not a node of the scene");
+            Mat4 ibm = identity4();
+            if (!inverse_bind.empty()) std::copy_n(inverse_bind.begin() + std::ptrdiff_t(16 * j), 16, ibm.begin());
+            return multiply(world_of[std::size_t(joint)], ibm);
+        };
+        const Mat4 placement = joint_matrix(0);
+        double scale = 0.0, off = 0.0;
+        for (double v : placement)
+            scale = std::max(scale, std::abs(v));
+        for (std::size_t j = 1; j < skin.joints.size(); ++j) {
+            const Mat4 other = joint_matrix(j);
+            for (int k = 0; k < 16; ++k)
+                off = std::max(off, std::abs(other[k] - placement[k]));
+        }
+        warn(where + (off <= 1e-6 * std::max(scale, 1.0)
+                          ? ": skin drawn in its bind pose (where its joints hold it; not animated)"
+                          : ": skin drawn rigidly where its first joint holds it: its joints are posed, and vksonar "
+                            "does not deform meshes"));
+        check_world(placement, where, true);
+        return placement;
     }
 
     // EXT_mesh_gpu_instancing: one matrix per instance from its TRANSLATION, ROTATION (a unit
