@@ -646,6 +646,25 @@ TEST(SceneGlb, IdsWrittenAsFloatsAreRefusedNamingTheField) {
     refused(scenes, "scenes[0].nodes[0]");
 }
 
+// An accessor without a bufferView (and not sparse) holds zeros, as glTF says: a primitive whose POSITION is
+// one is all-degenerate and skipped with the usual warning, the rest of the mesh drawn. It was refused.
+TEST(SceneGlb, AnAccessorWithoutABufferViewIsZeros) {
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/primitives.gltf")));
+    const Scene plain = load_ok(test_file("scenes/primitives.gltf"));
+    doc["accessors"].push_back({{"componentType", 5126}, {"count", 3}, {"type", "VEC3"}});
+    doc["meshes"][0]["primitives"].push_back({{"attributes", {{"POSITION", doc["accessors"].size() - 1}}}});
+    const std::string path = temp_path("zero_accessor.gltf");
+    const std::string text = doc.dump();
+    write_bytes(path, std::vector<char>(text.begin(), text.end()));
+    const Scene zeros = load_ok(path);
+    EXPECT_EQ(zeros.stats().triangles, plain.stats().triangles);
+    EXPECT_EQ(zeros.stats().skipped_primitives, plain.stats().skipped_primitives + 1);
+    const auto& w = zeros.stats().warnings;
+    EXPECT_TRUE(std::any_of(w.begin(), w.end(), [](const std::string& s) {
+        return s.find("primitive 8: skipped (all 1 triangles are degenerate)") != s.npos;
+    })) << (w.empty() ? std::string("no warnings") : w.back());
+}
+
 // Skins (glTF "Skins": a skinned mesh's node transform is ignored; its joints' J IBM place it). A rig whose
 // mesh node sits under a moved armature (FBX2glTF, Mixamo): the bone's J IBM is the identity, the vertices
 // stay as written (x 10 m); the node's own transform had put it at 16 m. One whose mesh node carries the

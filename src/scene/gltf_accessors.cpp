@@ -158,7 +158,7 @@ void append_accessor(const tinygltf::Model& model, int index, const std::string&
     if (bytes == 0 || n == 0) fail(ErrorCode::parse, where + ": unknown component type or type");
     const std::size_t element_bytes = bytes * std::size_t(n);
     const std::size_t base = out.size();
-    if (acc.bufferView >= 0 || !acc.sparse.isSparse) {
+    if (acc.bufferView >= 0) {
         const AccessorView view = view_accessor(model, index, element_bytes, where); // bounds the count
         out.resize(base + view.count * std::size_t(n));
         T* values = out.data() + base;
@@ -167,8 +167,9 @@ void append_accessor(const tinygltf::Model& model, int index, const std::string&
                 values[i * std::size_t(n) + std::size_t(c)] = static_cast<T>(
                     component(view.data + view.stride * i + bytes * std::size_t(c), acc.componentType, acc.normalized));
     } else {
-        // Zeros with sparse substitutions: nothing in the file bounds the count, so the file's own size
-        // does (a zero-filled accessor longer than every byte of data the file holds is refused).
+        // No bufferView: zeros (glTF: "MUST be initialized with zeros"), with sparse substitutions where it
+        // has them. Nothing in the file bounds the count, so the file's own size does (a zero-filled accessor
+        // longer than every byte of data the file holds is refused).
         const std::size_t limit = std::max<std::size_t>(std::size_t(1) << 20, total_buffer_bytes(model));
         if (acc.count > limit)
             fail(ErrorCode::parse, where + ": " + std::to_string(acc.count) +
