@@ -456,6 +456,39 @@ TEST(SceneWarnings, UnknownExtrasKeysOfScenesNodesAndMeshes) {
     EXPECT_TRUE(has("mesh 0: unknown key extras.vksonar.material ignored")) << ::testing::PrintToString(w);
 }
 
+// A class on a node without a mesh (an exporter's empty parent holding a diver's parts, Blender's custom
+// property on it) holds for the meshes below it, unless one sets its own; its unknown keys are warned about
+// as a mesh node's are. It was dropped in silence, and the child took its mesh's class.
+TEST(SceneWarnings, AParentsClassHoldsForTheMeshesBelowIt) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    ASSERT_FALSE(doc["nodes"][1].contains("mesh")); // "parent", holding node 0 ("child")
+    doc["nodes"][1]["extras"]["vksonar"] = {{"class", "diver"}, {"clas", "typo"}};
+    doc["meshes"][0]["extras"]["vksonar"] = {{"class", "tri"}};
+    const std::string path = temp_path("parent_class.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    const auto class_of = [&](const std::string& node) {
+        for (const SceneInstance& i : scene_data(scene).instances)
+            if (i.node == node) return i.class_name;
+        return std::string("(no instance)");
+    };
+    EXPECT_EQ(class_of("child"), "diver");
+    EXPECT_EQ(class_of("by_matrix"), "tri"); // not below the parent: its mesh's class
+    const std::vector<std::string>& w = scene.stats().warnings;
+    EXPECT_TRUE(std::any_of(w.begin(), w.end(), [](const std::string& x) {
+        return x.find("node 1: unknown key extras.vksonar.clas ignored") != std::string::npos;
+    })) << ::testing::PrintToString(w);
+    doc["nodes"][0]["extras"]["vksonar"] = {{"class", "hose"}}; // a child's own class wins
+    std::ofstream(path) << doc.dump();
+    const Scene own = load_ok(path);
+    for (const SceneInstance& i : scene_data(own).instances) {
+        if (i.node == "child") {
+            EXPECT_EQ(i.class_name, "hose");
+        }
+    }
+}
+
 // Effects put in the file's top-level extras (where a person might look for "the scene's") are not
 // read, and the loader says where they go instead of dropping them in silence.
 TEST(SceneWarnings, TopLevelExtrasVksonarSaysWhereEffectsGo) {

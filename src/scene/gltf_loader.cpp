@@ -282,11 +282,12 @@ private:
         std::vector<char> seen(model_.nodes.size(), 0);
         struct Item {
             int node;
-            Mat4 parent; // world_from_parent, including the y-up -> z-up rotation
+            Mat4 parent;            // world_from_parent, including the y-up -> z-up rotation
+            std::string class_name; // the nearest ancestor's extras.vksonar.class, if any
         };
         std::vector<Item> stack;
         for (auto it = roots.rbegin(); it != roots.rend(); ++it)
-            stack.push_back({*it, scaled(world_from_gltf(), scale_)});
+            stack.push_back({*it, scaled(world_from_gltf(), scale_), {}});
         // Every node's world, for the joints of skinned meshes (drawn after the walk: a joint may come later).
         std::vector<Mat4> world_of(model_.nodes.size(), identity4());
         struct Skinned {
@@ -307,13 +308,17 @@ private:
             const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
             const Mat4 world = multiply(item.parent, local_matrix(node, where));
             world_of[std::size_t(item.node)] = world;
+            // a class set on a node holds for the meshes below it (an exporter's empty parent: Blender's
+            // custom property on the object that groups a diver's parts) unless one of them sets its own
+            std::string own_class = class_of(node.extras_json_string, where);
+            const std::string& class_name = own_class.empty() ? item.class_name : own_class;
             check_world(world, where, node.mesh >= 0);
             if (node.mesh >= 0 && !node.weights.empty())
                 warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
             if (node.mesh >= 0 && node.skin >= 0) {
-                skinned.push_back({item.node, add_instance(item.node, where), where});
+                skinned.push_back({item.node, add_instance(item.node, class_name), where});
             } else if (node.mesh >= 0) {
-                const std::uint32_t id = add_instance(item.node, where);
+                const std::uint32_t id = add_instance(item.node, class_name);
                 const std::vector<Mat4> instances = instance_matrices(node, where);
                 if (instances.empty()) add_draws(node.mesh, world, id, where);
                 for (const Mat4& instance : instances)
@@ -321,7 +326,7 @@ private:
             } else if (node.mesh < -1)
                 fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
-                stack.push_back({*c, world});
+                stack.push_back({*c, world, class_name});
         }
         for (const Skinned& s : skinned) {
             const tinygltf::Node& node = model_.nodes[std::size_t(s.node)];
@@ -440,8 +445,9 @@ private:
         return vk["class"].get<std::string>();
     }
 
-    // The object a node with a mesh is (SceneInstance): its id, name and class.
-    std::uint32_t add_instance(int node_index, const std::string& where) {
+    // The object a node with a mesh is (SceneInstance): its id, name and class (node_class: its own
+    // extras.vksonar.class or its nearest ancestor's, else the mesh's, else the mesh's name).
+    std::uint32_t add_instance(int node_index, const std::string& node_class) {
         const tinygltf::Node& node = model_.nodes[std::size_t(node_index)];
         SceneInstance instance;
         instance.id = static_cast<std::uint32_t>(node_index) + 1;
@@ -452,7 +458,7 @@ private:
             instance.mesh = mesh.name;
             mesh_class = class_of(mesh.extras_json_string, "mesh " + std::to_string(node.mesh));
         }
-        instance.class_name = class_of(node.extras_json_string, where);
+        instance.class_name = node_class;
         if (instance.class_name.empty()) instance.class_name = mesh_class;
         if (instance.class_name.empty()) instance.class_name = instance.mesh;
         if (instance.class_name.empty()) instance.class_name = "mesh " + std::to_string(node.mesh);
