@@ -489,6 +489,20 @@ TEST(SceneWarnings, AParentsClassHoldsForTheMeshesBelowIt) {
     }
 }
 
+// Animations are not played (a scene is static): one warning says so, where they had been dropped in silence.
+TEST(SceneWarnings, AnimationsAreIgnoredWithAWarning) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["animations"] =
+        nlohmann::json::array({{{"channels", nlohmann::json::array()}, {"samplers", nlohmann::json::array()}}});
+    const std::string path = temp_path("animated.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    const std::vector<std::string>& w = scene.stats().warnings;
+    ASSERT_EQ(w.size(), 1u) << ::testing::PrintToString(w);
+    EXPECT_NE(w[0].find("1 animation(s) ignored"), std::string::npos) << w[0];
+}
+
 // Effects put in the file's top-level extras (where a person might look for "the scene's") are not
 // read, and the loader says where they go instead of dropping them in silence.
 TEST(SceneWarnings, TopLevelExtrasVksonarSaysWhereEffectsGo) {

@@ -180,6 +180,10 @@ private:
                 read_scene_extras(json::parse(scene.extras_json_string), scene_index);
         }
         traverse(roots);
+        // a sonar frame is one instant: the file's nodes as they are written, no animation played
+        if (!model_.animations.empty())
+            warn(std::to_string(model_.animations.size()) +
+                 " animation(s) ignored: the scene is drawn as the file places its nodes (a vksonar scene is static)");
     }
 
     void read_scene_extras(const json& extras, int scene_index) {
