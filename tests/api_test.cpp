@@ -3,6 +3,7 @@
 // HostVulkan::functions that need no device (those that need one: embed_test.cpp).
 #include <type_traits>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -125,37 +126,28 @@ TEST(Api, OptionsNoValueHasAreRefused) {
     Context context = Context::cpu_only();
     const SonarConfig config;
     Scene scene;
-    const auto refused = [&](const RendererOptions& options, const std::string& field) {
-        auto renderer = Renderer::create(context, config, scene, options);
+    RendererOptions options;
+    options.backend = Backend::cpu;
+    ASSERT_TRUE(Renderer::create(context, config, scene, options).ok());
+    // each field set to one number past its last value
+    const std::vector<std::pair<std::string, void (*)(RendererOptions&)>> cases = {
+        {"backend", [](RendererOptions& o) { o.backend = static_cast<Backend>(7); }},
+        {"tables", [](RendererOptions& o) { o.tables = static_cast<TableAccess>(2); }},
+        {"resample", [](RendererOptions& o) { o.resample = static_cast<ResampleMethod>(5); }},
+        {"layout", [](RendererOptions& o) { o.layout = static_cast<WorkLayout>(3); }},
+        {"stage_timing", [](RendererOptions& o) { o.stage_timing = static_cast<StageTiming>(4); }},
+        {"profile_rows", [](RendererOptions& o) { o.profile_rows = static_cast<ProfileRows>(2); }},
+        {"save_mask", [](RendererOptions& o) { o.save_mask = static_cast<SaveFlags>(1u << 5); }},
+    };
+    for (const auto& [field, set] : cases) {
+        RendererOptions bad = options;
+        set(bad);
+        auto renderer = Renderer::create(context, config, scene, bad);
         ASSERT_FALSE(renderer.ok()) << field;
         EXPECT_EQ(renderer.error().code, ErrorCode::invalid_argument);
         EXPECT_NE(renderer.error().message.find("RendererOptions: " + field + " = "), std::string::npos)
             << renderer.error().message;
-    };
-    RendererOptions options;
-    options.backend = Backend::cpu;
-    ASSERT_TRUE(Renderer::create(context, config, scene, options).ok());
-    RendererOptions backend = options;
-    backend.backend = static_cast<Backend>(7);
-    refused(backend, "backend");
-    RendererOptions tables = options;
-    tables.tables = static_cast<TableAccess>(2);
-    refused(tables, "tables");
-    RendererOptions resample = options;
-    resample.resample = static_cast<ResampleMethod>(5);
-    refused(resample, "resample");
-    RendererOptions layout = options;
-    layout.layout = static_cast<WorkLayout>(3);
-    refused(layout, "layout");
-    RendererOptions timing = options;
-    timing.stage_timing = static_cast<StageTiming>(4);
-    refused(timing, "stage_timing");
-    RendererOptions rows = options;
-    rows.profile_rows = static_cast<ProfileRows>(2);
-    refused(rows, "profile_rows");
-    RendererOptions mask = options;
-    mask.save_mask = static_cast<SaveFlags>(1u << 5);
-    refused(mask, "save_mask");
+    }
 
     ContextOptions below;
     below.device_index = -7;

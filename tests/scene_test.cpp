@@ -385,14 +385,8 @@ void append_u32(std::vector<char>& out, std::uint32_t v) {
         out.push_back(static_cast<char>((v >> (8 * k)) & 0xff));
 }
 
-// Packs plane_10m.gltf + plane_10m.bin into a GLB, as an exporter would.
-// with_empty_uri: the BIN chunk's buffer with "uri": "" (against the spec, which leaves uri out; tinygltf and
-// earlier builds read it as the BIN chunk)
-std::vector<char> make_plane_glb(bool with_empty_uri = false) {
-    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
-    std::vector<char> bin = read_bytes(test_file("scenes/plane_10m.bin"));
-    doc["buffers"][0].erase("uri");
-    if (with_empty_uri) doc["buffers"][0]["uri"] = "";
+// A GLB of a glTF document and its BIN chunk (each padded to 4 bytes, as the spec asks).
+std::vector<char> pack_glb(const nlohmann::json& doc, std::vector<char> bin) {
     std::string text = doc.dump();
     while (text.size() % 4)
         text += ' ';
@@ -408,6 +402,16 @@ std::vector<char> make_plane_glb(bool with_empty_uri = false) {
     append_u32(glb, 0x004E4942u);
     glb.insert(glb.end(), bin.begin(), bin.end());
     return glb;
+}
+
+// Packs plane_10m.gltf + plane_10m.bin into a GLB, as an exporter would.
+// with_empty_uri: the BIN chunk's buffer with "uri": "" (against the spec, which leaves uri out; tinygltf and
+// earlier builds read it as the BIN chunk)
+std::vector<char> make_plane_glb(bool with_empty_uri = false) {
+    nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
+    doc["buffers"][0].erase("uri");
+    if (with_empty_uri) doc["buffers"][0]["uri"] = "";
+    return pack_glb(doc, read_bytes(test_file("scenes/plane_10m.bin")));
 }
 
 std::string temp_path(const std::string& name) {
@@ -741,20 +745,8 @@ TEST(SceneGlb, ASkinnedMeshIsPlacedByItsJoints) {
         doc["scenes"][0]["nodes"] = roots;
         doc["skins"] =
             nlohmann::json::array({{{"joints", joints}, {"inverseBindMatrices", doc["accessors"].size() - 1}}});
-        std::string text = doc.dump();
-        while (text.size() % 4)
-            text += ' ';
-        std::vector<char> glb{'g', 'l', 'T', 'F'};
-        append_u32(glb, 2);
-        append_u32(glb, static_cast<std::uint32_t>(12 + 8 + text.size() + 8 + bin.size()));
-        append_u32(glb, static_cast<std::uint32_t>(text.size()));
-        append_u32(glb, 0x4E4F534Au);
-        glb.insert(glb.end(), text.begin(), text.end());
-        append_u32(glb, static_cast<std::uint32_t>(bin.size()));
-        append_u32(glb, 0x004E4942u);
-        glb.insert(glb.end(), bin.begin(), bin.end());
         const std::string path = temp_path("skinned.glb");
-        write_bytes(path, glb);
+        write_bytes(path, pack_glb(doc, bin));
         return load_ok(path);
     };
     const auto warned = [](const Scene& scene, const std::string& text) {
