@@ -483,6 +483,24 @@ TEST(LabelCpu, LabelledCellsAreTheCellsTheMainLobeFills) {
             }
 }
 
+// A labelled frame at `from` (frame 0), the frame at `to` (frame 1) and the flow between them; `rendered` is
+// null where a render or the flow failed.
+struct FlowRun {
+    std::unique_ptr<Rendered> rendered; // the frame at `from` and its renderer
+    Frame next;                         // the frame at `to`
+    std::vector<float> flow;
+};
+FlowRun flow_between(Backend backend, const SonarConfig& config, const Scene& scene, const Pose& from, const Pose& to) {
+    FlowRun run;
+    run.rendered = render_once(backend, config, scene, from, SaveFlags::labels);
+    if (!run.rendered) return run;
+    run.next = run.rendered->renderer.make_frame();
+    if (!run.rendered->renderer.render(to, 1, run.next) ||
+        !run.rendered->renderer.label_flow(run.rendered->frame, from, run.next, to, run.flow))
+        run.rendered.reset();
+    return run;
+}
+
 // Flow, sonar moving forward by d = 0.5 m in a static scene: each labelled point P of frame 0 moves to
 // P - (d, 0, 0) in the sonar frame, so its range bin changes by (|P - d x| - |P|) / w and its beam by the
 // change of its steering angle on the equi-angular table, computed here from P alone.
@@ -491,13 +509,10 @@ TEST_P(LabelBackendTest, FlowOfAForwardMove) {
     TwoObjects objects;
     Pose start, ahead;
     ahead.x_m = 0.5;
-    auto r = render_once(GetParam(), config, objects.scene, start, SaveFlags::labels);
-    ASSERT_TRUE(r);
-    Frame next = r->renderer.make_frame();
-    ASSERT_TRUE(r->renderer.render(ahead, 1, next));
-    std::vector<float> flow;
-    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, ahead, flow));
-    const Frame& f = r->frame;
+    const FlowRun run = flow_between(GetParam(), config, objects.scene, start, ahead);
+    ASSERT_TRUE(run.rendered);
+    const std::vector<float>& flow = run.flow;
+    const Frame& f = run.rendered->frame;
     ASSERT_EQ(flow.size(), std::size_t(f.bins) * f.beams * 2);
     const double bin_width = (config.range_max_m - config.range_min_m) / config.bins;
     const double spacing = config.hfov_deg * kDeg / config.beams;
@@ -569,13 +584,10 @@ TEST_P(LabelBackendTest, FlowTakesTheShortWayRoundAFullCircle) {
     add_sphere(scene, centre.x, centre.y, centre.z, 0.3, 64, -10.0, kSphereId);
     Pose start, turned;
     turned.yaw_deg = -4.0; // a world point's azimuth in the sonar frame grows by 4 deg
-    auto r = render_once(GetParam(), config, scene, start, SaveFlags::labels);
-    ASSERT_TRUE(r);
-    Frame next = r->renderer.make_frame();
-    ASSERT_TRUE(r->renderer.render(turned, 1, next));
-    std::vector<float> flow;
-    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, turned, flow));
-    const Frame& f = r->frame;
+    const FlowRun run = flow_between(GetParam(), config, scene, start, turned);
+    ASSERT_TRUE(run.rendered);
+    const std::vector<float>& flow = run.flow;
+    const Frame& f = run.rendered->frame;
     const double spacing = 360.0 / config.beams; // deg
     std::size_t finite = 0, crossing = 0;
     double worst_beam = 0, worst_bin = 0;
@@ -675,13 +687,11 @@ TEST_P(LabelBackendTest, FlowStopsAtAnOccluder) {
     add_quad(scene, 8.0, 0.0, 0.0, 4.0, 4.0, m, 0.0, kQuadId);
     Pose start, aside;
     aside.y_m = -6.67;
-    auto r = render_once(GetParam(), config, scene, start, SaveFlags::labels);
-    ASSERT_TRUE(r);
-    Frame next = r->renderer.make_frame();
-    ASSERT_TRUE(r->renderer.render(aside, 1, next));
-    EXPECT_EQ(std::count(next.instance.begin(), next.instance.end(), kSphereId), 0); // hidden indeed
-    std::vector<float> flow;
-    ASSERT_TRUE(r->renderer.label_flow(r->frame, start, next, aside, flow));
+    const FlowRun run = flow_between(GetParam(), config, scene, start, aside);
+    ASSERT_TRUE(run.rendered);
+    const auto& r = run.rendered;
+    EXPECT_EQ(std::count(run.next.instance.begin(), run.next.instance.end(), kSphereId), 0); // hidden indeed
+    const std::vector<float>& flow = run.flow;
     std::size_t sphere = 0, sphere_flow = 0, wall = 0, wall_flow = 0;
     for (std::size_t i = 0; i < r->frame.instance.size(); ++i) {
         const bool has = !std::isnan(flow[2 * i]);
