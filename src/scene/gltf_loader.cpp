@@ -352,6 +352,10 @@ private:
         if (skin.joints.empty()) fail(ErrorCode::parse, skin_where + " has no joints");
         std::vector<double> inverse_bind;
         if (skin.inverseBindMatrices >= 0) {
+            if (std::size_t(skin.inverseBindMatrices) < model_.accessors.size() &&
+                model_.accessors[std::size_t(skin.inverseBindMatrices)].type != TINYGLTF_TYPE_MAT4)
+                fail(ErrorCode::parse, skin_where + " inverseBindMatrices accessor " +
+                                           std::to_string(skin.inverseBindMatrices) + " is not MAT4");
             inverse_bind = gltf::read_accessor(model_, skin.inverseBindMatrices, skin_where + " inverseBindMatrices");
             check_finite(inverse_bind, skin_where + " inverseBindMatrices");
             if (inverse_bind.size() != 16 * skin.joints.size())
