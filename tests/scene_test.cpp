@@ -722,32 +722,62 @@ TEST(SceneGlb, AnAccessorWithoutABufferViewIsZeros) {
 // transform the bind baked into IBM (Blender): J IBM is that transform (x 13 m). A posed joint: drawn
 // rigidly where the first joint holds it, with a warning that says so.
 TEST(SceneGlb, ASkinnedMeshIsPlacedByItsJoints) {
-    const auto skinned = [](const nlohmann::json& nodes, const std::vector<int>& roots, const std::vector<int>& joints,
-                            const std::vector<std::array<float, 3>>& ibm_translations) {
+    // nodes, scene roots, the skin's joints, its inverse bind matrices (translations), and instance translations
+    // (EXT_mesh_gpu_instancing) for the skinned node, if any
+    const auto load_skinned = [](const nlohmann::json& nodes, const std::vector<int>& roots,
+                                 const std::vector<int>& joints,
+                                 const std::vector<std::array<float, 3>>& ibm_translations,
+                                 const std::vector<std::array<float, 3>>& instances = {}) {
         nlohmann::json doc = nlohmann::json::parse(read_bytes(test_file("scenes/plane_10m.gltf")));
         std::vector<char> bin = read_bytes(test_file("scenes/plane_10m.bin"));
-        while (bin.size() % 4)
-            bin.push_back(0);
-        const std::size_t offset = bin.size();
-        for (const auto& t : ibm_translations) { // column-major translations
-            const float m[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t[0], t[1], t[2], 1};
-            const char* bytes = reinterpret_cast<const char*>(m);
-            bin.insert(bin.end(), bytes, bytes + sizeof m);
+        const auto add_floats = [&](const std::vector<float>& values, std::size_t count, const char* type) {
+            while (bin.size() % 4)
+                bin.push_back(0);
+            const std::size_t offset = bin.size();
+            const char* bytes = reinterpret_cast<const char*>(values.data());
+            bin.insert(bin.end(), bytes, bytes + values.size() * sizeof(float));
+            doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bin.size() - offset}});
+            doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
+                                        {"componentType", 5126},
+                                        {"count", count},
+                                        {"type", type}});
+            return doc["accessors"].size() - 1;
+        };
+        std::vector<float> ibm;
+        for (const auto& t : ibm_translations) // column-major translations
+            ibm.insert(ibm.end(), {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, t[0], t[1], t[2], 1});
+        const std::size_t ibm_accessor = add_floats(ibm, ibm_translations.size(), "MAT4");
+        doc["nodes"] = nodes;
+        if (!instances.empty()) {
+            std::vector<float> moves;
+            for (const auto& t : instances)
+                moves.insert(moves.end(), t.begin(), t.end());
+            const std::size_t moves_accessor = add_floats(moves, instances.size(), "VEC3");
+            for (auto& node : doc["nodes"])
+                if (node.contains("skin"))
+                    node["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["TRANSLATION"] = moves_accessor;
+            doc["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
         }
-        doc["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", bin.size() - offset}});
-        doc["accessors"].push_back({{"bufferView", doc["bufferViews"].size() - 1},
-                                    {"componentType", 5126},
-                                    {"count", ibm_translations.size()},
-                                    {"type", "MAT4"}});
         doc["buffers"][0]["byteLength"] = bin.size();
         doc["buffers"][0].erase("uri");
-        doc["nodes"] = nodes;
         doc["scenes"][0]["nodes"] = roots;
-        doc["skins"] =
-            nlohmann::json::array({{{"joints", joints}, {"inverseBindMatrices", doc["accessors"].size() - 1}}});
+        doc["skins"] = nlohmann::json::array({{{"joints", joints}, {"inverseBindMatrices", ibm_accessor}}});
         const std::string path = temp_path("skinned.glb");
         write_bytes(path, pack_glb(doc, bin));
-        return load_ok(path);
+        return Scene::load_gltf(path);
+    };
+    const auto skinned = [&](const nlohmann::json& nodes, const std::vector<int>& roots, const std::vector<int>& joints,
+                             const std::vector<std::array<float, 3>>& ibm_translations,
+                             const std::vector<std::array<float, 3>>& instances = {}) {
+        Result<Scene> loaded = load_skinned(nodes, roots, joints, ibm_translations, instances);
+        EXPECT_TRUE(loaded.ok()) << (loaded.ok() ? "" : loaded.error().message);
+        return loaded.ok() ? std::move(loaded.value()) : Scene{};
+    };
+    const auto refused = [&](const nlohmann::json& nodes, const std::vector<int>& roots, const std::vector<int>& joints,
+                             const std::vector<std::array<float, 3>>& ibm_translations, const std::string& why) {
+        const Result<Scene> loaded = load_skinned(nodes, roots, joints, ibm_translations);
+        ASSERT_FALSE(loaded.ok()) << why;
+        EXPECT_NE(loaded.error().message.find(why), std::string::npos) << loaded.error().message;
     };
     const auto warned = [](const Scene& scene, const std::string& text) {
         const auto& w = scene.stats().warnings;
@@ -773,6 +803,39 @@ TEST(SceneGlb, ASkinnedMeshIsPlacedByItsJoints) {
     EXPECT_NEAR(moved.bounds().min_m[0], 10.0, 1e-6);
     EXPECT_NEAR(moved.bounds().min_m[2], -2.0 + 1.0, 1e-6);
     EXPECT_TRUE(warned(moved, "skin drawn rigidly where its first joint holds it"));
+    // glTF: at least one inverse bind matrix per joint (the rest unused); fewer, or a joint outside the scene,
+    // are refused
+    EXPECT_NEAR(skinned(armature, {0}, {1}, {{-6, 0, 0}, {0, 0, 0}}).bounds().min_m[0], 10.0, 1e-6);
+    refused(armature, {0}, {1, 0}, {{-6, 0, 0}}, "inverseBindMatrices holds 1 matrices for 2 joints");
+    nlohmann::json stray = armature;
+    stray.push_back({{"name", "not in the scene"}});
+    refused(stray, {0}, {3}, {{0, 0, 0}}, "joint 3 is not a node of the scene");
+    // instanced and skinned: each instance through the skin's placement (x 10, y 0 and -5 in the world)
+    const Scene twice = skinned(armature, {0}, {1}, {{-6, 0, 0}}, {{0, 0, 0}, {0, 0, 5}});
+    EXPECT_EQ(twice.stats().triangles, 4u);
+    EXPECT_NEAR(twice.bounds().min_m[0], 10.0, 1e-6);
+    EXPECT_NEAR(twice.bounds().min_m[1], -7.0, 1e-6);
+}
+
+// A class on a mesh node is its own object's: the objects placed below it (rocks on a seabed) keep theirs,
+// where a class on an empty parent is passed down.
+TEST(SceneGlb, AMeshParentsClassStaysItsOwn) {
+    std::ifstream in(test_file("scenes/node_transform.gltf"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    doc["nodes"][2]["children"] = {1}; // by_matrix (a mesh) now holds parent, which holds child
+    doc["scenes"][0]["nodes"] = {2};
+    doc["nodes"][2]["extras"]["vksonar"] = {{"class", "seafloor"}};
+    const std::string path = temp_path("mesh_parent_class.gltf");
+    std::ofstream(path) << doc.dump();
+    const Scene scene = load_ok(path);
+    for (const SceneInstance& i : scene_data(scene).instances) {
+        if (i.node == "child") {
+            EXPECT_NE(i.class_name, "seafloor");
+        }
+        if (i.node == "by_matrix") {
+            EXPECT_EQ(i.class_name, "seafloor");
+        }
+    }
 }
 
 TEST(SceneGlb, FileWithoutScenesDrawsItsRootNodes) {

@@ -478,16 +478,26 @@ void SubpixelReturns::build(const Plan& plan, const SceneData& scene, const Pose
             if (!plan.line_array) {
                 // planar: the two pixel columns whose centres it lies between, linearly (the line array's
                 // cone_share below does the same with the cone columns). Its nearest column alone made a small
-                // target's response across a beam a staircase of column steps: up to 0.55 dB off the pattern
+                // target's response across a beam a staircase of column steps: up to 0.6 dB off the pattern
                 // on the main lobe's skirt.
+                // Between two slices the neighbour's edge column stands in (the slices meet edge to edge, their
+                // columns as wide there); at the fan's edges and a tier view's the edge column takes it all.
                 const double at = (u / view.tan_half_h + 1.0) * 0.5 * W - 0.5; // column centres at integers
                 const double below = std::floor(at);
-                if (!(below >= 0.0)) return push(s * W, energy);            // before the first centre
-                if (!(below + 1.0 < W)) return push(s * W + W - 1, energy); // past the last
-                const auto first = static_cast<std::uint32_t>(below);
                 const double upper = at - below;
-                if (!push(s * W + first, energy * (1.0 - upper))) return false;
-                return upper > 0.0 ? push(s * W + first + 1, energy * upper) : true;
+                const bool slice = s < plan.slices;
+                std::uint32_t lower_column = 0;
+                if (below >= 0.0 && below + 1.0 < W) {
+                    lower_column = s * W + static_cast<std::uint32_t>(below);
+                } else if (below < 0.0 && slice && s > 0) {
+                    lower_column = s * W - 1; // the previous slice's last column
+                } else if (below >= 0.0 && slice && s + 1 < plan.slices) {
+                    lower_column = s * W + W - 1; // and the next slice's first after it
+                } else {
+                    return push(below < 0.0 ? s * W : s * W + W - 1, energy);
+                }
+                if (!push(lower_column, energy * (1.0 - upper))) return false;
+                return upper > 0.0 ? push(lower_column + 1, energy * upper) : true;
             }
             // the cone columns of its steering angle, sin(theta) = y / r (array_axis_cosine)
             const double x = M::cone_coord(q[1] / r, half_fov, inv_cone_step);

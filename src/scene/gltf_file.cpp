@@ -236,6 +236,11 @@ void check_structure(const json& doc) {
                                           at + ".targets[" + std::to_string(t) + "]");
         }
     });
+    each(doc, "skins", [](const json& skin, const std::string& where) {
+        require_count(skin, "inverseBindMatrices", where);
+        require_count(skin, "skeleton", where);
+        require_counts(skin, "joints", where);
+    });
     each(doc, "accessors", [](const json& accessor, const std::string& where) {
         for (const char* key : {"bufferView", "byteOffset", "count", "componentType"})
             require_count(accessor, key, where);

@@ -312,11 +312,15 @@ private:
             const tinygltf::Node& node = model_.nodes[std::size_t(item.node)];
             const Mat4 world = multiply(item.parent, local_matrix(node, where));
             world_of[std::size_t(item.node)] = world;
-            // a class set on a node holds for the meshes below it (an exporter's empty parent: Blender's
-            // custom property on the object that groups a diver's parts) unless one of them sets its own
+            // a class set on a node without a mesh holds for the meshes below it (an exporter's empty parent:
+            // Blender's custom property on the object that groups a diver's parts) unless one of them sets its
+            // own; a mesh node's class is its own object's (a seabed's, not the rocks' placed below it)
             std::string own_class = class_of(node.extras_json_string, where);
             const std::string& class_name = own_class.empty() ? item.class_name : own_class;
-            check_world(world, where, node.mesh >= 0);
+            const std::string& passed_down = node.mesh >= 0 ? item.class_name : class_name;
+            // (a skinned node's own transform is ignored: its joints place it)
+            check_world(world, where, node.mesh >= 0 && node.skin < 0);
+            if (node.skin >= 0 && node.mesh < 0) warn(where + ": skin on a node without a mesh ignored");
             if (node.mesh >= 0 && !node.weights.empty())
                 warn(where + ": morph weights of the node ignored (the mesh's default weights are drawn)");
             if (node.mesh >= 0 && node.skin >= 0) {
@@ -330,11 +334,15 @@ private:
             } else if (node.mesh < -1)
                 fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
-                stack.push_back({*c, world, class_name});
+                stack.push_back({*c, world, passed_down});
         }
         for (const Skinned& s : skinned) {
             const tinygltf::Node& node = model_.nodes[std::size_t(s.node)];
-            add_draws(node.mesh, skinned_placement(node.skin, world_of, seen, s.where), s.id, s.where);
+            const Mat4 placement = skinned_placement(node.skin, world_of, seen, s.where);
+            const std::vector<Mat4> instances = instance_matrices(node, s.where);
+            if (instances.empty()) add_draws(node.mesh, placement, s.id, s.where);
+            for (const Mat4& instance : instances)
+                add_draws(node.mesh, multiply(placement, instance), s.id, s.where);
         }
     }
 
@@ -358,7 +366,7 @@ private:
                                            std::to_string(skin.inverseBindMatrices) + " is not MAT4");
             inverse_bind = gltf::read_accessor(model_, skin.inverseBindMatrices, skin_where + " inverseBindMatrices");
             check_finite(inverse_bind, skin_where + " inverseBindMatrices");
-            if (inverse_bind.size() != 16 * skin.joints.size())
+            if (inverse_bind.size() < 16 * skin.joints.size()) // glTF: at least one per joint
                 fail(ErrorCode::parse, skin_where + " inverseBindMatrices holds " +
                                            std::to_string(inverse_bind.size() / 16) + " matrices for " +
                                            std::to_string(skin.joints.size()) + " joints");
@@ -380,7 +388,8 @@ private:
             for (int k = 0; k < 16; ++k)
                 off = std::max(off, std::abs(other[k] - placement[k]));
         }
-        warn(where + (off <= 1e-6 * std::max(scale, 1.0)
+        // (float matrices: a long chain of joints in its bind pose rounds to a few 1e-5 of the largest entry)
+        warn(where + (off <= 1e-4 * std::max(scale, 1.0)
                           ? ": skin drawn in its bind pose (where its joints hold it; not animated)"
                           : ": skin drawn rigidly where its first joint holds it: its joints are posed, and vksonar "
                             "does not deform meshes"));

@@ -751,8 +751,8 @@ void LabelsStage::visibility(Frame& frame, const Pose& pose, const SubpixelRetur
     cull_depth_clusters(a.clusters, scene.draws.size(), a.draws, a.drawn);
     // Objects taken out of the depth pass this frame (below the pixel grid's size, core/subpixel.h) have no
     // pixel of their own there, and drawn alone they look hidden by whatever lies behind them: their
-    // returns say instead (each a piece of it in one profile column), hidden as the profile stage hides
-    // them. One pass over the list tallies every labelled object's.
+    // returns say instead (a piece of it in each profile column it feeds: one or two), hidden as the profile stage
+    // hides them. One pass over the list tallies every labelled object's.
     if (subpixel != nullptr && !a.from_returns.empty()) {
         const shared::SubpixelReturn* returns = subpixel->returns();
         const SubpixelLabel* labels = subpixel->labels();

@@ -23,7 +23,7 @@ constexpr double kProfileBandBudget = 32768.0;
 // and at least what a footprint's length in metres spans, as that is the geometry's, not the bins':
 // kProfileFootprintM, and kProfileFootprintGrazing x range_max x the larger pixel side (a pixel's
 // footprint on a surface at 30 deg grazing). 8192 bins over 20 m (2.4 mm) put 80 and more bins under a
-// seabed pixel, and pixels 3.5 deg wide (accuracy.pixels_per_beam 0.09) their width in range across
+// seabed pixel, and pixels 2.8 deg wide (accuracy.pixels_per_beam 0.09) their width in range across
 // the row: with 6 bins every frame of either ran out of loops.
 constexpr double kProfileFootprintBins = 6.0;
 constexpr double kProfileFootprintM = 0.45; // 6 bins of the default's 7.7 cm, so its bands stay as they were

@@ -218,7 +218,7 @@ TEST_P(Subpixel, SmallSpheresCarryTheVerticalPatternAndAbsorption) {
 // across beam 255 by turning the sonar, 0.025 deg a step out to +-0.7 deg. Its energy in that beam follows
 // the beam's own sinc^2 in angle (half power at +-horizontal_beamwidth / 2) wherever the pattern is above
 // -5 dB, within 0.15 dB of the response at the beam's centre. Its pixel column alone used to take each
-// return: a staircase of 0.127 deg column steps, up to 0.55 dB off the pattern on the main lobe's skirt.
+// return: a staircase of 0.127 deg column steps, up to 0.6 dB off the pattern on the main lobe's skirt.
 TEST_P(Subpixel, APlanarBeamHearsASmallTargetThroughItsPatternNotInColumnSteps) {
     SonarConfig config = closed_form_config();
     config.beam_geometry = BeamGeometry::planar;
@@ -227,36 +227,40 @@ TEST_P(Subpixel, APlanarBeamHearsASmallTargetThroughItsPatternNotInColumnSteps) 
     add_closed_sphere(scene, 0.005, {12.0, 0.0, 0.0}, 48, 24, lambert(-20.0));
     auto rendered = render_checked(GetParam(), config, scene);
     ASSERT_TRUE(rendered);
-    const std::uint32_t beam = 255;
     const double half = 0.5 * config.hfov_deg * kDeg;
-    const double centre = (1.0 - (2.0 * beam + 1.0) / config.beams) * half; // the equi-angular table
     const double x_half = sinc_half_power_x() / std::sin(0.5 * config.horizontal_beamwidth_deg * kDeg);
     const auto pattern = [&](double separation) {
         const double x = x_half * std::sin(separation);
         return x == 0.0 ? 1.0 : std::pow(std::sin(x) / x, 2);
     };
-    const auto energy_at = [&](double azimuth) { // the sphere at this azimuth of the sonar's frame
-        Pose pose;
-        pose.yaw_deg = -azimuth / kDeg;
-        Frame& f = rendered->frame;
-        EXPECT_TRUE(rendered->renderer.render(pose, 0, f));
-        return beam_energy(f, beam);
-    };
-    const double at_centre = energy_at(centre);
-    ASSERT_GT(at_centre, 0.0);
-    double worst = 0;
-    int compared = 0;
-    for (int step = -28; step <= 28; ++step) {
-        const double offset = 0.025 * step * kDeg;
-        if (!(pattern(offset) > std::pow(10.0, -0.5))) continue;
-        const double error_db = db(energy_at(centre + offset) / at_centre / pattern(offset));
-        worst = std::max(worst, std::abs(error_db));
-        ++compared;
+    // beam 255 near broadside, and beam 168 (22.22 deg), whose skirt lies on the seam of two 43.3-degree slices at
+    // 21.67 deg (the neighbour slice's edge column takes the share there: 0.51 dB off without it)
+    ASSERT_EQ(renderer_plan(rendered->renderer).slices, 3u);
+    for (const std::uint32_t beam : {255u, 168u}) {
+        const double centre = (1.0 - (2.0 * beam + 1.0) / config.beams) * half; // the equi-angular table
+        const auto energy_at = [&](double azimuth) { // the sphere at this azimuth of the sonar's frame
+            Pose pose;
+            pose.yaw_deg = -azimuth / kDeg;
+            Frame& f = rendered->frame;
+            EXPECT_TRUE(rendered->renderer.render(pose, 0, f));
+            return beam_energy(f, beam);
+        };
+        const double at_centre = energy_at(centre);
+        ASSERT_GT(at_centre, 0.0);
+        double worst = 0;
+        int compared = 0;
+        for (int step = -28; step <= 28; ++step) {
+            const double offset = 0.025 * step * kDeg;
+            if (!(pattern(offset) > std::pow(10.0, -0.5))) continue;
+            const double error_db = db(energy_at(centre + offset) / at_centre / pattern(offset));
+            worst = std::max(worst, std::abs(error_db));
+            ++compared;
+        }
+        std::printf("[subpixel] %s planar beam %u across a 1 cm sphere: %d offsets, worst %.3f dB off the pattern\n",
+                    GetParam() == Backend::vulkan ? "vulkan" : "cpu", beam, compared, worst);
+        EXPECT_GE(compared, 40);
+        EXPECT_LT(worst, 0.15) << "beam " << beam;
     }
-    std::printf("[subpixel] %s planar beam across a 1 cm sphere: %d offsets, worst %.3f dB off the pattern\n",
-                GetParam() == Backend::vulkan ? "vulkan" : "cpu", compared, worst);
-    EXPECT_GE(compared, 40);
-    EXPECT_LT(worst, 0.15);
 }
 
 // A 1 cm cable across the fan at 10 m (y from -5 to 5 m, 26.6 degrees either side): a continuous line,

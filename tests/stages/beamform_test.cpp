@@ -973,7 +973,7 @@ TEST(WorkLayout, RowBandsFollowTheFootprintsLengthNotItsBins) {
     Pose pose;
     pose.pitch_deg = 10.0;
     expect_layouts_agree(config, scene, pose);
-    // Pixels 2.5 deg wide (accuracy.pixels_per_beam 0.09) on the bundled scene: their footprints span their
+    // Pixels 2.8 deg wide (accuracy.pixels_per_beam 0.09) on the bundled scene: their footprints span their
     // width in range across the row, which the larger pixel side now sizes (with 6 bins the frame was refused).
     auto bundled = Scene::load_gltf(VKSONAR_ASSET_DIR "/scenes/default.gltf");
     ASSERT_TRUE(bundled) << bundled.error().message;
