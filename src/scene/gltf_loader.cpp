@@ -287,7 +287,7 @@ private:
         struct Item {
             int node;
             Mat4 parent;            // world_from_parent, including the y-up -> z-up rotation
-            std::string class_name; // the nearest ancestor's extras.vksonar.class, if any
+            std::string class_name; // the nearest mesh-less ancestor's extras.vksonar.class, if any
         };
         std::vector<Item> stack;
         for (auto it = roots.rbegin(); it != roots.rend(); ++it)
@@ -326,11 +326,7 @@ private:
             if (node.mesh >= 0 && node.skin >= 0) {
                 skinned.push_back({item.node, add_instance(item.node, class_name), where});
             } else if (node.mesh >= 0) {
-                const std::uint32_t id = add_instance(item.node, class_name);
-                const std::vector<Mat4> instances = instance_matrices(node, where);
-                if (instances.empty()) add_draws(node.mesh, world, id, where);
-                for (const Mat4& instance : instances)
-                    add_draws(node.mesh, multiply(world, instance), id, where);
+                add_node_draws(node, world, add_instance(item.node, class_name), where);
             } else if (node.mesh < -1)
                 fail(ErrorCode::parse, where + ": mesh index " + std::to_string(node.mesh) + " is invalid");
             for (auto c = node.children.rbegin(); c != node.children.rend(); ++c)
@@ -338,12 +334,16 @@ private:
         }
         for (const Skinned& s : skinned) {
             const tinygltf::Node& node = model_.nodes[std::size_t(s.node)];
-            const Mat4 placement = skinned_placement(node.skin, world_of, seen, s.where);
-            const std::vector<Mat4> instances = instance_matrices(node, s.where);
-            if (instances.empty()) add_draws(node.mesh, placement, s.id, s.where);
-            for (const Mat4& instance : instances)
-                add_draws(node.mesh, multiply(placement, instance), s.id, s.where);
+            add_node_draws(node, skinned_placement(node.skin, world_of, seen, s.where), s.id, s.where);
         }
+    }
+
+    // A mesh node's draws: its mesh through `placement`, or once per EXT_mesh_gpu_instancing instance.
+    void add_node_draws(const tinygltf::Node& node, const Mat4& placement, std::uint32_t id, const std::string& where) {
+        const std::vector<Mat4> instances = instance_matrices(node, where);
+        if (instances.empty()) add_draws(node.mesh, placement, id, where);
+        for (const Mat4& instance : instances)
+            add_draws(node.mesh, multiply(placement, instance), id, where);
     }
 
     // A skinned mesh's placement (glTF "Skins": the node's own transform is ignored; a vertex goes through
@@ -463,7 +463,7 @@ private:
     }
 
     // The object a node with a mesh is (SceneInstance): its id, name and class (node_class: its own
-    // extras.vksonar.class or its nearest ancestor's, else the mesh's, else the mesh's name).
+    // extras.vksonar.class or its nearest mesh-less ancestor's, else the mesh's, else the mesh's name).
     std::uint32_t add_instance(int node_index, const std::string& node_class) {
         const tinygltf::Node& node = model_.nodes[std::size_t(node_index)];
         SceneInstance instance;
